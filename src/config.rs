@@ -1,0 +1,296 @@
+//! The whole configuration: one TOML file with a section per crate.
+//!
+//! Every section is owned by its crate (`serde(default, deny_unknown_fields)`,
+//! `Default`, `validate()`); this module composes them, cross-checks values
+//! that span sections, and turns TOML and validation failures into messages
+//! that name the file, the line and the dotted key.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use arcnav_vehicle::{ArcSetConfig, ConfigError, VehicleConfig};
+use serde::{Deserialize, Serialize};
+
+/// The documented defaults, as shipped in `config/default.toml`.
+pub const DEFAULT_TOML: &str = include_str!("../config/default.toml");
+
+/// Every parameter of arcnav.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub vehicle: VehicleConfig,
+    pub arcs: ArcSetConfig,
+}
+
+/// A configuration that could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigLoadError {
+    #[error("cannot read configuration file {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{location}: {message}")]
+    Parse { location: Location, message: String },
+    #[error("{origin}: invalid configuration: {source}")]
+    Invalid { origin: String, source: ConfigError },
+}
+
+/// Where in a TOML document an error is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Location {
+    pub origin: String,
+    /// 1-based line, when TOML gave a position.
+    pub line: Option<usize>,
+    /// Dotted key written on that line, when there is one.
+    pub key: Option<String>,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.origin)?;
+        if let Some(line) = self.line {
+            write!(f, ", line {line}")?;
+        }
+        if let Some(key) = &self.key {
+            write!(f, ", `{key}`")?;
+        }
+        Ok(())
+    }
+}
+
+impl Config {
+    /// Reads, parses and validates a TOML file; missing keys keep their defaults.
+    pub fn load(path: &Path) -> Result<Self, ConfigLoadError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Loads `path` if given, else the defaults.
+    pub fn load_or_default(path: Option<&Path>) -> Result<Self, ConfigLoadError> {
+        path.map_or_else(|| Ok(Self::default()), Self::load)
+    }
+
+    /// Parses and validates TOML text; `origin` names it in messages.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self, ConfigLoadError> {
+        let config: Self = toml::from_str(text).map_err(|err| {
+            let (line, key) = err
+                .span()
+                .map(|span| locate(text, span.start))
+                .unwrap_or((None, None));
+            ConfigLoadError::Parse {
+                location: Location {
+                    origin: origin.to_owned(),
+                    line,
+                    key,
+                },
+                message: err.message().to_owned(),
+            }
+        })?;
+        config
+            .validate()
+            .map_err(|source| ConfigLoadError::Invalid {
+                origin: origin.to_owned(),
+                source,
+            })?;
+        Ok(config)
+    }
+
+    /// Checks every section and the values that relate sections.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
+        self.arcs
+            .validate_for(&self.vehicle)
+            .map_err(|e| e.within("arcs"))?;
+        Ok(())
+    }
+
+    /// The configuration as TOML.
+    pub fn to_toml(&self) -> String {
+        // Plain structs of numbers, strings and tables always serialise.
+        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
+    }
+}
+
+/// The 1-based line of byte `offset` in `text` and the dotted key written on
+/// that line (table header included), if the line holds one.
+fn locate(text: &str, offset: usize) -> (Option<usize>, Option<String>) {
+    let offset = offset.min(text.len());
+    let Some(before) = text.get(..offset) else {
+        return (None, None);
+    };
+    let line_number = before.matches('\n').count() + 1;
+    let line = text.lines().nth(line_number - 1).unwrap_or("");
+    let trimmed = line.trim();
+    if let Some(header) = table_header(trimmed) {
+        return (Some(line_number), Some(header));
+    }
+    let key = trimmed
+        .split_once('=')
+        .map(|(k, _)| unquote_key(k))
+        .filter(|k| !k.is_empty());
+    let table = text
+        .lines()
+        .take(line_number - 1)
+        .filter_map(|l| table_header(l.trim()))
+        .last();
+    let key = match (table, key) {
+        (Some(table), Some(key)) => Some(format!("{table}.{key}")),
+        (None, Some(key)) => Some(key),
+        (_, None) => None,
+    };
+    (Some(line_number), key)
+}
+
+/// `[a.b]` or `[[a.b]]` → `a.b`.
+fn table_header(line: &str) -> Option<String> {
+    let inner = line.strip_prefix('[')?;
+    let inner = inner.strip_prefix('[').unwrap_or(inner);
+    let end = inner.find(']')?;
+    Some(unquote_key(&inner[..end]))
+}
+
+fn unquote_key(key: &str) -> String {
+    key.split('.')
+        .map(|part| part.trim().trim_matches('"').trim_matches('\''))
+        .collect::<Vec<_>>()
+        .join(".")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_error(text: &str) -> String {
+        Config::from_toml(text, "test.toml")
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn defaults_round_trip_through_toml() {
+        let defaults = Config::default();
+        let text = defaults.to_toml();
+        assert_eq!(Config::from_toml(&text, "round-trip").unwrap(), defaults);
+    }
+
+    #[test]
+    fn the_shipped_default_toml_parses_and_equals_the_defaults() {
+        assert_eq!(
+            Config::from_toml(DEFAULT_TOML, "config/default.toml").unwrap(),
+            Config::default()
+        );
+    }
+
+    #[test]
+    fn the_shipped_default_toml_documents_every_key() {
+        fn keys(prefix: &str, table: &toml::Table, out: &mut Vec<String>) {
+            for (k, v) in table {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                match v {
+                    toml::Value::Table(t) => keys(&key, t, out),
+                    _ => out.push(key),
+                }
+            }
+        }
+        let shipped: toml::Table = toml::from_str(DEFAULT_TOML).unwrap();
+        let defaults: toml::Table = toml::from_str(&Config::default().to_toml()).unwrap();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        keys("", &shipped, &mut a);
+        keys("", &defaults, &mut b);
+        a.sort();
+        b.sort();
+        assert_eq!(
+            a, b,
+            "config/default.toml must hold exactly the configuration's keys"
+        );
+        // Every key carries a comment right above it or on its line.
+        let lines: Vec<&str> = DEFAULT_TOML.lines().collect();
+        for (i, line) in lines.iter().enumerate() {
+            let t = line.trim();
+            if t.is_empty() || t.starts_with('#') || t.starts_with('[') {
+                continue;
+            }
+            let commented = t.contains('#') || (i > 0 && lines[i - 1].trim().starts_with('#'));
+            assert!(
+                commented,
+                "line {} of config/default.toml has no comment: {t}",
+                i + 1
+            );
+        }
+    }
+
+    #[test]
+    fn an_unknown_key_is_named_with_its_line() {
+        let msg = parse_error("[vehicle]\nwheelbase_m = 3.3\nwheel_base = 3.3\n");
+        assert!(
+            msg.starts_with("test.toml, line 3, `vehicle.wheel_base`: unknown field `wheel_base`, expected one of"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_section_is_named() {
+        let msg = parse_error("[vehicel]\nwheelbase_m = 3.3\n");
+        assert!(
+            msg.starts_with("test.toml, line 1, `vehicel`: unknown field `vehicel`"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_wrong_type_is_named_with_its_line() {
+        let msg = parse_error("# comment\n[arcs]\ncount = \"many\"\n");
+        assert_eq!(
+            msg,
+            "test.toml, line 3, `arcs.count`: invalid type: string \"many\", expected usize"
+        );
+    }
+
+    #[test]
+    fn an_out_of_range_value_is_named() {
+        let msg = parse_error("[vehicle]\nwidth_m = -2.0\n");
+        assert_eq!(
+            msg,
+            "test.toml: invalid configuration: `vehicle.width_m`: is -2, must be a finite number > 0"
+        );
+    }
+
+    #[test]
+    fn a_contradictory_value_names_both_keys() {
+        let msg = parse_error("[vehicle]\nmin_turning_radius_m = 9.0\n");
+        assert!(
+            msg.starts_with("test.toml: invalid configuration: `arcs.min_radius_m`: is 8 m, tighter than the vehicle's minimum turning radius (vehicle.min_turning_radius_m = 9 m)"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_syntax_error_gives_the_line() {
+        let msg = parse_error("[vehicle]\nwidth_m = \n");
+        assert!(msg.starts_with("test.toml, line 2"), "{msg}");
+    }
+
+    #[test]
+    fn a_missing_file_is_named() {
+        let err = Config::load(Path::new("/nonexistent/arcnav.toml")).unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("cannot read configuration file /nonexistent/arcnav.toml")
+        );
+    }
+
+    #[test]
+    fn partial_files_keep_the_other_defaults() {
+        let config = Config::from_toml("[arcs]\ncount = 41\n", "t").unwrap();
+        assert_eq!(config.arcs.count, 41);
+        assert_eq!(config.vehicle, VehicleConfig::default());
+    }
+}

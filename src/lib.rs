@@ -1,0 +1,13 @@
+//! # arcnav
+//!
+//! Reactive cross-country navigation after Langer, Rosenblatt and Hebert
+//! (CMU): early traversability evaluation of each range image, a Ganesha local
+//! map of untraversable cells, behaviours voting over steering arcs and a DAMN
+//! arbiter fusing the votes into a steering command.
+//!
+//! This crate holds what sits on top of the core crates: the composed
+//! configuration and the executors used by the `arcnav` binary.
+
+pub mod config;
+
+pub use config::Config;

@@ -1,0 +1,506 @@
+//! Steering arcs: the finite set of constant-curvature paths the behaviours
+//! vote over (002 §6, Figure 9: 39 arcs with radii from -8 m to +8 m).
+//!
+//! Arcs are indexed by their position in the [`ArcSet`], in increasing
+//! curvature: index 0 is the hardest right turn, the middle index is straight
+//! ahead, the last is the hardest left turn. Curvature `k = 1/R`, positive
+//! turning left. All geometry is in the vehicle frame at the moment of
+//! voting: the rear axle at the origin, heading along +x.
+
+use nalgebra::{Point2, Vector2};
+use serde::{Deserialize, Serialize};
+
+use crate::config::{self, ConfigError};
+use crate::model::{Footprint, VehicleConfig};
+
+/// How the arc set is laid out. Lives in `[arcs]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ArcSetConfig {
+    /// Number of arcs; odd, so that straight ahead is one of them (002 §6: 39).
+    pub count: usize,
+    /// Radius of the two tightest arcs, m (002 §6: 8 m).
+    pub min_radius_m: f64,
+}
+
+impl Default for ArcSetConfig {
+    fn default() -> Self {
+        Self {
+            count: 39,
+            min_radius_m: 8.0,
+        }
+    }
+}
+
+/// Most arcs a set may hold; far beyond any use, small enough to refuse typos.
+pub const MAX_ARCS: usize = 100_001;
+
+impl ArcSetConfig {
+    /// Checks the arc set on its own; keys are relative to `[arcs]`.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.count < 3 || self.count.is_multiple_of(2) || self.count > MAX_ARCS {
+            return Err(ConfigError::new(
+                "count",
+                format!(
+                    "is {}, must be an odd number between 3 and {MAX_ARCS} so that straight ahead is one of the arcs",
+                    self.count
+                ),
+            ));
+        }
+        config::positive("min_radius_m", self.min_radius_m)
+    }
+
+    /// Checks the arc set against the vehicle: an arc tighter than the
+    /// vehicle's minimum turning radius could win and could not be driven.
+    pub fn validate_for(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
+        self.validate()?;
+        if self.min_radius_m < vehicle.min_turning_radius_m {
+            return Err(ConfigError::new(
+                "min_radius_m",
+                format!(
+                    "is {} m, tighter than the vehicle's minimum turning radius (vehicle.min_turning_radius_m = {} m): the vehicle could not drive the extreme arcs",
+                    self.min_radius_m, vehicle.min_turning_radius_m
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The arcs, evenly spaced in curvature between `-1/R` and `+1/R`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArcSet {
+    curvatures: Vec<f64>,
+    max_curvature: f64,
+}
+
+impl ArcSet {
+    /// Builds the set; refuses a configuration `validate()` refuses.
+    pub fn new(config: &ArcSetConfig) -> Result<Self, ConfigError> {
+        config.validate()?;
+        let max_curvature = 1.0 / config.min_radius_m;
+        let n = config.count;
+        let half = (n - 1) as f64;
+        // Integer numerators make the set exactly symmetric with an exact 0.
+        let curvatures = (0..n)
+            .map(|i| max_curvature * (2.0 * i as f64 - half) / half)
+            .collect();
+        Ok(Self {
+            curvatures,
+            max_curvature,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.curvatures.len()
+    }
+
+    /// Never true: a valid set holds at least three arcs.
+    pub fn is_empty(&self) -> bool {
+        self.curvatures.is_empty()
+    }
+
+    /// Curvatures in index order, 1/m.
+    pub fn curvatures(&self) -> &[f64] {
+        &self.curvatures
+    }
+
+    /// Curvature of the arc at `index`, or `None` past the end.
+    pub fn curvature(&self, index: usize) -> Option<f64> {
+        self.curvatures.get(index).copied()
+    }
+
+    /// The arc at `index`, or `None` past the end.
+    pub fn arc(&self, index: usize) -> Option<Arc> {
+        self.curvature(index).map(Arc::new)
+    }
+
+    /// All arcs in index order.
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = Arc> + '_ {
+        self.curvatures.iter().map(|&k| Arc::new(k))
+    }
+
+    /// Index of the straight arc (the middle one).
+    pub fn straight_index(&self) -> usize {
+        self.curvatures.len() / 2
+    }
+
+    /// The largest |curvature| in the set, 1/m.
+    pub fn max_curvature(&self) -> f64 {
+        self.max_curvature
+    }
+
+    /// Curvature difference between neighbouring arcs, 1/m.
+    pub fn spacing(&self) -> f64 {
+        2.0 * self.max_curvature / (self.curvatures.len() - 1) as f64
+    }
+
+    /// Index of the arc nearest in curvature to `curvature` (clamped to the set).
+    pub fn nearest_index(&self, curvature: f64) -> usize {
+        if !curvature.is_finite() {
+            return self.straight_index();
+        }
+        let position = (curvature + self.max_curvature) / self.spacing();
+        (position.round().max(0.0) as usize).min(self.curvatures.len() - 1)
+    }
+}
+
+/// A pose along an arc, in the vehicle frame of the arc's start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArcPose {
+    pub position: Point2<f64>,
+    /// Heading, radians CCW from +x.
+    pub heading: f64,
+}
+
+impl ArcPose {
+    /// The point `p` (given in the frame of this pose) in the arc's start frame.
+    pub fn transform_point(&self, p: Point2<f64>) -> Point2<f64> {
+        let (sin, cos) = self.heading.sin_cos();
+        Point2::new(
+            self.position.x + cos * p.x - sin * p.y,
+            self.position.y + sin * p.x + cos * p.y,
+        )
+    }
+}
+
+/// A path of constant curvature starting at the origin heading along +x.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Arc {
+    /// 1/m, positive turning left.
+    pub curvature: f64,
+}
+
+impl Arc {
+    pub fn new(curvature: f64) -> Self {
+        Self { curvature }
+    }
+
+    /// Turning radius, m, signed like the curvature; `None` when straight.
+    pub fn radius(&self) -> Option<f64> {
+        (self.curvature != 0.0).then(|| 1.0 / self.curvature)
+    }
+
+    /// Centre of the turning circle; `None` when straight.
+    pub fn center(&self) -> Option<Point2<f64>> {
+        self.radius().map(|r| Point2::new(0.0, r))
+    }
+
+    /// The pose after driving `s` metres along the arc.
+    pub fn pose_at(&self, s: f64) -> ArcPose {
+        let theta = self.curvature * s;
+        // sin(θ)/k and (1 - cos θ)/k written as s·f(θ), exact as k → 0.
+        let (along, across) = if theta.abs() < 1e-6 {
+            (s * (1.0 - theta * theta / 6.0), s * (theta / 2.0))
+        } else {
+            (
+                theta.sin() / self.curvature,
+                (1.0 - theta.cos()) / self.curvature,
+            )
+        };
+        ArcPose {
+            position: Point2::new(along, across),
+            heading: theta,
+        }
+    }
+
+    /// Poses every `step_m` metres from 0 to `length_m` inclusive.
+    pub fn sample(&self, length_m: f64, step_m: f64) -> impl Iterator<Item = ArcPose> + '_ {
+        let steps = if step_m > 0.0 && length_m > 0.0 {
+            (length_m / step_m).ceil() as usize
+        } else {
+            0
+        };
+        (0..=steps).map(move |i| self.pose_at((i as f64 * step_m).min(length_m.max(0.0))))
+    }
+
+    /// The region the footprint sweeps while driving the first `length_m`
+    /// metres of this arc.
+    pub fn swept(&self, footprint: Footprint, length_m: f64) -> SweptFootprint {
+        SweptFootprint {
+            arc: *self,
+            footprint,
+            length_m,
+        }
+    }
+}
+
+/// The area a footprint covers while it drives along an arc.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SweptFootprint {
+    pub arc: Arc,
+    pub footprint: Footprint,
+    pub length_m: f64,
+}
+
+impl SweptFootprint {
+    /// The arc length at which the moving footprint first touches the fixed
+    /// point `p` (start frame), or `None` if it does not within `length_m`.
+    /// Exact: the point is followed on its circle about the turning centre
+    /// and intersected with the footprint's edges.
+    pub fn first_contact(&self, p: Point2<f64>) -> Option<f64> {
+        let s = self.first_contact_unbounded(p)?;
+        (s <= self.length_m).then_some(s)
+    }
+
+    /// True when the footprint touches `p` somewhere along the swept length.
+    pub fn covers(&self, p: Point2<f64>) -> bool {
+        self.first_contact(p).is_some()
+    }
+
+    /// Footprint outlines every `step_m` along the arc (for drawing).
+    pub fn outlines(&self, step_m: f64) -> Vec<[Point2<f64>; 4]> {
+        let corners = self.footprint.corners();
+        self.arc
+            .sample(self.length_m, step_m)
+            .map(|pose| corners.map(|c| pose.transform_point(c)))
+            .collect()
+    }
+
+    fn first_contact_unbounded(&self, p: Point2<f64>) -> Option<f64> {
+        let f = &self.footprint;
+        if f.contains(p) {
+            return Some(0.0);
+        }
+        let k = self.arc.curvature;
+        let Some(center) = self.arc.center() else {
+            // Straight: the point slides towards -x in the vehicle frame.
+            return (p.y.abs() <= f.half_width && p.x >= f.x_min).then(|| p.x - f.x_max);
+        };
+        // In the moving frame the point turns about `center` by -k·s.
+        let offset: Vector2<f64> = p - center;
+        let radius = offset.norm();
+        let angle_p = offset.y.atan2(offset.x);
+        let mut first: Option<f64> = None;
+        let mut consider = |q: Point2<f64>| {
+            let angle_q = (q.y - center.y).atan2(q.x - center.x);
+            let turn = if k > 0.0 {
+                angle_p - angle_q
+            } else {
+                angle_q - angle_p
+            };
+            let s = turn.rem_euclid(std::f64::consts::TAU) / k.abs();
+            first = Some(first.map_or(s, |best: f64| best.min(s)));
+        };
+        // Vertical edges x = const, horizontal edges y = const.
+        for x in [f.x_min, f.x_max] {
+            let dx = x - center.x;
+            let h2 = radius * radius - dx * dx;
+            if h2 >= 0.0 {
+                let h = h2.sqrt();
+                for y in [center.y - h, center.y + h] {
+                    if y.abs() <= f.half_width {
+                        consider(Point2::new(x, y));
+                    }
+                }
+            }
+        }
+        for y in [-f.half_width, f.half_width] {
+            let dy = y - center.y;
+            let h2 = radius * radius - dy * dy;
+            if h2 >= 0.0 {
+                let h = h2.sqrt();
+                for x in [center.x - h, center.x + h] {
+                    if (f.x_min..=f.x_max).contains(&x) {
+                        consider(Point2::new(x, y));
+                    }
+                }
+            }
+        }
+        first
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use proptest::prelude::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    fn default_set() -> ArcSet {
+        ArcSet::new(&ArcSetConfig::default()).unwrap()
+    }
+
+    #[test]
+    fn the_default_set_has_39_arcs_from_minus_to_plus_8_metres() {
+        let arcs = default_set();
+        assert_eq!(arcs.len(), 39);
+        assert_relative_eq!(
+            arcs.arc(0).unwrap().radius().unwrap(),
+            -8.0,
+            epsilon = 1e-12
+        );
+        assert_relative_eq!(
+            arcs.arc(38).unwrap().radius().unwrap(),
+            8.0,
+            epsilon = 1e-12
+        );
+        assert!(arcs.curvature(39).is_none());
+    }
+
+    #[test]
+    fn curvatures_are_evenly_spaced_and_symmetric_about_straight() {
+        let arcs = default_set();
+        let k = arcs.curvatures();
+        for pair in k.windows(2) {
+            assert_relative_eq!(pair[1] - pair[0], arcs.spacing(), epsilon = 1e-12);
+        }
+        for i in 0..k.len() {
+            assert_eq!(
+                k[i],
+                -k[k.len() - 1 - i],
+                "arc {i} mirrors its opposite exactly"
+            );
+        }
+        assert_eq!(arcs.straight_index(), 19);
+        assert_eq!(k[19], 0.0);
+        assert!(arcs.arc(19).unwrap().radius().is_none());
+    }
+
+    #[test]
+    fn nearest_index_speaks_curvature() {
+        let arcs = default_set();
+        assert_eq!(arcs.nearest_index(0.0), 19);
+        assert_eq!(arcs.nearest_index(0.125), 38);
+        assert_eq!(arcs.nearest_index(-1.0), 0);
+        assert_eq!(
+            arcs.nearest_index(arcs.curvature(25).unwrap() + 0.1 * arcs.spacing()),
+            25
+        );
+        assert_eq!(arcs.nearest_index(f64::NAN), 19);
+    }
+
+    #[test]
+    fn arcs_tighter_than_the_vehicle_can_turn_are_refused() {
+        let vehicle = VehicleConfig::default();
+        let err = ArcSetConfig {
+            min_radius_m: 7.0,
+            ..Default::default()
+        }
+        .validate_for(&vehicle)
+        .unwrap_err();
+        assert_eq!(err.key, "min_radius_m");
+        assert!(err.reason.contains("minimum turning radius"), "{err}");
+        ArcSetConfig::default().validate_for(&vehicle).unwrap();
+    }
+
+    #[test]
+    fn an_even_count_is_refused_because_straight_would_be_missing() {
+        let err = ArcSet::new(&ArcSetConfig {
+            count: 40,
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert_eq!(err.key, "count");
+    }
+
+    #[test]
+    fn sampled_points_lie_on_the_circle_of_radius_one_over_k() {
+        for arc in default_set().iter() {
+            let Some(center) = arc.center() else { continue };
+            let r = arc.radius().unwrap().abs();
+            for pose in arc.sample(20.0, 0.5) {
+                assert_relative_eq!((pose.position - center).norm(), r, epsilon = 1e-9);
+            }
+        }
+        // A quarter circle of radius 8 to the left ends at (8, 8) heading north.
+        let end = Arc::new(0.125).pose_at(8.0 * FRAC_PI_2);
+        assert_relative_eq!(end.position, Point2::new(8.0, 8.0), epsilon = 1e-12);
+        assert_relative_eq!(end.heading, FRAC_PI_2, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn nearly_straight_arcs_are_continuous_with_straight() {
+        let a = Arc::new(1e-9).pose_at(10.0);
+        let b = Arc::new(0.0).pose_at(10.0);
+        assert_relative_eq!(a.position, b.position, epsilon = 1e-7);
+    }
+
+    #[test]
+    fn swept_footprint_covers_the_vehicle_width_along_the_arc() {
+        let footprint = VehicleConfig::default().footprint();
+        for arc in default_set().iter() {
+            let swept = arc.swept(footprint, 15.0);
+            for pose in arc.sample(15.0, 0.75) {
+                for lateral in [-1.09, -0.5, 0.0, 0.5, 1.09] {
+                    let p = pose.transform_point(Point2::new(0.0, lateral));
+                    let s = swept.first_contact(p).expect("rear-axle line is covered");
+                    let along = pose.heading / arc.curvature;
+                    let along = if along.is_finite() {
+                        along
+                    } else {
+                        pose.position.x
+                    };
+                    assert!(
+                        s <= along + 1e-9,
+                        "covered no later than when the axle passes"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn swept_footprint_leaves_the_inside_of_the_turn_free() {
+        let footprint = VehicleConfig::default().footprint();
+        let arc = Arc::new(0.125);
+        let swept = arc.swept(footprint, 15.0);
+        // Inside the turn the body never comes closer to the centre than R - w/2.
+        let pose = arc.pose_at(10.0);
+        let inside = pose.transform_point(Point2::new(0.0, footprint.half_width + 0.05));
+        assert!(!swept.covers(inside));
+        let straight = Arc::new(0.0).swept(footprint, 15.0);
+        assert!(!straight.covers(Point2::new(8.0, 1.15)));
+        assert!(straight.covers(Point2::new(8.0, 1.05)));
+        // A point behind the vehicle is never reached driving forwards.
+        assert!(!straight.covers(Point2::new(-3.0, 0.0)));
+    }
+
+    #[test]
+    fn straight_first_contact_is_the_gap_to_the_front_bumper() {
+        let footprint = VehicleConfig::default().footprint();
+        let swept = Arc::new(0.0).swept(footprint, 20.0);
+        assert_relative_eq!(swept.first_contact(Point2::new(9.0, 0.3)).unwrap(), 5.0);
+        assert_eq!(swept.first_contact(Point2::new(1.0, 0.3)), Some(0.0));
+        assert_eq!(
+            swept.first_contact(Point2::new(30.0, 0.0)),
+            None,
+            "beyond the swept length"
+        );
+    }
+
+    fn brute_force_first_contact(swept: &SweptFootprint, p: Point2<f64>, step: f64) -> Option<f64> {
+        let steps = (swept.length_m / step) as usize;
+        (0..=steps).map(|i| i as f64 * step).find(|&s| {
+            let pose = swept.arc.pose_at(s);
+            let (sin, cos) = pose.heading.sin_cos();
+            let d = p - pose.position;
+            let local = Point2::new(cos * d.x + sin * d.y, -sin * d.x + cos * d.y);
+            swept.footprint.contains(local)
+        })
+    }
+
+    proptest! {
+        #[test]
+        fn exact_first_contact_agrees_with_dense_sampling(
+            k in -0.125f64..0.125, x in -3.0f64..20.0, y in -12.0f64..12.0
+        ) {
+            let footprint = VehicleConfig::default().footprint();
+            let swept = Arc::new(k).swept(footprint, 20.0);
+            let p = Point2::new(x, y);
+            let step = 0.002;
+            match (swept.first_contact(p), brute_force_first_contact(&swept, p, step)) {
+                (Some(a), Some(b)) => prop_assert!((a - b).abs() <= 2.0 * step, "exact {a} vs sampled {b}"),
+                (None, None) => {}
+                // A grazing contact may fall between samples: a footprint 1 cm
+                // larger all round must then be seen touching.
+                (Some(_), None) => {
+                    let grown = Footprint { x_min: footprint.x_min - 0.01, x_max: footprint.x_max + 0.01, half_width: footprint.half_width + 0.01 };
+                    prop_assert!(brute_force_first_contact(&swept.arc.swept(grown, 20.0 + 0.01), p, step).is_some());
+                }
+                (None, Some(b)) => prop_assert!(false, "sampling found contact at {b}, exact found none"),
+            }
+        }
+    }
+}

@@ -1,0 +1,28 @@
+//! # arcnav-vehicle
+//!
+//! The bottom layer of arcnav: time ([`Utime`], microseconds), poses and frame
+//! conventions (REP 103; the vehicle origin is on the ground under the middle
+//! of the rear axle), a [`PoseHistory`] answering "where was the vehicle when
+//! this image was taken", the [`VehicleConfig`] model, the [`ArcSet`] the
+//! behaviours vote over, [`SteeringCommand`] and a kinematic [`MotionModel`].
+//!
+//! Like every core crate it reads no clock, starts no thread and links no
+//! middleware.
+
+pub mod arcs;
+pub mod command;
+pub mod config;
+pub mod frames;
+pub mod model;
+pub mod motion;
+pub mod pose_history;
+pub mod time;
+
+pub use arcs::{Arc, ArcPose, ArcSet, ArcSetConfig, SweptFootprint};
+pub use command::SteeringCommand;
+pub use config::ConfigError;
+pub use frames::{Isometry, Pose};
+pub use model::{Footprint, VehicleConfig};
+pub use motion::{MotionLimits, MotionModel, PlanarState};
+pub use pose_history::{PoseHistory, PoseHistoryError};
+pub use time::Utime;

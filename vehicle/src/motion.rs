@@ -1,0 +1,326 @@
+//! A kinematic motion model: advances the vehicle on the ground plane under
+//! steering commands, with command latency, steering-rate and acceleration
+//! limits. The simulator drapes the result on its terrain; tests use it to
+//! check what a command sequence does.
+//!
+//! Between events the vehicle drives a constant-curvature arc, integrated in
+//! closed form in sub-steps of at most [`MAX_SUBSTEP_US`], so with no limits it
+//! follows an arc exactly.
+
+use std::collections::VecDeque;
+
+use crate::command::SteeringCommand;
+use crate::frames::wrap_angle;
+use crate::model::VehicleConfig;
+use crate::time::{Utime, micros_to_seconds, seconds_to_micros};
+
+/// Longest integration step, µs.
+pub const MAX_SUBSTEP_US: Utime = 10_000;
+
+/// The vehicle on the ground plane.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PlanarState {
+    /// World x of the rear-axle centre, m.
+    pub x: f64,
+    /// World y of the rear-axle centre, m.
+    pub y: f64,
+    /// Heading, radians CCW from world x, wrapped to (-π, π].
+    pub yaw: f64,
+    /// Speed, m/s (never negative: arcnav drives forwards).
+    pub speed_mps: f64,
+    /// Curvature being driven, 1/m.
+    pub curvature: f64,
+}
+
+/// Limits of the actuators. `f64::INFINITY` disables a limit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionLimits {
+    pub max_speed_mps: f64,
+    pub max_acceleration_mps2: f64,
+    pub max_deceleration_mps2: f64,
+    pub max_curvature: f64,
+    pub max_curvature_rate: f64,
+    pub latency_us: Utime,
+}
+
+impl MotionLimits {
+    /// The limits of a configured vehicle.
+    pub fn from_vehicle(vehicle: &VehicleConfig) -> Self {
+        Self {
+            max_speed_mps: vehicle.max_speed_mps,
+            max_acceleration_mps2: vehicle.max_acceleration_mps2,
+            max_deceleration_mps2: vehicle.max_deceleration_mps2,
+            max_curvature: vehicle.max_curvature(),
+            max_curvature_rate: vehicle.max_curvature_rate,
+            latency_us: seconds_to_micros(vehicle.command_latency_s),
+        }
+    }
+
+    /// An ideal vehicle: commands act at once and in full.
+    pub fn unlimited() -> Self {
+        Self {
+            max_speed_mps: f64::INFINITY,
+            max_acceleration_mps2: f64::INFINITY,
+            max_deceleration_mps2: f64::INFINITY,
+            max_curvature: f64::INFINITY,
+            max_curvature_rate: f64::INFINITY,
+            latency_us: 0,
+        }
+    }
+}
+
+/// The vehicle's response to commands over time.
+#[derive(Debug, Clone)]
+pub struct MotionModel {
+    limits: MotionLimits,
+    state: PlanarState,
+    utime: Utime,
+    target_curvature: f64,
+    target_speed_mps: f64,
+    /// Commands not yet acting, with the time they take effect.
+    pending: VecDeque<(Utime, SteeringCommand)>,
+}
+
+impl MotionModel {
+    /// A vehicle in `state` at time `utime`, holding its current speed and
+    /// curvature until commanded otherwise.
+    pub fn new(limits: MotionLimits, state: PlanarState, utime: Utime) -> Self {
+        Self {
+            limits,
+            state,
+            utime,
+            target_curvature: state.curvature,
+            target_speed_mps: state.speed_mps,
+            pending: VecDeque::new(),
+        }
+    }
+
+    pub fn state(&self) -> &PlanarState {
+        &self.state
+    }
+
+    pub fn utime(&self) -> Utime {
+        self.utime
+    }
+
+    pub fn limits(&self) -> &MotionLimits {
+        &self.limits
+    }
+
+    /// Hands a command to the vehicle; it takes effect `latency` after its
+    /// `utime` (or after the vehicle's current time, if that is later).
+    pub fn command(&mut self, command: SteeringCommand) {
+        let effective = command.utime.max(self.utime) + self.limits.latency_us;
+        // Keep the queue ordered by effective time.
+        let at = self.pending.partition_point(|(t, _)| *t <= effective);
+        self.pending.insert(at, (effective, command));
+    }
+
+    /// Drives until `utime` and returns the new state. A time in the past
+    /// leaves the state as it is.
+    pub fn advance_to(&mut self, utime: Utime) -> PlanarState {
+        while self.utime < utime {
+            // Apply every command due now.
+            while let Some(&(due, command)) = self.pending.front() {
+                if due > self.utime {
+                    break;
+                }
+                self.pending.pop_front();
+                self.target_curvature = command.curvature;
+                self.target_speed_mps = if command.is_stop() {
+                    0.0
+                } else {
+                    command.speed_mps
+                };
+            }
+            let mut end = (self.utime + MAX_SUBSTEP_US).min(utime);
+            if let Some(&(due, _)) = self.pending.front() {
+                end = end.min(due);
+            }
+            self.step(end);
+        }
+        self.state
+    }
+
+    /// One sub-step to `end`: controls move towards their targets within the
+    /// limits; the pose follows the arc of the mean curvature at mean speed.
+    fn step(&mut self, end: Utime) {
+        let dt = micros_to_seconds(end - self.utime);
+        let limits = &self.limits;
+        let k_target = clamp_abs(self.target_curvature, limits.max_curvature);
+        let v_target = self.target_speed_mps.clamp(0.0, limits.max_speed_mps);
+        let k0 = self.state.curvature;
+        let v0 = self.state.speed_mps;
+        let (k1, k_mean) = ramp(k0, k_target, limits.max_curvature_rate, dt);
+        let accel = if v_target >= v0 {
+            limits.max_acceleration_mps2
+        } else {
+            limits.max_deceleration_mps2
+        };
+        let (v1, v_mean) = ramp(v0, v_target, accel, dt);
+        let distance = v_mean * dt;
+        let k = k_mean;
+        let (x, y, yaw) = (self.state.x, self.state.y, self.state.yaw);
+        let dyaw = k * distance;
+        let (dx, dy) = if dyaw.abs() < 1e-9 {
+            let mid = yaw + 0.5 * dyaw;
+            (distance * mid.cos(), distance * mid.sin())
+        } else {
+            (
+                ((yaw + dyaw).sin() - yaw.sin()) / k,
+                (yaw.cos() - (yaw + dyaw).cos()) / k,
+            )
+        };
+        self.state = PlanarState {
+            x: x + dx,
+            y: y + dy,
+            yaw: wrap_angle(yaw + dyaw),
+            speed_mps: v1,
+            curvature: k1,
+        };
+        self.utime = end;
+    }
+}
+
+fn clamp_abs(value: f64, limit: f64) -> f64 {
+    value.clamp(-limit, limit)
+}
+
+/// A value moving from `from` towards `to` at `rate` per second for `dt`
+/// seconds: its final value and its mean over the interval (an infinite rate
+/// jumps to `to` at once).
+fn ramp(from: f64, to: f64, rate: f64, dt: f64) -> (f64, f64) {
+    let gap = to - from;
+    if dt <= 0.0 {
+        return (from, from);
+    }
+    let time_to_reach = gap.abs() / rate;
+    if time_to_reach >= dt {
+        let end = from + (rate * dt).copysign(gap);
+        (end, 0.5 * (from + end))
+    } else {
+        // Ramp for time_to_reach, then hold `to`.
+        let mean = (0.5 * (from + to) * time_to_reach + to * (dt - time_to_reach)) / dt;
+        (to, mean)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use std::f64::consts::{FRAC_PI_2, PI};
+
+    fn drive(curvature: f64, speed_mps: f64) -> SteeringCommand {
+        SteeringCommand {
+            utime: 0,
+            curvature,
+            speed_mps,
+            arc_index: Some(0),
+            vote: 1.0,
+        }
+    }
+
+    #[test]
+    fn with_no_limits_it_follows_an_arc_exactly() {
+        let mut model = MotionModel::new(MotionLimits::unlimited(), PlanarState::default(), 0);
+        model.command(drive(1.0 / 8.0, 2.0));
+        // A quarter circle of radius 8 m at 2 m/s takes 2π s.
+        let quarter_us = seconds_to_micros(8.0 * FRAC_PI_2 / 2.0);
+        let s = model.advance_to(quarter_us);
+        assert_relative_eq!(s.x, 8.0, epsilon = 1e-5);
+        assert_relative_eq!(s.y, 8.0, epsilon = 1e-5);
+        assert_relative_eq!(s.yaw, FRAC_PI_2, epsilon = 1e-6);
+        // Half a circle to the right from a start heading west.
+        let start = PlanarState {
+            yaw: PI,
+            ..Default::default()
+        };
+        let mut model = MotionModel::new(MotionLimits::unlimited(), start, 0);
+        model.command(drive(-0.25, 1.0));
+        let s = model.advance_to(seconds_to_micros(4.0 * PI));
+        assert_relative_eq!(s.x, 0.0, epsilon = 1e-5);
+        assert_relative_eq!(s.y, 8.0, epsilon = 1e-5);
+    }
+
+    #[test]
+    fn steering_rate_limit_delays_the_curvature_change() {
+        let limits = MotionLimits {
+            max_curvature_rate: 0.1,
+            ..MotionLimits::unlimited()
+        };
+        let mut model = MotionModel::new(limits, PlanarState::default(), 0);
+        model.command(drive(0.1, 1.0));
+        assert_relative_eq!(model.advance_to(500_000).curvature, 0.05, epsilon = 1e-12);
+        assert_relative_eq!(model.advance_to(999_000).curvature, 0.0999, epsilon = 1e-12);
+        assert_eq!(model.advance_to(1_000_000).curvature, 0.1);
+        assert_eq!(model.advance_to(3_000_000).curvature, 0.1);
+    }
+
+    #[test]
+    fn latency_delays_the_command() {
+        let limits = MotionLimits {
+            latency_us: 300_000,
+            ..MotionLimits::unlimited()
+        };
+        let mut model = MotionModel::new(limits, PlanarState::default(), 0);
+        model.command(drive(0.1, 2.0));
+        let before = model.advance_to(299_999);
+        assert_eq!(
+            (before.curvature, before.speed_mps, before.x),
+            (0.0, 0.0, 0.0)
+        );
+        let after = model.advance_to(300_001);
+        assert_eq!((after.curvature, after.speed_mps), (0.1, 2.0));
+        let later = model.advance_to(1_300_000);
+        assert_relative_eq!(later.yaw, 0.2, epsilon = 1e-9, max_relative = 1e-9);
+    }
+
+    #[test]
+    fn acceleration_and_braking_are_limited_and_stop_means_zero_speed() {
+        let limits = MotionLimits {
+            max_acceleration_mps2: 1.0,
+            max_deceleration_mps2: 2.0,
+            ..MotionLimits::unlimited()
+        };
+        let mut model = MotionModel::new(limits, PlanarState::default(), 0);
+        model.command(drive(0.0, 3.0));
+        assert_relative_eq!(model.advance_to(1_000_000).speed_mps, 1.0, epsilon = 1e-12);
+        assert_relative_eq!(model.state().x, 0.5, epsilon = 1e-9);
+        assert_eq!(model.advance_to(5_000_000).speed_mps, 3.0);
+        model.command(SteeringCommand::stop(5_000_000));
+        assert_relative_eq!(model.advance_to(5_500_000).speed_mps, 2.0, epsilon = 1e-12);
+        assert_eq!(model.advance_to(7_000_000).speed_mps, 0.0);
+    }
+
+    #[test]
+    fn curvature_and_speed_are_clamped_to_the_vehicle() {
+        let vehicle = VehicleConfig::default();
+        let limits = MotionLimits {
+            latency_us: 0,
+            max_curvature_rate: f64::INFINITY,
+            max_acceleration_mps2: f64::INFINITY,
+            ..MotionLimits::from_vehicle(&vehicle)
+        };
+        let mut model = MotionModel::new(limits, PlanarState::default(), 0);
+        model.command(drive(1.0, 100.0));
+        let s = model.advance_to(10_000);
+        assert_relative_eq!(s.curvature, 1.0 / 7.5);
+        assert_eq!(s.speed_mps, vehicle.max_speed_mps);
+    }
+
+    #[test]
+    fn commands_apply_in_order_of_effect() {
+        let mut model = MotionModel::new(MotionLimits::unlimited(), PlanarState::default(), 0);
+        model.command(SteeringCommand {
+            utime: 200_000,
+            ..drive(0.05, 1.0)
+        });
+        model.command(SteeringCommand {
+            utime: 100_000,
+            ..drive(-0.05, 1.0)
+        });
+        assert_eq!(model.advance_to(150_000).curvature, -0.05);
+        assert_eq!(model.advance_to(250_000).curvature, 0.05);
+    }
+}
