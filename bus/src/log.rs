@@ -1,0 +1,524 @@
+//! LCM event logs, as written by `lcm-logger` and read by `lcm-logplayer`.
+//!
+//! Each event: `u32 sync 0xEDA1DA01, i64 event_number, i64 timestamp_us,
+//! i32 channel_len, i32 data_len, channel bytes (no NUL), data`, big-endian.
+//!
+//! [`LogReader`] streams events with bounded memory and survives damage: a
+//! bad sync word or an impossible header makes it scan for the next sync word
+//! (the skipped bytes are counted); an event whose declared length runs into
+//! what looks like the next event is dropped as corrupt; a log that ends
+//! mid-event (a killed logger) ends the stream with the tail counted, not
+//! with an error. Only I/O failures are errors.
+//!
+//! [`LogWriter`] hands every event to the operating system in one `write`
+//! before returning (then flushes), so a process that is killed loses no
+//! completed event; call [`LogWriter::sync`] to also survive a power loss.
+
+use std::fs::File;
+use std::io::{self, Read, Write};
+use std::path::Path;
+
+use crate::codec::{EncodeError, Message};
+
+/// Marks the start of every event.
+pub const SYNC_WORD: u32 = 0xEDA1_DA01;
+const SYNC_BYTES: [u8; 4] = SYNC_WORD.to_be_bytes();
+/// Size of an event header.
+pub const HEADER_LEN: usize = 28;
+/// The reference reader refuses channel names of this length or more.
+pub const MAX_CHANNEL_LEN: usize = 1000;
+/// Largest event data accepted (the reference's message limit, 2^28 bytes).
+pub const MAX_DATA_LEN: usize = 1 << 28;
+
+const MIN_BUFFER: usize = 1 << 16;
+
+/// One event of a log.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LogEvent {
+    pub event_number: i64,
+    /// When the event was logged, µs.
+    pub timestamp: i64,
+    pub channel: String,
+    pub data: Vec<u8>,
+}
+
+/// What a reader met on its way through a log.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LogStats {
+    /// Events returned.
+    pub events: u64,
+    /// Bytes skipped while looking for a sync word.
+    pub skipped_bytes: u64,
+    /// Times the reader lost and found the event stream again.
+    pub resyncs: u64,
+    /// Events dropped because their header or length was corrupt.
+    pub corrupt_events: u64,
+    /// Bytes of an incomplete event at the end of the log (a killed logger).
+    pub truncated_tail_bytes: u64,
+}
+
+impl LogStats {
+    /// True when some of the log could not be read.
+    pub fn lost_anything(&self) -> bool {
+        self.skipped_bytes > 0 || self.corrupt_events > 0 || self.truncated_tail_bytes > 0
+    }
+}
+
+/// Streams the events of a log.
+pub struct LogReader<R> {
+    inner: R,
+    buf: Vec<u8>,
+    start: usize,
+    end: usize,
+    eof: bool,
+    stats: LogStats,
+}
+
+impl LogReader<File> {
+    /// Opens a log file.
+    pub fn open(path: impl AsRef<Path>) -> io::Result<Self> {
+        Ok(Self::new(File::open(path)?))
+    }
+}
+
+impl<R: Read> LogReader<R> {
+    pub fn new(inner: R) -> Self {
+        Self {
+            inner,
+            buf: vec![0; MIN_BUFFER],
+            start: 0,
+            end: 0,
+            eof: false,
+            stats: LogStats::default(),
+        }
+    }
+
+    pub fn stats(&self) -> &LogStats {
+        &self.stats
+    }
+
+    fn available(&self) -> &[u8] {
+        &self.buf[self.start..self.end]
+    }
+
+    /// Makes at least `n` bytes available unless the input ends first;
+    /// returns whether they are.
+    fn fill(&mut self, n: usize) -> io::Result<bool> {
+        while self.end - self.start < n && !self.eof {
+            if self.start > 0 {
+                self.buf.copy_within(self.start..self.end, 0);
+                self.end -= self.start;
+                self.start = 0;
+            }
+            let want = n.max(MIN_BUFFER);
+            if self.buf.len() < want {
+                self.buf.resize(want, 0);
+            } else if self.buf.len() > 4 * want && self.end < want {
+                // A huge event has passed: give the memory back.
+                self.buf.truncate(want);
+                self.buf.shrink_to_fit();
+            }
+            match self.inner.read(&mut self.buf[self.end..]) {
+                Ok(0) => self.eof = true,
+                Ok(read) => self.end += read,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(self.end - self.start >= n)
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.start += n;
+    }
+
+    /// Skips to the next sync word after the first byte, counting what is skipped.
+    fn resync(&mut self) -> io::Result<()> {
+        self.stats.resyncs += 1;
+        self.consume(1);
+        self.stats.skipped_bytes += 1;
+        loop {
+            if let Some(at) = find_sync(self.available()) {
+                self.consume(at);
+                self.stats.skipped_bytes += at as u64;
+                return Ok(());
+            }
+            // Keep the last 3 bytes: they may start a sync word.
+            let keep = self.available().len().min(3);
+            let skip = self.available().len() - keep;
+            self.consume(skip);
+            self.stats.skipped_bytes += skip as u64;
+            if !self.fill(keep + 1)? {
+                self.stats.skipped_bytes += self.available().len() as u64;
+                self.consume(self.available().len());
+                return Ok(());
+            }
+        }
+    }
+
+    /// The next event, `None` at the end of the log.
+    pub fn next_event(&mut self) -> io::Result<Option<LogEvent>> {
+        loop {
+            if !self.fill(4)? {
+                self.end_of_log();
+                return Ok(None);
+            }
+            if self.available()[..4] != SYNC_BYTES {
+                self.resync()?;
+                continue;
+            }
+            if !self.fill(HEADER_LEN)? {
+                self.end_of_log();
+                return Ok(None);
+            }
+            let header = &self.available()[..HEADER_LEN];
+            let event_number = i64::from_be_bytes(array(&header[4..12]));
+            let timestamp = i64::from_be_bytes(array(&header[12..20]));
+            let channel_len = i32::from_be_bytes(array(&header[20..24]));
+            let data_len = i32::from_be_bytes(array(&header[24..28]));
+            let (Ok(channel_len), Ok(data_len)) =
+                (usize::try_from(channel_len), usize::try_from(data_len))
+            else {
+                self.corrupt()?;
+                continue;
+            };
+            if channel_len == 0 || channel_len >= MAX_CHANNEL_LEN || data_len > MAX_DATA_LEN {
+                self.corrupt()?;
+                continue;
+            }
+            let total = HEADER_LEN + channel_len + data_len;
+            if !self.fill(total)? {
+                // Either the logger was killed mid-event, or the length is
+                // corrupt and another event starts inside it.
+                if hides_event(&self.available()[4..]) {
+                    self.corrupt()?;
+                    continue;
+                }
+                self.end_of_log();
+                return Ok(None);
+            }
+            let body = &self.available()[..total];
+            let Ok(channel) = std::str::from_utf8(&body[HEADER_LEN..HEADER_LEN + channel_len])
+            else {
+                self.corrupt()?;
+                continue;
+            };
+            let channel = channel.to_owned();
+            // An event whose declared span hides another plausible event
+            // header lied about its length: drop it and resynchronise.
+            if hides_event(&self.available()[4..total]) {
+                self.corrupt()?;
+                continue;
+            }
+            let data = self.available()[HEADER_LEN + channel_len..total].to_vec();
+            self.consume(total);
+            self.stats.events += 1;
+            return Ok(Some(LogEvent {
+                event_number,
+                timestamp,
+                channel,
+                data,
+            }));
+        }
+    }
+
+    fn corrupt(&mut self) -> io::Result<()> {
+        self.stats.corrupt_events += 1;
+        self.resync()
+    }
+
+    fn end_of_log(&mut self) {
+        let tail = self.available().len();
+        if tail > 0 {
+            tracing::warn!(
+                bytes = tail,
+                "log ends in the middle of an event (was the logger killed?)"
+            );
+            self.stats.truncated_tail_bytes += tail as u64;
+            self.consume(tail);
+        }
+    }
+}
+
+impl<R: Read> Iterator for LogReader<R> {
+    type Item = io::Result<LogEvent>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_event().transpose()
+    }
+}
+
+fn array<const N: usize>(bytes: &[u8]) -> [u8; N] {
+    let mut out = [0u8; N];
+    out.copy_from_slice(&bytes[..N]);
+    out
+}
+
+fn find_sync(bytes: &[u8]) -> Option<usize> {
+    let mut from = 0;
+    while let Some(at) = bytes[from..].iter().position(|&b| b == SYNC_BYTES[0]) {
+        let at = from + at;
+        if bytes.get(at..at + 4) == Some(&SYNC_BYTES) {
+            return Some(at);
+        }
+        from = at + 1;
+    }
+    None
+}
+
+/// True when `bytes` contain a sync word followed by a header that could
+/// start a real event (sane lengths, printable channel name). Random data
+/// matches with odds far below one in 2^50 per position.
+fn hides_event(bytes: &[u8]) -> bool {
+    let mut from = 0;
+    while let Some(at) = find_sync(&bytes[from..]) {
+        let at = from + at;
+        if let Some(header) = bytes.get(at..at + HEADER_LEN) {
+            let channel_len = i32::from_be_bytes(array(&header[20..24]));
+            let data_len = i32::from_be_bytes(array(&header[24..28]));
+            let sane = (1..MAX_CHANNEL_LEN as i32).contains(&channel_len) && data_len >= 0;
+            if sane {
+                let channel = &bytes[at + HEADER_LEN..];
+                let channel = &channel[..channel.len().min(channel_len as usize)];
+                if !channel.is_empty() && channel.iter().all(|b| b.is_ascii_graphic()) {
+                    return true;
+                }
+            }
+        }
+        from = at + 1;
+    }
+    false
+}
+
+/// An event that cannot be written.
+#[derive(Debug, thiserror::Error)]
+pub enum LogWriteError {
+    #[error("cannot write the log: {0}")]
+    Io(#[from] io::Error),
+    #[error("channel name {channel:?} must be 1 to {} bytes", MAX_CHANNEL_LEN - 1)]
+    BadChannel { channel: String },
+    #[error("event of {len} bytes is larger than the {MAX_DATA_LEN} bytes a log event may hold")]
+    TooLarge { len: usize },
+    #[error("cannot encode the message: {0}")]
+    Encode(#[from] EncodeError),
+}
+
+/// Appends events to a log.
+pub struct LogWriter<W: Write> {
+    inner: W,
+    next_event_number: i64,
+    event: Vec<u8>,
+    message: Vec<u8>,
+}
+
+impl LogWriter<File> {
+    /// Creates (or truncates) a log file.
+    pub fn create(path: impl AsRef<Path>) -> io::Result<Self> {
+        Ok(Self::new(File::create(path)?))
+    }
+
+    /// Asks the operating system to put everything written on disk.
+    pub fn sync(&mut self) -> io::Result<()> {
+        self.inner.sync_data()
+    }
+}
+
+impl<W: Write> LogWriter<W> {
+    pub fn new(inner: W) -> Self {
+        Self {
+            inner,
+            next_event_number: 0,
+            event: Vec::new(),
+            message: Vec::new(),
+        }
+    }
+
+    /// Writes one event and returns its event number; the event is with the
+    /// operating system when this returns.
+    pub fn write_event(
+        &mut self,
+        timestamp: i64,
+        channel: &str,
+        data: &[u8],
+    ) -> Result<i64, LogWriteError> {
+        if channel.is_empty() || channel.len() >= MAX_CHANNEL_LEN {
+            return Err(LogWriteError::BadChannel {
+                channel: channel.to_owned(),
+            });
+        }
+        if data.len() > MAX_DATA_LEN {
+            return Err(LogWriteError::TooLarge { len: data.len() });
+        }
+        let number = self.next_event_number;
+        self.event.clear();
+        self.event.extend_from_slice(&SYNC_BYTES);
+        self.event.extend_from_slice(&number.to_be_bytes());
+        self.event.extend_from_slice(&timestamp.to_be_bytes());
+        // Both lengths are bounded above, far below i32::MAX.
+        self.event
+            .extend_from_slice(&(channel.len() as i32).to_be_bytes());
+        self.event
+            .extend_from_slice(&(data.len() as i32).to_be_bytes());
+        self.event.extend_from_slice(channel.as_bytes());
+        self.event.extend_from_slice(data);
+        self.inner.write_all(&self.event)?;
+        self.inner.flush()?;
+        self.next_event_number += 1;
+        Ok(number)
+    }
+
+    /// Encodes `message` and writes it as one event.
+    pub fn write_message<M: Message>(
+        &mut self,
+        timestamp: i64,
+        channel: &str,
+        message: &M,
+    ) -> Result<i64, LogWriteError> {
+        let mut encoded = std::mem::take(&mut self.message);
+        let result = message
+            .encode_into(&mut encoded)
+            .map_err(LogWriteError::from)
+            .and_then(|()| self.write_event(timestamp, channel, &encoded));
+        self.message = encoded;
+        result
+    }
+
+    /// Number of events written so far.
+    pub fn events_written(&self) -> i64 {
+        self.next_event_number
+    }
+
+    pub fn into_inner(self) -> W {
+        self.inner
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn log_of(events: &[(i64, &str, &[u8])]) -> Vec<u8> {
+        let mut writer = LogWriter::new(Vec::new());
+        for (t, channel, data) in events {
+            writer.write_event(*t, channel, data).unwrap();
+        }
+        writer.into_inner()
+    }
+
+    fn read_all(bytes: &[u8]) -> (Vec<LogEvent>, LogStats) {
+        let mut reader = LogReader::new(bytes);
+        let events = reader.by_ref().collect::<io::Result<Vec<_>>>().unwrap();
+        (events, *reader.stats())
+    }
+
+    #[test]
+    fn events_round_trip_with_numbers_and_timestamps() {
+        let bytes = log_of(&[(10, "POSE", b"abc"), (20, "RANGE_IMAGE", &[0u8; 100_000])]);
+        assert_eq!(&bytes[..4], &[0xED, 0xA1, 0xDA, 0x01]);
+        let (events, stats) = read_all(&bytes);
+        assert_eq!(events.len(), 2);
+        assert_eq!((events[0].event_number, events[0].timestamp), (0, 10));
+        assert_eq!(events[0].channel, "POSE");
+        assert_eq!(events[0].data, b"abc");
+        assert_eq!(events[1].event_number, 1);
+        assert_eq!(events[1].data.len(), 100_000);
+        assert!(!stats.lost_anything());
+    }
+
+    #[test]
+    fn a_truncated_last_event_is_counted_not_an_error() {
+        let bytes = log_of(&[(1, "A", b"0123456789"), (2, "B", b"0123456789")]);
+        let cut = &bytes[..bytes.len() - 4];
+        let (events, stats) = read_all(cut);
+        assert_eq!(events.len(), 1);
+        assert_eq!(stats.truncated_tail_bytes, (HEADER_LEN + 1 + 10 - 4) as u64);
+        assert!(stats.lost_anything());
+    }
+
+    #[test]
+    fn garbage_between_events_is_skipped_and_counted() {
+        let first = log_of(&[(1, "A", b"xy")]);
+        let mut second = log_of(&[(2, "B", b"zw")]);
+        second[4..12].copy_from_slice(&1i64.to_be_bytes());
+        let mut bytes = first.clone();
+        bytes.extend_from_slice(&[0x55; 17]);
+        bytes.extend_from_slice(&second);
+        let (events, stats) = read_all(&bytes);
+        assert_eq!(
+            events
+                .iter()
+                .map(|e| e.channel.as_str())
+                .collect::<Vec<_>>(),
+            ["A", "B"]
+        );
+        assert_eq!(stats.skipped_bytes, 17);
+        assert_eq!(stats.resyncs, 1);
+    }
+
+    #[test]
+    fn an_event_with_a_lying_length_is_dropped_and_the_next_one_found() {
+        let mut bytes = log_of(&[(1, "A", b"first"), (2, "B", b"second"), (3, "C", b"third")]);
+        // Corrupt A's data length so that it swallows B.
+        bytes[24..28].copy_from_slice(&40i32.to_be_bytes());
+        let (events, stats) = read_all(&bytes);
+        let channels: Vec<_> = events.iter().map(|e| e.channel.as_str()).collect();
+        assert_eq!(channels, ["B", "C"]);
+        assert_eq!(stats.corrupt_events, 1);
+        assert!(stats.skipped_bytes > 0);
+    }
+
+    #[test]
+    fn impossible_headers_are_skipped() {
+        let mut bytes = log_of(&[(1, "A", b"1"), (2, "B", b"2")]);
+        bytes[20..24].copy_from_slice(&(-5i32).to_be_bytes());
+        let (events, stats) = read_all(&bytes);
+        assert_eq!(events.len(), 1);
+        assert_eq!(events[0].channel, "B");
+        assert_eq!(stats.corrupt_events, 1);
+    }
+
+    #[test]
+    fn only_garbage_yields_nothing_and_counts_everything() {
+        let (events, stats) = read_all(&[7u8; 1000]);
+        assert!(events.is_empty());
+        assert_eq!(stats.skipped_bytes, 1000);
+        let (events, _) = read_all(&[]);
+        assert!(events.is_empty());
+    }
+
+    #[test]
+    fn bad_channels_are_refused_by_the_writer() {
+        let mut writer = LogWriter::new(Vec::new());
+        assert!(matches!(
+            writer.write_event(0, "", b""),
+            Err(LogWriteError::BadChannel { .. })
+        ));
+        let long = "X".repeat(1000);
+        assert!(matches!(
+            writer.write_event(0, &long, b""),
+            Err(LogWriteError::BadChannel { .. })
+        ));
+        assert_eq!(writer.events_written(), 0);
+    }
+
+    #[test]
+    fn reads_one_byte_at_a_time_like_a_slow_pipe() {
+        struct Trickle<'a>(&'a [u8]);
+        impl Read for Trickle<'_> {
+            fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
+                let Some((first, rest)) = self.0.split_first() else {
+                    return Ok(0);
+                };
+                out[0] = *first;
+                self.0 = rest;
+                Ok(1)
+            }
+        }
+        let bytes = log_of(&[(1, "A", b"hello"), (2, "B", &[9u8; 70_000])]);
+        let events: Vec<_> = LogReader::new(Trickle(&bytes))
+            .collect::<io::Result<_>>()
+            .unwrap();
+        assert_eq!(events.len(), 2);
+        assert_eq!(events[1].data.len(), 70_000);
+    }
+}

@@ -1,0 +1,255 @@
+//! Typed messages on top of raw bytes: the channel names, decoding by
+//! fingerprint (so `RANGE_IMAGE_ERIM` or a foreign channel name carrying a
+//! `range_image_t` still decodes), and conversions to the vehicle crate.
+
+use arcnav_vehicle::frames::{FrameError, isometry_from_parts, rotation_to_wxyz};
+use arcnav_vehicle::{Isometry, Pose, SteeringCommand};
+use nalgebra::Vector3;
+
+use crate::codec::{DecodeError, EncodeError, Message, peek_fingerprint};
+use crate::lcmtypes::{
+    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, steering_command_t,
+    waypoints_t,
+};
+
+/// The channel names arcnav publishes and listens to.
+pub mod channels {
+    pub const POSE: &str = "POSE";
+    /// Range images; with several sensors, `RANGE_IMAGE_<SENSOR>`.
+    pub const RANGE_IMAGE: &str = "RANGE_IMAGE";
+    pub const WAYPOINTS: &str = "WAYPOINTS";
+    pub const OBSTACLE_CELLS: &str = "OBSTACLE_CELLS";
+    pub const STEERING_COMMAND: &str = "STEERING_COMMAND";
+    pub const LOCAL_MAP: &str = "LOCAL_MAP";
+    /// Prefix of each behaviour's vote channel.
+    pub const ARC_VOTES_PREFIX: &str = "ARC_VOTES_";
+
+    /// `ARC_VOTES_<BEHAVIOUR>`, upper-cased.
+    pub fn arc_votes(behaviour: &str) -> String {
+        format!("{ARC_VOTES_PREFIX}{}", behaviour.to_ascii_uppercase())
+    }
+
+    /// `RANGE_IMAGE_<SENSOR>`, upper-cased.
+    pub fn range_image(sensor: &str) -> String {
+        format!("{RANGE_IMAGE}_{}", sensor.to_ascii_uppercase())
+    }
+}
+
+/// Any top-level arcnav message.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AnyMessage {
+    Pose(pose_t),
+    RangeImage(range_image_t),
+    SteeringCommand(steering_command_t),
+    ArcVotes(arc_votes_t),
+    ObstacleCells(obstacle_cells_t),
+    Waypoints(waypoints_t),
+    LocalMap(local_map_t),
+}
+
+impl AnyMessage {
+    /// Decodes `bytes` by their fingerprint; `Ok(None)` for a type arcnav
+    /// does not know (e.g. `LCM_SELF_TEST`), to be skipped.
+    pub fn decode(bytes: &[u8]) -> Result<Option<Self>, DecodeError> {
+        let Some(fingerprint) = peek_fingerprint(bytes) else {
+            return Ok(None);
+        };
+        Ok(Some(match fingerprint {
+            pose_t::FINGERPRINT => Self::Pose(pose_t::decode(bytes)?),
+            range_image_t::FINGERPRINT => Self::RangeImage(range_image_t::decode(bytes)?),
+            steering_command_t::FINGERPRINT => {
+                Self::SteeringCommand(steering_command_t::decode(bytes)?)
+            }
+            arc_votes_t::FINGERPRINT => Self::ArcVotes(arc_votes_t::decode(bytes)?),
+            obstacle_cells_t::FINGERPRINT => Self::ObstacleCells(obstacle_cells_t::decode(bytes)?),
+            waypoints_t::FINGERPRINT => Self::Waypoints(waypoints_t::decode(bytes)?),
+            local_map_t::FINGERPRINT => Self::LocalMap(local_map_t::decode(bytes)?),
+            _ => return Ok(None),
+        }))
+    }
+
+    pub fn encode(&self) -> Result<Vec<u8>, EncodeError> {
+        match self {
+            Self::Pose(m) => m.encode(),
+            Self::RangeImage(m) => m.encode(),
+            Self::SteeringCommand(m) => m.encode(),
+            Self::ArcVotes(m) => m.encode(),
+            Self::ObstacleCells(m) => m.encode(),
+            Self::Waypoints(m) => m.encode(),
+            Self::LocalMap(m) => m.encode(),
+        }
+    }
+
+    /// The message's own timestamp, µs.
+    pub fn utime(&self) -> i64 {
+        match self {
+            Self::Pose(m) => m.utime,
+            Self::RangeImage(m) => m.utime,
+            Self::SteeringCommand(m) => m.utime,
+            Self::ArcVotes(m) => m.utime,
+            Self::ObstacleCells(m) => m.utime,
+            Self::Waypoints(m) => m.utime,
+            Self::LocalMap(m) => m.utime,
+        }
+    }
+
+    /// The LCM type name.
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Self::Pose(_) => pose_t::TYPE_NAME,
+            Self::RangeImage(_) => range_image_t::TYPE_NAME,
+            Self::SteeringCommand(_) => steering_command_t::TYPE_NAME,
+            Self::ArcVotes(_) => arc_votes_t::TYPE_NAME,
+            Self::ObstacleCells(_) => obstacle_cells_t::TYPE_NAME,
+            Self::Waypoints(_) => waypoints_t::TYPE_NAME,
+            Self::LocalMap(_) => local_map_t::TYPE_NAME,
+        }
+    }
+}
+
+impl From<&Pose> for pose_t {
+    fn from(pose: &Pose) -> Self {
+        let t = pose.world_from_vehicle.translation.vector;
+        Self {
+            utime: pose.utime,
+            position: [t.x, t.y, t.z],
+            orientation: rotation_to_wxyz(&pose.world_from_vehicle.rotation),
+            velocity: [pose.velocity.x, pose.velocity.y, pose.velocity.z],
+            yaw_rate: pose.yaw_rate,
+        }
+    }
+}
+
+/// A `pose_t` whose values are not a pose.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PoseError {
+    #[error("pose at {utime} µs: {source}")]
+    Frame { utime: i64, source: FrameError },
+    #[error("pose at {utime} µs has a velocity or yaw rate that is not finite")]
+    NonFinite { utime: i64 },
+}
+
+impl TryFrom<&pose_t> for Pose {
+    type Error = PoseError;
+
+    fn try_from(msg: &pose_t) -> Result<Self, PoseError> {
+        let world_from_vehicle: Isometry = isometry_from_parts(msg.position, msg.orientation)
+            .map_err(|source| PoseError::Frame {
+                utime: msg.utime,
+                source,
+            })?;
+        if !msg.velocity.iter().all(|v| v.is_finite()) || !msg.yaw_rate.is_finite() {
+            return Err(PoseError::NonFinite { utime: msg.utime });
+        }
+        Ok(Pose {
+            utime: msg.utime,
+            world_from_vehicle,
+            velocity: Vector3::from(msg.velocity),
+            yaw_rate: msg.yaw_rate,
+        })
+    }
+}
+
+impl From<&SteeringCommand> for steering_command_t {
+    fn from(command: &SteeringCommand) -> Self {
+        Self {
+            utime: command.utime,
+            curvature: command.curvature,
+            speed: command.speed_mps,
+            arc_index: command
+                .arc_index
+                .and_then(|i| i32::try_from(i).ok())
+                .unwrap_or(-1),
+            vote: command.vote,
+        }
+    }
+}
+
+impl From<&steering_command_t> for SteeringCommand {
+    /// Values a vehicle must not act on (negative or non-finite speed,
+    /// non-finite curvature) become a stop.
+    fn from(msg: &steering_command_t) -> Self {
+        let sane = msg.curvature.is_finite() && msg.speed.is_finite() && msg.speed >= 0.0;
+        if !sane {
+            return SteeringCommand::stop(msg.utime);
+        }
+        SteeringCommand {
+            utime: msg.utime,
+            curvature: msg.curvature,
+            speed_mps: msg.speed,
+            arc_index: usize::try_from(msg.arc_index).ok(),
+            vote: msg.vote,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+
+    #[test]
+    fn channel_names_follow_the_wire_contract() {
+        assert_eq!(
+            channels::arc_votes("obstacle_avoidance"),
+            "ARC_VOTES_OBSTACLE_AVOIDANCE"
+        );
+        assert_eq!(channels::range_image("erim"), "RANGE_IMAGE_ERIM");
+    }
+
+    #[test]
+    fn poses_convert_both_ways() {
+        let pose = Pose {
+            utime: 42,
+            world_from_vehicle: isometry_from_xyz_rpy([1.0, 2.0, 3.0], 0.1, 0.2, 0.3),
+            velocity: Vector3::new(1.0, -1.0, 0.0),
+            yaw_rate: 0.05,
+        };
+        let msg = pose_t::from(&pose);
+        let back = Pose::try_from(&msg).unwrap();
+        assert!(
+            (back.world_from_vehicle.translation.vector
+                - pose.world_from_vehicle.translation.vector)
+                .norm()
+                < 1e-12
+        );
+        assert!(
+            back.world_from_vehicle
+                .rotation
+                .angle_to(&pose.world_from_vehicle.rotation)
+                < 1e-12
+        );
+        let bad = pose_t {
+            orientation: [0.0; 4],
+            ..msg
+        };
+        assert!(Pose::try_from(&bad).is_err());
+    }
+
+    #[test]
+    fn a_stop_is_arc_index_minus_one_and_bad_commands_become_stops() {
+        let stop = steering_command_t::from(&SteeringCommand::stop(5));
+        assert_eq!((stop.arc_index, stop.speed), (-1, 0.0));
+        let weird = steering_command_t {
+            utime: 1,
+            curvature: 0.1,
+            speed: f64::NAN,
+            arc_index: 3,
+            vote: 0.5,
+        };
+        assert!(SteeringCommand::from(&weird).is_stop());
+    }
+
+    #[test]
+    fn unknown_fingerprints_are_skipped_and_known_ones_decode() {
+        assert_eq!(AnyMessage::decode(b"LCM self test").unwrap(), None);
+        assert_eq!(AnyMessage::decode(b"short").unwrap(), None);
+        let bytes = pose_t::default().encode().unwrap();
+        let decoded = AnyMessage::decode(&bytes).unwrap().unwrap();
+        assert_eq!(decoded.type_name(), "arcnav.pose_t");
+        assert!(
+            AnyMessage::decode(&bytes[..20]).is_err(),
+            "a truncated pose is an error"
+        );
+    }
+}

@@ -1,0 +1,265 @@
+//! Test support shared by arcnav's crates (a dev-dependency only).
+//!
+//! - [`LcmReference`]: the reference LCM implementation (PyPI `lcm`, pinned
+//!   in `scripts/test-tools`, installed into `target/lcm-venv`) as a test
+//!   peer: its Python bindings and its `lcm-gen`, `lcm-logger`,
+//!   `lcm-logplayer` binaries.
+//! - [`NetNs`]: a network namespace a test creates and deletes, with `lo` up
+//!   and `224.0.0.0/4` routed to it. Live traffic in tests runs only there,
+//!   never on the host's network.
+//!
+//! A missing tool skips a test with a loud message locally; under `CI=true`
+//! it fails the test with the reason instead.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// The pinned version of the reference implementation.
+pub const LCM_VERSION: &str = "1.5.3";
+
+/// The workspace root.
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// True under CI (`CI=true`), where nothing may be skipped.
+pub fn under_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// Skips (locally) or fails (under CI) because `what` is missing.
+#[track_caller]
+pub fn missing(what: &str) {
+    if under_ci() {
+        panic!("{what}; under CI=true this test may not be skipped (run scripts/test-tools)");
+    }
+    eprintln!("SKIPPED: {what} (run scripts/test-tools to install it)");
+}
+
+/// The reference LCM implementation in a virtual environment.
+#[derive(Debug, Clone)]
+pub struct LcmReference {
+    python: PathBuf,
+    bin: PathBuf,
+}
+
+impl LcmReference {
+    /// The venv named by `ARCNAV_LCM_VENV`, else `target/lcm-venv`, if it
+    /// holds a working `lcm` package.
+    pub fn find() -> Result<Self, String> {
+        let venv = std::env::var_os("ARCNAV_LCM_VENV")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| workspace_root().join("target/lcm-venv"));
+        let python = venv.join("bin/python");
+        if !python.exists() {
+            return Err(format!(
+                "the reference LCM (PyPI lcm=={LCM_VERSION}) is not installed at {}",
+                venv.display()
+            ));
+        }
+        let out = Command::new(&python)
+            .args(["-c", "import lcm, os; print(os.path.dirname(lcm.__file__))"])
+            .output()
+            .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
+        if !out.status.success() {
+            return Err(format!(
+                "{} cannot import lcm: {}",
+                python.display(),
+                String::from_utf8_lossy(&out.stderr)
+            ));
+        }
+        let package = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
+        let bin = package
+            .parent()
+            .map(|site| site.join("bin"))
+            .ok_or("unexpected lcm package location")?;
+        if !bin.join("lcm-gen").exists() {
+            return Err(format!("lcm-gen not found in {}", bin.display()));
+        }
+        Ok(Self { python, bin })
+    }
+
+    /// [`LcmReference::find`], or skip/fail through [`missing`].
+    #[track_caller]
+    pub fn require() -> Option<Self> {
+        match Self::find() {
+            Ok(reference) => Some(reference),
+            Err(why) => {
+                missing(&why);
+                None
+            }
+        }
+    }
+
+    /// The venv's Python interpreter.
+    pub fn python(&self) -> Command {
+        let mut command = Command::new(&self.python);
+        command.env("PYTHONUNBUFFERED", "1");
+        command
+    }
+
+    pub fn python_path(&self) -> &Path {
+        &self.python
+    }
+
+    /// Path of a reference binary (`lcm-gen`, `lcm-logger`, `lcm-logplayer`, ...).
+    /// These are the real binaries, not the venv wrappers, so signals reach them.
+    pub fn tool_path(&self, name: &str) -> PathBuf {
+        self.bin.join(name)
+    }
+
+    /// Runs `lcm-gen -p` on `lcm_files` into `out_dir`; returns `out_dir`.
+    pub fn generate_python(&self, lcm_files: &[PathBuf], out_dir: &Path) -> PathBuf {
+        std::fs::create_dir_all(out_dir).expect("create the lcm-gen output directory");
+        let status = Command::new(self.tool_path("lcm-gen"))
+            .arg("-p")
+            .arg("--ppath")
+            .arg(out_dir)
+            .args(lcm_files)
+            .status()
+            .expect("run lcm-gen");
+        assert!(status.success(), "lcm-gen -p failed on {lcm_files:?}");
+        out_dir.to_path_buf()
+    }
+}
+
+/// A fresh directory under `target/test-tmp` for one test.
+pub fn temp_dir(tag: &str) -> PathBuf {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let dir = workspace_root()
+        .join("target/test-tmp")
+        .join(format!("{tag}-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create a test directory");
+    dir
+}
+
+/// A network namespace owned by one test; deleted on drop.
+#[derive(Debug)]
+pub struct NetNs {
+    name: String,
+}
+
+const NETNS_PREFIX: &str = "arcnav-test-";
+
+impl NetNs {
+    /// Creates a namespace with `lo` up and multicast routed to `lo`.
+    /// Needs root and `ip` (iproute2).
+    pub fn create(tag: &str) -> Result<Self, String> {
+        static COUNTER: AtomicUsize = AtomicUsize::new(0);
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } != 0 {
+            return Err("network-namespace tests need root (ip netns add)".into());
+        }
+        remove_stale_namespaces();
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let name = format!("{NETNS_PREFIX}{}-{n}-{tag}", std::process::id());
+        let name: String = name.chars().take(60).collect();
+        ip(&["netns", "add", &name])?;
+        let ns = Self { name };
+        ip(&["-n", &ns.name, "link", "set", "lo", "up"])?;
+        ip(&["-n", &ns.name, "route", "add", "224.0.0.0/4", "dev", "lo"])?;
+        Ok(ns)
+    }
+
+    /// [`NetNs::create`], or skip/fail through [`missing`].
+    #[track_caller]
+    pub fn require(tag: &str) -> Option<Self> {
+        match Self::create(tag) {
+            Ok(ns) => Some(ns),
+            Err(why) => {
+                missing(&why);
+                None
+            }
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// A command that runs `program` inside the namespace.
+    pub fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
+        let mut command = Command::new("ip");
+        command.args(["netns", "exec", &self.name]).arg(program);
+        command
+    }
+
+    /// Runs `f` on a thread that has entered the namespace: sockets it
+    /// creates live there (and keep living there when used elsewhere).
+    pub fn run<T: Send>(&self, f: impl FnOnce() -> T + Send) -> T {
+        let path = format!("/run/netns/{}", self.name);
+        std::thread::scope(|scope| {
+            scope
+                .spawn(move || {
+                    let file =
+                        std::fs::File::open(&path).unwrap_or_else(|e| panic!("open {path}: {e}"));
+                    use std::os::fd::AsRawFd;
+                    // SAFETY: setns on a valid namespace fd only changes this
+                    // thread's network namespace.
+                    let rc = unsafe { libc::setns(file.as_raw_fd(), libc::CLONE_NEWNET) };
+                    assert_eq!(
+                        rc,
+                        0,
+                        "setns into {path}: {}",
+                        std::io::Error::last_os_error()
+                    );
+                    f()
+                })
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+        })
+    }
+}
+
+impl Drop for NetNs {
+    fn drop(&mut self) {
+        if let Err(e) = ip(&["netns", "del", &self.name]) {
+            eprintln!(
+                "warning: could not delete network namespace {}: {e}",
+                self.name
+            );
+        }
+    }
+}
+
+fn ip(args: &[&str]) -> Result<(), String> {
+    let out = Command::new("ip")
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| format!("cannot run `ip` (install iproute2): {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    }
+}
+
+/// Deletes namespaces left by test processes that no longer exist.
+fn remove_stale_namespaces() {
+    let Ok(entries) = std::fs::read_dir("/run/netns") else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(rest) = name.strip_prefix(NETNS_PREFIX) else {
+            continue;
+        };
+        let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = ip(&["netns", "del", &name]);
+        }
+    }
+}
