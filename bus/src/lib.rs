@@ -24,5 +24,5 @@ pub mod transport;
 
 pub use codec::{DecodeError, EncodeError, Message};
 pub use log::{LogEvent, LogReader, LogStats, LogWriter};
-pub use messages::AnyMessage;
+pub use messages::{AnyMessage, TypedEvent, TypedEvents};
 pub use transport::{Lcm, ReceivedMessage};

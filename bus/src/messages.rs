@@ -11,6 +11,7 @@ use crate::lcmtypes::{
     arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, steering_command_t,
     waypoints_t,
 };
+use crate::log::{LogReader, LogStats};
 
 /// The channel names arcnav publishes and listens to.
 pub mod channels {
@@ -103,6 +104,78 @@ impl AnyMessage {
             Self::ObstacleCells(_) => obstacle_cells_t::TYPE_NAME,
             Self::Waypoints(_) => waypoints_t::TYPE_NAME,
             Self::LocalMap(_) => local_map_t::TYPE_NAME,
+        }
+    }
+}
+
+/// An event of a log, decoded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TypedEvent {
+    pub event_number: i64,
+    /// When the event was logged, µs.
+    pub timestamp: i64,
+    pub channel: String,
+    pub message: AnyMessage,
+}
+
+/// What typed reading skipped, on top of the log's own [`LogStats`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TypedStats {
+    /// Events whose type arcnav does not know (e.g. `LCM_SELF_TEST`), per channel.
+    pub unknown: std::collections::BTreeMap<String, u64>,
+    /// Events with a known fingerprint that failed to decode, per channel.
+    pub undecodable: std::collections::BTreeMap<String, u64>,
+}
+
+/// The arcnav messages of a log, in log order; unknown types are skipped and
+/// counted, as are messages that do not decode (with a warning).
+pub struct TypedEvents<R> {
+    log: LogReader<R>,
+    stats: TypedStats,
+}
+
+impl<R: std::io::Read> TypedEvents<R> {
+    pub fn new(log: LogReader<R>) -> Self {
+        Self {
+            log,
+            stats: TypedStats::default(),
+        }
+    }
+
+    pub fn stats(&self) -> &TypedStats {
+        &self.stats
+    }
+
+    pub fn log_stats(&self) -> &LogStats {
+        self.log.stats()
+    }
+}
+
+impl<R: std::io::Read> Iterator for TypedEvents<R> {
+    type Item = std::io::Result<TypedEvent>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            let event = match self.log.next_event() {
+                Ok(Some(event)) => event,
+                Ok(None) => return None,
+                Err(e) => return Some(Err(e)),
+            };
+            match AnyMessage::decode(&event.data) {
+                Ok(Some(message)) => {
+                    return Some(Ok(TypedEvent {
+                        event_number: event.event_number,
+                        timestamp: event.timestamp,
+                        channel: event.channel,
+                        message,
+                    }));
+                }
+                Ok(None) => *self.stats.unknown.entry(event.channel).or_default() += 1,
+                Err(err) => {
+                    tracing::warn!(channel = %event.channel, event = event.event_number, %err, "undecodable message skipped");
+                    *self.stats.undecodable.entry(event.channel).or_default() += 1;
+                }
+            }
         }
     }
 }
@@ -238,6 +311,29 @@ mod tests {
             vote: 0.5,
         };
         assert!(SteeringCommand::from(&weird).is_stop());
+    }
+
+    #[test]
+    fn typed_reading_skips_self_tests_and_counts_bad_messages() {
+        let mut writer = crate::log::LogWriter::new(Vec::new());
+        writer
+            .write_event(1, "LCM_SELF_TEST", b"lcm self test")
+            .unwrap();
+        writer.write_message(2, "POSE", &pose_t::default()).unwrap();
+        let mut broken = pose_t::default().encode().unwrap();
+        broken.truncate(30);
+        writer.write_event(3, "POSE", &broken).unwrap();
+        writer
+            .write_message(4, "STEERING_COMMAND", &steering_command_t::default())
+            .unwrap();
+        let bytes = writer.into_inner();
+        let mut typed = TypedEvents::new(LogReader::new(bytes.as_slice()));
+        let events: Vec<TypedEvent> = typed.by_ref().map(Result::unwrap).collect();
+        let channels: Vec<&str> = events.iter().map(|e| e.channel.as_str()).collect();
+        assert_eq!(channels, ["POSE", "STEERING_COMMAND"]);
+        assert_eq!(events[1].event_number, 3);
+        assert_eq!(typed.stats().unknown["LCM_SELF_TEST"], 1);
+        assert_eq!(typed.stats().undecodable["POSE"], 1);
     }
 
     #[test]
