@@ -8,6 +8,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use arcnav_perception::{PerceptionConfig, SensorConfig};
 use arcnav_vehicle::{ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
@@ -20,6 +21,8 @@ pub const DEFAULT_TOML: &str = include_str!("../config/default.toml");
 pub struct Config {
     pub vehicle: VehicleConfig,
     pub arcs: ArcSetConfig,
+    pub sensor: SensorConfig,
+    pub perception: PerceptionConfig,
 }
 
 /// A configuration that could not be loaded.
@@ -105,6 +108,10 @@ impl Config {
         self.arcs
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("arcs"))?;
+        self.sensor.validate().map_err(|e| e.within("sensor"))?;
+        self.perception
+            .validate_for(&self.vehicle)
+            .map_err(|e| e.within("perception"))?;
         Ok(())
     }
 
@@ -268,6 +275,26 @@ mod tests {
         let msg = parse_error("[vehicle]\nmin_turning_radius_m = 9.0\n");
         assert!(
             msg.starts_with("test.toml: invalid configuration: `arcs.min_radius_m`: is 8 m, tighter than the vehicle's minimum turning radius (vehicle.min_turning_radius_m = 9 m)"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_perception_threshold_laxer_than_the_vehicle_is_refused() {
+        let msg = parse_error("[vehicle]\ntolerated_step_m = 0.15\n");
+        assert!(
+            msg.starts_with("test.toml: invalid configuration: `perception.cells.max_height_variation_m`: is 0.2, more than vehicle.tolerated_step_m (0.15)"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_sensor_preset_is_named() {
+        let msg = parse_error("[sensor]\npreset = \"velodyne\"\n");
+        assert!(
+            msg.starts_with(
+                "test.toml, line 2, `sensor.preset`: unknown variant `velodyne`, expected one of"
+            ),
             "{msg}"
         );
     }

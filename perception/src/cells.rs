@@ -1,0 +1,526 @@
+//! The per-image cell classifier of 002 §4 ("early traversability evaluation").
+//!
+//! Every valid pixel is projected into the gravity-aligned vehicle frame of
+//! the capture pose (x forward, y left, z up; the pose's roll and pitch
+//! removed) and binned into a grid of 20 cm cells. Per cell it keeps the point
+//! count, min/max z and the sums of a least-squares plane. A cell is
+//! untraversable for
+//!
+//! - (a) **height variation**: its points span more than the tolerated step;
+//! - (b) **slope**: its fitted plane is steeper than the vehicle's limit;
+//! - (c) **discontinuity**: the heights of a neighbouring cell lie more than
+//!   the tolerated step above or below its own;
+//!
+//! (a) and (b) only with at least 5 points, "to avoid frequent erroneous
+//! classification". Untraversable cells are grouped into 8-connected regions.
+//! Only cells with data are evaluated; nothing is interpolated; nothing is
+//! carried from one image to the next.
+//!
+//! Work is proportional to the valid pixels: the grid itself is only a map
+//! from cell to slot (4 bytes a cell, so it stays in cache); the
+//! accumulators of the cells an image touches live densely in touch order,
+//! and only those are evaluated and reset. Beam directions are
+//! separable (`cos el·(cos az, sin az) , sin el`), so per image only one
+//! 3-vector per column and per row is computed.
+
+use arcnav_vehicle::Isometry;
+use arcnav_vehicle::frames::level_frame;
+
+use crate::config::PerceptionConfig;
+use crate::evaluator::{
+    ImageStats, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, TerrainEvaluator,
+};
+use crate::fov::FovBuilder;
+use crate::image::RangeImage;
+
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    /// Position in the grid (`iy * side + ix`).
+    index: u32,
+    count: u32,
+    z_min: f32,
+    z_max: f32,
+    /// Σx, Σy, Σz, Σxx, Σxy, Σyy, Σxz, Σyz with x, y relative to the cell centre.
+    sums: [f32; 8],
+}
+
+impl Cell {
+    fn new(index: u32) -> Self {
+        Self {
+            index,
+            count: 0,
+            z_min: f32::INFINITY,
+            z_max: f32::NEG_INFINITY,
+            sums: [0.0; 8],
+        }
+    }
+
+    /// Adds a point (x, y relative to the cell centre). Values are finite.
+    #[inline(always)]
+    fn add(&mut self, dx: f32, dy: f32, z: f32) {
+        self.count += 1;
+        self.z_min = if z < self.z_min { z } else { self.z_min };
+        self.z_max = if z > self.z_max { z } else { self.z_max };
+        let terms = [dx, dy, z, dx * dx, dx * dy, dy * dy, dx * z, dy * z];
+        for (sum, term) in self.sums.iter_mut().zip(terms) {
+            *sum += term;
+        }
+    }
+}
+
+/// Least-squares plane sums over one cell or a window of cells, with x and
+/// y relative to the centre of the cell being judged (offsets stay below a
+/// metre, so f32 keeps millimetres; the solve runs in f64).
+#[derive(Debug, Clone, Copy, Default)]
+struct PlaneSums {
+    n: f32,
+    sx: f32,
+    sy: f32,
+    sz: f32,
+    sxx: f32,
+    sxy: f32,
+    syy: f32,
+    sxz: f32,
+    syz: f32,
+}
+
+impl PlaneSums {
+    /// Adds a cell whose centre lies at (ox, oy) from the judged cell's.
+    #[inline]
+    fn add(&mut self, cell: &Cell, ox: f32, oy: f32) {
+        let n = cell.count as f32;
+        let [sx, sy, sz, sxx, sxy, syy, sxz, syz] = cell.sums;
+        self.n += n;
+        self.sx += sx + n * ox;
+        self.sy += sy + n * oy;
+        self.sz += sz;
+        self.sxx += sxx + 2.0 * ox * sx + n * ox * ox;
+        self.syy += syy + 2.0 * oy * sy + n * oy * oy;
+        self.sxy += sxy + ox * sy + oy * sx + n * ox * oy;
+        self.sxz += sxz + ox * sz;
+        self.syz += syz + oy * sz;
+    }
+
+    /// Tangent² of the fitted plane's tilt, if the points spread enough in
+    /// both horizontal directions to define a plane.
+    fn slope_tan2(&self, min_variance: f64) -> Option<f64> {
+        let n = f64::from(self.n);
+        if n < 3.0 {
+            return None;
+        }
+        let (mx, my, mz) = (
+            f64::from(self.sx) / n,
+            f64::from(self.sy) / n,
+            f64::from(self.sz) / n,
+        );
+        let cxx = f64::from(self.sxx) / n - mx * mx;
+        let cyy = f64::from(self.syy) / n - my * my;
+        let cxy = f64::from(self.sxy) / n - mx * my;
+        let cxz = f64::from(self.sxz) / n - mx * mz;
+        let cyz = f64::from(self.syz) / n - my * mz;
+        let det = cxx * cyy - cxy * cxy;
+        let trace = cxx + cyy;
+        let smallest = 0.5 * (trace - (trace * trace - 4.0 * det).max(0.0).sqrt());
+        if smallest <= min_variance || det <= 0.0 {
+            return None;
+        }
+        let a = (cyy * cxz - cxy * cyz) / det;
+        let b = (cxx * cyz - cxy * cxz) / det;
+        Some(a * a + b * b)
+    }
+}
+
+/// The trig of the last beam table seen, so a sensor's table is processed once.
+#[derive(Debug, Default)]
+struct BeamTrig {
+    elevation: Vec<f32>,
+    azimuth: Vec<f32>,
+    cos_el: Vec<f32>,
+    sin_el: Vec<f32>,
+    cos_az: Vec<f32>,
+    sin_az: Vec<f32>,
+}
+
+impl BeamTrig {
+    fn update(&mut self, elevation: &[f32], azimuth: &[f32]) {
+        if self.elevation != elevation {
+            self.elevation.clear();
+            self.elevation.extend_from_slice(elevation);
+            self.cos_el.clear();
+            self.sin_el.clear();
+            for &e in elevation {
+                let (s, c) = f64::from(e).sin_cos();
+                self.sin_el.push(s as f32);
+                self.cos_el.push(c as f32);
+            }
+        }
+        if self.azimuth != azimuth {
+            self.azimuth.clear();
+            self.azimuth.extend_from_slice(azimuth);
+            self.cos_az.clear();
+            self.sin_az.clear();
+            for &a in azimuth {
+                let (s, c) = f64::from(a).sin_cos();
+                self.sin_az.push(s as f32);
+                self.cos_az.push(c as f32);
+            }
+        }
+    }
+}
+
+const EMPTY_SLOT: u32 = u32::MAX;
+
+/// The 002 §4 classifier. Build it with [`PerceptionConfig::build_evaluator`]
+/// or [`CellClassifier::new`].
+pub struct CellClassifier {
+    cell_size: f32,
+    min_points: u32,
+    max_height_variation: f32,
+    max_slope_tan2: f64,
+    max_discontinuity: f32,
+    min_plane_variance: f64,
+    min_range: f32,
+    max_range: f32,
+    fov_max_vertices: usize,
+    /// Cells per side; the grid spans [-half_extent, half_extent]² of the level frame.
+    side: usize,
+    /// Points are binned only this many cells away from the grid's edge, so
+    /// every neighbour a window reaches exists.
+    margin: usize,
+    /// Index offsets of the slope window's cells, with their (dx, dy) in metres.
+    window: Vec<(isize, f32, f32)>,
+    /// Index offsets of the neighbours after a cell in scan order (right,
+    /// and the three above): each pair of neighbours is compared once.
+    forward: [isize; 4],
+    half_extent: f32,
+    /// Per grid cell: its slot in `cells`, or `EMPTY_SLOT`.
+    slots: Vec<u32>,
+    /// The cells this image touched, in first-touch order.
+    cells: Vec<Cell>,
+    /// Per touched cell (same slot): its reasons and its region.
+    labels: Vec<(Reasons, u32)>,
+    queue: Vec<u32>,
+    trig: BeamTrig,
+    column_terms: Vec<[f32; 3]>,
+    /// Per column: the first and last row with a valid return.
+    column_rows: Vec<(u32, u32)>,
+    fov: FovBuilder,
+}
+
+impl CellClassifier {
+    /// A classifier with a grid covering `max_range_m` around the sensor.
+    pub fn new(config: &PerceptionConfig) -> Self {
+        let c = &config.cells;
+        let cell_size = c.cell_size_m as f32;
+        // The sensor may sit a few metres from the vehicle origin.
+        let half_extent = (config.max_range_m + 5.0) as f32;
+        let side = (2.0 * half_extent / cell_size).ceil() as usize;
+        let half_extent = side as f32 * cell_size / 2.0;
+        let radius = (c.slope_window_cells / 2) as isize;
+        let s = side as isize;
+        let window = (-radius..=radius)
+            .flat_map(|dy| {
+                (-radius..=radius)
+                    .map(move |dx| (dy * s + dx, dx as f32 * cell_size, dy as f32 * cell_size))
+            })
+            .collect();
+        Self {
+            cell_size,
+            min_points: c.min_points,
+            max_height_variation: c.max_height_variation_m as f32,
+            max_slope_tan2: c.max_slope_deg.to_radians().tan().powi(2),
+            max_discontinuity: c.max_discontinuity_m as f32,
+            min_plane_variance: c.min_plane_spread_m * c.min_plane_spread_m,
+            min_range: config.min_range_m as f32,
+            max_range: config.max_range_m as f32,
+            fov_max_vertices: config.fov_max_vertices,
+            side,
+            margin: radius.max(1) as usize,
+            window,
+            forward: [1, s - 1, s, s + 1],
+            half_extent,
+            slots: vec![EMPTY_SLOT; side * side],
+            cells: Vec::new(),
+            labels: Vec::new(),
+            queue: Vec::new(),
+            trig: BeamTrig::default(),
+            column_terms: Vec::new(),
+            column_rows: Vec::new(),
+            fov: FovBuilder::default(),
+        }
+    }
+
+    /// Projects and bins every valid pixel.
+    fn bin(&mut self, image: &RangeImage, level_from_sensor: &Isometry, stats: &mut ImageStats) {
+        self.trig
+            .update(&image.beams.elevation, &image.beams.azimuth);
+        let rotation = level_from_sensor.rotation.to_rotation_matrix();
+        let m = rotation.matrix();
+        let column = |i: usize| [m[(0, i)] as f32, m[(1, i)] as f32, m[(2, i)] as f32];
+        let (r0, r1, r2) = (column(0), column(1), column(2));
+        let t = level_from_sensor.translation.vector;
+        let t = [t.x as f32, t.y as f32, t.z as f32];
+        let cols = image.cols();
+        self.column_terms.clear();
+        for (&ca, &sa) in self.trig.cos_az.iter().zip(&self.trig.sin_az) {
+            self.column_terms.push([
+                ca * r0[0] + sa * r1[0],
+                ca * r0[1] + sa * r1[1],
+                ca * r0[2] + sa * r1[2],
+            ]);
+        }
+        self.fov.start(cols, [t[0], t[1]]);
+        self.column_rows.clear();
+        self.column_rows.resize(cols, (u32::MAX, 0));
+        let (cell_size, inv_cell, half, side) = (
+            self.cell_size,
+            1.0 / self.cell_size,
+            self.half_extent,
+            self.side,
+        );
+        // The interior of the grid, in cell units.
+        let (lo, hi) = (self.margin as f32, (side - self.margin) as f32);
+        let (min_range, max_range) = (self.min_range.max(f32::MIN_POSITIVE), self.max_range);
+        let (mut no_return, mut out_of_range, mut outside_grid, mut valid) =
+            (0u32, 0u32, 0u32, 0u32);
+        let column_terms = std::mem::take(&mut self.column_terms);
+        for (row, ranges) in image.range.chunks_exact(cols.max(1)).enumerate() {
+            let (ce, se) = (self.trig.cos_el[row], self.trig.sin_el[row]);
+            let v = [se * r2[0], se * r2[1], se * r2[2]];
+            for (col, (&range, u)) in ranges.iter().zip(&column_terms).enumerate() {
+                // NaN fails every comparison, so one test keeps only valid returns.
+                if !(range >= min_range && range <= max_range) {
+                    if range > 0.0 && range.is_finite() {
+                        out_of_range += 1;
+                    } else {
+                        no_return += 1;
+                    }
+                    continue;
+                }
+                let x = (ce * u[0] + v[0]) * range + t[0];
+                let y = (ce * u[1] + v[1]) * range + t[1];
+                let z = (ce * u[2] + v[2]) * range + t[2];
+                let fx = (x + half) * inv_cell;
+                let fy = (y + half) * inv_cell;
+                if !(fx >= lo && fx < hi && fy >= lo && fy < hi) {
+                    outside_grid += 1;
+                    continue;
+                }
+                debug_assert!(fx >= 0.0 && fy >= 0.0 && fx < side as f32 && fy < side as f32);
+                // SAFETY: fx and fy were just checked to be finite and within
+                // [margin, side - margin), far inside i32's range.
+                let (ix, iy) = unsafe {
+                    (
+                        fx.to_int_unchecked::<i32>() as usize,
+                        fy.to_int_unchecked::<i32>() as usize,
+                    )
+                };
+                let index = iy * side + ix;
+                let slot = &mut self.slots[index];
+                if *slot == EMPTY_SLOT {
+                    *slot = self.cells.len() as u32;
+                    self.cells.push(Cell::new(index as u32));
+                }
+                let dx = x - ((ix as f32 + 0.5) * cell_size - half);
+                let dy = y - ((iy as f32 + 0.5) * cell_size - half);
+                self.cells[*slot as usize].add(dx, dy, z);
+                valid += 1;
+                // The column's highest and lowest valid rows give its far and
+                // near return, for the field of view.
+                let span = &mut self.column_rows[col];
+                span.0 = span.0.min(row as u32);
+                span.1 = row as u32;
+            }
+        }
+        // Far and near return of each column, for the field of view.
+        for (col, (&(top, bottom), u)) in self.column_rows.iter().zip(&column_terms).enumerate() {
+            if top == u32::MAX {
+                continue;
+            }
+            for row in [top, bottom] {
+                let row = row as usize;
+                let (ce, se) = (self.trig.cos_el[row], self.trig.sin_el[row]);
+                let range = image.range[row * cols + col];
+                let x = (ce * u[0] + se * r2[0]) * range + t[0];
+                let y = (ce * u[1] + se * r2[1]) * range + t[1];
+                self.fov.add(col, x, y);
+            }
+        }
+        self.column_terms = column_terms;
+        stats.no_return += no_return;
+        stats.out_of_range += out_of_range;
+        stats.outside_grid += outside_grid;
+        stats.valid_points += valid;
+    }
+
+    /// The slot of the cell `offset` grid indices away from `cell`, if it
+    /// holds points. Binned cells keep `margin` cells from the edge, so every
+    /// offset of the window stays inside the grid.
+    #[inline]
+    fn neighbour(&self, cell: &Cell, offset: isize) -> Option<usize> {
+        let slot = *self.slots.get((cell.index as isize + offset) as usize)?;
+        (slot != EMPTY_SLOT).then_some(slot as usize)
+    }
+
+    /// Plane sums of the slope window around `cell`.
+    fn window_sums(&self, cell: &Cell) -> PlaneSums {
+        let mut sums = PlaneSums::default();
+        for &(offset, ox, oy) in &self.window {
+            if let Some(slot) = self.neighbour(cell, offset) {
+                sums.add(&self.cells[slot], ox, oy);
+            }
+        }
+        sums
+    }
+
+    /// Applies criteria (a), (b), (c) to every touched cell.
+    fn classify(&mut self, stats: &mut ImageStats) {
+        self.labels.clear();
+        self.labels
+            .resize(self.cells.len(), (Reasons::NONE, u32::MAX));
+        // (c) first: each pair of neighbours once, both sides of a jump marked.
+        for slot in 0..self.cells.len() {
+            let cell = self.cells[slot];
+            for offset in self.forward {
+                let Some(n) = self.neighbour(&cell, offset) else {
+                    continue;
+                };
+                let neighbour = &self.cells[n];
+                let gap = (neighbour.z_min - cell.z_max).max(cell.z_min - neighbour.z_max);
+                if gap > self.max_discontinuity {
+                    self.labels[slot].0.insert(Reasons::DISCONTINUITY);
+                    self.labels[n].0.insert(Reasons::DISCONTINUITY);
+                }
+            }
+        }
+        for slot in 0..self.cells.len() {
+            let cell = self.cells[slot];
+            let mut reasons = self.labels[slot].0;
+            if cell.count >= self.min_points {
+                if cell.z_max - cell.z_min > self.max_height_variation {
+                    reasons.insert(Reasons::HEIGHT_VARIATION);
+                }
+                if self
+                    .window_sums(&cell)
+                    .slope_tan2(self.min_plane_variance)
+                    .is_some_and(|tan2| tan2 > self.max_slope_tan2)
+                {
+                    reasons.insert(Reasons::SLOPE);
+                }
+            }
+            self.labels[slot].0 = reasons;
+            stats.cells_evaluated += 1;
+            if !reasons.is_empty() {
+                stats.untraversable += 1;
+                for (count, (reason, _)) in stats.by_reason.iter_mut().zip(Reasons::ALL) {
+                    *count += u32::from(reasons.contains(reason));
+                }
+            }
+        }
+    }
+
+    /// Groups untraversable cells into 8-connected regions and writes them,
+    /// in the world frame, into `report`.
+    fn emit(
+        &mut self,
+        world_from_level: &Isometry,
+        report: &mut ObstacleReport,
+        stats: &mut ImageStats,
+    ) {
+        for seed in 0..self.cells.len() {
+            if self.labels[seed].0.is_empty() || self.labels[seed].1 != u32::MAX {
+                continue;
+            }
+            let region = report.regions.len() as u32;
+            let mut summary = Region {
+                cells: 0,
+                reasons: Reasons::NONE,
+            };
+            self.queue.clear();
+            self.queue.push(seed as u32);
+            self.labels[seed].1 = region;
+            while let Some(slot) = self.queue.pop() {
+                let cell = self.cells[slot as usize];
+                summary.cells += 1;
+                summary.reasons.insert(self.labels[slot as usize].0);
+                let side = self.side as isize;
+                for offset in [-side - 1, -side, -side + 1, -1, 1, side - 1, side, side + 1] {
+                    let Some(n) = self.neighbour(&cell, offset) else {
+                        continue;
+                    };
+                    let label = &mut self.labels[n];
+                    if !label.0.is_empty() && label.1 == u32::MAX {
+                        label.1 = region;
+                        self.queue.push(n as u32);
+                    }
+                }
+            }
+            report.regions.push(summary);
+        }
+        stats.regions = report.regions.len() as u32;
+        let (sin, cos) = arcnav_vehicle::frames::yaw_of(world_from_level).sin_cos();
+        let origin = world_from_level.translation.vector;
+        for (cell, &(reasons, region)) in self.cells.iter().zip(&self.labels) {
+            if reasons.is_empty() {
+                continue;
+            }
+            let (ix, iy) = (
+                cell.index as usize % self.side,
+                cell.index as usize / self.side,
+            );
+            let cx = f64::from((ix as f32 + 0.5) * self.cell_size - self.half_extent);
+            let cy = f64::from((iy as f32 + 0.5) * self.cell_size - self.half_extent);
+            report.cells.push(ObstacleCell {
+                x: origin.x + cos * cx - sin * cy,
+                y: origin.y + sin * cx + cos * cy,
+                z_min: cell.z_min + origin.z as f32,
+                z_max: cell.z_max + origin.z as f32,
+                reasons,
+                region,
+            });
+        }
+    }
+
+    fn reset_touched(&mut self) {
+        for cell in &self.cells {
+            self.slots[cell.index as usize] = EMPTY_SLOT;
+        }
+        self.cells.clear();
+    }
+}
+
+impl TerrainEvaluator for CellClassifier {
+    fn name(&self) -> &'static str {
+        "cells"
+    }
+
+    fn evaluate(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+    ) -> Result<ImageStats, PerceptionError> {
+        report.clear();
+        image.validate()?;
+        report.utime = image.utime;
+        report.sensor.push_str(&image.sensor);
+        report.cell_size_m = f64::from(self.cell_size);
+        let mut stats = ImageStats {
+            pixels: image.range.len() as u32,
+            ..ImageStats::default()
+        };
+        if image.range.is_empty() {
+            return Ok(stats);
+        }
+        let world_from_level = level_frame(world_from_vehicle);
+        let level_from_sensor =
+            world_from_level.inverse() * world_from_vehicle * image.vehicle_from_sensor;
+        self.bin(image, &level_from_sensor, &mut stats);
+        self.classify(&mut stats);
+        self.emit(&world_from_level, report, &mut stats);
+        self.fov
+            .finish(&world_from_level, self.fov_max_vertices, &mut report.fov);
+        self.reset_touched();
+        Ok(stats)
+    }
+}

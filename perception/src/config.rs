@@ -1,0 +1,226 @@
+//! Perception's configuration (`[perception]`) and the evaluator registry.
+
+use arcnav_vehicle::VehicleConfig;
+use arcnav_vehicle::config::{self, ConfigError};
+use serde::{Deserialize, Serialize};
+
+use crate::cells::CellClassifier;
+use crate::evaluator::TerrainEvaluator;
+
+/// Evaluators arcnav can build by name.
+pub const EVALUATORS: [&str; 1] = ["cells"];
+
+/// Lives in `[perception]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PerceptionConfig {
+    /// Which terrain evaluator classifies images (see [`EVALUATORS`]).
+    pub evaluator: String,
+    /// Returns closer than this are ignored (the vehicle's own body), m.
+    pub min_range_m: f64,
+    /// Returns beyond this are ignored, m.
+    pub max_range_m: f64,
+    /// Most vertices of the field-of-view polygon sent to the local map.
+    pub fov_max_vertices: usize,
+    /// The per-cell classifier of 002 §4.
+    pub cells: CellsConfig,
+}
+
+impl Default for PerceptionConfig {
+    fn default() -> Self {
+        Self {
+            evaluator: "cells".into(),
+            min_range_m: 0.5,
+            max_range_m: 40.0,
+            fov_max_vertices: 128,
+            cells: CellsConfig::default(),
+        }
+    }
+}
+
+/// Lives in `[perception.cells]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CellsConfig {
+    /// Grid cell size, m (002 §4: 20 cm).
+    pub cell_size_m: f64,
+    /// Criteria (a) and (b) are evaluated only with at least this many points (002 §4: 5).
+    pub min_points: u32,
+    /// (a) A cell whose points span more height than this is untraversable, m.
+    pub max_height_variation_m: f64,
+    /// (b) A cell whose fitted plane is steeper than this is untraversable, degrees.
+    pub max_slope_deg: f64,
+    /// (c) A height gap larger than this to a neighbouring cell is a discontinuity, m.
+    pub max_discontinuity_m: f64,
+    /// (b) is evaluated only when the points spread at least this much
+    /// (standard deviation) across both horizontal axes, m.
+    pub min_plane_spread_m: f64,
+    /// (b) fits the plane to the points of this many cells square around the
+    /// cell (odd; 1 = the cell alone, as in 002 §4). A single 20 cm cell
+    /// straddling a tolerated 10 cm step fits a 27-37° plane; over 3×3 cells
+    /// (0.6 m) a true slope keeps its angle and a small step does not.
+    pub slope_window_cells: u32,
+}
+
+impl Default for CellsConfig {
+    fn default() -> Self {
+        let vehicle = VehicleConfig::default();
+        Self {
+            cell_size_m: 0.2,
+            min_points: 5,
+            max_height_variation_m: vehicle.tolerated_step_m,
+            max_slope_deg: vehicle.max_slope_deg,
+            max_discontinuity_m: vehicle.tolerated_step_m,
+            min_plane_spread_m: 0.03,
+            slope_window_cells: 3,
+        }
+    }
+}
+
+impl PerceptionConfig {
+    /// Checks the values and that no threshold lets pass terrain the vehicle
+    /// cannot drive. Keys are relative to `[perception]`, except those of
+    /// the vehicle named in messages.
+    pub fn validate_for(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
+        if !EVALUATORS.contains(&self.evaluator.as_str()) {
+            return Err(ConfigError::new(
+                "evaluator",
+                format!(
+                    "{:?} is not a known evaluator (known: {})",
+                    self.evaluator,
+                    EVALUATORS.join(", ")
+                ),
+            ));
+        }
+        config::non_negative("min_range_m", self.min_range_m)?;
+        config::positive("max_range_m", self.max_range_m)?;
+        if self.min_range_m >= self.max_range_m {
+            return Err(ConfigError::new(
+                "min_range_m",
+                format!(
+                    "is {} m, must be below max_range_m ({} m)",
+                    self.min_range_m, self.max_range_m
+                ),
+            ));
+        }
+        if self.max_range_m > 500.0 {
+            return Err(ConfigError::new(
+                "max_range_m",
+                format!("is {} m; at most 500 m is evaluated", self.max_range_m),
+            ));
+        }
+        if !(6..=100_000).contains(&self.fov_max_vertices) {
+            return Err(ConfigError::new(
+                "fov_max_vertices",
+                format!("is {}, must be 6 to 100000", self.fov_max_vertices),
+            ));
+        }
+        let c = &self.cells;
+        config::in_range("cells.cell_size_m", c.cell_size_m, 0.02, 2.0)?;
+        if !(1..=1_000_000).contains(&c.min_points) {
+            return Err(ConfigError::new(
+                "cells.min_points",
+                format!("is {}, must be at least 1", c.min_points),
+            ));
+        }
+        config::positive("cells.max_height_variation_m", c.max_height_variation_m)?;
+        config::in_range("cells.max_slope_deg", c.max_slope_deg, 0.1, 89.0)?;
+        config::positive("cells.max_discontinuity_m", c.max_discontinuity_m)?;
+        config::non_negative("cells.min_plane_spread_m", c.min_plane_spread_m)?;
+        if c.slope_window_cells.is_multiple_of(2) || c.slope_window_cells > 9 {
+            return Err(ConfigError::new(
+                "cells.slope_window_cells",
+                format!("is {}, must be 1, 3, 5, 7 or 9", c.slope_window_cells),
+            ));
+        }
+        let too_lax = |key: &str, value: f64, vehicle_key: &str, limit: f64| {
+            (value > limit).then(|| {
+                ConfigError::new(
+                    key,
+                    format!(
+                        "is {value}, more than vehicle.{vehicle_key} ({limit}): perception would pass terrain the vehicle cannot drive"
+                    ),
+                )
+            })
+        };
+        let checks = [
+            too_lax(
+                "cells.max_height_variation_m",
+                c.max_height_variation_m,
+                "tolerated_step_m",
+                vehicle.tolerated_step_m,
+            ),
+            too_lax(
+                "cells.max_discontinuity_m",
+                c.max_discontinuity_m,
+                "tolerated_step_m",
+                vehicle.tolerated_step_m,
+            ),
+            too_lax(
+                "cells.max_slope_deg",
+                c.max_slope_deg,
+                "max_slope_deg",
+                vehicle.max_slope_deg,
+            ),
+        ];
+        checks.into_iter().flatten().next().map_or(Ok(()), Err)
+    }
+
+    /// Builds the configured evaluator (call `validate_for` first).
+    pub fn build_evaluator(&self) -> Result<Box<dyn TerrainEvaluator>, ConfigError> {
+        match self.evaluator.as_str() {
+            "cells" => Ok(Box::new(CellClassifier::new(self))),
+            other => Err(ConfigError::new(
+                "evaluator",
+                format!(
+                    "{other:?} is not a known evaluator (known: {})",
+                    EVALUATORS.join(", ")
+                ),
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_derive_from_the_vehicle_and_are_valid() {
+        let p = PerceptionConfig::default();
+        assert_eq!(p.cells.cell_size_m, 0.2);
+        assert_eq!(p.cells.min_points, 5);
+        assert_eq!(p.cells.max_discontinuity_m, 0.2);
+        p.validate_for(&VehicleConfig::default()).unwrap();
+        assert_eq!(p.build_evaluator().unwrap().name(), "cells");
+    }
+
+    #[test]
+    fn a_threshold_laxer_than_the_vehicle_is_refused() {
+        let vehicle = VehicleConfig {
+            tolerated_step_m: 0.15,
+            ..Default::default()
+        };
+        let err = PerceptionConfig::default()
+            .validate_for(&vehicle)
+            .unwrap_err();
+        assert_eq!(err.key, "cells.max_height_variation_m");
+        assert!(
+            err.reason.contains("vehicle.tolerated_step_m (0.15)"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_evaluator_lists_the_known_ones() {
+        let p = PerceptionConfig {
+            evaluator: "magic".into(),
+            ..Default::default()
+        };
+        let err = p.validate_for(&VehicleConfig::default()).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "`evaluator`: \"magic\" is not a known evaluator (known: cells)"
+        );
+    }
+}

@@ -1,0 +1,185 @@
+//! What every terrain evaluator produces, and the trait they implement.
+//!
+//! An evaluator turns ONE range image, with the vehicle pose at its capture
+//! time, into the untraversable cells of that image (world frame) and the
+//! ground footprint the image observed. That is all the local map learns
+//! from perception (002 §4–5). The trait assumes nothing about how the cells
+//! are found: the paper's per-cell classifier is one implementation; a
+//! multi-scale height-difference map (000), a hierarchical PCA (001) or a
+//! Kalman elevation map (004, which keeps state across images) fit behind it.
+
+use arcnav_vehicle::{Isometry, Utime};
+
+use crate::fov::FovPolygon;
+use crate::image::{ImageError, RangeImage};
+
+/// Why a cell is untraversable (a bit set; evaluators may combine reasons).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, PartialOrd, Ord)]
+pub struct Reasons(u8);
+
+impl Reasons {
+    pub const NONE: Self = Self(0);
+    /// The height variation inside the cell is too large (002 §4, criterion a).
+    pub const HEIGHT_VARIATION: Self = Self(1);
+    /// The plane fitted to the cell is too steep (criterion b).
+    pub const SLOPE: Self = Self(2);
+    /// The elevation jumps between the cell and a neighbour (criterion c).
+    pub const DISCONTINUITY: Self = Self(4);
+    /// Every reason, with its name, in bit order.
+    pub const ALL: [(Self, &'static str); 3] = [
+        (Self::HEIGHT_VARIATION, "height variation"),
+        (Self::SLOPE, "slope"),
+        (Self::DISCONTINUITY, "discontinuity"),
+    ];
+
+    pub const fn bits(self) -> u8 {
+        self.0
+    }
+
+    pub const fn from_bits(bits: u8) -> Self {
+        Self(bits)
+    }
+
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    pub const fn contains(self, other: Self) -> bool {
+        self.0 & other.0 == other.0 && other.0 != 0
+    }
+
+    pub fn insert(&mut self, other: Self) {
+        self.0 |= other.0;
+    }
+
+    #[must_use]
+    pub const fn union(self, other: Self) -> Self {
+        Self(self.0 | other.0)
+    }
+
+    /// Names of the reasons set, e.g. `"height variation+slope"`.
+    pub fn names(self) -> String {
+        let names: Vec<&str> = Self::ALL
+            .iter()
+            .filter(|(r, _)| self.contains(*r))
+            .map(|(_, n)| *n)
+            .collect();
+        if names.is_empty() {
+            "none".into()
+        } else {
+            names.join("+")
+        }
+    }
+}
+
+/// One untraversable cell, world frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObstacleCell {
+    /// Cell centre, world frame, m.
+    pub x: f64,
+    pub y: f64,
+    /// Lowest and highest point seen in the cell, world z, m.
+    pub z_min: f32,
+    pub z_max: f32,
+    pub reasons: Reasons,
+    /// Index into [`ObstacleReport::regions`].
+    pub region: u32,
+}
+
+/// A connected group of untraversable cells of one image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Region {
+    /// Number of cells.
+    pub cells: u32,
+    /// Union of the cells' reasons.
+    pub reasons: Reasons,
+}
+
+/// Everything perception reports about one image.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ObstacleReport {
+    /// Capture time of the image.
+    pub utime: Utime,
+    pub sensor: String,
+    pub cell_size_m: f64,
+    pub cells: Vec<ObstacleCell>,
+    pub regions: Vec<Region>,
+    /// The ground the image actually observed, world frame.
+    pub fov: FovPolygon,
+}
+
+impl ObstacleReport {
+    /// Empties the report, keeping its allocations.
+    pub fn clear(&mut self) {
+        self.utime = 0;
+        self.sensor.clear();
+        self.cells.clear();
+        self.regions.clear();
+        self.fov.vertices.clear();
+    }
+}
+
+/// Counts of one evaluation. Evaluators never read a clock; executors time them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ImageStats {
+    pub pixels: u32,
+    /// Returns projected and binned.
+    pub valid_points: u32,
+    /// Pixels without a return (0, negative, NaN, infinite).
+    pub no_return: u32,
+    /// Returns closer than `min_range_m` or beyond `max_range_m`.
+    pub out_of_range: u32,
+    /// Returns outside the evaluation grid.
+    pub outside_grid: u32,
+    /// Cells holding at least one point.
+    pub cells_evaluated: u32,
+    /// Cells classified untraversable.
+    pub untraversable: u32,
+    /// Untraversable cells per reason, in [`Reasons::ALL`] order (a cell
+    /// with two reasons counts in both).
+    pub by_reason: [u32; 3],
+    pub regions: u32,
+}
+
+impl ImageStats {
+    /// Adds `other`'s counts to these.
+    pub fn accumulate(&mut self, other: &ImageStats) {
+        self.pixels += other.pixels;
+        self.valid_points += other.valid_points;
+        self.no_return += other.no_return;
+        self.out_of_range += other.out_of_range;
+        self.outside_grid += other.outside_grid;
+        self.cells_evaluated += other.cells_evaluated;
+        self.untraversable += other.untraversable;
+        for (a, b) in self.by_reason.iter_mut().zip(other.by_reason) {
+            *a += b;
+        }
+        self.regions += other.regions;
+    }
+}
+
+/// Why an image could not be evaluated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PerceptionError {
+    #[error(transparent)]
+    Image(#[from] ImageError),
+}
+
+/// A per-image terrain evaluator.
+pub trait TerrainEvaluator: Send {
+    /// Short name, as in the configuration.
+    fn name(&self) -> &'static str;
+
+    /// Evaluates `image`, taken with the vehicle at `world_from_vehicle` (the
+    /// pose at capture time), into `report` (cleared first). Allocates
+    /// nothing once warmed up to the image size.
+    fn evaluate(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+    ) -> Result<ImageStats, PerceptionError>;
+
+    /// Forgets anything carried between images (for evaluators that fuse).
+    fn reset(&mut self) {}
+}

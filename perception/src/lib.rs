@@ -1,0 +1,34 @@
+//! # arcnav-perception
+//!
+//! Early traversability evaluation (002 §4): each range image, on its own,
+//! becomes the list of untraversable cells it shows (world frame) plus the
+//! ground footprint it observed. Nothing is interpolated and no two images
+//! are merged: remembering is the local map's job.
+//!
+//! - [`image`]: range images and beam tables;
+//! - [`sensor`]: sensor models (ERIM, 64- and 128-beam lidars, custom) and
+//!   rendering of any [`raycast::RayCast`] scene;
+//! - [`evaluator`]: the [`TerrainEvaluator`] trait and its output;
+//! - [`cells`]: the paper's per-cell classifier;
+//! - [`fov`]: the observed footprint polygon;
+//! - [`scene`]: analytic scenes for tests and benchmarks;
+//! - [`config`]: `[perception]` and the evaluator registry.
+
+pub mod cells;
+pub mod config;
+pub mod evaluator;
+pub mod fov;
+pub mod image;
+pub mod raycast;
+pub mod scene;
+pub mod sensor;
+
+pub use cells::CellClassifier;
+pub use config::{CellsConfig, PerceptionConfig};
+pub use evaluator::{
+    ImageStats, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, TerrainEvaluator,
+};
+pub use fov::FovPolygon;
+pub use image::{BeamTable, ImageError, RangeImage};
+pub use raycast::RayCast;
+pub use sensor::{SensorConfig, SensorModel, SensorPreset};

@@ -1,0 +1,397 @@
+//! Range sensors: beam tables, mounts and rates, with presets for the paper's
+//! ERIM scanner and for spinning lidars, and rendering of what a sensor sees
+//! of any [`RayCast`] scene.
+
+use std::ops::Range;
+
+use arcnav_vehicle::config::{self, ConfigError};
+use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+use arcnav_vehicle::time::seconds_to_micros;
+use arcnav_vehicle::{Isometry, Utime};
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::image::{BeamTable, RangeImage};
+use crate::raycast::RayCast;
+
+/// Which sensor. Lives in `[sensor]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SensorPreset {
+    /// The paper's ERIM laser scanner: 64×256, 0.5° per pixel, 2 Hz, roof
+    /// mounted and tilted down (002 §2, §4).
+    Erim,
+    /// A 64-beam spinning lidar: +2° … -24.9°, 2048 columns over 360°, 10 Hz.
+    Lidar64,
+    /// A 128-beam spinning lidar: ±22.5°, 2048 columns over 360°, 10 Hz.
+    Lidar128,
+    /// The `[sensor.custom]` table.
+    Custom,
+}
+
+/// A sensor described field by field (`preset = "custom"`). The defaults
+/// are the ERIM preset's values.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CustomSensorConfig {
+    pub id: String,
+    pub rows: usize,
+    pub cols: usize,
+    /// Elevation of the first row's beam edge, degrees, sensor frame.
+    pub elevation_top_deg: f64,
+    /// Elevation of the last row's beam edge, degrees.
+    pub elevation_bottom_deg: f64,
+    /// Azimuth of the first column's edge, degrees, + left.
+    pub azimuth_left_deg: f64,
+    /// Azimuth of the last column's edge, degrees.
+    pub azimuth_right_deg: f64,
+    pub rate_hz: f64,
+    pub max_range_m: f64,
+    /// Sensor origin in the vehicle frame, m.
+    pub mount_position_m: [f64; 3],
+    /// Sensor → vehicle roll, pitch (+ down), yaw, degrees.
+    pub mount_rpy_deg: [f64; 3],
+}
+
+impl Default for CustomSensorConfig {
+    fn default() -> Self {
+        SensorModel::erim().to_custom()
+    }
+}
+
+/// The sensor arcnav sees with. Lives in `[sensor]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SensorConfig {
+    pub preset: SensorPreset,
+    /// Used when `preset = "custom"`.
+    pub custom: CustomSensorConfig,
+}
+
+impl Default for SensorConfig {
+    fn default() -> Self {
+        Self {
+            preset: SensorPreset::Erim,
+            custom: CustomSensorConfig::default(),
+        }
+    }
+}
+
+impl SensorConfig {
+    /// Keys relative to `[sensor]`.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let c = &self.custom;
+        let key = |k: &str| format!("custom.{k}");
+        if c.id.is_empty()
+            || !c
+                .id
+                .chars()
+                .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+        {
+            return Err(ConfigError::new(
+                key("id"),
+                format!("{:?} must be letters, digits or _", c.id),
+            ));
+        }
+        if !(1..=4096).contains(&c.rows) {
+            return Err(ConfigError::new(
+                key("rows"),
+                format!("is {}, must be 1 to 4096", c.rows),
+            ));
+        }
+        if !(1..=65_536).contains(&c.cols) {
+            return Err(ConfigError::new(
+                key("cols"),
+                format!("is {}, must be 1 to 65536", c.cols),
+            ));
+        }
+        config::in_range(&key("elevation_top_deg"), c.elevation_top_deg, -90.0, 90.0)?;
+        config::in_range(
+            &key("elevation_bottom_deg"),
+            c.elevation_bottom_deg,
+            -90.0,
+            90.0,
+        )?;
+        if c.elevation_bottom_deg >= c.elevation_top_deg {
+            return Err(ConfigError::new(
+                key("elevation_bottom_deg"),
+                format!(
+                    "is {}°, must be below elevation_top_deg ({}°)",
+                    c.elevation_bottom_deg, c.elevation_top_deg
+                ),
+            ));
+        }
+        config::in_range(&key("azimuth_left_deg"), c.azimuth_left_deg, -360.0, 360.0)?;
+        config::in_range(
+            &key("azimuth_right_deg"),
+            c.azimuth_right_deg,
+            -360.0,
+            360.0,
+        )?;
+        if (c.azimuth_left_deg - c.azimuth_right_deg).abs() > 360.0 {
+            return Err(ConfigError::new(
+                key("azimuth_right_deg"),
+                "the azimuth span exceeds 360°",
+            ));
+        }
+        config::positive(&key("rate_hz"), c.rate_hz)?;
+        config::positive(&key("max_range_m"), c.max_range_m)?;
+        for (i, v) in c
+            .mount_position_m
+            .iter()
+            .chain(&c.mount_rpy_deg)
+            .enumerate()
+        {
+            if !v.is_finite() {
+                let k = if i < 3 {
+                    "mount_position_m"
+                } else {
+                    "mount_rpy_deg"
+                };
+                return Err(ConfigError::new(key(k), "holds a value that is not finite"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The sensor this configuration describes.
+    pub fn model(&self) -> Result<SensorModel, ConfigError> {
+        self.validate()?;
+        Ok(match self.preset {
+            SensorPreset::Erim => SensorModel::erim(),
+            SensorPreset::Lidar64 => SensorModel::lidar64(),
+            SensorPreset::Lidar128 => SensorModel::lidar128(),
+            SensorPreset::Custom => SensorModel::from_custom(&self.custom),
+        })
+    }
+}
+
+/// A range sensor: its beams, where it is mounted and how often it images.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorModel {
+    pub id: String,
+    pub beams: BeamTable,
+    /// Sensor → vehicle.
+    pub vehicle_from_sensor: Isometry,
+    pub rate_hz: f64,
+    /// Returns beyond this are not reported, m.
+    pub max_range_m: f64,
+    custom: CustomSensorConfig,
+}
+
+impl SensorModel {
+    /// Builds a model from explicit values.
+    pub fn from_custom(c: &CustomSensorConfig) -> Self {
+        let rad = f64::to_radians;
+        Self {
+            id: c.id.clone(),
+            beams: BeamTable::uniform(
+                c.rows,
+                c.cols,
+                rad(c.elevation_top_deg),
+                rad(c.elevation_bottom_deg),
+                rad(c.azimuth_left_deg),
+                rad(c.azimuth_right_deg),
+            ),
+            vehicle_from_sensor: isometry_from_xyz_rpy(
+                c.mount_position_m,
+                rad(c.mount_rpy_deg[0]),
+                rad(c.mount_rpy_deg[1]),
+                rad(c.mount_rpy_deg[2]),
+            ),
+            rate_hz: c.rate_hz,
+            max_range_m: c.max_range_m,
+            custom: c.clone(),
+        }
+    }
+
+    /// The paper's ERIM: 64×256 pixels of 0.5° (32° × 128°), 2 Hz, 2.2 m up
+    /// on the roof above the front axle, pitched 18° down so its rows look
+    /// from ~3 m in front of the bumper to beyond the 20 m map window.
+    pub fn erim() -> Self {
+        Self::from_custom(&CustomSensorConfig {
+            id: "erim".into(),
+            rows: 64,
+            cols: 256,
+            elevation_top_deg: 16.0,
+            elevation_bottom_deg: -16.0,
+            azimuth_left_deg: 64.0,
+            azimuth_right_deg: -64.0,
+            rate_hz: 2.0,
+            max_range_m: 40.0,
+            mount_position_m: [1.5, 0.0, 2.2],
+            mount_rpy_deg: [0.0, 18.0, 0.0],
+        })
+    }
+
+    /// A 64-beam spinning lidar (HDL-64E-like vertical table), 2048 × 360°, 10 Hz.
+    pub fn lidar64() -> Self {
+        Self::from_custom(&CustomSensorConfig {
+            id: "lidar64".into(),
+            rows: 64,
+            cols: 2048,
+            elevation_top_deg: 2.0,
+            elevation_bottom_deg: -24.9,
+            azimuth_left_deg: 180.0,
+            azimuth_right_deg: -180.0,
+            rate_hz: 10.0,
+            max_range_m: 100.0,
+            mount_position_m: [1.2, 0.0, 2.4],
+            mount_rpy_deg: [0.0, 0.0, 0.0],
+        })
+    }
+
+    /// A 128-beam spinning lidar (±22.5°), 2048 × 360°, 10 Hz.
+    pub fn lidar128() -> Self {
+        Self::from_custom(&CustomSensorConfig {
+            id: "lidar128".into(),
+            rows: 128,
+            cols: 2048,
+            elevation_top_deg: 22.5,
+            elevation_bottom_deg: -22.5,
+            ..Self::lidar64().custom
+        })
+    }
+
+    /// The explicit values of this model (as `[sensor.custom]` would hold them).
+    pub fn to_custom(&self) -> CustomSensorConfig {
+        self.custom.clone()
+    }
+
+    /// Time between images, µs.
+    pub fn period_us(&self) -> Utime {
+        seconds_to_micros(1.0 / self.rate_hz)
+    }
+
+    /// An empty image of this sensor's shape (every range NaN).
+    pub fn blank_image(&self, utime: Utime) -> RangeImage {
+        RangeImage {
+            utime,
+            sensor: self.id.clone(),
+            vehicle_from_sensor: self.vehicle_from_sensor,
+            beams: self.beams.clone(),
+            range: vec![f32::NAN; self.beams.rows() * self.beams.cols()],
+        }
+    }
+
+    /// The image this sensor takes of `scene` from `world_from_vehicle`.
+    pub fn render(
+        &self,
+        utime: Utime,
+        world_from_vehicle: &Isometry,
+        scene: &impl RayCast,
+    ) -> RangeImage {
+        let mut image = self.blank_image(utime);
+        self.render_rows(
+            world_from_vehicle,
+            scene,
+            0..self.beams.rows(),
+            &mut image.range,
+        );
+        image
+    }
+
+    /// Renders rows `rows` into `out` (`rows.len() × cols` values, row-major),
+    /// so callers can split an image between threads. No return = NaN.
+    pub fn render_rows(
+        &self,
+        world_from_vehicle: &Isometry,
+        scene: &impl RayCast,
+        rows: Range<usize>,
+        out: &mut [f32],
+    ) {
+        let world_from_sensor = world_from_vehicle * self.vehicle_from_sensor;
+        let origin = Point3::from(world_from_sensor.translation.vector);
+        let cols = self.beams.cols();
+        let trig: Vec<(f64, f64)> = self
+            .beams
+            .azimuth
+            .iter()
+            .map(|&az| f64::from(az).sin_cos())
+            .collect();
+        for (row, chunk) in rows.zip(out.chunks_mut(cols)) {
+            let Some(&el) = self.beams.elevation.get(row) else {
+                break;
+            };
+            let (sin_el, cos_el) = f64::from(el).sin_cos();
+            for (value, &(sin_az, cos_az)) in chunk.iter_mut().zip(&trig) {
+                let beam = Vector3::new(cos_el * cos_az, cos_el * sin_az, sin_el);
+                let direction = world_from_sensor.rotation * beam;
+                *value = scene
+                    .cast(&origin, &direction, self.max_range_m)
+                    .map_or(f32::NAN, |d| d as f32);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn the_erim_preset_is_the_papers_scanner() {
+        let erim = SensorModel::erim();
+        assert_eq!((erim.beams.rows(), erim.beams.cols()), (64, 256));
+        assert_eq!(erim.rate_hz, 2.0);
+        assert_eq!(erim.period_us(), 500_000);
+        // 0.5° per pixel in both directions.
+        let el = &erim.beams.elevation;
+        assert_relative_eq!(
+            f64::from(el[0] - el[1]),
+            0.5f64.to_radians(),
+            epsilon = 1e-6
+        );
+        let az = &erim.beams.azimuth;
+        assert_relative_eq!(
+            f64::from(az[0] - az[1]),
+            0.5f64.to_radians(),
+            epsilon = 1e-6
+        );
+        // Tilted down: the top row looks 2° below the horizon.
+        let top = erim.vehicle_from_sensor.rotation
+            * Vector3::from(erim.beams.direction(0, 128).unwrap());
+        assert_relative_eq!(top.z.asin().to_degrees(), -2.25, epsilon = 0.3);
+    }
+
+    #[test]
+    fn lidar_presets_cover_360_degrees_at_10_hz() {
+        for lidar in [SensorModel::lidar64(), SensorModel::lidar128()] {
+            assert_eq!(lidar.beams.cols(), 2048);
+            assert_eq!(lidar.rate_hz, 10.0);
+            let span = lidar.beams.azimuth[0] - lidar.beams.azimuth[2047];
+            assert_relative_eq!(
+                f64::from(span),
+                std::f64::consts::TAU * 2047.0 / 2048.0,
+                epsilon = 1e-5
+            );
+        }
+        assert_eq!(SensorModel::lidar64().beams.rows(), 64);
+        assert_eq!(SensorModel::lidar128().beams.rows(), 128);
+    }
+
+    #[test]
+    fn config_selects_presets_and_checks_custom_values() {
+        let config = SensorConfig {
+            preset: SensorPreset::Lidar128,
+            ..Default::default()
+        };
+        assert_eq!(config.model().unwrap().id, "lidar128");
+        let mut config = SensorConfig {
+            preset: SensorPreset::Custom,
+            ..Default::default()
+        };
+        config.custom.rows = 16;
+        assert_eq!(config.model().unwrap().beams.rows(), 16);
+        config.custom.elevation_bottom_deg = 30.0;
+        assert_eq!(
+            config.validate().unwrap_err().key,
+            "custom.elevation_bottom_deg"
+        );
+        assert_eq!(
+            SensorConfig::default().custom,
+            SensorModel::erim().to_custom()
+        );
+    }
+}
