@@ -8,6 +8,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
 use arcnav_vehicle::{ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
@@ -23,6 +24,7 @@ pub struct Config {
     pub arcs: ArcSetConfig,
     pub sensor: SensorConfig,
     pub perception: PerceptionConfig,
+    pub localmap: LocalMapConfig,
 }
 
 /// A configuration that could not be loaded.
@@ -112,6 +114,7 @@ impl Config {
         self.perception
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("perception"))?;
+        self.localmap.validate().map_err(|e| e.within("localmap"))?;
         Ok(())
     }
 

@@ -1,0 +1,464 @@
+//! Ganesha (002 §5): the untraversable cells near the vehicle.
+//!
+//! - **Insertion**: each report carries the cells of one image, already in
+//!   the world frame because perception placed them with the pose at capture
+//!   time; a report that arrives 600 ms late therefore lands where the
+//!   obstacle is, not where the vehicle has moved to. Cells are aggregated
+//!   into world-aligned patches (0.40 m), each keeping first/last-seen time,
+//!   confirmations, sensors, reasons and heights.
+//! - **Consistency pruning**: a patch whose centre lies in the observed
+//!   footprint of a newer image from a sensor that reported it, and which that
+//!   image did not report again, takes a miss; after `misses_to_drop` misses
+//!   it is dropped. An image older than a patch's last confirmation counts no
+//!   miss, so out-of-order reports never prune what newer images confirmed.
+//! - **The loop** ([`LocalMap::update`]): with the current pose every patch is
+//!   re-expressed in the vehicle frame and those outside the window dropped.
+//! - **Snapshots**: immutable, vehicle frame, behind an `Arc`.
+//!
+//! Patches live in a scrolling ring-buffer grid (a power-of-two square that
+//! covers the window whatever the heading) holding indices into a dense list:
+//! lookup by position is O(1), iteration touches only live patches, and
+//! nothing is copied as the vehicle moves.
+
+use std::sync::Arc;
+
+use arcnav_perception::{ObstacleReport, Reasons};
+use arcnav_vehicle::frames::yaw_of;
+use arcnav_vehicle::time::micros_to_seconds;
+use arcnav_vehicle::{Isometry, Pose, Utime};
+
+use crate::config::{JumpPolicy, LocalMapConfig};
+use crate::raster::Coverage;
+
+const EMPTY: u32 = u32::MAX;
+/// Sensors are tracked in a 32-bit set.
+pub const MAX_SENSORS: usize = 32;
+
+/// One map patch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Patch {
+    /// World patch index: the patch spans [i·s, (i+1)·s) × [j·s, (j+1)·s).
+    pub i: i64,
+    pub j: i64,
+    /// Centre in the vehicle frame of the last update, m.
+    pub x: f32,
+    pub y: f32,
+    /// Capture time of the first and of the latest image reporting it.
+    pub first_seen: Utime,
+    pub last_seen: Utime,
+    /// Images that reported it.
+    pub confirmations: u32,
+    /// Newer overlapping images that did not report it since its last confirmation.
+    pub misses: u32,
+    pub reasons: Reasons,
+    /// Set of sensor indices (see [`LocalMap::sensor_name`]) that reported it.
+    pub sensors: u32,
+    /// Lowest and highest point of its cells, world z, m.
+    pub z_min: f32,
+    pub z_max: f32,
+    /// Last report that touched it.
+    stamp: u64,
+}
+
+/// What a pose update did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PoseUpdate {
+    Accepted,
+    /// The map was cleared; reports captured before the new pose are refused.
+    Reset(JumpReason),
+    /// The pose was ignored.
+    Rejected(JumpReason),
+}
+
+/// Why a pose was not taken as it came.
+#[derive(Debug, Clone, PartialEq)]
+pub enum JumpReason {
+    TimeBackwards { from: Utime, to: Utime },
+    Jump { distance_m: f64, allowed_m: f64 },
+}
+
+impl std::fmt::Display for JumpReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            JumpReason::TimeBackwards { from, to } => {
+                write!(f, "time went backwards from {from} µs to {to} µs")
+            }
+            JumpReason::Jump {
+                distance_m,
+                allowed_m,
+            } => write!(
+                f,
+                "the pose jumped {distance_m:.2} m where at most {allowed_m:.2} m is plausible"
+            ),
+        }
+    }
+}
+
+/// A report the map did not take.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InsertError {
+    #[error("report captured at {utime} µs predates the map reset at {reset} µs")]
+    BeforeReset { utime: Utime, reset: Utime },
+    #[error("sensor {sensor:?} would be the {}th; the map tracks at most {MAX_SENSORS}", MAX_SENSORS + 1)]
+    TooManySensors { sensor: String },
+    #[error("report holds a cell at ({x}, {y}), which is not a finite position")]
+    BadCell { x: f64, y: f64 },
+}
+
+/// What one insertion did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct InsertOutcome {
+    pub new_patches: u32,
+    pub confirmed_patches: u32,
+    /// Cells outside the window at insertion (not stored).
+    pub outside_window: u32,
+    /// Patches dropped because this image did not report them again.
+    pub pruned: u32,
+}
+
+/// Counters over the map's life.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MapStats {
+    pub reports: u64,
+    pub reports_refused: u64,
+    pub new_patches: u64,
+    pub confirmations: u64,
+    pub pruned_inconsistent: u64,
+    pub dropped_outside_window: u64,
+    pub resets: u64,
+    pub rejected_poses: u64,
+}
+
+/// An immutable view of the map in the vehicle frame, cheap to share.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MapSnapshot {
+    /// Time of the pose the snapshot is expressed in.
+    pub utime: Utime,
+    /// That pose.
+    pub world_from_vehicle: Isometry,
+    pub patch_size_m: f64,
+    pub patches: Vec<Patch>,
+}
+
+impl MapSnapshot {
+    pub fn len(&self) -> usize {
+        self.patches.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.patches.is_empty()
+    }
+}
+
+/// The local map.
+#[derive(Debug)]
+pub struct LocalMap {
+    config: LocalMapConfig,
+    max_speed_mps: f64,
+    mask: i64,
+    side: usize,
+    slots: Vec<u32>,
+    patches: Vec<Patch>,
+    sensors: Vec<String>,
+    pose: Option<Pose>,
+    /// Reports captured before this time predate the last reset.
+    epoch_start: Utime,
+    stamp: u64,
+    coverage: Coverage,
+    stats: MapStats,
+}
+
+impl LocalMap {
+    /// An empty map; `max_speed_mps` (the vehicle's) bounds plausible motion
+    /// between poses. Call `config.validate()` first.
+    pub fn new(config: &LocalMapConfig, max_speed_mps: f64) -> Self {
+        let radius = config
+            .ahead_m
+            .max(config.behind_m)
+            .hypot(config.half_width_m);
+        let side = ((2.0 * radius / config.patch_size_m).ceil() as usize + 2).next_power_of_two();
+        Self {
+            config: config.clone(),
+            max_speed_mps,
+            mask: side as i64 - 1,
+            side,
+            slots: vec![EMPTY; side * side],
+            patches: Vec::new(),
+            sensors: Vec::new(),
+            pose: None,
+            epoch_start: Utime::MIN,
+            stamp: 0,
+            coverage: Coverage::default(),
+            stats: MapStats::default(),
+        }
+    }
+
+    pub fn config(&self) -> &LocalMapConfig {
+        &self.config
+    }
+
+    pub fn stats(&self) -> &MapStats {
+        &self.stats
+    }
+
+    pub fn len(&self) -> usize {
+        self.patches.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.patches.is_empty()
+    }
+
+    /// The live patches, in no particular (but deterministic) order.
+    pub fn patches(&self) -> &[Patch] {
+        &self.patches
+    }
+
+    /// The pose of the last accepted update.
+    pub fn pose(&self) -> Option<&Pose> {
+        self.pose.as_ref()
+    }
+
+    /// Name of the sensor with index `index` in [`Patch::sensors`].
+    pub fn sensor_name(&self, index: usize) -> Option<&str> {
+        self.sensors.get(index).map(String::as_str)
+    }
+
+    /// Forgets every patch; reports captured before `utime` will be refused.
+    pub fn reset(&mut self, utime: Utime) {
+        self.patches.clear();
+        self.slots.fill(EMPTY);
+        self.epoch_start = utime;
+        self.stats.resets += 1;
+    }
+
+    fn slot_index(&self, i: i64, j: i64) -> usize {
+        ((j & self.mask) as usize) * self.side + (i & self.mask) as usize
+    }
+
+    fn sensor_index(&mut self, name: &str) -> Result<usize, InsertError> {
+        if let Some(index) = self.sensors.iter().position(|s| s == name) {
+            return Ok(index);
+        }
+        if self.sensors.len() == MAX_SENSORS {
+            return Err(InsertError::TooManySensors {
+                sensor: name.to_owned(),
+            });
+        }
+        self.sensors.push(name.to_owned());
+        Ok(self.sensors.len() - 1)
+    }
+
+    /// Vehicle-frame position of a world point under the current pose.
+    fn to_vehicle(&self, x: f64, y: f64) -> Option<(f64, f64)> {
+        let pose = self.pose.as_ref()?;
+        let t = pose.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
+        let (dx, dy) = (x - t.x, y - t.y);
+        Some((cos * dx + sin * dy, -sin * dx + cos * dy))
+    }
+
+    fn patch_centre(&self, i: i64, j: i64) -> (f64, f64) {
+        let s = self.config.patch_size_m;
+        ((i as f64 + 0.5) * s, (j as f64 + 0.5) * s)
+    }
+
+    fn remove(&mut self, index: usize) {
+        let patch = self.patches.swap_remove(index);
+        let slot = self.slot_index(patch.i, patch.j);
+        self.slots[slot] = EMPTY;
+        if let Some(moved) = self.patches.get(index) {
+            let slot = self.slot_index(moved.i, moved.j);
+            self.slots[slot] = index as u32;
+        }
+    }
+
+    /// Takes the cells of one image and prunes what that image should have
+    /// seen again and did not.
+    pub fn insert(&mut self, report: &ObstacleReport) -> Result<InsertOutcome, InsertError> {
+        if report.utime < self.epoch_start {
+            self.stats.reports_refused += 1;
+            return Err(InsertError::BeforeReset {
+                utime: report.utime,
+                reset: self.epoch_start,
+            });
+        }
+        if let Some(bad) = report
+            .cells
+            .iter()
+            .find(|c| !(c.x.is_finite() && c.y.is_finite()))
+        {
+            self.stats.reports_refused += 1;
+            return Err(InsertError::BadCell { x: bad.x, y: bad.y });
+        }
+        let sensor = self.sensor_index(&report.sensor).inspect_err(|_| {
+            self.stats.reports_refused += 1;
+        })?;
+        let sensor_bit = 1u32 << sensor;
+        self.stamp += 1;
+        let stamp = self.stamp;
+        let mut outcome = InsertOutcome::default();
+        let s = self.config.patch_size_m;
+        for cell in &report.cells {
+            let (i, j) = ((cell.x / s).floor() as i64, (cell.y / s).floor() as i64);
+            let slot = self.slot_index(i, j);
+            let existing = self.slots[slot];
+            if existing != EMPTY {
+                let patch = &mut self.patches[existing as usize];
+                if (patch.i, patch.j) == (i, j) {
+                    if patch.stamp != stamp {
+                        patch.stamp = stamp;
+                        patch.confirmations += 1;
+                        patch.misses = 0;
+                        outcome.confirmed_patches += 1;
+                    }
+                    patch.first_seen = patch.first_seen.min(report.utime);
+                    patch.last_seen = patch.last_seen.max(report.utime);
+                    patch.reasons.insert(cell.reasons);
+                    patch.sensors |= sensor_bit;
+                    patch.z_min = patch.z_min.min(cell.z_min);
+                    patch.z_max = patch.z_max.max(cell.z_max);
+                    continue;
+                }
+                // The ring wrapped onto a patch far outside the window.
+                self.remove(existing as usize);
+                self.stats.dropped_outside_window += 1;
+            }
+            let (cx, cy) = self.patch_centre(i, j);
+            let (vx, vy) = match self.to_vehicle(cx, cy) {
+                Some((vx, vy)) if !self.config.in_window(vx, vy) => {
+                    outcome.outside_window += 1;
+                    continue;
+                }
+                Some(v) => v,
+                // No pose yet: placed at the first update.
+                None => (0.0, 0.0),
+            };
+            self.slots[slot] = self.patches.len() as u32;
+            self.patches.push(Patch {
+                i,
+                j,
+                x: vx as f32,
+                y: vy as f32,
+                first_seen: report.utime,
+                last_seen: report.utime,
+                confirmations: 1,
+                misses: 0,
+                reasons: cell.reasons,
+                sensors: sensor_bit,
+                z_min: cell.z_min,
+                z_max: cell.z_max,
+                stamp,
+            });
+            outcome.new_patches += 1;
+        }
+        outcome.pruned = self.prune(report, sensor_bit, stamp);
+        self.stats.reports += 1;
+        self.stats.new_patches += u64::from(outcome.new_patches);
+        self.stats.confirmations += u64::from(outcome.confirmed_patches);
+        self.stats.pruned_inconsistent += u64::from(outcome.pruned);
+        Ok(outcome)
+    }
+
+    fn prune(&mut self, report: &ObstacleReport, sensor_bit: u32, stamp: u64) -> u32 {
+        if report.fov.is_empty() {
+            return 0;
+        }
+        self.coverage
+            .rasterise(&report.fov, self.config.patch_size_m);
+        let mut pruned = 0;
+        let mut index = 0;
+        while index < self.patches.len() {
+            let patch = &mut self.patches[index];
+            let judged = patch.stamp != stamp
+                && patch.last_seen < report.utime
+                && (self.config.cross_sensor_pruning || patch.sensors & sensor_bit != 0)
+                && self.coverage.covers(patch.i, patch.j);
+            if judged {
+                patch.misses += 1;
+                if patch.misses >= self.config.misses_to_drop {
+                    self.remove(index);
+                    pruned += 1;
+                    continue;
+                }
+            }
+            index += 1;
+        }
+        pruned
+    }
+
+    /// The loop of 002 §5 (Figure 8): takes the current pose, re-expresses
+    /// every patch in the vehicle frame and drops those outside the window.
+    /// A pose that jumps, or comes from the past, resets the map or is
+    /// rejected, as configured, with the reason logged.
+    pub fn update(&mut self, pose: &Pose) -> PoseUpdate {
+        if let Some(previous) = &self.pose {
+            let reason = if pose.utime < previous.utime {
+                Some(JumpReason::TimeBackwards {
+                    from: previous.utime,
+                    to: pose.utime,
+                })
+            } else {
+                let moved = (pose.world_from_vehicle.translation.vector
+                    - previous.world_from_vehicle.translation.vector)
+                    .xy()
+                    .norm();
+                let allowed = self.config.max_pose_jump_m
+                    + self.max_speed_mps * micros_to_seconds(pose.utime - previous.utime);
+                (moved > allowed || !moved.is_finite()).then_some(JumpReason::Jump {
+                    distance_m: moved,
+                    allowed_m: allowed,
+                })
+            };
+            if let Some(reason) = reason {
+                match self.config.on_pose_jump {
+                    JumpPolicy::Reset => {
+                        tracing::warn!(%reason, patches = self.patches.len(), "local map reset");
+                        self.reset(pose.utime);
+                        self.pose = Some(*pose);
+                        return PoseUpdate::Reset(reason);
+                    }
+                    JumpPolicy::Reject => {
+                        tracing::warn!(%reason, "pose rejected by the local map");
+                        self.stats.rejected_poses += 1;
+                        return PoseUpdate::Rejected(reason);
+                    }
+                }
+            }
+        }
+        self.pose = Some(*pose);
+        let t = pose.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
+        let s = self.config.patch_size_m;
+        let mut index = 0;
+        while index < self.patches.len() {
+            let patch = &mut self.patches[index];
+            let (dx, dy) = (
+                (patch.i as f64 + 0.5) * s - t.x,
+                (patch.j as f64 + 0.5) * s - t.y,
+            );
+            let (vx, vy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+            if !self.config.in_window(vx, vy) {
+                self.remove(index);
+                self.stats.dropped_outside_window += 1;
+                continue;
+            }
+            patch.x = vx as f32;
+            patch.y = vy as f32;
+            index += 1;
+        }
+        PoseUpdate::Accepted
+    }
+
+    /// The map as it stands, in the vehicle frame of the last update.
+    pub fn snapshot(&self) -> Arc<MapSnapshot> {
+        Arc::new(MapSnapshot {
+            utime: self.pose.map_or(0, |p| p.utime),
+            world_from_vehicle: self
+                .pose
+                .map_or_else(Isometry::identity, |p| p.world_from_vehicle),
+            patch_size_m: self.config.patch_size_m,
+            patches: self.patches.clone(),
+        })
+    }
+}

@@ -1,0 +1,124 @@
+//! A field-of-view polygon on the patch grid: which patches have their
+//! centre inside it. Built once per image by walking the polygon's edges and
+//! recording, for every patch row, where the row's centre line crosses them;
+//! a lookup then scans the two to four crossings of one row. Work is
+//! proportional to the edges and rows, not to the area covered.
+
+use arcnav_perception::FovPolygon;
+
+/// Crossings of patch-row centre lines with a polygon, over its bounding box.
+#[derive(Debug, Default, Clone)]
+pub struct Coverage {
+    /// Row of the box's first patch.
+    j0: i64,
+    rows: usize,
+    patch_size: f64,
+    /// Row r's crossings are `crossings[row_start[r]..row_start[r + 1]]`, sorted.
+    row_start: Vec<u32>,
+    crossings: Vec<f64>,
+    fill: Vec<u32>,
+}
+
+impl Coverage {
+    /// Prepares lookups of `polygon` for patches of `patch_size` (patch (i, j)
+    /// spans [i·s, (i+1)·s) × [j·s, (j+1)·s) in the world).
+    pub fn rasterise(&mut self, polygon: &FovPolygon, patch_size: f64) {
+        self.rows = 0;
+        self.patch_size = patch_size;
+        let Some((min, max)) = polygon.bounds() else {
+            return;
+        };
+        let row_of = |y: f64| (y / patch_size - 0.5).ceil() as i64;
+        self.j0 = row_of(min.y);
+        self.rows = (row_of(max.y) - self.j0 + 1).max(0) as usize;
+        // Rows whose centre line y = (j + 0.5)·s an edge crosses (half-open in y).
+        let span = |a: f64, b: f64| {
+            let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+            (row_of(lo), row_of(hi))
+        };
+        let vertices = &polygon.vertices;
+        let edges =
+            || (0..vertices.len()).map(|k| (vertices[k], vertices[(k + 1) % vertices.len()]));
+        self.row_start.clear();
+        self.row_start.resize(self.rows + 1, 0);
+        for (a, b) in edges() {
+            let (first, end) = span(a.y, b.y);
+            for j in first..end {
+                self.row_start[(j - self.j0) as usize + 1] += 1;
+            }
+        }
+        for r in 0..self.rows {
+            self.row_start[r + 1] += self.row_start[r];
+        }
+        self.crossings.clear();
+        self.crossings
+            .resize(self.row_start[self.rows] as usize, 0.0);
+        self.fill.clear();
+        self.fill.extend_from_slice(&self.row_start[..self.rows]);
+        for (a, b) in edges() {
+            let (first, end) = span(a.y, b.y);
+            for j in first..end {
+                let y = (j as f64 + 0.5) * patch_size;
+                let r = (j - self.j0) as usize;
+                self.crossings[self.fill[r] as usize] = a.x + (y - a.y) * (b.x - a.x) / (b.y - a.y);
+                self.fill[r] += 1;
+            }
+        }
+        for r in 0..self.rows {
+            let (start, end) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
+            self.crossings[start..end].sort_by(f64::total_cmp);
+        }
+    }
+
+    /// True when the centre of patch (i, j) lies inside the polygon (even-odd).
+    pub fn covers(&self, i: i64, j: i64) -> bool {
+        let r = j - self.j0;
+        if r < 0 || r as usize >= self.rows {
+            return false;
+        }
+        let r = r as usize;
+        let x = (i as f64 + 0.5) * self.patch_size;
+        let row = &self.crossings[self.row_start[r] as usize..self.row_start[r + 1] as usize];
+        row.iter().take_while(|&&c| c <= x).count() % 2 == 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point2;
+
+    #[test]
+    fn coverage_agrees_with_point_in_polygon_at_patch_centres() {
+        let polygon = FovPolygon::new(vec![
+            Point2::new(1.0, -3.0),
+            Point2::new(14.3, -7.1),
+            Point2::new(19.0, 0.2),
+            Point2::new(12.5, 8.9),
+            Point2::new(6.0, 2.0),
+            Point2::new(1.2, 3.3),
+        ]);
+        let mut coverage = Coverage::default();
+        coverage.rasterise(&polygon, 0.4);
+        let mut inside = 0;
+        for i in -10..60 {
+            for j in -30..30 {
+                let centre = Point2::new((i as f64 + 0.5) * 0.4, (j as f64 + 0.5) * 0.4);
+                assert_eq!(
+                    coverage.covers(i, j),
+                    polygon.contains(centre),
+                    "patch ({i}, {j})"
+                );
+                inside += usize::from(coverage.covers(i, j));
+            }
+        }
+        assert!(inside > 500);
+    }
+
+    #[test]
+    fn an_empty_polygon_covers_nothing() {
+        let mut coverage = Coverage::default();
+        coverage.rasterise(&FovPolygon::default(), 0.4);
+        assert!(!coverage.covers(0, 0));
+    }
+}

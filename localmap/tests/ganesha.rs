@@ -1,0 +1,415 @@
+//! The local map (002 §5): latency compensation, the window, consistency
+//! pruning, several sensors, out-of-order reports and pose jumps.
+
+use arcnav_localmap::{InsertError, JumpPolicy, JumpReason, LocalMap, LocalMapConfig, PoseUpdate};
+use arcnav_perception::scene::HeightFunction;
+use arcnav_perception::{
+    FovPolygon, ObstacleCell, ObstacleReport, PerceptionConfig, Reasons, SensorModel,
+};
+use arcnav_vehicle::frames::planar_isometry;
+use arcnav_vehicle::{Pose, PoseHistory, Utime};
+use nalgebra::Point2;
+
+const SECOND: Utime = 1_000_000;
+
+fn map() -> LocalMap {
+    map_with(LocalMapConfig::default())
+}
+
+fn map_with(config: LocalMapConfig) -> LocalMap {
+    config.validate().unwrap();
+    LocalMap::new(&config, 10.0)
+}
+
+fn pose_at(utime: Utime, x: f64, y: f64, yaw: f64) -> Pose {
+    Pose::at_rest(utime, planar_isometry(x, y, yaw))
+}
+
+fn cell(x: f64, y: f64) -> ObstacleCell {
+    ObstacleCell {
+        x,
+        y,
+        z_min: 0.0,
+        z_max: 0.5,
+        reasons: Reasons::HEIGHT_VARIATION,
+        region: 0,
+    }
+}
+
+fn rectangle(x0: f64, x1: f64, y0: f64, y1: f64) -> FovPolygon {
+    FovPolygon::new(vec![
+        Point2::new(x0, y0),
+        Point2::new(x1, y0),
+        Point2::new(x1, y1),
+        Point2::new(x0, y1),
+    ])
+}
+
+fn report(utime: Utime, sensor: &str, cells: &[(f64, f64)], fov: FovPolygon) -> ObstacleReport {
+    ObstacleReport {
+        utime,
+        sensor: sensor.into(),
+        cell_size_m: 0.2,
+        cells: cells.iter().map(|&(x, y)| cell(x, y)).collect(),
+        regions: vec![],
+        fov,
+    }
+}
+
+/// Vehicle-frame centres of the snapshot's patches.
+fn positions(map: &LocalMap) -> Vec<(f32, f32)> {
+    map.snapshot().patches.iter().map(|p| (p.x, p.y)).collect()
+}
+
+#[test]
+fn a_report_600_ms_late_lands_where_the_obstacle_is() {
+    // The vehicle drives north along x = 0 at 2.5 m/s; poses every 20 ms.
+    let mut history = PoseHistory::with_capacity(500);
+    for k in 0..=100 {
+        let t = k * 20_000;
+        history
+            .push(pose_at(
+                t,
+                0.0,
+                2.5 * t as f64 / SECOND as f64,
+                std::f64::consts::FRAC_PI_2,
+            ))
+            .unwrap();
+    }
+    // A 0.5 m box at world (0, 12.5); the image is taken at 0.2 s (y = 0.5).
+    let capture: Utime = 200_000;
+    let capture_pose = history.at(capture).unwrap();
+    let scene = HeightFunction::new(|x: f64, y: f64| {
+        if x.abs() < 0.5 && (12.0..13.0).contains(&y) {
+            0.5
+        } else {
+            0.0
+        }
+    });
+    let image = SensorModel::erim().render(capture, &capture_pose.world_from_vehicle, &scene);
+    let mut evaluator = PerceptionConfig::default().build_evaluator().unwrap();
+    let mut obstacles = ObstacleReport::default();
+    evaluator
+        .evaluate(&image, &capture_pose.world_from_vehicle, &mut obstacles)
+        .unwrap();
+    assert!(!obstacles.cells.is_empty());
+    // The report reaches the map 600 ms later: the vehicle has driven 1.5 m.
+    let mut map = map();
+    let now = history.at(capture + 600_000).unwrap();
+    assert_eq!(map.update(&now), PoseUpdate::Accepted);
+    map.insert(&obstacles).unwrap();
+    map.update(&now);
+    // The box front is 12 m from the capture position: 10.5 m from the vehicle now.
+    let ahead: Vec<f32> = positions(&map).iter().map(|p| p.0).collect();
+    let nearest = ahead.iter().copied().fold(f32::INFINITY, f32::min);
+    assert!(
+        (nearest - 10.5).abs() <= 0.45,
+        "box front {nearest} m ahead, expected 10.5 m"
+    );
+    assert!(positions(&map).iter().all(|p| p.1.abs() <= 1.0));
+}
+
+#[test]
+fn cells_are_dropped_at_each_window_boundary() {
+    let mut map = map();
+    let origin = pose_at(0, 0.0, 0.0, 0.0);
+    map.update(&origin);
+    // Heading east: vehicle x = world x. Window: -6 ≤ x ≤ 20, |y| ≤ 10.
+    let cells = [
+        (19.5, 0.1),
+        (20.5, 0.1),
+        (-5.5, 0.1),
+        (-6.5, 0.1),
+        (5.1, 9.5),
+        (5.1, 10.5),
+        (5.1, -9.5),
+        (5.1, -10.5),
+    ];
+    let outcome = map
+        .insert(&report(0, "erim", &cells, FovPolygon::default()))
+        .unwrap();
+    assert_eq!((outcome.new_patches, outcome.outside_window), (4, 4));
+    let mut kept = positions(&map);
+    kept.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    assert_eq!(kept, [(-5.4, 0.2), (5.0, -9.4), (5.0, 9.4), (19.4, 0.2)]);
+    // Driving 1 m forward pushes the cell behind out of the window.
+    map.update(&pose_at(SECOND / 2, 1.0, 0.0, 0.0));
+    assert_eq!(map.len(), 3);
+    // Turning 90° left: the far cell is now 18.4 m to the right and the one
+    // at (5.0, -9.4) 9.4 m behind: both gone; (5.0, 9.4) is 9.4 m ahead.
+    map.update(&pose_at(SECOND, 1.0, 0.0, std::f64::consts::FRAC_PI_2));
+    assert_eq!(positions(&map), [(9.4, -4.0)]);
+    assert_eq!(map.stats().dropped_outside_window, 3);
+}
+
+#[test]
+fn a_phantom_cell_disappears_after_one_overlapping_image_that_does_not_see_it() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    map.insert(&report(
+        100,
+        "erim",
+        &[(10.0, 0.0)],
+        rectangle(4.0, 25.0, -8.0, 8.0),
+    ))
+    .unwrap();
+    assert_eq!(map.len(), 1);
+    let outcome = map
+        .insert(&report(
+            600_000,
+            "erim",
+            &[],
+            rectangle(4.0, 25.0, -8.0, 8.0),
+        ))
+        .unwrap();
+    assert_eq!(outcome.pruned, 1);
+    assert!(map.is_empty());
+}
+
+#[test]
+fn a_cell_reported_again_is_kept_and_confirmed() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    let fov = rectangle(4.0, 25.0, -8.0, 8.0);
+    map.insert(&report(100, "erim", &[(10.0, 0.0)], fov.clone()))
+        .unwrap();
+    map.insert(&report(600_000, "erim", &[(10.05, 0.05), (10.1, 0.1)], fov))
+        .unwrap();
+    let patches = &map.snapshot().patches;
+    assert_eq!(patches.len(), 1);
+    assert_eq!(
+        patches[0].confirmations, 2,
+        "one confirmation per image, not per cell"
+    );
+    assert_eq!(
+        (patches[0].first_seen, patches[0].last_seen),
+        (100, 600_000)
+    );
+}
+
+#[test]
+fn a_cell_outside_the_newer_images_footprint_survives() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    map.insert(&report(
+        100,
+        "erim",
+        &[(10.0, 0.0), (3.0, 6.0)],
+        rectangle(2.0, 25.0, -8.0, 8.0),
+    ))
+    .unwrap();
+    // The newer image sees only x > 8 and |y| < 4.
+    let outcome = map
+        .insert(&report(
+            600_000,
+            "erim",
+            &[],
+            rectangle(8.0, 25.0, -4.0, 4.0),
+        ))
+        .unwrap();
+    assert_eq!(outcome.pruned, 1);
+    assert_eq!(positions(&map), [(3.0, 6.2)]);
+}
+
+#[test]
+fn misses_to_drop_sets_how_many_images_must_disagree() {
+    let mut map = map_with(LocalMapConfig {
+        misses_to_drop: 2,
+        ..Default::default()
+    });
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    let fov = rectangle(4.0, 25.0, -8.0, 8.0);
+    map.insert(&report(100, "erim", &[(10.0, 0.0)], fov.clone()))
+        .unwrap();
+    map.insert(&report(200, "erim", &[], fov.clone())).unwrap();
+    assert_eq!(map.len(), 1);
+    assert_eq!(map.patches()[0].misses, 1);
+    map.insert(&report(300, "erim", &[], fov)).unwrap();
+    assert!(map.is_empty());
+}
+
+#[test]
+fn two_sensors_with_different_footprints() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    let erim_fov = rectangle(4.0, 25.0, -8.0, 8.0);
+    let side_fov = rectangle(-5.0, 12.0, -10.0, 2.0);
+    map.insert(&report(
+        100,
+        "erim",
+        &[(10.0, 0.0), (15.0, 0.0)],
+        erim_fov.clone(),
+    ))
+    .unwrap();
+    map.insert(&report(150, "side", &[(0.0, -8.0)], side_fov.clone()))
+        .unwrap();
+    assert_eq!(map.len(), 3);
+    // The side sensor covers (10, 0) but never reported it: it does not prune
+    // the ERIM's cell; its own cell, seen again by the ERIM's footprint, stays.
+    map.insert(&report(300, "side", &[(0.0, -8.0)], side_fov.clone()))
+        .unwrap();
+    map.insert(&report(
+        400,
+        "erim",
+        &[(10.0, 0.0), (15.0, 0.0)],
+        erim_fov.clone(),
+    ))
+    .unwrap();
+    assert_eq!(map.len(), 3);
+    // The ERIM stops seeing (15, 0): dropped. (10, 0) still reported: kept.
+    map.insert(&report(500, "erim", &[(10.0, 0.0)], erim_fov.clone()))
+        .unwrap();
+    assert_eq!(map.len(), 2);
+    let sensors: Vec<u32> = map.patches().iter().map(|p| p.sensors).collect();
+    assert!(
+        sensors.contains(&0b10),
+        "the side sensor's cell is tagged with its sensor"
+    );
+    assert_eq!(map.sensor_name(1), Some("side"));
+    // With cross-sensor pruning any overlapping image may retract any cell.
+    let mut shared = map_with(LocalMapConfig {
+        cross_sensor_pruning: true,
+        ..Default::default()
+    });
+    shared.update(&pose_at(0, 0.0, 0.0, 0.0));
+    shared
+        .insert(&report(100, "erim", &[(10.0, 0.0)], erim_fov))
+        .unwrap();
+    shared.insert(&report(200, "side", &[], side_fov)).unwrap();
+    assert!(shared.is_empty());
+}
+
+#[test]
+fn an_out_of_order_report_never_prunes_what_a_newer_image_confirmed() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    let fov = rectangle(4.0, 25.0, -8.0, 8.0);
+    map.insert(&report(500_000, "erim", &[(10.0, 0.0)], fov.clone()))
+        .unwrap();
+    // An image captured earlier arrives late and did not see the cell.
+    let outcome = map
+        .insert(&report(400_000, "erim", &[(12.0, 1.0)], fov.clone()))
+        .unwrap();
+    assert_eq!(outcome.pruned, 0);
+    assert_eq!(map.len(), 2);
+    let late = map.patches().iter().find(|p| p.x > 11.0).unwrap();
+    assert_eq!((late.first_seen, late.last_seen), (400_000, 400_000));
+    // A newer image without (12, 1) prunes it; one older than it cannot.
+    map.insert(&report(450_000, "erim", &[(10.0, 0.0)], fov.clone()))
+        .unwrap();
+    assert_eq!(map.len(), 1, "450 ms is newer than the 400 ms sighting");
+    map.insert(&report(300_000, "erim", &[], fov)).unwrap();
+    assert_eq!(map.len(), 1, "300 ms is older than the 500 ms confirmation");
+}
+
+#[test]
+fn a_pose_jump_resets_the_map_and_refuses_reports_from_before() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    map.insert(&report(0, "erim", &[(10.0, 0.0)], FovPolygon::default()))
+        .unwrap();
+    map.update(&pose_at(100_000, 0.25, 0.0, 0.0));
+    assert_eq!(map.len(), 1, "0.25 m in 0.1 s is plausible");
+    let jump = map.update(&pose_at(200_000, 40.0, 0.0, 0.0));
+    assert!(
+        matches!(jump, PoseUpdate::Reset(JumpReason::Jump { .. })),
+        "{jump:?}"
+    );
+    assert!(map.is_empty());
+    assert_eq!(
+        map.insert(&report(
+            150_000,
+            "erim",
+            &[(45.0, 0.0)],
+            FovPolygon::default()
+        )),
+        Err(InsertError::BeforeReset {
+            utime: 150_000,
+            reset: 200_000
+        })
+    );
+    map.insert(&report(
+        250_000,
+        "erim",
+        &[(45.0, 0.0)],
+        FovPolygon::default(),
+    ))
+    .unwrap();
+    assert_eq!(map.len(), 1);
+    // Time running backwards resets too.
+    let back = map.update(&pose_at(100_000, 40.0, 0.0, 0.0));
+    assert_eq!(
+        back,
+        PoseUpdate::Reset(JumpReason::TimeBackwards {
+            from: 200_000,
+            to: 100_000
+        })
+    );
+    assert!(map.is_empty());
+    assert_eq!(map.stats().resets, 2);
+}
+
+#[test]
+fn with_the_reject_policy_a_jumping_pose_is_ignored() {
+    let mut map = map_with(LocalMapConfig {
+        on_pose_jump: JumpPolicy::Reject,
+        ..Default::default()
+    });
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    map.insert(&report(0, "erim", &[(10.0, 0.0)], FovPolygon::default()))
+        .unwrap();
+    let update = map.update(&pose_at(100_000, 30.0, 0.0, 0.0));
+    assert!(matches!(
+        update,
+        PoseUpdate::Rejected(JumpReason::Jump { .. })
+    ));
+    assert_eq!(map.len(), 1);
+    assert_eq!(map.pose().unwrap().utime, 0);
+    assert_eq!(map.stats().rejected_poses, 1);
+}
+
+#[test]
+fn snapshots_are_immutable_and_shared_across_threads() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    map.insert(&report(
+        0,
+        "erim",
+        &[(10.0, 0.0), (12.0, 0.0)],
+        FovPolygon::default(),
+    ))
+    .unwrap();
+    let snapshot = map.snapshot();
+    let reader = {
+        let snapshot = std::sync::Arc::clone(&snapshot);
+        std::thread::spawn(move || snapshot.patches.iter().map(|p| p.x).sum::<f32>())
+    };
+    // The map moves on while the behaviour thread reads.
+    map.update(&pose_at(SECOND, 5.0, 0.0, 0.0));
+    map.insert(&report(
+        SECOND,
+        "erim",
+        &[(20.0, 0.0)],
+        FovPolygon::default(),
+    ))
+    .unwrap();
+    assert_eq!(reader.join().unwrap(), 10.2 + 12.2);
+    assert_eq!(snapshot.len(), 2);
+    assert_eq!(map.snapshot().len(), 3);
+}
+
+#[test]
+fn bad_reports_are_refused_with_a_reason() {
+    let mut map = map();
+    let bad = report(0, "erim", &[(f64::NAN, 0.0)], FovPolygon::default());
+    assert!(matches!(map.insert(&bad), Err(InsertError::BadCell { .. })));
+    for i in 0..32 {
+        map.insert(&report(0, &format!("s{i}"), &[], FovPolygon::default()))
+            .unwrap();
+    }
+    assert!(matches!(
+        map.insert(&report(0, "one-too-many", &[], FovPolygon::default())),
+        Err(InsertError::TooManySensors { .. })
+    ));
+    assert_eq!(map.stats().reports_refused, 2);
+}
