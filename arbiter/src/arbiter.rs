@@ -1,0 +1,466 @@
+//! DAMN command fusion (Rosenblatt; 002 §6): behaviours never steer, they
+//! vote; the arbiter decides.
+//!
+//! Each decision: fresh votes (younger than the timeout) of behaviours with a
+//! non-zero weight are summed with their weights and normalised by the total
+//! weight, so the fused vote stays in [-1, 1]; optionally smoothed across
+//! neighbouring arcs; an arc any of them vetoes can never win; the best arc
+//! wins (ties go to the straighter arc), optionally refined to the peak of a
+//! parabola through its neighbours. The command is stop when a required
+//! behaviour is stale, when nobody voted, when every arc is vetoed, or when the
+//! best vote is below the acceptable minimum. Speed is the minimum of the
+//! behaviours' speed votes, the cruise speed, the vehicle's top speed and the
+//! lateral-acceleration limit of the arc, lowered when the winning vote is
+//! weak.
+//!
+//! With [`Arbiter::set_explain`] on, every decision is kept as a [`Decision`]
+//! (each behaviour's votes, weight and age, the fused votes, who vetoed what
+//! because of which cell, the command or the stop reason); off, none of it
+//! is copied.
+
+use arcnav_vehicle::time::seconds_to_micros;
+use arcnav_vehicle::{ArcSet, SteeringCommand, Utime, VehicleConfig};
+
+use crate::config::ArbiterConfig;
+use crate::votes::{BehaviourVotes, Votes};
+
+/// Why the arbiter commanded stop.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StopReason {
+    /// No behaviour with a non-zero weight has fresh votes.
+    NoVotes,
+    /// A required behaviour has not voted within the timeout.
+    RequiredStale {
+        behaviour: String,
+        age_us: Option<Utime>,
+    },
+    /// Every arc is vetoed; how many arcs each behaviour vetoed.
+    AllArcsForbidden { vetoes: Vec<(String, usize)> },
+    /// The best fused vote is below `min_acceptable_vote`.
+    NoAcceptableArc { best_vote: f32 },
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StopReason::NoVotes => write!(f, "no behaviour has voted"),
+            StopReason::RequiredStale {
+                behaviour,
+                age_us: Some(age),
+            } => {
+                write!(
+                    f,
+                    "required behaviour {behaviour} last voted {:.2} s ago",
+                    *age as f64 * 1e-6
+                )
+            }
+            StopReason::RequiredStale {
+                behaviour,
+                age_us: None,
+            } => {
+                write!(f, "required behaviour {behaviour} has never voted")
+            }
+            StopReason::AllArcsForbidden { vetoes } => {
+                let who: Vec<String> = vetoes
+                    .iter()
+                    .map(|(b, n)| format!("{b} vetoed {n}"))
+                    .collect();
+                write!(f, "every arc is forbidden ({})", who.join(", "))
+            }
+            StopReason::NoAcceptableArc { best_vote } => {
+                write!(
+                    f,
+                    "the best arc's fused vote {best_vote:.2} is below the acceptable minimum"
+                )
+            }
+        }
+    }
+}
+
+/// A vote buffer of the wrong size.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{behaviour} voted over {got} arcs, the arbiter's arc set has {expected}")]
+pub struct VoteSizeError {
+    pub behaviour: String,
+    pub got: usize,
+    pub expected: usize,
+}
+
+/// One behaviour's part in a decision.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InputExplanation {
+    pub behaviour: String,
+    pub weight: f64,
+    /// Age of its latest votes at the decision, if it ever voted.
+    pub age_us: Option<Utime>,
+    /// Whether its votes took part (fresh and weighted).
+    pub used: bool,
+    pub votes: Option<Votes>,
+}
+
+/// The full record of one decision.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decision {
+    pub utime: Utime,
+    pub command: SteeringCommand,
+    pub stop: Option<StopReason>,
+    /// Fused (and smoothed) vote per arc; vetoed arcs hold -1.
+    pub fused: Vec<f32>,
+    /// Per arc, the behaviours that vetoed it with the cell that caused it.
+    pub vetoes: Vec<Vec<(String, Option<[f32; 2]>)>>,
+    pub inputs: Vec<InputExplanation>,
+    /// The speed limits that applied, m/s: cruise, speed votes, lateral, weak vote.
+    pub speed_limits: Vec<(String, f64)>,
+}
+
+/// Counts of decisions.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ArbiterStats {
+    pub decisions: u64,
+    pub stops_no_votes: u64,
+    pub stops_required_stale: u64,
+    pub stops_all_forbidden: u64,
+    pub stops_no_acceptable: u64,
+    pub rejected_votes: u64,
+}
+
+#[derive(Debug, Clone)]
+struct Input {
+    name: String,
+    weight: f64,
+    required: bool,
+    latest: Option<(Utime, Votes)>,
+}
+
+/// The arbiter.
+#[derive(Debug, Clone)]
+pub struct Arbiter {
+    config: ArbiterConfig,
+    arcs: ArcSet,
+    max_speed_mps: f64,
+    timeout_us: Utime,
+    inputs: Vec<Input>,
+    fused: Vec<f32>,
+    vetoed: Vec<bool>,
+    smoothed: Vec<f32>,
+    kernel: Vec<f32>,
+    explain: bool,
+    decision: Option<Decision>,
+    stats: ArbiterStats,
+}
+
+impl Arbiter {
+    /// An arbiter over `arcs` for `vehicle`. Call `config.validate()` first.
+    pub fn new(config: &ArbiterConfig, arcs: ArcSet, vehicle: &VehicleConfig) -> Self {
+        let n = arcs.len();
+        let sigma = config.smoothing_sigma_arcs;
+        let kernel = if sigma > 0.0 {
+            let half = (3.0 * sigma).ceil() as i64;
+            (-half..=half)
+                .map(|d| (-(d as f64).powi(2) / (2.0 * sigma * sigma)).exp() as f32)
+                .collect()
+        } else {
+            vec![1.0]
+        };
+        let mut arbiter = Self {
+            config: config.clone(),
+            arcs,
+            max_speed_mps: vehicle.max_speed_mps,
+            timeout_us: seconds_to_micros(config.vote_timeout_s),
+            inputs: Vec::new(),
+            fused: vec![0.0; n],
+            vetoed: vec![false; n],
+            smoothed: vec![0.0; n],
+            kernel,
+            explain: false,
+            decision: None,
+            stats: ArbiterStats::default(),
+        };
+        for name in &config.required {
+            arbiter.input_index(name);
+        }
+        arbiter
+    }
+
+    pub fn arcs(&self) -> &ArcSet {
+        &self.arcs
+    }
+
+    pub fn config(&self) -> &ArbiterConfig {
+        &self.config
+    }
+
+    pub fn stats(&self) -> &ArbiterStats {
+        &self.stats
+    }
+
+    /// Keeps a [`Decision`] record of every decision (costs copies).
+    pub fn set_explain(&mut self, explain: bool) {
+        self.explain = explain;
+        if !explain {
+            self.decision = None;
+        }
+    }
+
+    /// The record of the last decision, when explaining.
+    pub fn decision(&self) -> Option<&Decision> {
+        self.decision.as_ref()
+    }
+
+    fn input_index(&mut self, name: &str) -> usize {
+        if let Some(i) = self.inputs.iter().position(|input| input.name == name) {
+            return i;
+        }
+        self.inputs.push(Input {
+            name: name.to_owned(),
+            weight: self.config.weight(name),
+            required: self.config.required.iter().any(|r| r == name),
+            latest: None,
+        });
+        self.inputs.len() - 1
+    }
+
+    /// Takes a behaviour's votes (the newest per behaviour is kept; older
+    /// votes arriving late do not replace newer ones).
+    pub fn on_votes(&mut self, votes: &BehaviourVotes) -> Result<(), VoteSizeError> {
+        if votes.votes.len() != self.arcs.len() {
+            self.stats.rejected_votes += 1;
+            return Err(VoteSizeError {
+                behaviour: votes.behaviour.clone(),
+                got: votes.votes.len(),
+                expected: self.arcs.len(),
+            });
+        }
+        let i = self.input_index(&votes.behaviour);
+        match &mut self.inputs[i].latest {
+            Some((utime, _)) if *utime > votes.utime => {}
+            Some((utime, latest)) => {
+                *utime = votes.utime;
+                latest.copy_from(&votes.votes);
+            }
+            slot @ None => *slot = Some((votes.utime, votes.votes.clone())),
+        }
+        Ok(())
+    }
+
+    fn fresh(&self, input: &Input, now: Utime) -> bool {
+        input
+            .latest
+            .as_ref()
+            .is_some_and(|(utime, _)| now - *utime <= self.timeout_us)
+    }
+
+    /// Fuses the fresh votes into a command at time `now`.
+    pub fn decide(&mut self, now: Utime) -> SteeringCommand {
+        self.stats.decisions += 1;
+        let outcome = self.fuse(now);
+        let command = match &outcome {
+            Ok((command, _)) => *command,
+            Err(reason) => {
+                match reason {
+                    StopReason::NoVotes => self.stats.stops_no_votes += 1,
+                    StopReason::RequiredStale { .. } => self.stats.stops_required_stale += 1,
+                    StopReason::AllArcsForbidden { .. } => self.stats.stops_all_forbidden += 1,
+                    StopReason::NoAcceptableArc { .. } => self.stats.stops_no_acceptable += 1,
+                }
+                SteeringCommand::stop(now)
+            }
+        };
+        if self.explain {
+            let (stop, limits) = match outcome {
+                Ok((_, limits)) => (None, limits),
+                Err(reason) => (Some(reason), Vec::new()),
+            };
+            self.decision = Some(self.explanation(now, command, stop, limits));
+        }
+        command
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn fuse(&mut self, now: Utime) -> Result<(SteeringCommand, Vec<(String, f64)>), StopReason> {
+        self.smoothed.fill(0.0);
+        for input in &self.inputs {
+            if input.required && input.weight > 0.0 && !self.fresh(input, now) {
+                return Err(StopReason::RequiredStale {
+                    behaviour: input.name.clone(),
+                    age_us: input.latest.as_ref().map(|(t, _)| now - t),
+                });
+            }
+        }
+        self.fused.fill(0.0);
+        self.vetoed.fill(false);
+        let mut total_weight = 0.0;
+        let mut speed_vote: Option<(String, f64)> = None;
+        for input in &self.inputs {
+            if input.weight <= 0.0 || !self.fresh(input, now) {
+                continue;
+            }
+            let Some((_, votes)) = &input.latest else {
+                continue;
+            };
+            total_weight += input.weight;
+            let w = input.weight as f32;
+            for ((fused, vetoed), (&vote, &veto)) in self
+                .fused
+                .iter_mut()
+                .zip(self.vetoed.iter_mut())
+                .zip(votes.values().iter().zip(votes.vetoed()))
+            {
+                *fused += w * vote;
+                *vetoed |= veto;
+            }
+            if let Some(speed) = votes.speed_mps()
+                && speed_vote.as_ref().is_none_or(|(_, s)| speed < *s)
+            {
+                speed_vote = Some((input.name.clone(), speed));
+            }
+        }
+        if total_weight <= 0.0 {
+            return Err(StopReason::NoVotes);
+        }
+        let scale = (1.0 / total_weight) as f32;
+        for (fused, &vetoed) in self.fused.iter_mut().zip(&self.vetoed) {
+            *fused = if vetoed { -1.0 } else { *fused * scale };
+        }
+        self.smooth();
+        let straight = self.arcs.straight_index();
+        let best = (0..self.smoothed.len())
+            .filter(|&i| !self.vetoed[i])
+            .max_by(|&a, &b| {
+                self.smoothed[a]
+                    .total_cmp(&self.smoothed[b])
+                    // Ties: the straighter arc wins.
+                    .then(b.abs_diff(straight).cmp(&a.abs_diff(straight)))
+            });
+        let Some(best) = best else {
+            return Err(StopReason::AllArcsForbidden {
+                vetoes: self
+                    .inputs
+                    .iter()
+                    .filter(|input| input.weight > 0.0 && self.fresh(input, now))
+                    .filter_map(|input| {
+                        let (_, votes) = input.latest.as_ref()?;
+                        let count = votes.vetoed().iter().filter(|&&v| v).count();
+                        (count > 0).then(|| (input.name.clone(), count))
+                    })
+                    .collect(),
+            });
+        };
+        let best_vote = self.smoothed[best];
+        if f64::from(best_vote) < self.config.min_acceptable_vote {
+            return Err(StopReason::NoAcceptableArc { best_vote });
+        }
+        let curvature = self.peak_curvature(best);
+        let mut limits = vec![
+            ("cruise".to_owned(), self.config.cruise_speed_mps),
+            ("vehicle".to_owned(), self.max_speed_mps),
+        ];
+        if let Some((behaviour, speed)) = speed_vote {
+            limits.push((behaviour, speed));
+        }
+        if curvature != 0.0 {
+            limits.push((
+                "lateral".to_owned(),
+                (self.config.max_lateral_accel_mps2 / curvature.abs()).sqrt(),
+            ));
+        }
+        let base = limits.iter().map(|(_, s)| *s).fold(f64::INFINITY, f64::min);
+        let slow = self.config.slow_below_vote;
+        let floor = self.config.min_acceptable_vote;
+        let factor = if f64::from(best_vote) >= slow {
+            1.0
+        } else {
+            ((f64::from(best_vote) - floor) / (slow - floor)).max(self.config.min_speed_fraction)
+        };
+        if factor < 1.0 {
+            limits.push(("weak vote".to_owned(), base * factor));
+        }
+        Ok((
+            SteeringCommand {
+                utime: now,
+                curvature,
+                speed_mps: base * factor,
+                arc_index: Some(best),
+                vote: best_vote,
+            },
+            limits,
+        ))
+    }
+
+    /// Gaussian smoothing of the fused votes across arcs (vetoed arcs count as -1).
+    fn smooth(&mut self) {
+        let n = self.fused.len() as i64;
+        let half = (self.kernel.len() / 2) as i64;
+        for i in 0..n {
+            let (mut sum, mut weight) = (0.0f32, 0.0f32);
+            for (k, &w) in self.kernel.iter().enumerate() {
+                let j = i + k as i64 - half;
+                if (0..n).contains(&j) {
+                    sum += w * self.fused[j as usize];
+                    weight += w;
+                }
+            }
+            self.smoothed[i as usize] = sum / weight;
+        }
+    }
+
+    /// The winning arc's curvature, moved to the peak of the parabola through
+    /// it and its neighbours when that is enabled and they are not vetoed.
+    fn peak_curvature(&self, best: usize) -> f64 {
+        let k = self.arcs.curvatures()[best];
+        if !self.config.interpolate_peak || best == 0 || best + 1 >= self.smoothed.len() {
+            return k;
+        }
+        if self.vetoed[best - 1] || self.vetoed[best + 1] {
+            return k;
+        }
+        let (a, b, c) = (
+            f64::from(self.smoothed[best - 1]),
+            f64::from(self.smoothed[best]),
+            f64::from(self.smoothed[best + 1]),
+        );
+        let denominator = a - 2.0 * b + c;
+        if denominator >= 0.0 {
+            return k;
+        }
+        let offset = (0.5 * (a - c) / denominator).clamp(-0.5, 0.5);
+        k + offset * self.arcs.spacing()
+    }
+
+    fn explanation(
+        &self,
+        now: Utime,
+        command: SteeringCommand,
+        stop: Option<StopReason>,
+        speed_limits: Vec<(String, f64)>,
+    ) -> Decision {
+        let mut vetoes = vec![Vec::new(); self.arcs.len()];
+        let mut inputs = Vec::with_capacity(self.inputs.len());
+        for input in &self.inputs {
+            let used = input.weight > 0.0 && self.fresh(input, now);
+            if let (true, Some((_, votes))) = (used, &input.latest) {
+                for (arc, cause) in votes.vetoed().iter().zip(votes.causes()).enumerate() {
+                    if *cause.0 {
+                        vetoes[arc].push((input.name.clone(), *cause.1));
+                    }
+                }
+            }
+            inputs.push(InputExplanation {
+                behaviour: input.name.clone(),
+                weight: input.weight,
+                age_us: input.latest.as_ref().map(|(t, _)| now - t),
+                used,
+                votes: input.latest.as_ref().map(|(_, v)| v.clone()),
+            });
+        }
+        Decision {
+            utime: now,
+            command,
+            stop,
+            fused: self.smoothed.clone(),
+            vetoes,
+            inputs,
+            speed_limits,
+        }
+    }
+}

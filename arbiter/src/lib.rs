@@ -1,0 +1,13 @@
+//! # arcnav-arbiter
+//!
+//! Rosenblatt's DAMN command arbitration as used in 002 §6: behaviours vote
+//! in [-1, 1] over the arc set, the arbiter owns the weights and decides. It
+//! knows votes, not behaviours.
+
+pub mod arbiter;
+pub mod config;
+pub mod votes;
+
+pub use arbiter::{Arbiter, ArbiterStats, Decision, InputExplanation, StopReason, VoteSizeError};
+pub use config::ArbiterConfig;
+pub use votes::{BehaviourVotes, Votes};

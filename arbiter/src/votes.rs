@@ -1,0 +1,137 @@
+//! One behaviour's votes over the arc set.
+
+use arcnav_vehicle::Utime;
+
+/// What a behaviour thinks of every arc: a vote in [-1, 1] per arc (index
+/// order of the `ArcSet`), arcs it forbids outright (a veto: no weighted sum
+/// can make such an arc win), the map cell that caused each veto, and an
+/// optional speed limit. Buffers are sized once for the arc set; behaviours
+/// fill them in place.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Votes {
+    values: Vec<f32>,
+    vetoed: Vec<bool>,
+    causes: Vec<Option<[f32; 2]>>,
+    speed_mps: Option<f64>,
+}
+
+impl Votes {
+    /// Neutral votes (0, no veto, no speed) for `arcs` arcs.
+    pub fn new(arcs: usize) -> Self {
+        Self {
+            values: vec![0.0; arcs],
+            vetoed: vec![false; arcs],
+            causes: vec![None; arcs],
+            speed_mps: None,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// Back to neutral, keeping the buffers.
+    pub fn clear(&mut self) {
+        self.values.fill(0.0);
+        self.vetoed.fill(false);
+        self.causes.fill(None);
+        self.speed_mps = None;
+    }
+
+    /// Sets the vote of arc `index`, clamped to [-1, 1] (NaN counts as -1).
+    pub fn set(&mut self, index: usize, vote: f32) {
+        if let Some(v) = self.values.get_mut(index) {
+            *v = if vote.is_nan() {
+                -1.0
+            } else {
+                vote.clamp(-1.0, 1.0)
+            };
+        }
+    }
+
+    /// Forbids arc `index` (its vote becomes -1); `cause` is the vehicle-frame
+    /// position of what makes it forbidden, if known.
+    pub fn veto(&mut self, index: usize, cause: Option<[f32; 2]>) {
+        if index < self.values.len() {
+            self.values[index] = -1.0;
+            self.vetoed[index] = true;
+            self.causes[index] = cause;
+        }
+    }
+
+    /// Votes the highest speed this behaviour accepts, m/s (negative: 0).
+    pub fn vote_speed(&mut self, speed_mps: f64) {
+        self.speed_mps = Some(if speed_mps.is_nan() {
+            0.0
+        } else {
+            speed_mps.max(0.0)
+        });
+    }
+
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    pub fn vetoed(&self) -> &[bool] {
+        &self.vetoed
+    }
+
+    pub fn causes(&self) -> &[Option<[f32; 2]>] {
+        &self.causes
+    }
+
+    pub fn speed_mps(&self) -> Option<f64> {
+        self.speed_mps
+    }
+
+    pub fn vote(&self, index: usize) -> Option<f32> {
+        self.values.get(index).copied()
+    }
+
+    pub fn is_vetoed(&self, index: usize) -> bool {
+        self.vetoed.get(index).copied().unwrap_or(false)
+    }
+
+    /// Copies `other` into these buffers (same arc count).
+    pub fn copy_from(&mut self, other: &Votes) {
+        self.values.clone_from(&other.values);
+        self.vetoed.clone_from(&other.vetoed);
+        self.causes.clone_from(&other.causes);
+        self.speed_mps = other.speed_mps;
+    }
+}
+
+/// Votes as the arbiter receives them: whose, and when they were cast.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BehaviourVotes {
+    pub behaviour: String,
+    /// When the votes were cast.
+    pub utime: Utime,
+    pub votes: Votes,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn votes_are_clamped_and_vetoes_are_minus_one() {
+        let mut v = Votes::new(5);
+        v.set(0, 3.0);
+        v.set(1, -7.0);
+        v.set(2, f32::NAN);
+        v.veto(3, Some([5.0, 0.0]));
+        v.set(9, 1.0);
+        assert_eq!(v.values(), [1.0, -1.0, -1.0, -1.0, 0.0]);
+        assert_eq!(v.vetoed(), [false, false, false, true, false]);
+        assert_eq!(v.causes()[3], Some([5.0, 0.0]));
+        v.vote_speed(-2.0);
+        assert_eq!(v.speed_mps(), Some(0.0));
+        v.clear();
+        assert_eq!(v, Votes::new(5));
+    }
+}
