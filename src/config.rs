@@ -8,16 +8,20 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use std::collections::BTreeMap;
+
+use arcnav_arbiter::ArbiterConfig;
+use arcnav_behaviours::{Registry, RegistryError, Setup};
 use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
-use arcnav_vehicle::{ArcSetConfig, ConfigError, VehicleConfig};
+use arcnav_vehicle::{ArcSet, ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
 /// The documented defaults, as shipped in `config/default.toml`.
 pub const DEFAULT_TOML: &str = include_str!("../config/default.toml");
 
 /// Every parameter of arcnav.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Config {
     pub vehicle: VehicleConfig,
@@ -25,6 +29,47 @@ pub struct Config {
     pub sensor: SensorConfig,
     pub perception: PerceptionConfig,
     pub localmap: LocalMapConfig,
+    pub arbiter: ArbiterConfig,
+    /// One table per active behaviour, `[behaviours.NAME]`. The built-in
+    /// behaviours are always present (set their weight to 0 to skip them);
+    /// a table in a file changes only the keys it names.
+    #[serde(deserialize_with = "behaviours_with_defaults")]
+    pub behaviours: BTreeMap<String, toml::Table>,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            vehicle: VehicleConfig::default(),
+            arcs: ArcSetConfig::default(),
+            sensor: SensorConfig::default(),
+            perception: PerceptionConfig::default(),
+            localmap: LocalMapConfig::default(),
+            arbiter: ArbiterConfig::default(),
+            behaviours: default_behaviours(),
+        }
+    }
+}
+
+/// The built-in behaviours with their default tables.
+fn default_behaviours() -> BTreeMap<String, toml::Table> {
+    let registry = Registry::builtin();
+    registry
+        .names()
+        .into_iter()
+        .filter_map(|name| registry.defaults(&name).ok().map(|table| (name, table)))
+        .collect()
+}
+
+fn behaviours_with_defaults<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> Result<BTreeMap<String, toml::Table>, D::Error> {
+    let mut behaviours = default_behaviours();
+    let given: BTreeMap<String, toml::Table> = serde::Deserialize::deserialize(deserializer)?;
+    for (name, table) in given {
+        behaviours.entry(name).or_default().extend(table);
+    }
+    Ok(behaviours)
 }
 
 /// A configuration that could not be loaded.
@@ -81,7 +126,17 @@ impl Config {
 
     /// Parses and validates TOML text; `origin` names it in messages.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self, ConfigLoadError> {
-        let config: Self = toml::from_str(text).map_err(|err| {
+        Self::from_toml_with(text, origin, &Registry::builtin())
+    }
+
+    /// Like [`Config::from_toml`], with behaviours from `registry` (for
+    /// programs that add their own).
+    pub fn from_toml_with(
+        text: &str,
+        origin: &str,
+        registry: &Registry,
+    ) -> Result<Self, ConfigLoadError> {
+        let mut config: Self = toml::from_str(text).map_err(|err| {
             let (line, key) = err
                 .span()
                 .map(|span| locate(text, span.start))
@@ -96,7 +151,8 @@ impl Config {
             }
         })?;
         config
-            .validate()
+            .validate_with(registry)
+            .and_then(|()| config.normalise_behaviours(registry))
             .map_err(|source| ConfigLoadError::Invalid {
                 origin: origin.to_owned(),
                 source,
@@ -104,8 +160,65 @@ impl Config {
         Ok(config)
     }
 
-    /// Checks every section and the values that relate sections.
+    /// Reads, parses and validates a file with behaviours from `registry`.
+    pub fn load_with(path: &Path, registry: &Registry) -> Result<Self, ConfigLoadError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml_with(&text, &path.display().to_string(), registry)
+    }
+
+    /// The arc set this configuration describes.
+    pub fn arc_set(&self) -> Result<ArcSet, ConfigError> {
+        ArcSet::new(&self.arcs).map_err(|e| e.within("arcs"))
+    }
+
+    /// Builds every configured behaviour (in name order) with `registry`.
+    pub fn build_behaviours(
+        &self,
+        registry: &Registry,
+        arcs: &ArcSet,
+    ) -> Result<Vec<Box<dyn arcnav_behaviours::Behaviour>>, ConfigError> {
+        let setup = Setup {
+            arcs,
+            vehicle: &self.vehicle,
+            patch_size_m: self.localmap.patch_size_m,
+        };
+        self.behaviours
+            .iter()
+            .map(|(name, table)| {
+                registry
+                    .build(name, table, &setup)
+                    .map_err(|e| behaviour_error(name, e))
+            })
+            .collect()
+    }
+
+    /// Replaces each behaviour table by its full form (every default filled in).
+    fn normalise_behaviours(&mut self, registry: &Registry) -> Result<(), ConfigError> {
+        let arcs = self.arc_set()?;
+        let setup = Setup {
+            arcs: &arcs,
+            vehicle: &self.vehicle,
+            patch_size_m: self.localmap.patch_size_m,
+        };
+        for (name, table) in &mut self.behaviours {
+            *table = registry
+                .normalise(name, table, &setup)
+                .map_err(|e| behaviour_error(name, e))?;
+        }
+        Ok(())
+    }
+
+    /// Checks every section and the values that relate sections, with the
+    /// built-in behaviours.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.validate_with(&Registry::builtin())
+    }
+
+    /// Checks every section with behaviours from `registry`.
+    pub fn validate_with(&self, registry: &Registry) -> Result<(), ConfigError> {
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
         self.arcs
             .validate_for(&self.vehicle)
@@ -115,6 +228,18 @@ impl Config {
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("perception"))?;
         self.localmap.validate().map_err(|e| e.within("localmap"))?;
+        self.arbiter.validate().map_err(|e| e.within("arbiter"))?;
+        let arcs = self.arc_set()?;
+        let setup = Setup {
+            arcs: &arcs,
+            vehicle: &self.vehicle,
+            patch_size_m: self.localmap.patch_size_m,
+        };
+        for (name, table) in &self.behaviours {
+            registry
+                .normalise(name, table, &setup)
+                .map_err(|e| behaviour_error(name, e))?;
+        }
         Ok(())
     }
 
@@ -122,6 +247,18 @@ impl Config {
     pub fn to_toml(&self) -> String {
         // Plain structs of numbers, strings and tables always serialise.
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
+    }
+}
+
+fn behaviour_error(name: &str, error: RegistryError) -> ConfigError {
+    match error {
+        RegistryError::Config(e) if e.key.is_empty() => {
+            ConfigError::new(format!("behaviours.{name}"), e.reason)
+        }
+        RegistryError::Config(e) => e.within(&format!("behaviours.{name}")),
+        unknown @ RegistryError::Unknown { .. } => {
+            ConfigError::new(format!("behaviours.{name}"), unknown.to_string())
+        }
     }
 }
 
@@ -300,6 +437,34 @@ mod tests {
             ),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn an_unknown_behaviour_lists_the_known_ones() {
+        let msg = parse_error("[behaviours.wall_follower]\ngain = 2.0\n");
+        assert_eq!(
+            msg,
+            "test.toml: invalid configuration: `behaviours.wall_follower`: unknown behaviour \"wall_follower\" (known: goal_seeking, obstacle_avoidance)"
+        );
+    }
+
+    #[test]
+    fn a_bad_behaviour_key_is_named() {
+        let msg = parse_error("[behaviours.goal_seeking]\nlookahed_m = 3.0\n");
+        assert!(
+            msg.starts_with("test.toml: invalid configuration: `behaviours.goal_seeking.lookahed_m`: unknown field `lookahed_m`"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_behaviour_table_changes_only_its_keys_and_the_others_stay() {
+        let config =
+            Config::from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
+        let goal = &config.behaviours["goal_seeking"];
+        assert_eq!(goal["lookahead_m"].as_float(), Some(14.0));
+        assert_eq!(goal["arrival_radius_m"].as_float(), Some(5.0));
+        assert!(config.behaviours.contains_key("obstacle_avoidance"));
     }
 
     #[test]

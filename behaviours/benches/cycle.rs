@@ -1,0 +1,125 @@
+//! One full cycle: obstacle avoidance and goal seeking vote, the arbiter
+//! decides, over a map of 2 000 cells. Targets: ≤ 20 µs with 39 arcs,
+//! ≤ 0.3 ms with 1 000 arcs (1 001 here: the count is odd so that straight is
+//! one of the arcs). Run with `cargo bench -p arcnav-behaviours`.
+
+use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, Votes};
+use arcnav_behaviours::{Behaviour, Mission, Registry, Setup, VoteContext, Waypoint};
+use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot};
+use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
+use arcnav_vehicle::frames::planar_isometry;
+use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
+use divan::{Bencher, black_box};
+
+fn main() {
+    divan::main();
+}
+
+/// 2 000 distinct patches scattered over the window (deterministic).
+fn map() -> MapSnapshot {
+    let mut local = LocalMap::new(&LocalMapConfig::default(), 10.0);
+    local.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
+    let mut cells = Vec::new();
+    let mut k: u64 = 1;
+    while local.len() < 2_000 {
+        cells.clear();
+        for _ in 0..64 {
+            k = k
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let x = -5.9 + (k >> 40) as f64 / (1u64 << 24) as f64 * 25.8;
+            let y = -9.9 + ((k >> 16) & 0xff_ffff) as f64 / (1u64 << 24) as f64 * 19.8;
+            cells.push(ObstacleCell {
+                x,
+                y,
+                z_min: 0.0,
+                z_max: 0.5,
+                reasons: Reasons::HEIGHT_VARIATION,
+                region: 0,
+            });
+        }
+        let report = ObstacleReport {
+            utime: 0,
+            sensor: "bench".into(),
+            cell_size_m: 0.2,
+            cells: cells.clone(),
+            regions: vec![],
+            fov: FovPolygon::default(),
+        };
+        local.insert(&report).expect("valid cells");
+    }
+    (*local.snapshot()).clone()
+}
+
+fn bench_cycle(bencher: Bencher, arc_count: usize) {
+    let arcs = ArcSet::new(&ArcSetConfig {
+        count: arc_count,
+        min_radius_m: 8.0,
+    })
+    .expect("valid arcs");
+    let vehicle = VehicleConfig::default();
+    let setup = Setup {
+        arcs: &arcs,
+        vehicle: &vehicle,
+        patch_size_m: 0.4,
+    };
+    let registry = Registry::builtin();
+    let built = std::time::Instant::now();
+    let mut behaviours: Vec<Box<dyn Behaviour>> = ["obstacle_avoidance", "goal_seeking"]
+        .iter()
+        .map(|name| {
+            registry
+                .build(name, &toml::Table::new(), &setup)
+                .expect("builtin")
+        })
+        .collect();
+    println!(
+        "{arc_count} arcs: behaviours built in {:.1} ms (once, at start-up)",
+        built.elapsed().as_secs_f64() * 1e3
+    );
+    let mut arbiter = Arbiter::new(&ArbiterConfig::default(), arcs.clone(), &vehicle);
+    let map = map();
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = Mission {
+        version: 1,
+        waypoints: vec![Waypoint {
+            x: 200.0,
+            y: 40.0,
+            radius_m: None,
+        }],
+    };
+    let mut votes: Vec<BehaviourVotes> = behaviours
+        .iter()
+        .map(|b| BehaviourVotes {
+            behaviour: b.name().to_owned(),
+            utime: 0,
+            votes: Votes::new(arcs.len()),
+        })
+        .collect();
+    bencher.bench_local(|| {
+        let ctx = VoteContext {
+            utime: 0,
+            pose: &pose,
+            map: black_box(&map),
+            mission: &mission,
+            arcs: &arcs,
+            last_command: None,
+        };
+        for (behaviour, out) in behaviours.iter_mut().zip(votes.iter_mut()) {
+            out.votes.clear();
+            behaviour.vote(&ctx, &mut out.votes);
+            let _ = arbiter.on_votes(out);
+        }
+        arbiter.decide(0)
+    });
+}
+
+#[divan::bench]
+fn cycle_39_arcs(bencher: Bencher) {
+    bench_cycle(bencher, 39);
+}
+
+#[divan::bench]
+fn cycle_1001_arcs(bencher: Bencher) {
+    bench_cycle(bencher, 1001);
+}

@@ -1,0 +1,91 @@
+//! The behaviour trait and what a behaviour sees.
+
+use arcnav_arbiter::Votes;
+use arcnav_localmap::MapSnapshot;
+use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime, VehicleConfig};
+
+/// A point to reach, world frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Waypoint {
+    pub x: f64,
+    pub y: f64,
+    /// Arrival radius, m; `None` uses the goal-seeking default.
+    pub radius_m: Option<f64>,
+}
+
+/// The waypoints to reach, in order.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Mission {
+    /// Changes whenever the list changes (the `utime` of its message).
+    pub version: Utime,
+    pub waypoints: Vec<Waypoint>,
+}
+
+/// Everything a behaviour may look at when it votes.
+#[derive(Debug, Clone, Copy)]
+pub struct VoteContext<'a> {
+    /// Time of the vote.
+    pub utime: Utime,
+    /// The vehicle now.
+    pub pose: &'a Pose,
+    /// The local map in the vehicle frame of `pose`.
+    pub map: &'a MapSnapshot,
+    pub mission: &'a Mission,
+    /// The arcs to vote over; votes are in this set's index order.
+    pub arcs: &'a ArcSet,
+    /// The last command the arbiter sent, if any.
+    pub last_command: Option<&'a SteeringCommand>,
+}
+
+/// What a behaviour is built with, besides its own TOML table.
+#[derive(Debug, Clone, Copy)]
+pub struct Setup<'a> {
+    pub arcs: &'a ArcSet,
+    pub vehicle: &'a VehicleConfig,
+    /// Side of the local map's patches, m (a patch is a square, its position its centre).
+    pub patch_size_m: f64,
+}
+
+/// How far a mission has come.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// Index of the waypoint being sought (== `waypoints` when complete).
+    pub current: usize,
+    pub waypoints: usize,
+    pub complete: bool,
+}
+
+/// A voting behaviour (002 §6, DAMN).
+///
+/// Behaviours never steer: every cycle each fills one vote per arc in
+/// [-1, 1] (and may veto arcs or vote a speed limit); the arbiter weights and
+/// fuses them. A behaviour is added with one file implementing this trait and
+/// [`crate::Plugin`], one line in the [`crate::Registry`] and one table in the
+/// configuration.
+pub trait Behaviour: Send {
+    /// The name its votes are weighted and published under
+    /// (`ARC_VOTES_<NAME>`), as in its configuration table.
+    fn name(&self) -> &str;
+
+    /// Fills `votes` for `ctx.arcs`. Called every cycle with `votes` reset
+    /// to neutral (0, no veto, no speed). The hot method: allocate nothing.
+    fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes);
+
+    /// Forgets everything carried between cycles. Called when a mission
+    /// starts over or the local map was reset.
+    fn reset(&mut self) {}
+
+    /// Called after each decision with the command the arbiter sent.
+    fn debrief(&mut self, _command: &SteeringCommand) {}
+
+    /// Progress through the mission, for behaviours that follow one.
+    fn progress(&self) -> Option<Progress> {
+        None
+    }
+}
+
+impl std::fmt::Debug for dyn Behaviour {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Behaviour({})", self.name())
+    }
+}

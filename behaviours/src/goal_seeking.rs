@@ -1,0 +1,142 @@
+//! Goal seeking (002 §6): higher votes for arcs that steer the vehicle
+//! toward the current waypoint; advances through the waypoint list.
+//!
+//! An arc's vote is the cosine of the angle between the vehicle's heading
+//! after driving `lookahead_m` along the arc and the direction from there to
+//! the waypoint: +1 for an arc that ends pointing at it, -1 pointing away,
+//! varying smoothly across arcs. A waypoint is reached within its arrival
+//! radius, or — so that an obstacle detour does not force a loop back — when
+//! it is behind the vehicle and within `pass_radius_factor` radii. After the
+//! last waypoint the mission is complete: votes are neutral and the speed
+//! vote is 0.
+
+use arcnav_arbiter::Votes;
+use arcnav_vehicle::config::{self, ConfigError};
+use arcnav_vehicle::frames::wrap_angle;
+use serde::{Deserialize, Serialize};
+
+use crate::behaviour::{Behaviour, Mission, Progress, Setup, VoteContext};
+use crate::registry::Plugin;
+
+/// Lives in `[behaviours.goal_seeking]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GoalSeekingConfig {
+    /// A waypoint is reached within this distance (unless the waypoint has its own), m.
+    pub arrival_radius_m: f64,
+    /// Arcs are judged by where they point after this distance, m.
+    pub lookahead_m: f64,
+    /// A waypoint behind the vehicle and within this many arrival radii is
+    /// passed (0 = only the radius counts).
+    pub pass_radius_factor: f64,
+}
+
+impl Default for GoalSeekingConfig {
+    fn default() -> Self {
+        Self {
+            arrival_radius_m: 5.0,
+            lookahead_m: 10.0,
+            pass_radius_factor: 2.0,
+        }
+    }
+}
+
+/// The goal-seeking behaviour.
+#[derive(Debug, Clone)]
+pub struct GoalSeeking {
+    config: GoalSeekingConfig,
+    mission_version: Option<i64>,
+    waypoints: usize,
+    current: usize,
+}
+
+impl GoalSeeking {
+    pub fn new(config: GoalSeekingConfig) -> Self {
+        Self {
+            config,
+            mission_version: None,
+            waypoints: 0,
+            current: 0,
+        }
+    }
+
+    /// Moves past every waypoint already reached from (x, y) heading `yaw`.
+    fn advance(&mut self, mission: &Mission, x: f64, y: f64, yaw: f64) {
+        while let Some(w) = mission.waypoints.get(self.current) {
+            let radius = w
+                .radius_m
+                .filter(|r| *r > 0.0)
+                .unwrap_or(self.config.arrival_radius_m);
+            let (dx, dy) = (w.x - x, w.y - y);
+            let distance = dx.hypot(dy);
+            let ahead = dx * yaw.cos() + dy * yaw.sin();
+            let passed = ahead < 0.0 && distance < radius * self.config.pass_radius_factor;
+            if distance <= radius || passed {
+                self.current += 1;
+            } else {
+                break;
+            }
+        }
+    }
+}
+
+impl Behaviour for GoalSeeking {
+    fn name(&self) -> &str {
+        Self::NAME
+    }
+
+    fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
+        if self.mission_version != Some(ctx.mission.version) {
+            self.mission_version = Some(ctx.mission.version);
+            self.current = 0;
+        }
+        self.waypoints = ctx.mission.waypoints.len();
+        let position = ctx.pose.position();
+        let yaw = ctx.pose.yaw();
+        self.advance(ctx.mission, position.x, position.y, yaw);
+        let Some(goal) = ctx.mission.waypoints.get(self.current) else {
+            // Complete (or nothing to do): no opinion on steering, and stop.
+            votes.vote_speed(0.0);
+            return;
+        };
+        // The waypoint in the vehicle frame.
+        let (dx, dy) = (goal.x - position.x, goal.y - position.y);
+        let (sin, cos) = yaw.sin_cos();
+        let (gx, gy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+        let lookahead = self.config.lookahead_m.min(gx.hypot(gy));
+        for (index, arc) in ctx.arcs.iter().enumerate() {
+            let end = arc.pose_at(lookahead);
+            let bearing = (gy - end.position.y).atan2(gx - end.position.x);
+            votes.set(index, wrap_angle(bearing - end.heading).cos() as f32);
+        }
+    }
+
+    fn reset(&mut self) {
+        self.current = 0;
+        self.mission_version = None;
+    }
+
+    fn progress(&self) -> Option<Progress> {
+        Some(Progress {
+            current: self.current.min(self.waypoints),
+            waypoints: self.waypoints,
+            complete: self.waypoints > 0 && self.current >= self.waypoints,
+        })
+    }
+}
+
+impl Plugin for GoalSeeking {
+    const NAME: &'static str = "goal_seeking";
+    type Config = GoalSeekingConfig;
+
+    fn validate(c: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
+        config::positive("arrival_radius_m", c.arrival_radius_m)?;
+        config::positive("lookahead_m", c.lookahead_m)?;
+        config::non_negative("pass_radius_factor", c.pass_radius_factor)?;
+        Ok(())
+    }
+
+    fn build(config: Self::Config, _setup: &Setup<'_>) -> Self {
+        Self::new(config)
+    }
+}

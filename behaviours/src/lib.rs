@@ -1,0 +1,20 @@
+//! # arcnav-behaviours
+//!
+//! Behaviours vote over the arc set; the arbiter decides (002 §6).
+//!
+//! - [`Behaviour`]: one hot method, [`Behaviour::vote`], filling a
+//!   caller-owned [`arcnav_arbiter::Votes`] from a [`VoteContext`] (map
+//!   snapshot, pose, mission, arcs); lifecycle hooks with default bodies;
+//! - [`Registry`]: builds behaviours by name from their TOML tables; plug in
+//!   your own with [`Plugin`] and `registry.add::<Mine>()`;
+//! - [`ObstacleAvoidance`] and [`GoalSeeking`], the paper's two behaviours.
+
+pub mod behaviour;
+pub mod goal_seeking;
+pub mod obstacle_avoidance;
+pub mod registry;
+
+pub use behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
+pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
+pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig};
+pub use registry::{Plugin, Registry, RegistryError};

@@ -1,0 +1,392 @@
+//! Obstacle avoidance (002 §6): the vehicle footprint swept along each arc
+//! against the map's cells.
+//!
+//! - a collision closer than `min_distance_m` along the arc: -1, a veto,
+//!   recording the cell that causes it;
+//! - no collision before `max_distance_m`: +1, minus a near-miss penalty that
+//!   grows as the closest cell comes nearer to the swept footprint;
+//! - a collision in between: a negative vote rising linearly from -1 at
+//!   `min_distance_m` towards 0 at `max_distance_m`.
+//!
+//! Per-arc geometry is precomputed once: for the footprint and for
+//! `near_miss_bands` widenings of it up to `near_miss_m`, the grid cells each
+//! sweeps, grouped into 64-bit row masks sorted by the distance along the arc
+//! at which the footprint first touches them (exact, from
+//! [`arcnav_vehicle::SweptFootprint::first_contact`]). Each cycle the map's
+//! cells are rasterised into a small bitmap and each arc walks its masks in
+//! distance order: most arcs are decided by one pass over the widest band.
+//! Map patches are squares, so the footprint is grown by half a patch.
+
+use std::collections::HashMap;
+
+use arcnav_arbiter::Votes;
+use arcnav_vehicle::config::{self, ConfigError};
+use arcnav_vehicle::{Arc, Footprint, SweptFootprint};
+use nalgebra::Point2;
+use serde::{Deserialize, Serialize};
+
+use crate::behaviour::{Behaviour, Setup, VoteContext};
+use crate::registry::Plugin;
+
+/// Lives in `[behaviours.obstacle_avoidance]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ObstacleAvoidanceConfig {
+    /// A collision closer than this along the arc forbids the arc, m.
+    pub min_distance_m: f64,
+    /// An arc clear this far along is a good arc, m.
+    pub max_distance_m: f64,
+    /// Cells closer than this to the swept footprint count as near misses, m.
+    pub near_miss_m: f64,
+    /// Vote lost by a clear arc whose footprint grazes a cell.
+    pub near_miss_penalty: f64,
+    /// Clearance bands between 0 and `near_miss_m` (the penalty's resolution).
+    pub near_miss_bands: u32,
+    /// Resolution of the collision grid, m.
+    pub grid_resolution_m: f64,
+    /// Vote a speed at which the vehicle can stop within the best arc's free
+    /// distance (minus `stop_margin_m`), reacting after `reaction_s`.
+    pub speed_vote: bool,
+    pub stop_margin_m: f64,
+    pub reaction_s: f64,
+}
+
+impl Default for ObstacleAvoidanceConfig {
+    fn default() -> Self {
+        Self {
+            min_distance_m: 6.0,
+            max_distance_m: 18.0,
+            near_miss_m: 1.0,
+            near_miss_penalty: 0.5,
+            near_miss_bands: 4,
+            grid_resolution_m: 0.2,
+            speed_vote: true,
+            stop_margin_m: 2.0,
+            reaction_s: 0.75,
+        }
+    }
+}
+
+/// One group of grid cells of an arc's swept band.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    /// Distance along the arc at which the footprint first touches the group.
+    s: f32,
+    /// Word of the bitmap.
+    word: u32,
+    mask: u64,
+}
+
+/// The swept bands of one arc, each a list of entries in distance order.
+#[derive(Debug, Clone)]
+struct Template {
+    bands: Vec<Vec<Entry>>,
+}
+
+/// The vehicle-frame grid the map is rasterised into.
+#[derive(Debug, Clone)]
+struct Grid {
+    x0: f64,
+    y0: f64,
+    resolution: f64,
+    rows: usize,
+    columns: usize,
+    words_per_row: usize,
+}
+
+impl Grid {
+    fn cell(&self, x: f64, y: f64) -> Option<(usize, usize)> {
+        let (fx, fy) = (
+            (x - self.x0) / self.resolution,
+            (y - self.y0) / self.resolution,
+        );
+        (fx >= 0.0 && fy >= 0.0 && fx < self.rows as f64 && fy < self.columns as f64)
+            .then_some((fx as usize, fy as usize))
+    }
+
+    fn centre(&self, row: usize, column: usize) -> Point2<f64> {
+        Point2::new(
+            self.x0 + (row as f64 + 0.5) * self.resolution,
+            self.y0 + (column as f64 + 0.5) * self.resolution,
+        )
+    }
+}
+
+/// The obstacle-avoidance behaviour.
+#[derive(Debug, Clone)]
+pub struct ObstacleAvoidance {
+    config: ObstacleAvoidanceConfig,
+    grid: Grid,
+    templates: Vec<Template>,
+    /// Margin of band b (0 for the footprint itself).
+    margins: Vec<f64>,
+    deceleration: f64,
+    bitmap: Vec<u64>,
+    /// Map patch index per grid cell that holds one (u32::MAX otherwise).
+    causes: Vec<u32>,
+    set_cells: Vec<u32>,
+    /// Per arc: first collision distance (∞ if none within max), for speed.
+    free: Vec<f64>,
+}
+
+impl ObstacleAvoidance {
+    /// Precomputes the swept bands of every arc.
+    pub fn new(config: ObstacleAvoidanceConfig, setup: &Setup<'_>) -> Self {
+        let half_patch = setup.patch_size_m / 2.0;
+        let body = setup.vehicle.footprint();
+        let footprint = Footprint {
+            x_min: body.x_min - half_patch,
+            x_max: body.x_max + half_patch,
+            half_width: body.half_width + half_patch,
+        };
+        let bands = config.near_miss_bands as usize;
+        let margins: Vec<f64> = (0..=bands)
+            .map(|b| config.near_miss_m * b as f64 / bands.max(1) as f64)
+            .collect();
+        let widest = footprint.widened(config.near_miss_m);
+        let reach = config.max_distance_m;
+        // Grid bounds: every outline of the widest band along every arc.
+        let (mut lo, mut hi) = (
+            Point2::new(f64::MAX, f64::MAX),
+            Point2::new(f64::MIN, f64::MIN),
+        );
+        for arc in setup.arcs.iter() {
+            for outline in arc.swept(widest, reach).outlines(0.25) {
+                for corner in outline {
+                    lo = lo.inf(&corner);
+                    hi = hi.sup(&corner);
+                }
+            }
+        }
+        let r = config.grid_resolution_m;
+        let rows = ((hi.x - lo.x) / r).ceil() as usize + 1;
+        let columns = ((hi.y - lo.y) / r).ceil() as usize + 1;
+        let words_per_row = columns.div_ceil(64);
+        let grid = Grid {
+            x0: lo.x,
+            y0: lo.y,
+            resolution: r,
+            rows,
+            columns,
+            words_per_row,
+        };
+        let templates = setup
+            .arcs
+            .iter()
+            .map(|arc| build_template(arc, &footprint, &margins, &grid, reach))
+            .collect();
+        Self {
+            deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
+            bitmap: vec![0; rows * words_per_row],
+            causes: vec![u32::MAX; rows * columns],
+            set_cells: Vec::new(),
+            free: vec![f64::INFINITY; setup.arcs.len()],
+            config,
+            grid,
+            templates,
+            margins,
+        }
+    }
+
+    /// Rasterises the map into the bitmap (clearing the last cycle's cells).
+    fn rasterise(&mut self, ctx: &VoteContext<'_>) {
+        for &cell in &self.set_cells {
+            let (row, column) = (
+                cell as usize / self.grid.columns,
+                cell as usize % self.grid.columns,
+            );
+            self.bitmap[row * self.grid.words_per_row + column / 64] = 0;
+            self.causes[cell as usize] = u32::MAX;
+        }
+        self.set_cells.clear();
+        for (index, patch) in ctx.map.patches.iter().enumerate() {
+            let Some((row, column)) = self.grid.cell(f64::from(patch.x), f64::from(patch.y)) else {
+                continue;
+            };
+            self.bitmap[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
+            let cell = row * self.grid.columns + column;
+            if self.causes[cell] == u32::MAX {
+                self.causes[cell] = index as u32;
+                self.set_cells.push(cell as u32);
+            }
+        }
+    }
+
+    /// The first entry of `band` that holds a map cell within `reach`.
+    fn first_hit<'t>(&self, band: &'t [Entry], reach: f32) -> Option<&'t Entry> {
+        band.iter()
+            .take_while(|e| e.s <= reach)
+            .find(|e| self.bitmap[e.word as usize] & e.mask != 0)
+    }
+
+    /// The map cell behind a hit entry, vehicle frame.
+    fn cause(&self, entry: &Entry, ctx: &VoteContext<'_>) -> Option<[f32; 2]> {
+        let hits = self.bitmap[entry.word as usize] & entry.mask;
+        let row = entry.word as usize / self.grid.words_per_row;
+        let column =
+            (entry.word as usize % self.grid.words_per_row) * 64 + hits.trailing_zeros() as usize;
+        let patch = self.causes.get(row * self.grid.columns + column)?;
+        let patch = ctx.map.patches.get(*patch as usize)?;
+        Some([patch.x, patch.y])
+    }
+}
+
+fn build_template(
+    arc: Arc,
+    footprint: &Footprint,
+    margins: &[f64],
+    grid: &Grid,
+    reach: f64,
+) -> Template {
+    let widest = arc.swept(footprint.widened(margins[margins.len() - 1]), reach);
+    // Bounds of this arc's widest band, in grid cells.
+    let (mut lo, mut hi) = (
+        Point2::new(f64::MAX, f64::MAX),
+        Point2::new(f64::MIN, f64::MIN),
+    );
+    for outline in widest.outlines(0.25) {
+        for corner in outline {
+            lo = lo.inf(&corner);
+            hi = hi.sup(&corner);
+        }
+    }
+    let to_row =
+        |x: f64| (((x - grid.x0) / grid.resolution).floor().max(0.0) as usize).min(grid.rows - 1);
+    let to_column = |y: f64| {
+        (((y - grid.y0) / grid.resolution).floor().max(0.0) as usize).min(grid.columns - 1)
+    };
+    let mut cells: Vec<Vec<(f32, usize, usize)>> = vec![Vec::new(); margins.len()];
+    for row in to_row(lo.x)..=to_row(hi.x) {
+        for column in to_column(lo.y)..=to_column(hi.y) {
+            let p = grid.centre(row, column);
+            if widest.first_contact(p).is_none() {
+                continue;
+            }
+            for (band, &margin) in margins.iter().enumerate() {
+                let swept = SweptFootprint {
+                    arc,
+                    footprint: footprint.widened(margin),
+                    length_m: reach,
+                };
+                if let Some(s) = swept.first_contact(p) {
+                    cells[band].push((s as f32, row, column));
+                }
+            }
+        }
+    }
+    let bin = grid.resolution as f32;
+    let bands = cells
+        .into_iter()
+        .map(|mut band| {
+            band.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            // Group by (distance bin, word), keeping the group's first distance.
+            let mut entries: Vec<Entry> = Vec::new();
+            let mut groups: HashMap<(i64, u32), usize> = HashMap::new();
+            for (s, row, column) in band {
+                let word = (row * grid.words_per_row + column / 64) as u32;
+                let bit = 1u64 << (column % 64);
+                let index = *groups
+                    .entry(((s / bin).floor() as i64, word))
+                    .or_insert_with(|| {
+                        entries.push(Entry { s, word, mask: 0 });
+                        entries.len() - 1
+                    });
+                entries[index].mask |= bit;
+            }
+            entries.sort_by(|a, b| a.s.total_cmp(&b.s));
+            entries
+        })
+        .collect();
+    Template { bands }
+}
+
+impl Behaviour for ObstacleAvoidance {
+    fn name(&self) -> &str {
+        Self::NAME
+    }
+
+    fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
+        self.rasterise(ctx);
+        let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
+        let reach = max as f32;
+        let widest = self.margins.len() - 1;
+        for arc in 0..self.templates.len().min(votes.len()) {
+            let template = &self.templates[arc];
+            self.free[arc] = f64::INFINITY;
+            if self.first_hit(&template.bands[widest], reach).is_none() {
+                votes.set(arc, 1.0);
+                continue;
+            }
+            if let Some(hit) = self.first_hit(&template.bands[0], reach) {
+                let distance = f64::from(hit.s);
+                self.free[arc] = distance;
+                if distance < min {
+                    let cause = self.cause(hit, ctx);
+                    votes.veto(arc, cause);
+                } else {
+                    votes.set(arc, -(1.0 - (distance - min) / (max - min)) as f32);
+                }
+                continue;
+            }
+            // Clear of collisions: the narrowest band that grazes a cell.
+            let band = (1..=widest)
+                .find(|&b| self.first_hit(&template.bands[b], reach).is_some())
+                .unwrap_or(widest);
+            let clearance = self.margins[band - 1];
+            let penalty =
+                self.config.near_miss_penalty * (1.0 - clearance / self.config.near_miss_m);
+            votes.set(arc, (1.0 - penalty) as f32);
+        }
+        if self.config.speed_vote {
+            let free = (0..votes.len())
+                .filter(|&i| !votes.is_vetoed(i))
+                .map(|i| self.free[i].min(max))
+                .fold(0.0, f64::max);
+            // v·t + v²/2a = free - margin, solved for v.
+            let (a, t) = (self.deceleration, self.config.reaction_s);
+            let room = (free - self.config.stop_margin_m).max(0.0);
+            votes.vote_speed(-a * t + ((a * t).powi(2) + 2.0 * a * room).sqrt());
+        }
+    }
+}
+
+impl Plugin for ObstacleAvoidance {
+    const NAME: &'static str = "obstacle_avoidance";
+    type Config = ObstacleAvoidanceConfig;
+
+    fn validate(c: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
+        config::positive("min_distance_m", c.min_distance_m)?;
+        config::positive("max_distance_m", c.max_distance_m)?;
+        if c.max_distance_m <= c.min_distance_m {
+            return Err(ConfigError::new(
+                "max_distance_m",
+                format!(
+                    "is {} m, must exceed min_distance_m ({} m)",
+                    c.max_distance_m, c.min_distance_m
+                ),
+            ));
+        }
+        if c.max_distance_m > 100.0 {
+            return Err(ConfigError::new(
+                "max_distance_m",
+                format!("is {} m, at most 100 m", c.max_distance_m),
+            ));
+        }
+        config::positive("near_miss_m", c.near_miss_m)?;
+        config::in_range("near_miss_penalty", c.near_miss_penalty, 0.0, 2.0)?;
+        if !(1..=16).contains(&c.near_miss_bands) {
+            return Err(ConfigError::new(
+                "near_miss_bands",
+                format!("is {}, must be 1 to 16", c.near_miss_bands),
+            ));
+        }
+        config::in_range("grid_resolution_m", c.grid_resolution_m, 0.05, 1.0)?;
+        config::non_negative("stop_margin_m", c.stop_margin_m)?;
+        config::non_negative("reaction_s", c.reaction_s)?;
+        Ok(())
+    }
+
+    fn build(config: Self::Config, setup: &Setup<'_>) -> Self {
+        Self::new(config, setup)
+    }
+}

@@ -1,0 +1,420 @@
+//! Hand-computed cases of 002 §6 for the two behaviours, the registry, and
+//! the behaviours together with the arbiter.
+//!
+//! Distances "ahead" are measured from the front bumper (x = 4.0 m in the
+//! vehicle frame), which is where the swept footprint first touches them.
+
+use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, StopReason, Votes};
+use arcnav_behaviours::{
+    Behaviour, GoalSeeking, GoalSeekingConfig, Mission, ObstacleAvoidance, ObstacleAvoidanceConfig,
+    Registry, RegistryError, Setup, VoteContext, Waypoint,
+};
+use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot};
+use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
+use arcnav_vehicle::frames::planar_isometry;
+use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
+
+const FRONT: f64 = 4.0;
+
+fn arcs() -> ArcSet {
+    ArcSet::new(&ArcSetConfig::default()).unwrap()
+}
+
+fn setup<'a>(arcs: &'a ArcSet, vehicle: &'a VehicleConfig) -> Setup<'a> {
+    Setup {
+        arcs,
+        vehicle,
+        patch_size_m: 0.4,
+    }
+}
+
+/// A map with cells at the given vehicle-frame positions (vehicle at the origin heading east).
+fn snapshot(cells: &[(f64, f64)]) -> MapSnapshot {
+    let mut map = LocalMap::new(&LocalMapConfig::default(), 10.0);
+    map.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
+    let report = ObstacleReport {
+        utime: 0,
+        sensor: "test".into(),
+        cell_size_m: 0.2,
+        cells: cells
+            .iter()
+            .map(|&(x, y)| ObstacleCell {
+                x,
+                y,
+                z_min: 0.0,
+                z_max: 0.6,
+                reasons: Reasons::HEIGHT_VARIATION,
+                region: 0,
+            })
+            .collect(),
+        regions: vec![],
+        fov: FovPolygon::default(),
+    };
+    map.insert(&report).unwrap();
+    (*map.snapshot()).clone()
+}
+
+fn avoidance_votes(cells: &[(f64, f64)]) -> Votes {
+    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let mut behaviour =
+        ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, &vehicle));
+    let map = snapshot(cells);
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = Mission::default();
+    let ctx = VoteContext {
+        utime: 0,
+        pose: &pose,
+        map: &map,
+        mission: &mission,
+        arcs: &arcs,
+        last_command: None,
+    };
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    votes
+}
+
+#[test]
+fn an_obstacle_5_m_ahead_forbids_straight_and_leaves_the_hard_turns_clear() {
+    let votes = avoidance_votes(&[(FRONT + 5.0, 0.0)]);
+    assert!(
+        votes.is_vetoed(19),
+        "straight collides 5 m ahead, closer than 6 m"
+    );
+    assert_eq!(votes.vote(19), Some(-1.0));
+    let cause = votes.causes()[19].expect("the veto names its cell");
+    assert!(
+        (f64::from(cause[0]) - 9.0).abs() < 0.3 && f64::from(cause[1]).abs() < 0.3,
+        "{cause:?}"
+    );
+    assert_eq!(votes.vote(0), Some(1.0), "hard right is clear");
+    assert_eq!(votes.vote(38), Some(1.0), "hard left is clear");
+    assert!(!votes.is_vetoed(0) && !votes.is_vetoed(38));
+}
+
+#[test]
+fn an_obstacle_15_m_ahead_makes_straight_negative_but_not_forbidden() {
+    let votes = avoidance_votes(&[(FRONT + 15.0, 0.0)]);
+    let straight = votes.vote(19).unwrap();
+    assert!(!votes.is_vetoed(19));
+    // Contact after 15 m - 0.2 m (half a patch): -(1 - (14.8 - 6) / 12) = -0.27.
+    assert!(
+        (straight - (-0.267)).abs() < 0.03,
+        "straight votes {straight}"
+    );
+    // Nearer obstacles give lower votes.
+    let nearer = avoidance_votes(&[(FRONT + 10.0, 0.0)]).vote(19).unwrap();
+    assert!(nearer < straight, "{nearer} < {straight}");
+}
+
+#[test]
+fn a_near_miss_lowers_the_vote_of_the_arc_passing_beside_it() {
+    // 1.8 m left of the centreline, 8 m ahead: 0.5 m from the grown footprint.
+    let votes = avoidance_votes(&[(FRONT + 8.0, 1.8)]);
+    let straight = votes.vote(19).unwrap();
+    assert!(
+        straight > 0.0 && straight < 1.0,
+        "straight grazes it: {straight}"
+    );
+    assert_eq!(votes.vote(5), Some(1.0), "a right turn passes far from it");
+    // Closer passes cost more.
+    let closer = avoidance_votes(&[(FRONT + 8.0, 1.45)]).vote(19).unwrap();
+    assert!(closer < straight, "{closer} < {straight}");
+}
+
+#[test]
+fn an_empty_map_makes_every_arc_clear() {
+    let votes = avoidance_votes(&[]);
+    assert!(votes.values().iter().all(|&v| v == 1.0));
+    assert!(votes.speed_mps().unwrap() > 5.0);
+}
+
+#[test]
+fn being_boxed_in_slows_the_speed_vote() {
+    // A wall 7 m ahead alone is avoided by turning: no reason to slow down.
+    let ahead: Vec<(f64, f64)> = (-25..=25).map(|k| (FRONT + 7.0, k as f64 * 0.4)).collect();
+    let open = avoidance_votes(&[]).speed_mps().unwrap();
+    assert_eq!(avoidance_votes(&ahead).speed_mps().unwrap(), open);
+    // With walls 5 m to each side as well, every arc ends within ~8 m.
+    let mut boxed = ahead;
+    boxed.extend((5..=27).flat_map(|k| [(k as f64 * 0.4, 5.0), (k as f64 * 0.4, -5.0)]));
+    let slowed = avoidance_votes(&boxed).speed_mps().unwrap();
+    assert!(
+        slowed < 0.7 * open,
+        "{slowed} m/s boxed in, {open} m/s in the open"
+    );
+}
+
+fn goal_votes(goal: (f64, f64)) -> Votes {
+    let arcs = arcs();
+    let mut behaviour = GoalSeeking::new(GoalSeekingConfig::default());
+    let map = MapSnapshot::default();
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = Mission {
+        version: 1,
+        waypoints: vec![Waypoint {
+            x: goal.0,
+            y: goal.1,
+            radius_m: None,
+        }],
+    };
+    let ctx = VoteContext {
+        utime: 0,
+        pose: &pose,
+        map: &map,
+        mission: &mission,
+        arcs: &arcs,
+        last_command: None,
+    };
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    votes
+}
+
+#[test]
+fn a_goal_to_the_left_prefers_left_arcs_and_votes_vary_smoothly() {
+    let votes = goal_votes((5.0, 40.0));
+    let v = votes.values();
+    assert!(
+        v[38] > v[19] && v[19] > v[0],
+        "left {} > straight {} > right {}",
+        v[38],
+        v[19],
+        v[0]
+    );
+    for pair in v.windows(2) {
+        assert!(
+            pair[1] >= pair[0],
+            "votes rise steadily towards the left: {v:?}"
+        );
+        assert!(
+            (pair[1] - pair[0]).abs() < 0.15,
+            "no jump between neighbouring arcs"
+        );
+    }
+    // Straight ahead: straight is best.
+    let ahead = goal_votes((100.0, 0.0));
+    let best = (0..39)
+        .max_by(|&a, &b| ahead.values()[a].total_cmp(&ahead.values()[b]))
+        .unwrap();
+    assert_eq!(best, 19);
+}
+
+#[test]
+fn goal_seeking_advances_through_the_waypoints_and_reports_the_mission_complete() {
+    let arcs = arcs();
+    let mut behaviour = GoalSeeking::new(GoalSeekingConfig::default());
+    let map = MapSnapshot::default();
+    let mission = Mission {
+        version: 7,
+        waypoints: vec![
+            Waypoint {
+                x: 20.0,
+                y: 0.0,
+                radius_m: None,
+            },
+            Waypoint {
+                x: 40.0,
+                y: 0.0,
+                radius_m: Some(1.0),
+            },
+        ],
+    };
+    let mut vote_at = |x: f64| {
+        let pose = Pose::at_rest(0, planar_isometry(x, 0.0, 0.0));
+        let ctx = VoteContext {
+            utime: 0,
+            pose: &pose,
+            map: &map,
+            mission: &mission,
+            arcs: &arcs,
+            last_command: None,
+        };
+        let mut votes = Votes::new(arcs.len());
+        behaviour.vote(&ctx, &mut votes);
+        (behaviour.progress().unwrap(), votes)
+    };
+    assert_eq!(vote_at(0.0).0.current, 0);
+    assert_eq!(
+        vote_at(16.0).0.current,
+        1,
+        "within 5 m of the first waypoint"
+    );
+    let (progress, votes) = vote_at(38.5);
+    assert_eq!(progress.current, 1, "the second waypoint asks for 1 m");
+    assert!(votes.speed_mps().is_none());
+    let (progress, votes) = vote_at(39.5);
+    assert!(progress.complete);
+    assert_eq!(votes.speed_mps(), Some(0.0), "mission complete: stop");
+    assert!(votes.values().iter().all(|&v| v == 0.0));
+}
+
+#[test]
+fn a_waypoint_passed_during_a_detour_counts_as_reached() {
+    let arcs = arcs();
+    let mut behaviour = GoalSeeking::new(GoalSeekingConfig::default());
+    let map = MapSnapshot::default();
+    let mission = Mission {
+        version: 1,
+        waypoints: vec![
+            Waypoint {
+                x: 20.0,
+                y: 0.0,
+                radius_m: None,
+            },
+            Waypoint {
+                x: 60.0,
+                y: 0.0,
+                radius_m: None,
+            },
+        ],
+    };
+    // 7 m to the side of it, already 2 m past: 7.3 m away, under 2 × 5 m.
+    let pose = Pose::at_rest(0, planar_isometry(22.0, 7.0, 0.0));
+    let ctx = VoteContext {
+        utime: 0,
+        pose: &pose,
+        map: &map,
+        mission: &mission,
+        arcs: &arcs,
+        last_command: None,
+    };
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    assert_eq!(behaviour.progress().unwrap().current, 1);
+}
+
+#[test]
+fn the_registry_builds_by_name_and_lists_the_known_ones_for_an_unknown_name() {
+    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let registry = Registry::builtin();
+    assert_eq!(registry.names(), ["goal_seeking", "obstacle_avoidance"]);
+    let table: toml::Table = toml::from_str("lookahead_m = 12.0").unwrap();
+    let behaviour = registry
+        .build("goal_seeking", &table, &setup(&arcs, &vehicle))
+        .unwrap();
+    assert_eq!(behaviour.name(), "goal_seeking");
+    let err = registry
+        .build(
+            "wall_follower",
+            &toml::Table::new(),
+            &setup(&arcs, &vehicle),
+        )
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "unknown behaviour \"wall_follower\" (known: goal_seeking, obstacle_avoidance)"
+    );
+    let bad: toml::Table = toml::from_str("lookahed_m = 12.0").unwrap();
+    let RegistryError::Config(err) = registry
+        .build("goal_seeking", &bad, &setup(&arcs, &vehicle))
+        .unwrap_err()
+    else {
+        panic!("a config error expected")
+    };
+    assert_eq!(err.key, "lookahed_m");
+    let contradictory: toml::Table = toml::from_str("min_distance_m = 20.0").unwrap();
+    let RegistryError::Config(err) = registry
+        .build(
+            "obstacle_avoidance",
+            &contradictory,
+            &setup(&arcs, &vehicle),
+        )
+        .unwrap_err()
+    else {
+        panic!("a config error expected")
+    };
+    assert_eq!(err.key, "max_distance_m");
+    let full = registry
+        .normalise("goal_seeking", &table, &setup(&arcs, &vehicle))
+        .unwrap();
+    assert_eq!(full["lookahead_m"].as_float(), Some(12.0));
+    assert_eq!(
+        full["arrival_radius_m"].as_float(),
+        Some(5.0),
+        "defaults filled in"
+    );
+}
+
+/// Both behaviours vote, the arbiter decides.
+fn decide(
+    cells: &[(f64, f64)],
+    goal: (f64, f64),
+) -> (arcnav_vehicle::SteeringCommand, Option<StopReason>) {
+    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let registry = Registry::builtin();
+    let s = setup(&arcs, &vehicle);
+    let mut behaviours: Vec<Box<dyn Behaviour>> = ["obstacle_avoidance", "goal_seeking"]
+        .iter()
+        .map(|name| registry.build(name, &toml::Table::new(), &s).unwrap())
+        .collect();
+    let mut arbiter = Arbiter::new(&ArbiterConfig::default(), arcs.clone(), &vehicle);
+    arbiter.set_explain(true);
+    let map = snapshot(cells);
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = Mission {
+        version: 1,
+        waypoints: vec![Waypoint {
+            x: goal.0,
+            y: goal.1,
+            radius_m: None,
+        }],
+    };
+    let ctx = VoteContext {
+        utime: 0,
+        pose: &pose,
+        map: &map,
+        mission: &mission,
+        arcs: &arcs,
+        last_command: None,
+    };
+    for behaviour in &mut behaviours {
+        let mut votes = Votes::new(arcs.len());
+        behaviour.vote(&ctx, &mut votes);
+        arbiter
+            .on_votes(&BehaviourVotes {
+                behaviour: behaviour.name().into(),
+                utime: 0,
+                votes,
+            })
+            .unwrap();
+    }
+    let command = arbiter.decide(0);
+    (command, arbiter.decision().unwrap().stop.clone())
+}
+
+#[test]
+fn with_a_rock_ahead_and_the_goal_ahead_the_vehicle_steers_around_it() {
+    let rock: Vec<(f64, f64)> = (-2..=2)
+        .flat_map(|i| (-2..=2).map(move |j| (FRONT + 8.0 + i as f64 * 0.4, j as f64 * 0.4)))
+        .collect();
+    let (command, stop) = decide(&rock, (100.0, 0.0));
+    assert_eq!(stop, None);
+    let arc = command.arc_index.unwrap();
+    assert_ne!(arc, 19, "not into the rock");
+    assert!(command.speed_mps > 0.0);
+    let (free, _) = decide(&[], (100.0, 0.0));
+    assert_eq!(
+        free.arc_index,
+        Some(19),
+        "with nothing in the way, straight to the goal"
+    );
+}
+
+#[test]
+fn a_wall_across_every_arc_stops_the_vehicle() {
+    let wall: Vec<(f64, f64)> = (-25..=25).map(|k| (FRONT + 1.5, k as f64 * 0.4)).collect();
+    let (command, stop) = decide(&wall, (100.0, 0.0));
+    assert!(command.is_stop());
+    assert_eq!(command.speed_mps, 0.0);
+    assert!(
+        matches!(stop, Some(StopReason::AllArcsForbidden { .. })),
+        "{stop:?}"
+    );
+}
+
+#[test]
+fn the_same_inputs_give_the_same_decision() {
+    let rock = [(FRONT + 6.0, 0.4), (FRONT + 6.4, 0.8), (FRONT + 9.0, -2.0)];
+    assert_eq!(decide(&rock, (50.0, 20.0)), decide(&rock, (50.0, 20.0)));
+}
