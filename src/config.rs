@@ -14,6 +14,7 @@ use arcnav_arbiter::ArbiterConfig;
 use arcnav_behaviours::{Registry, RegistryError, Setup};
 use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
+use arcnav_vehicle::config::toml_location;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
@@ -139,7 +140,7 @@ impl Config {
         let mut config: Self = toml::from_str(text).map_err(|err| {
             let (line, key) = err
                 .span()
-                .map(|span| locate(text, span.start))
+                .map(|span| toml_location(text, span.start))
                 .unwrap_or((None, None));
             ConfigLoadError::Parse {
                 location: Location {
@@ -260,51 +261,6 @@ fn behaviour_error(name: &str, error: RegistryError) -> ConfigError {
             ConfigError::new(format!("behaviours.{name}"), unknown.to_string())
         }
     }
-}
-
-/// The 1-based line of byte `offset` in `text` and the dotted key written on
-/// that line (table header included), if the line holds one.
-fn locate(text: &str, offset: usize) -> (Option<usize>, Option<String>) {
-    let offset = offset.min(text.len());
-    let Some(before) = text.get(..offset) else {
-        return (None, None);
-    };
-    let line_number = before.matches('\n').count() + 1;
-    let line = text.lines().nth(line_number - 1).unwrap_or("");
-    let trimmed = line.trim();
-    if let Some(header) = table_header(trimmed) {
-        return (Some(line_number), Some(header));
-    }
-    let key = trimmed
-        .split_once('=')
-        .map(|(k, _)| unquote_key(k))
-        .filter(|k| !k.is_empty());
-    let table = text
-        .lines()
-        .take(line_number - 1)
-        .filter_map(|l| table_header(l.trim()))
-        .last();
-    let key = match (table, key) {
-        (Some(table), Some(key)) => Some(format!("{table}.{key}")),
-        (None, Some(key)) => Some(key),
-        (_, None) => None,
-    };
-    (Some(line_number), key)
-}
-
-/// `[a.b]` or `[[a.b]]` → `a.b`.
-fn table_header(line: &str) -> Option<String> {
-    let inner = line.strip_prefix('[')?;
-    let inner = inner.strip_prefix('[').unwrap_or(inner);
-    let end = inner.find(']')?;
-    Some(unquote_key(&inner[..end]))
-}
-
-fn unquote_key(key: &str) -> String {
-    key.split('.')
-        .map(|part| part.trim().trim_matches('"').trim_matches('\''))
-        .collect::<Vec<_>>()
-        .join(".")
 }
 
 #[cfg(test)]

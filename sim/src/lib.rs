@@ -1,0 +1,28 @@
+//! # arcnav-sim
+//!
+//! The simulator that closes the loop when nobody has a HMMWV at hand:
+//!
+//! - [`world`]: worlds in TOML (terrain from noise or a `.npy`/`.asc` file,
+//!   boulders, trees, bushes, ditches, holes, banks, waypoints, start), three
+//!   embedded ones and [`generate`]d ones;
+//! - [`tiles`]: the world as 0.1 m height tiles and a ray caster implementing
+//!   perception's [`arcnav_perception::RayCast`] — the one rendering path;
+//! - [`sensor`]: range images with noise and dropouts;
+//! - [`drape`]: the vehicle standing on the ground;
+//! - [`truth`]: collisions of the footprint with the true hazards.
+
+pub mod config;
+pub mod drape;
+pub mod generate;
+pub mod heightmap;
+pub mod noise;
+pub mod rng;
+pub mod sensor;
+pub mod tiles;
+pub mod truth;
+pub mod world;
+
+pub use config::{CollisionPolicy, SimConfig};
+pub use generate::{Difficulty, generate};
+pub use truth::{Collision, Truth};
+pub use world::{Feature, FeatureKind, World, WorldError, WorldSpec};

@@ -1,0 +1,369 @@
+//! The world as a height field for the sensor: square tiles of 0.1 m cells
+//! built lazily around the vehicle and cached, and a ray caster over them.
+//!
+//! Each cell holds the world height at its centre (terrain and features), a
+//! flat-topped column: vertical faces stand where a feature rises, which is
+//! what a range sensor sees of a rock or a trunk. Rays walk 0.8 m blocks with
+//! a 2-D DDA, skipping blocks whose highest cell they pass above, and walk the
+//! cells of the blocks they may hit.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use arcnav_perception::RayCast;
+use nalgebra::{Point3, Vector3};
+
+use crate::world::World;
+
+/// Cell size, m.
+pub const CELL_M: f64 = 0.1;
+/// Cells per block side (blocks carry the max height of their cells).
+const BLOCK: usize = 8;
+/// Cells per tile side.
+const TILE: usize = 256;
+const BLOCKS: usize = TILE / BLOCK;
+const TILE_M: f64 = TILE as f64 * CELL_M;
+const BLOCK_M: f64 = BLOCK as f64 * CELL_M;
+
+/// One tile of heights.
+#[derive(Debug)]
+pub struct Tile {
+    heights: Vec<f32>,
+    block_max: Vec<f32>,
+}
+
+impl Tile {
+    fn build(world: &World, tx: i64, ty: i64) -> Self {
+        let (x0, y0) = (tx as f64 * TILE_M, ty as f64 * TILE_M);
+        let mut heights = Vec::with_capacity(TILE * TILE);
+        for j in 0..TILE {
+            let y = y0 + (j as f64 + 0.5) * CELL_M;
+            for i in 0..TILE {
+                heights.push(world.height(x0 + (i as f64 + 0.5) * CELL_M, y) as f32);
+            }
+        }
+        let mut block_max = vec![f32::NEG_INFINITY; BLOCKS * BLOCKS];
+        for j in 0..TILE {
+            for i in 0..TILE {
+                let b = &mut block_max[(j / BLOCK) * BLOCKS + i / BLOCK];
+                *b = b.max(heights[j * TILE + i]);
+            }
+        }
+        Self { heights, block_max }
+    }
+}
+
+/// Tiles built on demand and kept while near the vehicle.
+#[derive(Debug)]
+pub struct TileCache {
+    world: Arc<World>,
+    tiles: HashMap<(i64, i64), (Arc<Tile>, u64)>,
+    capacity: usize,
+    clock: u64,
+    threads: usize,
+}
+
+/// The tiles around one sensor position, read-only: what rays are cast in.
+#[derive(Debug, Clone)]
+pub struct TileView {
+    tx0: i64,
+    ty0: i64,
+    width: usize,
+    tiles: Vec<Option<Arc<Tile>>>,
+}
+
+impl TileCache {
+    /// A cache of up to `capacity` tiles (25.6 m each), built with up to
+    /// `threads` threads.
+    pub fn new(world: Arc<World>, capacity: usize, threads: usize) -> Self {
+        Self {
+            world,
+            tiles: HashMap::new(),
+            capacity: capacity.max(16),
+            clock: 0,
+            threads: threads.max(1),
+        }
+    }
+
+    pub fn world(&self) -> &Arc<World> {
+        &self.world
+    }
+
+    /// Tiles built so far (cached or evicted).
+    pub fn len(&self) -> usize {
+        self.tiles.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.tiles.is_empty()
+    }
+
+    /// Makes sure every tile within `radius` of (x, y) exists and returns
+    /// them as a view.
+    pub fn view(&mut self, x: f64, y: f64, radius: f64) -> TileView {
+        self.clock += 1;
+        let index = |v: f64| (v / TILE_M).floor() as i64;
+        let (tx0, ty0, tx1, ty1) = (
+            index(x - radius),
+            index(y - radius),
+            index(x + radius),
+            index(y + radius),
+        );
+        let missing: Vec<(i64, i64)> = (ty0..=ty1)
+            .flat_map(|ty| (tx0..=tx1).map(move |tx| (tx, ty)))
+            .filter(|key| !self.tiles.contains_key(key))
+            .collect();
+        // Build missing tiles in parallel: each is a pure function of the world.
+        let world = &self.world;
+        let built: Vec<((i64, i64), Tile)> = if missing.len() > 1 && self.threads > 1 {
+            let chunk = missing.len().div_ceil(self.threads);
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = missing
+                    .chunks(chunk)
+                    .map(|keys| {
+                        scope.spawn(move || {
+                            keys.iter()
+                                .map(|&(tx, ty)| ((tx, ty), Tile::build(world, tx, ty)))
+                                .collect::<Vec<_>>()
+                        })
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .flat_map(|h| h.join().unwrap_or_default())
+                    .collect()
+            })
+        } else {
+            missing
+                .iter()
+                .map(|&(tx, ty)| ((tx, ty), Tile::build(world, tx, ty)))
+                .collect()
+        };
+        for (key, tile) in built {
+            self.tiles.insert(key, (Arc::new(tile), self.clock));
+        }
+        let width = (tx1 - tx0 + 1) as usize;
+        let mut tiles = Vec::with_capacity(width * (ty1 - ty0 + 1) as usize);
+        for ty in ty0..=ty1 {
+            for tx in tx0..=tx1 {
+                let entry = self.tiles.get_mut(&(tx, ty));
+                tiles.push(entry.map(|(tile, used)| {
+                    *used = self.clock;
+                    Arc::clone(tile)
+                }));
+            }
+        }
+        // Evict the least recently used beyond capacity (never this view's).
+        while self.tiles.len() > self.capacity {
+            let Some(oldest) = self
+                .tiles
+                .iter()
+                .filter(|(_, (_, used))| *used < self.clock)
+                .min_by_key(|(key, (_, used))| (*used, **key))
+                .map(|(key, _)| *key)
+            else {
+                break;
+            };
+            self.tiles.remove(&oldest);
+        }
+        TileView {
+            tx0,
+            ty0,
+            width,
+            tiles,
+        }
+    }
+}
+
+impl TileView {
+    fn tile(&self, tx: i64, ty: i64) -> Option<&Tile> {
+        let (dx, dy) = (tx - self.tx0, ty - self.ty0);
+        if dx < 0 || dy < 0 || dx as usize >= self.width {
+            return None;
+        }
+        self.tiles
+            .get(dy as usize * self.width + dx as usize)?
+            .as_deref()
+    }
+
+    /// Max height of the block at block coordinates (bx, by), if loaded.
+    fn block_max(&self, bx: i64, by: i64) -> Option<f64> {
+        let per_tile = BLOCKS as i64;
+        let tile = self.tile(bx.div_euclid(per_tile), by.div_euclid(per_tile))?;
+        let (i, j) = (
+            bx.rem_euclid(per_tile) as usize,
+            by.rem_euclid(per_tile) as usize,
+        );
+        Some(f64::from(tile.block_max[j * BLOCKS + i]))
+    }
+
+    /// Height of the cell at cell coordinates (cx, cy), if loaded.
+    pub fn cell_height(&self, cx: i64, cy: i64) -> Option<f64> {
+        let per_tile = TILE as i64;
+        let tile = self.tile(cx.div_euclid(per_tile), cy.div_euclid(per_tile))?;
+        let (i, j) = (
+            cx.rem_euclid(per_tile) as usize,
+            cy.rem_euclid(per_tile) as usize,
+        );
+        Some(f64::from(tile.heights[j * TILE + i]))
+    }
+
+    /// Walks the cells of size `size` along the ray from `t0` to `t1`,
+    /// calling `visit(cx, cy, t_in, t_out)`; stops when it returns Some.
+    fn walk<T>(
+        origin: &Point3<f64>,
+        d: &Vector3<f64>,
+        t0: f64,
+        t1: f64,
+        size: f64,
+        mut visit: impl FnMut(i64, i64, f64, f64) -> Option<T>,
+    ) -> Option<T> {
+        let start = origin + d * t0;
+        let (mut cx, mut cy) = (
+            (start.x / size).floor() as i64,
+            (start.y / size).floor() as i64,
+        );
+        let step = |dir: f64| if dir > 0.0 { 1 } else { -1 };
+        let (sx, sy) = (step(d.x), step(d.y));
+        let next_boundary = |c: i64, s: i64| (if s > 0 { c + 1 } else { c }) as f64 * size;
+        let delta = |dir: f64| {
+            if dir.abs() < 1e-12 {
+                f64::INFINITY
+            } else {
+                size / dir.abs()
+            }
+        };
+        let (dx, dy) = (delta(d.x), delta(d.y));
+        let mut tx = if d.x.abs() < 1e-12 {
+            f64::INFINITY
+        } else {
+            (next_boundary(cx, sx) - origin.x) / d.x
+        };
+        let mut ty = if d.y.abs() < 1e-12 {
+            f64::INFINITY
+        } else {
+            (next_boundary(cy, sy) - origin.y) / d.y
+        };
+        let mut t_in = t0;
+        loop {
+            let t_out = tx.min(ty).min(t1);
+            if let Some(hit) = visit(cx, cy, t_in, t_out) {
+                return Some(hit);
+            }
+            if t_out >= t1 {
+                return None;
+            }
+            if tx < ty {
+                cx += sx;
+                t_in = tx;
+                tx += dx;
+            } else {
+                cy += sy;
+                t_in = ty;
+                ty += dy;
+            }
+        }
+    }
+}
+
+impl RayCast for TileView {
+    fn cast(&self, origin: &Point3<f64>, d: &Vector3<f64>, max_range: f64) -> Option<f64> {
+        let z_at = |t: f64| origin.z + d.z * t;
+        TileView::walk(origin, d, 0.0, max_range, BLOCK_M, |bx, by, t0, t1| {
+            let top = self.block_max(bx, by)?;
+            // The ray's lowest point over this block.
+            if z_at(if d.z < 0.0 { t1 } else { t0 }) > top {
+                return None;
+            }
+            TileView::walk(origin, d, t0, t1, CELL_M, |cx, cy, c0, c1| {
+                let h = self.cell_height(cx, cy)?;
+                let (z0, z1) = (z_at(c0), z_at(c1));
+                if z0 <= h {
+                    Some(c0)
+                } else if z1 <= h {
+                    Some(c0 + (z0 - h) / (z0 - z1) * (c1 - c0))
+                } else {
+                    None
+                }
+            })
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::World;
+
+    fn flat_world_with_wall() -> Arc<World> {
+        let text = r#"
+name = "t"
+[terrain]
+origin_m = [-50.0, -50.0]
+size_m = [100.0, 100.0]
+hills_amplitude_m = 0.0
+roughness_amplitude_m = 0.0
+[start]
+position_m = [0.0, 0.0]
+[[waypoints]]
+position_m = [20.0, 0.0]
+[[trees]]
+position_m = [10.05, 0.05]
+radius_m = 0.5
+height_m = 3.0
+"#;
+        Arc::new(World::from_toml(text, "test", None).unwrap())
+    }
+
+    #[test]
+    fn rays_hit_flat_ground_and_vertical_faces_where_they_are() {
+        let mut cache = TileCache::new(flat_world_with_wall(), 32, 2);
+        let view = cache.view(0.0, 0.0, 30.0);
+        let origin = Point3::new(0.0, 0.0, 2.0);
+        // Down 45°: ground at 2 m ahead, 2.83 m along the ray.
+        let d = Vector3::new(1.0, 0.0, -1.0).normalize();
+        assert!((view.cast(&origin, &d, 40.0).unwrap() - 8f64.sqrt()).abs() < 1e-9);
+        // Horizontal at 2 m: the trunk's face at x = 9.55 (cells of 0.1 m).
+        let d = Vector3::new(1.0, 0.0, 0.0);
+        let hit = view.cast(&origin, &d, 40.0).unwrap();
+        assert!((hit - 9.55).abs() <= 0.1, "{hit}");
+        // Up: nothing.
+        assert_eq!(
+            view.cast(&origin, &Vector3::new(1.0, 0.0, 0.2).normalize(), 40.0),
+            None
+        );
+        // Ground 200 m away along +y (no tree there), beyond the range: nothing.
+        assert_eq!(
+            view.cast(&origin, &Vector3::new(0.0, 1.0, -0.01).normalize(), 40.0),
+            None
+        );
+    }
+
+    #[test]
+    fn diagonal_and_negative_directions_work() {
+        let mut cache = TileCache::new(flat_world_with_wall(), 32, 1);
+        let view = cache.view(0.0, 0.0, 30.0);
+        let origin = Point3::new(3.0, 3.0, 1.0);
+        for (dx, dy) in [(-1.0, -1.0), (-1.0, 0.5), (0.3, -1.0), (0.0, 1.0)] {
+            let d = Vector3::new(dx, dy, -0.5).normalize();
+            let t = view.cast(&origin, &d, 40.0).unwrap();
+            assert!(
+                (origin.z + d.z * t).abs() < 1e-9,
+                "lands on the ground at z = 0"
+            );
+        }
+    }
+
+    #[test]
+    fn the_cache_is_bounded_and_keeps_what_is_in_view() {
+        let mut cache = TileCache::new(flat_world_with_wall(), 16, 2);
+        for k in 0..10 {
+            let view = cache.view(k as f64 * 30.0 - 40.0, 0.0, 20.0);
+            assert!(
+                view.cell_height(((k as f64 * 30.0 - 40.0) / CELL_M) as i64, 0)
+                    .is_some()
+            );
+        }
+        assert!(cache.len() <= 16);
+    }
+}

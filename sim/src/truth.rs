@@ -1,0 +1,199 @@
+//! Ground truth: the vehicle's footprint against the world's true hazards —
+//! features it cannot drive over (rocks above the tolerated step, trunks,
+//! bushes, ditches and holes deeper than the step, banks steeper than its
+//! limit), attitude beyond its slope limit, and the edge of the map. Each
+//! contact with a hazard is one collision, however long it lasts.
+
+use std::collections::BTreeSet;
+
+use arcnav_vehicle::{Footprint, Utime, VehicleConfig};
+use serde::Serialize;
+
+use crate::world::{Feature, World};
+
+/// One collision.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Collision {
+    /// Time of first contact, µs.
+    pub utime: Utime,
+    /// Vehicle origin then, world frame, m.
+    pub position: [f64; 2],
+    /// What was hit, e.g. "boulder 0.82 m tall" or "slope 27°".
+    pub cause: String,
+    /// Index of the feature hit, when it is one.
+    pub feature: Option<usize>,
+}
+
+/// The hazard checker of one run.
+#[derive(Debug)]
+pub struct Truth {
+    vehicle: VehicleConfig,
+    footprint: Footprint,
+    /// Feature index and why it is a hazard.
+    hazards: Vec<Option<String>>,
+    in_contact: BTreeSet<usize>,
+    tilted: bool,
+    off_map: bool,
+    near: Vec<u32>,
+    /// Every collision so far.
+    pub collisions: Vec<Collision>,
+    /// Smallest gap seen between the footprint and a hazard, m.
+    pub closest_approach_m: f64,
+    /// Where it was.
+    pub closest_at: Option<[f64; 2]>,
+}
+
+impl Truth {
+    pub fn new(world: &World, vehicle: &VehicleConfig) -> Self {
+        Self {
+            hazards: world.features.iter().map(|f| f.hazard(vehicle)).collect(),
+            vehicle: vehicle.clone(),
+            footprint: vehicle.footprint(),
+            in_contact: BTreeSet::new(),
+            tilted: false,
+            off_map: false,
+            near: Vec::new(),
+            collisions: Vec::new(),
+            closest_approach_m: f64::INFINITY,
+            closest_at: None,
+        }
+    }
+
+    /// Checks the vehicle at (x, y, yaw) with its attitude; returns the
+    /// collisions that start now.
+    pub fn check(
+        &mut self,
+        world: &World,
+        utime: Utime,
+        x: f64,
+        y: f64,
+        yaw: f64,
+        roll: f64,
+        pitch: f64,
+    ) -> &[Collision] {
+        let before = self.collisions.len();
+        let (sin, cos) = yaw.sin_cos();
+        let to_vehicle = |p: [f64; 2]| {
+            let (dx, dy) = (p[0] - x, p[1] - y);
+            [cos * dx + sin * dy, -sin * dx + cos * dy]
+        };
+        let reach = self
+            .footprint
+            .x_max
+            .max(-self.footprint.x_min)
+            .hypot(self.footprint.half_width)
+            + 12.0;
+        world.features_within([x - reach, y - reach, x + reach, y + reach], &mut self.near);
+        let mut touching = BTreeSet::new();
+        for &i in &self.near {
+            let i = i as usize;
+            let Some(why) = &self.hazards[i] else {
+                continue;
+            };
+            let f: &Feature = &world.features[i];
+            let gap =
+                segment_box_distance(to_vehicle(f.a), to_vehicle(f.b), &self.footprint) - f.radius;
+            if gap < self.closest_approach_m {
+                self.closest_approach_m = gap.max(0.0);
+                self.closest_at = Some([x, y]);
+            }
+            if gap <= 0.0 {
+                touching.insert(i);
+                if !self.in_contact.contains(&i) {
+                    self.collisions.push(Collision {
+                        utime,
+                        position: [x, y],
+                        cause: why.clone(),
+                        feature: Some(i),
+                    });
+                }
+            }
+        }
+        self.in_contact = touching;
+        let tilt = roll.abs().max(pitch.abs()).to_degrees();
+        let tilted = tilt > self.vehicle.max_slope_deg;
+        if tilted && !self.tilted {
+            self.collisions.push(Collision {
+                utime,
+                position: [x, y],
+                cause: format!(
+                    "slope {tilt:.0}° (limit {:.0}°)",
+                    self.vehicle.max_slope_deg
+                ),
+                feature: None,
+            });
+        }
+        self.tilted = tilted;
+        let off_map = !world.contains(x, y);
+        if off_map && !self.off_map {
+            self.collisions.push(Collision {
+                utime,
+                position: [x, y],
+                cause: "left the map".into(),
+                feature: None,
+            });
+        }
+        self.off_map = off_map;
+        &self.collisions[before..]
+    }
+}
+
+/// Distance from the segment a–b to the footprint rectangle (0 if they meet),
+/// both in the vehicle frame.
+fn segment_box_distance(a: [f64; 2], b: [f64; 2], f: &Footprint) -> f64 {
+    let inside = |p: [f64; 2]| (f.x_min..=f.x_max).contains(&p[0]) && p[1].abs() <= f.half_width;
+    if inside(a) || inside(b) {
+        return 0.0;
+    }
+    let corners = [
+        [f.x_min, -f.half_width],
+        [f.x_max, -f.half_width],
+        [f.x_max, f.half_width],
+        [f.x_min, f.half_width],
+    ];
+    let point_box = |p: [f64; 2]| {
+        let dx = (f.x_min - p[0]).max(0.0).max(p[0] - f.x_max);
+        let dy = (p[1].abs() - f.half_width).max(0.0);
+        dx.hypot(dy)
+    };
+    let mut best = point_box(a).min(point_box(b));
+    for k in 0..4 {
+        let (c, d) = (corners[k], corners[(k + 1) % 4]);
+        if segments_cross(a, b, c, d) {
+            return 0.0;
+        }
+        best = best.min(crate::world::segment_distance(c, a, b));
+    }
+    best
+}
+
+fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+    let cross = |o: [f64; 2], p: [f64; 2], q: [f64; 2]| {
+        (p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0])
+    };
+    let (d1, d2) = (cross(c, d, a), cross(c, d, b));
+    let (d3, d4) = (cross(a, b, c), cross(a, b, d));
+    d1 * d2 < 0.0 && d3 * d4 < 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn segment_box_distances() {
+        let f = Footprint {
+            x_min: -1.0,
+            x_max: 4.0,
+            half_width: 1.0,
+        };
+        assert_eq!(segment_box_distance([6.0, 0.0], [6.0, 0.0], &f), 2.0);
+        assert_eq!(
+            segment_box_distance([2.0, 3.0], [2.0, -3.0], &f),
+            0.0,
+            "crosses the body"
+        );
+        assert!((segment_box_distance([5.0, 2.0], [5.0, 2.0], &f) - 2f64.sqrt()).abs() < 1e-12);
+        assert_eq!(segment_box_distance([0.0, 0.0], [0.0, 0.0], &f), 0.0);
+    }
+}

@@ -1,0 +1,838 @@
+//! Simulated worlds: terrain (procedural hills and roughness, or a height
+//! file), discrete features (boulders, tree trunks and bushes as vertical
+//! obstacles; ditches and holes as negative ones; steep banks), the start
+//! pose and the waypoints. Written in TOML (see `docs/worlds.md`), embedded
+//! (`World::embedded`), or generated from a seed (`crate::generate`).
+//!
+//! The world's height at (x, y) is the terrain's plus every feature's
+//! contribution, so a rock on a hillside sits on the hill.
+
+use std::path::{Path, PathBuf};
+
+use arcnav_vehicle::VehicleConfig;
+use arcnav_vehicle::config::toml_location;
+use serde::{Deserialize, Serialize};
+
+use crate::heightmap::{HeightGrid, HeightmapError};
+use crate::noise::Noise;
+use crate::rng::Rng;
+
+/// The `[terrain]` table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TerrainSpec {
+    /// South-west corner of the world, m.
+    pub origin_m: [f64; 2],
+    /// Extent east and north, m.
+    pub size_m: [f64; 2],
+    /// Seed of the procedural terrain.
+    pub seed: u64,
+    /// Height of the hills (peak to mean), m.
+    pub hills_amplitude_m: f64,
+    /// Distance between hilltops, m.
+    pub hills_wavelength_m: f64,
+    /// Height of the small-scale ground roughness, m.
+    pub roughness_amplitude_m: f64,
+    /// Scale of the roughness, m.
+    pub roughness_wavelength_m: f64,
+    /// A height file (`.npy` or `.asc`) replacing the procedural hills;
+    /// relative paths are relative to the world file. Roughness is added.
+    pub heightmap: Option<PathBuf>,
+    /// Sample spacing of the height file, m (required for `.npy`).
+    pub heightmap_resolution_m: Option<f64>,
+    /// World position of the height file's south-west sample, m.
+    pub heightmap_origin_m: Option<[f64; 2]>,
+    /// Heights in the file are multiplied by this.
+    pub heightmap_scale: f64,
+}
+
+impl Default for TerrainSpec {
+    fn default() -> Self {
+        Self {
+            origin_m: [-100.0, -100.0],
+            size_m: [200.0, 200.0],
+            seed: 1,
+            hills_amplitude_m: 2.0,
+            hills_wavelength_m: 100.0,
+            roughness_amplitude_m: 0.03,
+            roughness_wavelength_m: 1.5,
+            heightmap: None,
+            heightmap_resolution_m: None,
+            heightmap_origin_m: None,
+            heightmap_scale: 1.0,
+        }
+    }
+}
+
+/// The `[start]` table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StartSpec {
+    pub position_m: [f64; 2],
+    /// Heading, degrees counter-clockwise from east.
+    #[serde(default)]
+    pub heading_deg: f64,
+}
+
+/// A `[[waypoints]]` entry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WaypointSpec {
+    pub position_m: [f64; 2],
+    /// Arrival radius, m (default: the goal-seeking behaviour's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius_m: Option<f64>,
+}
+
+/// A round feature rising from the ground: boulder, tree trunk or bush.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoundSpec {
+    pub position_m: [f64; 2],
+    pub radius_m: f64,
+    /// Height above the ground, m.
+    pub height_m: f64,
+}
+
+/// A hole: a round pit with vertical walls.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HoleSpec {
+    pub position_m: [f64; 2],
+    pub radius_m: f64,
+    pub depth_m: f64,
+}
+
+/// A ditch: a trench along a segment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DitchSpec {
+    pub from_m: [f64; 2],
+    pub to_m: [f64; 2],
+    pub width_m: f64,
+    pub depth_m: f64,
+}
+
+/// A bank: an embankment along a segment with a flat top and steep sides.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BankSpec {
+    pub from_m: [f64; 2],
+    pub to_m: [f64; 2],
+    pub height_m: f64,
+    pub top_width_m: f64,
+    /// Steepness of its sides, degrees.
+    pub slope_deg: f64,
+}
+
+/// Kinds of scattered features.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScatterKind {
+    Boulder,
+    Tree,
+    Bush,
+    Hole,
+}
+
+/// A `[[scatter]]` entry: round features placed at random, reproducibly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScatterSpec {
+    pub kind: ScatterKind,
+    /// Attempts; placements too close to others are skipped.
+    pub count: u32,
+    pub seed: u64,
+    /// Keep at least this much free ground between features, m.
+    pub min_spacing_m: f64,
+    /// Radius range, m.
+    pub radius_m: [f64; 2],
+    /// Height range (depth for holes), m.
+    pub height_m: [f64; 2],
+    /// Only within this distance of the route (start → waypoints), m.
+    pub near_route_m: f64,
+    /// Keep this far from waypoints and the start, m.
+    #[serde(default = "default_clearance")]
+    pub clear_of_waypoints_m: f64,
+}
+
+fn default_clearance() -> f64 {
+    10.0
+}
+
+/// A world file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldSpec {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    #[serde(default)]
+    pub terrain: TerrainSpec,
+    pub start: StartSpec,
+    #[serde(default)]
+    pub waypoints: Vec<WaypointSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub boulders: Vec<RoundSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub trees: Vec<RoundSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bushes: Vec<RoundSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub holes: Vec<HoleSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ditches: Vec<DitchSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub banks: Vec<BankSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scatter: Vec<ScatterSpec>,
+}
+
+/// A world that cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WorldError {
+    #[error("cannot read world file {path}: {reason}")]
+    Read { path: PathBuf, reason: String },
+    #[error("{origin}{}{}: {message}", line.map(|l| format!(", line {l}")).unwrap_or_default(), key.as_ref().map(|k| format!(", `{k}`")).unwrap_or_default())]
+    Parse {
+        origin: String,
+        line: Option<usize>,
+        key: Option<String>,
+        message: String,
+    },
+    #[error("{origin}: {message}")]
+    Invalid { origin: String, message: String },
+    #[error(transparent)]
+    Heightmap(#[from] HeightmapError),
+}
+
+/// What a feature is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FeatureKind {
+    Boulder,
+    Tree,
+    Bush,
+    Hole,
+    Ditch,
+    Bank,
+}
+
+impl FeatureKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            FeatureKind::Boulder => "boulder",
+            FeatureKind::Tree => "tree",
+            FeatureKind::Bush => "bush",
+            FeatureKind::Hole => "hole",
+            FeatureKind::Ditch => "ditch",
+            FeatureKind::Bank => "bank",
+        }
+    }
+}
+
+/// A feature of the built world. Its ground shape is a capsule: the set of
+/// points within `radius` of the segment `a`–`b` (a disc when `a == b`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Feature {
+    pub kind: FeatureKind,
+    pub a: [f64; 2],
+    pub b: [f64; 2],
+    /// Half-width of its ground shape, m.
+    pub radius: f64,
+    /// Height above ground (negative: depth), m.
+    pub height: f64,
+    /// Flat-top half-width (banks), m.
+    pub top_half_width: f64,
+    /// Side slope (banks), degrees.
+    pub slope_deg: f64,
+}
+
+impl Feature {
+    /// Distance from p to the feature's axis (segment).
+    pub fn axis_distance(&self, p: [f64; 2]) -> f64 {
+        segment_distance(p, self.a, self.b)
+    }
+
+    /// Distance from p to the feature's ground shape (0 inside).
+    pub fn distance(&self, p: [f64; 2]) -> f64 {
+        (self.axis_distance(p) - self.radius).max(0.0)
+    }
+
+    /// The height it adds at p.
+    pub fn height_at(&self, p: [f64; 2]) -> f64 {
+        let d = self.axis_distance(p);
+        if d > self.radius {
+            return 0.0;
+        }
+        let u = d / self.radius;
+        match self.kind {
+            FeatureKind::Boulder => self.height * (1.0 - u * u).max(0.0).sqrt(),
+            FeatureKind::Tree | FeatureKind::Hole | FeatureKind::Ditch => self.height,
+            FeatureKind::Bush => self.height * (1.0 - u.powi(8)).max(0.0).sqrt(),
+            FeatureKind::Bank => {
+                if d <= self.top_half_width {
+                    self.height
+                } else {
+                    (self.height - (d - self.top_half_width) * self.slope_deg.to_radians().tan())
+                        .max(0.0)
+                }
+            }
+        }
+    }
+
+    /// Whether the vehicle cannot drive over it, and why.
+    pub fn hazard(&self, vehicle: &VehicleConfig) -> Option<String> {
+        let step = vehicle.tolerated_step_m;
+        match self.kind {
+            FeatureKind::Tree | FeatureKind::Bush if self.height > step => {
+                Some(format!("{} {:.1} m tall", self.kind.name(), self.height))
+            }
+            FeatureKind::Boulder if self.height > step => {
+                Some(format!("boulder {:.2} m tall", self.height))
+            }
+            FeatureKind::Hole | FeatureKind::Ditch if -self.height > step => {
+                Some(format!("{} {:.2} m deep", self.kind.name(), -self.height))
+            }
+            FeatureKind::Bank if self.slope_deg > vehicle.max_slope_deg && self.height > step => {
+                Some(format!("bank sides of {:.0}°", self.slope_deg))
+            }
+            _ => None,
+        }
+    }
+
+    /// Bounding box (min x, min y, max x, max y).
+    pub fn bounds(&self) -> [f64; 4] {
+        [
+            self.a[0].min(self.b[0]) - self.radius,
+            self.a[1].min(self.b[1]) - self.radius,
+            self.a[0].max(self.b[0]) + self.radius,
+            self.a[1].max(self.b[1]) + self.radius,
+        ]
+    }
+}
+
+/// Distance from p to the segment a–b.
+pub fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = abx * abx + aby * aby;
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * abx + (p[1] - a[1]) * aby) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * abx).hypot(p[1] - a[1] - t * aby)
+}
+
+#[derive(Debug, Clone)]
+enum Base {
+    Procedural {
+        noise: Noise,
+        amplitude: f64,
+        wavelength: f64,
+    },
+    File {
+        grid: HeightGrid,
+        scale: f64,
+    },
+}
+
+/// Features bucketed on a coarse grid for fast lookup by position.
+#[derive(Debug, Clone)]
+struct FeatureIndex {
+    origin: [f64; 2],
+    cell: f64,
+    cols: usize,
+    rows: usize,
+    buckets: Vec<Vec<u32>>,
+}
+
+impl FeatureIndex {
+    const CELL_M: f64 = 8.0;
+
+    fn new(bounds: [f64; 4], features: &[Feature]) -> Self {
+        let cell = Self::CELL_M;
+        let cols = (((bounds[2] - bounds[0]) / cell).ceil() as usize).max(1);
+        let rows = (((bounds[3] - bounds[1]) / cell).ceil() as usize).max(1);
+        let mut index = Self {
+            origin: [bounds[0], bounds[1]],
+            cell,
+            cols,
+            rows,
+            buckets: vec![Vec::new(); cols * rows],
+        };
+        for (i, f) in features.iter().enumerate() {
+            let b = f.bounds();
+            let (c0, r0) = index.clamp_cell(b[0], b[1]);
+            let (c1, r1) = index.clamp_cell(b[2], b[3]);
+            for r in r0..=r1 {
+                for c in c0..=c1 {
+                    index.buckets[r * cols + c].push(i as u32);
+                }
+            }
+        }
+        index
+    }
+
+    fn clamp_cell(&self, x: f64, y: f64) -> (usize, usize) {
+        let c = ((x - self.origin[0]) / self.cell)
+            .floor()
+            .clamp(0.0, (self.cols - 1) as f64) as usize;
+        let r = ((y - self.origin[1]) / self.cell)
+            .floor()
+            .clamp(0.0, (self.rows - 1) as f64) as usize;
+        (c, r)
+    }
+
+    /// Features whose bounds may contain p (p inside the indexed area).
+    fn at(&self, x: f64, y: f64) -> &[u32] {
+        let (c, r) = self.clamp_cell(x, y);
+        &self.buckets[r * self.cols + c]
+    }
+
+    /// Features whose bounds may meet the box (deduplicated into `out`).
+    fn within(&self, bounds: [f64; 4], out: &mut Vec<u32>) {
+        out.clear();
+        let (c0, r0) = self.clamp_cell(bounds[0], bounds[1]);
+        let (c1, r1) = self.clamp_cell(bounds[2], bounds[3]);
+        for r in r0..=r1 {
+            for c in c0..=c1 {
+                out.extend_from_slice(&self.buckets[r * self.cols + c]);
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+    }
+}
+
+/// A waypoint of the built world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorldWaypoint {
+    pub x: f64,
+    pub y: f64,
+    pub radius_m: Option<f64>,
+}
+
+/// A built world.
+#[derive(Debug, Clone)]
+pub struct World {
+    pub spec: WorldSpec,
+    base: Base,
+    roughness: Noise,
+    roughness_amplitude: f64,
+    roughness_wavelength: f64,
+    pub features: Vec<Feature>,
+    index: FeatureIndex,
+    /// (min x, min y, max x, max y), m.
+    pub bounds: [f64; 4],
+    /// Start position and heading (radians).
+    pub start: ([f64; 2], f64),
+    pub waypoints: Vec<WorldWaypoint>,
+}
+
+/// The worlds compiled into arcnav: name, description, TOML.
+pub const EMBEDDED: [(&str, &str, &str); 3] = [
+    (
+        "paper_loop",
+        "the paper's mission (002 §3): a 1 km loop through hills, rocks, trees, bushes, ditches and banks, 10 waypoints ~100 m apart",
+        include_str!("../worlds/paper_loop.toml"),
+    ),
+    (
+        "short_course",
+        "a 150 m course with a boulder field, a ditch and a bank: a quick end-to-end run",
+        include_str!("../worlds/short_course.toml"),
+    ),
+    (
+        "open_field",
+        "gentle open ground and three waypoints, no obstacles: a smoke test",
+        include_str!("../worlds/open_field.toml"),
+    ),
+];
+
+impl World {
+    /// An embedded world by name (see [`EMBEDDED`]).
+    pub fn embedded(name: &str) -> Option<Result<World, WorldError>> {
+        EMBEDDED
+            .iter()
+            .find(|(n, _, _)| *n == name)
+            .map(|(n, _, text)| World::from_toml(text, &format!("embedded world {n}"), None))
+    }
+
+    /// Reads a world file; height files are found relative to it.
+    pub fn load(path: &Path) -> Result<World, WorldError> {
+        let text = std::fs::read_to_string(path).map_err(|e| WorldError::Read {
+            path: path.to_owned(),
+            reason: e.to_string(),
+        })?;
+        World::from_toml(&text, &path.display().to_string(), path.parent())
+    }
+
+    /// Parses and builds a world; `origin` names it in messages.
+    pub fn from_toml(
+        text: &str,
+        origin: &str,
+        base_dir: Option<&Path>,
+    ) -> Result<World, WorldError> {
+        let spec: WorldSpec = toml::from_str(text).map_err(|err| {
+            let (line, key) = err
+                .span()
+                .map(|s| toml_location(text, s.start))
+                .unwrap_or((None, None));
+            WorldError::Parse {
+                origin: origin.to_owned(),
+                line,
+                key,
+                message: err.message().to_owned(),
+            }
+        })?;
+        World::build(spec, origin, base_dir)
+    }
+
+    /// Builds a world from its spec (scatter expanded, height file loaded).
+    pub fn build(
+        spec: WorldSpec,
+        origin: &str,
+        base_dir: Option<&Path>,
+    ) -> Result<World, WorldError> {
+        let invalid = |message: String| WorldError::Invalid {
+            origin: origin.to_owned(),
+            message,
+        };
+        let t = &spec.terrain;
+        if !(t.size_m[0] > 0.0
+            && t.size_m[1] > 0.0
+            && t.size_m[0].is_finite()
+            && t.size_m[1].is_finite())
+        {
+            return Err(invalid(format!(
+                "terrain.size_m {:?} must be two positive sizes",
+                t.size_m
+            )));
+        }
+        if t.size_m[0] * t.size_m[1] > 25e6 {
+            return Err(invalid(format!(
+                "terrain.size_m {:?}: at most 25 km² are supported",
+                t.size_m
+            )));
+        }
+        if !(t.hills_wavelength_m > 0.0 && t.roughness_wavelength_m > 0.0) {
+            return Err(invalid("terrain wavelengths must be positive".into()));
+        }
+        let bounds = [
+            t.origin_m[0],
+            t.origin_m[1],
+            t.origin_m[0] + t.size_m[0],
+            t.origin_m[1] + t.size_m[1],
+        ];
+        let base = match &t.heightmap {
+            Some(file) => {
+                let path = match base_dir {
+                    Some(dir) if file.is_relative() => dir.join(file),
+                    _ => file.clone(),
+                };
+                let grid = HeightGrid::load(&path, t.heightmap_resolution_m, t.heightmap_origin_m)?;
+                Base::File {
+                    grid,
+                    scale: t.heightmap_scale,
+                }
+            }
+            None => Base::Procedural {
+                noise: Noise::new(t.seed),
+                amplitude: t.hills_amplitude_m,
+                wavelength: t.hills_wavelength_m,
+            },
+        };
+        if spec.waypoints.is_empty() {
+            return Err(invalid("the world has no [[waypoints]]".into()));
+        }
+        let inside = |p: [f64; 2]| {
+            (bounds[0]..=bounds[2]).contains(&p[0]) && (bounds[1]..=bounds[3]).contains(&p[1])
+        };
+        if !inside(spec.start.position_m) {
+            return Err(invalid(format!(
+                "the start pose {:?} is off the map [{}, {}] × [{}, {}]",
+                spec.start.position_m, bounds[0], bounds[2], bounds[1], bounds[3]
+            )));
+        }
+        for (i, w) in spec.waypoints.iter().enumerate() {
+            if !inside(w.position_m) {
+                return Err(invalid(format!(
+                    "waypoint {} at {:?} is off the map",
+                    i + 1,
+                    w.position_m
+                )));
+            }
+        }
+        let mut features = Vec::new();
+        let round = |kind: FeatureKind, r: &RoundSpec, sign: f64| -> Result<Feature, WorldError> {
+            if !(r.radius_m > 0.0 && r.height_m > 0.0) {
+                return Err(invalid(format!(
+                    "{} at {:?}: radius_m and height_m must be positive",
+                    kind.name(),
+                    r.position_m
+                )));
+            }
+            Ok(Feature {
+                kind,
+                a: r.position_m,
+                b: r.position_m,
+                radius: r.radius_m,
+                height: sign * r.height_m,
+                top_half_width: 0.0,
+                slope_deg: 90.0,
+            })
+        };
+        for r in &spec.boulders {
+            features.push(round(FeatureKind::Boulder, r, 1.0)?);
+        }
+        for r in &spec.trees {
+            features.push(round(FeatureKind::Tree, r, 1.0)?);
+        }
+        for r in &spec.bushes {
+            features.push(round(FeatureKind::Bush, r, 1.0)?);
+        }
+        for h in &spec.holes {
+            let r = RoundSpec {
+                position_m: h.position_m,
+                radius_m: h.radius_m,
+                height_m: h.depth_m,
+            };
+            features.push(round(FeatureKind::Hole, &r, -1.0)?);
+        }
+        for d in &spec.ditches {
+            if !(d.width_m > 0.0 && d.depth_m > 0.0) {
+                return Err(invalid(format!(
+                    "ditch from {:?}: width_m and depth_m must be positive",
+                    d.from_m
+                )));
+            }
+            features.push(Feature {
+                kind: FeatureKind::Ditch,
+                a: d.from_m,
+                b: d.to_m,
+                radius: d.width_m / 2.0,
+                height: -d.depth_m,
+                top_half_width: 0.0,
+                slope_deg: 90.0,
+            });
+        }
+        for b in &spec.banks {
+            if !(b.height_m > 0.0
+                && b.top_width_m >= 0.0
+                && b.slope_deg > 0.0
+                && b.slope_deg < 90.0)
+            {
+                return Err(invalid(format!(
+                    "bank from {:?}: height_m > 0, top_width_m >= 0 and 0 < slope_deg < 90 are required",
+                    b.from_m
+                )));
+            }
+            let run = b.height_m / b.slope_deg.to_radians().tan();
+            features.push(Feature {
+                kind: FeatureKind::Bank,
+                a: b.from_m,
+                b: b.to_m,
+                radius: b.top_width_m / 2.0 + run,
+                height: b.height_m,
+                top_half_width: b.top_width_m / 2.0,
+                slope_deg: b.slope_deg,
+            });
+        }
+        let waypoints: Vec<WorldWaypoint> = spec
+            .waypoints
+            .iter()
+            .map(|w| WorldWaypoint {
+                x: w.position_m[0],
+                y: w.position_m[1],
+                radius_m: w.radius_m,
+            })
+            .collect();
+        let route: Vec<[f64; 2]> = std::iter::once(spec.start.position_m)
+            .chain(spec.waypoints.iter().map(|w| w.position_m))
+            .collect();
+        for scatter in &spec.scatter {
+            scatter_features(scatter, &route, bounds, &mut features).map_err(invalid)?;
+        }
+        let index = FeatureIndex::new(bounds, &features);
+        Ok(World {
+            roughness: Noise::new(t.seed.wrapping_add(7919)),
+            roughness_amplitude: t.roughness_amplitude_m,
+            roughness_wavelength: t.roughness_wavelength_m,
+            start: (spec.start.position_m, spec.start.heading_deg.to_radians()),
+            spec,
+            base,
+            features,
+            index,
+            bounds,
+            waypoints,
+        })
+    }
+
+    /// Checks that the mission can be driven by `vehicle`: no waypoint inside
+    /// a hazard, the start clear of hazards.
+    pub fn validate_for(&self, vehicle: &VehicleConfig, origin: &str) -> Result<(), WorldError> {
+        let invalid = |message: String| WorldError::Invalid {
+            origin: origin.to_owned(),
+            message,
+        };
+        for (i, w) in self.waypoints.iter().enumerate() {
+            if let Some((j, f, why)) = self.hazard_at([w.x, w.y], 0.0, vehicle) {
+                return Err(invalid(format!(
+                    "waypoint {} at ({:.1}, {:.1}) lies inside {} #{} ({why}) at ({:.1}, {:.1})",
+                    i + 1,
+                    w.x,
+                    w.y,
+                    f.kind.name(),
+                    j,
+                    f.a[0],
+                    f.a[1]
+                )));
+            }
+        }
+        let reach = vehicle.length_m.max(vehicle.width_m);
+        if let Some((j, f, why)) = self.hazard_at(self.start.0, reach, vehicle) {
+            return Err(invalid(format!(
+                "the start pose at ({:.1}, {:.1}) is within {reach} m of {} #{} ({why})",
+                self.start.0[0],
+                self.start.0[1],
+                f.kind.name(),
+                j
+            )));
+        }
+        Ok(())
+    }
+
+    /// The first hazardous feature within `margin` of p.
+    fn hazard_at(
+        &self,
+        p: [f64; 2],
+        margin: f64,
+        vehicle: &VehicleConfig,
+    ) -> Option<(usize, &Feature, String)> {
+        let mut near = Vec::new();
+        self.index.within(
+            [p[0] - margin, p[1] - margin, p[0] + margin, p[1] + margin],
+            &mut near,
+        );
+        near.iter().find_map(|&i| {
+            let f = &self.features[i as usize];
+            (f.distance(p) <= margin)
+                .then(|| f.hazard(vehicle))
+                .flatten()
+                .map(|why| (i as usize, f, why))
+        })
+    }
+
+    /// Ground height without features, m.
+    pub fn terrain_height(&self, x: f64, y: f64) -> f64 {
+        let hills = match &self.base {
+            Base::Procedural {
+                noise,
+                amplitude,
+                wavelength,
+            } => amplitude * noise.fbm(x / wavelength, y / wavelength, 3),
+            Base::File { grid, scale } => scale * grid.height(x, y),
+        };
+        hills
+            + self.roughness_amplitude
+                * self.roughness.fbm(
+                    x / self.roughness_wavelength,
+                    y / self.roughness_wavelength,
+                    2,
+                )
+    }
+
+    /// Height of the world at (x, y): terrain plus features, m.
+    pub fn height(&self, x: f64, y: f64) -> f64 {
+        let mut h = self.terrain_height(x, y);
+        for &i in self.index.at(x, y) {
+            h += self.features[i as usize].height_at([x, y]);
+        }
+        h
+    }
+
+    /// Indices of the features whose bounds may meet the box.
+    pub fn features_within(&self, bounds: [f64; 4], out: &mut Vec<u32>) {
+        self.index.within(bounds, out);
+    }
+
+    /// True when (x, y) is inside the world's bounds.
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        (self.bounds[0]..=self.bounds[2]).contains(&x)
+            && (self.bounds[1]..=self.bounds[3]).contains(&y)
+    }
+}
+
+/// Places one scatter entry's features (Poisson-disc style rejection).
+fn scatter_features(
+    scatter: &ScatterSpec,
+    route: &[[f64; 2]],
+    bounds: [f64; 4],
+    features: &mut Vec<Feature>,
+) -> Result<(), String> {
+    let (r0, r1) = (scatter.radius_m[0], scatter.radius_m[1]);
+    let (h0, h1) = (scatter.height_m[0], scatter.height_m[1]);
+    if !(r0 > 0.0 && r1 >= r0 && h0 > 0.0 && h1 >= h0) {
+        return Err(format!(
+            "scatter of {:?}: radius_m and height_m must be [min, max] ranges of positive values",
+            scatter.kind
+        ));
+    }
+    if scatter.count > 100_000 {
+        return Err(format!(
+            "scatter of {:?}: count {} exceeds 100000",
+            scatter.kind, scatter.count
+        ));
+    }
+    let route_distance = |p: [f64; 2]| -> f64 {
+        route
+            .windows(2)
+            .map(|w| segment_distance(p, w[0], w[1]))
+            .fold(f64::INFINITY, f64::min)
+            .min(
+                route
+                    .first()
+                    .map_or(f64::INFINITY, |s| (p[0] - s[0]).hypot(p[1] - s[1])),
+            )
+    };
+    let (kind, sign) = match scatter.kind {
+        ScatterKind::Boulder => (FeatureKind::Boulder, 1.0),
+        ScatterKind::Tree => (FeatureKind::Tree, 1.0),
+        ScatterKind::Bush => (FeatureKind::Bush, 1.0),
+        ScatterKind::Hole => (FeatureKind::Hole, -1.0),
+    };
+    let mut rng = Rng::new(scatter.seed);
+    let reach = scatter.near_route_m;
+    let area = [
+        bounds[0].max(route.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min) - reach),
+        bounds[1].max(route.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min) - reach),
+        bounds[2].min(route.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max) + reach),
+        bounds[3].min(route.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max) + reach),
+    ];
+    for _ in 0..scatter.count {
+        let p = [rng.range(area[0], area[2]), rng.range(area[1], area[3])];
+        let radius = rng.range(r0, r1);
+        let height = rng.range(h0, h1);
+        if route_distance(p) > reach {
+            continue;
+        }
+        let clear_of_route_points = route
+            .iter()
+            .all(|w| (p[0] - w[0]).hypot(p[1] - w[1]) > scatter.clear_of_waypoints_m + radius);
+        let spaced = features
+            .iter()
+            .all(|f| f.distance(p) > radius + scatter.min_spacing_m);
+        if clear_of_route_points && spaced {
+            features.push(Feature {
+                kind,
+                a: p,
+                b: p,
+                radius,
+                height: sign * height,
+                top_half_width: 0.0,
+                slope_deg: 90.0,
+            });
+        }
+    }
+    Ok(())
+}
