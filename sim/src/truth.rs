@@ -6,9 +6,11 @@
 
 use std::collections::BTreeSet;
 
+use arcnav_vehicle::frames::yaw_of;
 use arcnav_vehicle::{Footprint, Utime, VehicleConfig};
 use serde::Serialize;
 
+use crate::drape::Stance;
 use crate::world::{Feature, World};
 
 /// One collision.

@@ -537,7 +537,7 @@ impl World {
                 }
             }
             None => Base::Procedural {
-                noise: Noise::new(t.seed),
+                noise: Box::new(Noise::new(t.seed)),
                 amplitude: t.hills_amplitude_m,
                 wavelength: t.hills_wavelength_m,
             },
