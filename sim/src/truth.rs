@@ -61,19 +61,14 @@ impl Truth {
         }
     }
 
-    /// Checks the vehicle at (x, y, yaw) with its attitude; returns the
-    /// collisions that start now.
-    pub fn check(
-        &mut self,
-        world: &World,
-        utime: Utime,
-        x: f64,
-        y: f64,
-        yaw: f64,
-        roll: f64,
-        pitch: f64,
-    ) -> &[Collision] {
+    /// Checks the vehicle standing as `stance`; returns the collisions that
+    /// start now.
+    pub fn check(&mut self, world: &World, utime: Utime, stance: &Stance) -> &[Collision] {
         let before = self.collisions.len();
+        let t = stance.world_from_vehicle.translation.vector;
+        let (x, y) = (t.x, t.y);
+        let yaw = yaw_of(&stance.world_from_vehicle);
+        let (roll, pitch) = (stance.roll, stance.pitch);
         let (sin, cos) = yaw.sin_cos();
         let to_vehicle = |p: [f64; 2]| {
             let (dx, dy) = (p[0] - x, p[1] - y);

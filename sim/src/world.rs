@@ -327,7 +327,7 @@ pub fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
 #[derive(Debug, Clone)]
 enum Base {
     Procedural {
-        noise: Noise,
+        noise: Box<Noise>,
         amplitude: f64,
         wavelength: f64,
     },
