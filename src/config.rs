@@ -14,6 +14,9 @@ use arcnav_arbiter::ArbiterConfig;
 use arcnav_behaviours::{Registry, RegistryError, Setup};
 use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
+use arcnav_sim::SimConfig;
+
+use crate::pipeline::PipelineConfig;
 use arcnav_vehicle::config::toml_location;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
@@ -31,6 +34,8 @@ pub struct Config {
     pub perception: PerceptionConfig,
     pub localmap: LocalMapConfig,
     pub arbiter: ArbiterConfig,
+    pub pipeline: PipelineConfig,
+    pub sim: SimConfig,
     /// One table per active behaviour, `[behaviours.NAME]`. The built-in
     /// behaviours are always present (set their weight to 0 to skip them);
     /// a table in a file changes only the keys it names.
@@ -47,6 +52,8 @@ impl Default for Config {
             perception: PerceptionConfig::default(),
             localmap: LocalMapConfig::default(),
             arbiter: ArbiterConfig::default(),
+            pipeline: PipelineConfig::default(),
+            sim: SimConfig::default(),
             behaviours: default_behaviours(),
         }
     }
@@ -230,6 +237,8 @@ impl Config {
             .map_err(|e| e.within("perception"))?;
         self.localmap.validate().map_err(|e| e.within("localmap"))?;
         self.arbiter.validate().map_err(|e| e.within("arbiter"))?;
+        self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
+        self.sim.validate().map_err(|e| e.within("sim"))?;
         let arcs = self.arc_set()?;
         let setup = Setup {
             arcs: &arcs,

@@ -9,5 +9,9 @@
 //! configuration and the executors used by the `arcnav` binary.
 
 pub mod config;
+pub mod mission;
+pub mod pipeline;
+pub mod render;
+pub mod wire;
 
 pub use config::Config;

@@ -1,0 +1,536 @@
+//! A simulated mission: the simulator closes the loop around the real
+//! pipeline in lock-step on simulated time.
+//!
+//! Every pose tick (50 Hz) the vehicle model advances under the commands it
+//! has received, is draped on the terrain and checked against the true
+//! hazards; the pipeline gets the pose (with noise and drift if configured)
+//! and, at the sensor's rate, a range image ray-cast from the true pose. The
+//! pipeline sees nothing else of the world: no shortcut through ground truth.
+
+use std::collections::BTreeSet;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use arcnav_arbiter::{BehaviourVotes, Decision};
+use arcnav_behaviours::{Mission, Registry, Waypoint};
+use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
+use arcnav_bus::log::LogWriter;
+use arcnav_bus::messages::channels;
+use arcnav_localmap::MapSnapshot;
+use arcnav_perception::{ObstacleReport, SensorModel};
+use arcnav_sim::drape::drape;
+use arcnav_sim::rng::Rng;
+use arcnav_sim::tiles::TileCache;
+use arcnav_sim::{Collision, CollisionPolicy, Truth, World};
+use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
+use arcnav_vehicle::{MotionLimits, MotionModel, PlanarState, Pose, SteeringCommand, Utime};
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use crate::config::Config;
+use crate::pipeline::{Input, Pipeline, Sink, StageTimes};
+use crate::render;
+use crate::wire;
+
+/// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
+pub const SIM_EPOCH_US: Utime = 1_767_225_600_000_000;
+
+/// What goes into the mission's LCM log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LogMode {
+    /// Everything, range images included (what `arcnav replay` needs).
+    #[default]
+    All,
+    /// Everything but range images (much smaller with a lidar).
+    NoImages,
+}
+
+/// How a mission is run and what it writes.
+#[derive(Debug, Clone, Default)]
+pub struct MissionOptions {
+    /// Write the LCM event log here.
+    pub log: Option<PathBuf>,
+    pub log_mode: LogMode,
+    /// Write a local-map picture every this many simulated seconds, into `snapshot_dir`.
+    pub snapshot_every_s: Option<f64>,
+    pub snapshot_dir: Option<PathBuf>,
+}
+
+/// How it ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    Completed,
+    Collision,
+    Timeout,
+    Stuck,
+}
+
+/// Progress, reported about once per simulated second.
+#[derive(Debug, Clone, Copy)]
+pub struct MissionProgress {
+    pub sim_time_s: f64,
+    pub distance_m: f64,
+    pub waypoint: usize,
+    pub waypoints: usize,
+    pub speed_mps: f64,
+    pub time_limit_s: f64,
+}
+
+/// Mission statistics (`report.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct MissionReport {
+    pub world: String,
+    pub sensor: String,
+    pub outcome: Outcome,
+    /// True only when the mission completed with zero collisions.
+    pub success: bool,
+    pub waypoints_reached: usize,
+    pub waypoints: usize,
+    pub distance_m: f64,
+    pub duration_s: f64,
+    pub average_speed_mps: f64,
+    pub max_speed_mps: f64,
+    pub cruise_speed_mps: f64,
+    pub images: u64,
+    pub images_dropped: u64,
+    pub collisions: Vec<Collision>,
+    /// Smallest gap between the footprint and a true hazard, m.
+    pub closest_approach_m: Option<f64>,
+    pub stops: StopStats,
+    pub map_resets: u64,
+    pub stage_times: StageTimes,
+    /// Rendering range images (simulator, not pipeline), ms per image.
+    pub render_ms_mean: f64,
+    pub wall_time_s: f64,
+    pub realtime_factor: f64,
+}
+
+/// Stop commands during the mission.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct StopStats {
+    pub stop_commands: u64,
+    /// Runs of consecutive stop commands.
+    pub episodes: u64,
+    pub no_votes: u64,
+    pub required_stale: u64,
+    pub all_arcs_forbidden: u64,
+    pub no_acceptable_arc: u64,
+}
+
+/// A point of the driven path.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct TrackPoint {
+    pub utime: Utime,
+    pub x: f64,
+    pub y: f64,
+    pub speed_mps: f64,
+}
+
+/// Everything a mission produced.
+#[derive(Debug, Clone)]
+pub struct MissionRun {
+    pub report: MissionReport,
+    pub track: Vec<TrackPoint>,
+    /// Where images were taken.
+    pub image_positions: Vec<[f64; 2]>,
+    /// World patches that were ever in the local map (i, j) and the patch size.
+    pub obstacle_patches: BTreeSet<(i64, i64)>,
+    pub patch_size_m: f64,
+    pub snapshots: Vec<PathBuf>,
+}
+
+/// A mission that could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum MissionError {
+    #[error(transparent)]
+    Config(#[from] arcnav_vehicle::ConfigError),
+    #[error(transparent)]
+    World(#[from] arcnav_sim::WorldError),
+    #[error("cannot write the log {path}: {source}")]
+    Log {
+        path: PathBuf,
+        source: arcnav_bus::log::LogWriteError,
+    },
+    #[error("cannot create the log {path}: {source}")]
+    CreateLog {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write a snapshot picture: {0}")]
+    Picture(#[from] render::RenderError),
+}
+
+/// Receives the pipeline's outputs during a mission.
+struct MissionSink<'a> {
+    log: Option<(&'a Path, LogWriter<BufWriter<File>>)>,
+    error: Option<MissionError>,
+    arcs: arcnav_vehicle::ArcSet,
+    commands: Vec<SteeringCommand>,
+    stops: StopStats,
+    stopped: bool,
+    patches: BTreeSet<(i64, i64)>,
+    snapshot: Option<(f64, &'a Path, Utime)>,
+    snapshots: Vec<PathBuf>,
+    config: &'a Config,
+    track: Vec<TrackPoint>,
+}
+
+impl MissionSink<'_> {
+    fn log<M: arcnav_bus::Message>(&mut self, at: Utime, channel: &str, message: &M) {
+        if let Some((path, writer)) = &mut self.log
+            && self.error.is_none()
+            && let Err(source) = writer.write_message(at, channel, message)
+        {
+            self.error = Some(MissionError::Log {
+                path: path.to_path_buf(),
+                source,
+            });
+        }
+    }
+}
+
+impl Sink for MissionSink<'_> {
+    fn on_obstacles(&mut self, at: Utime, report: &ObstacleReport) {
+        self.log(
+            at,
+            channels::OBSTACLE_CELLS,
+            &wire::obstacles_to_wire(report),
+        );
+    }
+
+    fn on_votes(&mut self, at: Utime, votes: &[BehaviourVotes]) {
+        for v in votes {
+            let message = wire::votes_to_wire(v, &self.arcs);
+            self.log(at, &channels::arc_votes(&v.behaviour), &message);
+        }
+    }
+
+    fn on_command(
+        &mut self,
+        at: Utime,
+        command: &SteeringCommand,
+        decision: Option<&Decision>,
+        map: &MapSnapshot,
+    ) {
+        self.log(
+            at,
+            channels::STEERING_COMMAND,
+            &steering_command_t::from(command),
+        );
+        self.commands.push(*command);
+        if command.is_stop() {
+            self.stops.stop_commands += 1;
+            if !self.stopped {
+                self.stops.episodes += 1;
+            }
+        }
+        self.stopped = command.is_stop();
+        self.patches.extend(map.patches.iter().map(|p| (p.i, p.j)));
+        if let Some((every, dir, next)) = &mut self.snapshot
+            && at >= *next
+            && self.error.is_none()
+        {
+            *next = at + seconds_to_micros(*every);
+            let path = dir.join(format!(
+                "snapshot-{:07.1}s.png",
+                micros_to_seconds(at - SIM_EPOCH_US)
+            ));
+            match render::snapshot_picture(
+                &path,
+                self.config,
+                &self.arcs,
+                map,
+                decision,
+                at - SIM_EPOCH_US,
+                &self.track,
+            ) {
+                Ok(()) => self.snapshots.push(path),
+                Err(e) => self.error = Some(e.into()),
+            }
+        }
+    }
+}
+
+/// The mission of `world` as the goal-seeking behaviour sees it.
+pub fn mission_of(world: &World, version: Utime) -> Mission {
+    Mission {
+        version,
+        waypoints: world
+            .waypoints
+            .iter()
+            .map(|w| Waypoint {
+                x: w.x,
+                y: w.y,
+                radius_m: w.radius_m,
+            })
+            .collect(),
+    }
+}
+
+/// Runs a mission of `world` to its end.
+pub fn run_mission(
+    config: &Config,
+    registry: &Registry,
+    world: Arc<World>,
+    options: &MissionOptions,
+    progress: &mut dyn FnMut(&MissionProgress),
+) -> Result<MissionRun, MissionError> {
+    let wall = Instant::now();
+    world.validate_for(&config.vehicle, &world.spec.name)?;
+    let sensor: SensorModel = config.sensor.model().map_err(|e| e.within("sensor"))?;
+    let mut pipeline = Pipeline::new(config, registry)?;
+    pipeline.set_explain(options.snapshot_every_s.is_some());
+    let sim = &config.sim;
+    let threads = sim.thread_count();
+    let dt = seconds_to_micros(1.0 / sim.pose_rate_hz);
+    let t0 = SIM_EPOCH_US;
+    let (start, heading) = world.start;
+    let mut motion = MotionModel::new(
+        MotionLimits::from_vehicle(&config.vehicle),
+        PlanarState {
+            x: start[0],
+            y: start[1],
+            yaw: heading,
+            ..PlanarState::default()
+        },
+        t0,
+    );
+    let mut tiles = TileCache::new(Arc::clone(&world), 128, threads);
+    let mut truth = Truth::new(&world, &config.vehicle);
+    let mut pose_rng = Rng::stream(sim.seed, 0x0b5e_55ed);
+    let log = match &options.log {
+        Some(path) => Some((
+            path.as_path(),
+            LogWriter::new(BufWriter::new(File::create(path).map_err(|source| {
+                MissionError::CreateLog {
+                    path: path.clone(),
+                    source,
+                }
+            })?)),
+        )),
+        None => None,
+    };
+    let mut sink = MissionSink {
+        log,
+        error: None,
+        arcs: pipeline.arcs().clone(),
+        commands: Vec::new(),
+        stops: StopStats::default(),
+        stopped: false,
+        patches: BTreeSet::new(),
+        snapshot: match (options.snapshot_every_s, &options.snapshot_dir) {
+            (Some(every), Some(dir)) => Some((every, dir.as_path(), t0)),
+            _ => None,
+        },
+        snapshots: Vec::new(),
+        config,
+        track: Vec::new(),
+    };
+    let mission = mission_of(&world, t0);
+    sink.log(t0, channels::WAYPOINTS, &wire::mission_to_wire(&mission));
+    pipeline.input(Input::Waypoints(mission), &mut sink);
+
+    let image_period = sensor.period_us();
+    let time_limit = t0 + seconds_to_micros(sim.time_limit_s);
+    let stuck_after = seconds_to_micros(sim.stuck_after_s);
+    let (mut next_image, mut images, mut image_positions) = (t0, 0u64, Vec::new());
+    let (mut distance, mut max_speed, mut drift) = (0.0f64, 0.0f64, [0.0f64; 2]);
+    let (mut render_ms, mut next_progress) = (0.0f64, t0);
+    let mut best_gap = (usize::MAX, f64::INFINITY, t0);
+    let mut previous = *motion.state();
+    let outcome;
+    let mut t = t0;
+    let mut tick: u64 = 0;
+    loop {
+        let state = motion.advance_to(t);
+        let stepped = (state.x - previous.x).hypot(state.y - previous.y);
+        distance += stepped;
+        previous = state;
+        max_speed = max_speed.max(state.speed_mps);
+        let stance = drape(&world, &config.vehicle, &state);
+        if tick.is_multiple_of(5) {
+            sink.track.push(TrackPoint {
+                utime: t,
+                x: state.x,
+                y: state.y,
+                speed_mps: state.speed_mps,
+            });
+        }
+        let collided = !truth.check(&world, t, &stance).is_empty();
+        if collided && sim.on_collision == CollisionPolicy::Stop {
+            outcome = Outcome::Collision;
+            break;
+        }
+        // What the pipeline is told: the pose, with noise and drift if configured.
+        if sim.drift_per_m > 0.0 {
+            drift[0] += stepped * sim.drift_per_m * pose_rng.normal();
+            drift[1] += stepped * sim.drift_per_m * pose_rng.normal();
+        }
+        let (noise_x, noise_y, noise_yaw) = if sim.pose_noise_m > 0.0 || sim.heading_noise_deg > 0.0
+        {
+            (
+                sim.pose_noise_m * pose_rng.normal(),
+                sim.pose_noise_m * pose_rng.normal(),
+                sim.heading_noise_deg.to_radians() * pose_rng.normal(),
+            )
+        } else {
+            (0.0, 0.0, 0.0)
+        };
+        let true_position = stance.world_from_vehicle.translation.vector;
+        let measured = Pose {
+            utime: t,
+            world_from_vehicle: isometry_from_xyz_rpy(
+                [
+                    true_position.x + drift[0] + noise_x,
+                    true_position.y + drift[1] + noise_y,
+                    true_position.z,
+                ],
+                stance.roll,
+                stance.pitch,
+                state.yaw + noise_yaw,
+            ),
+            velocity: Vector3::new(
+                state.speed_mps * state.yaw.cos(),
+                state.speed_mps * state.yaw.sin(),
+                0.0,
+            ),
+            yaw_rate: state.speed_mps * state.curvature,
+        };
+        sink.log(t, channels::POSE, &pose_t::from(&measured));
+        pipeline.input(Input::Pose(measured), &mut sink);
+        if t >= next_image {
+            let started = Instant::now();
+            let sensor_position = (stance.world_from_vehicle * sensor.vehicle_from_sensor)
+                .translation
+                .vector;
+            let view = tiles.view(
+                sensor_position.x,
+                sensor_position.y,
+                sensor.max_range_m + 1.0,
+            );
+            let image = arcnav_sim::sensor::render(
+                &sensor,
+                &view,
+                &stance.world_from_vehicle,
+                t,
+                (sim.range_noise_m, sim.dropout_probability),
+                (sim.seed, images),
+                threads,
+            );
+            render_ms += started.elapsed().as_secs_f64() * 1e3;
+            if options.log_mode == LogMode::All {
+                sink.log(
+                    t,
+                    &channels::range_image(&sensor.id),
+                    &wire::range_image_to_wire(&image),
+                );
+            }
+            pipeline.input(Input::Image(image), &mut sink);
+            images += 1;
+            image_positions.push([state.x, state.y]);
+            next_image += image_period;
+        }
+        pipeline.run_until(t, &mut sink);
+        for command in sink.commands.drain(..) {
+            motion.command(command);
+        }
+        if let Some(e) = sink.error.take() {
+            return Err(e);
+        }
+        let status = pipeline.behaviours.progress();
+        if status.is_some_and(|p| p.complete) {
+            outcome = Outcome::Completed;
+            break;
+        }
+        // Stuck: no nearer to the current waypoint for too long.
+        if let Some(p) = status
+            && let Some(w) = world.waypoints.get(p.current)
+        {
+            let gap = (w.x - state.x).hypot(w.y - state.y);
+            if p.current != best_gap.0 || gap < best_gap.1 - 1.0 {
+                best_gap = (p.current, gap, t);
+            } else if t - best_gap.2 > stuck_after {
+                outcome = Outcome::Stuck;
+                break;
+            }
+        }
+        if t >= time_limit {
+            outcome = Outcome::Timeout;
+            break;
+        }
+        if t >= next_progress {
+            next_progress = t + 1_000_000;
+            progress(&MissionProgress {
+                sim_time_s: micros_to_seconds(t - t0),
+                distance_m: distance,
+                waypoint: status.map_or(0, |p| p.current),
+                waypoints: world.waypoints.len(),
+                speed_mps: state.speed_mps,
+                time_limit_s: sim.time_limit_s,
+            });
+        }
+        tick += 1;
+        t = t0 + tick as i64 * dt;
+    }
+    let duration = micros_to_seconds(t - t0);
+    let arbiter = pipeline.arbiter.stats();
+    let mut stops = sink.stops;
+    stops.no_votes = arbiter.stops_no_votes;
+    stops.required_stale = arbiter.stops_required_stale;
+    stops.all_arcs_forbidden = arbiter.stops_all_forbidden;
+    stops.no_acceptable_arc = arbiter.stops_no_acceptable;
+    let reached = pipeline.behaviours.progress().map_or(0, |p| p.current);
+    let drops = pipeline.perception.drops;
+    let wall_time = wall.elapsed().as_secs_f64();
+    let report = MissionReport {
+        world: world.spec.name.clone(),
+        sensor: sensor.id.clone(),
+        success: outcome == Outcome::Completed && truth.collisions.is_empty(),
+        outcome,
+        waypoints_reached: reached,
+        waypoints: world.waypoints.len(),
+        distance_m: distance,
+        duration_s: duration,
+        average_speed_mps: if duration > 0.0 {
+            distance / duration
+        } else {
+            0.0
+        },
+        max_speed_mps: max_speed,
+        cruise_speed_mps: config.arbiter.cruise_speed_mps,
+        images,
+        images_dropped: drops.no_pose + drops.invalid + drops.out_of_order,
+        collisions: truth.collisions.clone(),
+        closest_approach_m: truth
+            .closest_approach_m
+            .is_finite()
+            .then_some(truth.closest_approach_m),
+        stops,
+        map_resets: pipeline.map_resets,
+        stage_times: pipeline.times,
+        render_ms_mean: if images > 0 {
+            render_ms / images as f64
+        } else {
+            0.0
+        },
+        wall_time_s: wall_time,
+        realtime_factor: if wall_time > 0.0 {
+            duration / wall_time
+        } else {
+            0.0
+        },
+    };
+    Ok(MissionRun {
+        report,
+        track: sink.track,
+        image_positions,
+        obstacle_patches: sink.patches,
+        patch_size_m: config.localmap.patch_size_m,
+        snapshots: sink.snapshots,
+    })
+}

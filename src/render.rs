@@ -1,0 +1,633 @@
+//! Pictures: the whole mission on its terrain (like the paper's Figure 3b)
+//! and local-map snapshots with the arcs coloured by their fused vote and
+//! each behaviour's votes (like Figures 6 and 9).
+
+use std::path::Path;
+
+use ab_glyph::{Font, FontRef, PxScale, ScaleFont, point};
+use arcnav_arbiter::Decision;
+use arcnav_localmap::MapSnapshot;
+use arcnav_sim::{FeatureKind, World};
+use arcnav_vehicle::{ArcSet, Utime};
+use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform};
+
+use crate::config::Config;
+use crate::mission::{MissionRun, TrackPoint};
+
+/// A picture that could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error("picture of {width}×{height} pixels is not possible")]
+    Size { width: u32, height: u32 },
+    #[error("cannot write {path}: {reason}")]
+    Write { path: String, reason: String },
+}
+
+/// RGBA, 0-255.
+pub type Rgba = [u8; 4];
+
+const WHITE: Rgba = [255, 255, 255, 255];
+const BLACK: Rgba = [0, 0, 0, 255];
+const RED: Rgba = [220, 30, 30, 255];
+const BLUE: Rgba = [30, 80, 220, 255];
+
+fn color(c: Rgba) -> Color {
+    Color::from_rgba8(c[0], c[1], c[2], c[3])
+}
+
+fn paint(c: Rgba) -> Paint<'static> {
+    let mut p = Paint::default();
+    p.set_color(color(c));
+    p.anti_alias = true;
+    p
+}
+
+/// Red (-1) through yellow (0) to green (+1).
+pub fn vote_color(v: f32) -> Rgba {
+    let v = v.clamp(-1.0, 1.0);
+    if v < 0.0 {
+        let t = v + 1.0;
+        [220, (40.0 + 170.0 * t) as u8, 40, 255]
+    } else {
+        [(220.0 * (1.0 - v)) as u8, (210.0 - 40.0 * v) as u8, 40, 255]
+    }
+}
+
+/// Blue (slow) through green to red (fast) over [0, max].
+pub fn speed_color(speed: f64, max: f64) -> Rgba {
+    let t = (speed / max.max(0.1)).clamp(0.0, 1.0);
+    let (r, g, b) = if t < 0.5 {
+        let u = t * 2.0;
+        (20.0, 80.0 + 150.0 * u, 230.0 - 170.0 * u)
+    } else {
+        let u = (t - 0.5) * 2.0;
+        (20.0 + 220.0 * u, 230.0 - 190.0 * u, 60.0 - 40.0 * u)
+    };
+    [r as u8, g as u8, b as u8, 255]
+}
+
+/// A canvas with a text renderer.
+pub struct Canvas {
+    pub pixmap: Pixmap,
+    font: FontRef<'static>,
+}
+
+impl Canvas {
+    pub fn new(width: u32, height: u32, background: Rgba) -> Result<Self, RenderError> {
+        let mut pixmap = Pixmap::new(width, height).ok_or(RenderError::Size { width, height })?;
+        pixmap.fill(color(background));
+        // The DejaVu font is compiled in; it always parses.
+        let font =
+            FontRef::try_from_slice(dejavu::sans::regular()).map_err(|_| RenderError::Size {
+                width: 0,
+                height: 0,
+            })?;
+        Ok(Self { pixmap, font })
+    }
+
+    pub fn width(&self) -> f32 {
+        self.pixmap.width() as f32
+    }
+
+    pub fn height(&self) -> f32 {
+        self.pixmap.height() as f32
+    }
+
+    pub fn fill_rect(&mut self, x: f32, y: f32, w: f32, h: f32, c: Rgba) {
+        if let Some(rect) = Rect::from_xywh(x, y, w.max(0.5), h.max(0.5)) {
+            self.pixmap
+                .fill_rect(rect, &paint(c), Transform::identity(), None);
+        }
+    }
+
+    pub fn circle(
+        &mut self,
+        x: f32,
+        y: f32,
+        r: f32,
+        fill: Option<Rgba>,
+        outline: Option<(Rgba, f32)>,
+    ) {
+        let Some(path) = PathBuilder::from_circle(x, y, r.max(0.5)) else {
+            return;
+        };
+        if let Some(c) = fill {
+            self.pixmap.fill_path(
+                &path,
+                &paint(c),
+                FillRule::Winding,
+                Transform::identity(),
+                None,
+            );
+        }
+        if let Some((c, width)) = outline {
+            let stroke = Stroke {
+                width,
+                ..Stroke::default()
+            };
+            self.pixmap
+                .stroke_path(&path, &paint(c), &stroke, Transform::identity(), None);
+        }
+    }
+
+    pub fn polyline(&mut self, points: &[(f32, f32)], c: Rgba, width: f32, dashed: bool) {
+        let length: f32 = points
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+            .sum();
+        if points.len() < 2 || length < 1e-3 {
+            return;
+        }
+        let mut pb = PathBuilder::new();
+        pb.move_to(points[0].0, points[0].1);
+        for p in &points[1..] {
+            pb.line_to(p.0, p.1);
+        }
+        let Some(path) = pb.finish() else { return };
+        let mut stroke = Stroke {
+            width,
+            ..Stroke::default()
+        };
+        if dashed {
+            stroke.dash = tiny_skia::StrokeDash::new(vec![4.0, 4.0], 0.0);
+        }
+        self.pixmap
+            .stroke_path(&path, &paint(c), &stroke, Transform::identity(), None);
+    }
+
+    pub fn polygon(
+        &mut self,
+        points: &[(f32, f32)],
+        fill: Option<Rgba>,
+        outline: Option<(Rgba, f32)>,
+    ) {
+        if points.len() < 3 {
+            return;
+        }
+        let mut pb = PathBuilder::new();
+        pb.move_to(points[0].0, points[0].1);
+        for p in &points[1..] {
+            pb.line_to(p.0, p.1);
+        }
+        pb.close();
+        let Some(path) = pb.finish() else { return };
+        if let Some(c) = fill {
+            self.pixmap.fill_path(
+                &path,
+                &paint(c),
+                FillRule::EvenOdd,
+                Transform::identity(),
+                None,
+            );
+        }
+        if let Some((c, width)) = outline {
+            let stroke = Stroke {
+                width,
+                ..Stroke::default()
+            };
+            self.pixmap
+                .stroke_path(&path, &paint(c), &stroke, Transform::identity(), None);
+        }
+    }
+
+    /// Text with its baseline at (x, y); returns the width drawn.
+    pub fn text(&mut self, x: f32, y: f32, size: f32, c: Rgba, text: &str) -> f32 {
+        let scale = PxScale::from(size);
+        let font = self.font.as_scaled(scale);
+        let mut caret = x;
+        let (w, h) = (self.pixmap.width() as i32, self.pixmap.height() as i32);
+        let pixels = self.pixmap.pixels_mut();
+        for ch in text.chars() {
+            let id = font.glyph_id(ch);
+            let advance = font.h_advance(id);
+            let glyph = id.with_scale_and_position(scale, point(caret, y));
+            if let Some(outlined) = self.font.outline_glyph(glyph) {
+                let bounds = outlined.px_bounds();
+                outlined.draw(|gx, gy, coverage| {
+                    let (px, py) = (
+                        bounds.min.x as i32 + gx as i32,
+                        bounds.min.y as i32 + gy as i32,
+                    );
+                    if px < 0 || py < 0 || px >= w || py >= h {
+                        return;
+                    }
+                    let pixel = &mut pixels[(py * w + px) as usize];
+                    let a = coverage.clamp(0.0, 1.0) * f32::from(c[3]) / 255.0;
+                    let blend = |under: u8, over: u8| {
+                        (f32::from(under) * (1.0 - a) + f32::from(over) * a) as u8
+                    };
+                    if let Some(mixed) = tiny_skia::PremultipliedColorU8::from_rgba(
+                        blend(pixel.red(), c[0]),
+                        blend(pixel.green(), c[1]),
+                        blend(pixel.blue(), c[2]),
+                        255,
+                    ) {
+                        *pixel = mixed;
+                    }
+                });
+            }
+            caret += advance;
+        }
+        caret - x
+    }
+
+    /// Text on a light box for legibility over a picture.
+    pub fn label(&mut self, x: f32, y: f32, size: f32, c: Rgba, text: &str) {
+        let width = text.chars().count() as f32 * size * 0.6;
+        self.fill_rect(
+            x - 3.0,
+            y - size,
+            width + 6.0,
+            size * 1.35,
+            [255, 255, 255, 200],
+        );
+        self.text(x, y, size, c, text);
+    }
+
+    pub fn save(&self, path: &Path) -> Result<(), RenderError> {
+        self.pixmap.save_png(path).map_err(|e| RenderError::Write {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })
+    }
+}
+
+/// The whole mission: shaded terrain, hazards, the obstacle cells the local
+/// map held, the path coloured by speed, image positions, waypoints and
+/// collisions.
+pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(), RenderError> {
+    let mut xs: Vec<f64> = world
+        .waypoints
+        .iter()
+        .map(|w| w.x)
+        .chain(run.track.iter().map(|p| p.x))
+        .collect();
+    let mut ys: Vec<f64> = world
+        .waypoints
+        .iter()
+        .map(|w| w.y)
+        .chain(run.track.iter().map(|p| p.y))
+        .collect();
+    xs.push(world.start.0[0]);
+    ys.push(world.start.0[1]);
+    let margin = 25.0;
+    let min_x = xs.iter().cloned().fold(f64::INFINITY, f64::min) - margin;
+    let max_x = xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + margin;
+    let min_y = ys.iter().cloned().fold(f64::INFINITY, f64::min) - margin;
+    let max_y = ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + margin;
+    let scale = (1600.0 / (max_x - min_x).max(max_y - min_y)).clamp(1.0, 8.0);
+    let header = 70.0;
+    let (w, h) = (
+        ((max_x - min_x) * scale) as u32,
+        ((max_y - min_y) * scale) as u32 + header as u32,
+    );
+    let mut canvas = Canvas::new(w, h, WHITE)?;
+    let to_px = |x: f64, y: f64| {
+        (
+            ((x - min_x) * scale) as f32,
+            (header + (max_y - y) * scale) as f32,
+        )
+    };
+
+    // Terrain: elevation tint with hill shading.
+    let (gw, gh) = (w as usize, (h as usize).saturating_sub(header as usize));
+    let step = 1.0 / scale;
+    let heights: Vec<f64> = (0..gh)
+        .flat_map(|r| (0..gw).map(move |c| (c, r)))
+        .map(|(c, r)| {
+            world.terrain_height(
+                min_x + (c as f64 + 0.5) * step,
+                max_y - (r as f64 + 0.5) * step,
+            )
+        })
+        .collect();
+    let (lo, hi) = heights
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let pixels = canvas.pixmap.pixels_mut();
+    for r in 0..gh {
+        for c in 0..gw {
+            let at = |cc: usize, rr: usize| heights[rr.min(gh - 1) * gw + cc.min(gw - 1)];
+            let dzdx = (at(c + 1, r) - at(c.saturating_sub(1), r)) / (2.0 * step);
+            let dzdy = (at(c, r.saturating_sub(1)) - at(c, r + 1)) / (2.0 * step);
+            let shade = ((-dzdx * 0.6 + dzdy * 0.6 + 1.0)
+                / (dzdx * dzdx + dzdy * dzdy + 1.0).sqrt())
+            .clamp(0.3, 1.3)
+                / 1.3;
+            let t = (heights[r * gw + c] - lo) / (hi - lo).max(0.1);
+            let base = [150.0 + 60.0 * t, 175.0 + 30.0 * t, 120.0 + 50.0 * t];
+            let rgb = base.map(|v| (v * (0.55 + 0.45 * shade)).clamp(0.0, 255.0) as u8);
+            if let Some(p) = tiny_skia::PremultipliedColorU8::from_rgba(rgb[0], rgb[1], rgb[2], 255)
+            {
+                pixels[(r + header as usize) * gw + c] = p;
+            }
+        }
+    }
+    // Features: dark when the vehicle cannot drive over them.
+    let vehicle = arcnav_vehicle::VehicleConfig::default();
+    for f in &world.features {
+        let hazard = f.hazard(&vehicle).is_some();
+        let c: Rgba = match (f.kind, hazard) {
+            (FeatureKind::Boulder, true) => [95, 95, 95, 255],
+            (FeatureKind::Tree, _) => [20, 90, 30, 255],
+            (FeatureKind::Bush, _) => [60, 140, 50, 255],
+            (FeatureKind::Hole | FeatureKind::Ditch, true) => [40, 60, 120, 255],
+            (FeatureKind::Bank, _) => [140, 100, 60, 255],
+            _ => [170, 170, 160, 255],
+        };
+        let (ax, ay) = to_px(f.a[0], f.a[1]);
+        let (bx, by) = to_px(f.b[0], f.b[1]);
+        let r = (f.radius * scale) as f32;
+        if f.a == f.b {
+            canvas.circle(ax, ay, r.max(1.5), Some(c), None);
+        } else {
+            canvas.polyline(&[(ax, ay), (bx, by)], c, (2.0 * r).max(2.0), false);
+        }
+    }
+    // What the local map held: the paper's "obstacle regions shown as black dots".
+    let s = run.patch_size_m;
+    for &(i, j) in &run.obstacle_patches {
+        let (x, y) = to_px(i as f64 * s, (j + 1) as f64 * s);
+        canvas.fill_rect(x, y, (s * scale) as f32, (s * scale) as f32, [0, 0, 0, 200]);
+    }
+    // The path, coloured by speed.
+    let top = run.track.iter().map(|p| p.speed_mps).fold(0.5, f64::max);
+    for pair in run.track.windows(2) {
+        let (a, b) = (to_px(pair[0].x, pair[0].y), to_px(pair[1].x, pair[1].y));
+        canvas.polyline(&[a, b], speed_color(pair[1].speed_mps, top), 3.0, false);
+    }
+    for p in &run.image_positions {
+        let (x, y) = to_px(p[0], p[1]);
+        canvas.circle(x, y, 1.6, Some(WHITE), Some((BLACK, 0.5)));
+    }
+    // Waypoints and the start.
+    let (sx, sy) = to_px(world.start.0[0], world.start.0[1]);
+    canvas.circle(sx, sy, 7.0, None, Some((BLACK, 2.5)));
+    canvas.label(sx + 9.0, sy - 6.0, 14.0, BLACK, "start");
+    for (k, wp) in world.waypoints.iter().enumerate() {
+        let (x, y) = to_px(wp.x, wp.y);
+        let r = (wp.radius_m.unwrap_or(5.0) * scale) as f32;
+        let reached = k < run.report.waypoints_reached;
+        canvas.circle(
+            x,
+            y,
+            r.max(5.0),
+            None,
+            Some((if reached { BLUE } else { RED }, 2.5)),
+        );
+        canvas.label(
+            x + r.max(5.0) + 3.0,
+            y + 5.0,
+            15.0,
+            BLACK,
+            &format!("{}", k + 1),
+        );
+    }
+    for c in &run.report.collisions {
+        let (x, y) = to_px(c.position[0], c.position[1]);
+        canvas.polyline(&[(x - 8.0, y - 8.0), (x + 8.0, y + 8.0)], RED, 3.0, false);
+        canvas.polyline(&[(x - 8.0, y + 8.0), (x + 8.0, y - 8.0)], RED, 3.0, false);
+        canvas.label(x + 10.0, y, 13.0, RED, &c.cause);
+    }
+    // Header: what happened, and the speed scale.
+    let r = &run.report;
+    canvas.fill_rect(0.0, 0.0, w as f32, header as f32, WHITE);
+    canvas.text(
+        10.0,
+        24.0,
+        19.0,
+        BLACK,
+        &format!(
+            "{} — {} — {:.0} m in {:.0} s, {:.2} m/s average, {} images, {} collision(s)",
+            r.world,
+            if r.success { "completed" } else { "FAILED" },
+            r.distance_m,
+            r.duration_s,
+            r.average_speed_mps,
+            r.images,
+            r.collisions.len()
+        ),
+    );
+    canvas.text(10.0, 50.0, 14.0, BLACK, "path speed:");
+    for k in 0..120 {
+        let v = top * k as f64 / 119.0;
+        canvas.fill_rect(95.0 + k as f32 * 2.0, 38.0, 2.0, 14.0, speed_color(v, top));
+    }
+    canvas.text(340.0, 50.0, 14.0, BLACK, &format!("0 – {top:.1} m/s"));
+    canvas.text(
+        470.0,
+        50.0,
+        14.0,
+        BLACK,
+        &format!("black: cells in the local map · white: images · circles: waypoints ({} reached) · {:.1} m/px", r.waypoints_reached, 1.0 / scale),
+    );
+    canvas.save(path)
+}
+
+/// One decision: the local map in the vehicle frame with the arcs coloured by
+/// fused vote (chosen arc in blue, forbidden arcs dashed), and each
+/// behaviour's votes and the fused votes as bars, hardest left turn first.
+pub fn snapshot_picture(
+    path: &Path,
+    config: &Config,
+    arcs: &ArcSet,
+    map: &MapSnapshot,
+    decision: Option<&Decision>,
+    elapsed_us: Utime,
+    _track: &[TrackPoint],
+) -> Result<(), RenderError> {
+    let ppm = 20.0f32;
+    let (x_behind, x_ahead, half) = (8.0f32, 22.0f32, 13.0f32);
+    let map_h = ((x_behind + x_ahead) * ppm) as u32;
+    let map_w = (2.0 * half * ppm) as u32;
+    let panel = 520u32;
+    let mut canvas = Canvas::new(map_w + panel, map_h.max(640), [245, 245, 240, 255])?;
+    // Vehicle frame (x forward up, y left to the left) to pixels.
+    let to_px = |x: f32, y: f32| ((half - y) * ppm, (x_ahead - x) * ppm);
+    canvas.fill_rect(0.0, 0.0, map_w as f32, map_h as f32, WHITE);
+    let lm = &config.localmap;
+    let window = [
+        to_px(lm.ahead_m as f32, lm.half_width_m as f32),
+        to_px(lm.ahead_m as f32, -lm.half_width_m as f32),
+        to_px(-lm.behind_m as f32, -lm.half_width_m as f32),
+        to_px(-lm.behind_m as f32, lm.half_width_m as f32),
+    ];
+    canvas.polygon(&window, None, Some(([150, 150, 150, 255], 1.0)));
+    for m in (-5..=20).step_by(5) {
+        let (_, y) = to_px(m as f32, 0.0);
+        canvas.text(3.0, y + 4.0, 11.0, [120, 120, 120, 255], &format!("{m} m"));
+    }
+    // Map patches.
+    let s = map.patch_size_m as f32;
+    for p in &map.patches {
+        let (x, y) = to_px(p.x + s / 2.0, p.y + s / 2.0);
+        canvas.fill_rect(x, y, s * ppm, s * ppm, [30, 30, 30, 255]);
+    }
+    // Arcs: fused vote colours, chosen arc blue.
+    let chosen = decision.and_then(|d| d.command.arc_index);
+    let reach = 18.0;
+    for (i, arc) in arcs.iter().enumerate() {
+        let (vote, vetoed) = decision
+            .map(|d| {
+                (
+                    d.fused.get(i).copied().unwrap_or(0.0),
+                    d.vetoes.get(i).is_some_and(|v| !v.is_empty()),
+                )
+            })
+            .unwrap_or((0.0, false));
+        let points: Vec<(f32, f32)> = arc
+            .sample(reach, 0.5)
+            .map(|p| to_px(p.position.x as f32, p.position.y as f32))
+            .collect();
+        if Some(i) == chosen {
+            continue;
+        }
+        canvas.polyline(&points, vote_color(vote), 2.0, vetoed);
+    }
+    if let Some(i) = chosen
+        && let Some(arc) = arcs.arc(i)
+    {
+        let points: Vec<(f32, f32)> = arc
+            .sample(reach, 0.5)
+            .map(|p| to_px(p.position.x as f32, p.position.y as f32))
+            .collect();
+        canvas.polyline(&points, BLUE, 4.0, false);
+    }
+    let f = config.vehicle.footprint();
+    let body = [
+        to_px(f.x_max as f32, f.half_width as f32),
+        to_px(f.x_max as f32, -f.half_width as f32),
+        to_px(f.x_min as f32, -f.half_width as f32),
+        to_px(f.x_min as f32, f.half_width as f32),
+    ];
+    canvas.polygon(&body, Some([70, 110, 200, 180]), Some((BLACK, 1.5)));
+
+    // Vote bars.
+    let x0 = map_w as f32 + 20.0;
+    let bar_w = ((panel as f32 - 40.0) / arcs.len() as f32).max(1.0);
+    let mut rows: Vec<(String, Vec<f32>, Vec<bool>)> = Vec::new();
+    if let Some(d) = decision {
+        for input in &d.inputs {
+            if let Some(v) = &input.votes {
+                rows.push((
+                    format!(
+                        "{} (weight {}{})",
+                        input.behaviour,
+                        input.weight,
+                        if input.used { "" } else { ", not used" }
+                    ),
+                    v.values().to_vec(),
+                    v.vetoed().to_vec(),
+                ));
+            }
+        }
+        let vetoed = d.vetoes.iter().map(|v| !v.is_empty()).collect();
+        rows.push(("fused".to_owned(), d.fused.clone(), vetoed));
+    }
+    let row_h = 110.0;
+    let mut y = 30.0;
+    canvas.text(
+        x0,
+        y - 8.0,
+        15.0,
+        BLACK,
+        &format!("t = {:.1} s", elapsed_us as f64 * 1e-6),
+    );
+    y += 10.0;
+    for (name, values, vetoed) in &rows {
+        canvas.text(x0, y + 12.0, 13.0, BLACK, name);
+        let mid = y + 20.0 + (row_h - 40.0) / 2.0;
+        let amp = (row_h - 40.0) / 2.0;
+        canvas.polyline(
+            &[(x0, mid), (x0 + bar_w * values.len() as f32, mid)],
+            [150, 150, 150, 255],
+            1.0,
+            false,
+        );
+        for (k, (&v, &veto)) in values.iter().zip(vetoed).enumerate().rev() {
+            // Hardest left turn (last index) first.
+            let col = (values.len() - 1 - k) as f32;
+            let c = if veto {
+                [120, 0, 0, 255]
+            } else {
+                vote_color(v)
+            };
+            let (top, height) = if v >= 0.0 {
+                (mid - v * amp, v * amp)
+            } else {
+                (mid, -v * amp)
+            };
+            canvas.fill_rect(x0 + col * bar_w + 0.5, top, bar_w - 1.0, height, c);
+            if Some(k) == chosen && name == "fused" {
+                canvas.fill_rect(x0 + col * bar_w, mid + amp + 2.0, bar_w, 4.0, BLUE);
+            }
+        }
+        y += row_h;
+    }
+    canvas.text(
+        x0,
+        y,
+        11.0,
+        [90, 90, 90, 255],
+        "bars: hard left ... straight ... hard right; dark red: vetoed",
+    );
+    y += 24.0;
+    if let Some(d) = decision {
+        let c = &d.command;
+        let line = match &d.stop {
+            Some(reason) => format!("STOP: {reason}"),
+            None => format!(
+                "arc {} of {}: curvature {:+.4} 1/m (radius {}), {:.2} m/s, fused vote {:.2}",
+                c.arc_index.map_or(0, |i| i),
+                arcs.len(),
+                c.curvature,
+                if c.curvature.abs() < 1e-9 {
+                    "straight".to_owned()
+                } else {
+                    format!("{:.1} m", 1.0 / c.curvature)
+                },
+                c.speed_mps,
+                c.vote
+            ),
+        };
+        canvas.text(
+            x0,
+            y,
+            13.0,
+            if d.stop.is_some() { RED } else { BLACK },
+            &line,
+        );
+        y += 20.0;
+        let mut listed = 0;
+        for (arc, vetoes) in d.vetoes.iter().enumerate() {
+            for (who, cause) in vetoes {
+                if listed < 6 {
+                    let at = cause.map_or("unknown cell".to_owned(), |c| {
+                        format!("cell at ({:.1}, {:.1}) m", c[0], c[1])
+                    });
+                    canvas.text(
+                        x0,
+                        y,
+                        11.0,
+                        [120, 0, 0, 255],
+                        &format!("arc {arc} vetoed by {who}: {at}"),
+                    );
+                    y += 15.0;
+                }
+                listed += 1;
+            }
+        }
+        if listed > 6 {
+            canvas.text(
+                x0,
+                y,
+                11.0,
+                [120, 0, 0, 255],
+                &format!("... {} vetoes in all", listed),
+            );
+        }
+    }
+    canvas.save(path)
+}

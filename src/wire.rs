@@ -1,0 +1,410 @@
+//! Conversions between the pipeline's types and the LCM wire types
+//! (`bus/lcmtypes/*.lcm`). Incoming messages are checked: a message that does
+//! not describe a valid value is an error, never a panic.
+
+use arcnav_arbiter::{BehaviourVotes, Votes};
+use arcnav_behaviours::{Mission, Waypoint};
+use arcnav_bus::lcmtypes::{
+    arc_votes_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t, range_image_t,
+    waypoints_t,
+};
+use arcnav_localmap::MapSnapshot;
+use arcnav_perception::{
+    BeamTable, FovPolygon, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region,
+};
+use arcnav_vehicle::frames::{FrameError, isometry_from_parts, rotation_to_wxyz};
+use arcnav_vehicle::{ArcSet, Isometry};
+use nalgebra::Point2;
+
+/// A wire message that does not describe a valid value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WireError {
+    #[error("{what}: {source}")]
+    Frame {
+        what: &'static str,
+        source: FrameError,
+    },
+    #[error("{what}: {reason}")]
+    Invalid { what: &'static str, reason: String },
+}
+
+fn position_and_rotation(iso: &Isometry) -> ([f64; 3], [f64; 4]) {
+    let t = iso.translation.vector;
+    ([t.x, t.y, t.z], rotation_to_wxyz(&iso.rotation))
+}
+
+/// A range image for the wire.
+pub fn range_image_to_wire(image: &RangeImage) -> range_image_t {
+    let (mount_position, mount_orientation) = position_and_rotation(&image.vehicle_from_sensor);
+    range_image_t {
+        utime: image.utime,
+        sensor: image.sensor.clone(),
+        mount_position,
+        mount_orientation,
+        rows: image.rows() as i32,
+        cols: image.cols() as i32,
+        elevation: image.beams.elevation.clone(),
+        azimuth: image.beams.azimuth.clone(),
+        range: image.range.clone(),
+    }
+}
+
+/// A range image from the wire (sizes were checked by the decoder).
+pub fn range_image_from_wire(msg: range_image_t) -> Result<RangeImage, WireError> {
+    let vehicle_from_sensor = isometry_from_parts(msg.mount_position, msg.mount_orientation)
+        .map_err(|source| WireError::Frame {
+            what: "range image mount",
+            source,
+        })?;
+    let image = RangeImage {
+        utime: msg.utime,
+        sensor: msg.sensor,
+        vehicle_from_sensor,
+        beams: BeamTable {
+            elevation: msg.elevation,
+            azimuth: msg.azimuth,
+        },
+        range: msg.range,
+    };
+    image.validate().map_err(|e| WireError::Invalid {
+        what: "range image",
+        reason: e.to_string(),
+    })?;
+    Ok(image)
+}
+
+/// An obstacle report for the wire.
+pub fn obstacles_to_wire(report: &ObstacleReport) -> obstacle_cells_t {
+    obstacle_cells_t {
+        utime: report.utime,
+        sensor: report.sensor.clone(),
+        cell_size: report.cell_size_m as f32,
+        num_cells: report.cells.len() as i32,
+        cells: report
+            .cells
+            .iter()
+            .map(|c| obstacle_cell_t {
+                x: c.x,
+                y: c.y,
+                z_min: c.z_min,
+                z_max: c.z_max,
+                reasons: c.reasons.bits() as i8,
+                region: c.region as i32,
+            })
+            .collect(),
+        num_fov: report.fov.vertices.len() as i32,
+        fov: report.fov.vertices.iter().map(|v| [v.x, v.y]).collect(),
+    }
+}
+
+/// An obstacle report from the wire; regions are rebuilt from the cells.
+pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, WireError> {
+    let invalid = |reason: String| WireError::Invalid {
+        what: "obstacle cells",
+        reason,
+    };
+    let mut regions: Vec<Region> = Vec::new();
+    let mut cells = Vec::with_capacity(msg.cells.len());
+    for c in &msg.cells {
+        if !(c.x.is_finite() && c.y.is_finite()) {
+            return Err(invalid(format!(
+                "cell at ({}, {}) is not a finite position",
+                c.x, c.y
+            )));
+        }
+        let region = u32::try_from(c.region)
+            .map_err(|_| invalid(format!("region {} is negative", c.region)))?;
+        if region as usize >= 1 << 20 {
+            return Err(invalid(format!("region {region} is implausibly large")));
+        }
+        let reasons = Reasons::from_bits(c.reasons as u8);
+        if regions.len() <= region as usize {
+            regions.resize(
+                region as usize + 1,
+                Region {
+                    cells: 0,
+                    reasons: Reasons::NONE,
+                },
+            );
+        }
+        regions[region as usize].cells += 1;
+        regions[region as usize].reasons.insert(reasons);
+        cells.push(ObstacleCell {
+            x: c.x,
+            y: c.y,
+            z_min: c.z_min,
+            z_max: c.z_max,
+            reasons,
+            region,
+        });
+    }
+    if msg.fov.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(invalid(
+            "field-of-view polygon has a vertex that is not finite".into(),
+        ));
+    }
+    Ok(ObstacleReport {
+        utime: msg.utime,
+        sensor: msg.sensor,
+        cell_size_m: f64::from(msg.cell_size),
+        cells,
+        regions,
+        fov: FovPolygon::new(msg.fov.iter().map(|v| Point2::new(v[0], v[1])).collect()),
+    })
+}
+
+/// A behaviour's votes for the wire.
+pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
+    let n = votes.votes.len();
+    arc_votes_t {
+        utime: votes.utime,
+        behaviour: votes.behaviour.clone(),
+        num_arcs: n as i32,
+        curvature: arcs.curvatures().iter().map(|&k| k as f32).collect(),
+        votes: votes.votes.values().to_vec(),
+        vetoed: votes.votes.vetoed().to_vec(),
+        has_speed_vote: votes.votes.speed_mps().is_some(),
+        speed_vote: votes.votes.speed_mps().unwrap_or(0.0),
+    }
+}
+
+/// A behaviour's votes from the wire; they must be over `arcs`.
+pub fn votes_from_wire(msg: &arc_votes_t, arcs: &ArcSet) -> Result<BehaviourVotes, WireError> {
+    let invalid = |reason: String| WireError::Invalid {
+        what: "arc votes",
+        reason,
+    };
+    if msg.votes.len() != arcs.len() {
+        return Err(invalid(format!(
+            "{} voted over {} arcs, this arc set has {}",
+            msg.behaviour,
+            msg.votes.len(),
+            arcs.len()
+        )));
+    }
+    let tolerance = (arcs.spacing() / 4.0) as f32;
+    if let Some(i) = (0..arcs.len())
+        .find(|&i| (msg.curvature[i] - arcs.curvatures()[i] as f32).abs() > tolerance)
+    {
+        return Err(invalid(format!(
+            "{}'s arc {i} has curvature {}, this arc set's is {:.5}",
+            msg.behaviour,
+            msg.curvature[i],
+            arcs.curvatures()[i]
+        )));
+    }
+    let mut votes = Votes::new(arcs.len());
+    for (i, (&v, &vetoed)) in msg.votes.iter().zip(&msg.vetoed).enumerate() {
+        if vetoed {
+            votes.veto(i, None);
+        } else {
+            votes.set(i, v);
+        }
+    }
+    if msg.has_speed_vote {
+        votes.vote_speed(msg.speed_vote);
+    }
+    Ok(BehaviourVotes {
+        behaviour: msg.behaviour.clone(),
+        utime: msg.utime,
+        votes,
+    })
+}
+
+/// A mission for the wire.
+pub fn mission_to_wire(mission: &Mission) -> waypoints_t {
+    waypoints_t {
+        utime: mission.version,
+        num_waypoints: mission.waypoints.len() as i32,
+        position: mission.waypoints.iter().map(|w| [w.x, w.y]).collect(),
+        radius: mission
+            .waypoints
+            .iter()
+            .map(|w| w.radius_m.unwrap_or(0.0) as f32)
+            .collect(),
+    }
+}
+
+/// A mission from the wire.
+pub fn mission_from_wire(msg: &waypoints_t) -> Result<Mission, WireError> {
+    let waypoints = msg
+        .position
+        .iter()
+        .zip(&msg.radius)
+        .map(|(p, &r)| {
+            if p.iter().all(|v| v.is_finite()) && r.is_finite() {
+                Ok(Waypoint {
+                    x: p[0],
+                    y: p[1],
+                    radius_m: (r > 0.0).then_some(f64::from(r)),
+                })
+            } else {
+                Err(WireError::Invalid {
+                    what: "waypoints",
+                    reason: format!("waypoint ({}, {}) radius {r} is not finite", p[0], p[1]),
+                })
+            }
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(Mission {
+        version: msg.utime,
+        waypoints,
+    })
+}
+
+/// A local-map snapshot for tools and rendering.
+pub fn map_to_wire(snapshot: &MapSnapshot) -> local_map_t {
+    let (position, orientation) = position_and_rotation(&snapshot.world_from_vehicle);
+    let s = snapshot.patch_size_m;
+    local_map_t {
+        utime: snapshot.utime,
+        position,
+        orientation,
+        patch_size: s as f32,
+        num_patches: snapshot.patches.len() as i32,
+        patches: snapshot
+            .patches
+            .iter()
+            .map(|p| local_map_patch_t {
+                x: p.x,
+                y: p.y,
+                world_x: (p.i as f64 + 0.5) * s,
+                world_y: (p.j as f64 + 0.5) * s,
+                first_seen: p.first_seen,
+                last_seen: p.last_seen,
+                confirmations: p.confirmations as i32,
+                reasons: p.reasons.bits() as i8,
+            })
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_perception::SensorModel;
+    use arcnav_vehicle::ArcSetConfig;
+
+    #[test]
+    fn range_images_round_trip() {
+        let mut image = SensorModel::erim().blank_image(42);
+        image.range[7] = 12.5;
+        let back = range_image_from_wire(range_image_to_wire(&image)).unwrap();
+        assert_eq!(back.range[7], 12.5);
+        assert_eq!(back.beams, image.beams);
+        assert!(
+            (back.vehicle_from_sensor.translation.vector
+                - image.vehicle_from_sensor.translation.vector)
+                .norm()
+                < 1e-12
+        );
+        let mut bad = range_image_to_wire(&image);
+        bad.mount_orientation = [0.0; 4];
+        assert!(range_image_from_wire(bad).is_err());
+    }
+
+    #[test]
+    fn obstacle_reports_round_trip_with_their_regions() {
+        let report = ObstacleReport {
+            utime: 5,
+            sensor: "erim".into(),
+            cell_size_m: 0.2,
+            cells: vec![
+                ObstacleCell {
+                    x: 1.0,
+                    y: 2.0,
+                    z_min: 0.0,
+                    z_max: 0.5,
+                    reasons: Reasons::SLOPE,
+                    region: 0,
+                },
+                ObstacleCell {
+                    x: 1.2,
+                    y: 2.0,
+                    z_min: 0.0,
+                    z_max: 0.6,
+                    reasons: Reasons::HEIGHT_VARIATION,
+                    region: 0,
+                },
+                ObstacleCell {
+                    x: 9.0,
+                    y: 2.0,
+                    z_min: 0.0,
+                    z_max: 0.6,
+                    reasons: Reasons::DISCONTINUITY,
+                    region: 1,
+                },
+            ],
+            regions: vec![
+                Region {
+                    cells: 2,
+                    reasons: Reasons::SLOPE.union(Reasons::HEIGHT_VARIATION),
+                },
+                Region {
+                    cells: 1,
+                    reasons: Reasons::DISCONTINUITY,
+                },
+            ],
+            fov: FovPolygon::new(vec![
+                Point2::new(0.0, 0.0),
+                Point2::new(10.0, 0.0),
+                Point2::new(5.0, 5.0),
+            ]),
+        };
+        let back = obstacles_from_wire(obstacles_to_wire(&report)).unwrap();
+        assert_eq!(back.cells, report.cells);
+        assert_eq!(back.regions, report.regions);
+        assert_eq!(back.fov, report.fov);
+        let mut bad = obstacles_to_wire(&report);
+        bad.cells[0].region = -1;
+        assert!(obstacles_from_wire(bad).is_err());
+    }
+
+    #[test]
+    fn votes_round_trip_and_must_match_the_arc_set() {
+        let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
+        let mut votes = Votes::new(39);
+        votes.set(3, 0.5);
+        votes.veto(19, Some([1.0, 2.0]));
+        votes.vote_speed(1.5);
+        let bv = BehaviourVotes {
+            behaviour: "obstacle_avoidance".into(),
+            utime: 9,
+            votes,
+        };
+        let back = votes_from_wire(&votes_to_wire(&bv, &arcs), &arcs).unwrap();
+        assert_eq!(back.votes.values(), bv.votes.values());
+        assert_eq!(back.votes.vetoed(), bv.votes.vetoed());
+        assert_eq!(back.votes.speed_mps(), Some(1.5));
+        let other = ArcSet::new(&ArcSetConfig {
+            count: 39,
+            min_radius_m: 10.0,
+        })
+        .unwrap();
+        let err = votes_from_wire(&votes_to_wire(&bv, &other), &arcs).unwrap_err();
+        assert!(err.to_string().contains("arc 0 has curvature"), "{err}");
+    }
+
+    #[test]
+    fn missions_round_trip() {
+        let mission = Mission {
+            version: 3,
+            waypoints: vec![
+                Waypoint {
+                    x: 1.0,
+                    y: 2.0,
+                    radius_m: Some(4.0),
+                },
+                Waypoint {
+                    x: 5.0,
+                    y: 6.0,
+                    radius_m: None,
+                },
+            ],
+        };
+        assert_eq!(
+            mission_from_wire(&mission_to_wire(&mission)).unwrap(),
+            mission
+        );
+    }
+}
