@@ -78,6 +78,16 @@ impl Default for SensorConfig {
 }
 
 impl SensorConfig {
+    /// The preset's name as in the configuration.
+    pub fn preset_name(&self) -> &'static str {
+        match self.preset {
+            SensorPreset::Erim => "erim",
+            SensorPreset::Lidar64 => "lidar64",
+            SensorPreset::Lidar128 => "lidar128",
+            SensorPreset::Custom => "custom",
+        }
+    }
+
     /// Keys relative to `[sensor]`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let c = &self.custom;

@@ -1,0 +1,244 @@
+//! `arcnav sim` end to end, as a user runs it.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use arcnav_bus::log::LogReader;
+use arcnav_bus::messages::{AnyMessage, TypedEvents};
+use serde_json::Value;
+
+fn arcnav(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args(args)
+        .output()
+        .expect("the arcnav binary runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn out_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("arcnav-sim-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn run_short_course(tag: &str) -> PathBuf {
+    let out = out_dir(tag);
+    let (code, stdout, stderr) = arcnav(&[
+        "sim",
+        "--world",
+        "short_course",
+        "--out",
+        out.to_str().unwrap(),
+        "--snapshot-every",
+        "20",
+    ]);
+    assert_eq!(code, 0, "the short course completes:\n{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("mission       completed on short_course"),
+        "{stdout}"
+    );
+    out
+}
+
+#[test]
+fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
+    let out = run_short_course("e2e");
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["outcome"], "completed");
+    assert_eq!(report["success"], true);
+    assert_eq!(report["waypoints_reached"], 3);
+    assert_eq!(report["collisions"].as_array().unwrap().len(), 0);
+    let distance = report["distance_m"].as_f64().unwrap();
+    assert!(
+        (140.0..200.0).contains(&distance),
+        "{distance} m for a 150 m course"
+    );
+    let duration = report["duration_s"].as_f64().unwrap();
+    assert!(report["average_speed_mps"].as_f64().unwrap() > 2.0);
+    assert!(
+        report["stage_times"]["perception"]["count"]
+            .as_u64()
+            .unwrap()
+            > 50
+    );
+
+    // Every message of the log decodes; every channel is there at its rate.
+    let mut events = TypedEvents::new(LogReader::open(out.join("mission.lcm")).unwrap());
+    let mut times: BTreeMap<String, Vec<i64>> = BTreeMap::new();
+    for event in events.by_ref() {
+        let event = event.unwrap();
+        times
+            .entry(event.channel.clone())
+            .or_default()
+            .push(event.timestamp);
+        if let AnyMessage::SteeringCommand(c) = &event.message {
+            assert!(c.speed >= 0.0 && c.curvature.abs() <= 0.125 + 1e-9);
+        }
+    }
+    assert!(!events.log_stats().lost_anything());
+    assert!(events.stats().unknown.is_empty() && events.stats().undecodable.is_empty());
+    let channels: Vec<&str> = times.keys().map(String::as_str).collect();
+    assert_eq!(
+        channels,
+        [
+            "ARC_VOTES_GOAL_SEEKING",
+            "ARC_VOTES_OBSTACLE_AVOIDANCE",
+            "OBSTACLE_CELLS",
+            "POSE",
+            "RANGE_IMAGE_ERIM",
+            "STEERING_COMMAND",
+            "WAYPOINTS"
+        ]
+    );
+    let rate = |channel: &str| {
+        let t = &times[channel];
+        let gaps: Vec<i64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        (
+            t.len(),
+            gaps.iter().copied().min().unwrap(),
+            gaps.iter().copied().max().unwrap(),
+        )
+    };
+    let (commands, min_gap, max_gap) = rate("STEERING_COMMAND");
+    assert_eq!(
+        (min_gap, max_gap),
+        (100_000, 100_000),
+        "commands every 100 ms (10 Hz)"
+    );
+    assert!(
+        (commands as f64 - duration * 10.0).abs() <= 2.0,
+        "{commands} commands in {duration} s"
+    );
+    assert_eq!(rate("POSE").1, 20_000, "poses at 50 Hz");
+    assert_eq!(rate("RANGE_IMAGE_ERIM").1, 500_000, "images at 2 Hz");
+    assert_eq!(
+        times["OBSTACLE_CELLS"].len(),
+        times["RANGE_IMAGE_ERIM"].len(),
+        "one report per image"
+    );
+
+    // Pictures.
+    let png = std::fs::read(out.join("map.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    let snapshots = std::fs::read_dir(out.join("snapshots")).unwrap().count();
+    assert!(
+        snapshots >= 3,
+        "{snapshots} snapshots over ~60 s at one per 20 s"
+    );
+}
+
+#[test]
+fn the_same_mission_writes_the_same_log_byte_for_byte() {
+    let a = run_short_course("det-a");
+    let b = run_short_course("det-b");
+    let (la, lb) = (
+        std::fs::read(a.join("mission.lcm")).unwrap(),
+        std::fs::read(b.join("mission.lcm")).unwrap(),
+    );
+    assert!(la.len() > 1_000_000);
+    assert!(la == lb, "two runs of the same mission differ");
+}
+
+#[test]
+fn list_shows_the_embedded_worlds() {
+    let (code, stdout, _) = arcnav(&["sim", "--list"]);
+    assert_eq!(code, 0);
+    for name in ["paper_loop", "short_course", "open_field"] {
+        assert!(stdout.contains(name), "{stdout}");
+    }
+}
+
+#[test]
+fn bad_worlds_fail_with_a_message_naming_the_problem() {
+    let (code, _, stderr) = arcnav(&["sim", "--world", "atlantis"]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("no embedded world named \"atlantis\""),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("paper_loop"),
+        "the known ones are listed: {stderr}"
+    );
+
+    let (code, _, stderr) = arcnav(&["sim", "--world", "/nonexistent/world.toml"]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("cannot read world file /nonexistent/world.toml"),
+        "{stderr}"
+    );
+
+    let dir = out_dir("bad-world");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("w.toml");
+    std::fs::write(
+        &file,
+        "name = \"w\"\n[start]\nposition_m = [0.0, 0.0]\n[[waypoints]]\nposition_m = [30.0, 0.0]\n[[trees]]\nposition_m = [30.0, 0.2]\nradius_m = 0.3\nheight_m = 5.0\n",
+    )
+    .unwrap();
+    let (code, _, stderr) = arcnav(&[
+        "sim",
+        "--world",
+        file.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("waypoint 1 at (30.0, 0.0) lies inside tree #0"),
+        "{stderr}"
+    );
+    assert!(
+        !Path::new(&dir.join("mission.lcm")).exists(),
+        "nothing is run"
+    );
+}
+
+#[test]
+fn a_generated_world_can_be_saved_and_run_again() {
+    let dir = out_dir("generated");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("seed7.toml");
+    let (code, stdout, stderr) = arcnav(&[
+        "sim",
+        "--seed",
+        "7",
+        "--difficulty",
+        "easy",
+        "--save-world",
+        file.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--no-images",
+    ]);
+    assert!(stdout.contains("world saved to"), "{stdout}{stderr}");
+    let first: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        code == 0,
+        first["success"] == true,
+        "exit status 0 exactly when the mission succeeds"
+    );
+    let again = dir.join("again");
+    let (_, _, stderr) = arcnav(&[
+        "sim",
+        "--world",
+        file.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+        "--no-images",
+    ]);
+    let second: Value =
+        serde_json::from_str(&std::fs::read_to_string(again.join("report.json")).unwrap())
+            .unwrap_or_else(|_| panic!("{stderr}"));
+    assert_eq!(
+        first["distance_m"], second["distance_m"],
+        "the saved world is the generated one"
+    );
+}
