@@ -102,6 +102,9 @@ pub struct MissionReport {
     /// Smallest gap between the footprint and a true hazard, m.
     pub closest_approach_m: Option<f64>,
     pub stops: StopStats,
+    /// Mean |change of curvature| between consecutive commands, 1/m: how
+    /// much the vehicle weaves.
+    pub steering_activity: f64,
     pub map_resets: u64,
     pub stage_times: StageTimes,
     /// Rendering range images (simulator, not pipeline), ms per image.
@@ -171,6 +174,8 @@ struct MissionSink<'a> {
     error: Option<MissionError>,
     arcs: arcnav_vehicle::ArcSet,
     commands: Vec<SteeringCommand>,
+    previous_curvature: Option<f64>,
+    curvature_change: (f64, u64),
     stops: StopStats,
     stopped: bool,
     patches: BTreeSet<(i64, i64)>,
@@ -223,6 +228,11 @@ impl Sink for MissionSink<'_> {
             &steering_command_t::from(command),
         );
         self.commands.push(*command);
+        if let Some(previous) = self.previous_curvature {
+            self.curvature_change.0 += (command.curvature - previous).abs();
+            self.curvature_change.1 += 1;
+        }
+        self.previous_curvature = Some(command.curvature);
         if command.is_stop() {
             self.stops.stop_commands += 1;
             if !self.stopped {
@@ -283,9 +293,14 @@ pub fn run_mission(
     let wall = Instant::now();
     world.validate_for(&config.vehicle, &world.spec.name)?;
     let sensor: SensorModel = config.sensor.model().map_err(|e| e.within("sensor"))?;
+    // Returns beyond what perception evaluates are never used: not rendered.
+    let mut rendered = sensor.clone();
+    rendered.max_range_m = sensor
+        .max_range_m
+        .min(config.perception.max_range_m + config.sim.render_margin_m);
+    let sim = &config.sim;
     let mut pipeline = Pipeline::new(config, registry)?;
     pipeline.set_explain(options.snapshot_every_s.is_some());
-    let sim = &config.sim;
     let threads = sim.thread_count();
     let dt = seconds_to_micros(1.0 / sim.pose_rate_hz);
     let t0 = SIM_EPOCH_US;
@@ -320,6 +335,8 @@ pub fn run_mission(
         error: None,
         arcs: pipeline.arcs().clone(),
         commands: Vec::new(),
+        previous_curvature: None,
+        curvature_change: (0.0, 0),
         stops: StopStats::default(),
         stopped: false,
         patches: BTreeSet::new(),
@@ -414,7 +431,7 @@ pub fn run_mission(
                 sensor.max_range_m + 1.0,
             );
             let image = arcnav_sim::sensor::render(
-                &sensor,
+                &rendered,
                 &view,
                 &stance.world_from_vehicle,
                 t,
@@ -511,6 +528,7 @@ pub fn run_mission(
             .is_finite()
             .then_some(truth.closest_approach_m),
         stops,
+        steering_activity: sink.curvature_change.0 / sink.curvature_change.1.max(1) as f64,
         map_resets: pipeline.map_resets,
         stage_times: pipeline.times,
         render_ms_mean: if images > 0 {

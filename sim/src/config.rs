@@ -38,6 +38,9 @@ pub struct SimConfig {
     pub seed: u64,
     /// Threads rendering range images and building terrain tiles (0: all cores).
     pub threads: usize,
+    /// Rays are cast only this far beyond `perception.max_range_m` (returns
+    /// perception would ignore are not rendered), m.
+    pub render_margin_m: f64,
 }
 
 impl Default for SimConfig {
@@ -54,6 +57,7 @@ impl Default for SimConfig {
             stuck_after_s: 90.0,
             seed: 1,
             threads: 0,
+            render_margin_m: 5.0,
         }
     }
 }
@@ -69,6 +73,7 @@ impl SimConfig {
         config::non_negative("drift_per_m", self.drift_per_m)?;
         config::positive("time_limit_s", self.time_limit_s)?;
         config::positive("stuck_after_s", self.stuck_after_s)?;
+        config::non_negative("render_margin_m", self.render_margin_m)?;
         Ok(())
     }
 

@@ -19,17 +19,23 @@ use crate::world::World;
 pub const CELL_M: f64 = 0.1;
 /// Cells per block side (blocks carry the max height of their cells).
 const BLOCK: usize = 8;
+/// Cells per super-block side (8 × 8 blocks).
+const SUPER: usize = 64;
 /// Cells per tile side.
 const TILE: usize = 256;
 const BLOCKS: usize = TILE / BLOCK;
+const SUPERS: usize = TILE / SUPER;
 const TILE_M: f64 = TILE as f64 * CELL_M;
 const BLOCK_M: f64 = BLOCK as f64 * CELL_M;
+const SUPER_M: f64 = SUPER as f64 * CELL_M;
 
 /// One tile of heights.
 #[derive(Debug)]
 pub struct Tile {
     heights: Vec<f32>,
     block_max: Vec<f32>,
+    super_max: Vec<f32>,
+    max: f32,
 }
 
 impl Tile {
@@ -43,13 +49,23 @@ impl Tile {
             }
         }
         let mut block_max = vec![f32::NEG_INFINITY; BLOCKS * BLOCKS];
+        let mut super_max = vec![f32::NEG_INFINITY; SUPERS * SUPERS];
         for j in 0..TILE {
             for i in 0..TILE {
+                let h = heights[j * TILE + i];
                 let b = &mut block_max[(j / BLOCK) * BLOCKS + i / BLOCK];
-                *b = b.max(heights[j * TILE + i]);
+                *b = b.max(h);
+                let s = &mut super_max[(j / SUPER) * SUPERS + i / SUPER];
+                *s = s.max(h);
             }
         }
-        Self { heights, block_max }
+        let max = super_max.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        Self {
+            heights,
+            block_max,
+            super_max,
+            max,
+        }
     }
 }
 
@@ -70,6 +86,8 @@ pub struct TileView {
     ty0: i64,
     width: usize,
     tiles: Vec<Option<Arc<Tile>>>,
+    /// Highest cell of every tile in view: a rising ray above it hits nothing.
+    max: f64,
 }
 
 impl TileCache {
@@ -166,11 +184,17 @@ impl TileCache {
             };
             self.tiles.remove(&oldest);
         }
+        let max = tiles
+            .iter()
+            .flatten()
+            .map(|t| f64::from(t.max))
+            .fold(f64::NEG_INFINITY, f64::max);
         TileView {
             tx0,
             ty0,
             width,
             tiles,
+            max,
         }
     }
 }
@@ -269,22 +293,52 @@ impl TileView {
 impl RayCast for TileView {
     fn cast(&self, origin: &Point3<f64>, d: &Vector3<f64>, max_range: f64) -> Option<f64> {
         let z_at = |t: f64| origin.z + d.z * t;
-        TileView::walk(origin, d, 0.0, max_range, BLOCK_M, |bx, by, t0, t1| {
-            let top = self.block_max(bx, by)?;
-            // The ray's lowest point over this block.
-            if z_at(if d.z < 0.0 { t1 } else { t0 }) > top {
+        // A ray rising from above everything in view hits nothing.
+        if d.z >= 0.0 && origin.z > self.max {
+            return None;
+        }
+        // The ray's lowest point over [t0, t1].
+        let lowest = |t0: f64, t1: f64| z_at(if d.z < 0.0 { t1 } else { t0 });
+        TileView::walk(origin, d, 0.0, max_range, SUPER_M, |sx, sy, s0, s1| {
+            // A super-block lies inside one tile: find it once.
+            let per_tile = SUPERS as i64;
+            let (tx, ty) = (sx.div_euclid(per_tile), sy.div_euclid(per_tile));
+            let tile = self.tile(tx, ty)?;
+            let (i, j) = (
+                sx.rem_euclid(per_tile) as usize,
+                sy.rem_euclid(per_tile) as usize,
+            );
+            if lowest(s0, s1) > f64::from(tile.super_max[j * SUPERS + i]) {
                 return None;
             }
-            TileView::walk(origin, d, t0, t1, CELL_M, |cx, cy, c0, c1| {
-                let h = self.cell_height(cx, cy)?;
-                let (z0, z1) = (z_at(c0), z_at(c1));
-                if z0 <= h {
-                    Some(c0)
-                } else if z1 <= h {
-                    Some(c0 + (z0 - h) / (z0 - z1) * (c1 - c0))
-                } else {
-                    None
+            let (cell_x0, cell_y0) = (tx * TILE as i64, ty * TILE as i64);
+            let local = |cx: i64, cy: i64| {
+                let (i, j) = (cx - cell_x0, cy - cell_y0);
+                (i >= 0 && j >= 0 && i < TILE as i64 && j < TILE as i64)
+                    .then_some((i as usize, j as usize))
+            };
+            TileView::walk(origin, d, s0, s1, BLOCK_M, |bx, by, t0, t1| {
+                let top = match local(bx * BLOCK as i64, by * BLOCK as i64) {
+                    Some((i, j)) => f64::from(tile.block_max[(j / BLOCK) * BLOCKS + i / BLOCK]),
+                    None => self.block_max(bx, by)?,
+                };
+                if lowest(t0, t1) > top {
+                    return None;
                 }
+                TileView::walk(origin, d, t0, t1, CELL_M, |cx, cy, c0, c1| {
+                    let h = match local(cx, cy) {
+                        Some((i, j)) => f64::from(tile.heights[j * TILE + i]),
+                        None => self.cell_height(cx, cy)?,
+                    };
+                    let (z0, z1) = (z_at(c0), z_at(c1));
+                    if z0 <= h {
+                        Some(c0)
+                    } else if z1 <= h {
+                        Some(c0 + (z0 - h) / (z0 - z1) * (c1 - c0))
+                    } else {
+                        None
+                    }
+                })
             })
         })
     }

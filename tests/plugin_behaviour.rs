@@ -1,0 +1,130 @@
+//! The user-written behaviour of examples/prefer_current.rs, wired in
+//! through configuration alone, built and exercised.
+
+#[allow(dead_code)]
+#[path = "../examples/prefer_current.rs"]
+mod prefer_current;
+
+use std::sync::Arc;
+
+use arcnav::Config;
+use arcnav::mission::{MissionOptions, run_mission};
+use arcnav_arbiter::Votes;
+use arcnav_behaviours::{Mission, Registry, VoteContext};
+use arcnav_localmap::MapSnapshot;
+use arcnav_sim::World;
+use arcnav_vehicle::frames::planar_isometry;
+use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, SteeringCommand};
+
+#[test]
+fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() {
+    let err = Config::from_toml(prefer_current::CONFIG, "example")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(
+            "unknown behaviour \"prefer_current\" (known: goal_seeking, obstacle_avoidance)"
+        ),
+        "{err}"
+    );
+    let registry = prefer_current::registry();
+    let config = Config::from_toml_with(prefer_current::CONFIG, "example", &registry).unwrap();
+    assert_eq!(
+        config.behaviours["prefer_current"]["width_arcs"].as_float(),
+        Some(4.0)
+    );
+    let arcs = config.arc_set().unwrap();
+    let names: Vec<String> = config
+        .build_behaviours(&registry, &arcs)
+        .unwrap()
+        .iter()
+        .map(|b| b.name().to_owned())
+        .collect();
+    assert_eq!(
+        names,
+        ["goal_seeking", "obstacle_avoidance", "prefer_current"]
+    );
+    let bad = prefer_current::CONFIG.replace("width_arcs = 4.0", "width_arcs = 0.0");
+    let err = Config::from_toml_with(&bad, "example", &registry)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("`behaviours.prefer_current.width_arcs`: is 0"),
+        "{err}"
+    );
+}
+
+#[test]
+fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
+    let registry: Registry = prefer_current::registry();
+    let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
+    let config = Config::default();
+    let setup = arcnav_behaviours::Setup {
+        arcs: &arcs,
+        vehicle: &config.vehicle,
+        patch_size_m: 0.4,
+    };
+    let mut behaviour = registry
+        .build("prefer_current", &toml::Table::new(), &setup)
+        .unwrap();
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let (map, mission) = (MapSnapshot::default(), Mission::default());
+    let command = SteeringCommand {
+        utime: 0,
+        curvature: arcs.curvatures()[25],
+        speed_mps: 2.0,
+        arc_index: Some(25),
+        vote: 1.0,
+    };
+    let ctx = VoteContext {
+        utime: 0,
+        pose: &pose,
+        map: &map,
+        mission: &mission,
+        arcs: &arcs,
+        last_command: Some(&command),
+    };
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    let v = votes.values();
+    assert_eq!(v[25], 1.0);
+    assert!(
+        (v[21] - v[29]).abs() < 1e-6,
+        "symmetric about the current arc"
+    );
+    assert!(v[25] > v[22] && v[22] > v[15] && v[15] > v[0]);
+    // Without a command it has no opinion.
+    let ctx = VoteContext {
+        last_command: None,
+        ..ctx
+    };
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    assert!(votes.values().iter().all(|&v| v == 0.0));
+}
+
+#[test]
+fn it_damps_the_weaving_on_a_real_mission() {
+    let registry = prefer_current::registry();
+    let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+    let with = Config::from_toml_with(prefer_current::CONFIG, "example", &registry).unwrap();
+    let run = |config: &Config| {
+        run_mission(
+            config,
+            &registry,
+            Arc::clone(&world),
+            &MissionOptions::default(),
+            &mut |_| {},
+        )
+        .unwrap()
+        .report
+    };
+    let (plain, damped) = (run(&Config::default()), run(&with));
+    assert!(plain.success && damped.success);
+    assert!(
+        damped.steering_activity < 0.8 * plain.steering_activity,
+        "steering activity {:.5} with prefer_current, {:.5} without",
+        damped.steering_activity,
+        plain.steering_activity
+    );
+}
