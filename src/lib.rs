@@ -12,6 +12,7 @@ pub mod config;
 pub mod mission;
 pub mod pipeline;
 pub mod render;
+pub mod replay;
 pub mod wire;
 
 pub use config::Config;

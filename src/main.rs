@@ -36,6 +36,14 @@ enum Command {
     /// to --out; exit status 0 only when the mission completes without a
     /// collision.
     Sim(SimArgs),
+    /// Replay an LCM log (POSE, RANGE_IMAGE, WAYPOINTS) through perception,
+    /// local map, behaviours and arbiter in log time; write the recomputed
+    /// decisions to --out and compare them with the ones the log recorded.
+    /// Exit status: 0 all input used, 3 some input was lost (listed), 1 error.
+    Replay(ReplayArgs),
+    /// Picture of one decision of a log: the local map, the vehicle, the arcs
+    /// coloured by fused vote, each behaviour's votes and who vetoed what.
+    Render(RenderArgs),
     /// Print the effective configuration (defaults merged with FILE) as TOML,
     /// or validate FILE with --check.
     Config {
@@ -86,6 +94,62 @@ struct SimArgs {
     save_world: Option<PathBuf>,
 }
 
+#[derive(Debug, clap::Args)]
+struct ReplayArgs {
+    /// The LCM event log (written by arcnav sim, lcm-logger or any LCM program
+    /// using the arcnav types).
+    log: PathBuf,
+    /// Configuration file (defaults merged with it).
+    #[arg(long, conflicts_with = "compare_config")]
+    config: Option<PathBuf>,
+    /// Run the log under two configurations and compare them.
+    #[arg(long, num_args = 2, value_names = ["A.toml", "B.toml"])]
+    compare_config: Option<Vec<PathBuf>>,
+    /// Write the inputs and the recomputed outputs to this log.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Start this many seconds into the log (the local map starts empty there).
+    #[arg(long, value_name = "S")]
+    from: Option<f64>,
+    /// Stop this many seconds into the log.
+    #[arg(long, value_name = "S")]
+    to: Option<f64>,
+    /// Replay at this many times real time (default: as fast as possible).
+    #[arg(long, value_name = "X")]
+    speed: Option<f64>,
+    /// Waypoints from this file ([[waypoints]] position_m = [x, y], as in a
+    /// world file) instead of the log's WAYPOINTS.
+    #[arg(long, value_name = "FILE")]
+    waypoints: Option<PathBuf>,
+    /// Use the log's OBSTACLE_CELLS instead of recomputing them (logs without images).
+    #[arg(long)]
+    recorded_cells: bool,
+    /// Write the summary, problems and comparison as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// List at most this many differing decisions.
+    #[arg(long, default_value_t = 10)]
+    show: usize,
+}
+
+#[derive(Debug, clap::Args)]
+struct RenderArgs {
+    /// The LCM event log.
+    log: PathBuf,
+    /// Seconds into the log: the first decision at or after it is drawn.
+    #[arg(long, value_name = "S")]
+    at: f64,
+    /// The picture (default: decision-<S>s.png).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Configuration file (defaults merged with it).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Use the log's OBSTACLE_CELLS instead of recomputing them.
+    #[arg(long)]
+    recorded_cells: bool,
+}
+
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum DifficultyArg {
     Easy,
@@ -133,6 +197,8 @@ fn init_logging(verbose: u8, quiet: u8) {
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
         Command::Sim(args) => sim(args),
+        Command::Replay(args) => replay(args),
+        Command::Render(args) => render(args),
         Command::Config { file, check } => {
             let config = Config::load_or_default(file.as_deref())?;
             if check {
@@ -277,6 +343,12 @@ fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         },
     )?;
     bar.finish_and_clear();
+    let config_path = out.join("config.toml");
+    std::fs::write(
+        &config_path,
+        format!("# the configuration of this run: replay with `arcnav replay mission.lcm --config config.toml`\n{}", config.to_toml()),
+    )
+    .with_context(|| format!("cannot write {}", config_path.display()))?;
     let report_path = out.join("report.json");
     std::fs::write(&report_path, serde_json::to_string_pretty(&run.report)?)
         .with_context(|| format!("cannot write {}", report_path.display()))?;
@@ -338,7 +410,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         r.duration_s, r.wall_time_s, r.realtime_factor, r.render_ms_mean
     );
     println!(
-        "outputs       {}/mission.lcm, report.json, map.png{}",
+        "outputs       {}/mission.lcm, report.json, map.png, config.toml{}",
         out.display(),
         if snapshots.is_empty() {
             String::new()
@@ -346,4 +418,261 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
             format!(", {} snapshots in snapshots/", snapshots.len())
         }
     );
+}
+
+/// Waypoints from a TOML file with [[waypoints]] entries (a world file works).
+fn load_waypoints(path: &Path) -> anyhow::Result<arcnav_behaviours::Mission> {
+    #[derive(serde::Deserialize)]
+    struct File {
+        waypoints: Vec<arcnav_sim::world::WaypointSpec>,
+    }
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let file: File = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))
+        .with_context(|| "a waypoints file holds [[waypoints]] tables with position_m = [x, y]")?;
+    anyhow::ensure!(
+        !file.waypoints.is_empty(),
+        "{} holds no [[waypoints]]",
+        path.display()
+    );
+    Ok(arcnav_behaviours::Mission {
+        version: 1,
+        waypoints: file
+            .waypoints
+            .iter()
+            .map(|w| arcnav_behaviours::Waypoint {
+                x: w.position_m[0],
+                y: w.position_m[1],
+                radius_m: w.radius_m,
+            })
+            .collect(),
+    })
+}
+
+fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
+    use arcnav::replay::{ReplayOptions, compare, replay as run_replay};
+    let registry = Registry::builtin();
+    let load = |path: &Option<PathBuf>| -> anyhow::Result<Config> {
+        Ok(match path {
+            Some(p) => Config::load_with(p, &registry)?,
+            None => Config::default(),
+        })
+    };
+    if let Some(speed) = args.speed {
+        anyhow::ensure!(speed > 0.0, "--speed {speed}: must be positive");
+    }
+    let options = ReplayOptions {
+        from_s: args.from,
+        to_s: args.to,
+        out: args.out.clone(),
+        waypoints: args.waypoints.as_deref().map(load_waypoints).transpose()?,
+        speed: args.speed,
+        recorded_cells: args.recorded_cells,
+        stop_at_s: None,
+    };
+    let size = std::fs::metadata(&args.log)
+        .with_context(|| format!("cannot read the log {}", args.log.display()))?
+        .len();
+    let bar = indicatif::ProgressBar::new(size);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} replaying [{bar:30}] {bytes}/{total_bytes} ({eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let mut runs = Vec::new();
+    let configs: Vec<(String, Config, ReplayOptions)> = match &args.compare_config {
+        Some(pair) => {
+            let (a, b) = (&pair[0], &pair[1]);
+            vec![
+                (
+                    a.display().to_string(),
+                    load(&Some(a.clone()))?,
+                    ReplayOptions {
+                        out: None,
+                        ..options.clone()
+                    },
+                ),
+                (
+                    b.display().to_string(),
+                    load(&Some(b.clone()))?,
+                    options.clone(),
+                ),
+            ]
+        }
+        None => vec![("replayed".to_owned(), load(&args.config)?, options.clone())],
+    };
+    for (label, config, opts) in &configs {
+        bar.set_position(0);
+        let result = run_replay(&args.log, config, &registry, opts, &mut |p| {
+            bar.set_position(p)
+        })?;
+        runs.push((label.clone(), config.clone(), result));
+    }
+    bar.finish_and_clear();
+    let (_, config, last) = &runs[runs.len() - 1];
+    let origin = last.span.map_or(0, |s| s.0);
+    let i = &last.inputs;
+    println!("log           {}", args.log.display());
+    println!(
+        "inputs        {} poses, {} range images, {} waypoint lists{}",
+        i.poses,
+        i.images,
+        i.waypoints,
+        if args.recorded_cells {
+            format!(", {} recorded obstacle reports", i.recorded_cells)
+        } else {
+            String::new()
+        }
+    );
+    if let Some((a, b)) = last.span {
+        println!("span          {:.1} s of log", (b - a) as f64 * 1e-6);
+    }
+    println!(
+        "decisions     {} recomputed{}",
+        last.cycles.len(),
+        args.out
+            .as_ref()
+            .map(|o| format!(", written to {}", o.display()))
+            .unwrap_or_default()
+    );
+    let weight_of = |c: &Config| {
+        let c = c.clone();
+        move |name: &str| c.arbiter.weight(name)
+    };
+    let mut comparisons = Vec::new();
+    if runs.len() == 2 {
+        let (wa, wb) = (weight_of(&runs[0].1), weight_of(&runs[1].1));
+        comparisons.push(compare(
+            (&runs[0].0, &runs[1].0),
+            &runs[0].2.cycles,
+            &runs[1].2.cycles,
+            (&wa, &wb),
+            origin,
+        ));
+    } else if !last.recorded.is_empty() {
+        let w = weight_of(config);
+        comparisons.push(compare(
+            ("recorded", "replayed"),
+            &last.recorded,
+            &last.cycles,
+            (&w, &w),
+            origin,
+        ));
+    } else {
+        println!("comparison    the log holds no STEERING_COMMAND to compare with");
+    }
+    for c in &comparisons {
+        println!(
+            "comparison    {} vs {}: {} decisions compared, {} agree ({:.2}%)",
+            c.a, c.b, c.compared, c.agreeing, c.agreement_percent
+        );
+        if let Some(d) = &c.first_divergence {
+            println!("              first divergence at {:.2} s", d.time_s);
+        }
+        if let Some(d) = &c.largest_curvature_difference {
+            println!(
+                "              largest curvature difference {:.4} 1/m at {:.2} s",
+                (d.a.curvature - d.b.curvature).abs(),
+                d.time_s
+            );
+        }
+        for d in c.differences.iter().take(args.show) {
+            let arc = |x: &arcnav::replay::Decided| {
+                x.arc.map_or("stop".to_owned(), |a| format!("arc {a}"))
+            };
+            println!(
+                "              {:>8.2} s  {}: {} at {:.2} m/s  {}: {} at {:.2} m/s{}",
+                d.time_s,
+                c.a,
+                arc(&d.a),
+                d.a.speed_mps,
+                c.b,
+                arc(&d.b),
+                d.b.speed_mps,
+                d.moved_by
+                    .as_ref()
+                    .map(|b| format!("  (moved by {b})"))
+                    .unwrap_or_default()
+            );
+        }
+        if c.differences.len() > args.show {
+            println!(
+                "              ... {} differences in all (--show N, --json FILE)",
+                c.differences.len()
+            );
+        }
+    }
+    let problems = &last.problems;
+    let lines = problems.lines();
+    if lines.is_empty() {
+        println!("problems      none: every input was used");
+    } else {
+        println!("problems      {}", lines[0]);
+        for line in &lines[1..] {
+            println!("              {line}");
+        }
+    }
+    if let Some(path) = &args.json {
+        let json = serde_json::json!({
+            "log": args.log.display().to_string(),
+            "inputs": last.inputs,
+            "decisions": last.cycles.len(),
+            "problems": problems,
+            "input_lost": problems.lost_input(),
+            "comparisons": comparisons,
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(if problems.lost_input() {
+        ExitCode::from(3)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
+    use arcnav::replay::{ReplayOptions, replay as run_replay};
+    let registry = Registry::builtin();
+    let config = match &args.config {
+        Some(p) => Config::load_with(p, &registry)?,
+        None => Config::default(),
+    };
+    let options = ReplayOptions {
+        recorded_cells: args.recorded_cells,
+        stop_at_s: Some(args.at),
+        ..ReplayOptions::default()
+    };
+    let result = run_replay(&args.log, &config, &registry, &options, &mut |_| {})?;
+    let origin = result.span.map_or(0, |s| s.0);
+    let Some((at, decision, map)) = &result.kept else {
+        anyhow::bail!(
+            "no decision at or after {} s: the log spans {:.1} s and yielded {} decisions",
+            args.at,
+            result.span.map_or(0.0, |(a, b)| (b - a) as f64 * 1e-6),
+            result.cycles.len()
+        );
+    };
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("decision-{:.1}s.png", args.at)));
+    arcnav::render::snapshot_picture(
+        &out,
+        &config,
+        &result.arcs,
+        map,
+        Some(decision),
+        at - origin,
+        &[],
+    )?;
+    println!(
+        "decision at {:.2} s drawn to {}",
+        (at - origin) as f64 * 1e-6,
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
 }

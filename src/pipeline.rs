@@ -43,6 +43,9 @@ pub struct PipelineConfig {
     /// Images waiting for the pose at their capture time; beyond, the
     /// oldest is dropped (counted).
     pub max_waiting_images: usize,
+    /// An image is placed only with poses at most this far apart around its
+    /// capture time; in a hole of the pose stream it is dropped, s.
+    pub max_pose_gap_s: f64,
 }
 
 impl Default for PipelineConfig {
@@ -52,6 +55,7 @@ impl Default for PipelineConfig {
             perception_latency_s: 0.3,
             pose_history_s: 10.0,
             max_waiting_images: 4,
+            max_pose_gap_s: 0.2,
         }
     }
 }
@@ -62,6 +66,7 @@ impl PipelineConfig {
         check::in_range("command_rate_hz", self.command_rate_hz, 0.5, 1000.0)?;
         check::in_range("perception_latency_s", self.perception_latency_s, 0.0, 10.0)?;
         check::in_range("pose_history_s", self.pose_history_s, 0.5, 600.0)?;
+        check::in_range("max_pose_gap_s", self.max_pose_gap_s, 0.001, 60.0)?;
         if !(1..=1000).contains(&self.max_waiting_images) {
             return Err(ConfigError::new(
                 "max_waiting_images",
@@ -90,6 +95,7 @@ pub struct PerceptionNode {
     poses: PoseHistory,
     waiting: VecDeque<RangeImage>,
     max_waiting: usize,
+    max_gap_us: Utime,
     newest_capture: Vec<(String, Utime)>,
     pub images: u64,
     pub reports: u64,
@@ -108,6 +114,7 @@ impl PerceptionNode {
             poses: PoseHistory::with_capacity((config.pipeline.pose_history_s * rate) as usize),
             waiting: VecDeque::new(),
             max_waiting: config.pipeline.max_waiting_images,
+            max_gap_us: seconds_to_micros(config.pipeline.max_pose_gap_s),
             newest_capture: Vec::new(),
             images: 0,
             reports: 0,
@@ -161,7 +168,7 @@ impl PerceptionNode {
     }
 
     fn evaluate(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
-        let pose = match self.poses.at(image.utime) {
+        let pose = match self.poses.at_within(image.utime, self.max_gap_us) {
             Ok(pose) => pose,
             Err(e) => {
                 tracing::debug!(%e, image = image.utime, "image dropped: no pose at capture time");
@@ -309,6 +316,9 @@ pub enum Input {
     Pose(Pose),
     Image(RangeImage),
     Waypoints(Mission),
+    /// Obstacle cells perceived elsewhere (a recorded log's OBSTACLE_CELLS,
+    /// or a distributed perception node): straight to the local map.
+    Obstacles(ObstacleReport),
 }
 
 impl Input {
@@ -317,6 +327,7 @@ impl Input {
             Input::Pose(p) => p.utime,
             Input::Image(i) => i.utime,
             Input::Waypoints(m) => m.version,
+            Input::Obstacles(r) => r.utime,
         }
     }
 }
@@ -468,6 +479,11 @@ impl Pipeline {
             }
             Input::Waypoints(mission) => {
                 self.behaviours.on_waypoints(mission);
+            }
+            Input::Obstacles(report) => {
+                let at = report.utime + self.latency_us;
+                self.deliveries.push_back((at, report));
+                self.deliveries.make_contiguous().sort_by_key(|(t, _)| *t);
             }
         }
     }

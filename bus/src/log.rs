@@ -72,6 +72,8 @@ pub struct LogReader<R> {
     end: usize,
     eof: bool,
     stats: LogStats,
+    /// Bytes of the input consumed so far.
+    position: u64,
 }
 
 impl LogReader<File> {
@@ -90,11 +92,17 @@ impl<R: Read> LogReader<R> {
             end: 0,
             eof: false,
             stats: LogStats::default(),
+            position: 0,
         }
     }
 
     pub fn stats(&self) -> &LogStats {
         &self.stats
+    }
+
+    /// Bytes of the log consumed so far (for progress).
+    pub fn position(&self) -> u64 {
+        self.position
     }
 
     fn available(&self) -> &[u8] {
@@ -130,6 +138,7 @@ impl<R: Read> LogReader<R> {
 
     fn consume(&mut self, n: usize) {
         self.start += n;
+        self.position += n as u64;
     }
 
     /// Skips to the next sync word after the first byte, counting what is skipped.

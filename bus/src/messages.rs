@@ -149,6 +149,11 @@ impl<R: std::io::Read> TypedEvents<R> {
     pub fn log_stats(&self) -> &LogStats {
         self.log.stats()
     }
+
+    /// Bytes of the log consumed so far.
+    pub fn position(&self) -> u64 {
+        self.log.position()
+    }
 }
 
 impl<R: std::io::Read> Iterator for TypedEvents<R> {

@@ -28,6 +28,15 @@ pub enum PoseHistoryError {
     NotIncreasing { utime: Utime, newest: Utime },
     #[error("pose at {utime} µs has a value that is not finite")]
     NonFinite { utime: Utime },
+    #[error(
+        "no pose around {requested} µs: the nearest are {before} µs and {after} µs, more than {max_gap} µs apart"
+    )]
+    Gap {
+        requested: Utime,
+        before: Utime,
+        after: Utime,
+        max_gap: Utime,
+    },
 }
 
 /// The most recent poses, oldest first, strictly increasing in time.
@@ -105,6 +114,28 @@ impl PoseHistory {
     /// True when `utime` lies within `[oldest, newest]`.
     pub fn covers(&self, utime: Utime) -> bool {
         matches!((self.oldest(), self.newest()), (Some(o), Some(n)) if (o.utime..=n.utime).contains(&utime))
+    }
+
+    /// The pose at `utime`, interpolated between the two samples around it
+    /// only if they are at most `max_gap` apart (a hole in the pose stream is
+    /// not papered over).
+    pub fn at_within(&self, utime: Utime, max_gap: Utime) -> Result<Pose, PoseHistoryError> {
+        let pose = self.at(utime)?;
+        let after_index = self.poses.partition_point(|p| p.utime < utime);
+        if let (Some(after), Some(before)) = (
+            self.poses.get(after_index),
+            after_index.checked_sub(1).and_then(|i| self.poses.get(i)),
+        ) && after.utime != utime
+            && after.utime - before.utime > max_gap
+        {
+            return Err(PoseHistoryError::Gap {
+                requested: utime,
+                before: before.utime,
+                after: after.utime,
+                max_gap,
+            });
+        }
+        Ok(pose)
     }
 
     /// The pose at `utime`, interpolated between the two samples around it.
@@ -275,6 +306,30 @@ mod tests {
             Err(PoseHistoryError::NonFinite { utime: 1 })
         );
         assert!(history.is_empty());
+    }
+
+    #[test]
+    fn a_hole_in_the_pose_stream_is_not_interpolated_across() {
+        let history = PoseHistory::from_poses(
+            10,
+            [
+                pose(0, 0.0, 0.0, 0.0),
+                pose(100, 1.0, 0.0, 0.0),
+                pose(3_000, 9.0, 0.0, 0.0),
+            ],
+        )
+        .unwrap();
+        assert!(history.at_within(50, 200).is_ok());
+        assert!(history.at_within(3_000, 200).is_ok(), "exactly on a sample");
+        assert_eq!(
+            history.at_within(1_000, 200),
+            Err(PoseHistoryError::Gap {
+                requested: 1_000,
+                before: 100,
+                after: 3_000,
+                max_gap: 200
+            })
+        );
     }
 
     #[test]

@@ -1,0 +1,606 @@
+//! Replaying range-image logs against the pipeline.
+//!
+//! A log's POSE, RANGE_IMAGE* and WAYPOINTS drive the lock-step
+//! [`Pipeline`] in log order, on the messages' own timestamps; OBSTACLE_CELLS,
+//! ARC_VOTES_* and STEERING_COMMAND are recomputed (the recorded ones are
+//! kept aside for comparison, or, with `recorded_cells`, the recorded cells
+//! replace perception). The same log and configuration give the same output
+//! byte for byte. Nothing in the input can panic the replay: damaged or
+//! foreign input is skipped and counted, and the [`InputProblems`] say what.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use arcnav_arbiter::{BehaviourVotes, Decision};
+use arcnav_behaviours::{Mission, Registry};
+use arcnav_bus::lcmtypes::steering_command_t;
+use arcnav_bus::log::{LogReader, LogStats, LogWriteError, LogWriter};
+use arcnav_bus::messages::{AnyMessage, TypedEvents, channels};
+use arcnav_localmap::MapSnapshot;
+use arcnav_perception::ObstacleReport;
+use arcnav_vehicle::{ArcSet, ConfigError, Pose, SteeringCommand, Utime};
+use serde::Serialize;
+
+use crate::config::Config;
+use crate::pipeline::{Input, Pipeline, Sink};
+use crate::wire;
+
+/// How to replay.
+#[derive(Debug, Clone, Default)]
+pub struct ReplayOptions {
+    /// Start this many seconds after the log's first message (state starts empty there).
+    pub from_s: Option<f64>,
+    /// Stop this many seconds after the log's first message.
+    pub to_s: Option<f64>,
+    /// Write the inputs and the recomputed outputs to this log.
+    pub out: Option<PathBuf>,
+    /// Waypoints to use instead of (or when the log has no) WAYPOINTS.
+    pub waypoints: Option<Mission>,
+    /// Pace the replay at this many times real time (default: as fast as possible).
+    pub speed: Option<f64>,
+    /// Feed the log's OBSTACLE_CELLS to the local map instead of recomputing
+    /// them from range images.
+    pub recorded_cells: bool,
+    /// Keep the decision and map of the first cycle at or after this many
+    /// seconds (for `arcnav render`), and stop there.
+    pub stop_at_s: Option<f64>,
+}
+
+/// What could not be used, and why. Any of it but `unknown_channels` and
+/// `ignored` means input was lost.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct InputProblems {
+    pub log: LogSummary,
+    /// Messages of types arcnav does not know, per channel (e.g. LCM_SELF_TEST).
+    pub unknown_channels: BTreeMap<String, u64>,
+    /// Messages with a known fingerprint that do not decode, per channel.
+    pub undecodable: BTreeMap<String, u64>,
+    /// Poses that are not poses (bad quaternion, non-finite values).
+    pub invalid_poses: u64,
+    /// Range images that are not images (bad mount, sizes, angles).
+    pub invalid_images: u64,
+    /// Images with no pose around their capture time.
+    pub images_without_pose: u64,
+    /// Images older than one already evaluated from the same sensor.
+    pub images_out_of_order: u64,
+    /// Times the pose jumped or ran backwards and the local map was reset.
+    pub map_resets: u64,
+    /// Known messages the replay does not consume (e.g. LOCAL_MAP), per channel.
+    pub ignored: BTreeMap<String, u64>,
+}
+
+/// The log reader's counts.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct LogSummary {
+    pub events: u64,
+    pub skipped_bytes: u64,
+    pub corrupt_events: u64,
+    pub truncated_tail_bytes: u64,
+}
+
+impl From<&LogStats> for LogSummary {
+    fn from(s: &LogStats) -> Self {
+        Self {
+            events: s.events,
+            skipped_bytes: s.skipped_bytes,
+            corrupt_events: s.corrupt_events,
+            truncated_tail_bytes: s.truncated_tail_bytes,
+        }
+    }
+}
+
+impl InputProblems {
+    /// True when some input could not be used.
+    pub fn lost_input(&self) -> bool {
+        self.log.skipped_bytes > 0
+            || self.log.corrupt_events > 0
+            || self.log.truncated_tail_bytes > 0
+            || !self.undecodable.is_empty()
+            || self.invalid_poses > 0
+            || self.invalid_images > 0
+            || self.images_without_pose > 0
+            || self.images_out_of_order > 0
+    }
+
+    /// One line per problem, for the summary.
+    pub fn lines(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        let l = &self.log;
+        if l.skipped_bytes > 0 {
+            lines.push(format!(
+                "{} bytes of damaged log skipped ({} corrupt events)",
+                l.skipped_bytes, l.corrupt_events
+            ));
+        }
+        if l.truncated_tail_bytes > 0 {
+            lines.push(format!(
+                "log ends mid-event: {} bytes of a truncated last event",
+                l.truncated_tail_bytes
+            ));
+        }
+        for (channel, n) in &self.undecodable {
+            lines.push(format!("{n} undecodable message(s) on {channel}"));
+        }
+        for (what, n) in [
+            ("invalid pose(s)", self.invalid_poses),
+            ("invalid range image(s)", self.invalid_images),
+            (
+                "image(s) skipped: no pose around the capture time",
+                self.images_without_pose,
+            ),
+            (
+                "image(s) skipped: older than one already evaluated",
+                self.images_out_of_order,
+            ),
+            (
+                "local map reset(s): the pose jumped or ran backwards",
+                self.map_resets,
+            ),
+        ] {
+            if n > 0 {
+                lines.push(format!("{n} {what}"));
+            }
+        }
+        for (channel, n) in &self.unknown_channels {
+            lines.push(format!(
+                "{n} message(s) of an unknown type on {channel} (skipped)"
+            ));
+        }
+        for (channel, n) in &self.ignored {
+            lines.push(format!("{n} message(s) on {channel} not used by replay"));
+        }
+        lines
+    }
+}
+
+/// Inputs used.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct InputCounts {
+    pub poses: u64,
+    pub images: u64,
+    pub waypoints: u64,
+    pub recorded_cells: u64,
+}
+
+/// One decision of a replay.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cycle {
+    pub command: SteeringCommand,
+    pub votes: Vec<BehaviourVotes>,
+}
+
+/// What a replay produced.
+#[derive(Debug, Clone)]
+pub struct ReplayResult {
+    /// Recomputed decisions by time.
+    pub cycles: BTreeMap<Utime, Cycle>,
+    /// The log's own decisions by time (STEERING_COMMAND and ARC_VOTES_*).
+    pub recorded: BTreeMap<Utime, Cycle>,
+    pub inputs: InputCounts,
+    pub problems: InputProblems,
+    /// First and last message time of the log, µs.
+    pub span: Option<(Utime, Utime)>,
+    /// The decision and map kept for `stop_at_s`.
+    pub kept: Option<(Utime, Decision, MapSnapshot)>,
+    pub arcs: ArcSet,
+}
+
+/// A replay that could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error("cannot read the log {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write the log {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: LogWriteError,
+    },
+    #[error("cannot create the log {path}: {source}")]
+    Create {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+}
+
+struct ReplaySink<'a> {
+    out: Option<(&'a Path, LogWriter<BufWriter<File>>)>,
+    error: Option<ReplayError>,
+    arcs: ArcSet,
+    cycles: BTreeMap<Utime, Cycle>,
+    pending_votes: Vec<BehaviourVotes>,
+    keep_at: Option<Utime>,
+    kept: Option<(Utime, Decision, MapSnapshot)>,
+}
+
+impl ReplaySink<'_> {
+    fn log<M: arcnav_bus::Message>(&mut self, at: Utime, channel: &str, message: &M) {
+        if let Some((path, writer)) = &mut self.out
+            && self.error.is_none()
+            && let Err(source) = writer.write_message(at, channel, message)
+        {
+            self.error = Some(ReplayError::Write {
+                path: path.to_path_buf(),
+                source,
+            });
+        }
+    }
+
+    fn copy(&mut self, at: Utime, channel: &str, data: &[u8]) {
+        if let Some((path, writer)) = &mut self.out
+            && self.error.is_none()
+            && let Err(source) = writer.write_event(at, channel, data)
+        {
+            self.error = Some(ReplayError::Write {
+                path: path.to_path_buf(),
+                source,
+            });
+        }
+    }
+}
+
+impl Sink for ReplaySink<'_> {
+    fn on_obstacles(&mut self, at: Utime, report: &ObstacleReport) {
+        self.log(
+            at,
+            channels::OBSTACLE_CELLS,
+            &wire::obstacles_to_wire(report),
+        );
+    }
+
+    fn on_votes(&mut self, at: Utime, votes: &[BehaviourVotes]) {
+        for v in votes {
+            let message = wire::votes_to_wire(v, &self.arcs);
+            self.log(at, &channels::arc_votes(&v.behaviour), &message);
+        }
+        self.pending_votes = votes.to_vec();
+    }
+
+    fn on_command(
+        &mut self,
+        at: Utime,
+        command: &SteeringCommand,
+        decision: Option<&Decision>,
+        map: &MapSnapshot,
+    ) {
+        self.log(
+            at,
+            channels::STEERING_COMMAND,
+            &steering_command_t::from(command),
+        );
+        self.cycles.insert(
+            at,
+            Cycle {
+                command: *command,
+                votes: std::mem::take(&mut self.pending_votes),
+            },
+        );
+        if let (Some(keep), None, Some(decision)) = (self.keep_at, &self.kept, decision)
+            && at >= keep
+        {
+            self.kept = Some((at, decision.clone(), map.clone()));
+        }
+    }
+}
+
+/// Replays the log at `path`.
+pub fn replay(
+    path: &Path,
+    config: &Config,
+    registry: &Registry,
+    options: &ReplayOptions,
+    progress: &mut dyn FnMut(u64),
+) -> Result<ReplayResult, ReplayError> {
+    let reader = LogReader::open(path).map_err(|source| ReplayError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    let mut events = TypedEvents::new(reader);
+    let mut pipeline = Pipeline::new(config, registry)?;
+    pipeline.set_explain(options.stop_at_s.is_some());
+    let arcs = pipeline.arcs().clone();
+    let out = match &options.out {
+        Some(out) => Some((
+            out.as_path(),
+            LogWriter::new(BufWriter::new(File::create(out).map_err(|source| {
+                ReplayError::Create {
+                    path: out.clone(),
+                    source,
+                }
+            })?)),
+        )),
+        None => None,
+    };
+    let mut sink = ReplaySink {
+        out,
+        error: None,
+        arcs: arcs.clone(),
+        cycles: BTreeMap::new(),
+        pending_votes: Vec::new(),
+        keep_at: None,
+        kept: None,
+    };
+    let mut recorded: BTreeMap<Utime, Cycle> = BTreeMap::new();
+    let mut recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>> = BTreeMap::new();
+    let (mut inputs, mut problems) = (InputCounts::default(), InputProblems::default());
+    let mut span: Option<(Utime, Utime)> = None;
+    let mut last_time = Utime::MIN;
+    let mut waypoints_given = false;
+    if let Some(mission) = &options.waypoints {
+        pipeline.input(Input::Waypoints(mission.clone()), &mut sink);
+        waypoints_given = true;
+        inputs.waypoints += 1;
+    }
+    let (wall_start, mut first_time) = (Instant::now(), None::<Utime>);
+    let mut last_progress = 0;
+    while let Some(event) = events.next() {
+        let event = event.map_err(|source| ReplayError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        let t = event.timestamp;
+        let origin = *first_time.get_or_insert(t);
+        span = Some(span.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
+        let since = (t - origin) as f64 * 1e-6;
+        if options.from_s.is_some_and(|from| since < from) {
+            continue;
+        }
+        if options.to_s.is_some_and(|to| since > to) {
+            break;
+        }
+        if let Some(at) = options.stop_at_s {
+            sink.keep_at = Some(origin + (at * 1e6) as Utime);
+            if sink.kept.is_some() {
+                break;
+            }
+        }
+        if let Some(speed) = options.speed {
+            let due = Duration::from_secs_f64(((t - origin) as f64 * 1e-6 / speed).max(0.0));
+            if let Some(wait) = due.checked_sub(wall_start.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        let position = events.position();
+        if position - last_progress > 1 << 20 {
+            last_progress = position;
+            progress(position);
+        }
+        let channel = event.channel.as_str();
+        match event.message {
+            AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
+                Ok(pose) => {
+                    inputs.poses += 1;
+                    sink.log(t, channel, &msg);
+                    last_time = last_time.max(pose.utime);
+                    pipeline.input(Input::Pose(pose), &mut sink);
+                }
+                Err(e) => {
+                    tracing::debug!(%e, "invalid pose skipped");
+                    problems.invalid_poses += 1;
+                }
+            },
+            AnyMessage::RangeImage(msg) if !options.recorded_cells => {
+                let encoded = arcnav_bus::Message::encode(&msg).unwrap_or_default();
+                match wire::range_image_from_wire(msg) {
+                    Ok(image) => {
+                        inputs.images += 1;
+                        sink.copy(t, channel, &encoded);
+                        pipeline.input(Input::Image(image), &mut sink);
+                    }
+                    Err(e) => {
+                        tracing::debug!(%e, "invalid range image skipped");
+                        problems.invalid_images += 1;
+                    }
+                }
+            }
+            AnyMessage::ObstacleCells(msg) if options.recorded_cells => {
+                match wire::obstacles_from_wire(msg) {
+                    Ok(report) => {
+                        inputs.recorded_cells += 1;
+                        sink.on_obstacles(t, &report);
+                        pipeline.input(Input::Obstacles(report), &mut sink);
+                    }
+                    Err(_) => *problems.undecodable.entry(event.channel).or_default() += 1,
+                }
+            }
+            AnyMessage::Waypoints(msg) if !waypoints_given => match wire::mission_from_wire(&msg) {
+                Ok(mission) => {
+                    inputs.waypoints += 1;
+                    sink.log(t, channel, &msg);
+                    pipeline.input(Input::Waypoints(mission), &mut sink);
+                }
+                Err(_) => *problems.undecodable.entry(event.channel).or_default() += 1,
+            },
+            AnyMessage::SteeringCommand(msg) => {
+                recorded.insert(
+                    t,
+                    Cycle {
+                        command: SteeringCommand::from(&msg),
+                        votes: recorded_votes.remove(&t).unwrap_or_default(),
+                    },
+                );
+            }
+            AnyMessage::ArcVotes(msg) => {
+                if let Ok(votes) = wire::votes_from_wire(&msg, &arcs) {
+                    recorded_votes.entry(t).or_default().push(votes);
+                }
+            }
+            // Recomputed by the replay: the recorded ones are replaced.
+            AnyMessage::ObstacleCells(_) => {}
+            AnyMessage::RangeImage(_) | AnyMessage::Waypoints(_) | AnyMessage::LocalMap(_) => {
+                *problems.ignored.entry(event.channel).or_default() += 1;
+            }
+        }
+        if let Some(e) = sink.error.take() {
+            return Err(e);
+        }
+    }
+    pipeline.run_until(last_time, &mut sink);
+    if let Some(e) = sink.error.take() {
+        return Err(e);
+    }
+    let drops = pipeline.perception.drops;
+    problems.images_without_pose = drops.no_pose;
+    problems.images_out_of_order = drops.out_of_order;
+    problems.invalid_images += drops.invalid;
+    problems.map_resets = pipeline.map_resets;
+    problems.log = events.log_stats().into();
+    problems.unknown_channels = events.stats().unknown.clone();
+    for (channel, n) in &events.stats().undecodable {
+        *problems.undecodable.entry(channel.clone()).or_default() += n;
+    }
+    Ok(ReplayResult {
+        cycles: sink.cycles,
+        recorded,
+        inputs,
+        problems,
+        span,
+        kept: sink.kept,
+        arcs,
+    })
+}
+
+/// A decision that differs between two runs.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Difference {
+    /// Seconds from the log's start.
+    pub time_s: f64,
+    pub utime: Utime,
+    pub a: Decided,
+    pub b: Decided,
+    /// The behaviour whose (weighted) votes moved the choice from a's arc to b's most.
+    pub moved_by: Option<String>,
+}
+
+/// One side of a difference.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Decided {
+    pub arc: Option<usize>,
+    pub curvature: f64,
+    pub speed_mps: f64,
+}
+
+impl From<&SteeringCommand> for Decided {
+    fn from(c: &SteeringCommand) -> Self {
+        Self {
+            arc: c.arc_index,
+            curvature: c.curvature,
+            speed_mps: c.speed_mps,
+        }
+    }
+}
+
+/// How two runs of a log compare.
+#[derive(Debug, Clone, Serialize)]
+pub struct Comparison {
+    pub a: String,
+    pub b: String,
+    /// Decisions at the same times in both runs.
+    pub compared: usize,
+    pub agreeing: usize,
+    pub agreement_percent: f64,
+    pub largest_curvature_difference: Option<Difference>,
+    pub first_divergence: Option<Difference>,
+    pub differences: Vec<Difference>,
+}
+
+/// Compares decisions of `a` and `b` at the times both made one.
+/// `weights_a`/`weights_b` give each behaviour's weight, to attribute changes.
+pub fn compare(
+    labels: (&str, &str),
+    a: &BTreeMap<Utime, Cycle>,
+    b: &BTreeMap<Utime, Cycle>,
+    weights: (&dyn Fn(&str) -> f64, &dyn Fn(&str) -> f64),
+    origin: Utime,
+) -> Comparison {
+    let mut differences = Vec::new();
+    let mut compared = 0;
+    for (t, ca) in a {
+        let Some(cb) = b.get(t) else { continue };
+        compared += 1;
+        let same = ca.command.arc_index == cb.command.arc_index
+            && (ca.command.speed_mps - cb.command.speed_mps).abs() < 1e-6
+            && (ca.command.curvature - cb.command.curvature).abs() < 1e-9;
+        if same {
+            continue;
+        }
+        differences.push(Difference {
+            time_s: (*t - origin) as f64 * 1e-6,
+            utime: *t,
+            a: Decided::from(&ca.command),
+            b: Decided::from(&cb.command),
+            moved_by: attribute(ca, cb, weights),
+        });
+    }
+    let largest = differences
+        .iter()
+        .max_by(|x, y| {
+            (x.a.curvature - x.b.curvature)
+                .abs()
+                .total_cmp(&(y.a.curvature - y.b.curvature).abs())
+        })
+        .cloned();
+    Comparison {
+        a: labels.0.to_owned(),
+        b: labels.1.to_owned(),
+        compared,
+        agreeing: compared - differences.len(),
+        agreement_percent: if compared == 0 {
+            100.0
+        } else {
+            100.0 * (compared - differences.len()) as f64 / compared as f64
+        },
+        largest_curvature_difference: largest,
+        first_divergence: differences.first().cloned(),
+        differences,
+    }
+}
+
+/// Which behaviour's weighted votes moved the choice from a's arc to b's
+/// most: for each behaviour, how much more it favours b's arc over a's in
+/// run b than in run a.
+fn attribute(
+    a: &Cycle,
+    b: &Cycle,
+    weights: (&dyn Fn(&str) -> f64, &dyn Fn(&str) -> f64),
+) -> Option<String> {
+    let (arc_a, arc_b) = (a.command.arc_index?, b.command.arc_index?);
+    let preference = |cycle: &Cycle, name: &str, weight: f64| -> f64 {
+        cycle
+            .votes
+            .iter()
+            .find(|v| v.behaviour == name)
+            .map_or(0.0, |v| {
+                weight
+                    * f64::from(
+                        v.votes.vote(arc_b).unwrap_or(0.0) - v.votes.vote(arc_a).unwrap_or(0.0),
+                    )
+            })
+    };
+    let mut names: Vec<&str> = a
+        .votes
+        .iter()
+        .chain(&b.votes)
+        .map(|v| v.behaviour.as_str())
+        .collect();
+    names.sort_unstable();
+    names.dedup();
+    names
+        .into_iter()
+        .map(|name| {
+            (
+                name,
+                preference(b, name, (weights.1)(name)) - preference(a, name, (weights.0)(name)),
+            )
+        })
+        .filter(|(_, shift)| *shift > 1e-9)
+        .max_by(|x, y| x.1.total_cmp(&y.1))
+        .map(|(name, _)| name.to_owned())
+}

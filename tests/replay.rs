@@ -1,0 +1,404 @@
+//! `arcnav replay` and `arcnav render`: reproduction, determinism,
+//! comparison, and damaged input.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Arc, OnceLock};
+
+use arcnav::Config;
+use arcnav::mission::{MissionOptions, run_mission};
+use arcnav::replay::{ReplayOptions, compare, replay};
+use arcnav_behaviours::Registry;
+use arcnav_bus::log::{LogReader, LogWriter};
+use arcnav_sim::World;
+use serde_json::Value;
+
+fn dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("arcnav-replay-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A log of the short course, made once per test run.
+fn sim_log() -> &'static Path {
+    static LOG: OnceLock<PathBuf> = OnceLock::new();
+    LOG.get_or_init(|| {
+        let path = dir("source").join("short_course.lcm");
+        let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+        let options = MissionOptions {
+            log: Some(path.clone()),
+            ..MissionOptions::default()
+        };
+        let run = run_mission(
+            &Config::default(),
+            &Registry::builtin(),
+            world,
+            &options,
+            &mut |_| {},
+        )
+        .unwrap();
+        assert!(run.report.success);
+        path
+    })
+}
+
+fn arcnav(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Rewrites a log, keeping the events `keep` accepts.
+fn filtered(source: &Path, target: &Path, keep: impl Fn(&str, i64) -> bool) {
+    let mut writer = LogWriter::create(target).unwrap();
+    for event in LogReader::open(source).unwrap() {
+        let event = event.unwrap();
+        if keep(&event.channel, event.timestamp) {
+            writer
+                .write_event(event.timestamp, &event.channel, &event.data)
+                .unwrap();
+        }
+    }
+}
+
+#[test]
+fn replaying_a_sim_log_reproduces_the_sims_own_commands_exactly() {
+    let result = replay(
+        sim_log(),
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(result.recorded.len() > 500);
+    let same = |name: &str| Config::default().arbiter.weight(name);
+    let comparison = compare(
+        ("recorded", "replayed"),
+        &result.recorded,
+        &result.cycles,
+        (&same, &same),
+        0,
+    );
+    assert_eq!(comparison.compared, result.recorded.len());
+    assert_eq!(
+        comparison.agreement_percent, 100.0,
+        "{:?}",
+        comparison.first_divergence
+    );
+    assert!(
+        !result.problems.lost_input(),
+        "{:?}",
+        result.problems.lines()
+    );
+}
+
+#[test]
+fn the_same_log_and_configuration_give_byte_identical_output_logs() {
+    let out = dir("determinism");
+    let (a, b) = (out.join("a.lcm"), out.join("b.lcm"));
+    for target in [&a, &b] {
+        let (code, stdout, stderr) = arcnav(&[
+            "replay",
+            sim_log().to_str().unwrap(),
+            "--out",
+            target.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{stdout}{stderr}");
+        assert!(stdout.contains("(100.00%)"), "{stdout}");
+    }
+    let (la, lb) = (std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert!(la.len() > 1_000_000);
+    assert!(la == lb, "two replays of the same log differ");
+    // The output holds the inputs and the recomputed outputs.
+    let channels: std::collections::BTreeSet<String> = LogReader::open(&a)
+        .unwrap()
+        .map(|e| e.unwrap().channel)
+        .collect();
+    for channel in [
+        "POSE",
+        "RANGE_IMAGE_ERIM",
+        "WAYPOINTS",
+        "OBSTACLE_CELLS",
+        "ARC_VOTES_OBSTACLE_AVOIDANCE",
+        "ARC_VOTES_GOAL_SEEKING",
+        "STEERING_COMMAND",
+    ] {
+        assert!(
+            channels.contains(channel),
+            "{channel} missing from {channels:?}"
+        );
+    }
+}
+
+#[test]
+fn a_one_weight_change_produces_a_comparison_naming_the_behaviour() {
+    let out = dir("compare");
+    let (a, b, json) = (
+        out.join("a.toml"),
+        out.join("b.toml"),
+        out.join("comparison.json"),
+    );
+    std::fs::write(&a, "[arbiter.weights]\ngoal_seeking = 0.5\n").unwrap();
+    std::fs::write(&b, "[arbiter.weights]\ngoal_seeking = 2.0\n").unwrap();
+    let (code, stdout, stderr) = arcnav(&[
+        "replay",
+        sim_log().to_str().unwrap(),
+        "--compare-config",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(stdout.contains("first divergence at"), "{stdout}");
+    assert!(stdout.contains("moved by goal_seeking"), "{stdout}");
+    let report: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let comparison = &report["comparisons"][0];
+    assert!(comparison["agreement_percent"].as_f64().unwrap() < 100.0);
+    let differences = comparison["differences"].as_array().unwrap();
+    let by_goal = differences
+        .iter()
+        .filter(|d| d["moved_by"] == "goal_seeking")
+        .count();
+    assert!(
+        by_goal * 2 > differences.len(),
+        "{by_goal} of {} differences attributed to goal_seeking",
+        differences.len()
+    );
+    assert!(
+        comparison["largest_curvature_difference"]["time_s"]
+            .as_f64()
+            .is_some()
+    );
+}
+
+#[test]
+fn a_log_truncated_mid_event_replays_and_reports_the_loss() {
+    let out = dir("truncated");
+    let bytes = std::fs::read(sim_log()).unwrap();
+    let cut = out.join("cut.lcm");
+    std::fs::write(&cut, &bytes[..bytes.len() - 3000]).unwrap();
+    let (code, stdout, _) = arcnav(&["replay", cut.to_str().unwrap()]);
+    assert_eq!(code, 3, "input was lost: {stdout}");
+    assert!(stdout.contains("log ends mid-event"), "{stdout}");
+    assert!(
+        stdout.contains("decisions"),
+        "the rest was replayed: {stdout}"
+    );
+}
+
+#[test]
+fn a_corrupted_region_is_skipped_and_the_replay_goes_on() {
+    let out = dir("corrupt");
+    let mut bytes = std::fs::read(sim_log()).unwrap();
+    // Longer than any event (a range image is 64 KB), so headers are hit.
+    let middle = bytes.len() / 2;
+    for b in &mut bytes[middle..middle + 200_000] {
+        *b = 0x5a;
+    }
+    let damaged = out.join("damaged.lcm");
+    std::fs::write(&damaged, &bytes).unwrap();
+    let result = replay(
+        &damaged,
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(
+        result.problems.log.skipped_bytes > 100_000,
+        "{:?}",
+        result.problems.log
+    );
+    let whole = replay(
+        sim_log(),
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    let last = |r: &arcnav::replay::ReplayResult| *r.cycles.keys().last().unwrap();
+    assert_eq!(
+        last(&result),
+        last(&whole),
+        "decisions continue after the damage to the end"
+    );
+    assert!(result.problems.lost_input());
+    let (code, stdout, _) = arcnav(&["replay", damaged.to_str().unwrap()]);
+    assert_eq!(code, 3);
+    assert!(stdout.contains("bytes of damaged log skipped"), "{stdout}");
+}
+
+#[test]
+fn images_in_a_hole_of_the_pose_stream_are_skipped_with_a_counted_reason() {
+    let out = dir("pose-gap");
+    let first = LogReader::open(sim_log())
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .timestamp;
+    let holed = out.join("holed.lcm");
+    let (from, to) = (first + 20_000_000, first + 23_000_000);
+    filtered(sim_log(), &holed, |channel, t| {
+        !(channel == "POSE" && (from..to).contains(&t))
+    });
+    let result = replay(
+        &holed,
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(
+        (5..=7).contains(&result.problems.images_without_pose),
+        "the 6 images of the 3 s hole: {}",
+        result.problems.images_without_pose
+    );
+    let (code, stdout, _) = arcnav(&["replay", holed.to_str().unwrap()]);
+    assert_eq!(code, 3);
+    assert!(
+        stdout.contains("image(s) skipped: no pose around the capture time"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn foreign_channels_are_skipped_and_listed_without_counting_as_loss() {
+    let out = dir("foreign");
+    let mixed = out.join("mixed.lcm");
+    let mut writer = LogWriter::create(&mixed).unwrap();
+    writer
+        .write_event(0, "LCM_SELF_TEST", b"lcm self test")
+        .unwrap();
+    for (k, event) in LogReader::open(sim_log()).unwrap().enumerate() {
+        let event = event.unwrap();
+        writer
+            .write_event(event.timestamp, &event.channel, &event.data)
+            .unwrap();
+        if k % 100 == 0 {
+            writer
+                .write_event(
+                    event.timestamp,
+                    "CAMERA_JPEG",
+                    b"\xff\xd8 not an arcnav type",
+                )
+                .unwrap();
+        }
+    }
+    drop(writer);
+    let result = replay(
+        &mixed,
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_eq!(result.problems.unknown_channels["LCM_SELF_TEST"], 1);
+    assert!(result.problems.unknown_channels["CAMERA_JPEG"] > 10);
+    assert!(!result.problems.lost_input());
+    let (code, stdout, _) = arcnav(&["replay", mixed.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}");
+    assert!(
+        stdout.contains("message(s) of an unknown type on CAMERA_JPEG (skipped)"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn out_of_order_images_are_handled() {
+    let out = dir("order");
+    // Swap every other pair of RANGE_IMAGE events: the older one arrives late.
+    let events: Vec<_> = LogReader::open(sim_log())
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let images: Vec<usize> = events
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.channel == "RANGE_IMAGE_ERIM")
+        .map(|(i, _)| i)
+        .collect();
+    let mut order: Vec<usize> = (0..events.len()).collect();
+    for pair in images.chunks_exact(2).step_by(2) {
+        order.swap(pair[0], pair[1]);
+    }
+    let shuffled = out.join("shuffled.lcm");
+    let mut writer = LogWriter::create(&shuffled).unwrap();
+    for i in order {
+        writer
+            .write_event(events[i].timestamp, &events[i].channel, &events[i].data)
+            .unwrap();
+    }
+    drop(writer);
+    let result = replay(
+        &shuffled,
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(
+        result.problems.images_out_of_order > 10,
+        "{:?}",
+        result.problems.images_out_of_order
+    );
+    assert!(result.cycles.len() > 500, "the replay went on");
+}
+
+#[test]
+fn render_draws_a_decision_and_refuses_a_time_past_the_log() {
+    let out = dir("render");
+    let png = out.join("decision.png");
+    let (code, stdout, stderr) = arcnav(&[
+        "render",
+        sim_log().to_str().unwrap(),
+        "--at",
+        "12.5",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(stdout.contains("decision at 12.50 s"), "{stdout}");
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    let (code, _, stderr) = arcnav(&["render", sim_log().to_str().unwrap(), "--at", "9999"]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("no decision at or after 9999 s"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn waypoints_can_come_from_a_file() {
+    let out = dir("waypoints");
+    let no_waypoints = out.join("no-waypoints.lcm");
+    filtered(sim_log(), &no_waypoints, |channel, _| {
+        channel != "WAYPOINTS"
+    });
+    let file = out.join("w.toml");
+    std::fs::write(&file, "[[waypoints]]\nposition_m = [55.0, 4.0]\n[[waypoints]]\nposition_m = [105.0, -4.0]\n[[waypoints]]\nposition_m = [150.0, 0.0]\n").unwrap();
+    let (code, stdout, stderr) = arcnav(&[
+        "replay",
+        no_waypoints.to_str().unwrap(),
+        "--waypoints",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(
+        stdout.contains("(100.00%)"),
+        "the same waypoints give the same decisions: {stdout}"
+    );
+}
