@@ -467,6 +467,9 @@ pub fn replay(
     })
 }
 
+/// A behaviour's weight by name, for attributing changes.
+pub type WeightOf<'a> = &'a dyn Fn(&str) -> f64;
+
 /// A decision that differs between two runs.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Difference {
@@ -517,7 +520,7 @@ pub fn compare(
     labels: (&str, &str),
     a: &BTreeMap<Utime, Cycle>,
     b: &BTreeMap<Utime, Cycle>,
-    weights: (&dyn Fn(&str) -> f64, &dyn Fn(&str) -> f64),
+    weights: (WeightOf<'_>, WeightOf<'_>),
     origin: Utime,
 ) -> Comparison {
     let mut differences = Vec::new();
@@ -566,11 +569,7 @@ pub fn compare(
 /// Which behaviour's weighted votes moved the choice from a's arc to b's
 /// most: for each behaviour, how much more it favours b's arc over a's in
 /// run b than in run a.
-fn attribute(
-    a: &Cycle,
-    b: &Cycle,
-    weights: (&dyn Fn(&str) -> f64, &dyn Fn(&str) -> f64),
-) -> Option<String> {
+fn attribute(a: &Cycle, b: &Cycle, weights: (WeightOf<'_>, WeightOf<'_>)) -> Option<String> {
     let (arc_a, arc_b) = (a.command.arc_index?, b.command.arc_index?);
     let preference = |cycle: &Cycle, name: &str, weight: f64| -> f64 {
         cycle
