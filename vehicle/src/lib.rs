@@ -17,6 +17,7 @@ pub mod model;
 pub mod motion;
 pub mod pose_history;
 pub mod time;
+pub mod watchdog;
 
 pub use arcs::{Arc, ArcPose, ArcSet, ArcSetConfig, SweptFootprint};
 pub use command::SteeringCommand;
@@ -26,3 +27,4 @@ pub use model::{Footprint, VehicleConfig};
 pub use motion::{MotionLimits, MotionModel, PlanarState};
 pub use pose_history::{PoseHistory, PoseHistoryError};
 pub use time::Utime;
+pub use watchdog::CommandWatchdog;
