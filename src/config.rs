@@ -16,6 +16,7 @@ use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
 use arcnav_sim::SimConfig;
 
+use crate::live::LiveConfig;
 use crate::pipeline::PipelineConfig;
 use arcnav_vehicle::config::toml_location;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, ConfigError, VehicleConfig};
@@ -35,6 +36,7 @@ pub struct Config {
     pub localmap: LocalMapConfig,
     pub arbiter: ArbiterConfig,
     pub pipeline: PipelineConfig,
+    pub live: LiveConfig,
     pub sim: SimConfig,
     /// One table per active behaviour, `[behaviours.NAME]`. The built-in
     /// behaviours are always present (set their weight to 0 to skip them);
@@ -53,6 +55,7 @@ impl Default for Config {
             localmap: LocalMapConfig::default(),
             arbiter: ArbiterConfig::default(),
             pipeline: PipelineConfig::default(),
+            live: LiveConfig::default(),
             sim: SimConfig::default(),
             behaviours: default_behaviours(),
         }
@@ -203,6 +206,26 @@ impl Config {
             .collect()
     }
 
+    /// Builds the configured behaviour `name` alone (a distributed behaviour node).
+    pub fn build_behaviour(
+        &self,
+        registry: &Registry,
+        arcs: &ArcSet,
+        name: &str,
+    ) -> Option<Result<Box<dyn arcnav_behaviours::Behaviour>, ConfigError>> {
+        let table = self.behaviours.get(name)?;
+        let setup = Setup {
+            arcs,
+            vehicle: &self.vehicle,
+            patch_size_m: self.localmap.patch_size_m,
+        };
+        Some(
+            registry
+                .build(name, table, &setup)
+                .map_err(|e| behaviour_error(name, e)),
+        )
+    }
+
     /// Replaces each behaviour table by its full form (every default filled in).
     fn normalise_behaviours(&mut self, registry: &Registry) -> Result<(), ConfigError> {
         let arcs = self.arc_set()?;
@@ -238,6 +261,7 @@ impl Config {
         self.localmap.validate().map_err(|e| e.within("localmap"))?;
         self.arbiter.validate().map_err(|e| e.within("arbiter"))?;
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
+        self.live.validate().map_err(|e| e.within("live"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
         let arcs = self.arc_set()?;
         let setup = Setup {

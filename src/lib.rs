@@ -9,6 +9,7 @@
 //! configuration and the executors used by the `arcnav` binary.
 
 pub mod config;
+pub mod live;
 pub mod mission;
 pub mod pipeline;
 pub mod render;

@@ -3,9 +3,11 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
 use anyhow::Context as _;
 use arcnav::Config;
+use arcnav::live::node::NodeKind;
 use arcnav::mission::{LogMode, MissionOptions, MissionProgress, run_mission};
 use arcnav_behaviours::Registry;
 use arcnav_perception::SensorPreset;
@@ -41,6 +43,20 @@ enum Command {
     /// decisions to --out and compare them with the ones the log recorded.
     /// Exit status: 0 all input used, 3 some input was lost (listed), 1 error.
     Replay(ReplayArgs),
+    /// Drive live: every node in this process, a thread each. Takes POSE,
+    /// RANGE_IMAGE* and WAYPOINTS from LCM and publishes STEERING_COMMAND at
+    /// pipeline.command_rate_hz (and at once on new obstacle cells). Commands
+    /// stop when poses, images or obstacle-avoidance votes go stale; Ctrl-C or
+    /// SIGTERM publishes a final stop and exits.
+    Run(LiveArgs),
+    /// Run one node as its own process on LCM, like the original system
+    /// spread over workstations: perception (RANGE_IMAGE* → OBSTACLE_CELLS),
+    /// localmap (→ LOCAL_MAP), behaviour NAME (LOCAL_MAP → ARC_VOTES_NAME) or
+    /// arbiter (ARC_VOTES_* → STEERING_COMMAND).
+    Node {
+        #[command(subcommand)]
+        node: NodeCommand,
+    },
     /// Picture of one decision of a log: the local map, the vehicle, the arcs
     /// coloured by fused vote, each behaviour's votes and who vetoed what.
     Render(RenderArgs),
@@ -150,6 +166,43 @@ struct RenderArgs {
     recorded_cells: bool,
 }
 
+#[derive(Debug, clap::Args)]
+struct LiveArgs {
+    /// LCM provider URL.
+    #[arg(long, value_name = "URL", env = "LCM_DEFAULT_URL", default_value = arcnav_bus::transport::DEFAULT_URL)]
+    lcm: String,
+    /// Configuration file (defaults merged with it; see config/default.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Print a table of every node's figures (cycle time, queues, drops,
+    /// latency) at exit.
+    #[arg(long)]
+    stats: bool,
+    /// Write those figures as JSON to this file at exit.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Stop after this many seconds (default: until Ctrl-C or SIGTERM).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+}
+
+#[derive(Debug, Subcommand)]
+enum NodeCommand {
+    /// Range images + poses → OBSTACLE_CELLS.
+    Perception(LiveArgs),
+    /// Poses + obstacle cells → LOCAL_MAP, one per decision cycle.
+    Localmap(LiveArgs),
+    /// One behaviour (configured under [behaviours.NAME]): LOCAL_MAP → ARC_VOTES_<NAME>.
+    Behaviour {
+        /// The behaviour, e.g. obstacle_avoidance or goal_seeking.
+        name: String,
+        #[command(flatten)]
+        live: LiveArgs,
+    },
+    /// ARC_VOTES_* → STEERING_COMMAND, with the safety watchdog.
+    Arbiter(LiveArgs),
+}
+
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum DifficultyArg {
     Easy,
@@ -190,6 +243,7 @@ fn init_logging(verbose: u8, quiet: u8) {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
         .init();
 }
@@ -199,6 +253,15 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Sim(args) => sim(args),
         Command::Replay(args) => replay(args),
         Command::Render(args) => render(args),
+        Command::Run(args) => live(None, args),
+        Command::Node { node } => match node {
+            NodeCommand::Perception(args) => live(Some(NodeKind::Perception), args),
+            NodeCommand::Localmap(args) => live(Some(NodeKind::LocalMap), args),
+            NodeCommand::Arbiter(args) => live(Some(NodeKind::Arbiter), args),
+            NodeCommand::Behaviour { name, live: args } => {
+                live(Some(NodeKind::Behaviour(name)), args)
+            }
+        },
         Command::Config { file, check } => {
             let config = Config::load_or_default(file.as_deref())?;
             if check {
@@ -632,6 +695,61 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// `arcnav run` (no node) or `arcnav node …`.
+fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> {
+    use arcnav::live::threaded::{LiveOptions, StopWhen};
+    let registry = Registry::builtin();
+    let config = match &args.config {
+        Some(p) => Config::load_with(p, &registry)?,
+        None => Config::default(),
+    };
+    let after = match args.duration {
+        Some(s) if s > 0.0 && s.is_finite() => Some(std::time::Duration::from_secs_f64(s)),
+        Some(s) => anyhow::bail!("--duration {s}: must be a positive number of seconds"),
+        None => None,
+    };
+    let flag = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // A second signal while shutting down exits at once.
+        signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&flag))
+            .context("cannot install the signal handlers")?;
+        signal_hook::flag::register(signal, Arc::clone(&flag))
+            .context("cannot install the signal handlers")?;
+    }
+    let lcm = arcnav_bus::transport::Lcm::new(&args.lcm)
+        .with_context(|| format!("cannot open LCM at {}", args.lcm))?;
+    let options = LiveOptions {
+        stop: StopWhen { flag, after },
+        ..LiveOptions::default()
+    };
+    let what = node
+        .as_ref()
+        .map_or("every node".to_owned(), |n| format!("node {n}"));
+    tracing::info!(
+        lcm = %args.lcm,
+        rate_hz = config.pipeline.command_rate_hz,
+        "starting {what}; Ctrl-C or SIGTERM stops"
+    );
+    let report = match &node {
+        None => arcnav::live::threaded::run(&config, &registry, lcm, &options)?,
+        Some(kind) => arcnav::live::node::run_node(kind, &config, &registry, lcm, &options)?,
+    };
+    tracing::info!(
+        commands = report.commands,
+        stops = report.stops,
+        "{what} stopped after {:.1} s",
+        report.wall_s
+    );
+    if args.stats {
+        print!("{}", report.table());
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {

@@ -130,12 +130,19 @@ impl PerceptionNode {
             if matches!(e, arcnav_vehicle::PoseHistoryError::NotIncreasing { .. })
                 && pose.utime < self.newest_pose()
             {
-                // Time went backwards: start the history over.
+                // Time went backwards (a log started over): start over.
                 self.poses.clear();
+                self.waiting.clear();
+                self.newest_capture.clear();
                 let _ = self.poses.push(*pose);
             }
         }
         self.drain(out);
+    }
+
+    /// Images waiting for the pose at their capture time.
+    pub fn waiting(&self) -> usize {
+        self.waiting.len()
     }
 
     fn newest_pose(&self) -> Utime {

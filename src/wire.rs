@@ -8,13 +8,13 @@ use arcnav_bus::lcmtypes::{
     arc_votes_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t, range_image_t,
     waypoints_t,
 };
-use arcnav_localmap::MapSnapshot;
+use arcnav_localmap::{MapSnapshot, Patch};
 use arcnav_perception::{
     BeamTable, FovPolygon, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region,
 };
 use arcnav_vehicle::frames::{FrameError, isometry_from_parts, rotation_to_wxyz};
-use arcnav_vehicle::{ArcSet, Isometry};
-use nalgebra::Point2;
+use arcnav_vehicle::{ArcSet, Isometry, Pose, Utime};
+use nalgebra::{Point2, Vector3};
 
 /// A wire message that does not describe a valid value.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -252,17 +252,29 @@ pub fn mission_from_wire(msg: &waypoints_t) -> Result<Mission, WireError> {
     })
 }
 
-/// A local-map snapshot for tools and rendering.
-pub fn map_to_wire(snapshot: &MapSnapshot) -> local_map_t {
-    let (position, orientation) = position_and_rotation(&snapshot.world_from_vehicle);
-    let s = snapshot.patch_size_m;
+/// A local-map snapshot as one decision cycle sees it (channel LOCAL_MAP).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapMessage {
+    /// The decision cycle the snapshot is for; votes on it carry this time.
+    pub cycle_utime: Utime,
+    /// The pose the snapshot is expressed in (its time is `map.utime`).
+    pub pose: Pose,
+    pub map: MapSnapshot,
+    /// Map resets so far.
+    pub resets: u64,
+}
+
+/// A cycle's map for the wire.
+pub fn map_to_wire(cycle_utime: Utime, pose: &Pose, map: &MapSnapshot, resets: u64) -> local_map_t {
+    let (position, orientation) = position_and_rotation(&map.world_from_vehicle);
+    let s = map.patch_size_m;
     local_map_t {
-        utime: snapshot.utime,
+        utime: map.utime,
         position,
         orientation,
         patch_size: s as f32,
-        num_patches: snapshot.patches.len() as i32,
-        patches: snapshot
+        num_patches: map.patches.len() as i32,
+        patches: map
             .patches
             .iter()
             .map(|p| local_map_patch_t {
@@ -274,9 +286,83 @@ pub fn map_to_wire(snapshot: &MapSnapshot) -> local_map_t {
                 last_seen: p.last_seen,
                 confirmations: p.confirmations as i32,
                 reasons: p.reasons.bits() as i8,
+                z_min: p.z_min,
+                z_max: p.z_max,
+                misses: p.misses as i32,
+                sensors: p.sensors as i32,
             })
             .collect(),
+        cycle_utime,
+        velocity: [pose.velocity.x, pose.velocity.y, pose.velocity.z],
+        yaw_rate: pose.yaw_rate,
+        resets: i32::try_from(resets).unwrap_or(i32::MAX),
     }
+}
+
+/// A cycle's map from the wire. Patch indices come back from the world
+/// centres (exact doubles), not from the `float` patch size.
+pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
+    let invalid = |reason: String| WireError::Invalid {
+        what: "local map",
+        reason,
+    };
+    let world_from_vehicle =
+        isometry_from_parts(msg.position, msg.orientation).map_err(|source| WireError::Frame {
+            what: "local map pose",
+            source,
+        })?;
+    let size = f64::from(msg.patch_size);
+    if !(size.is_finite() && size > 0.0) {
+        return Err(invalid(format!("patch size {size} is not positive")));
+    }
+    if !(msg.velocity.iter().all(|v| v.is_finite()) && msg.yaw_rate.is_finite()) {
+        return Err(invalid("velocity or yaw rate is not finite".into()));
+    }
+    let mut patches = Vec::with_capacity(msg.patches.len());
+    for p in &msg.patches {
+        let (i, j) = (p.world_x / size, p.world_y / size);
+        if !(i.is_finite() && j.is_finite() && i.abs() < 1e15 && j.abs() < 1e15) {
+            return Err(invalid(format!(
+                "patch at ({}, {}) is not a finite position",
+                p.world_x, p.world_y
+            )));
+        }
+        let counts = [p.confirmations, p.misses, p.sensors];
+        if counts[..2].iter().any(|&c| c < 0) {
+            return Err(invalid(format!(
+                "patch at ({}, {}) has a negative count",
+                p.world_x, p.world_y
+            )));
+        }
+        let mut patch = Patch::at(i.floor() as i64, j.floor() as i64);
+        patch.x = p.x;
+        patch.y = p.y;
+        patch.first_seen = p.first_seen;
+        patch.last_seen = p.last_seen;
+        patch.confirmations = counts[0] as u32;
+        patch.misses = counts[1] as u32;
+        patch.sensors = counts[2] as u32;
+        patch.reasons = Reasons::from_bits(p.reasons as u8);
+        patch.z_min = p.z_min;
+        patch.z_max = p.z_max;
+        patches.push(patch);
+    }
+    Ok(MapMessage {
+        cycle_utime: msg.cycle_utime,
+        pose: Pose {
+            utime: msg.utime,
+            world_from_vehicle,
+            velocity: Vector3::from(msg.velocity),
+            yaw_rate: msg.yaw_rate,
+        },
+        map: MapSnapshot {
+            utime: msg.utime,
+            world_from_vehicle,
+            patch_size_m: size,
+            patches,
+        },
+        resets: u64::try_from(msg.resets).unwrap_or(0),
+    })
 }
 
 #[cfg(test)]
@@ -406,5 +492,58 @@ mod tests {
             mission_from_wire(&mission_to_wire(&mission)).unwrap(),
             mission
         );
+    }
+
+    #[test]
+    fn map_cycles_round_trip() {
+        let pose = Pose {
+            utime: 1_000,
+            world_from_vehicle: arcnav_vehicle::frames::isometry_from_xyz_rpy(
+                [100.0, -40.0, 2.0],
+                0.01,
+                -0.02,
+                1.2,
+            ),
+            velocity: Vector3::new(2.0, 1.0, 0.0),
+            yaw_rate: 0.1,
+        };
+        let mut far = Patch::at(-251, 99);
+        far.x = 12.5;
+        far.y = -3.0;
+        far.first_seen = 500;
+        far.last_seen = 900;
+        far.confirmations = 3;
+        far.misses = 1;
+        far.sensors = 0b101;
+        far.reasons = Reasons::SLOPE;
+        far.z_min = -0.25;
+        far.z_max = 0.75;
+        let map = MapSnapshot {
+            utime: pose.utime,
+            world_from_vehicle: pose.world_from_vehicle,
+            patch_size_m: 0.4,
+            patches: vec![far, Patch::at(0, -1), Patch::at(123_456, -7)],
+        };
+        let back = map_from_wire(&map_to_wire(1_020, &pose, &map, 2)).unwrap();
+        assert_eq!(back.cycle_utime, 1_020);
+        assert_eq!(back.resets, 2);
+        assert_eq!(back.pose.utime, 1_000);
+        assert!((back.pose.velocity - pose.velocity).norm() < 1e-12);
+        assert!(
+            (back.pose.world_from_vehicle.translation.vector
+                - pose.world_from_vehicle.translation.vector)
+                .norm()
+                < 1e-9
+        );
+        assert_eq!(back.map.patches, map.patches);
+        let mut bad = map_to_wire(1_020, &pose, &map, 2);
+        bad.patches[0].world_x = f64::NAN;
+        assert!(map_from_wire(&bad).is_err());
+        let mut bad = map_to_wire(1_020, &pose, &map, 2);
+        bad.patch_size = 0.0;
+        assert!(map_from_wire(&bad).is_err());
+        let mut bad = map_to_wire(1_020, &pose, &map, 2);
+        bad.patches[1].confirmations = -1;
+        assert!(map_from_wire(&bad).is_err());
     }
 }

@@ -60,6 +60,28 @@ pub struct Patch {
     stamp: u64,
 }
 
+impl Patch {
+    /// An empty patch at world index (`i`, `j`), to fill in field by field
+    /// (a map snapshot rebuilt from a message, a test).
+    pub fn at(i: i64, j: i64) -> Self {
+        Self {
+            i,
+            j,
+            x: 0.0,
+            y: 0.0,
+            first_seen: 0,
+            last_seen: 0,
+            confirmations: 0,
+            misses: 0,
+            reasons: Reasons::NONE,
+            sensors: 0,
+            z_min: 0.0,
+            z_max: 0.0,
+            stamp: 0,
+        }
+    }
+}
+
 /// What a pose update did.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PoseUpdate {

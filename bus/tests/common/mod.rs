@@ -74,8 +74,16 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
                 last_seen: 1_700_000_000_500_000 + i,
                 confirmations: 3 + i as i32,
                 reasons: 4,
+                z_min: 0.5 - i as f32,
+                z_max: 1.25 + i as f32,
+                misses: i as i32,
+                sensors: 1,
             })
             .collect(),
+        cycle_utime: 1_700_000_001_020_000,
+        velocity: [2.5, -0.5, 0.0],
+        yaw_rate: 0.125,
+        resets: 2,
     };
     vec![
         ("pose_t", AnyMessage::Pose(pose)),
@@ -304,8 +312,16 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                             last_seen: rng.next_u64() as i64,
                             confirmations: rng.next_u64() as i32,
                             reasons: rng.next_u64() as i8,
+                            z_min: rng.f32(),
+                            z_max: rng.f32(),
+                            misses: rng.next_u64() as i32,
+                            sensors: rng.next_u64() as i32,
                         })
                         .collect(),
+                    cycle_utime: rng.next_u64() as i64,
+                    velocity: [rng.f64(), rng.f64(), rng.f64()],
+                    yaw_rate: rng.f64(),
+                    resets: rng.next_u64() as i32,
                 }),
             )
         }

@@ -102,7 +102,15 @@ def samples(arcnav):
         p.last_seen = 1_700_000_000_500_000 + i
         p.confirmations = 3 + i
         p.reasons = 4
+        p.z_min = 0.5 - i
+        p.z_max = 1.25 + i
+        p.misses = i
+        p.sensors = 1
         m.patches.append(p)
+    m.cycle_utime = 1_700_000_001_020_000
+    m.velocity = [2.5, -0.5, 0.0]
+    m.yaw_rate = 0.125
+    m.resets = 2
     out["local_map_t"] = m
     return out
 

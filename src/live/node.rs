@@ -1,0 +1,345 @@
+//! `arcnav node …`: each node in its own process, talking LCM, like the
+//! original system spread over workstations.
+//!
+//! | node | takes | publishes |
+//! |---|---|---|
+//! | perception | POSE, RANGE_IMAGE* | OBSTACLE_CELLS |
+//! | localmap | POSE, OBSTACLE_CELLS | LOCAL_MAP (one per cycle) |
+//! | behaviour NAME | LOCAL_MAP, WAYPOINTS, STEERING_COMMAND | ARC_VOTES_NAME |
+//! | arbiter | ARC_VOTES_*, POSE, OBSTACLE_CELLS | STEERING_COMMAND |
+//!
+//! The arbiter decides a cycle when every behaviour with a positive weight
+//! has voted for it, or `live.decision_deadline_s` after the first vote;
+//! votes older than `arbiter.vote_timeout_s` are not used and a required
+//! behaviour's stale votes mean stop. It watches POSE and OBSTACLE_CELLS (one
+//! per evaluated image) for its safety watchdog.
+
+use std::time::{Duration, Instant};
+
+use arcnav_arbiter::Arbiter;
+use arcnav_behaviours::Registry;
+use arcnav_bus::messages::{AnyMessage, channels};
+use arcnav_bus::transport::{Lcm, wall_clock_utime};
+
+use super::stages::{self, ArbiterStage, MapStage};
+use super::threaded::{
+    IoRoutes, LiveError, LiveOptions, Ticker, decode, expected_behaviours, io_loop,
+    perception_worker, publish_command, pump,
+};
+use super::{LiveReport, NodeStatus, Samples};
+use crate::config::Config;
+use crate::pipeline::{BehaviourNode, PerceptionNode};
+use crate::wire;
+
+/// Which node to run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum NodeKind {
+    Perception,
+    LocalMap,
+    Arbiter,
+    /// A behaviour configured under `[behaviours.NAME]`.
+    Behaviour(String),
+}
+
+impl std::fmt::Display for NodeKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NodeKind::Perception => write!(f, "perception"),
+            NodeKind::LocalMap => write!(f, "localmap"),
+            NodeKind::Arbiter => write!(f, "arbiter"),
+            NodeKind::Behaviour(name) => write!(f, "behaviour {name}"),
+        }
+    }
+}
+
+/// Runs one node on `lcm` until `options.stop`.
+pub fn run_node(
+    kind: &NodeKind,
+    config: &Config,
+    registry: &Registry,
+    lcm: Lcm,
+    options: &LiveOptions,
+) -> Result<LiveReport, LiveError> {
+    config.validate_with(registry)?;
+    let started = Instant::now();
+    let mut report = match kind {
+        NodeKind::Perception => perception(config, lcm, options)?,
+        NodeKind::LocalMap => localmap(config, lcm, options)?,
+        NodeKind::Arbiter => arbiter(config, lcm, options)?,
+        NodeKind::Behaviour(name) => behaviour(config, registry, name, lcm, options)?,
+    };
+    report.wall_s = started.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+fn report(nodes: Vec<NodeStatus>) -> LiveReport {
+    LiveReport {
+        nodes,
+        ..LiveReport::default()
+    }
+}
+
+fn perception(
+    config: &Config,
+    mut lcm: Lcm,
+    options: &LiveOptions,
+) -> Result<LiveReport, LiveError> {
+    let node = PerceptionNode::new(config)?;
+    let publisher = lcm.publisher();
+    let (slot, images, replaced) = stages::newest_wins();
+    let (poses_tx, poses) = crossbeam_channel::bounded(config.live.queue_capacity);
+    let period = config.live.status_period_s;
+    let worker = std::thread::Builder::new()
+        .name("perception".into())
+        .spawn(move || {
+            perception_worker(node, poses, images, replaced, period, |report, _| {
+                if let Err(e) = publisher
+                    .publish_message(channels::OBSTACLE_CELLS, &wire::obstacles_to_wire(&report))
+                {
+                    tracing::error!(%e, "cannot publish obstacle cells");
+                }
+            })
+        })
+        .map_err(|source| LiveError::Spawn {
+            node: "perception",
+            source,
+        })?;
+    let routes = IoRoutes {
+        perception_poses: Some(poses_tx),
+        images: Some(slot),
+        ..IoRoutes::default()
+    };
+    routes.subscribe(&mut lcm)?;
+    let io = io_loop(&mut lcm, options, &config.live, routes);
+    let perception = worker
+        .join()
+        .map_err(|_| LiveError::Panicked("perception"))?;
+    Ok(report(vec![io?, perception]))
+}
+
+fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
+    let mut stage = MapStage::new(config);
+    let mut status = NodeStatus::new("localmap");
+    let mut busy = Samples::default();
+    let mut ticker = Ticker::new(config.live.status_period_s, wall_clock_utime());
+    let period_ms = 1e3 / config.pipeline.command_rate_hz;
+    lcm.subscribe(channels::POSE);
+    lcm.subscribe(channels::OBSTACLE_CELLS);
+    let publisher = lcm.publisher();
+    let mut out = Vec::new();
+    let fill = |status: &mut NodeStatus, stage: &MapStage, busy: &Samples| {
+        status.handled = stage.cycles;
+        status.busy_ms = busy.summary();
+        status.queue(stage.waiting());
+        status.set("event_cycles", stage.event_cycles);
+        status.set("late_reports", stage.late_reports);
+        status.set("skipped_cycles", stage.skipped_cycles);
+        status.set("resets", stage.resets);
+        status.set("patches", stage.node.map.len() as u64);
+    };
+    pump(
+        &mut lcm,
+        options,
+        Duration::from_millis(50),
+        |message, now| {
+            let started = Instant::now();
+            if let Some(message) = message {
+                match decode(&message) {
+                    Some(AnyMessage::Pose(msg)) => match arcnav_vehicle::Pose::try_from(&msg) {
+                        Ok(pose) => stage.on_pose(pose, &mut out),
+                        Err(e) => {
+                            tracing::warn!(%e, "pose refused");
+                            status.dropped += 1;
+                        }
+                    },
+                    Some(AnyMessage::ObstacleCells(msg)) => match wire::obstacles_from_wire(msg) {
+                        Ok(r) => stage.on_report(r, message.recv_utime, &mut out),
+                        Err(e) => {
+                            tracing::warn!(%e, "obstacle cells refused");
+                            status.dropped += 1;
+                        }
+                    },
+                    _ => status.dropped += 1,
+                }
+            }
+            for cycle in out.drain(..) {
+                let msg = wire::map_to_wire(cycle.utime, &cycle.pose, &cycle.map, cycle.resets);
+                if let Err(e) = publisher.publish_message(channels::LOCAL_MAP, &msg) {
+                    tracing::error!(%e, "cannot publish the local map");
+                }
+                let ms = started.elapsed().as_secs_f64() * 1e3;
+                busy.add(ms);
+                if ms > period_ms {
+                    status.overruns += 1;
+                }
+            }
+            if ticker.due(now) {
+                fill(&mut status, &stage, &busy);
+                status.log();
+            }
+        },
+    )?;
+    fill(&mut status, &stage, &busy);
+    Ok(report(vec![status]))
+}
+
+fn behaviour(
+    config: &Config,
+    registry: &Registry,
+    name: &str,
+    mut lcm: Lcm,
+    options: &LiveOptions,
+) -> Result<LiveReport, LiveError> {
+    let arcs = config.arc_set()?;
+    let built = config
+        .build_behaviour(registry, &arcs, name)
+        .ok_or_else(|| LiveError::UnknownBehaviour {
+            name: name.to_owned(),
+            known: config
+                .behaviours
+                .keys()
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", "),
+        })??;
+    if config.arbiter.weight(name) <= 0.0 {
+        tracing::warn!(
+            behaviour = name,
+            "its weight in [arbiter.weights] is 0: the arbiter will not use its votes"
+        );
+    }
+    let mut node = BehaviourNode::new(vec![built], arcs.clone());
+    let mut status = NodeStatus::new(&format!("behaviour {name}"));
+    let mut busy = Samples::default();
+    let mut ticker = Ticker::new(config.live.status_period_s, wall_clock_utime());
+    let period_ms = 1e3 / config.pipeline.command_rate_hz;
+    let channel = channels::arc_votes(name);
+    lcm.subscribe(channels::LOCAL_MAP);
+    lcm.subscribe(channels::WAYPOINTS);
+    lcm.subscribe(channels::STEERING_COMMAND);
+    let publisher = lcm.publisher();
+    let mut resets = 0;
+    pump(
+        &mut lcm,
+        options,
+        Duration::from_millis(50),
+        |message, now| {
+            if let Some(message) = message {
+                match decode(&message) {
+                    Some(AnyMessage::LocalMap(msg)) => match wire::map_from_wire(&msg) {
+                        Ok(cycle) => {
+                            let started = Instant::now();
+                            if cycle.resets != resets {
+                                resets = cycle.resets;
+                                node.reset();
+                            }
+                            let votes = node.on_cycle(cycle.cycle_utime, &cycle.pose, &cycle.map);
+                            let msg = wire::votes_to_wire(&votes[0], &arcs);
+                            if let Err(e) = publisher.publish_message(&channel, &msg) {
+                                tracing::error!(%e, "cannot publish the votes");
+                            }
+                            let ms = started.elapsed().as_secs_f64() * 1e3;
+                            busy.add(ms);
+                            status.handled += 1;
+                            if ms > period_ms {
+                                status.overruns += 1;
+                            }
+                        }
+                        Err(e) => {
+                            tracing::warn!(%e, "local map refused");
+                            status.dropped += 1;
+                        }
+                    },
+                    Some(AnyMessage::Waypoints(msg)) => match wire::mission_from_wire(&msg) {
+                        Ok(mission) => node.on_waypoints(mission),
+                        Err(e) => {
+                            tracing::warn!(%e, "waypoints refused");
+                            status.dropped += 1;
+                        }
+                    },
+                    Some(AnyMessage::SteeringCommand(msg)) => {
+                        node.on_command(&arcnav_vehicle::SteeringCommand::from(&msg));
+                    }
+                    _ => status.dropped += 1,
+                }
+            }
+            if ticker.due(now) {
+                status.busy_ms = busy.summary();
+                status.log();
+            }
+        },
+    )?;
+    status.busy_ms = busy.summary();
+    Ok(report(vec![status]))
+}
+
+fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
+    let arcs = config.arc_set()?;
+    let arbiter = Arbiter::new(&config.arbiter, arcs.clone(), &config.vehicle);
+    let expected = expected_behaviours(config);
+    tracing::info!(
+        ?expected,
+        "the arbiter decides when these behaviours have voted"
+    );
+    let mut stage = ArbiterStage::new(config, arbiter, expected, wall_clock_utime());
+    stage.measure_latency_from_cells();
+    let mut status = NodeStatus::new("arbiter");
+    let mut busy = Samples::default();
+    let mut ticker = Ticker::new(config.live.status_period_s, wall_clock_utime());
+    lcm.subscribe_regex(&format!("{}.*", channels::ARC_VOTES_PREFIX))?;
+    lcm.subscribe(channels::POSE);
+    lcm.subscribe(channels::OBSTACLE_CELLS);
+    let publisher = lcm.publisher();
+    let tap = options.command_tap.clone();
+    let tick = Duration::from_secs_f64((0.25 / config.pipeline.command_rate_hz).min(0.01));
+    let result = pump(&mut lcm, options, tick, |message, now| {
+        if let Some(message) = message {
+            match decode(&message) {
+                Some(AnyMessage::ArcVotes(msg)) => match wire::votes_from_wire(&msg, &arcs) {
+                    Ok(votes) => {
+                        let started = Instant::now();
+                        match stage.on_votes(&votes, &[], now) {
+                            Ok(Some(decided)) => {
+                                publish_command(&publisher, &decided, tap.as_ref());
+                                busy.add(started.elapsed().as_secs_f64() * 1e3);
+                            }
+                            Ok(None) => {}
+                            Err(e) => tracing::warn!(%e, "votes refused"),
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(%e, channel = %message.channel, "votes refused");
+                        status.dropped += 1;
+                    }
+                },
+                Some(AnyMessage::Pose(msg)) => stage.on_pose(msg.utime, message.recv_utime),
+                Some(AnyMessage::ObstacleCells(msg)) => {
+                    stage.on_perceived(msg.utime, message.recv_utime);
+                }
+                _ => status.dropped += 1,
+            }
+        }
+        if let Some(decided) = stage.on_tick(now) {
+            publish_command(&publisher, &decided, tap.as_ref());
+        }
+        if ticker.due(now) {
+            stage.status(&mut status);
+            status.busy_ms = busy.summary();
+            status.log();
+        }
+    });
+    // The final stop goes out whatever ended the loop.
+    let last = stage.final_stop(wall_clock_utime());
+    publish_command(&publisher, &last, tap.as_ref());
+    result?;
+    stage.status(&mut status);
+    status.busy_ms = busy.summary();
+    Ok(LiveReport {
+        commands: stage.commands,
+        stops: stage.stops,
+        arrival_to_command_ms: stage.arrival_to_command_ms.summary(),
+        capture_to_command_ms: stage.capture_to_command_ms.summary(),
+        nodes: vec![status],
+        ..LiveReport::default()
+    })
+}

@@ -1,0 +1,834 @@
+//! Live operation: the threaded executor (`arcnav run`) and the distributed
+//! nodes (`arcnav node …`) against the lock-step replay of the same log, the
+//! safety watchdogs, signals and a flood of range images.
+//!
+//! Network traffic runs only inside a network namespace each test creates and
+//! deletes (see DEVELOPERS.md); the in-process test uses LCM's `memq://`.
+//! The tests run one at a time: they feed logs in real time and measure
+//! timing, which other tests on the same two cores would disturb.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock, mpsc};
+use std::time::{Duration, Instant};
+
+use arcnav::Config;
+use arcnav::live::stages::{Decided, Hazard, Why};
+use arcnav::live::threaded::{self, LiveOptions};
+use arcnav::mission::{MissionOptions, SIM_EPOCH_US, run_mission};
+use arcnav::replay::{ReplayOptions, replay};
+use arcnav_behaviours::Registry;
+use arcnav_bus::codec::Message as _;
+use arcnav_bus::lcmtypes::steering_command_t;
+use arcnav_bus::log::LogReader;
+use arcnav_bus::messages::channels;
+use arcnav_bus::transport::Lcm;
+use arcnav_perception::SensorPreset;
+use arcnav_sim::World;
+use arcnav_testkit::{LcmReference, NetNs, temp_dir};
+use arcnav_vehicle::{CommandWatchdog, SteeringCommand, Utime};
+
+/// One live test at a time.
+fn serial() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Seconds of the short course each log holds.
+const LOG_S: f64 = 20.0;
+
+/// The configuration of the logs and of the live runs compared with them.
+fn config(sensor: SensorPreset, reproduce: bool) -> Config {
+    let mut c = Config::default();
+    c.sensor.preset = sensor;
+    c.sim.time_limit_s = LOG_S;
+    c.live.reproduce_lockstep = reproduce;
+    c.live.status_period_s = 0.0;
+    c
+}
+
+/// The first `LOG_S` seconds of the short course, made once per test run.
+fn sim_log(sensor: SensorPreset) -> PathBuf {
+    static LOGS: Mutex<BTreeMap<String, PathBuf>> = Mutex::new(BTreeMap::new());
+    let key = format!("{sensor:?}");
+    let mut logs = LOGS.lock().unwrap_or_else(|e| e.into_inner());
+    logs.entry(key.clone())
+        .or_insert_with(|| {
+            let path = temp_dir("live-log").join(format!("{key}.lcm"));
+            let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+            let options = MissionOptions {
+                log: Some(path.clone()),
+                ..MissionOptions::default()
+            };
+            run_mission(
+                &config(sensor, false),
+                &Registry::builtin(),
+                world,
+                &options,
+                &mut |_| {},
+            )
+            .unwrap();
+            path
+        })
+        .clone()
+}
+
+/// The lock-step replay's commands, by cycle time.
+fn lockstep(log: &Path, config: &Config) -> BTreeMap<Utime, SteeringCommand> {
+    replay(
+        log,
+        config,
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap()
+    .cycles
+    .into_iter()
+    .map(|(t, c)| (t, c.command))
+    .collect()
+}
+
+/// Publishes the log's inputs (POSE, RANGE_IMAGE*, WAYPOINTS) at `speed` ×
+/// real time; returns how many range images it published.
+fn feed(log: &Path, speed: f64, mut publish: impl FnMut(&str, &[u8])) -> usize {
+    let started = Instant::now();
+    let mut first = None;
+    let mut images = 0;
+    for event in LogReader::open(log).unwrap() {
+        let event = event.unwrap();
+        let input = event.channel == channels::POSE
+            || event.channel == channels::WAYPOINTS
+            || event.channel.starts_with(channels::RANGE_IMAGE);
+        if !input {
+            continue;
+        }
+        let t0 = *first.get_or_insert(event.timestamp);
+        let due = Duration::from_secs_f64((event.timestamp - t0) as f64 * 1e-6 / speed);
+        if let Some(wait) = due.checked_sub(started.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        if event.channel.starts_with(channels::RANGE_IMAGE) {
+            images += 1;
+        }
+        publish(&event.channel, &event.data);
+    }
+    images
+}
+
+/// How live commands agree with the lock-step ones over the replayed cycles
+/// from `skip_s` after the log's start to `until_s`.
+struct Agreement {
+    compared: usize,
+    agreeing: usize,
+    missing: usize,
+}
+
+impl Agreement {
+    fn of(
+        live: &BTreeMap<Utime, SteeringCommand>,
+        lockstep: &BTreeMap<Utime, SteeringCommand>,
+        skip_s: f64,
+        until_s: f64,
+    ) -> Self {
+        let (from, to) = (
+            SIM_EPOCH_US + (skip_s * 1e6) as i64,
+            SIM_EPOCH_US + (until_s * 1e6) as i64,
+        );
+        let mut a = Agreement {
+            compared: 0,
+            agreeing: 0,
+            missing: 0,
+        };
+        for (t, expected) in lockstep.range(from..to) {
+            let Some(got) = live.get(t) else {
+                a.missing += 1;
+                continue;
+            };
+            a.compared += 1;
+            if got.arc_index == expected.arc_index
+                && (got.speed_mps - expected.speed_mps).abs() < 1e-6
+            {
+                a.agreeing += 1;
+            }
+        }
+        a
+    }
+
+    fn percent(&self) -> f64 {
+        100.0 * self.agreeing as f64 / (self.compared + self.missing).max(1) as f64
+    }
+}
+
+#[test]
+fn the_threaded_executor_gives_the_lockstep_commands() {
+    let _serial = serial();
+    let config = config(SensorPreset::Erim, true);
+    let log = sim_log(SensorPreset::Erim);
+    let expected = lockstep(&log, &config);
+    let lcm = Lcm::new("memq://").unwrap();
+    let publisher = lcm.publisher();
+    let (tap, taken) = crossbeam_channel::unbounded::<Decided>();
+    let (ready, is_ready) = crossbeam_channel::bounded(1);
+    let options = LiveOptions {
+        command_tap: Some(tap),
+        ready: Some(ready),
+        ..LiveOptions::default()
+    };
+    let flag = Arc::clone(&options.stop.flag);
+    let runner = {
+        let config = config.clone();
+        std::thread::spawn(move || threaded::run(&config, &Registry::builtin(), lcm, &options))
+    };
+    is_ready.recv_timeout(Duration::from_secs(30)).unwrap();
+    // Four times real time: perception still delivers long before the
+    // modelled 0.3 s latency.
+    feed(&log, 4.0, |channel, data| {
+        publisher.publish(channel, data).unwrap()
+    });
+    std::thread::sleep(Duration::from_millis(300));
+    flag.store(true, std::sync::atomic::Ordering::Relaxed);
+    let report = runner.join().unwrap().unwrap();
+    let decided: Vec<Decided> = taken.try_iter().collect();
+    let live: BTreeMap<Utime, SteeringCommand> = decided
+        .iter()
+        .filter(|d| matches!(d.why, Why::Complete))
+        .map(|d| (d.command.utime, d.command))
+        .collect();
+    // Until perception has evaluated an image the live arbiter refuses to
+    // drive; lock-step replay has no such watchdog. The cycle at the first
+    // pose may come before the first image is evaluated; from the next one
+    // on the commands must be the same.
+    let first = live.keys().next().copied().unwrap();
+    let first_s = (first - SIM_EPOCH_US) as f64 * 1e-6;
+    assert!(first_s <= 0.11, "first decision on votes at {first_s:.2} s");
+    for d in decided.iter().filter(|d| d.command.utime < first) {
+        assert_eq!(d.why, Why::Watchdog(Hazard::NoImage));
+    }
+    let a = Agreement::of(&live, &expected, first_s, LOG_S);
+    eprintln!("{}", report.table());
+    eprintln!(
+        "threaded vs lock-step: {} of {} cycles agree ({:.2}%), {} missing",
+        a.agreeing,
+        a.compared + a.missing,
+        a.percent(),
+        a.missing
+    );
+    // Same nodes, same timing model: the same commands, cycle for cycle.
+    assert!(a.compared >= 190, "only {} cycles compared", a.compared);
+    assert_eq!(a.missing, 0);
+    assert_eq!(a.agreeing, a.compared);
+    // The run steered: not a trivially straight log.
+    let arcs: std::collections::BTreeSet<_> = live.values().map(|c| c.arc_index).collect();
+    assert!(arcs.len() >= 3, "arcs used: {arcs:?}");
+    // The final command is a stop.
+    let last = decided.last().unwrap();
+    assert_eq!(last.why, Why::Final);
+    assert!(last.command.is_stop());
+    // Figures for every node.
+    let names: Vec<&str> = report.nodes.iter().map(|n| n.node.as_str()).collect();
+    assert_eq!(
+        names,
+        ["io", "perception", "localmap", "behaviours", "arbiter"]
+    );
+    assert_eq!(report.nodes[1].dropped, 0, "{}", report.table());
+}
+
+// ---------------------------------------------------------------------------
+// Over UDP multicast, inside a network namespace.
+
+/// An `arcnav` process inside the namespace, its output collected.
+struct Proc {
+    name: String,
+    child: Child,
+    stderr: Arc<Mutex<String>>,
+    stdout: Arc<Mutex<String>>,
+    ready: mpsc::Receiver<()>,
+}
+
+impl Proc {
+    fn arcnav(ns: &NetNs, name: &str, args: &[&str]) -> Proc {
+        let mut child = ns
+            .command(env!("CARGO_BIN_EXE_arcnav"))
+            .args(args)
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let (ready_tx, ready) = mpsc::channel();
+        let stderr = Arc::new(Mutex::new(String::new()));
+        let stdout = Arc::new(Mutex::new(String::new()));
+        let pipe = child.stderr.take().unwrap();
+        let text = Arc::clone(&stderr);
+        std::thread::spawn(move || {
+            for line in BufReader::new(pipe).lines().map_while(Result::ok) {
+                if line.contains("ready: receiving") {
+                    let _ = ready_tx.send(());
+                }
+                let mut text = text.lock().unwrap();
+                text.push_str(&line);
+                text.push('\n');
+            }
+        });
+        let pipe = child.stdout.take().unwrap();
+        let text = Arc::clone(&stdout);
+        std::thread::spawn(move || {
+            for line in BufReader::new(pipe).lines().map_while(Result::ok) {
+                let mut text = text.lock().unwrap();
+                text.push_str(&line);
+                text.push('\n');
+            }
+        });
+        Proc {
+            name: name.to_owned(),
+            child,
+            stderr,
+            stdout,
+            ready,
+        }
+    }
+
+    fn wait_ready(&self) {
+        if self.ready.recv_timeout(Duration::from_secs(60)).is_err() {
+            panic!(
+                "{} did not become ready:\n{}",
+                self.name,
+                self.stderr.lock().unwrap()
+            );
+        }
+    }
+
+    fn signal(&self, signal: &str) {
+        let status = Command::new("kill")
+            .args([format!("-{signal}"), self.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill -{signal} {}", self.name);
+    }
+
+    /// Waits for the exit; the exit code (None: killed) and stdout.
+    fn finish(mut self) -> (Option<i32>, String) {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let status = loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                break status;
+            }
+            if Instant::now() > deadline {
+                let _ = self.child.kill();
+                panic!(
+                    "{} did not exit:\n{}",
+                    self.name,
+                    self.stderr.lock().unwrap()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        // Let the pipe readers drain.
+        std::thread::sleep(Duration::from_millis(100));
+        let stdout = self.stdout.lock().unwrap().clone();
+        if status.code() != Some(0) {
+            eprintln!("{} stderr:\n{}", self.name, self.stderr.lock().unwrap());
+        }
+        (status.code(), stdout)
+    }
+
+    /// Resident memory, kB.
+    fn rss_kb(&self) -> Option<u64> {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).ok()?;
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+    }
+}
+
+/// The reference `lcm-logplayer` playing `channels` of `log` at `speed`.
+fn logplayer(
+    ns: &NetNs,
+    reference: &LcmReference,
+    log: &Path,
+    channels: &str,
+    speed: f64,
+) -> Child {
+    ns.command(reference.tool_path("lcm-logplayer"))
+        .args(["-e", channels, "-s", &speed.to_string()])
+        .arg(log)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
+/// Steering commands as a vehicle receives them: (arrival, command).
+type Received = Vec<(Instant, SteeringCommand)>;
+
+/// Records STEERING_COMMAND inside `ns` while `body` runs.
+fn recording<T>(ns: &NetNs, body: impl FnOnce() -> T) -> (T, Received) {
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let (ready_tx, ready) = mpsc::channel();
+    std::thread::scope(|scope| {
+        let recorder = scope.spawn(|| {
+            ns.run(|| {
+                let mut lcm = Lcm::new("").unwrap();
+                lcm.subscribe(channels::STEERING_COMMAND);
+                ready_tx.send(()).unwrap();
+                let mut got = Vec::new();
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    if let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() {
+                        let msg = steering_command_t::decode(&m.data).unwrap();
+                        got.push((Instant::now(), SteeringCommand::from(&msg)));
+                    }
+                }
+                got
+            })
+        });
+        ready.recv().unwrap();
+        let out = body();
+        // Late commands (the final stop) still arrive.
+        std::thread::sleep(Duration::from_millis(300));
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        (out, recorder.join().unwrap())
+    })
+}
+
+/// The commands published at cycle times (heartbeat stops sit between them).
+fn by_time(received: &Received) -> BTreeMap<Utime, SteeringCommand> {
+    received.iter().map(|(_, c)| (c.utime, *c)).collect()
+}
+
+fn write_config(config: &Config, dir: &Path) -> String {
+    let path = dir.join("config.toml");
+    std::fs::write(&path, config.to_toml()).unwrap();
+    path.display().to_string()
+}
+
+/// Checks `received` against the lock-step replay of `log`.
+fn assert_reproduces(label: &str, received: &Received, log: &Path, config: &Config) {
+    let expected = lockstep(log, config);
+    let live = by_time(received);
+    // From the first cycle driven on votes (the live arbiter stops until an
+    // image has been evaluated; see the threaded test).
+    let first = received
+        .iter()
+        .find(|(_, c)| !c.is_stop())
+        .map(|(_, c)| c.utime)
+        .unwrap_or_else(|| panic!("{label}: never drove"));
+    let first_s = (first - SIM_EPOCH_US) as f64 * 1e-6;
+    assert!(first_s <= 0.31, "{label}: first drove at {first_s:.2} s");
+    let a = Agreement::of(&live, &expected, first_s, LOG_S);
+    eprintln!(
+        "{label} vs lock-step: {} of {} cycles agree ({:.2}%), {} missing",
+        a.agreeing,
+        a.compared + a.missing,
+        a.percent(),
+        a.missing
+    );
+    // Timing jitter only: a vote set arriving after the deadline, a
+    // datagram lost, may change a cycle or two.
+    assert!(
+        a.compared + a.missing >= 190,
+        "{label}: {} cycles",
+        a.compared
+    );
+    assert!(a.percent() >= 97.0, "{label}: {:.2}% agree", a.percent());
+    // The last command is the final stop.
+    assert!(
+        received.last().unwrap().1.is_stop(),
+        "{label}: last command drives"
+    );
+}
+
+#[test]
+fn distributed_nodes_reproduce_the_lockstep_replay_over_udp_multicast() {
+    let _serial = serial();
+    let Some(reference) = LcmReference::require() else {
+        return;
+    };
+    let Some(ns) = NetNs::require("distributed") else {
+        return;
+    };
+    let log = sim_log(SensorPreset::Erim);
+    let config = config(SensorPreset::Erim, true);
+    let dir = temp_dir("live-distributed");
+    let file = write_config(&config, &dir);
+    let nodes: Vec<(&str, Vec<&str>)> = vec![
+        ("perception", vec!["node", "perception"]),
+        ("localmap", vec!["node", "localmap"]),
+        (
+            "obstacle_avoidance",
+            vec!["node", "behaviour", "obstacle_avoidance"],
+        ),
+        ("goal_seeking", vec!["node", "behaviour", "goal_seeking"]),
+        ("arbiter", vec!["node", "arbiter"]),
+    ];
+    let (stats, received) = recording(&ns, || {
+        let procs: Vec<Proc> = nodes
+            .iter()
+            .map(|(name, args)| {
+                let mut args = args.clone();
+                args.extend(["--config", &file, "--stats"]);
+                Proc::arcnav(&ns, name, &args)
+            })
+            .collect();
+        procs.iter().for_each(Proc::wait_ready);
+        let status = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0)
+            .wait()
+            .unwrap();
+        assert!(status.success());
+        std::thread::sleep(Duration::from_millis(300));
+        procs.iter().for_each(|p| p.signal("TERM"));
+        let mut stats = String::new();
+        for p in procs {
+            let (code, out) = p.finish();
+            assert_eq!(code, Some(0));
+            stats.push_str(&out);
+        }
+        stats
+    });
+    eprintln!("{stats}");
+    assert_reproduces("distributed", &received, &log, &config);
+    // Every node reported its figures.
+    for node in [
+        "perception",
+        "localmap",
+        "behaviour obstacle_avoidance",
+        "arbiter",
+    ] {
+        assert!(stats.contains(node), "no {node} row in:\n{stats}");
+    }
+}
+
+#[test]
+fn arcnav_run_reproduces_the_lockstep_replay_over_udp_multicast() {
+    let _serial = serial();
+    let Some(reference) = LcmReference::require() else {
+        return;
+    };
+    let Some(ns) = NetNs::require("run") else {
+        return;
+    };
+    let log = sim_log(SensorPreset::Erim);
+    let config = config(SensorPreset::Erim, true);
+    let dir = temp_dir("live-run");
+    let file = write_config(&config, &dir);
+    let (stats, received) = recording(&ns, || {
+        let run = Proc::arcnav(&ns, "run", &["run", "--config", &file, "--stats"]);
+        run.wait_ready();
+        let status = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0)
+            .wait()
+            .unwrap();
+        assert!(status.success());
+        std::thread::sleep(Duration::from_millis(300));
+        run.signal("TERM");
+        let (code, out) = run.finish();
+        assert_eq!(code, Some(0));
+        out
+    });
+    eprintln!("{stats}");
+    assert_reproduces("arcnav run", &received, &log, &config);
+    assert!(stats.contains("image arrival→command"), "{stats}");
+}
+
+/// When the first command after `after` that is a stop arrived, and whether
+/// every command from then on (until `until`) is a stop.
+fn stop_after(received: &Received, after: Instant, until: Instant) -> Option<(Duration, bool)> {
+    let (at, _) = received.iter().find(|(t, c)| *t >= after && c.is_stop())?;
+    let all = received
+        .iter()
+        .filter(|(t, _)| t >= at && *t <= until)
+        .all(|(_, c)| c.is_stop());
+    Some((at.duration_since(after), all))
+}
+
+#[test]
+fn killing_obstacle_avoidance_makes_the_arbiter_stop_within_its_timeout() {
+    let _serial = serial();
+    let Some(reference) = LcmReference::require() else {
+        return;
+    };
+    let Some(ns) = NetNs::require("kill-oa") else {
+        return;
+    };
+    let log = sim_log(SensorPreset::Erim);
+    let config = config(SensorPreset::Erim, false);
+    let timeout = config.arbiter.vote_timeout_s;
+    let dir = temp_dir("live-kill-oa");
+    let file = write_config(&config, &dir);
+    let ((killed, end), received) = recording(&ns, || {
+        let common = ["--config", file.as_str()];
+        let spawn = |name: &str, args: &[&str]| {
+            let args: Vec<&str> = args.iter().chain(common.iter()).copied().collect();
+            Proc::arcnav(&ns, name, &args)
+        };
+        let procs = vec![
+            spawn("perception", &["node", "perception"]),
+            spawn("localmap", &["node", "localmap"]),
+            spawn("goal_seeking", &["node", "behaviour", "goal_seeking"]),
+            spawn("arbiter", &["node", "arbiter"]),
+        ];
+        let oa = spawn(
+            "obstacle_avoidance",
+            &["node", "behaviour", "obstacle_avoidance"],
+        );
+        procs.iter().chain([&oa]).for_each(Proc::wait_ready);
+        let mut feeder = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0);
+        std::thread::sleep(Duration::from_secs(4));
+        oa.signal("KILL");
+        let killed = Instant::now();
+        std::thread::sleep(Duration::from_secs_f64(timeout + 2.0));
+        let end = Instant::now();
+        let _ = feeder.kill();
+        let _ = feeder.wait();
+        let _ = oa.finish();
+        for p in procs {
+            p.signal("TERM");
+            assert_eq!(p.finish().0, Some(0));
+        }
+        (killed, end)
+    });
+    let drove = received
+        .iter()
+        .filter(|(t, _)| *t < killed)
+        .any(|(_, c)| !c.is_stop());
+    assert!(drove, "the vehicle never drove before the kill");
+    let (delay, held) = stop_after(&received, killed, end).expect("no stop after the kill");
+    eprintln!(
+        "obstacle avoidance killed: stop after {:.0} ms (vote timeout {:.0} ms)",
+        delay.as_secs_f64() * 1e3,
+        timeout * 1e3
+    );
+    // Its last votes are at most one cycle old at the kill; the arbiter
+    // stops once they are older than the timeout.
+    assert!(
+        delay.as_secs_f64() <= timeout + 0.3,
+        "stopped {:.2} s after the kill",
+        delay.as_secs_f64()
+    );
+    assert!(
+        delay.as_secs_f64() >= timeout - 0.25,
+        "stopped before the timeout"
+    );
+    assert!(held, "drove again without obstacle avoidance");
+}
+
+#[test]
+fn a_silent_pose_stream_stops_the_vehicle_and_sigterm_publishes_a_final_stop() {
+    let _serial = serial();
+    let Some(reference) = LcmReference::require() else {
+        return;
+    };
+    let Some(ns) = NetNs::require("poses") else {
+        return;
+    };
+    let log = sim_log(SensorPreset::Erim);
+    let config = config(SensorPreset::Erim, false);
+    let timeout = config.live.pose_timeout_s;
+    let dir = temp_dir("live-poses");
+    let file = write_config(&config, &dir);
+    let ((silenced, terminated, end), received) = recording(&ns, || {
+        let run = Proc::arcnav(&ns, "run", &["run", "--config", &file]);
+        run.wait_ready();
+        // Poses and images from two players: only the poses stop.
+        let mut images = logplayer(&ns, &reference, &log, "RANGE_IMAGE.*|WAYPOINTS", 1.0);
+        let mut poses = logplayer(&ns, &reference, &log, "POSE", 1.0);
+        std::thread::sleep(Duration::from_secs(4));
+        let _ = poses.kill();
+        let silenced = Instant::now();
+        let _ = poses.wait();
+        std::thread::sleep(Duration::from_secs(2));
+        let _ = images.kill();
+        let _ = images.wait();
+        let terminated = Instant::now();
+        run.signal("TERM");
+        let (code, _) = run.finish();
+        assert_eq!(code, Some(0), "arcnav run exits 0 on SIGTERM");
+        (silenced, terminated, Instant::now())
+    });
+    let (delay, held) = stop_after(&received, silenced, terminated).expect("no stop");
+    eprintln!(
+        "poses silenced: stop after {:.0} ms (pose timeout {:.0} ms)",
+        delay.as_secs_f64() * 1e3,
+        timeout * 1e3
+    );
+    assert!(delay.as_secs_f64() <= timeout + 0.25, "{delay:?}");
+    assert!(held);
+    // Stop is repeated at the command rate while the poses are silent.
+    let repeated = received
+        .iter()
+        .filter(|(t, _)| *t > silenced + delay && *t <= silenced + delay + Duration::from_secs(1))
+        .count();
+    assert!(repeated >= 8, "{repeated} stops in the second after");
+    // SIGTERM: a final stop, after which nothing comes.
+    let last = received.iter().rfind(|(t, _)| *t >= terminated);
+    let (at, command) = last.expect("no final stop after SIGTERM");
+    assert!(command.is_stop());
+    assert!(*at <= end);
+}
+
+#[test]
+fn when_arcnav_dies_the_vehicle_watchdog_stops_the_vehicle() {
+    let _serial = serial();
+    let Some(reference) = LcmReference::require() else {
+        return;
+    };
+    let Some(ns) = NetNs::require("sigkill") else {
+        return;
+    };
+    let log = sim_log(SensorPreset::Erim);
+    let config = config(SensorPreset::Erim, false);
+    let dir = temp_dir("live-sigkill");
+    let file = write_config(&config, &dir);
+    let (killed, received) = recording(&ns, || {
+        let run = Proc::arcnav(&ns, "run", &["run", "--config", &file]);
+        run.wait_ready();
+        let mut feeder = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0);
+        std::thread::sleep(Duration::from_secs(3));
+        // No chance to publish a final stop.
+        run.signal("KILL");
+        let killed = Instant::now();
+        let _ = run.finish();
+        let _ = feeder.kill();
+        let _ = feeder.wait();
+        killed
+    });
+    let last = received.last().expect("no commands");
+    assert!(
+        !last.1.is_stop(),
+        "SIGKILL should leave a driving command last"
+    );
+    // The vehicle side: commands by receive time into its watchdog.
+    let start = received[0].0;
+    let us = |t: Instant| t.duration_since(start).as_micros() as i64;
+    let mut watchdog = CommandWatchdog::new(300_000);
+    for (t, command) in &received {
+        watchdog.on_command(us(*t), *command);
+    }
+    assert!(!watchdog.command_at(us(last.0) + 50_000).is_stop());
+    assert!(watchdog.command_at(us(killed) + 400_000).is_stop());
+    assert_eq!(watchdog.trips, 1);
+}
+
+#[test]
+fn a_flood_of_large_range_images_keeps_memory_bounded_and_counts_drops() {
+    let _serial = serial();
+    let Some(reference) = LcmReference::require() else {
+        return;
+    };
+    let Some(ns) = NetNs::require("flood") else {
+        return;
+    };
+    // 128×2048 images (1 MiB each) at ten times their 10 Hz rate, four
+    // times over, then at a hundred times: more than perception can take.
+    let mut short = config(SensorPreset::Lidar128, false);
+    short.sim.time_limit_s = 3.0;
+    let log = flood_log(&short);
+    let published = LogReader::open(&log)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .channel
+                .starts_with(channels::RANGE_IMAGE)
+        })
+        .count() as u64;
+    let dir = temp_dir("live-flood");
+    let file = write_config(&short, &dir);
+    let json = dir.join("run.json");
+    let run = Proc::arcnav(
+        &ns,
+        "run",
+        &["run", "--config", &file, "--json", json.to_str().unwrap()],
+    );
+    run.wait_ready();
+    std::thread::sleep(Duration::from_millis(300));
+    let baseline = run.rss_kb().unwrap();
+    let mut peak = baseline;
+    const ROUNDS: u64 = 5;
+    for round in 0..ROUNDS {
+        let speed = if round + 1 < ROUNDS { 10.0 } else { 100.0 };
+        let mut player = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*", speed);
+        while player.try_wait().unwrap().is_none() {
+            peak = peak.max(run.rss_kb().unwrap_or(0));
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    peak = peak.max(run.rss_kb().unwrap_or(0));
+    run.signal("TERM");
+    assert_eq!(run.finish().0, Some(0));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let node = |name: &str| {
+        report["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["node"] == name)
+            .unwrap()
+            .clone()
+    };
+    let counter = |node: &serde_json::Value, name: &str| {
+        node["counters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c[0] == name)
+            .map_or(0, |c| c[1].as_u64().unwrap())
+    };
+    let (io, perception) = (node("io"), node("perception"));
+    let received = counter(&io, "images");
+    let incomplete = counter(&io, "incomplete_messages");
+    let evaluated = perception["handled"].as_u64().unwrap();
+    let replaced = counter(&perception, "replaced_by_newer");
+    let unplaced = counter(&perception, "no_pose")
+        + counter(&perception, "invalid")
+        + counter(&perception, "out_of_order");
+    let flooded_mib = ROUNDS * published;
+    eprintln!(
+        "flood: {} images ({} MiB) published, {received} received ({incomplete} incomplete), \
+         {evaluated} evaluated, {replaced} replaced by newer, {unplaced} unplaceable; \
+         RSS {baseline} kB before, peak {peak} kB",
+        ROUNDS * published,
+        flooded_mib
+    );
+    // Every received image is evaluated or counted; none is lost silently.
+    assert_eq!(evaluated + replaced + unplaced, received);
+    // Perception fell behind in the last round and skipped to the newest.
+    assert!(replaced > 0, "no image replaced by a newer one");
+    // Each round starts the log over: the executor follows (the first image
+    // of a round has no pose before it yet).
+    assert!(
+        evaluated >= received / 2,
+        "{evaluated} of {received} evaluated"
+    );
+    // What did not arrive whole is counted by the transport (or never left
+    // the kernel: at most the socket buffer's worth per round).
+    assert!(received + incomplete <= ROUNDS * published);
+    // Bounded: far less than what was pushed through.
+    let grown_mib = (peak.saturating_sub(baseline)) / 1024;
+    assert!(
+        grown_mib < 64 && grown_mib < flooded_mib / 4,
+        "RSS grew by {grown_mib} MiB during a {flooded_mib} MiB flood"
+    );
+}
+
+/// A lidar128 log of `config.sim.time_limit_s` seconds.
+fn flood_log(config: &Config) -> PathBuf {
+    static LOG: OnceLock<PathBuf> = OnceLock::new();
+    LOG.get_or_init(|| {
+        let path = temp_dir("live-flood-log").join("lidar128.lcm");
+        let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+        let options = MissionOptions {
+            log: Some(path.clone()),
+            ..MissionOptions::default()
+        };
+        run_mission(config, &Registry::builtin(), world, &options, &mut |_| {}).unwrap();
+        path
+    })
+    .clone()
+}
