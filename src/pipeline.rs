@@ -21,7 +21,9 @@ use std::time::Instant;
 use arcnav_arbiter::{Arbiter, BehaviourVotes, Decision, Votes};
 use arcnav_behaviours::{Behaviour, Mission, Progress, Registry, VoteContext};
 use arcnav_localmap::{LocalMap, MapSnapshot, PoseUpdate};
-use arcnav_perception::{ImageStats, ObstacleReport, RangeImage, TerrainEvaluator};
+use arcnav_perception::{
+    ImageStats, InOrder, ObstacleReport, RangeImage, Runner, TerrainEvaluator,
+};
 use arcnav_vehicle::config::{self as check, ConfigError};
 use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{ArcSet, Pose, PoseHistory, SteeringCommand, Utime};
@@ -92,6 +94,7 @@ pub struct PerceptionDrops {
 /// Perception: range images + poses → obstacle reports.
 pub struct PerceptionNode {
     evaluator: Box<dyn TerrainEvaluator>,
+    runner: Box<dyn Runner + Send>,
     poses: PoseHistory,
     waiting: VecDeque<RangeImage>,
     max_waiting: usize,
@@ -111,6 +114,7 @@ impl PerceptionNode {
                 .perception
                 .build_evaluator()
                 .map_err(|e| e.within("perception"))?,
+            runner: Box::new(InOrder),
             poses: PoseHistory::with_capacity((config.pipeline.pose_history_s * rate) as usize),
             waiting: VecDeque::new(),
             max_waiting: config.pipeline.max_waiting_images,
@@ -138,6 +142,12 @@ impl PerceptionNode {
             }
         }
         self.drain(out);
+    }
+
+    /// Hands independent parts of each evaluation to `runner` (threads of a
+    /// live executor); results are the same as without.
+    pub fn set_runner(&mut self, runner: Box<dyn Runner + Send>) {
+        self.runner = runner;
     }
 
     /// Images waiting for the pose at their capture time.
@@ -198,10 +208,12 @@ impl PerceptionNode {
                 .push((image.sensor.clone(), image.utime)),
         }
         let mut report = ObstacleReport::default();
-        match self
-            .evaluator
-            .evaluate(&image, &pose.world_from_vehicle, &mut report)
-        {
+        match self.evaluator.evaluate_with(
+            &image,
+            &pose.world_from_vehicle,
+            &mut report,
+            &*self.runner,
+        ) {
             Ok(stats) => {
                 self.totals.accumulate(&stats);
                 self.reports += 1;

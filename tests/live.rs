@@ -92,30 +92,17 @@ fn lockstep(log: &Path, config: &Config) -> BTreeMap<Utime, SteeringCommand> {
 }
 
 /// Publishes the log's inputs (POSE, RANGE_IMAGE*, WAYPOINTS) at `speed` ×
-/// real time; returns how many range images it published.
-fn feed(log: &Path, speed: f64, mut publish: impl FnMut(&str, &[u8])) -> usize {
-    let started = Instant::now();
-    let mut first = None;
-    let mut images = 0;
-    for event in LogReader::open(log).unwrap() {
-        let event = event.unwrap();
-        let input = event.channel == channels::POSE
-            || event.channel == channels::WAYPOINTS
-            || event.channel.starts_with(channels::RANGE_IMAGE);
-        if !input {
-            continue;
-        }
-        let t0 = *first.get_or_insert(event.timestamp);
-        let due = Duration::from_secs_f64((event.timestamp - t0) as f64 * 1e-6 / speed);
-        if let Some(wait) = due.checked_sub(started.elapsed()) {
-            std::thread::sleep(wait);
-        }
-        if event.channel.starts_with(channels::RANGE_IMAGE) {
-            images += 1;
-        }
-        publish(&event.channel, &event.data);
-    }
-    images
+/// real time.
+fn feed(log: &Path, speed: f64, mut publish: impl FnMut(&str, &[u8])) {
+    let input = |channel: &str| {
+        channel == channels::POSE
+            || channel == channels::WAYPOINTS
+            || channel.starts_with(channels::RANGE_IMAGE)
+    };
+    arcnav_bus::log::play(LogReader::open(log).unwrap(), speed, input, |e| {
+        publish(&e.channel, &e.data)
+    })
+    .unwrap();
 }
 
 /// How live commands agree with the lock-step ones over the replayed cycles

@@ -257,6 +257,35 @@ impl<R: Read> Iterator for LogReader<R> {
     }
 }
 
+/// Plays the events of `log` whose channel `keep` accepts at `speed` × the
+/// pace they were logged at, handing each to `publish` on time (what
+/// `lcm-logplayer` does, for feeding an LCM instance in-process). Returns the
+/// number of events played.
+pub fn play<R: Read>(
+    log: LogReader<R>,
+    speed: f64,
+    keep: impl Fn(&str) -> bool,
+    mut publish: impl FnMut(&LogEvent),
+) -> io::Result<u64> {
+    let started = std::time::Instant::now();
+    let mut first = None;
+    let mut played = 0;
+    for event in log {
+        let event = event?;
+        if !keep(&event.channel) {
+            continue;
+        }
+        let t0 = *first.get_or_insert(event.timestamp);
+        let due = (event.timestamp - t0).max(0) as f64 * 1e-6 / speed;
+        if let Some(wait) = std::time::Duration::from_secs_f64(due).checked_sub(started.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        publish(&event);
+        played += 1;
+    }
+    Ok(played)
+}
+
 fn array<const N: usize>(bytes: &[u8]) -> [u8; N] {
     let mut out = [0u8; N];
     out.copy_from_slice(&bytes[..N]);
@@ -529,5 +558,32 @@ mod tests {
             .unwrap();
         assert_eq!(events.len(), 2);
         assert_eq!(events[1].data.len(), 70_000);
+    }
+
+    #[test]
+    fn play_keeps_the_pace_and_the_chosen_channels() {
+        let mut writer = LogWriter::new(Vec::new());
+        for (t, channel) in [(0, "A"), (100_000, "B"), (200_000, "A"), (400_000, "A")] {
+            writer.write_event(1_000_000 + t, channel, &[1, 2]).unwrap();
+        }
+        let bytes = writer.into_inner();
+        let started = std::time::Instant::now();
+        let mut seen = Vec::new();
+        let played = play(
+            LogReader::new(&bytes[..]),
+            2.0,
+            |c| c == "A",
+            |e| {
+                seen.push((e.timestamp, started.elapsed()));
+            },
+        )
+        .unwrap();
+        assert_eq!(played, 3);
+        assert_eq!(
+            seen.iter().map(|s| s.0).collect::<Vec<_>>(),
+            [1_000_000, 1_200_000, 1_400_000]
+        );
+        // At twice the pace, the last event (0.4 s in) comes after 0.2 s.
+        assert!(seen[2].1 >= std::time::Duration::from_millis(200));
     }
 }

@@ -28,7 +28,8 @@ use arcnav_vehicle::frames::level_frame;
 
 use crate::config::PerceptionConfig;
 use crate::evaluator::{
-    ImageStats, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, TerrainEvaluator,
+    ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner,
+    TerrainEvaluator,
 };
 use crate::fov::FovBuilder;
 use crate::image::RangeImage;
@@ -63,6 +64,18 @@ impl Cell {
         self.z_max = if z > self.z_max { z } else { self.z_max };
         let terms = [dx, dy, z, dx * dx, dx * dy, dy * dy, dx * z, dy * z];
         for (sum, term) in self.sums.iter_mut().zip(terms) {
+            *sum += term;
+        }
+    }
+}
+
+impl Cell {
+    /// Adds the points of `other`, the same cell binned from other columns.
+    fn merge(&mut self, other: &Cell) {
+        self.count += other.count;
+        self.z_min = self.z_min.min(other.z_min);
+        self.z_max = self.z_max.max(other.z_max);
+        for (sum, term) in self.sums.iter_mut().zip(other.sums) {
             *sum += term;
         }
     }
@@ -170,6 +183,163 @@ impl BeamTrig {
 
 const EMPTY_SLOT: u32 = u32::MAX;
 
+/// An image's columns are binned in this many parts, which a
+/// [`Runner`] may bin at the same time; the parts are merged in a fixed
+/// order, so the result is the same however they ran.
+const PARTS: usize = 2;
+
+/// Images with fewer pixels are binned in order whatever the runner: a
+/// thread hand-off would cost more than it saves.
+const PARALLEL_MIN_PIXELS: usize = 1 << 16;
+
+/// The cells binned from a part of an image's columns.
+#[derive(Debug)]
+struct Bins {
+    /// Per grid cell: its slot in `cells`, or `EMPTY_SLOT`.
+    slots: Vec<u32>,
+    /// The cells this part touched, in first-touch order.
+    cells: Vec<Cell>,
+    /// Per column of the part: the first and last row with a valid return.
+    column_rows: Vec<(u32, u32)>,
+    /// No return, out of range, outside the grid, valid.
+    counts: [u32; 4],
+}
+
+impl Bins {
+    fn new(side: usize) -> Self {
+        Self {
+            slots: vec![EMPTY_SLOT; side * side],
+            cells: Vec::new(),
+            column_rows: Vec::new(),
+            counts: [0; 4],
+        }
+    }
+
+    /// Moves `other`'s cells into these (leaving `other` empty).
+    fn absorb(&mut self, other: &mut Bins) {
+        for cell in other.cells.drain(..) {
+            other.slots[cell.index as usize] = EMPTY_SLOT;
+            let slot = &mut self.slots[cell.index as usize];
+            if *slot == EMPTY_SLOT {
+                *slot = self.cells.len() as u32;
+                self.cells.push(cell);
+            } else {
+                self.cells[*slot as usize].merge(&cell);
+            }
+        }
+        for (count, more) in self.counts.iter_mut().zip(other.counts) {
+            *count += more;
+        }
+    }
+}
+
+/// What every part of one image's binning shares: the grid and the
+/// projection of the image's beams into the level frame.
+#[derive(Clone, Copy)]
+struct Projection<'a> {
+    ranges: &'a [f32],
+    cols: usize,
+    cos_el: &'a [f32],
+    sin_el: &'a [f32],
+    /// Per column: the rotated horizontal beam direction.
+    column_terms: &'a [[f32; 3]],
+    /// The rotated vertical axis of the sensor.
+    r2: [f32; 3],
+    t: [f32; 3],
+    cell_size: f32,
+    half: f32,
+    side: usize,
+    /// The interior of the grid, in cell units.
+    lo: f32,
+    hi: f32,
+    min_range: f32,
+    max_range: f32,
+}
+
+impl Projection<'_> {
+    /// Projects and bins the valid pixels of `columns` into `bins`, with
+    /// the AVX2 instruction set where the processor has it (the same
+    /// arithmetic, so the same result: Rust never fuses a multiply and an add
+    /// on its own).
+    fn bin(&self, columns: std::ops::Range<usize>, bins: &mut Bins) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            return unsafe { self.bin_avx2(columns, bins) };
+        }
+        self.bin_portable(columns, bins);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn bin_avx2(&self, columns: std::ops::Range<usize>, bins: &mut Bins) {
+        self.bin_portable(columns, bins);
+    }
+
+    #[inline(always)]
+    fn bin_portable(&self, columns: std::ops::Range<usize>, bins: &mut Bins) {
+        let inv_cell = 1.0 / self.cell_size;
+        let (t, r2, half, side) = (self.t, self.r2, self.half, self.side);
+        let (lo, hi) = (self.lo, self.hi);
+        let (min_range, max_range) = (self.min_range, self.max_range);
+        let (mut no_return, mut out_of_range, mut outside_grid, mut valid) =
+            (0u32, 0u32, 0u32, 0u32);
+        bins.column_rows.clear();
+        bins.column_rows.resize(columns.len(), (u32::MAX, 0));
+        let terms = &self.column_terms[columns.clone()];
+        for (row, ranges) in self.ranges.chunks_exact(self.cols.max(1)).enumerate() {
+            let (ce, se) = (self.cos_el[row], self.sin_el[row]);
+            let v = [se * r2[0], se * r2[1], se * r2[2]];
+            let ranges = &ranges[columns.clone()];
+            for (i, (&range, u)) in ranges.iter().zip(terms).enumerate() {
+                // NaN fails every comparison, so one test keeps only valid returns.
+                if !(range >= min_range && range <= max_range) {
+                    if range > 0.0 && range.is_finite() {
+                        out_of_range += 1;
+                    } else {
+                        no_return += 1;
+                    }
+                    continue;
+                }
+                let x = (ce * u[0] + v[0]) * range + t[0];
+                let y = (ce * u[1] + v[1]) * range + t[1];
+                let z = (ce * u[2] + v[2]) * range + t[2];
+                let fx = (x + half) * inv_cell;
+                let fy = (y + half) * inv_cell;
+                if !(fx >= lo && fx < hi && fy >= lo && fy < hi) {
+                    outside_grid += 1;
+                    continue;
+                }
+                debug_assert!(fx >= 0.0 && fy >= 0.0 && fx < side as f32 && fy < side as f32);
+                // SAFETY: fx and fy were just checked to be finite and within
+                // [margin, side - margin), far inside i32's range.
+                let (ix, iy) = unsafe {
+                    (
+                        fx.to_int_unchecked::<i32>() as usize,
+                        fy.to_int_unchecked::<i32>() as usize,
+                    )
+                };
+                let index = iy * side + ix;
+                let slot = &mut bins.slots[index];
+                if *slot == EMPTY_SLOT {
+                    *slot = bins.cells.len() as u32;
+                    bins.cells.push(Cell::new(index as u32));
+                }
+                let dx = x - ((ix as f32 + 0.5) * self.cell_size - half);
+                let dy = y - ((iy as f32 + 0.5) * self.cell_size - half);
+                bins.cells[*slot as usize].add(dx, dy, z);
+                valid += 1;
+                // The column's highest and lowest valid rows give its far and
+                // near return, for the field of view.
+                let span = &mut bins.column_rows[i];
+                span.0 = span.0.min(row as u32);
+                span.1 = row as u32;
+            }
+        }
+        bins.counts = [no_return, out_of_range, outside_grid, valid];
+    }
+}
+
 /// The 002 §4 classifier. Build it with [`PerceptionConfig::build_evaluator`]
 /// or [`CellClassifier::new`].
 pub struct CellClassifier {
@@ -193,17 +363,13 @@ pub struct CellClassifier {
     /// and the three above): each pair of neighbours is compared once.
     forward: [isize; 4],
     half_extent: f32,
-    /// Per grid cell: its slot in `cells`, or `EMPTY_SLOT`.
-    slots: Vec<u32>,
-    /// The cells this image touched, in first-touch order.
-    cells: Vec<Cell>,
-    /// Per touched cell (same slot): its reasons and its region.
+    /// The parts' bins; the first holds the whole image once merged.
+    bins: [Bins; PARTS],
+    /// Per touched cell (same slot as in `bins[0]`): its reasons and its region.
     labels: Vec<(Reasons, u32)>,
     queue: Vec<u32>,
     trig: BeamTrig,
     column_terms: Vec<[f32; 3]>,
-    /// Per column: the first and last row with a valid return.
-    column_rows: Vec<(u32, u32)>,
     fov: FovBuilder,
 }
 
@@ -239,19 +405,23 @@ impl CellClassifier {
             window,
             forward: [1, s - 1, s, s + 1],
             half_extent,
-            slots: vec![EMPTY_SLOT; side * side],
-            cells: Vec::new(),
+            bins: std::array::from_fn(|_| Bins::new(side)),
             labels: Vec::new(),
             queue: Vec::new(),
             trig: BeamTrig::default(),
             column_terms: Vec::new(),
-            column_rows: Vec::new(),
             fov: FovBuilder::default(),
         }
     }
 
-    /// Projects and bins every valid pixel.
-    fn bin(&mut self, image: &RangeImage, level_from_sensor: &Isometry, stats: &mut ImageStats) {
+    /// Projects and bins every valid pixel, the parts through `runner`.
+    fn bin(
+        &mut self,
+        image: &RangeImage,
+        level_from_sensor: &Isometry,
+        runner: &dyn Runner,
+        stats: &mut ImageStats,
+    ) {
         self.trig
             .update(&image.beams.elevation, &image.beams.azimuth);
         let rotation = level_from_sensor.rotation.to_rotation_matrix();
@@ -269,84 +439,55 @@ impl CellClassifier {
                 ca * r0[2] + sa * r1[2],
             ]);
         }
-        self.fov.start(cols, [t[0], t[1]]);
-        self.column_rows.clear();
-        self.column_rows.resize(cols, (u32::MAX, 0));
-        let (cell_size, inv_cell, half, side) = (
-            self.cell_size,
-            1.0 / self.cell_size,
-            self.half_extent,
-            self.side,
-        );
-        // The interior of the grid, in cell units.
-        let (lo, hi) = (self.margin as f32, (side - self.margin) as f32);
-        let (min_range, max_range) = (self.min_range.max(f32::MIN_POSITIVE), self.max_range);
-        let (mut no_return, mut out_of_range, mut outside_grid, mut valid) =
-            (0u32, 0u32, 0u32, 0u32);
-        let column_terms = std::mem::take(&mut self.column_terms);
-        for (row, ranges) in image.range.chunks_exact(cols.max(1)).enumerate() {
-            let (ce, se) = (self.trig.cos_el[row], self.trig.sin_el[row]);
-            let v = [se * r2[0], se * r2[1], se * r2[2]];
-            for (col, (&range, u)) in ranges.iter().zip(&column_terms).enumerate() {
-                // NaN fails every comparison, so one test keeps only valid returns.
-                if !(range >= min_range && range <= max_range) {
-                    if range > 0.0 && range.is_finite() {
-                        out_of_range += 1;
-                    } else {
-                        no_return += 1;
-                    }
-                    continue;
-                }
-                let x = (ce * u[0] + v[0]) * range + t[0];
-                let y = (ce * u[1] + v[1]) * range + t[1];
-                let z = (ce * u[2] + v[2]) * range + t[2];
-                let fx = (x + half) * inv_cell;
-                let fy = (y + half) * inv_cell;
-                if !(fx >= lo && fx < hi && fy >= lo && fy < hi) {
-                    outside_grid += 1;
-                    continue;
-                }
-                debug_assert!(fx >= 0.0 && fy >= 0.0 && fx < side as f32 && fy < side as f32);
-                // SAFETY: fx and fy were just checked to be finite and within
-                // [margin, side - margin), far inside i32's range.
-                let (ix, iy) = unsafe {
-                    (
-                        fx.to_int_unchecked::<i32>() as usize,
-                        fy.to_int_unchecked::<i32>() as usize,
-                    )
-                };
-                let index = iy * side + ix;
-                let slot = &mut self.slots[index];
-                if *slot == EMPTY_SLOT {
-                    *slot = self.cells.len() as u32;
-                    self.cells.push(Cell::new(index as u32));
-                }
-                let dx = x - ((ix as f32 + 0.5) * cell_size - half);
-                let dy = y - ((iy as f32 + 0.5) * cell_size - half);
-                self.cells[*slot as usize].add(dx, dy, z);
-                valid += 1;
-                // The column's highest and lowest valid rows give its far and
-                // near return, for the field of view.
-                let span = &mut self.column_rows[col];
-                span.0 = span.0.min(row as u32);
-                span.1 = row as u32;
-            }
-        }
+        let projection = Projection {
+            ranges: &image.range,
+            cols,
+            cos_el: &self.trig.cos_el,
+            sin_el: &self.trig.sin_el,
+            column_terms: &self.column_terms,
+            r2,
+            t,
+            cell_size: self.cell_size,
+            half: self.half_extent,
+            side: self.side,
+            lo: self.margin as f32,
+            hi: (self.side - self.margin) as f32,
+            min_range: self.min_range.max(f32::MIN_POSITIVE),
+            max_range: self.max_range,
+        };
+        let parts: [std::ops::Range<usize>; PARTS] =
+            std::array::from_fn(|k| cols * k / PARTS..cols * (k + 1) / PARTS);
+        let [first, second] = &mut self.bins;
+        let (left, right) = (parts[0].clone(), parts[1].clone());
+        let mut tasks: [&mut (dyn FnMut() + Send); PARTS] =
+            [&mut || projection.bin(left.clone(), first), &mut || {
+                projection.bin(right.clone(), second)
+            }];
+        runner.run(&mut tasks);
         // Far and near return of each column, for the field of view.
-        for (col, (&(top, bottom), u)) in self.column_rows.iter().zip(&column_terms).enumerate() {
-            if top == u32::MAX {
-                continue;
-            }
-            for row in [top, bottom] {
-                let row = row as usize;
-                let (ce, se) = (self.trig.cos_el[row], self.trig.sin_el[row]);
-                let range = image.range[row * cols + col];
-                let x = (ce * u[0] + se * r2[0]) * range + t[0];
-                let y = (ce * u[1] + se * r2[1]) * range + t[1];
-                self.fov.add(col, x, y);
+        self.fov.start(cols, [t[0], t[1]]);
+        for (bins, columns) in self.bins.iter().zip(&parts) {
+            for (i, &(top, bottom)) in bins.column_rows.iter().enumerate() {
+                if top == u32::MAX {
+                    continue;
+                }
+                let col = columns.start + i;
+                let u = self.column_terms[col];
+                for row in [top, bottom] {
+                    let row = row as usize;
+                    let (ce, se) = (self.trig.cos_el[row], self.trig.sin_el[row]);
+                    let range = image.range[row * cols + col];
+                    let x = (ce * u[0] + se * r2[0]) * range + t[0];
+                    let y = (ce * u[1] + se * r2[1]) * range + t[1];
+                    self.fov.add(col, x, y);
+                }
             }
         }
-        self.column_terms = column_terms;
+        let (first, rest) = self.bins.split_at_mut(1);
+        for other in rest {
+            first[0].absorb(other);
+        }
+        let [no_return, out_of_range, outside_grid, valid] = first[0].counts;
         stats.no_return += no_return;
         stats.out_of_range += out_of_range;
         stats.outside_grid += outside_grid;
@@ -358,7 +499,9 @@ impl CellClassifier {
     /// offset of the window stays inside the grid.
     #[inline]
     fn neighbour(&self, cell: &Cell, offset: isize) -> Option<usize> {
-        let slot = *self.slots.get((cell.index as isize + offset) as usize)?;
+        let slot = *self.bins[0]
+            .slots
+            .get((cell.index as isize + offset) as usize)?;
         (slot != EMPTY_SLOT).then_some(slot as usize)
     }
 
@@ -367,25 +510,25 @@ impl CellClassifier {
         let mut sums = PlaneSums::default();
         for &(offset, ox, oy) in &self.window {
             if let Some(slot) = self.neighbour(cell, offset) {
-                sums.add(&self.cells[slot], ox, oy);
+                sums.add(&self.bins[0].cells[slot], ox, oy);
             }
         }
         sums
     }
 
     /// Applies criteria (a), (b), (c) to every touched cell.
-    fn classify(&mut self, stats: &mut ImageStats) {
+    fn classify(&mut self, runner: &dyn Runner, stats: &mut ImageStats) {
         self.labels.clear();
-        self.labels
-            .resize(self.cells.len(), (Reasons::NONE, u32::MAX));
+        let cells = self.bins[0].cells.len();
+        self.labels.resize(cells, (Reasons::NONE, u32::MAX));
         // (c) first: each pair of neighbours once, both sides of a jump marked.
-        for slot in 0..self.cells.len() {
-            let cell = self.cells[slot];
+        for slot in 0..cells {
+            let cell = self.bins[0].cells[slot];
             for offset in self.forward {
                 let Some(n) = self.neighbour(&cell, offset) else {
                     continue;
                 };
-                let neighbour = &self.cells[n];
+                let neighbour = &self.bins[0].cells[n];
                 let gap = (neighbour.z_min - cell.z_max).max(cell.z_min - neighbour.z_max);
                 if gap > self.max_discontinuity {
                     self.labels[slot].0.insert(Reasons::DISCONTINUITY);
@@ -393,28 +536,57 @@ impl CellClassifier {
                 }
             }
         }
-        for slot in 0..self.cells.len() {
-            let cell = self.cells[slot];
-            let mut reasons = self.labels[slot].0;
-            if cell.count >= self.min_points {
-                if cell.z_max - cell.z_min > self.max_height_variation {
-                    reasons.insert(Reasons::HEIGHT_VARIATION);
-                }
-                if self
-                    .window_sums(&cell)
-                    .slope_tan2(self.min_plane_variance)
-                    .is_some_and(|tan2| tan2 > self.max_slope_tan2)
-                {
-                    reasons.insert(Reasons::SLOPE);
-                }
-            }
-            self.labels[slot].0 = reasons;
+        // (a) and (b) judge each cell on its own: the halves may run at once.
+        let mut labels = std::mem::take(&mut self.labels);
+        let half = cells / 2;
+        let (low, high) = labels.split_at_mut(half);
+        let this = &*self;
+        runner.run(&mut [&mut || this.judge(0, low), &mut || this.judge(half, high)]);
+        self.labels = labels;
+        for &(reasons, _) in &self.labels {
             stats.cells_evaluated += 1;
             if !reasons.is_empty() {
                 stats.untraversable += 1;
                 for (count, (reason, _)) in stats.by_reason.iter_mut().zip(Reasons::ALL) {
                     *count += u32::from(reasons.contains(reason));
                 }
+            }
+        }
+    }
+
+    /// Applies (a) and (b) to the cells from slot `first` on, one per label
+    /// (with AVX2 where the processor has it, as in [`Projection::bin`]).
+    fn judge(&self, first: usize, labels: &mut [(Reasons, u32)]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            return unsafe { self.judge_avx2(first, labels) };
+        }
+        self.judge_portable(first, labels);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn judge_avx2(&self, first: usize, labels: &mut [(Reasons, u32)]) {
+        self.judge_portable(first, labels);
+    }
+
+    #[inline(always)]
+    fn judge_portable(&self, first: usize, labels: &mut [(Reasons, u32)]) {
+        let cells = &self.bins[0].cells[first..];
+        for (cell, label) in cells.iter().zip(labels) {
+            if cell.count < self.min_points {
+                continue;
+            }
+            if cell.z_max - cell.z_min > self.max_height_variation {
+                label.0.insert(Reasons::HEIGHT_VARIATION);
+            }
+            if self
+                .window_sums(cell)
+                .slope_tan2(self.min_plane_variance)
+                .is_some_and(|tan2| tan2 > self.max_slope_tan2)
+            {
+                label.0.insert(Reasons::SLOPE);
             }
         }
     }
@@ -427,7 +599,7 @@ impl CellClassifier {
         report: &mut ObstacleReport,
         stats: &mut ImageStats,
     ) {
-        for seed in 0..self.cells.len() {
+        for seed in 0..self.bins[0].cells.len() {
             if self.labels[seed].0.is_empty() || self.labels[seed].1 != u32::MAX {
                 continue;
             }
@@ -440,7 +612,7 @@ impl CellClassifier {
             self.queue.push(seed as u32);
             self.labels[seed].1 = region;
             while let Some(slot) = self.queue.pop() {
-                let cell = self.cells[slot as usize];
+                let cell = self.bins[0].cells[slot as usize];
                 summary.cells += 1;
                 summary.reasons.insert(self.labels[slot as usize].0);
                 let side = self.side as isize;
@@ -460,7 +632,7 @@ impl CellClassifier {
         stats.regions = report.regions.len() as u32;
         let (sin, cos) = arcnav_vehicle::frames::yaw_of(world_from_level).sin_cos();
         let origin = world_from_level.translation.vector;
-        for (cell, &(reasons, region)) in self.cells.iter().zip(&self.labels) {
+        for (cell, &(reasons, region)) in self.bins[0].cells.iter().zip(&self.labels) {
             if reasons.is_empty() {
                 continue;
             }
@@ -482,10 +654,11 @@ impl CellClassifier {
     }
 
     fn reset_touched(&mut self) {
-        for cell in &self.cells {
-            self.slots[cell.index as usize] = EMPTY_SLOT;
+        let bins = &mut self.bins[0];
+        for cell in &bins.cells {
+            bins.slots[cell.index as usize] = EMPTY_SLOT;
         }
-        self.cells.clear();
+        bins.cells.clear();
     }
 }
 
@@ -499,6 +672,16 @@ impl TerrainEvaluator for CellClassifier {
         image: &RangeImage,
         world_from_vehicle: &Isometry,
         report: &mut ObstacleReport,
+    ) -> Result<ImageStats, PerceptionError> {
+        self.evaluate_with(image, world_from_vehicle, report, &InOrder)
+    }
+
+    fn evaluate_with(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+        runner: &dyn Runner,
     ) -> Result<ImageStats, PerceptionError> {
         report.clear();
         image.validate()?;
@@ -515,8 +698,13 @@ impl TerrainEvaluator for CellClassifier {
         let world_from_level = level_frame(world_from_vehicle);
         let level_from_sensor =
             world_from_level.inverse() * world_from_vehicle * image.vehicle_from_sensor;
-        self.bin(image, &level_from_sensor, &mut stats);
-        self.classify(&mut stats);
+        let runner: &dyn Runner = if image.range.len() >= PARALLEL_MIN_PIXELS {
+            runner
+        } else {
+            &InOrder
+        };
+        self.bin(image, &level_from_sensor, runner, &mut stats);
+        self.classify(runner, &mut stats);
         self.emit(&world_from_level, report, &mut stats);
         self.fov
             .finish(&world_from_level, self.fov_max_vertices, &mut report.fov);

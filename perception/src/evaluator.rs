@@ -165,6 +165,26 @@ pub enum PerceptionError {
     Image(#[from] ImageError),
 }
 
+/// Runs the independent pieces of one evaluation, possibly at the same time.
+/// Perception never starts threads: an executor that has threads to spare
+/// passes a runner that uses them. Results never depend on the runner.
+pub trait Runner: Sync {
+    /// Runs every task once; returns when all are done.
+    fn run(&self, tasks: &mut [&mut (dyn FnMut() + Send)]);
+}
+
+/// Runs the tasks one after the other, on the calling thread.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct InOrder;
+
+impl Runner for InOrder {
+    fn run(&self, tasks: &mut [&mut (dyn FnMut() + Send)]) {
+        for task in tasks {
+            task();
+        }
+    }
+}
+
 /// A per-image terrain evaluator.
 pub trait TerrainEvaluator: Send {
     /// Short name, as in the configuration.
@@ -179,6 +199,20 @@ pub trait TerrainEvaluator: Send {
         world_from_vehicle: &Isometry,
         report: &mut ObstacleReport,
     ) -> Result<ImageStats, PerceptionError>;
+
+    /// [`TerrainEvaluator::evaluate`], with independent pieces of the work
+    /// handed to `runner` (which may run them at the same time). The result
+    /// is the same as `evaluate`'s.
+    fn evaluate_with(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+        runner: &dyn Runner,
+    ) -> Result<ImageStats, PerceptionError> {
+        let _ = runner;
+        self.evaluate(image, world_from_vehicle, report)
+    }
 
     /// Forgets anything carried between images (for evaluators that fuse).
     fn reset(&mut self) {}

@@ -26,7 +26,8 @@ pub mod sensor;
 pub use cells::CellClassifier;
 pub use config::{CellsConfig, PerceptionConfig};
 pub use evaluator::{
-    ImageStats, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, TerrainEvaluator,
+    ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner,
+    TerrainEvaluator,
 };
 pub use fov::FovPolygon;
 pub use image::{BeamTable, ImageError, RangeImage};

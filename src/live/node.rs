@@ -84,7 +84,8 @@ fn perception(
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
-    let node = PerceptionNode::new(config)?;
+    let mut node = PerceptionNode::new(config)?;
+    node.set_runner(Box::new(super::threaded::PerceptionHelper::new()?));
     let publisher = lcm.publisher();
     let (slot, images, replaced) = stages::newest_wins();
     let (poses_tx, poses) = crossbeam_channel::bounded(config.live.queue_capacity);

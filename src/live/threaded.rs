@@ -192,6 +192,36 @@ pub(crate) fn expected_behaviours(config: &Config) -> Vec<String> {
         .collect()
 }
 
+/// A helper thread for perception: the perception thread bins and judges
+/// half of each large image itself and hands the other half to it.
+pub struct PerceptionHelper(rayon::ThreadPool);
+
+impl PerceptionHelper {
+    pub fn new() -> Result<Self, LiveError> {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .thread_name(|_| "perception-helper".into())
+            .build()
+            .map(Self)
+            .map_err(|e| LiveError::Spawn {
+                node: "perception-helper",
+                source: std::io::Error::other(e),
+            })
+    }
+}
+
+impl arcnav_perception::Runner for PerceptionHelper {
+    fn run(&self, tasks: &mut [&mut (dyn FnMut() + Send)]) {
+        self.0.in_place_scope(|scope| {
+            let (first, rest) = tasks.split_at_mut(1);
+            for task in rest {
+                scope.spawn(move |_| task());
+            }
+            first.iter_mut().for_each(|task| task());
+        });
+    }
+}
+
 /// Perception on its own thread's loop: poses and the newest image in,
 /// reports (with their image's arrival time) out, until the inputs close.
 pub(crate) fn perception_worker(
@@ -311,7 +341,8 @@ pub fn run(
     let started = Instant::now();
     let live = config.live.clone();
     let arcs = config.arc_set()?;
-    let perception = PerceptionNode::new(config)?;
+    let mut perception = PerceptionNode::new(config)?;
+    perception.set_runner(Box::new(PerceptionHelper::new()?));
     let mut map = MapStage::new(config);
     let mut behaviours =
         BehaviourNode::new(config.build_behaviours(registry, &arcs)?, arcs.clone());

@@ -1,0 +1,115 @@
+//! End-to-end latency of `arcnav run` (the threaded executor): from a range
+//! image's arrival to the publication of the first command decided on a map
+//! holding its cells, p50 and p99, for the 2 Hz ERIM and the 10 Hz 128×2048
+//! lidar (target: p99 ≤ 5 ms for 128×2048). Logs of the short course are
+//! made once by the simulator into target/bench-data and played in real
+//! time into the executor over LCM's in-process `memq://` provider, with the
+//! default live configuration (new cells trigger a decision at once).
+//!
+//! `cargo bench --bench live [-- SECONDS]` (default: 30 s of each log).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+use arcnav::Config;
+use arcnav::live::threaded::{self, LiveOptions};
+use arcnav::mission::{MissionOptions, run_mission};
+use arcnav_behaviours::Registry;
+use arcnav_bus::log::LogReader;
+use arcnav_bus::messages::channels;
+use arcnav_bus::transport::Lcm;
+use arcnav_perception::SensorPreset;
+use arcnav_sim::World;
+
+fn make_log(path: &Path, config: &Config) {
+    if path.exists() {
+        return;
+    }
+    eprintln!("making {} (once)...", path.display());
+    let world = Arc::new(
+        World::embedded("short_course")
+            .expect("embedded")
+            .expect("valid"),
+    );
+    let options = MissionOptions {
+        log: Some(path.to_owned()),
+        ..MissionOptions::default()
+    };
+    run_mission(config, &Registry::builtin(), world, &options, &mut |_| {})
+        .expect("the mission runs");
+}
+
+fn measure(label: &str, log: &Path, config: &Config, speed: f64) {
+    let lcm = Lcm::new("memq://").expect("memq");
+    let publisher = lcm.publisher();
+    let (ready, is_ready) = crossbeam_channel::bounded(1);
+    let options = LiveOptions {
+        ready: Some(ready),
+        ..LiveOptions::default()
+    };
+    let flag = Arc::clone(&options.stop.flag);
+    let runner = {
+        let config = config.clone();
+        std::thread::spawn(move || threaded::run(&config, &Registry::builtin(), lcm, &options))
+    };
+    is_ready.recv().expect("the executor starts");
+    let input = |channel: &str| {
+        channel == channels::POSE
+            || channel == channels::WAYPOINTS
+            || channel.starts_with(channels::RANGE_IMAGE)
+    };
+    arcnav_bus::log::play(LogReader::open(log).expect("log"), speed, input, |e| {
+        publisher
+            .publish(&e.channel, &e.data)
+            .expect("memq publish")
+    })
+    .expect("log plays");
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    flag.store(true, Ordering::Relaxed);
+    let report = runner.join().expect("no panic").expect("runs");
+    let a = report.arrival_to_command_ms;
+    let perception = &report.nodes[1].busy_ms;
+    println!(
+        "{label:<10} image arrival → command: p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms over {} images \
+         (perception p50 {:.2} ms, p99 {:.2} ms){}",
+        a.p50,
+        a.p99,
+        a.max,
+        a.count,
+        perception.p50,
+        perception.p99,
+        if label.contains("128") {
+            format!(
+                " target p99 ≤ 5 ms: {}",
+                if a.p99 <= 5.0 { "met" } else { "NOT met" }
+            )
+        } else {
+            String::new()
+        }
+    );
+    if std::env::var_os("ARCNAV_BENCH_TABLE").is_some() {
+        print!("{}", report.table());
+    }
+}
+
+fn main() {
+    let seconds: f64 = std::env::args()
+        .skip(1)
+        .find_map(|a| a.parse().ok())
+        .unwrap_or(30.0);
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/bench-data");
+    std::fs::create_dir_all(&data).expect("create target/bench-data");
+    for (label, preset) in [
+        ("ERIM", SensorPreset::Erim),
+        ("128×2048", SensorPreset::Lidar128),
+    ] {
+        let mut config = Config::default();
+        config.sensor.preset = preset;
+        config.sim.time_limit_s = seconds;
+        config.live.status_period_s = 0.0;
+        let log = data.join(format!("live-{preset:?}-{seconds}s.lcm").to_lowercase());
+        make_log(&log, &config);
+        measure(label, &log, &config, 1.0);
+    }
+}
