@@ -180,6 +180,26 @@ impl NodeStatus {
         }
     }
 
+    /// One item took `ms` of its `period_ms` budget; longer is an overrun,
+    /// logged the 1st, 2nd, 4th, 8th… time (the node cannot keep up).
+    pub fn took(&mut self, busy: &mut Samples, ms: f64, period_ms: f64) {
+        busy.add(ms);
+        if ms > period_ms {
+            self.set_overruns(
+                self.overruns + 1,
+                &format!("took {ms:.1} ms of a {period_ms:.0} ms period"),
+            );
+        }
+    }
+
+    /// Sets the overrun count, logging when it reaches a power of two.
+    pub fn set_overruns(&mut self, overruns: u64, what: &str) {
+        if overruns > self.overruns && overruns.is_power_of_two() {
+            tracing::warn!(node = %self.node, overruns, "cannot keep up: {what}");
+        }
+        self.overruns = overruns;
+    }
+
     pub fn queue(&mut self, depth: usize) {
         self.queue_depth = depth;
         self.queue_max = self.queue_max.max(depth);

@@ -168,11 +168,7 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
                 if let Err(e) = publisher.publish_message(channels::LOCAL_MAP, &msg) {
                     tracing::error!(%e, "cannot publish the local map");
                 }
-                let ms = started.elapsed().as_secs_f64() * 1e3;
-                busy.add(ms);
-                if ms > period_ms {
-                    status.overruns += 1;
-                }
+                status.took(&mut busy, started.elapsed().as_secs_f64() * 1e3, period_ms);
             }
             if ticker.due(now) {
                 fill(&mut status, &stage, &busy);
@@ -239,12 +235,12 @@ fn behaviour(
                             if let Err(e) = publisher.publish_message(&channel, &msg) {
                                 tracing::error!(%e, "cannot publish the votes");
                             }
-                            let ms = started.elapsed().as_secs_f64() * 1e3;
-                            busy.add(ms);
                             status.handled += 1;
-                            if ms > period_ms {
-                                status.overruns += 1;
-                            }
+                            status.took(
+                                &mut busy,
+                                started.elapsed().as_secs_f64() * 1e3,
+                                period_ms,
+                            );
                         }
                         Err(e) => {
                             tracing::warn!(%e, "local map refused");

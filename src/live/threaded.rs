@@ -241,7 +241,10 @@ pub(crate) fn perception_worker(
         let replaced = replaced.load(Ordering::Relaxed);
         status.handled = node.reports;
         status.busy_ms = busy.summary();
-        status.overruns = replaced;
+        status.set_overruns(
+            replaced,
+            "range images replaced by newer ones before evaluation",
+        );
         status.queue(node.waiting());
         status.dropped =
             replaced + node.drops.no_pose + node.drops.invalid + node.drops.out_of_order;
@@ -271,6 +274,10 @@ pub(crate) fn perception_worker(
         if !reports.is_empty() {
             busy.add(started.elapsed().as_secs_f64() * 1e3);
         }
+        status.set_overruns(
+            replaced.load(Ordering::Relaxed),
+            "range images replaced by newer ones before evaluation",
+        );
         for report in reports.drain(..) {
             let arrival = arrivals
                 .iter()
@@ -421,11 +428,7 @@ pub fn run(
                             behaviours.reset();
                         }
                         let votes = behaviours.on_cycle(cycle.utime, &cycle.pose, &cycle.map).to_vec();
-                        let ms = started.elapsed().as_secs_f64() * 1e3;
-                        busy.add(ms);
-                        if ms > period_s * 1e3 {
-                            status.overruns += 1;
-                        }
+                        status.took(&mut busy, started.elapsed().as_secs_f64() * 1e3, period_s * 1e3);
                         status.handled += 1;
                         let _ = arbiter_tx.send(ToArbiter::Votes { votes, images: cycle.images });
                     },
@@ -577,11 +580,11 @@ fn map_worker(
             Next::Closed => break,
         }
         if !out.is_empty() {
-            let ms = started.elapsed().as_secs_f64() * 1e3;
-            busy.add(ms);
-            if ms > period_s * 1e3 {
-                status.overruns += 1;
-            }
+            status.took(
+                &mut busy,
+                started.elapsed().as_secs_f64() * 1e3,
+                period_s * 1e3,
+            );
         }
         for cycle in out.drain(..) {
             cycles.put(cycle);
