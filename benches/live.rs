@@ -10,15 +10,13 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 
 use arcnav::Config;
-use arcnav::live::threaded::{self, LiveOptions};
+use arcnav::live::threaded::InProcess;
 use arcnav::mission::{MissionOptions, run_mission};
 use arcnav_behaviours::Registry;
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::channels;
-use arcnav_bus::transport::Lcm;
 use arcnav_perception::SensorPreset;
 use arcnav_sim::World;
 
@@ -41,33 +39,16 @@ fn make_log(path: &Path, config: &Config) {
 }
 
 fn measure(label: &str, log: &Path, config: &Config, speed: f64) {
-    let lcm = Lcm::new("memq://").expect("memq");
-    let publisher = lcm.publisher();
-    let (ready, is_ready) = crossbeam_channel::bounded(1);
-    let options = LiveOptions {
-        ready: Some(ready),
-        ..LiveOptions::default()
-    };
-    let flag = Arc::clone(&options.stop.flag);
-    let runner = {
-        let config = config.clone();
-        std::thread::spawn(move || threaded::run(&config, &Registry::builtin(), lcm, &options))
-    };
-    is_ready.recv().expect("the executor starts");
-    let input = |channel: &str| {
-        channel == channels::POSE
-            || channel == channels::WAYPOINTS
-            || channel.starts_with(channels::RANGE_IMAGE)
-    };
-    arcnav_bus::log::play(LogReader::open(log).expect("log"), speed, input, |e| {
-        publisher
+    let run = InProcess::start(config, Registry::builtin(), None).expect("arcnav run starts");
+    let log = LogReader::open(log).expect("log");
+    arcnav_bus::log::play(log, speed, channels::is_input, |e| {
+        run.publisher()
             .publish(&e.channel, &e.data)
             .expect("memq publish")
     })
     .expect("log plays");
     std::thread::sleep(std::time::Duration::from_millis(300));
-    flag.store(true, Ordering::Relaxed);
-    let report = runner.join().expect("no panic").expect("runs");
+    let report = run.stop().expect("runs");
     let a = report.arrival_to_command_ms;
     let perception = &report.nodes[1].busy_ms;
     println!(

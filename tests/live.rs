@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use arcnav::Config;
 use arcnav::live::stages::{Decided, Hazard, Why};
-use arcnav::live::threaded::{self, LiveOptions};
+use arcnav::live::threaded::InProcess;
 use arcnav::mission::{MissionOptions, SIM_EPOCH_US, run_mission};
 use arcnav::replay::{ReplayOptions, replay};
 use arcnav_behaviours::Registry;
@@ -94,12 +94,8 @@ fn lockstep(log: &Path, config: &Config) -> BTreeMap<Utime, SteeringCommand> {
 /// Publishes the log's inputs (POSE, RANGE_IMAGE*, WAYPOINTS) at `speed` ×
 /// real time.
 fn feed(log: &Path, speed: f64, mut publish: impl FnMut(&str, &[u8])) {
-    let input = |channel: &str| {
-        channel == channels::POSE
-            || channel == channels::WAYPOINTS
-            || channel.starts_with(channels::RANGE_IMAGE)
-    };
-    arcnav_bus::log::play(LogReader::open(log).unwrap(), speed, input, |e| {
+    let log = LogReader::open(log).unwrap();
+    arcnav_bus::log::play(log, speed, channels::is_input, |e| {
         publish(&e.channel, &e.data)
     })
     .unwrap();
@@ -155,29 +151,15 @@ fn the_threaded_executor_gives_the_lockstep_commands() {
     let config = config(SensorPreset::Erim, true);
     let log = sim_log(SensorPreset::Erim);
     let expected = lockstep(&log, &config);
-    let lcm = Lcm::new("memq://").unwrap();
-    let publisher = lcm.publisher();
     let (tap, taken) = crossbeam_channel::unbounded::<Decided>();
-    let (ready, is_ready) = crossbeam_channel::bounded(1);
-    let options = LiveOptions {
-        command_tap: Some(tap),
-        ready: Some(ready),
-        ..LiveOptions::default()
-    };
-    let flag = Arc::clone(&options.stop.flag);
-    let runner = {
-        let config = config.clone();
-        std::thread::spawn(move || threaded::run(&config, &Registry::builtin(), lcm, &options))
-    };
-    is_ready.recv_timeout(Duration::from_secs(30)).unwrap();
+    let run = InProcess::start(&config, Registry::builtin(), Some(tap)).unwrap();
     // Four times real time: perception still delivers long before the
     // modelled 0.3 s latency.
     feed(&log, 4.0, |channel, data| {
-        publisher.publish(channel, data).unwrap()
+        run.publisher().publish(channel, data).unwrap()
     });
     std::thread::sleep(Duration::from_millis(300));
-    flag.store(true, std::sync::atomic::Ordering::Relaxed);
-    let report = runner.join().unwrap().unwrap();
+    let report = run.stop().unwrap();
     let decided: Vec<Decided> = taken.try_iter().collect();
     let live: BTreeMap<Utime, SteeringCommand> = decided
         .iter()
@@ -394,6 +376,59 @@ fn write_config(config: &Config, dir: &Path) -> String {
     path.display().to_string()
 }
 
+/// What a network test needs: the reference tools, a namespace of its own,
+/// a log to play and a configuration file; one test at a time.
+struct Net {
+    _serial: MutexGuard<'static, ()>,
+    reference: LcmReference,
+    ns: NetNs,
+    log: PathBuf,
+    config: Config,
+    file: String,
+}
+
+impl Net {
+    /// `None` (skipped locally, failed under CI) without root or the tools.
+    fn setup(tag: &str, config: Config, log: impl FnOnce(&Config) -> PathBuf) -> Option<Net> {
+        let serial = serial();
+        let reference = LcmReference::require()?;
+        let ns = NetNs::require(tag)?;
+        let log = log(&config);
+        let file = write_config(&config, &temp_dir(&format!("live-{tag}")));
+        Some(Net {
+            _serial: serial,
+            reference,
+            ns,
+            log,
+            config,
+            file,
+        })
+    }
+
+    /// The ERIM log of the short course under `config`.
+    fn erim(tag: &str, config: Config) -> Option<Net> {
+        Net::setup(tag, config, |_| sim_log(SensorPreset::Erim))
+    }
+
+    /// `arcnav ARGS --config FILE` inside the namespace.
+    fn arcnav(&self, name: &str, args: &[&str]) -> Proc {
+        let args: Vec<&str> = args
+            .iter()
+            .copied()
+            .chain(["--config", self.file.as_str()])
+            .collect();
+        Proc::arcnav(&self.ns, name, &args)
+    }
+
+    /// The reference player on the test's log.
+    fn play(&self, channels: &str, speed: f64) -> Child {
+        logplayer(&self.ns, &self.reference, &self.log, channels, speed)
+    }
+}
+
+/// Every input of the pipeline, as `lcm-logplayer -e` takes it.
+const INPUTS: &str = "POSE|RANGE_IMAGE.*|WAYPOINTS";
+
 /// Checks `received` against the lock-step replay of `log`.
 fn assert_reproduces(label: &str, received: &Received, log: &Path, config: &Config) {
     let expected = lockstep(log, config);
@@ -432,41 +467,29 @@ fn assert_reproduces(label: &str, received: &Received, log: &Path, config: &Conf
 
 #[test]
 fn distributed_nodes_reproduce_the_lockstep_replay_over_udp_multicast() {
-    let _serial = serial();
-    let Some(reference) = LcmReference::require() else {
+    let Some(net) = Net::erim("distributed", config(SensorPreset::Erim, true)) else {
         return;
     };
-    let Some(ns) = NetNs::require("distributed") else {
-        return;
-    };
-    let log = sim_log(SensorPreset::Erim);
-    let config = config(SensorPreset::Erim, true);
-    let dir = temp_dir("live-distributed");
-    let file = write_config(&config, &dir);
-    let nodes: Vec<(&str, Vec<&str>)> = vec![
-        ("perception", vec!["node", "perception"]),
-        ("localmap", vec!["node", "localmap"]),
+    let nodes: [(&str, &[&str]); 5] = [
+        ("perception", &["node", "perception", "--stats"]),
+        ("localmap", &["node", "localmap", "--stats"]),
         (
             "obstacle_avoidance",
-            vec!["node", "behaviour", "obstacle_avoidance"],
+            &["node", "behaviour", "obstacle_avoidance", "--stats"],
         ),
-        ("goal_seeking", vec!["node", "behaviour", "goal_seeking"]),
-        ("arbiter", vec!["node", "arbiter"]),
+        (
+            "goal_seeking",
+            &["node", "behaviour", "goal_seeking", "--stats"],
+        ),
+        ("arbiter", &["node", "arbiter", "--stats"]),
     ];
-    let (stats, received) = recording(&ns, || {
+    let (stats, received) = recording(&net.ns, || {
         let procs: Vec<Proc> = nodes
             .iter()
-            .map(|(name, args)| {
-                let mut args = args.clone();
-                args.extend(["--config", &file, "--stats"]);
-                Proc::arcnav(&ns, name, &args)
-            })
+            .map(|(name, args)| net.arcnav(name, args))
             .collect();
         procs.iter().for_each(Proc::wait_ready);
-        let status = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0)
-            .wait()
-            .unwrap();
-        assert!(status.success());
+        assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
         std::thread::sleep(Duration::from_millis(300));
         procs.iter().for_each(|p| p.signal("TERM"));
         let mut stats = String::new();
@@ -478,7 +501,7 @@ fn distributed_nodes_reproduce_the_lockstep_replay_over_udp_multicast() {
         stats
     });
     eprintln!("{stats}");
-    assert_reproduces("distributed", &received, &log, &config);
+    assert_reproduces("distributed", &received, &net.log, &net.config);
     // Every node reported its figures.
     for node in [
         "perception",
@@ -492,24 +515,13 @@ fn distributed_nodes_reproduce_the_lockstep_replay_over_udp_multicast() {
 
 #[test]
 fn arcnav_run_reproduces_the_lockstep_replay_over_udp_multicast() {
-    let _serial = serial();
-    let Some(reference) = LcmReference::require() else {
+    let Some(net) = Net::erim("run", config(SensorPreset::Erim, true)) else {
         return;
     };
-    let Some(ns) = NetNs::require("run") else {
-        return;
-    };
-    let log = sim_log(SensorPreset::Erim);
-    let config = config(SensorPreset::Erim, true);
-    let dir = temp_dir("live-run");
-    let file = write_config(&config, &dir);
-    let (stats, received) = recording(&ns, || {
-        let run = Proc::arcnav(&ns, "run", &["run", "--config", &file, "--stats"]);
+    let (stats, received) = recording(&net.ns, || {
+        let run = net.arcnav("run", &["run", "--stats"]);
         run.wait_ready();
-        let status = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0)
-            .wait()
-            .unwrap();
-        assert!(status.success());
+        assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
         std::thread::sleep(Duration::from_millis(300));
         run.signal("TERM");
         let (code, out) = run.finish();
@@ -517,7 +529,7 @@ fn arcnav_run_reproduces_the_lockstep_replay_over_udp_multicast() {
         out
     });
     eprintln!("{stats}");
-    assert_reproduces("arcnav run", &received, &log, &config);
+    assert_reproduces("arcnav run", &received, &net.log, &net.config);
     assert!(stats.contains("image arrival→command"), "{stats}");
 }
 
@@ -534,36 +546,23 @@ fn stop_after(received: &Received, after: Instant, until: Instant) -> Option<(Du
 
 #[test]
 fn killing_obstacle_avoidance_makes_the_arbiter_stop_within_its_timeout() {
-    let _serial = serial();
-    let Some(reference) = LcmReference::require() else {
+    let Some(net) = Net::erim("kill-oa", config(SensorPreset::Erim, false)) else {
         return;
     };
-    let Some(ns) = NetNs::require("kill-oa") else {
-        return;
-    };
-    let log = sim_log(SensorPreset::Erim);
-    let config = config(SensorPreset::Erim, false);
-    let timeout = config.arbiter.vote_timeout_s;
-    let dir = temp_dir("live-kill-oa");
-    let file = write_config(&config, &dir);
-    let ((killed, end), received) = recording(&ns, || {
-        let common = ["--config", file.as_str()];
-        let spawn = |name: &str, args: &[&str]| {
-            let args: Vec<&str> = args.iter().chain(common.iter()).copied().collect();
-            Proc::arcnav(&ns, name, &args)
-        };
+    let timeout = net.config.arbiter.vote_timeout_s;
+    let ((killed, end), received) = recording(&net.ns, || {
         let procs = vec![
-            spawn("perception", &["node", "perception"]),
-            spawn("localmap", &["node", "localmap"]),
-            spawn("goal_seeking", &["node", "behaviour", "goal_seeking"]),
-            spawn("arbiter", &["node", "arbiter"]),
+            net.arcnav("perception", &["node", "perception"]),
+            net.arcnav("localmap", &["node", "localmap"]),
+            net.arcnav("goal_seeking", &["node", "behaviour", "goal_seeking"]),
+            net.arcnav("arbiter", &["node", "arbiter"]),
         ];
-        let oa = spawn(
+        let oa = net.arcnav(
             "obstacle_avoidance",
             &["node", "behaviour", "obstacle_avoidance"],
         );
         procs.iter().chain([&oa]).for_each(Proc::wait_ready);
-        let mut feeder = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0);
+        let mut feeder = net.play(INPUTS, 1.0);
         std::thread::sleep(Duration::from_secs(4));
         oa.signal("KILL");
         let killed = Instant::now();
@@ -605,24 +604,16 @@ fn killing_obstacle_avoidance_makes_the_arbiter_stop_within_its_timeout() {
 
 #[test]
 fn a_silent_pose_stream_stops_the_vehicle_and_sigterm_publishes_a_final_stop() {
-    let _serial = serial();
-    let Some(reference) = LcmReference::require() else {
+    let Some(net) = Net::erim("poses", config(SensorPreset::Erim, false)) else {
         return;
     };
-    let Some(ns) = NetNs::require("poses") else {
-        return;
-    };
-    let log = sim_log(SensorPreset::Erim);
-    let config = config(SensorPreset::Erim, false);
-    let timeout = config.live.pose_timeout_s;
-    let dir = temp_dir("live-poses");
-    let file = write_config(&config, &dir);
-    let ((silenced, terminated, end), received) = recording(&ns, || {
-        let run = Proc::arcnav(&ns, "run", &["run", "--config", &file]);
+    let timeout = net.config.live.pose_timeout_s;
+    let ((silenced, terminated, end), received) = recording(&net.ns, || {
+        let run = net.arcnav("run", &["run"]);
         run.wait_ready();
         // Poses and images from two players: only the poses stop.
-        let mut images = logplayer(&ns, &reference, &log, "RANGE_IMAGE.*|WAYPOINTS", 1.0);
-        let mut poses = logplayer(&ns, &reference, &log, "POSE", 1.0);
+        let mut images = net.play("RANGE_IMAGE.*|WAYPOINTS", 1.0);
+        let mut poses = net.play("POSE", 1.0);
         std::thread::sleep(Duration::from_secs(4));
         let _ = poses.kill();
         let silenced = Instant::now();
@@ -659,21 +650,13 @@ fn a_silent_pose_stream_stops_the_vehicle_and_sigterm_publishes_a_final_stop() {
 
 #[test]
 fn when_arcnav_dies_the_vehicle_watchdog_stops_the_vehicle() {
-    let _serial = serial();
-    let Some(reference) = LcmReference::require() else {
+    let Some(net) = Net::erim("sigkill", config(SensorPreset::Erim, false)) else {
         return;
     };
-    let Some(ns) = NetNs::require("sigkill") else {
-        return;
-    };
-    let log = sim_log(SensorPreset::Erim);
-    let config = config(SensorPreset::Erim, false);
-    let dir = temp_dir("live-sigkill");
-    let file = write_config(&config, &dir);
-    let (killed, received) = recording(&ns, || {
-        let run = Proc::arcnav(&ns, "run", &["run", "--config", &file]);
+    let (killed, received) = recording(&net.ns, || {
+        let run = net.arcnav("run", &["run"]);
         run.wait_ready();
-        let mut feeder = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*|WAYPOINTS", 1.0);
+        let mut feeder = net.play(INPUTS, 1.0);
         std::thread::sleep(Duration::from_secs(3));
         // No chance to publish a final stop.
         run.signal("KILL");
@@ -702,19 +685,14 @@ fn when_arcnav_dies_the_vehicle_watchdog_stops_the_vehicle() {
 
 #[test]
 fn a_flood_of_large_range_images_keeps_memory_bounded_and_counts_drops() {
-    let _serial = serial();
-    let Some(reference) = LcmReference::require() else {
-        return;
-    };
-    let Some(ns) = NetNs::require("flood") else {
-        return;
-    };
     // 128×2048 images (1 MiB each) at ten times their 10 Hz rate, four
     // times over, then at a hundred times: more than perception can take.
     let mut short = config(SensorPreset::Lidar128, false);
     short.sim.time_limit_s = 3.0;
-    let log = flood_log(&short);
-    let published = LogReader::open(&log)
+    let Some(net) = Net::setup("flood", short, flood_log) else {
+        return;
+    };
+    let published = LogReader::open(&net.log)
         .unwrap()
         .filter(|e| {
             e.as_ref()
@@ -723,14 +701,8 @@ fn a_flood_of_large_range_images_keeps_memory_bounded_and_counts_drops() {
                 .starts_with(channels::RANGE_IMAGE)
         })
         .count() as u64;
-    let dir = temp_dir("live-flood");
-    let file = write_config(&short, &dir);
-    let json = dir.join("run.json");
-    let run = Proc::arcnav(
-        &ns,
-        "run",
-        &["run", "--config", &file, "--json", json.to_str().unwrap()],
-    );
+    let json = temp_dir("live-flood-report").join("run.json");
+    let run = net.arcnav("run", &["run", "--json", json.to_str().unwrap()]);
     run.wait_ready();
     std::thread::sleep(Duration::from_millis(300));
     let baseline = run.rss_kb().unwrap();
@@ -738,7 +710,7 @@ fn a_flood_of_large_range_images_keeps_memory_bounded_and_counts_drops() {
     const ROUNDS: u64 = 5;
     for round in 0..ROUNDS {
         let speed = if round + 1 < ROUNDS { 10.0 } else { 100.0 };
-        let mut player = logplayer(&ns, &reference, &log, "POSE|RANGE_IMAGE.*", speed);
+        let mut player = net.play("POSE|RANGE_IMAGE.*", speed);
         while player.try_wait().unwrap().is_none() {
             peak = peak.max(run.rss_kb().unwrap_or(0));
             std::thread::sleep(Duration::from_millis(10));

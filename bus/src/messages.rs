@@ -30,6 +30,11 @@ pub mod channels {
         format!("{ARC_VOTES_PREFIX}{}", behaviour.to_ascii_uppercase())
     }
 
+    /// What a navigation system takes in: POSE, RANGE_IMAGE*, WAYPOINTS.
+    pub fn is_input(channel: &str) -> bool {
+        channel == POSE || channel == WAYPOINTS || channel.starts_with(RANGE_IMAGE)
+    }
+
     /// `RANGE_IMAGE_<SENSOR>`, upper-cased.
     pub fn range_image(sensor: &str) -> String {
         format!("{RANGE_IMAGE}_{}", sensor.to_ascii_uppercase())

@@ -545,6 +545,68 @@ pub fn run(
     })
 }
 
+/// `arcnav run` on an in-process LCM (`memq://`) that the caller feeds
+/// through [`InProcess::publisher`]: for tests, benchmarks and tools.
+pub struct InProcess {
+    publisher: Publisher,
+    stop: Arc<AtomicBool>,
+    handle: JoinHandle<Result<LiveReport, LiveError>>,
+}
+
+impl InProcess {
+    /// Starts the executor; returns once it receives. Every command is also
+    /// sent to `tap` when given.
+    pub fn start(
+        config: &Config,
+        registry: Registry,
+        tap: Option<Sender<Decided>>,
+    ) -> Result<Self, LiveError> {
+        let lcm = Lcm::new("memq://")?;
+        let publisher = lcm.publisher();
+        let (ready, is_ready) = crossbeam_channel::bounded(1);
+        let options = LiveOptions {
+            command_tap: tap,
+            ready: Some(ready),
+            ..LiveOptions::default()
+        };
+        let stop = Arc::clone(&options.stop.flag);
+        let config = config.clone();
+        let handle = std::thread::Builder::new()
+            .name("arcnav-run".into())
+            .spawn(move || run(&config, &registry, lcm, &options))
+            .map_err(|source| LiveError::Spawn {
+                node: "arcnav-run",
+                source,
+            })?;
+        if is_ready.recv().is_err() {
+            // The executor ended before receiving: its error says why.
+            return Err(handle
+                .join()
+                .map_err(|_| LiveError::Panicked("arcnav-run"))?
+                .err()
+                .unwrap_or(LiveError::Panicked("arcnav-run")));
+        }
+        Ok(Self {
+            publisher,
+            stop,
+            handle,
+        })
+    }
+
+    /// Publishes into the executor.
+    pub fn publisher(&self) -> &Publisher {
+        &self.publisher
+    }
+
+    /// Stops the executor (final stop included) and returns its figures.
+    pub fn stop(self) -> Result<LiveReport, LiveError> {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle
+            .join()
+            .map_err(|_| LiveError::Panicked("arcnav-run"))?
+    }
+}
+
 /// The local map's thread: poses and reports in, cycles out.
 fn map_worker(
     map: &mut MapStage,
