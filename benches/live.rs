@@ -6,37 +6,20 @@
 //! time into the executor over LCM's in-process `memq://` provider, with the
 //! default live configuration (new cells trigger a decision at once).
 //!
-//! `cargo bench --bench live [-- SECONDS]` (default: 30 s of each log).
+//! `cargo bench --bench live [-- SECONDS]` (default: 30 s of each log);
+//! `ARCNAV_BENCH_MAX_RANGE_M=25` evaluates returns only as far as the map
+//! window can use them (its far corners are 21 m from the sensor).
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+mod common;
+
+use std::path::Path;
 
 use arcnav::Config;
 use arcnav::live::threaded::InProcess;
-use arcnav::mission::{MissionOptions, run_mission};
 use arcnav_behaviours::Registry;
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::channels;
 use arcnav_perception::SensorPreset;
-use arcnav_sim::World;
-
-fn make_log(path: &Path, config: &Config) {
-    if path.exists() {
-        return;
-    }
-    eprintln!("making {} (once)...", path.display());
-    let world = Arc::new(
-        World::embedded("short_course")
-            .expect("embedded")
-            .expect("valid"),
-    );
-    let options = MissionOptions {
-        log: Some(path.to_owned()),
-        ..MissionOptions::default()
-    };
-    run_mission(config, &Registry::builtin(), world, &options, &mut |_| {})
-        .expect("the mission runs");
-}
 
 fn measure(label: &str, log: &Path, config: &Config, speed: f64) {
     let run = InProcess::start(config, Registry::builtin(), None).expect("arcnav run starts");
@@ -79,8 +62,7 @@ fn main() {
         .skip(1)
         .find_map(|a| a.parse().ok())
         .unwrap_or(30.0);
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/bench-data");
-    std::fs::create_dir_all(&data).expect("create target/bench-data");
+    let data = common::data_dir();
     for (label, preset) in [
         ("ERIM", SensorPreset::Erim),
         ("128×2048", SensorPreset::Lidar128),
@@ -89,8 +71,14 @@ fn main() {
         config.sensor.preset = preset;
         config.sim.time_limit_s = seconds;
         config.live.status_period_s = 0.0;
+        if let Some(range) = std::env::var("ARCNAV_BENCH_MAX_RANGE_M")
+            .ok()
+            .and_then(|v| v.parse().ok())
+        {
+            config.perception.max_range_m = range;
+        }
         let log = data.join(format!("live-{preset:?}-{seconds}s.lcm").to_lowercase());
-        make_log(&log, &config);
+        common::make_log(&log, "short_course", &config);
         measure(label, &log, &config, 1.0);
     }
 }

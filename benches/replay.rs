@@ -3,30 +3,15 @@
 //! 128×2048 lidar log (target ≥ 20×). The logs are made once by the
 //! simulator into target/bench-data. Run with `cargo bench --bench replay`.
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+mod common;
+
+use std::path::Path;
 use std::time::Instant;
 
 use arcnav::Config;
-use arcnav::mission::{MissionOptions, run_mission};
 use arcnav::replay::{ReplayOptions, replay};
 use arcnav_behaviours::Registry;
 use arcnav_perception::SensorPreset;
-use arcnav_sim::World;
-
-fn make_log(path: &Path, world: &str, config: &Config) {
-    if path.exists() {
-        return;
-    }
-    eprintln!("making {} (once)...", path.display());
-    let world = Arc::new(World::embedded(world).expect("embedded").expect("valid"));
-    let options = MissionOptions {
-        log: Some(path.to_owned()),
-        ..MissionOptions::default()
-    };
-    run_mission(config, &Registry::builtin(), world, &options, &mut |_| {})
-        .expect("the mission runs");
-}
 
 fn measure(label: &str, log: &Path, config: &Config, target: f64) {
     let registry = Registry::builtin();
@@ -55,16 +40,15 @@ fn measure(label: &str, log: &Path, config: &Config, target: f64) {
 }
 
 fn main() {
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/bench-data");
-    std::fs::create_dir_all(&data).expect("create target/bench-data");
+    let data = common::data_dir();
     let erim = Config::default();
     let erim_log = data.join("paper_loop-erim.lcm");
-    make_log(&erim_log, "paper_loop", &erim);
+    common::make_log(&erim_log, "paper_loop", &erim);
     let mut lidar = Config::default();
     lidar.sensor.preset = SensorPreset::Lidar128;
     lidar.sim.time_limit_s = 20.0;
     let lidar_log = data.join("short_course-lidar128-20s.lcm");
-    make_log(&lidar_log, "short_course", &lidar);
+    common::make_log(&lidar_log, "short_course", &lidar);
     measure("ERIM 64×256, 2 Hz", &erim_log, &erim, 500.0);
     measure("lidar 128×2048, 10 Hz", &lidar_log, &lidar, 20.0);
 }

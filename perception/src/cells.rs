@@ -215,17 +215,23 @@ impl Bins {
         }
     }
 
+    /// Adds the points of `cell` to the cell of the same index.
+    #[inline(always)]
+    fn put(&mut self, cell: &Cell) {
+        let slot = &mut self.slots[cell.index as usize];
+        if *slot == EMPTY_SLOT {
+            *slot = self.cells.len() as u32;
+            self.cells.push(*cell);
+        } else {
+            self.cells[*slot as usize].merge(cell);
+        }
+    }
+
     /// Moves `other`'s cells into these (leaving `other` empty).
     fn absorb(&mut self, other: &mut Bins) {
         for cell in other.cells.drain(..) {
             other.slots[cell.index as usize] = EMPTY_SLOT;
-            let slot = &mut self.slots[cell.index as usize];
-            if *slot == EMPTY_SLOT {
-                *slot = self.cells.len() as u32;
-                self.cells.push(cell);
-            } else {
-                self.cells[*slot as usize].merge(&cell);
-            }
+            self.put(&cell);
         }
         for (count, more) in self.counts.iter_mut().zip(other.counts) {
             *count += more;
@@ -287,6 +293,7 @@ impl Projection<'_> {
         bins.column_rows.clear();
         bins.column_rows.resize(columns.len(), (u32::MAX, 0));
         let terms = &self.column_terms[columns.clone()];
+        let mut run = Cell::new(u32::MAX);
         for (row, ranges) in self.ranges.chunks_exact(self.cols.max(1)).enumerate() {
             let (ce, se) = (self.cos_el[row], self.sin_el[row]);
             let v = [se * r2[0], se * r2[1], se * r2[2]];
@@ -319,15 +326,18 @@ impl Projection<'_> {
                         fy.to_int_unchecked::<i32>() as usize,
                     )
                 };
-                let index = iy * side + ix;
-                let slot = &mut bins.slots[index];
-                if *slot == EMPTY_SLOT {
-                    *slot = bins.cells.len() as u32;
-                    bins.cells.push(Cell::new(index as u32));
+                let index = (iy * side + ix) as u32;
+                // Neighbouring pixels mostly fall in the same cell: their
+                // points gather in `run` and reach the bins once per run.
+                if index != run.index {
+                    if run.count > 0 {
+                        bins.put(&run);
+                    }
+                    run = Cell::new(index);
                 }
                 let dx = x - ((ix as f32 + 0.5) * self.cell_size - half);
                 let dy = y - ((iy as f32 + 0.5) * self.cell_size - half);
-                bins.cells[*slot as usize].add(dx, dy, z);
+                run.add(dx, dy, z);
                 valid += 1;
                 // The column's highest and lowest valid rows give its far and
                 // near return, for the field of view.
@@ -335,6 +345,9 @@ impl Projection<'_> {
                 span.0 = span.0.min(row as u32);
                 span.1 = row as u32;
             }
+        }
+        if run.count > 0 {
+            bins.put(&run);
         }
         bins.counts = [no_return, out_of_range, outside_grid, valid];
     }

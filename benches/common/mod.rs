@@ -1,0 +1,33 @@
+//! What the benchmarks share: simulator logs made once into
+//! target/bench-data.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arcnav::Config;
+use arcnav::mission::{MissionOptions, run_mission};
+use arcnav_behaviours::Registry;
+use arcnav_sim::World;
+
+/// `target/bench-data`, created.
+pub fn data_dir() -> PathBuf {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/bench-data");
+    std::fs::create_dir_all(&data).expect("create target/bench-data");
+    data
+}
+
+/// The log of a simulated mission on the embedded `world` under `config`,
+/// made unless `path` exists.
+pub fn make_log(path: &Path, world: &str, config: &Config) {
+    if path.exists() {
+        return;
+    }
+    eprintln!("making {} (once)...", path.display());
+    let world = Arc::new(World::embedded(world).expect("embedded").expect("valid"));
+    let options = MissionOptions {
+        log: Some(path.to_owned()),
+        ..MissionOptions::default()
+    };
+    run_mission(config, &Registry::builtin(), world, &options, &mut |_| {})
+        .expect("the mission runs");
+}
