@@ -56,16 +56,10 @@ impl Cell {
         }
     }
 
-    /// Adds a point (x, y relative to the cell centre). Values are finite.
+    /// What a point (x, y relative to the cell centre) adds to `sums`.
     #[inline(always)]
-    fn add(&mut self, dx: f32, dy: f32, z: f32) {
-        self.count += 1;
-        self.z_min = if z < self.z_min { z } else { self.z_min };
-        self.z_max = if z > self.z_max { z } else { self.z_max };
-        let terms = [dx, dy, z, dx * dx, dx * dy, dy * dy, dx * z, dy * z];
-        for (sum, term) in self.sums.iter_mut().zip(terms) {
-            *sum += term;
-        }
+    fn terms(dx: f32, dy: f32, z: f32) -> [f32; 8] {
+        [dx, dy, z, dx * dx, dx * dy, dy * dy, dx * z, dy * z]
     }
 }
 
@@ -203,7 +197,25 @@ struct Bins {
     column_rows: Vec<(u32, u32)>,
     /// No return, out of range, outside the grid, valid.
     counts: [u32; 4],
+    /// The row being binned, projected.
+    row: ProjectedRow,
 }
+
+/// One row of a part, projected: per pixel its cell (or why it has none)
+/// and its point relative to the cell's centre.
+#[derive(Debug, Default)]
+struct ProjectedRow {
+    index: Vec<u32>,
+    dx: Vec<f32>,
+    dy: Vec<f32>,
+    z: Vec<f32>,
+}
+
+/// `ProjectedRow::index` of a pixel that has no cell, by reason (all above
+/// any grid index).
+const NO_RETURN: u32 = u32::MAX;
+const OUT_OF_RANGE: u32 = u32::MAX - 1;
+const OUTSIDE_GRID: u32 = u32::MAX - 2;
 
 impl Bins {
     fn new(side: usize) -> Self {
@@ -212,18 +224,7 @@ impl Bins {
             cells: Vec::new(),
             column_rows: Vec::new(),
             counts: [0; 4],
-        }
-    }
-
-    /// Adds the points of `cell` to the cell of the same index.
-    #[inline(always)]
-    fn put(&mut self, cell: &Cell) {
-        let slot = &mut self.slots[cell.index as usize];
-        if *slot == EMPTY_SLOT {
-            *slot = self.cells.len() as u32;
-            self.cells.push(*cell);
-        } else {
-            self.cells[*slot as usize].merge(cell);
+            row: ProjectedRow::default(),
         }
     }
 
@@ -231,11 +232,95 @@ impl Bins {
     fn absorb(&mut self, other: &mut Bins) {
         for cell in other.cells.drain(..) {
             other.slots[cell.index as usize] = EMPTY_SLOT;
-            self.put(&cell);
+            put(&mut self.slots, &mut self.cells, &cell);
         }
         for (count, more) in self.counts.iter_mut().zip(other.counts) {
             *count += more;
         }
+    }
+}
+
+/// Bins the projected pixels of one row, in order, continuing `run` (the
+/// run reaching into the next row is returned). Neighbouring pixels mostly
+/// fall in the same cell: their points gather in the run and reach the bins
+/// once per run. A function of its own, with the run in local variables, so
+/// that the compiler keeps it in registers (inlined into the projection, it
+/// went through memory at every point: 20% slower).
+#[inline(never)]
+fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
+    let Cell {
+        index: mut index_of_run,
+        mut count,
+        mut z_min,
+        mut z_max,
+        mut sums,
+    } = run;
+    let [mut no_return, mut out_of_range, mut outside_grid, mut valid] = bins.counts;
+    let pixels = points
+        .index
+        .iter()
+        .zip(&points.dx)
+        .zip(points.dy.iter().zip(&points.z))
+        .zip(bins.column_rows.iter_mut());
+    for (((&index, &dx), (&dy, &z)), span) in pixels {
+        if index >= OUTSIDE_GRID {
+            match index {
+                NO_RETURN => no_return += 1,
+                OUTSIDE_GRID => outside_grid += 1,
+                _ => out_of_range += 1,
+            }
+            continue;
+        }
+        if index != index_of_run {
+            if count > 0 {
+                let run = Cell {
+                    index: index_of_run,
+                    count,
+                    z_min,
+                    z_max,
+                    sums,
+                };
+                put(&mut bins.slots, &mut bins.cells, &run);
+            }
+            Cell {
+                index: index_of_run,
+                count,
+                z_min,
+                z_max,
+                sums,
+            } = Cell::new(index);
+        }
+        count += 1;
+        z_min = if z < z_min { z } else { z_min };
+        z_max = if z > z_max { z } else { z_max };
+        for (sum, term) in sums.iter_mut().zip(Cell::terms(dx, dy, z)) {
+            *sum += term;
+        }
+        valid += 1;
+        // The column's highest and lowest valid rows give its far and near
+        // return, for the field of view.
+        span.0 = span.0.min(row);
+        span.1 = row;
+    }
+    bins.counts = [no_return, out_of_range, outside_grid, valid];
+    Cell {
+        index: index_of_run,
+        count,
+        z_min,
+        z_max,
+        sums,
+    }
+}
+
+/// Adds the points of `cell` to the cell of the same index.
+#[inline(always)]
+fn put(slots: &mut [u32], cells: &mut Vec<Cell>, cell: &Cell) {
+    let slot = &mut slots[cell.index as usize];
+    if *slot == EMPTY_SLOT {
+        *slot = cells.len() as u32;
+        cells.push(*cell);
+    } else {
+        cells[*slot as usize].merge(cell);
     }
 }
 
@@ -247,8 +332,8 @@ struct Projection<'a> {
     cols: usize,
     cos_el: &'a [f32],
     sin_el: &'a [f32],
-    /// Per column: the rotated horizontal beam direction.
-    column_terms: &'a [[f32; 3]],
+    /// Per column: the rotated horizontal beam direction, one array per axis.
+    column_terms: &'a [Vec<f32>; 3],
     /// The rotated vertical axis of the sensor.
     r2: [f32; 3],
     t: [f32; 3],
@@ -282,74 +367,82 @@ impl Projection<'_> {
         self.bin_portable(columns, bins);
     }
 
+    /// Bins row by row, each in two passes: [`Self::project_row`] projects
+    /// every pixel on its own (no branch, no dependency between pixels, so
+    /// the compiler runs it eight pixels at a time), then [`gather`] puts the
+    /// points into the bins in pixel order.
     #[inline(always)]
     fn bin_portable(&self, columns: std::ops::Range<usize>, bins: &mut Bins) {
-        let inv_cell = 1.0 / self.cell_size;
-        let (t, r2, half, side) = (self.t, self.r2, self.half, self.side);
-        let (lo, hi) = (self.lo, self.hi);
-        let (min_range, max_range) = (self.min_range, self.max_range);
-        let (mut no_return, mut out_of_range, mut outside_grid, mut valid) =
-            (0u32, 0u32, 0u32, 0u32);
+        let mut points = std::mem::take(&mut bins.row);
         bins.column_rows.clear();
         bins.column_rows.resize(columns.len(), (u32::MAX, 0));
-        let terms = &self.column_terms[columns.clone()];
+        bins.counts = [0; 4];
         let mut run = Cell::new(u32::MAX);
         for (row, ranges) in self.ranges.chunks_exact(self.cols.max(1)).enumerate() {
-            let (ce, se) = (self.cos_el[row], self.sin_el[row]);
-            let v = [se * r2[0], se * r2[1], se * r2[2]];
-            let ranges = &ranges[columns.clone()];
-            for (i, (&range, u)) in ranges.iter().zip(terms).enumerate() {
-                // NaN fails every comparison, so one test keeps only valid returns.
-                if !(range >= min_range && range <= max_range) {
-                    if range > 0.0 && range.is_finite() {
-                        out_of_range += 1;
-                    } else {
-                        no_return += 1;
-                    }
-                    continue;
-                }
-                let x = (ce * u[0] + v[0]) * range + t[0];
-                let y = (ce * u[1] + v[1]) * range + t[1];
-                let z = (ce * u[2] + v[2]) * range + t[2];
-                let fx = (x + half) * inv_cell;
-                let fy = (y + half) * inv_cell;
-                if !(fx >= lo && fx < hi && fy >= lo && fy < hi) {
-                    outside_grid += 1;
-                    continue;
-                }
-                debug_assert!(fx >= 0.0 && fy >= 0.0 && fx < side as f32 && fy < side as f32);
-                // SAFETY: fx and fy were just checked to be finite and within
-                // [margin, side - margin), far inside i32's range.
-                let (ix, iy) = unsafe {
-                    (
-                        fx.to_int_unchecked::<i32>() as usize,
-                        fy.to_int_unchecked::<i32>() as usize,
-                    )
-                };
-                let index = (iy * side + ix) as u32;
-                // Neighbouring pixels mostly fall in the same cell: their
-                // points gather in `run` and reach the bins once per run.
-                if index != run.index {
-                    if run.count > 0 {
-                        bins.put(&run);
-                    }
-                    run = Cell::new(index);
-                }
-                let dx = x - ((ix as f32 + 0.5) * self.cell_size - half);
-                let dy = y - ((iy as f32 + 0.5) * self.cell_size - half);
-                run.add(dx, dy, z);
-                valid += 1;
-                // The column's highest and lowest valid rows give its far and
-                // near return, for the field of view.
-                let span = &mut bins.column_rows[i];
-                span.0 = span.0.min(row as u32);
-                span.1 = row as u32;
-            }
+            self.project_row(row, &ranges[columns.clone()], columns.start, &mut points);
+            run = gather(row as u32, &points, bins, run);
         }
         if run.count > 0 {
-            bins.put(&run);
+            put(&mut bins.slots, &mut bins.cells, &run);
         }
-        bins.counts = [no_return, out_of_range, outside_grid, valid];
+        bins.row = points;
+    }
+
+    /// Projects the pixels `ranges` of `row`, from column `first` on, into `out`.
+    #[inline(always)]
+    fn project_row(&self, row: usize, ranges: &[f32], first: usize, out: &mut ProjectedRow) {
+        let n = ranges.len();
+        for buffer in [&mut out.dx, &mut out.dy, &mut out.z] {
+            buffer.resize(n, 0.0);
+        }
+        out.index.resize(n, 0);
+        let inv_cell = 1.0 / self.cell_size;
+        let (t, half, side, cell) = (self.t, self.half, self.side, self.cell_size);
+        let (lo, hi, last) = (self.lo, self.hi, self.hi - 1.0);
+        let (min_range, max_range) = (self.min_range, self.max_range);
+        let (ce, se, r2) = (self.cos_el[row], self.sin_el[row], self.r2);
+        let v = [se * r2[0], se * r2[1], se * r2[2]];
+        let [ux, uy, uz] = self.column_terms;
+        let columns = first..first + n;
+        let (ux, uy, uz) = (&ux[columns.clone()], &uy[columns.clone()], &uz[columns]);
+        let (index, dx, dy, z) = (
+            &mut out.index[..n],
+            &mut out.dx[..n],
+            &mut out.dy[..n],
+            &mut out.z[..n],
+        );
+        for k in 0..n {
+            let range = ranges[k];
+            let x = (ce * ux[k] + v[0]) * range + t[0];
+            let y = (ce * uy[k] + v[1]) * range + t[1];
+            z[k] = (ce * uz[k] + v[2]) * range + t[2];
+            let fx = (x + half) * inv_cell;
+            let fy = (y + half) * inv_cell;
+            // NaN fails every comparison, so these tests keep only valid
+            // returns; clamped, the cell is computed for every pixel.
+            let in_range = range >= min_range && range <= max_range;
+            let in_grid = fx >= lo && fx < hi && fy >= lo && fy < hi;
+            // SAFETY: clamped to [lo, hi - 1] (max and min return the
+            // number when the other operand is NaN), far inside i32.
+            let (ix, iy) = unsafe {
+                (
+                    fx.max(lo).min(last).to_int_unchecked::<i32>(),
+                    fy.max(lo).min(last).to_int_unchecked::<i32>(),
+                )
+            };
+            let returned = range > 0.0 && range < f32::INFINITY;
+            let why = if returned { OUT_OF_RANGE } else { NO_RETURN };
+            let cell_index = (iy as u32) * side as u32 + ix as u32;
+            index[k] = if !in_range {
+                why
+            } else if in_grid {
+                cell_index
+            } else {
+                OUTSIDE_GRID
+            };
+            dx[k] = x - ((ix as f32 + 0.5) * cell - half);
+            dy[k] = y - ((iy as f32 + 0.5) * cell - half);
+        }
     }
 }
 
@@ -382,7 +475,7 @@ pub struct CellClassifier {
     labels: Vec<(Reasons, u32)>,
     queue: Vec<u32>,
     trig: BeamTrig,
-    column_terms: Vec<[f32; 3]>,
+    column_terms: [Vec<f32>; 3],
     fov: FovBuilder,
 }
 
@@ -422,7 +515,7 @@ impl CellClassifier {
             labels: Vec::new(),
             queue: Vec::new(),
             trig: BeamTrig::default(),
-            column_terms: Vec::new(),
+            column_terms: Default::default(),
             fov: FovBuilder::default(),
         }
     }
@@ -444,13 +537,15 @@ impl CellClassifier {
         let t = level_from_sensor.translation.vector;
         let t = [t.x as f32, t.y as f32, t.z as f32];
         let cols = image.cols();
-        self.column_terms.clear();
-        for (&ca, &sa) in self.trig.cos_az.iter().zip(&self.trig.sin_az) {
-            self.column_terms.push([
-                ca * r0[0] + sa * r1[0],
-                ca * r0[1] + sa * r1[1],
-                ca * r0[2] + sa * r1[2],
-            ]);
+        for (axis, terms) in self.column_terms.iter_mut().enumerate() {
+            terms.clear();
+            terms.extend(
+                self.trig
+                    .cos_az
+                    .iter()
+                    .zip(&self.trig.sin_az)
+                    .map(|(&ca, &sa)| ca * r0[axis] + sa * r1[axis]),
+            );
         }
         let projection = Projection {
             ranges: &image.range,
@@ -485,7 +580,7 @@ impl CellClassifier {
                     continue;
                 }
                 let col = columns.start + i;
-                let u = self.column_terms[col];
+                let u = self.column_terms.each_ref().map(|terms| terms[col]);
                 for row in [top, bottom] {
                     let row = row as usize;
                     let (ce, se) = (self.trig.cos_el[row], self.trig.sin_el[row]);
