@@ -465,9 +465,8 @@ pub struct CellClassifier {
     margin: usize,
     /// Index offsets of the slope window's cells, with their (dx, dy) in metres.
     window: Vec<(isize, f32, f32)>,
-    /// Index offsets of the neighbours after a cell in scan order (right,
-    /// and the three above): each pair of neighbours is compared once.
-    forward: [isize; 4],
+    /// Index offsets of a cell's eight neighbours.
+    neighbours: [isize; 8],
     half_extent: f32,
     /// The parts' bins; the first holds the whole image once merged.
     bins: [Bins; PARTS],
@@ -509,7 +508,7 @@ impl CellClassifier {
             side,
             margin: radius.max(1) as usize,
             window,
-            forward: [1, s - 1, s, s + 1],
+            neighbours: [-s - 1, -s, -s + 1, -1, 1, s - 1, s, s + 1],
             half_extent,
             bins: std::array::from_fn(|_| Bins::new(side)),
             labels: Vec::new(),
@@ -629,22 +628,8 @@ impl CellClassifier {
         self.labels.clear();
         let cells = self.bins[0].cells.len();
         self.labels.resize(cells, (Reasons::NONE, u32::MAX));
-        // (c) first: each pair of neighbours once, both sides of a jump marked.
-        for slot in 0..cells {
-            let cell = self.bins[0].cells[slot];
-            for offset in self.forward {
-                let Some(n) = self.neighbour(&cell, offset) else {
-                    continue;
-                };
-                let neighbour = &self.bins[0].cells[n];
-                let gap = (neighbour.z_min - cell.z_max).max(cell.z_min - neighbour.z_max);
-                if gap > self.max_discontinuity {
-                    self.labels[slot].0.insert(Reasons::DISCONTINUITY);
-                    self.labels[n].0.insert(Reasons::DISCONTINUITY);
-                }
-            }
-        }
-        // (a) and (b) judge each cell on its own: the halves may run at once.
+        // Each cell is judged on its own (a jump between two cells marks
+        // both, as each sees it): the halves may run at once.
         let mut labels = std::mem::take(&mut self.labels);
         let half = cells / 2;
         let (low, high) = labels.split_at_mut(half);
@@ -662,7 +647,7 @@ impl CellClassifier {
         }
     }
 
-    /// Applies (a) and (b) to the cells from slot `first` on, one per label
+    /// Applies (a), (b), (c) to the cells from slot `first` on, one per label
     /// (with AVX2 where the processor has it, as in [`Projection::bin`]).
     fn judge(&self, first: usize, labels: &mut [(Reasons, u32)]) {
         #[cfg(target_arch = "x86_64")]
@@ -683,6 +668,16 @@ impl CellClassifier {
     fn judge_portable(&self, first: usize, labels: &mut [(Reasons, u32)]) {
         let cells = &self.bins[0].cells[first..];
         for (cell, label) in cells.iter().zip(labels) {
+            let jump = self.neighbours.iter().any(|&offset| {
+                self.neighbour(cell, offset).is_some_and(|n| {
+                    let neighbour = &self.bins[0].cells[n];
+                    let gap = (neighbour.z_min - cell.z_max).max(cell.z_min - neighbour.z_max);
+                    gap > self.max_discontinuity
+                })
+            });
+            if jump {
+                label.0.insert(Reasons::DISCONTINUITY);
+            }
             if cell.count < self.min_points {
                 continue;
             }
@@ -723,8 +718,7 @@ impl CellClassifier {
                 let cell = self.bins[0].cells[slot as usize];
                 summary.cells += 1;
                 summary.reasons.insert(self.labels[slot as usize].0);
-                let side = self.side as isize;
-                for offset in [-side - 1, -side, -side + 1, -1, 1, side - 1, side, side + 1] {
+                for offset in self.neighbours {
                     let Some(n) = self.neighbour(&cell, offset) else {
                         continue;
                     };
