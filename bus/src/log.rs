@@ -293,15 +293,7 @@ fn array<const N: usize>(bytes: &[u8]) -> [u8; N] {
 }
 
 fn find_sync(bytes: &[u8]) -> Option<usize> {
-    let mut from = 0;
-    while let Some(at) = bytes[from..].iter().position(|&b| b == SYNC_BYTES[0]) {
-        let at = from + at;
-        if bytes.get(at..at + 4) == Some(&SYNC_BYTES) {
-            return Some(at);
-        }
-        from = at + 1;
-    }
-    None
+    memchr::memmem::find(bytes, &SYNC_BYTES)
 }
 
 /// True when `bytes` contain a sync word followed by a header that could
