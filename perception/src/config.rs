@@ -117,6 +117,22 @@ impl PerceptionConfig {
         }
         let c = &self.cells;
         config::in_range("cells.cell_size_m", c.cell_size_m, 0.02, 2.0)?;
+        // The classifier's grid spans the range around the sensor (plus 5 m
+        // for the mount) and holds 4 bytes a cell in each of its two parts.
+        let side = (2.0 * (self.max_range_m + 5.0) / c.cell_size_m).ceil();
+        if side * side > MAX_GRID_CELLS as f64 {
+            return Err(ConfigError::new(
+                "cells.cell_size_m",
+                format!(
+                    "{} m cells out to max_range_m = {} m need a {side} x {side} grid \
+                     ({:.0} MiB); at most {MAX_GRID_CELLS} cells: use larger cells \
+                     or a shorter range",
+                    c.cell_size_m,
+                    self.max_range_m,
+                    side * side * 8.0 / f64::from(1 << 20)
+                ),
+            ));
+        }
         if !(1..=1_000_000).contains(&c.min_points) {
             return Err(ConfigError::new(
                 "cells.min_points",
@@ -181,6 +197,9 @@ impl PerceptionConfig {
     }
 }
 
+/// The most cells the classifier's grid may have (256 MiB of slots).
+const MAX_GRID_CELLS: u64 = 1 << 25;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -207,6 +226,22 @@ mod tests {
         assert_eq!(err.key, "cells.max_height_variation_m");
         assert!(
             err.reason.contains("vehicle.tolerated_step_m (0.15)"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_grid_too_large_for_memory_is_refused() {
+        let mut p = PerceptionConfig {
+            max_range_m: 500.0,
+            ..Default::default()
+        };
+        p.validate_for(&VehicleConfig::default()).unwrap();
+        p.cells.cell_size_m = 0.02;
+        let err = p.validate_for(&VehicleConfig::default()).unwrap_err();
+        assert_eq!(err.key, "cells.cell_size_m");
+        assert!(
+            err.reason.contains("need a 50500 x 50500 grid (19457 MiB)"),
             "{err}"
         );
     }
