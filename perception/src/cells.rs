@@ -255,6 +255,18 @@ fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
         mut z_max,
         mut sums,
     } = run;
+    // The run's locals, as a cell.
+    macro_rules! run {
+        () => {
+            Cell {
+                index: index_of_run,
+                count,
+                z_min,
+                z_max,
+                sums,
+            }
+        };
+    }
     let [mut no_return, mut out_of_range, mut outside_grid, mut valid] = bins.counts;
     let pixels = points
         .index
@@ -273,22 +285,16 @@ fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
         }
         if index != index_of_run {
             if count > 0 {
-                let run = Cell {
-                    index: index_of_run,
-                    count,
-                    z_min,
-                    z_max,
-                    sums,
-                };
-                put(&mut bins.slots, &mut bins.cells, &run);
+                put(&mut bins.slots, &mut bins.cells, &run!());
             }
-            Cell {
-                index: index_of_run,
-                count,
-                z_min,
-                z_max,
-                sums,
-            } = Cell::new(index);
+            let fresh = Cell::new(index);
+            (index_of_run, count, z_min, z_max, sums) = (
+                fresh.index,
+                fresh.count,
+                fresh.z_min,
+                fresh.z_max,
+                fresh.sums,
+            );
         }
         count += 1;
         z_min = if z < z_min { z } else { z_min };
@@ -303,13 +309,7 @@ fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
         span.1 = row;
     }
     bins.counts = [no_return, out_of_range, outside_grid, valid];
-    Cell {
-        index: index_of_run,
-        count,
-        z_min,
-        z_max,
-        sums,
-    }
+    run!()
 }
 
 /// Adds the points of `cell` to the cell of the same index.
