@@ -12,6 +12,7 @@ pub mod config;
 pub mod live;
 pub mod mission;
 pub mod pipeline;
+mod recorder;
 pub mod render;
 pub mod replay;
 pub mod wire;

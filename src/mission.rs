@@ -8,8 +8,6 @@
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
 use std::collections::BTreeSet;
-use std::fs::File;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -17,7 +15,6 @@ use std::time::Instant;
 use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Registry, Waypoint};
 use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
-use arcnav_bus::log::LogWriter;
 use arcnav_bus::messages::channels;
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, SensorModel};
@@ -33,6 +30,7 @@ use serde::Serialize;
 
 use crate::config::Config;
 use crate::pipeline::{Input, Pipeline, Sink, StageTimes};
+use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
 use crate::wire;
 
@@ -147,6 +145,12 @@ pub struct MissionRun {
     pub snapshots: Vec<PathBuf>,
 }
 
+impl From<WriteFailed> for MissionError {
+    fn from(WriteFailed { path, source }: WriteFailed) -> Self {
+        Self::Log { path, source }
+    }
+}
+
 /// A mission that could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum MissionError {
@@ -170,8 +174,8 @@ pub enum MissionError {
 
 /// Receives the pipeline's outputs during a mission.
 struct MissionSink<'a> {
-    log: Option<(&'a Path, LogWriter<BufWriter<File>>)>,
-    error: Option<MissionError>,
+    /// The mission log, and the first error of the mission.
+    log: Recorder<'a, MissionError>,
     arcs: arcnav_vehicle::ArcSet,
     commands: Vec<SteeringCommand>,
     previous_curvature: Option<f64>,
@@ -185,34 +189,13 @@ struct MissionSink<'a> {
     track: Vec<TrackPoint>,
 }
 
-impl MissionSink<'_> {
-    fn log<M: arcnav_bus::Message>(&mut self, at: Utime, channel: &str, message: &M) {
-        if let Some((path, writer)) = &mut self.log
-            && self.error.is_none()
-            && let Err(source) = writer.write_message(at, channel, message)
-        {
-            self.error = Some(MissionError::Log {
-                path: path.to_path_buf(),
-                source,
-            });
-        }
-    }
-}
-
 impl Sink for MissionSink<'_> {
     fn on_obstacles(&mut self, at: Utime, report: &ObstacleReport) {
-        self.log(
-            at,
-            channels::OBSTACLE_CELLS,
-            &wire::obstacles_to_wire(report),
-        );
+        self.log.obstacles(at, report);
     }
 
     fn on_votes(&mut self, at: Utime, votes: &[BehaviourVotes]) {
-        for v in votes {
-            let message = wire::votes_to_wire(v, &self.arcs);
-            self.log(at, &channels::arc_votes(&v.behaviour), &message);
-        }
+        self.log.votes(at, votes, &self.arcs);
     }
 
     fn on_command(
@@ -222,7 +205,7 @@ impl Sink for MissionSink<'_> {
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.log(
+        self.log.message(
             at,
             channels::STEERING_COMMAND,
             &steering_command_t::from(command),
@@ -243,7 +226,7 @@ impl Sink for MissionSink<'_> {
         self.patches.extend(map.patches.iter().map(|p| (p.i, p.j)));
         if let Some((every, dir, next)) = &mut self.snapshot
             && at >= *next
-            && self.error.is_none()
+            && self.log.error.is_none()
         {
             *next = at + seconds_to_micros(*every);
             let path = dir.join(format!(
@@ -260,7 +243,7 @@ impl Sink for MissionSink<'_> {
                 &self.track,
             ) {
                 Ok(()) => self.snapshots.push(path),
-                Err(e) => self.error = Some(e.into()),
+                Err(e) => self.log.error = Some(e.into()),
             }
         }
     }
@@ -318,21 +301,10 @@ pub fn run_mission(
     let mut tiles = TileCache::new(Arc::clone(&world), 128, threads);
     let mut truth = Truth::new(&world, &config.vehicle);
     let mut pose_rng = Rng::stream(sim.seed, 0x0b5e_55ed);
-    let log = match &options.log {
-        Some(path) => Some((
-            path.as_path(),
-            LogWriter::new(BufWriter::new(File::create(path).map_err(|source| {
-                MissionError::CreateLog {
-                    path: path.clone(),
-                    source,
-                }
-            })?)),
-        )),
-        None => None,
-    };
+    let log = Recorder::create(options.log.as_deref())
+        .map_err(|(path, source)| MissionError::CreateLog { path, source })?;
     let mut sink = MissionSink {
         log,
-        error: None,
         arcs: pipeline.arcs().clone(),
         commands: Vec::new(),
         previous_curvature: None,
@@ -349,7 +321,8 @@ pub fn run_mission(
         track: Vec::new(),
     };
     let mission = mission_of(&world, t0);
-    sink.log(t0, channels::WAYPOINTS, &wire::mission_to_wire(&mission));
+    sink.log
+        .message(t0, channels::WAYPOINTS, &wire::mission_to_wire(&mission));
     pipeline.input(Input::Waypoints(mission), &mut sink);
 
     let image_period = sensor.period_us();
@@ -418,7 +391,8 @@ pub fn run_mission(
             ),
             yaw_rate: state.speed_mps * state.curvature,
         };
-        sink.log(t, channels::POSE, &pose_t::from(&measured));
+        sink.log
+            .message(t, channels::POSE, &pose_t::from(&measured));
         pipeline.input(Input::Pose(measured), &mut sink);
         if t >= next_image {
             let started = Instant::now();
@@ -441,7 +415,7 @@ pub fn run_mission(
             );
             render_ms += started.elapsed().as_secs_f64() * 1e3;
             if options.log_mode == LogMode::All {
-                sink.log(
+                sink.log.message(
                     t,
                     &channels::range_image(&sensor.id),
                     &wire::range_image_to_wire(&image),
@@ -456,7 +430,7 @@ pub fn run_mission(
         for command in sink.commands.drain(..) {
             motion.command(command);
         }
-        if let Some(e) = sink.error.take() {
+        if let Some(e) = sink.log.error.take() {
             return Err(e);
         }
         let status = pipeline.behaviours.progress();

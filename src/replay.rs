@@ -9,15 +9,13 @@
 //! foreign input is skipped and counted, and the [`InputProblems`] say what.
 
 use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Registry};
 use arcnav_bus::lcmtypes::steering_command_t;
-use arcnav_bus::log::{LogReader, LogStats, LogWriteError, LogWriter};
+use arcnav_bus::log::{LogReader, LogStats, LogWriteError};
 use arcnav_bus::messages::{AnyMessage, TypedEvents, channels};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::ObstacleReport;
@@ -26,6 +24,7 @@ use serde::Serialize;
 
 use crate::config::Config;
 use crate::pipeline::{Input, Pipeline, Sink};
+use crate::recorder::{Recorder, WriteFailed};
 use crate::wire;
 
 /// How to replay.
@@ -188,6 +187,12 @@ pub struct ReplayResult {
     pub arcs: ArcSet,
 }
 
+impl From<WriteFailed> for ReplayError {
+    fn from(WriteFailed { path, source }: WriteFailed) -> Self {
+        Self::Write { path, source }
+    }
+}
+
 /// A replay that could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
@@ -211,8 +216,8 @@ pub enum ReplayError {
 }
 
 struct ReplaySink<'a> {
-    out: Option<(&'a Path, LogWriter<BufWriter<File>>)>,
-    error: Option<ReplayError>,
+    /// The output log, and the first error of the replay.
+    out: Recorder<'a, ReplayError>,
     arcs: ArcSet,
     cycles: BTreeMap<Utime, Cycle>,
     pending_votes: Vec<BehaviourVotes>,
@@ -220,46 +225,13 @@ struct ReplaySink<'a> {
     kept: Option<(Utime, Decision, MapSnapshot)>,
 }
 
-impl ReplaySink<'_> {
-    fn log<M: arcnav_bus::Message>(&mut self, at: Utime, channel: &str, message: &M) {
-        if let Some((path, writer)) = &mut self.out
-            && self.error.is_none()
-            && let Err(source) = writer.write_message(at, channel, message)
-        {
-            self.error = Some(ReplayError::Write {
-                path: path.to_path_buf(),
-                source,
-            });
-        }
-    }
-
-    fn copy(&mut self, at: Utime, channel: &str, data: &[u8]) {
-        if let Some((path, writer)) = &mut self.out
-            && self.error.is_none()
-            && let Err(source) = writer.write_event(at, channel, data)
-        {
-            self.error = Some(ReplayError::Write {
-                path: path.to_path_buf(),
-                source,
-            });
-        }
-    }
-}
-
 impl Sink for ReplaySink<'_> {
     fn on_obstacles(&mut self, at: Utime, report: &ObstacleReport) {
-        self.log(
-            at,
-            channels::OBSTACLE_CELLS,
-            &wire::obstacles_to_wire(report),
-        );
+        self.out.obstacles(at, report);
     }
 
     fn on_votes(&mut self, at: Utime, votes: &[BehaviourVotes]) {
-        for v in votes {
-            let message = wire::votes_to_wire(v, &self.arcs);
-            self.log(at, &channels::arc_votes(&v.behaviour), &message);
-        }
+        self.out.votes(at, votes, &self.arcs);
         self.pending_votes = votes.to_vec();
     }
 
@@ -270,7 +242,7 @@ impl Sink for ReplaySink<'_> {
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.log(
+        self.out.message(
             at,
             channels::STEERING_COMMAND,
             &steering_command_t::from(command),
@@ -306,21 +278,10 @@ pub fn replay(
     let mut pipeline = Pipeline::new(config, registry)?;
     pipeline.set_explain(options.stop_at_s.is_some());
     let arcs = pipeline.arcs().clone();
-    let out = match &options.out {
-        Some(out) => Some((
-            out.as_path(),
-            LogWriter::new(BufWriter::new(File::create(out).map_err(|source| {
-                ReplayError::Create {
-                    path: out.clone(),
-                    source,
-                }
-            })?)),
-        )),
-        None => None,
-    };
+    let out = Recorder::create(options.out.as_deref())
+        .map_err(|(path, source)| ReplayError::Create { path, source })?;
     let mut sink = ReplaySink {
         out,
-        error: None,
         arcs: arcs.clone(),
         cycles: BTreeMap::new(),
         pending_votes: Vec::new(),
@@ -377,7 +338,7 @@ pub fn replay(
             AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
                 Ok(pose) => {
                     inputs.poses += 1;
-                    sink.log(t, channel, &msg);
+                    sink.out.message(t, channel, &msg);
                     last_time = last_time.max(pose.utime);
                     pipeline.input(Input::Pose(pose), &mut sink);
                 }
@@ -391,7 +352,7 @@ pub fn replay(
                 match wire::range_image_from_wire(msg) {
                     Ok(image) => {
                         inputs.images += 1;
-                        sink.copy(t, channel, &encoded);
+                        sink.out.event(t, channel, &encoded);
                         pipeline.input(Input::Image(image), &mut sink);
                     }
                     Err(e) => {
@@ -413,7 +374,7 @@ pub fn replay(
             AnyMessage::Waypoints(msg) if !waypoints_given => match wire::mission_from_wire(&msg) {
                 Ok(mission) => {
                     inputs.waypoints += 1;
-                    sink.log(t, channel, &msg);
+                    sink.out.message(t, channel, &msg);
                     pipeline.input(Input::Waypoints(mission), &mut sink);
                 }
                 Err(_) => *problems.undecodable.entry(event.channel).or_default() += 1,
@@ -438,12 +399,12 @@ pub fn replay(
                 *problems.ignored.entry(event.channel).or_default() += 1;
             }
         }
-        if let Some(e) = sink.error.take() {
+        if let Some(e) = sink.out.error.take() {
             return Err(e);
         }
     }
     pipeline.run_until(last_time, &mut sink);
-    if let Some(e) = sink.error.take() {
+    if let Some(e) = sink.out.error.take() {
         return Err(e);
     }
     let drops = pipeline.perception.drops;

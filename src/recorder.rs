@@ -1,0 +1,84 @@
+//! The output log that `arcnav sim` and `arcnav replay` write the pipeline's
+//! messages to, and the first error their run meets.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use arcnav_arbiter::BehaviourVotes;
+use arcnav_bus::log::{LogWriteError, LogWriter};
+use arcnav_bus::messages::channels;
+use arcnav_perception::ObstacleReport;
+use arcnav_vehicle::{ArcSet, Utime};
+
+use crate::wire;
+
+/// A write to the output log failed.
+#[derive(Debug)]
+pub(crate) struct WriteFailed {
+    pub path: PathBuf,
+    pub source: LogWriteError,
+}
+
+/// An optional output log and the first error of the run (of any kind `E`
+/// can hold): once an error is kept, nothing more is written.
+pub(crate) struct Recorder<'a, E> {
+    out: Option<(&'a Path, LogWriter<BufWriter<File>>)>,
+    pub error: Option<E>,
+}
+
+impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
+    /// Creates (truncates) the log at `path`, if there is one.
+    pub fn create(path: Option<&'a Path>) -> Result<Self, (PathBuf, std::io::Error)> {
+        let out = match path {
+            Some(path) => {
+                let file = File::create(path).map_err(|e| (path.to_owned(), e))?;
+                Some((path, LogWriter::new(BufWriter::new(file))))
+            }
+            None => None,
+        };
+        Ok(Self { out, error: None })
+    }
+
+    /// Writes `message` on `channel` at `at`.
+    pub fn message<M: arcnav_bus::Message>(&mut self, at: Utime, channel: &str, message: &M) {
+        self.write(|writer| writer.write_message(at, channel, message).map(drop));
+    }
+
+    /// Writes an already encoded message.
+    pub fn event(&mut self, at: Utime, channel: &str, data: &[u8]) {
+        self.write(|writer| writer.write_event(at, channel, data).map(drop));
+    }
+
+    /// Writes perception's report on OBSTACLE_CELLS.
+    pub fn obstacles(&mut self, at: Utime, report: &ObstacleReport) {
+        self.message(
+            at,
+            channels::OBSTACLE_CELLS,
+            &wire::obstacles_to_wire(report),
+        );
+    }
+
+    /// Writes each behaviour's votes on its ARC_VOTES_<NAME> channel.
+    pub fn votes(&mut self, at: Utime, votes: &[BehaviourVotes], arcs: &ArcSet) {
+        for v in votes {
+            let message = wire::votes_to_wire(v, arcs);
+            self.message(at, &channels::arc_votes(&v.behaviour), &message);
+        }
+    }
+
+    fn write(
+        &mut self,
+        write: impl FnOnce(&mut LogWriter<BufWriter<File>>) -> Result<(), LogWriteError>,
+    ) {
+        if let Some((path, writer)) = &mut self.out
+            && self.error.is_none()
+            && let Err(source) = write(writer)
+        {
+            self.error = Some(E::from(WriteFailed {
+                path: path.to_path_buf(),
+                source,
+            }));
+        }
+    }
+}
