@@ -7,7 +7,7 @@ use std::sync::{Arc, OnceLock};
 
 use arcnav::Config;
 use arcnav::mission::{MissionOptions, run_mission};
-use arcnav::replay::{ReplayOptions, compare, replay};
+use arcnav::replay::{ReplayOptions, ReplayResult, compare, replay};
 use arcnav_behaviours::Registry;
 use arcnav_bus::log::{LogReader, LogWriter};
 use arcnav_sim::World;
@@ -17,6 +17,18 @@ fn dir(tag: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("arcnav-replay-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// `path` replayed with the default configuration and behaviours.
+fn replay_with_defaults(path: &Path) -> ReplayResult {
+    replay(
+        path,
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap()
 }
 
 /// A log of the short course, made once per test run.
@@ -69,14 +81,7 @@ fn filtered(source: &Path, target: &Path, keep: impl Fn(&str, i64) -> bool) {
 
 #[test]
 fn replaying_a_sim_log_reproduces_the_sims_own_commands_exactly() {
-    let result = replay(
-        sim_log(),
-        &Config::default(),
-        &Registry::builtin(),
-        &ReplayOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let result = replay_with_defaults(sim_log());
     assert!(result.recorded.len() > 500);
     let same = |name: &str| Config::default().arbiter.weight(name);
     let comparison = compare(
@@ -205,27 +210,13 @@ fn a_corrupted_region_is_skipped_and_the_replay_goes_on() {
     }
     let damaged = out.join("damaged.lcm");
     std::fs::write(&damaged, &bytes).unwrap();
-    let result = replay(
-        &damaged,
-        &Config::default(),
-        &Registry::builtin(),
-        &ReplayOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let result = replay_with_defaults(&damaged);
     assert!(
         result.problems.log.skipped_bytes > 100_000,
         "{:?}",
         result.problems.log
     );
-    let whole = replay(
-        sim_log(),
-        &Config::default(),
-        &Registry::builtin(),
-        &ReplayOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let whole = replay_with_defaults(sim_log());
     let last = |r: &arcnav::replay::ReplayResult| *r.cycles.keys().last().unwrap();
     assert_eq!(
         last(&result),
@@ -252,14 +243,7 @@ fn images_in_a_hole_of_the_pose_stream_are_skipped_with_a_counted_reason() {
     filtered(sim_log(), &holed, |channel, t| {
         !(channel == "POSE" && (from..to).contains(&t))
     });
-    let result = replay(
-        &holed,
-        &Config::default(),
-        &Registry::builtin(),
-        &ReplayOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let result = replay_with_defaults(&holed);
     assert!(
         (5..=7).contains(&result.problems.images_without_pose),
         "the 6 images of the 3 s hole: {}",
@@ -297,14 +281,7 @@ fn foreign_channels_are_skipped_and_listed_without_counting_as_loss() {
         }
     }
     drop(writer);
-    let result = replay(
-        &mixed,
-        &Config::default(),
-        &Registry::builtin(),
-        &ReplayOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let result = replay_with_defaults(&mixed);
     assert_eq!(result.problems.unknown_channels["LCM_SELF_TEST"], 1);
     assert!(result.problems.unknown_channels["CAMERA_JPEG"] > 10);
     assert!(!result.problems.lost_input());
@@ -342,14 +319,7 @@ fn out_of_order_images_are_handled() {
             .unwrap();
     }
     drop(writer);
-    let result = replay(
-        &shuffled,
-        &Config::default(),
-        &Registry::builtin(),
-        &ReplayOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let result = replay_with_defaults(&shuffled);
     assert!(
         result.problems.images_out_of_order > 10,
         "{:?}",
