@@ -4,7 +4,9 @@
 //! lidar (target: p99 ≤ 5 ms for 128×2048). Logs of the short course are
 //! made once by the simulator into target/bench-data and played in real
 //! time into the executor over LCM's in-process `memq://` provider, with the
-//! default live configuration (new cells trigger a decision at once).
+//! default live configuration (new cells trigger a decision at once), the
+//! perception thread sleeping between images (the default) and then polling
+//! for them (`live.perception_busy_poll = true`).
 //!
 //! `cargo bench --bench live [-- SECONDS]` (default: 30 s of each log);
 //! `ARCNAV_BENCH_MAX_RANGE_M=25` evaluates returns only as far as the map
@@ -35,7 +37,7 @@ fn measure(label: &str, log: &Path, config: &Config, speed: f64) {
     let a = report.arrival_to_command_ms;
     let perception = &report.nodes[1].busy_ms;
     println!(
-        "{label:<10} image arrival → command: p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms over {} images \
+        "{label:<24} image arrival → command: p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms over {} images \
          (perception p50 {:.2} ms, p99 {:.2} ms){}",
         a.p50,
         a.p99,
@@ -79,6 +81,10 @@ fn main() {
         }
         let log = data.join(format!("live-{preset:?}-{seconds}s.lcm").to_lowercase());
         common::make_log(&log, "short_course", &config);
-        measure(label, &log, &config, 1.0);
+        for busy_poll in [false, true] {
+            config.live.perception_busy_poll = busy_poll;
+            let wait = if busy_poll { "busy poll" } else { "sleeping" };
+            measure(&format!("{label} ({wait})"), &log, &config, 1.0);
+        }
     }
 }

@@ -147,8 +147,21 @@ impl Agreement {
 
 #[test]
 fn the_threaded_executor_gives_the_lockstep_commands() {
+    assert_threaded_gives_lockstep(false);
+}
+
+#[test]
+fn a_busy_polling_perception_thread_gives_the_same_commands() {
+    assert_threaded_gives_lockstep(true);
+}
+
+/// `arcnav run`'s executor over memq, fed a sim log at 4× real time, gives
+/// lock-step replay's commands, its perception thread sleeping between
+/// images or polling for them.
+fn assert_threaded_gives_lockstep(perception_busy_poll: bool) {
     let _serial = serial();
-    let config = config(SensorPreset::Erim, true);
+    let mut config = config(SensorPreset::Erim, true);
+    config.live.perception_busy_poll = perception_busy_poll;
     let log = sim_log(SensorPreset::Erim);
     let expected = lockstep(&log, &config);
     let (tap, taken) = crossbeam_channel::unbounded::<Decided>();

@@ -45,6 +45,13 @@ pub struct LiveConfig {
     /// Messages waiting between two threads before the oldest are dropped
     /// (counted); range images always keep only the newest.
     pub queue_capacity: usize,
+    /// The perception thread polls for its next image instead of sleeping
+    /// until one comes. It then keeps one core busy, and picks each image up
+    /// at once on a core that is awake and warm: on a virtual machine, or a
+    /// processor that saves power when idle, an image evaluated right after
+    /// a sleep takes much longer than one after another (2-vCPU VM,
+    /// 128×2048 at 10 Hz, image arrival to command: median 3.5 → 2.7 ms).
+    pub perception_busy_poll: bool,
 }
 
 impl Default for LiveConfig {
@@ -57,6 +64,7 @@ impl Default for LiveConfig {
             reproduce_lockstep: false,
             status_period_s: 10.0,
             queue_capacity: 1024,
+            perception_busy_poll: false,
         }
     }
 }

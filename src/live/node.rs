@@ -89,11 +89,11 @@ fn perception(
     let publisher = lcm.publisher();
     let (slot, images, replaced) = stages::newest_wins();
     let (poses_tx, poses) = crossbeam_channel::bounded(config.live.queue_capacity);
-    let period = config.live.status_period_s;
+    let live = config.live.clone();
     let worker = std::thread::Builder::new()
         .name("perception".into())
         .spawn(move || {
-            perception_worker(node, poses, images, replaced, period, |report, _| {
+            perception_worker(node, poses, images, replaced, &live, |report, _| {
                 if let Err(e) = publisher
                     .publish_message(channels::OBSTACLE_CELLS, &wire::obstacles_to_wire(&report))
                 {

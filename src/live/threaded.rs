@@ -224,14 +224,21 @@ impl arcnav_perception::Runner for PerceptionHelper {
 
 /// Perception on its own thread's loop: poses and the newest image in,
 /// reports (with their image's arrival time) out, until the inputs close.
+/// With `live.perception_busy_poll` it polls its inputs instead of sleeping.
 pub(crate) fn perception_worker(
     mut node: PerceptionNode,
     poses: Receiver<Pose>,
     images: Receiver<Arrived<RangeImage>>,
     replaced: Arc<AtomicU64>,
-    status_period_s: f64,
+    live: &super::LiveConfig,
     mut out: impl FnMut(ObstacleReport, i64),
 ) -> NodeStatus {
+    let wait = if live.perception_busy_poll {
+        Wait::Poll
+    } else {
+        Wait::Block
+    };
+    let status_period_s = live.status_period_s;
     let mut status = NodeStatus::new("perception");
     let mut busy = Samples::default();
     let mut ticker = Ticker::new(status_period_s, wall_clock_utime());
@@ -254,7 +261,7 @@ pub(crate) fn perception_worker(
         status.set("out_of_order", node.drops.out_of_order);
     };
     loop {
-        let event = next(&poses, &images);
+        let event = next(&poses, &images, wait);
         let started = Instant::now();
         match event {
             Next::First(pose) => node.on_pose(&pose, &mut |r| reports.push(r)),
@@ -304,12 +311,37 @@ enum Next<A, B> {
     Closed,
 }
 
+/// How a thread waits for its next message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Wait {
+    /// Sleeps until one comes.
+    Block,
+    /// Polls, yielding the core to any other runnable thread between polls
+    /// but never sleeping: the core stays awake.
+    Poll,
+}
+
 /// The next message of either receiver.
-fn next<A, B>(first: &Receiver<A>, second: &Receiver<B>) -> Next<A, B> {
-    select! {
-        recv(first) -> m => m.map_or(Next::Closed, Next::First),
-        recv(second) -> m => m.map_or(Next::Closed, Next::Second),
-        default(Duration::from_millis(100)) => Next::Idle,
+fn next<A, B>(first: &Receiver<A>, second: &Receiver<B>, wait: Wait) -> Next<A, B> {
+    const IDLE: Duration = Duration::from_millis(100);
+    if wait == Wait::Block {
+        return select! {
+            recv(first) -> m => m.map_or(Next::Closed, Next::First),
+            recv(second) -> m => m.map_or(Next::Closed, Next::Second),
+            default(IDLE) => Next::Idle,
+        };
+    }
+    let since = Instant::now();
+    loop {
+        select! {
+            recv(first) -> m => return m.map_or(Next::Closed, Next::First),
+            recv(second) -> m => return m.map_or(Next::Closed, Next::Second),
+            default => {}
+        }
+        if since.elapsed() >= IDLE {
+            return Next::Idle;
+        }
+        std::thread::yield_now();
     }
 }
 
@@ -376,14 +408,14 @@ pub fn run(
 
     let perception_thread = {
         let arbiter_tx = arbiter_tx.clone();
-        let period = live.status_period_s;
+        let live = live.clone();
         spawn("perception", move || {
             perception_worker(
                 perception,
                 perception_poses,
                 images,
                 replaced,
-                period,
+                &live,
                 |report, arrival| {
                     let _ =
                         arbiter_tx.try_send(ToArbiter::Perceived(report.utime, wall_clock_utime()));
@@ -633,7 +665,7 @@ fn map_worker(
             status.set("patches", map.node.map.len() as u64);
         };
     loop {
-        let event = next(&poses, &reports);
+        let event = next(&poses, &reports, Wait::Block);
         let started = Instant::now();
         match event {
             Next::First(pose) => map.on_pose(pose, &mut out),
@@ -772,4 +804,36 @@ pub(crate) fn io_loop(
     status.set("incomplete_messages", transport.reassembly.incomplete);
     status.set("malformed_datagrams", transport.reassembly.malformed);
     result.map(|()| status)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn next_brings_either_input_then_idle_then_closed_sleeping_or_polling() {
+        for wait in [Wait::Block, Wait::Poll] {
+            let (poses_tx, poses) = crossbeam_channel::bounded::<u8>(4);
+            let (images_tx, images) = crossbeam_channel::bounded::<&str>(4);
+            let late = std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(20));
+                images_tx.send("image").unwrap();
+                images_tx
+            });
+            assert!(
+                matches!(next(&poses, &images, wait), Next::Second("image")),
+                "{wait:?}"
+            );
+            poses_tx.send(7).unwrap();
+            assert!(matches!(next(&poses, &images, wait), Next::First(7)));
+            let images_tx = late.join().unwrap();
+            // Nothing for 100 ms: idle, so the status still gets logged.
+            let since = Instant::now();
+            assert!(matches!(next(&poses, &images, wait), Next::Idle));
+            assert!(since.elapsed() >= Duration::from_millis(100), "{wait:?}");
+            // An input closed: the executor is shutting down.
+            drop(images_tx);
+            assert!(matches!(next(&poses, &images, wait), Next::Closed));
+        }
+    }
 }
