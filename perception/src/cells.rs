@@ -287,14 +287,13 @@ fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
             if count > 0 {
                 put(&mut bins.slots, &mut bins.cells, &run!());
             }
-            let fresh = Cell::new(index);
-            (index_of_run, count, z_min, z_max, sums) = (
-                fresh.index,
-                fresh.count,
-                fresh.z_min,
-                fresh.z_max,
-                fresh.sums,
-            );
+            Cell {
+                index: index_of_run,
+                count,
+                z_min,
+                z_max,
+                sums,
+            } = Cell::new(index);
         }
         count += 1;
         z_min = if z < z_min { z } else { z_min };
@@ -483,9 +482,7 @@ impl CellClassifier {
     pub fn new(config: &PerceptionConfig) -> Self {
         let c = &config.cells;
         let cell_size = c.cell_size_m as f32;
-        // The sensor may sit a few metres from the vehicle origin.
-        let half_extent = (config.max_range_m + 5.0) as f32;
-        let side = (2.0 * half_extent / cell_size).ceil() as usize;
+        let side = config.grid_side();
         let half_extent = side as f32 * cell_size / 2.0;
         let radius = (c.slope_window_cells / 2) as isize;
         let s = side as isize;

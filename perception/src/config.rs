@@ -78,6 +78,14 @@ impl Default for CellsConfig {
 }
 
 impl PerceptionConfig {
+    /// Cells per side of the cell classifier's grid: it covers `max_range_m`
+    /// around the sensor, plus 5 m because the sensor may sit a few metres
+    /// from the vehicle origin.
+    pub(crate) fn grid_side(&self) -> usize {
+        let half_extent = (self.max_range_m + 5.0) as f32;
+        (2.0 * half_extent / self.cells.cell_size_m as f32).ceil() as usize
+    }
+
     /// Checks the values and that no threshold lets pass terrain the vehicle
     /// cannot drive. Keys are relative to `[perception]`, except those of
     /// the vehicle named in messages.
@@ -117,9 +125,8 @@ impl PerceptionConfig {
         }
         let c = &self.cells;
         config::in_range("cells.cell_size_m", c.cell_size_m, 0.02, 2.0)?;
-        // The classifier's grid spans the range around the sensor (plus 5 m
-        // for the mount) and holds 4 bytes a cell in each of its two parts.
-        let side = (2.0 * (self.max_range_m + 5.0) / c.cell_size_m).ceil();
+        // The classifier's grid holds 4 bytes a cell in each of its two parts.
+        let side = self.grid_side() as f64;
         if side * side > MAX_GRID_CELLS as f64 {
             return Err(ConfigError::new(
                 "cells.cell_size_m",
