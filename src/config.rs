@@ -259,6 +259,7 @@ impl Config {
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("perception"))?;
         self.localmap.validate().map_err(|e| e.within("localmap"))?;
+        self.region_covers_the_map_window()?;
         self.arbiter.validate().map_err(|e| e.within("arbiter"))?;
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
         self.live.validate().map_err(|e| e.within("live"))?;
@@ -275,6 +276,27 @@ impl Config {
                 .map_err(|e| behaviour_error(name, e))?;
         }
         Ok(())
+    }
+
+    /// Perception must evaluate all the ground the local map keeps.
+    fn region_covers_the_map_window(&self) -> Result<(), ConfigError> {
+        let (region, map) = (&self.perception.region, &self.localmap);
+        [
+            ("ahead_m", region.ahead_m, map.ahead_m),
+            ("behind_m", region.behind_m, map.behind_m),
+            ("half_width_m", region.half_width_m, map.half_width_m),
+        ]
+        .into_iter()
+        .find(|&(_, evaluated, kept)| evaluated < kept)
+        .map_or(Ok(()), |(key, evaluated, kept)| {
+            Err(ConfigError::new(
+                format!("perception.region.{key}"),
+                format!(
+                    "is {evaluated} m, less than localmap.{key} ({kept} m): \
+                     obstacles there would never reach the map"
+                ),
+            ))
+        })
     }
 
     /// The configuration as TOML.
@@ -406,6 +428,25 @@ mod tests {
             msg.starts_with("test.toml: invalid configuration: `arcs.min_radius_m`: is 8 m, tighter than the vehicle's minimum turning radius (vehicle.min_turning_radius_m = 9 m)"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn a_perception_region_smaller_than_the_map_window_is_refused() {
+        let msg = parse_error("[localmap]\nahead_m = 30.0\n");
+        assert!(
+            msg.starts_with("test.toml: invalid configuration: `perception.region.ahead_m`: is 22 m, less than localmap.ahead_m (30 m)"),
+            "{msg}"
+        );
+        let msg = parse_error("[perception.region]\nbehind_m = 5.0\n");
+        assert!(
+            msg.contains("`perception.region.behind_m`: is 5 m, less than localmap.behind_m (6 m)"),
+            "{msg}"
+        );
+        Config::from_toml(
+            "[localmap]\nahead_m = 30.0\n[perception.region]\nahead_m = 32.0\n",
+            "test.toml",
+        )
+        .unwrap();
     }
 
     #[test]

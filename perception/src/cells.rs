@@ -2,7 +2,8 @@
 //!
 //! Every valid pixel is projected into the gravity-aligned vehicle frame of
 //! the capture pose (x forward, y left, z up; the pose's roll and pitch
-//! removed) and binned into a grid of 20 cm cells. Per cell it keeps the point
+//! removed) and, if it falls in the evaluated region around the vehicle
+//! (`[perception.region]`), binned into a grid of 20 cm cells. Per cell it keeps the point
 //! count, min/max z and the sums of a least-squares plane. A cell is
 //! untraversable for
 //!
@@ -26,7 +27,7 @@
 use arcnav_vehicle::Isometry;
 use arcnav_vehicle::frames::level_frame;
 
-use crate::config::PerceptionConfig;
+use crate::config::{GridShape, PerceptionConfig};
 use crate::evaluator::{
     ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner,
     TerrainEvaluator,
@@ -36,7 +37,7 @@ use crate::image::RangeImage;
 
 #[derive(Debug, Clone, Copy)]
 struct Cell {
-    /// Position in the grid (`iy * side + ix`).
+    /// Position in the grid (`iy * cols + ix`).
     index: u32,
     count: u32,
     z_min: f32,
@@ -218,9 +219,9 @@ const OUT_OF_RANGE: u32 = u32::MAX - 1;
 const OUTSIDE_GRID: u32 = u32::MAX - 2;
 
 impl Bins {
-    fn new(side: usize) -> Self {
+    fn new(cells: usize) -> Self {
         Self {
-            slots: vec![EMPTY_SLOT; side * side],
+            slots: vec![EMPTY_SLOT; cells],
             cells: Vec::new(),
             column_rows: Vec::new(),
             counts: [0; 4],
@@ -337,11 +338,13 @@ struct Projection<'a> {
     r2: [f32; 3],
     t: [f32; 3],
     cell_size: f32,
-    half: f32,
-    side: usize,
-    /// The interior of the grid, in cell units.
-    lo: f32,
-    hi: f32,
+    /// The grid's corner, negated.
+    offset: [f32; 2],
+    /// Cells per grid row.
+    stride: usize,
+    /// The interior of the grid (the region), in cell units, per axis.
+    lo: [f32; 2],
+    hi: [f32; 2],
     min_range: f32,
     max_range: f32,
 }
@@ -396,8 +399,9 @@ impl Projection<'_> {
         }
         out.index.resize(n, 0);
         let inv_cell = 1.0 / self.cell_size;
-        let (t, half, side, cell) = (self.t, self.half, self.side, self.cell_size);
-        let (lo, hi, last) = (self.lo, self.hi, self.hi - 1.0);
+        let (t, [ox, oy], stride, cell) = (self.t, self.offset, self.stride, self.cell_size);
+        let ([lo_x, lo_y], [hi_x, hi_y]) = (self.lo, self.hi);
+        let (last_x, last_y) = (hi_x - 1.0, hi_y - 1.0);
         let (min_range, max_range) = (self.min_range, self.max_range);
         let (ce, se, r2) = (self.cos_el[row], self.sin_el[row], self.r2);
         let v = [se * r2[0], se * r2[1], se * r2[2]];
@@ -415,23 +419,23 @@ impl Projection<'_> {
             let x = (ce * ux[k] + v[0]) * range + t[0];
             let y = (ce * uy[k] + v[1]) * range + t[1];
             z[k] = (ce * uz[k] + v[2]) * range + t[2];
-            let fx = (x + half) * inv_cell;
-            let fy = (y + half) * inv_cell;
+            let fx = (x + ox) * inv_cell;
+            let fy = (y + oy) * inv_cell;
             // NaN fails every comparison, so these tests keep only valid
             // returns; clamped, the cell is computed for every pixel.
             let in_range = range >= min_range && range <= max_range;
-            let in_grid = fx >= lo && fx < hi && fy >= lo && fy < hi;
+            let in_grid = fx >= lo_x && fx < hi_x && fy >= lo_y && fy < hi_y;
             // SAFETY: clamped to [lo, hi - 1] (max and min return the
             // number when the other operand is NaN), far inside i32.
             let (ix, iy) = unsafe {
                 (
-                    fx.max(lo).min(last).to_int_unchecked::<i32>(),
-                    fy.max(lo).min(last).to_int_unchecked::<i32>(),
+                    fx.max(lo_x).min(last_x).to_int_unchecked::<i32>(),
+                    fy.max(lo_y).min(last_y).to_int_unchecked::<i32>(),
                 )
             };
             let returned = range > 0.0 && range < f32::INFINITY;
             let why = if returned { OUT_OF_RANGE } else { NO_RETURN };
-            let cell_index = (iy as u32) * side as u32 + ix as u32;
+            let cell_index = (iy as u32) * stride as u32 + ix as u32;
             index[k] = if !in_range {
                 why
             } else if in_grid {
@@ -439,8 +443,8 @@ impl Projection<'_> {
             } else {
                 OUTSIDE_GRID
             };
-            dx[k] = x - ((ix as f32 + 0.5) * cell - half);
-            dy[k] = y - ((iy as f32 + 0.5) * cell - half);
+            dx[k] = x - ((ix as f32 + 0.5) * cell - ox);
+            dy[k] = y - ((iy as f32 + 0.5) * cell - oy);
         }
     }
 }
@@ -457,16 +461,14 @@ pub struct CellClassifier {
     min_range: f32,
     max_range: f32,
     fov_max_vertices: usize,
-    /// Cells per side; the grid spans [-half_extent, half_extent]² of the level frame.
-    side: usize,
-    /// Points are binned only this many cells away from the grid's edge, so
-    /// every neighbour a window reaches exists.
-    margin: usize,
+    /// The grid over the region, in the level frame. Points are binned only
+    /// `grid.margin` cells away from its edge, so every neighbour a window
+    /// reaches exists.
+    grid: GridShape,
     /// Index offsets of the slope window's cells, with their (dx, dy) in metres.
     window: Vec<(isize, f32, f32)>,
     /// Index offsets of a cell's eight neighbours.
     neighbours: [isize; 8],
-    half_extent: f32,
     /// The parts' bins; the first holds the whole image once merged.
     bins: [Bins; PARTS],
     /// Per touched cell (same slot as in `bins[0]`): its reasons and its region.
@@ -482,10 +484,9 @@ impl CellClassifier {
     pub fn new(config: &PerceptionConfig) -> Self {
         let c = &config.cells;
         let cell_size = c.cell_size_m as f32;
-        let side = config.grid_side();
-        let half_extent = side as f32 * cell_size / 2.0;
+        let grid = config.grid();
         let radius = (c.slope_window_cells / 2) as isize;
-        let s = side as isize;
+        let s = grid.cols as isize;
         let window = (-radius..=radius)
             .flat_map(|dy| {
                 (-radius..=radius)
@@ -502,12 +503,10 @@ impl CellClassifier {
             min_range: config.min_range_m as f32,
             max_range: config.max_range_m as f32,
             fov_max_vertices: config.fov_max_vertices,
-            side,
-            margin: radius.max(1) as usize,
+            grid,
             window,
             neighbours: [-s - 1, -s, -s + 1, -1, 1, s - 1, s, s + 1],
-            half_extent,
-            bins: std::array::from_fn(|_| Bins::new(side)),
+            bins: std::array::from_fn(|_| Bins::new(grid.cols * grid.rows)),
             labels: Vec::new(),
             queue: Vec::new(),
             trig: BeamTrig::default(),
@@ -552,10 +551,13 @@ impl CellClassifier {
             r2,
             t,
             cell_size: self.cell_size,
-            half: self.half_extent,
-            side: self.side,
-            lo: self.margin as f32,
-            hi: (self.side - self.margin) as f32,
+            offset: self.grid.origin.map(|o| -o),
+            stride: self.grid.cols,
+            lo: [self.grid.margin as f32; 2],
+            hi: [
+                (self.grid.cols - self.grid.margin) as f32,
+                (self.grid.rows - self.grid.margin) as f32,
+            ],
             min_range: self.min_range.max(f32::MIN_POSITIVE),
             max_range: self.max_range,
         };
@@ -599,7 +601,7 @@ impl CellClassifier {
     }
 
     /// The slot of the cell `offset` grid indices away from `cell`, if it
-    /// holds points. Binned cells keep `margin` cells from the edge, so every
+    /// holds points. Binned cells keep a margin from the edge, so every
     /// offset of the window stays inside the grid.
     #[inline]
     fn neighbour(&self, cell: &Cell, offset: isize) -> Option<usize> {
@@ -736,11 +738,12 @@ impl CellClassifier {
                 continue;
             }
             let (ix, iy) = (
-                cell.index as usize % self.side,
-                cell.index as usize / self.side,
+                cell.index as usize % self.grid.cols,
+                cell.index as usize / self.grid.cols,
             );
-            let cx = f64::from((ix as f32 + 0.5) * self.cell_size - self.half_extent);
-            let cy = f64::from((iy as f32 + 0.5) * self.cell_size - self.half_extent);
+            let [ox, oy] = self.grid.origin;
+            let cx = f64::from((ix as f32 + 0.5) * self.cell_size + ox);
+            let cy = f64::from((iy as f32 + 0.5) * self.cell_size + oy);
             report.cells.push(ObstacleCell {
                 x: origin.x + cos * cx - sin * cy,
                 y: origin.y + sin * cx + cos * cy,

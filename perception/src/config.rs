@@ -22,6 +22,8 @@ pub struct PerceptionConfig {
     pub max_range_m: f64,
     /// Most vertices of the field-of-view polygon sent to the local map.
     pub fov_max_vertices: usize,
+    /// The ground evaluated around the vehicle.
+    pub region: RegionConfig,
     /// The per-cell classifier of 002 §4.
     pub cells: CellsConfig,
 }
@@ -33,9 +35,47 @@ impl Default for PerceptionConfig {
             min_range_m: 0.5,
             max_range_m: 40.0,
             fov_max_vertices: 128,
+            region: RegionConfig::default(),
             cells: CellsConfig::default(),
         }
     }
+}
+
+/// Lives in `[perception.region]`: only the ground inside this box around
+/// the vehicle (in its gravity-aligned frame: x ahead, y left) is evaluated.
+/// The local map drops at once what lies outside its window (002 §5), so
+/// the default is that window (0-20 m ahead, ±10 m, 6 m behind) with 2 m to
+/// spare: a 360° lidar's image then costs a third less.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RegionConfig {
+    /// Ahead of the vehicle origin, m.
+    pub ahead_m: f64,
+    /// Behind the vehicle origin, m.
+    pub behind_m: f64,
+    /// To each side, m.
+    pub half_width_m: f64,
+}
+
+impl Default for RegionConfig {
+    fn default() -> Self {
+        Self {
+            ahead_m: 22.0,
+            behind_m: 8.0,
+            half_width_m: 12.0,
+        }
+    }
+}
+
+/// The cell classifier's grid: `cols × rows` cells of the level frame, the
+/// first cell's corner at `origin`; `margin` cells along each edge stay
+/// empty, so every neighbour a binned cell's window reaches exists.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct GridShape {
+    pub cols: usize,
+    pub rows: usize,
+    pub origin: [f32; 2],
+    pub margin: usize,
 }
 
 /// Lives in `[perception.cells]`.
@@ -78,12 +118,26 @@ impl Default for CellsConfig {
 }
 
 impl PerceptionConfig {
-    /// Cells per side of the cell classifier's grid: it covers `max_range_m`
-    /// around the sensor, plus 5 m because the sensor may sit a few metres
-    /// from the vehicle origin.
-    pub(crate) fn grid_side(&self) -> usize {
-        let half_extent = (self.max_range_m + 5.0) as f32;
-        (2.0 * half_extent / self.cells.cell_size_m as f32).ceil() as usize
+    /// The cell classifier's grid: the region, widened to whole cells
+    /// (cell edges lie on multiples of the cell size from the vehicle
+    /// origin) and by the margin the slope window needs.
+    pub(crate) fn grid(&self) -> GridShape {
+        let cell = self.cells.cell_size_m;
+        let margin = (self.cells.slope_window_cells / 2).max(1) as usize;
+        let cells = |metres: f64| (metres / cell).ceil().max(0.0) as usize;
+        let (behind, right) = (
+            cells(self.region.behind_m) + margin,
+            cells(self.region.half_width_m) + margin,
+        );
+        GridShape {
+            cols: behind + cells(self.region.ahead_m) + margin,
+            rows: 2 * right,
+            origin: [
+                -(behind as f64 * cell) as f32,
+                -(right as f64 * cell) as f32,
+            ],
+            margin,
+        }
     }
 
     /// Checks the values and that no threshold lets pass terrain the vehicle
@@ -123,20 +177,37 @@ impl PerceptionConfig {
                 format!("is {}, must be 6 to 100000", self.fov_max_vertices),
             ));
         }
+        let r = &self.region;
+        config::positive("region.ahead_m", r.ahead_m)?;
+        config::non_negative("region.behind_m", r.behind_m)?;
+        config::positive("region.half_width_m", r.half_width_m)?;
+        for (key, value) in [
+            ("region.ahead_m", r.ahead_m),
+            ("region.behind_m", r.behind_m),
+            ("region.half_width_m", r.half_width_m),
+        ] {
+            if value > 500.0 {
+                return Err(ConfigError::new(
+                    key,
+                    format!("is {value} m; at most 500 m is evaluated"),
+                ));
+            }
+        }
         let c = &self.cells;
         config::in_range("cells.cell_size_m", c.cell_size_m, 0.02, 2.0)?;
         // The classifier's grid holds 4 bytes a cell in each of its two parts.
-        let side = self.grid_side() as f64;
-        if side * side > MAX_GRID_CELLS as f64 {
+        let grid = self.grid();
+        let cells = grid.cols as f64 * grid.rows as f64;
+        if cells > MAX_GRID_CELLS as f64 {
             return Err(ConfigError::new(
                 "cells.cell_size_m",
                 format!(
-                    "{} m cells out to max_range_m = {} m need a {side} x {side} grid \
-                     ({:.0} MiB); at most {MAX_GRID_CELLS} cells: use larger cells \
-                     or a shorter range",
+                    "{} m cells over the region need a {} x {} grid ({:.0} MiB); \
+                     at most {MAX_GRID_CELLS} cells: use larger cells or a smaller region",
                     c.cell_size_m,
-                    self.max_range_m,
-                    side * side * 8.0 / f64::from(1 << 20)
+                    grid.cols,
+                    grid.rows,
+                    cells * 8.0 / f64::from(1 << 20)
                 ),
             ));
         }
@@ -241,6 +312,11 @@ mod tests {
     fn a_grid_too_large_for_memory_is_refused() {
         let mut p = PerceptionConfig {
             max_range_m: 500.0,
+            region: RegionConfig {
+                ahead_m: 500.0,
+                behind_m: 500.0,
+                half_width_m: 500.0,
+            },
             ..Default::default()
         };
         p.validate_for(&VehicleConfig::default()).unwrap();
@@ -248,7 +324,7 @@ mod tests {
         let err = p.validate_for(&VehicleConfig::default()).unwrap_err();
         assert_eq!(err.key, "cells.cell_size_m");
         assert!(
-            err.reason.contains("need a 50500 x 50500 grid (19457 MiB)"),
+            err.reason.contains("need a 50002 x 50002 grid (19075 MiB)"),
             "{err}"
         );
     }

@@ -129,7 +129,7 @@ pub struct ImageStats {
     pub no_return: u32,
     /// Returns closer than `min_range_m` or beyond `max_range_m`.
     pub out_of_range: u32,
-    /// Returns outside the evaluation grid.
+    /// Returns outside the evaluated region (`[perception.region]`).
     pub outside_grid: u32,
     /// Cells holding at least one point.
     pub cells_evaluated: u32,

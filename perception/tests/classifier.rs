@@ -302,7 +302,7 @@ fn a_lidar_sees_all_around_but_not_its_blind_zone() {
     let sensor = SensorModel::lidar64();
     let (report, stats) = classify(
         |x, y| {
-            if inside(x, y, -12.0, -11.0, -0.5, 0.5) {
+            if inside(x, y, -7.0, -6.0, -0.5, 0.5) {
                 0.6
             } else {
                 0.0
@@ -311,17 +311,98 @@ fn a_lidar_sees_all_around_but_not_its_blind_zone() {
         &sensor,
         &Isometry::identity(),
     );
-    let n = all_within(&report, -12.3, -10.7, -0.8, 0.8);
+    let n = all_within(&report, -7.3, -5.7, -0.8, 0.8);
     assert!(
         n >= 3,
         "a box behind the vehicle is found: {n} cells, {stats:?}"
     );
     assert!(report.fov.contains(Point2::new(20.0, 5.0)));
-    assert!(report.fov.contains(Point2::new(-15.0, -3.0)));
+    assert!(report.fov.contains(Point2::new(-7.5, -3.0)));
     assert!(
         !report.fov.contains(Point2::new(1.5, 1.5)),
         "the ground beside the vehicle is hidden by the roof line"
     );
+}
+
+/// A box 12 m behind, one 30 m ahead and one 10 m ahead, seen by a 360° lidar.
+fn three_boxes(x: f64, y: f64) -> f64 {
+    let boxes = [(-12.5, -11.5), (29.5, 30.5), (9.5, 10.5)];
+    if boxes
+        .iter()
+        .any(|&(x0, x1)| inside(x, y, x0, x1, -0.5, 0.5))
+    {
+        0.6
+    } else {
+        0.0
+    }
+}
+
+#[test]
+fn only_the_region_around_the_vehicle_is_evaluated() {
+    let sensor = SensorModel::lidar64();
+    let pose = Isometry::identity();
+    let image = sensor.render(1_000_000, &pose, &HeightFunction::new(three_boxes));
+    let evaluate = |config: &PerceptionConfig| {
+        config.validate_for(&VehicleConfig::default()).unwrap();
+        let mut report = ObstacleReport::default();
+        let stats = config
+            .build_evaluator()
+            .unwrap()
+            .evaluate(&image, &pose, &mut report)
+            .unwrap();
+        (report, stats)
+    };
+    let near = PerceptionConfig::default();
+    let (r, wide) = (&near.region, &mut PerceptionConfig::default());
+    assert_eq!((r.ahead_m, r.behind_m, r.half_width_m), (22.0, 8.0, 12.0));
+    wide.region.ahead_m = 35.0;
+    wide.region.behind_m = 15.0;
+    let (cropped, cropped_stats) = evaluate(&near);
+    let (whole, whole_stats) = evaluate(wide);
+
+    let count = |report: &ObstacleReport, x0: f64, x1: f64| {
+        report
+            .cells
+            .iter()
+            .filter(|c| (x0..=x1).contains(&c.x) && c.y.abs() <= 0.8)
+            .count()
+    };
+    for (x0, x1) in [(-12.8, -11.2), (29.2, 30.8)] {
+        assert_eq!(count(&cropped, x0, x1), 0, "box at {x0} m lies outside");
+        assert!(count(&whole, x0, x1) >= 2, "box at {x0} m: {whole_stats:?}");
+    }
+    assert!(count(&cropped, 9.2, 10.8) >= 3, "{cropped_stats:?}");
+    assert!(
+        cropped
+            .cells
+            .iter()
+            .all(|c| (-8.0..=22.0).contains(&c.x) && c.y.abs() <= 12.0),
+        "every cell lies in the region"
+    );
+    // Outside the region, returns are counted, not evaluated; inside it
+    // (a cell away from its edge) the cells are the same.
+    assert!(cropped_stats.outside_grid > whole_stats.outside_grid);
+    assert!(cropped_stats.valid_points < whole_stats.valid_points);
+    assert_eq!(
+        cropped_stats.valid_points
+            + cropped_stats.no_return
+            + cropped_stats.out_of_range
+            + cropped_stats.outside_grid,
+        cropped_stats.pixels
+    );
+    let interior = |report: &ObstacleReport| {
+        report
+            .cells
+            .iter()
+            .filter(|c| (-7.6..=21.6).contains(&c.x) && c.y.abs() <= 11.6)
+            .map(|c| (c.x.to_bits(), c.y.to_bits(), c.reasons))
+            .collect::<Vec<_>>()
+    };
+    let (mut a, mut b) = (interior(&cropped), interior(&whole));
+    a.sort_by_key(|c| (c.0, c.1));
+    b.sort_by_key(|c| (c.0, c.1));
+    assert!(!a.is_empty());
+    assert_eq!(a, b);
 }
 
 #[test]
