@@ -5,12 +5,11 @@
 //! made once by the simulator into target/bench-data and played in real
 //! time into the executor over LCM's in-process `memq://` provider, with the
 //! default live configuration (new cells trigger a decision at once), the
-//! perception thread sleeping between images (the default) and then polling
-//! for them (`live.perception_busy_poll = true`).
+//! perception thread sleeping between images and evaluating each alone (the
+//! default), then polling for them and handing half of each 128×2048 image
+//! to a helper thread (`live.perception_busy_poll = true`).
 //!
-//! `cargo bench --bench live [-- SECONDS]` (default: 30 s of each log);
-//! `ARCNAV_BENCH_MAX_RANGE_M=25` evaluates returns only as far as the map
-//! window can use them (its far corners are 21 m from the sensor).
+//! `cargo bench --bench live [-- SECONDS]` (default: 30 s of each log).
 
 mod common;
 
@@ -73,12 +72,6 @@ fn main() {
         config.sensor.preset = preset;
         config.sim.time_limit_s = seconds;
         config.live.status_period_s = 0.0;
-        if let Some(range) = std::env::var("ARCNAV_BENCH_MAX_RANGE_M")
-            .ok()
-            .and_then(|v| v.parse().ok())
-        {
-            config.perception.max_range_m = range;
-        }
         let log = data.join(format!("live-{preset:?}-{seconds}s.lcm").to_lowercase());
         common::make_log(&log, "short_course", &config);
         for busy_poll in [false, true] {

@@ -46,11 +46,12 @@ pub struct LiveConfig {
     /// (counted); range images always keep only the newest.
     pub queue_capacity: usize,
     /// The perception thread polls for its next image instead of sleeping
-    /// until one comes. It then keeps one core busy, and picks each image up
-    /// at once on a core that is awake and warm: on a virtual machine, or a
+    /// until one comes, and hands half of each large image to a helper
+    /// thread. It then keeps one core busy, and picks each image up at once
+    /// on a core that is awake and warm: on a virtual machine, or a
     /// processor that saves power when idle, an image evaluated right after
     /// a sleep takes much longer than one after another (2-vCPU VM,
-    /// 128×2048 at 10 Hz, image arrival to command: median 3.5 → 2.7 ms).
+    /// 128×2048 at 10 Hz, image arrival to command: median 2.9-3.2 → 2.0-2.5 ms).
     pub perception_busy_poll: bool,
 }
 

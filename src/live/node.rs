@@ -28,7 +28,7 @@ use super::threaded::{
 };
 use super::{LiveReport, NodeStatus, Samples};
 use crate::config::Config;
-use crate::pipeline::{BehaviourNode, PerceptionNode};
+use crate::pipeline::BehaviourNode;
 use crate::wire;
 
 /// Which node to run.
@@ -84,8 +84,7 @@ fn perception(
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
-    let mut node = PerceptionNode::new(config)?;
-    node.set_runner(Box::new(super::threaded::PerceptionHelper::new()?));
+    let node = super::threaded::perception_node(config)?;
     let publisher = lcm.publisher();
     let (slot, images, replaced) = stages::newest_wins();
     let (poses_tx, poses) = crossbeam_channel::bounded(config.live.queue_capacity);
