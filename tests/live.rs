@@ -200,7 +200,19 @@ fn assert_threaded_gives_lockstep(perception_busy_poll: bool) {
     );
     // Same nodes, same timing model: the same commands, cycle for cycle.
     assert!(a.compared >= 190, "only {} cycles compared", a.compared);
-    assert_eq!(a.missing, 0);
+    let missing: Vec<_> = expected
+        .keys()
+        .filter(|t| (first..SIM_EPOCH_US + (LOG_S * 1e6) as i64).contains(*t))
+        .filter(|t| !live.contains_key(*t))
+        .map(|t| {
+            let why = decided
+                .iter()
+                .find(|d| d.command.utime == *t)
+                .map(|d| &d.why);
+            format!("{:.2} s: {why:?}", (t - SIM_EPOCH_US) as f64 * 1e-6)
+        })
+        .collect();
+    assert_eq!(a.missing, 0, "cycles decided otherwise: {missing:?}");
     assert_eq!(a.agreeing, a.compared);
     // The run steered: not a trivially straight log.
     let arcs: std::collections::BTreeSet<_> = live.values().map(|c| c.arc_index).collect();
