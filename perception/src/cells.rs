@@ -256,7 +256,7 @@ fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
         mut z_max,
         mut sums,
     } = run;
-    // The run's locals, as a cell.
+    // The run's locals, as a cell (and, assigned to, as its fields).
     macro_rules! run {
         () => {
             Cell {
@@ -288,13 +288,7 @@ fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
             if count > 0 {
                 put(&mut bins.slots, &mut bins.cells, &run!());
             }
-            Cell {
-                index: index_of_run,
-                count,
-                z_min,
-                z_max,
-                sums,
-            } = Cell::new(index);
+            run!() = Cell::new(index);
         }
         count += 1;
         z_min = if z < z_min { z } else { z_min };
