@@ -165,12 +165,6 @@ impl PerceptionConfig {
                 ),
             ));
         }
-        if self.max_range_m > 500.0 {
-            return Err(ConfigError::new(
-                "max_range_m",
-                format!("is {} m; at most 500 m is evaluated", self.max_range_m),
-            ));
-        }
         if !(6..=100_000).contains(&self.fov_max_vertices) {
             return Err(ConfigError::new(
                 "fov_max_vertices",
@@ -182,6 +176,7 @@ impl PerceptionConfig {
         config::non_negative("region.behind_m", r.behind_m)?;
         config::positive("region.half_width_m", r.half_width_m)?;
         for (key, value) in [
+            ("max_range_m", self.max_range_m),
             ("region.ahead_m", r.ahead_m),
             ("region.behind_m", r.behind_m),
             ("region.half_width_m", r.half_width_m),
