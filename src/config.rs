@@ -9,15 +9,18 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
-use arcnav_arbiter::ArbiterConfig;
-use arcnav_behaviours::{Registry, RegistryError, Setup};
+use arcnav_arbiter::{Arbiter, ArbiterConfig};
+use arcnav_behaviours::{Behaviour, Prepared, Registry, RegistryError, Setup};
 use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
+use arcnav_pipeline::{
+    BehaviourSet, DecisionCycle, Delivery, LiveConfig, LocalMapNode, PerceptionNode, Pipeline,
+    PipelineConfig,
+};
 use arcnav_sim::SimConfig;
 
-use crate::live::LiveConfig;
-use crate::pipeline::PipelineConfig;
 use arcnav_vehicle::config::toml_location;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
@@ -43,11 +46,27 @@ pub struct Config {
     /// a table in a file changes only the keys it names.
     #[serde(deserialize_with = "behaviours_with_defaults")]
     pub behaviours: BTreeMap<String, toml::Table>,
+    /// The behaviour tables parsed into their typed configurations and
+    /// checked, once, when the configuration was loaded.
+    #[serde(skip)]
+    prepared: PreparedBehaviours,
+}
+
+/// Behaviour tables parsed and checked by the registry, by name. Building
+/// a behaviour uses these when its table is still the one prepared.
+#[derive(Debug, Clone, Default)]
+struct PreparedBehaviours(Arc<BTreeMap<String, Prepared>>);
+
+impl PartialEq for PreparedBehaviours {
+    /// A cache of what the tables say: configurations compare by their tables.
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl Default for Config {
     fn default() -> Self {
-        Self {
+        let mut config = Self {
             vehicle: VehicleConfig::default(),
             arcs: ArcSetConfig::default(),
             sensor: SensorConfig::default(),
@@ -58,7 +77,13 @@ impl Default for Config {
             live: LiveConfig::default(),
             sim: SimConfig::default(),
             behaviours: default_behaviours(),
+            prepared: PreparedBehaviours::default(),
+        };
+        // The built-in defaults always prepare.
+        if let Ok(prepared) = config.prepare_behaviours(&Registry::builtin()) {
+            config.prepared = prepared;
         }
+        config
     }
 }
 
@@ -162,8 +187,14 @@ impl Config {
             }
         })?;
         config
-            .validate_with(registry)
-            .and_then(|()| config.normalise_behaviours(registry))
+            .validate_sections()
+            .and_then(|()| config.prepare_behaviours(registry))
+            .map(|prepared| {
+                for (name, p) in prepared.0.iter() {
+                    config.behaviours.insert(name.clone(), p.table().clone());
+                }
+                config.prepared = prepared;
+            })
             .map_err(|source| ConfigLoadError::Invalid {
                 origin: origin.to_owned(),
                 source,
@@ -185,61 +216,144 @@ impl Config {
         ArcSet::new(&self.arcs).map_err(|e| e.within("arcs"))
     }
 
-    /// Builds every configured behaviour (in name order) with `registry`.
-    pub fn build_behaviours(
-        &self,
-        registry: &Registry,
-        arcs: &ArcSet,
-    ) -> Result<Vec<Box<dyn arcnav_behaviours::Behaviour>>, ConfigError> {
-        let setup = Setup {
+    fn setup<'a>(&'a self, arcs: &'a ArcSet) -> Setup<'a> {
+        Setup {
             arcs,
             vehicle: &self.vehicle,
             patch_size_m: self.localmap.patch_size_m,
-        };
-        self.behaviours
+        }
+    }
+
+    /// Parses and checks every behaviour table with `registry`; checks that
+    /// `[arbiter.weights]` and `arbiter.required` name configured behaviours.
+    fn prepare_behaviours(&self, registry: &Registry) -> Result<PreparedBehaviours, ConfigError> {
+        let arcs = self.arc_set()?;
+        let setup = self.setup(&arcs);
+        let prepared = self
+            .behaviours
             .iter()
             .map(|(name, table)| {
                 registry
-                    .build(name, table, &setup)
+                    .prepare(name, table, &setup)
+                    .map(|p| (name.clone(), p))
                     .map_err(|e| behaviour_error(name, e))
             })
-            .collect()
+            .collect::<Result<BTreeMap<_, _>, _>>()?;
+        self.arbiter_names_behaviours()?;
+        Ok(PreparedBehaviours(Arc::new(prepared)))
     }
 
-    /// Builds the configured behaviour `name` alone (a distributed behaviour node).
+    /// Every name the arbiter's section gives must be a configured behaviour.
+    fn arbiter_names_behaviours(&self) -> Result<(), ConfigError> {
+        let known = || self.behaviours.keys().cloned().collect::<Vec<_>>().join(", ");
+        let unknown = |key: String, name: &str| {
+            ConfigError::new(
+                key,
+                format!("{name:?} is not a configured behaviour (configured: {})", known()),
+            )
+        };
+        if let Some(name) = self
+            .arbiter
+            .weights
+            .keys()
+            .find(|name| !self.behaviours.contains_key(*name))
+        {
+            return Err(unknown(format!("arbiter.weights.{name}"), name));
+        }
+        if let Some(name) = self
+            .arbiter
+            .required
+            .iter()
+            .find(|name| !self.behaviours.contains_key(*name))
+        {
+            return Err(unknown("arbiter.required".into(), name));
+        }
+        Ok(())
+    }
+
+    /// Builds the configured behaviour `name` (`None`: not configured), from
+    /// its table as prepared at load; a table changed since is prepared now.
     pub fn build_behaviour(
         &self,
         registry: &Registry,
         arcs: &ArcSet,
         name: &str,
-    ) -> Option<Result<Box<dyn arcnav_behaviours::Behaviour>, ConfigError>> {
+    ) -> Option<Result<Box<dyn Behaviour>, ConfigError>> {
         let table = self.behaviours.get(name)?;
-        let setup = Setup {
-            arcs,
-            vehicle: &self.vehicle,
-            patch_size_m: self.localmap.patch_size_m,
-        };
-        Some(
-            registry
-                .build(name, table, &setup)
+        let setup = self.setup(arcs);
+        Some(match self.prepared.0.get(name) {
+            Some(p) if p.table() == table => Ok(p.build(&setup)),
+            _ => registry
+                .prepare(name, table, &setup)
+                .map(|p| p.build(&setup))
                 .map_err(|e| behaviour_error(name, e)),
-        )
+        })
     }
 
-    /// Replaces each behaviour table by its full form (every default filled in).
-    fn normalise_behaviours(&mut self, registry: &Registry) -> Result<(), ConfigError> {
+    /// Builds every configured behaviour (in name order).
+    pub fn build_behaviours(
+        &self,
+        registry: &Registry,
+        arcs: &ArcSet,
+    ) -> Result<Vec<Box<dyn Behaviour>>, ConfigError> {
+        self.behaviours
+            .keys()
+            .filter_map(|name| self.build_behaviour(registry, arcs, name))
+            .collect()
+    }
+
+    /// The configured behaviours, voting over the configured arcs.
+    pub fn behaviour_set(&self, registry: &Registry) -> Result<BehaviourSet, ConfigError> {
         let arcs = self.arc_set()?;
-        let setup = Setup {
-            arcs: &arcs,
-            vehicle: &self.vehicle,
-            patch_size_m: self.localmap.patch_size_m,
-        };
-        for (name, table) in &mut self.behaviours {
-            *table = registry
-                .normalise(name, table, &setup)
-                .map_err(|e| behaviour_error(name, e))?;
+        Ok(BehaviourSet::new(self.build_behaviours(registry, &arcs)?, arcs))
+    }
+
+    /// The perception node, from `[perception]` and `[pipeline]`.
+    pub fn perception_node(&self) -> Result<PerceptionNode, ConfigError> {
+        PerceptionNode::new(&self.perception, &self.pipeline).map_err(|e| e.within("perception"))
+    }
+
+    /// The local map and its cycle clock, from `[localmap]`, the vehicle's
+    /// top speed and `[pipeline]`, with reports delivered as `delivery` says.
+    pub fn decision_cycle<T>(&self, delivery: Delivery) -> DecisionCycle<T> {
+        let map = LocalMapNode::new(&self.localmap, self.vehicle.max_speed_mps);
+        DecisionCycle::new(map, &self.pipeline, delivery)
+    }
+
+    /// How a live run delivers reports to the map (`[live]`).
+    pub fn live_delivery(&self) -> Delivery {
+        if self.live.reproduce_lockstep {
+            Delivery::held(&self.pipeline)
+        } else {
+            Delivery::OnArrival {
+                decide_at_once: self.live.decide_on_new_cells,
+            }
         }
-        Ok(())
+    }
+
+    /// The DAMN arbiter, from `[arbiter]`, `[arcs]` and the vehicle.
+    pub fn arbiter(&self) -> Result<Arbiter, ConfigError> {
+        Ok(Arbiter::new(&self.arbiter, self.arc_set()?, &self.vehicle))
+    }
+
+    /// The lock-step executor with every node of this configuration.
+    pub fn lockstep(&self, registry: &Registry) -> Result<Pipeline, ConfigError> {
+        Ok(Pipeline::new(
+            self.perception_node()?,
+            self.decision_cycle(Delivery::held(&self.pipeline)),
+            self.behaviour_set(registry)?,
+            self.arbiter()?,
+        ))
+    }
+
+    /// The behaviours whose votes complete a cycle: every configured one
+    /// with a positive weight.
+    pub fn expected_behaviours(&self) -> Vec<String> {
+        self.behaviours
+            .keys()
+            .filter(|name| self.arbiter.weight(name) > 0.0)
+            .cloned()
+            .collect()
     }
 
     /// Checks every section and the values that relate sections, with the
@@ -248,8 +362,14 @@ impl Config {
         self.validate_with(&Registry::builtin())
     }
 
-    /// Checks every section with behaviours from `registry`.
+    /// Checks every section with behaviours from `registry` (a configuration
+    /// built in code; one loaded from TOML was checked when loaded).
     pub fn validate_with(&self, registry: &Registry) -> Result<(), ConfigError> {
+        self.validate_sections()?;
+        self.prepare_behaviours(registry).map(|_| ())
+    }
+
+    fn validate_sections(&self) -> Result<(), ConfigError> {
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
         self.arcs
             .validate_for(&self.vehicle)
@@ -261,20 +381,18 @@ impl Config {
         self.localmap.validate().map_err(|e| e.within("localmap"))?;
         self.region_covers_the_map_window()?;
         self.arbiter.validate().map_err(|e| e.within("arbiter"))?;
+        if self.arbiter.cruise_speed_mps > self.vehicle.max_speed_mps {
+            return Err(ConfigError::new(
+                "arbiter.cruise_speed_mps",
+                format!(
+                    "is {} m/s, faster than the vehicle's top speed (vehicle.max_speed_mps = {} m/s)",
+                    self.arbiter.cruise_speed_mps, self.vehicle.max_speed_mps
+                ),
+            ));
+        }
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
         self.live.validate().map_err(|e| e.within("live"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
-        let arcs = self.arc_set()?;
-        let setup = Setup {
-            arcs: &arcs,
-            vehicle: &self.vehicle,
-            patch_size_m: self.localmap.patch_size_m,
-        };
-        for (name, table) in &self.behaviours {
-            registry
-                .normalise(name, table, &setup)
-                .map_err(|e| behaviour_error(name, e))?;
-        }
         Ok(())
     }
 

@@ -5,13 +5,14 @@
 //! map of untraversable cells, behaviours voting over steering arcs and a DAMN
 //! arbiter fusing the votes into a steering command.
 //!
-//! This crate holds what sits on top of the core crates: the composed
-//! configuration and the executors used by the `arcnav` binary.
+//! This crate holds what sits on top of the pipeline library
+//! ([`arcnav_pipeline`]): the composed configuration, the mission runner,
+//! replay, recording, pictures and the live executors' I/O used by the
+//! `arcnav` binary.
 
 pub mod config;
 pub mod live;
 pub mod mission;
-pub mod pipeline;
 mod recorder;
 pub mod render;
 pub mod replay;

@@ -29,7 +29,7 @@ use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::config::Config;
-use crate::pipeline::{Input, Pipeline, Sink, StageTimes};
+use arcnav_pipeline::{Input, Sink, StageTimes};
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
 use crate::wire;
@@ -282,7 +282,9 @@ pub fn run_mission(
         .max_range_m
         .min(config.perception.max_range_m + config.sim.render_margin_m);
     let sim = &config.sim;
-    let mut pipeline = Pipeline::new(config, registry)?;
+    let mut pipeline = config.lockstep(registry)?;
+    pipeline.time_stages(Instant::now);
+    pipeline.time_stages(Instant::now);
     pipeline.set_explain(options.snapshot_every_s.is_some());
     let threads = sim.thread_count();
     let dt = seconds_to_micros(1.0 / sim.pose_rate_hz);
@@ -503,7 +505,7 @@ pub fn run_mission(
             .then_some(truth.closest_approach_m),
         stops,
         steering_activity: sink.curvature_change.0 / sink.curvature_change.1.max(1) as f64,
-        map_resets: pipeline.map_resets,
+        map_resets: pipeline.cycle.counts().map_resets,
         stage_times: pipeline.times,
         render_ms_mean: if images > 0 {
             render_ms / images as f64

@@ -1,7 +1,7 @@
 //! Replaying range-image logs against the pipeline.
 //!
 //! A log's POSE, RANGE_IMAGE* and WAYPOINTS drive the lock-step
-//! [`Pipeline`] in log order, on the messages' own timestamps; OBSTACLE_CELLS,
+//! [`arcnav_pipeline::Pipeline`] in log order, on the messages' own timestamps; OBSTACLE_CELLS,
 //! ARC_VOTES_* and STEERING_COMMAND are recomputed (the recorded ones are
 //! kept aside for comparison, or, with `recorded_cells`, the recorded cells
 //! replace perception). The same log and configuration give the same output
@@ -23,7 +23,7 @@ use arcnav_vehicle::{ArcSet, ConfigError, Pose, SteeringCommand, Utime};
 use serde::Serialize;
 
 use crate::config::Config;
-use crate::pipeline::{Input, Pipeline, Sink};
+use arcnav_pipeline::{Input, Sink};
 use crate::recorder::{Recorder, WriteFailed};
 use crate::wire;
 
@@ -275,7 +275,7 @@ pub fn replay(
         source,
     })?;
     let mut events = TypedEvents::new(reader);
-    let mut pipeline = Pipeline::new(config, registry)?;
+    let mut pipeline = config.lockstep(registry)?;
     pipeline.set_explain(options.stop_at_s.is_some());
     let arcs = pipeline.arcs().clone();
     let out = Recorder::create(options.out.as_deref())
@@ -411,7 +411,7 @@ pub fn replay(
     problems.images_without_pose = drops.no_pose;
     problems.images_out_of_order = drops.out_of_order;
     problems.invalid_images += drops.invalid;
-    problems.map_resets = pipeline.map_resets;
+    problems.map_resets = pipeline.cycle.counts().map_resets;
     problems.log = events.log_stats().into();
     problems.unknown_channels = events.stats().unknown.clone();
     for (channel, n) in &events.stats().undecodable {

@@ -31,8 +31,19 @@ pub struct ArbiterConfig {
     pub min_speed_fraction: f64,
     /// Speed on an arc is limited so that v²·|k| stays below this, m/s².
     pub max_lateral_accel_mps2: f64,
-    /// Weight of each behaviour in the fused vote; 0 skips a behaviour.
+    /// Weight of each behaviour in the fused vote; 0 skips a behaviour. A
+    /// `[arbiter.weights]` table changes the weights it names; the others
+    /// keep their defaults.
+    #[serde(deserialize_with = "weights_over_defaults")]
     pub weights: BTreeMap<String, f64>,
+}
+
+fn weights_over_defaults<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> Result<BTreeMap<String, f64>, D::Error> {
+    let mut weights = ArbiterConfig::default().weights;
+    weights.extend(BTreeMap::<String, f64>::deserialize(deserializer)?);
+    Ok(weights)
 }
 
 impl Default for ArbiterConfig {

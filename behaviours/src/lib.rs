@@ -17,4 +17,4 @@ pub mod registry;
 pub use behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
 pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
 pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig};
-pub use registry::{Plugin, Registry, RegistryError};
+pub use registry::{Plugin, Prepared, Registry, RegistryError};

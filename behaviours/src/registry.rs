@@ -23,7 +23,7 @@ pub trait Plugin: Behaviour + Sized + 'static {
     /// Its name in the configuration (`[behaviours.NAME]`).
     const NAME: &'static str;
     /// Its configuration, with the documented defaults in `Default`.
-    type Config: Serialize + DeserializeOwned + Default;
+    type Config: Serialize + DeserializeOwned + Default + Clone + Send + Sync + 'static;
 
     /// Checks the configuration (keys relative to its table).
     fn validate(_config: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
@@ -43,15 +43,41 @@ pub enum RegistryError {
     Config(#[from] ConfigError),
 }
 
-type Builder =
-    Box<dyn Fn(&toml::Table, &Setup<'_>) -> Result<Box<dyn Behaviour>, ConfigError> + Send + Sync>;
-type Normaliser =
-    Box<dyn Fn(&toml::Table, &Setup<'_>) -> Result<toml::Table, ConfigError> + Send + Sync>;
+type Preparer =
+    Box<dyn Fn(&toml::Table, &Setup<'_>) -> Result<Prepared, ConfigError> + Send + Sync>;
 
 struct Entry {
-    build: Builder,
-    normalise: Normaliser,
+    prepare: Preparer,
     defaults: toml::Table,
+}
+
+/// A behaviour's table, parsed into its typed configuration and validated
+/// (once): what building the behaviour needs, and the table with every
+/// default filled in.
+#[derive(Clone)]
+pub struct Prepared {
+    table: toml::Table,
+    build: std::sync::Arc<dyn Fn(&Setup<'_>) -> Box<dyn Behaviour> + Send + Sync>,
+}
+
+impl Prepared {
+    /// The table with every default filled in.
+    pub fn table(&self) -> &toml::Table {
+        &self.table
+    }
+
+    /// Builds the behaviour (its configuration was checked when prepared).
+    pub fn build(&self, setup: &Setup<'_>) -> Box<dyn Behaviour> {
+        (self.build)(setup)
+    }
+}
+
+impl std::fmt::Debug for Prepared {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Prepared")
+            .field("table", &self.table)
+            .finish_non_exhaustive()
+    }
 }
 
 /// Behaviours by name.
@@ -111,21 +137,20 @@ impl Registry {
 
     /// Registers `P` under `P::NAME` (replacing a behaviour of that name).
     pub fn add<P: Plugin>(&mut self) -> &mut Self {
-        let build: Builder = Box::new(|table, setup| {
+        let prepare: Preparer = Box::new(|table, setup| {
             let config: P::Config = parse(table)?;
             P::validate(&config, setup)?;
-            Ok(Box::new(P::build(config, setup)))
-        });
-        let normalise: Normaliser = Box::new(|table, setup| {
-            let config: P::Config = parse(table)?;
-            P::validate(&config, setup)?;
-            Ok(table_of(&config))
+            Ok(Prepared {
+                table: table_of(&config),
+                build: std::sync::Arc::new(move |setup| {
+                    Box::new(P::build(config.clone(), setup)) as Box<dyn Behaviour>
+                }),
+            })
         });
         self.entries.insert(
             P::NAME,
             Entry {
-                build,
-                normalise,
+                prepare,
                 defaults: table_of(&P::Config::default()),
             },
         );
@@ -146,25 +171,26 @@ impl Registry {
             })
     }
 
-    /// Builds behaviour `name` from its table. Config errors carry keys
-    /// relative to the table.
+    /// Parses and checks behaviour `name`'s table, once: the result builds
+    /// the behaviour as often as needed. Config errors carry keys relative
+    /// to the table.
+    pub fn prepare(
+        &self,
+        name: &str,
+        table: &toml::Table,
+        setup: &Setup<'_>,
+    ) -> Result<Prepared, RegistryError> {
+        Ok((self.entry(name)?.prepare)(table, setup)?)
+    }
+
+    /// Builds behaviour `name` from its table (prepares it, then builds).
     pub fn build(
         &self,
         name: &str,
         table: &toml::Table,
         setup: &Setup<'_>,
     ) -> Result<Box<dyn Behaviour>, RegistryError> {
-        Ok((self.entry(name)?.build)(table, setup)?)
-    }
-
-    /// The table with every default filled in (after checking it).
-    pub fn normalise(
-        &self,
-        name: &str,
-        table: &toml::Table,
-        setup: &Setup<'_>,
-    ) -> Result<toml::Table, RegistryError> {
-        Ok((self.entry(name)?.normalise)(table, setup)?)
+        Ok(self.prepare(name, table, setup)?.build(setup))
     }
 
     /// The default table of behaviour `name`.

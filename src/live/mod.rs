@@ -3,155 +3,27 @@
 //! run`) or each node in its own process talking LCM ([`node`], `arcnav node
 //! …`).
 //!
-//! Both executors run the same nodes as the lock-step [`Pipeline`] and the
-//! same live stages ([`stages`]); they differ only in how messages travel.
+//! Both executors run the nodes of [`arcnav_pipeline`], the same ones and
+//! the same decision cycle as the lock-step [`Pipeline`]; they differ only
+//! in how messages travel.
 //! Time: the decision cycle follows the *sensor clock* (the timestamps of
 //! the pose stream, so a log played back in real time drives the system
 //! exactly as the vehicle would), while the safety watchdogs follow the
 //! *wall clock* (a silent sensor stops time on the sensor clock).
 //!
-//! [`Pipeline`]: crate::pipeline::Pipeline
+//! [`Pipeline`]: arcnav_pipeline::Pipeline
 
+pub mod handoff;
+pub mod io;
 pub mod node;
-pub mod stages;
 pub mod threaded;
+mod workers;
 
 use std::fmt::Write as _;
 
-use arcnav_vehicle::config::{self as check, ConfigError};
-use serde::{Deserialize, Serialize};
-
-/// Lives in `[live]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LiveConfig {
-    /// No pose for this long (wall clock): the arbiter commands stop, s.
-    pub pose_timeout_s: f64,
-    /// No range image evaluated for this long: the arbiter commands stop, s.
-    pub image_timeout_s: f64,
-    /// The distributed arbiter decides this long after a cycle's first votes
-    /// even when an expected behaviour has not voted, s.
-    pub decision_deadline_s: f64,
-    /// Decide at once when new obstacle cells reach the map, besides the
-    /// fixed-rate cycle.
-    pub decide_on_new_cells: bool,
-    /// Cells wait until capture + `pipeline.perception_latency_s` and
-    /// decisions happen only on the cycle, as in `arcnav sim` and `arcnav
-    /// replay`: a live run then reproduces the lock-step replay of its inputs
-    /// (used by the tests; adds the modelled latency).
-    pub reproduce_lockstep: bool,
-    /// Each node logs its status this often (0: never), s.
-    pub status_period_s: f64,
-    /// Messages waiting between two threads before the oldest are dropped
-    /// (counted); range images always keep only the newest.
-    pub queue_capacity: usize,
-    /// The perception thread polls for its next image instead of sleeping
-    /// until one comes, and hands half of each large image to a helper
-    /// thread. It then keeps one core busy, and picks each image up at once
-    /// on a core that is awake and warm: on a virtual machine, or a
-    /// processor that saves power when idle, an image evaluated right after
-    /// a sleep takes much longer than one after another (2-vCPU VM,
-    /// 128×2048 at 10 Hz, image arrival to command: median 2.9-3.2 → 2.0-2.5 ms).
-    pub perception_busy_poll: bool,
-}
-
-impl Default for LiveConfig {
-    fn default() -> Self {
-        Self {
-            pose_timeout_s: 0.5,
-            image_timeout_s: 1.5,
-            decision_deadline_s: 0.05,
-            decide_on_new_cells: true,
-            reproduce_lockstep: false,
-            status_period_s: 10.0,
-            queue_capacity: 1024,
-            perception_busy_poll: false,
-        }
-    }
-}
-
-impl LiveConfig {
-    /// Keys relative to `[live]`.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        check::in_range("pose_timeout_s", self.pose_timeout_s, 0.01, 60.0)?;
-        check::in_range("image_timeout_s", self.image_timeout_s, 0.01, 600.0)?;
-        check::in_range("decision_deadline_s", self.decision_deadline_s, 0.0, 10.0)?;
-        check::in_range("status_period_s", self.status_period_s, 0.0, 86_400.0)?;
-        if !(8..=1_000_000).contains(&self.queue_capacity) {
-            return Err(ConfigError::new(
-                "queue_capacity",
-                format!("is {}, must be 8 to 1000000", self.queue_capacity),
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// Count, mean, median, 99th percentile and maximum of a series.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
-pub struct Summary {
-    pub count: u64,
-    pub mean: f64,
-    pub p50: f64,
-    pub p99: f64,
-    pub max: f64,
-}
-
-impl Summary {
-    fn cell(&self, value: f64) -> String {
-        if self.count == 0 {
-            "-".to_owned()
-        } else {
-            format!("{value:.2}")
-        }
-    }
-}
-
-/// A series of measurements; percentiles over the newest [`Samples::KEPT`].
-#[derive(Debug, Clone, Default)]
-pub struct Samples {
-    kept: Vec<f64>,
-    next: usize,
-    count: u64,
-    sum: f64,
-    max: f64,
-}
-
-impl Samples {
-    pub const KEPT: usize = 1 << 16;
-
-    pub fn add(&mut self, value: f64) {
-        if self.kept.len() < Self::KEPT {
-            self.kept.push(value);
-        } else {
-            self.kept[self.next] = value;
-            self.next = (self.next + 1) % Self::KEPT;
-        }
-        self.count += 1;
-        self.sum += value;
-        self.max = if self.count == 1 {
-            value
-        } else {
-            self.max.max(value)
-        };
-    }
-
-    pub fn summary(&self) -> Summary {
-        if self.count == 0 {
-            return Summary::default();
-        }
-        let mut sorted = self.kept.clone();
-        sorted.sort_by(f64::total_cmp);
-        let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize];
-        Summary {
-            count: self.count,
-            mean: self.sum / self.count as f64,
-            p50: at(0.5),
-            p99: at(0.99),
-            max: self.max,
-        }
-    }
-}
+pub use arcnav_pipeline::{LiveConfig, Samples, Summary};
+use arcnav_pipeline::ArbiterNode;
+use serde::Serialize;
 
 /// What a node reports about itself (periodically through `tracing`, and in
 /// the `--stats` table at exit).
@@ -234,6 +106,19 @@ impl NodeStatus {
             counters.join(" ")
         );
     }
+}
+
+/// The arbiter node's figures into `status`.
+pub(crate) fn arbiter_status(node: &ArbiterNode, status: &mut NodeStatus) {
+    let counts = node.counts();
+    status.handled = counts.commands;
+    status.set("stops", counts.stops);
+    status.set("watchdog_stops", counts.watchdog_stops);
+    status.set("deadline_decisions", counts.deadline_decisions);
+    status.set("late_votes", counts.late_votes);
+    let stats = node.arbiter.stats();
+    status.set("required_stale", stats.stops_required_stale);
+    status.set("rejected_votes", stats.rejected_votes);
 }
 
 /// The figures of a live run.
@@ -362,20 +247,5 @@ mod tests {
         assert!(table.contains("no_pose 2"), "{table}");
         assert!(table.contains("40 published (3 stops)"), "{table}");
         assert!(table.contains("image arrival→command"), "{table}");
-    }
-
-    #[test]
-    fn bad_live_settings_are_refused() {
-        assert!(LiveConfig::default().validate().is_ok());
-        let bad = LiveConfig {
-            pose_timeout_s: 0.0,
-            ..LiveConfig::default()
-        };
-        assert!(bad.validate().is_err());
-        let bad = LiveConfig {
-            queue_capacity: 1,
-            ..LiveConfig::default()
-        };
-        assert!(bad.validate().is_err());
     }
 }

@@ -16,19 +16,17 @@
 
 use std::time::{Duration, Instant};
 
-use arcnav_arbiter::Arbiter;
 use arcnav_behaviours::Registry;
 use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_bus::transport::{Lcm, wall_clock_utime};
+use arcnav_pipeline::{ArbiterNode, BehaviourSet};
 
-use super::stages::{self, ArbiterStage, MapStage};
-use super::threaded::{
-    IoRoutes, LiveError, LiveOptions, Ticker, decode, expected_behaviours, io_loop,
-    perception_worker, publish_command, pump,
-};
-use super::{LiveReport, NodeStatus, Samples};
+use super::handoff;
+use super::io::{IoRoutes, Ticker, decode, io_loop, publish_command, pump};
+use super::threaded::{LiveError, LiveOptions};
+use super::workers::{MapStage, perception_node, perception_worker};
+use super::{LiveReport, NodeStatus, Samples, arbiter_status};
 use crate::config::Config;
-use crate::pipeline::BehaviourNode;
 use crate::wire;
 
 /// Which node to run.
@@ -60,7 +58,6 @@ pub fn run_node(
     lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
-    config.validate_with(registry)?;
     let started = Instant::now();
     let mut report = match kind {
         NodeKind::Perception => perception(config, lcm, options)?,
@@ -84,9 +81,9 @@ fn perception(
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
-    let node = super::threaded::perception_node(config)?;
+    let node = perception_node(config)?;
     let publisher = lcm.publisher();
-    let (slot, images, replaced) = stages::newest_wins();
+    let (slot, images, replaced) = handoff::newest_wins();
     let (poses_tx, poses) = crossbeam_channel::bounded(config.live.queue_capacity);
     let live = config.live.clone();
     let worker = std::thread::Builder::new()
@@ -126,17 +123,6 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
     lcm.subscribe(channels::POSE);
     lcm.subscribe(channels::OBSTACLE_CELLS);
     let publisher = lcm.publisher();
-    let mut out = Vec::new();
-    let fill = |status: &mut NodeStatus, stage: &MapStage, busy: &Samples| {
-        status.handled = stage.cycles;
-        status.busy_ms = busy.summary();
-        status.queue(stage.waiting());
-        status.set("event_cycles", stage.event_cycles);
-        status.set("late_reports", stage.late_reports);
-        status.set("skipped_cycles", stage.skipped_cycles);
-        status.set("resets", stage.resets);
-        status.set("patches", stage.node.map.len() as u64);
-    };
     pump(
         &mut lcm,
         options,
@@ -146,14 +132,14 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
             if let Some(message) = message {
                 match decode(&message) {
                     Some(AnyMessage::Pose(msg)) => match arcnav_vehicle::Pose::try_from(&msg) {
-                        Ok(pose) => stage.on_pose(pose, &mut out),
+                        Ok(pose) => stage.on_pose(pose),
                         Err(e) => {
                             tracing::warn!(%e, "pose refused");
                             status.dropped += 1;
                         }
                     },
                     Some(AnyMessage::ObstacleCells(msg)) => match wire::obstacles_from_wire(msg) {
-                        Ok(r) => stage.on_report(r, message.recv_utime, &mut out),
+                        Ok(r) => stage.on_report(r, message.recv_utime),
                         Err(e) => {
                             tracing::warn!(%e, "obstacle cells refused");
                             status.dropped += 1;
@@ -162,7 +148,7 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
                     _ => status.dropped += 1,
                 }
             }
-            for cycle in out.drain(..) {
+            for cycle in stage.cycles() {
                 let msg = wire::map_to_wire(cycle.utime, &cycle.pose, &cycle.map, cycle.resets);
                 if let Err(e) = publisher.publish_message(channels::LOCAL_MAP, &msg) {
                     tracing::error!(%e, "cannot publish the local map");
@@ -170,12 +156,14 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
                 status.took(&mut busy, started.elapsed().as_secs_f64() * 1e3, period_ms);
             }
             if ticker.due(now) {
-                fill(&mut status, &stage, &busy);
+                stage.fill(&mut status);
+                status.busy_ms = busy.summary();
                 status.log();
             }
         },
     )?;
-    fill(&mut status, &stage, &busy);
+    stage.fill(&mut status);
+    status.busy_ms = busy.summary();
     Ok(report(vec![status]))
 }
 
@@ -204,7 +192,7 @@ fn behaviour(
             "its weight in [arbiter.weights] is 0: the arbiter will not use its votes"
         );
     }
-    let mut node = BehaviourNode::new(vec![built], arcs.clone());
+    let mut node = BehaviourSet::new(vec![built], arcs.clone());
     let mut status = NodeStatus::new(&format!("behaviour {name}"));
     let mut busy = Samples::default();
     let mut ticker = Ticker::new(config.live.status_period_s, wall_clock_utime());
@@ -214,7 +202,6 @@ fn behaviour(
     lcm.subscribe(channels::WAYPOINTS);
     lcm.subscribe(channels::STEERING_COMMAND);
     let publisher = lcm.publisher();
-    let mut resets = 0;
     pump(
         &mut lcm,
         options,
@@ -225,11 +212,12 @@ fn behaviour(
                     Some(AnyMessage::LocalMap(msg)) => match wire::map_from_wire(&msg) {
                         Ok(cycle) => {
                             let started = Instant::now();
-                            if cycle.resets != resets {
-                                resets = cycle.resets;
-                                node.reset();
-                            }
-                            let votes = node.on_cycle(cycle.cycle_utime, &cycle.pose, &cycle.map);
+                            let votes = node.on_cycle(
+                                cycle.resets,
+                                cycle.cycle_utime,
+                                &cycle.pose,
+                                &cycle.map,
+                            );
                             let msg = wire::votes_to_wire(&votes[0], &arcs);
                             if let Err(e) = publisher.publish_message(&channel, &msg) {
                                 tracing::error!(%e, "cannot publish the votes");
@@ -271,13 +259,19 @@ fn behaviour(
 
 fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
     let arcs = config.arc_set()?;
-    let arbiter = Arbiter::new(&config.arbiter, arcs.clone(), &config.vehicle);
-    let expected = expected_behaviours(config);
+    let expected = config.expected_behaviours();
     tracing::info!(
         ?expected,
         "the arbiter decides when these behaviours have voted"
     );
-    let mut stage = ArbiterStage::new(config, arbiter, expected, wall_clock_utime());
+    let mut stage = ArbiterNode::new(
+        config.arbiter()?,
+        expected,
+        &config.live,
+        &config.pipeline,
+        wall_clock_utime(),
+    );
+    let mut out = Vec::new();
     stage.measure_latency_from_cells();
     let mut status = NodeStatus::new("arbiter");
     let mut busy = Samples::default();
@@ -294,12 +288,11 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
                 Some(AnyMessage::ArcVotes(msg)) => match wire::votes_from_wire(&msg, &arcs) {
                     Ok(votes) => {
                         let started = Instant::now();
-                        match stage.on_votes(&votes, &[], now) {
-                            Ok(Some(decided)) => {
-                                publish_command(&publisher, &decided, tap.as_ref());
+                        match stage.on_votes(&votes, &[], now, &mut out) {
+                            Ok(()) if !out.is_empty() => {
                                 busy.add(started.elapsed().as_secs_f64() * 1e3);
                             }
-                            Ok(None) => {}
+                            Ok(()) => {}
                             Err(e) => tracing::warn!(%e, "votes refused"),
                         }
                     }
@@ -315,11 +308,12 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
                 _ => status.dropped += 1,
             }
         }
-        if let Some(decided) = stage.on_tick(now) {
+        stage.on_tick(now, &mut out);
+        for decided in out.drain(..) {
             publish_command(&publisher, &decided, tap.as_ref());
         }
         if ticker.due(now) {
-            stage.status(&mut status);
+            arbiter_status(&stage, &mut status);
             status.busy_ms = busy.summary();
             status.log();
         }
@@ -328,11 +322,11 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
     let last = stage.final_stop(wall_clock_utime());
     publish_command(&publisher, &last, tap.as_ref());
     result?;
-    stage.status(&mut status);
+    arbiter_status(&stage, &mut status);
     status.busy_ms = busy.summary();
     Ok(LiveReport {
-        commands: stage.commands,
-        stops: stage.stops,
+        commands: stage.counts().commands,
+        stops: stage.counts().stops,
         arrival_to_command_ms: stage.arrival_to_command_ms.summary(),
         capture_to_command_ms: stage.capture_to_command_ms.summary(),
         nodes: vec![status],

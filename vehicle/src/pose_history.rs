@@ -44,6 +44,9 @@ pub enum PoseHistoryError {
 pub struct PoseHistory {
     poses: VecDeque<Pose>,
     capacity: usize,
+    /// Poses older than the newest by more than this are dropped (the
+    /// newest of them stays, so the span's first instant can be interpolated).
+    span: Option<Utime>,
 }
 
 impl PoseHistory {
@@ -52,8 +55,18 @@ impl PoseHistory {
     pub fn with_capacity(capacity: usize) -> Self {
         let capacity = capacity.max(2);
         Self {
-            poses: VecDeque::with_capacity(capacity),
+            poses: VecDeque::with_capacity(capacity.min(1024)),
             capacity,
+            span: None,
+        }
+    }
+
+    /// An empty history keeping the poses of the newest `span` µs, whatever
+    /// the pose rate, but never more than `capacity` poses (at least 2).
+    pub fn spanning(span: Utime, capacity: usize) -> Self {
+        Self {
+            span: Some(span.max(0)),
+            ..Self::with_capacity(capacity)
         }
     }
 
@@ -87,6 +100,12 @@ impl PoseHistory {
             self.poses.pop_front();
         }
         self.poses.push_back(pose);
+        if let Some(span) = self.span {
+            let oldest_kept = pose.utime.saturating_sub(span);
+            while self.poses.get(1).is_some_and(|p| p.utime <= oldest_kept) {
+                self.poses.pop_front();
+            }
+        }
         Ok(())
     }
 
@@ -342,5 +361,28 @@ mod tests {
         assert_eq!(history.oldest().unwrap().utime, 2);
         assert!(history.at(1).is_err());
         assert!(history.covers(3) && !history.covers(5));
+    }
+
+    #[test]
+    fn a_spanning_history_keeps_its_seconds_whatever_the_pose_rate() {
+        // 10 s at 50 Hz and at 400 Hz: both keep the newest 10 s, and the
+        // pose just before the span so its first instant interpolates.
+        for rate_hz in [50, 400] {
+            let dt = 1_000_000 / rate_hz;
+            let mut history = PoseHistory::spanning(10_000_000, 100_000);
+            for k in 0..(30 * rate_hz) {
+                history.push(pose(k * dt, k as f64, 0.0, 0.0)).unwrap();
+            }
+            let newest = history.newest().unwrap().utime;
+            assert!(history.at(newest - 10_000_000).is_ok(), "{rate_hz} Hz");
+            assert!(history.oldest().unwrap().utime > newest - 10_000_000 - dt);
+            assert_eq!(history.len() as i64, 10 * rate_hz + 1);
+        }
+        // The count bound still holds.
+        let mut history = PoseHistory::spanning(10_000_000, 5);
+        for t in 0..20 {
+            history.push(pose(t, 0.0, 0.0, 0.0)).unwrap();
+        }
+        assert_eq!(history.len(), 5);
     }
 }

@@ -1,0 +1,604 @@
+//! The arbiter node of live runs (002 §6, DAMN): votes gathered per
+//! cycle, decisions when a cycle is complete or at its deadline, and the
+//! safety watchdog on poses, images and decisions.
+
+use std::collections::VecDeque;
+
+use arcnav_arbiter::{Arbiter, BehaviourVotes, VoteSizeError};
+use arcnav_vehicle::time::seconds_to_micros;
+use arcnav_vehicle::{SteeringCommand, Utime};
+use serde::Serialize;
+
+use crate::config::{LiveConfig, PipelineConfig};
+use crate::stats::Samples;
+
+/// Why the arbiter's watchdog commands stop.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Hazard {
+    NoPose,
+    PoseStale {
+        age_s: f64,
+    },
+    NoImage,
+    ImagesStale {
+        age_s: f64,
+    },
+    /// Poses and images are fresh but no decision came for this long (the
+    /// local map or every behaviour is silent).
+    NoDecisions {
+        age_s: f64,
+    },
+}
+
+impl std::fmt::Display for Hazard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Hazard::NoPose => write!(f, "no pose received yet"),
+            Hazard::PoseStale { age_s } => write!(f, "last pose {age_s:.2} s ago"),
+            Hazard::NoImage => write!(f, "no range image evaluated yet"),
+            Hazard::ImagesStale { age_s } => {
+                write!(f, "last range image evaluated {age_s:.2} s ago")
+            }
+            Hazard::NoDecisions { age_s } => {
+                write!(f, "no votes to decide on for {age_s:.2} s")
+            }
+        }
+    }
+}
+
+/// Why a command was published.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Why {
+    /// Every expected behaviour voted for the cycle.
+    Complete,
+    /// These behaviours had not voted for the cycle when its deadline
+    /// passed, or when a newer cycle was complete (cycles are decided in
+    /// order, none is skipped).
+    Deadline { missing: Vec<String> },
+    /// The watchdog overrode the votes or the pipeline is silent.
+    Watchdog(Hazard),
+    /// The executor is shutting down.
+    Final,
+}
+
+/// A command to publish.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decided {
+    pub command: SteeringCommand,
+    pub why: Why,
+}
+
+/// The arbiter node of a live run: the DAMN [`Arbiter`] with what live
+/// operation needs around it. Votes are gathered per cycle (their `utime`):
+/// a cycle is decided when every expected behaviour has voted for it, or at
+/// its deadline, and cycles are decided in order, each once. Its watchdog
+/// commands stop when poses, evaluated images or decisions stop coming;
+/// while that lasts it repeats stop at the command rate.
+///
+/// Wall-clock times (µs since the Unix epoch) arrive as arguments: it reads
+/// no clock.
+pub struct ArbiterNode {
+    pub arbiter: Arbiter,
+    expected: Vec<String>,
+    /// Cycles with votes not yet decided, oldest first.
+    pending: VecDeque<PendingCycle>,
+    /// The newest cycle decided: votes for older cycles come too late.
+    decided: Option<Utime>,
+    deadline_us: i64,
+    pose_timeout_us: i64,
+    image_timeout_us: i64,
+    stall_us: i64,
+    period_us: i64,
+    started: i64,
+    /// Newest pose time and its wall-clock arrival.
+    pose: Option<(Utime, i64)>,
+    last_image: Option<i64>,
+    last_decision: Option<i64>,
+    last_publish: Option<i64>,
+    hazard: Option<Hazard>,
+    /// Images new in the decisions since the last one: capture, arrival
+    /// (`None`: known only from OBSTACLE_CELLS, in a distributed system).
+    images: Vec<(Utime, Option<i64>)>,
+    latency_from_cells: bool,
+    /// Cells reach the map this long after capture (lock-step timing), µs.
+    hold_us: Utime,
+    pub arrival_to_command_ms: Samples,
+    pub capture_to_command_ms: Samples,
+    counts: ArbiterCounts,
+}
+
+/// One cycle's votes from the expected behaviours, in `expected` order.
+struct PendingCycle {
+    utime: Utime,
+    votes: Vec<Option<BehaviourVotes>>,
+    /// Wall-clock arrival of its first votes.
+    first: i64,
+}
+
+/// Cycles waiting for votes at most; beyond, the oldest is decided at once.
+const MAX_PENDING_CYCLES: usize = 64;
+
+/// What the arbiter node did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct ArbiterCounts {
+    pub commands: u64,
+    pub stops: u64,
+    pub watchdog_stops: u64,
+    /// Cycles decided without every expected behaviour's votes.
+    pub deadline_decisions: u64,
+    /// Votes for a cycle already decided (dropped).
+    pub late_votes: u64,
+}
+
+impl ArbiterNode {
+    /// `expected`: the behaviours whose votes complete a cycle. `now`: wall
+    /// clock. Timing from `[live]` and the pipeline's command rate; with
+    /// `live.reproduce_lockstep` a cycle waits for its votes up to
+    /// `arbiter.vote_timeout_s` instead of `live.decision_deadline_s`.
+    pub fn new(
+        arbiter: Arbiter,
+        expected: Vec<String>,
+        live: &LiveConfig,
+        timing: &PipelineConfig,
+        now: i64,
+    ) -> Self {
+        let stall_us = seconds_to_micros(arbiter.config().vote_timeout_s);
+        Self {
+            arbiter,
+            expected,
+            pending: VecDeque::new(),
+            decided: None,
+            deadline_us: if live.reproduce_lockstep {
+                stall_us
+            } else {
+                seconds_to_micros(live.decision_deadline_s)
+            },
+            pose_timeout_us: seconds_to_micros(live.pose_timeout_s),
+            image_timeout_us: seconds_to_micros(live.image_timeout_s),
+            stall_us,
+            period_us: seconds_to_micros(1.0 / timing.command_rate_hz),
+            started: now,
+            pose: None,
+            last_image: None,
+            last_decision: None,
+            last_publish: None,
+            hazard: None,
+            images: Vec::new(),
+            latency_from_cells: false,
+            hold_us: if live.reproduce_lockstep {
+                seconds_to_micros(timing.perception_latency_s)
+            } else {
+                0
+            },
+            arrival_to_command_ms: Samples::default(),
+            capture_to_command_ms: Samples::default(),
+            counts: ArbiterCounts::default(),
+        }
+    }
+
+    /// The behaviours a cycle waits for.
+    pub fn expected(&self) -> &[String] {
+        &self.expected
+    }
+
+    pub fn counts(&self) -> ArbiterCounts {
+        self.counts
+    }
+
+    /// A pose was received at `now`.
+    pub fn on_pose(&mut self, utime: Utime, now: i64) {
+        if self.pose.is_none_or(|(t, _)| utime >= t) {
+            self.pose = Some((utime, now));
+        }
+    }
+
+    /// Latency is measured from the obstacle cells seen by the arbiter
+    /// (a distributed arbiter, which never sees the cycles), not from the
+    /// images each decision's map holds.
+    pub fn measure_latency_from_cells(&mut self) {
+        self.latency_from_cells = true;
+    }
+
+    /// Perception evaluated the image captured at `capture`.
+    pub fn on_perceived(&mut self, capture: Utime, now: i64) {
+        self.last_image = Some(now);
+        if self.latency_from_cells && self.images.len() < 64 {
+            self.images.push((capture, None));
+        }
+    }
+
+    /// One behaviour's votes, received at `now`, on a map that holds the
+    /// cells of `images` (capture, arrival) for the first time. The commands
+    /// they let the arbiter decide go to `out`: their cycle's when it is
+    /// complete, after those of older cycles still waiting.
+    pub fn on_votes(
+        &mut self,
+        votes: &BehaviourVotes,
+        images: &[(Utime, i64)],
+        now: i64,
+        out: &mut Vec<Decided>,
+    ) -> Result<(), VoteSizeError> {
+        let Some(slot) = self.expected.iter().position(|e| *e == votes.behaviour) else {
+            // Not waited for: fused from the next decision on.
+            return self.arbiter.on_votes(votes);
+        };
+        if votes.votes.len() != self.arbiter.arcs().len() {
+            return self.arbiter.on_votes(votes);
+        }
+        if self.decided.is_some_and(|d| votes.utime < d) {
+            self.counts.late_votes += 1;
+            return Ok(());
+        }
+        self.images.extend(
+            images
+                .iter()
+                .map(|&(capture, arrival)| (capture, Some(arrival))),
+        );
+        let i = self.pending.partition_point(|p| p.utime < votes.utime);
+        if self.pending.get(i).is_none_or(|p| p.utime != votes.utime) {
+            self.pending.insert(
+                i,
+                PendingCycle {
+                    utime: votes.utime,
+                    votes: vec![None; self.expected.len()],
+                    first: now,
+                },
+            );
+        }
+        self.pending[i].votes[slot] = Some(votes.clone());
+        if self.pending[i].votes.iter().all(Option::is_some) {
+            for _ in 0..=i {
+                self.decide_oldest(now, out);
+            }
+        } else if self.pending.len() > MAX_PENDING_CYCLES {
+            self.decide_oldest(now, out);
+        }
+        Ok(())
+    }
+
+    /// Time passes: decisions at their deadline, or a stop while a hazard lasts.
+    pub fn on_tick(&mut self, now: i64, out: &mut Vec<Decided>) {
+        let before = out.len();
+        while self
+            .pending
+            .front()
+            .is_some_and(|p| now - p.first >= self.deadline_us)
+        {
+            self.decide_oldest(now, out);
+        }
+        if out.len() > before {
+            return;
+        }
+        let hazard = self.hazard(now).or_else(|| {
+            let since = self.last_decision.unwrap_or(self.started);
+            (now - since > self.stall_us).then(|| Hazard::NoDecisions {
+                age_s: (now - since) as f64 * 1e-6,
+            })
+        });
+        self.note_hazard(hazard.clone());
+        let Some(hazard) = hazard else { return };
+        if self
+            .last_publish
+            .is_some_and(|last| now - last < self.period_us)
+        {
+            return;
+        }
+        self.counts.watchdog_stops += 1;
+        let stop = SteeringCommand::stop(self.sensor_time(now));
+        out.push(self.publish(stop, Why::Watchdog(hazard), now));
+    }
+
+    /// The stop published when the executor shuts down.
+    pub fn final_stop(&mut self, now: i64) -> Decided {
+        self.publish(
+            SteeringCommand::stop(self.sensor_time(now)),
+            Why::Final,
+            now,
+        )
+    }
+
+    /// The sensor clock extrapolated from the newest pose (wall clock before any).
+    fn sensor_time(&self, now: i64) -> Utime {
+        self.pose.map_or(now, |(utime, at)| utime + (now - at))
+    }
+
+    fn hazard(&self, now: i64) -> Option<Hazard> {
+        let age = |since: i64| (now - since) as f64 * 1e-6;
+        match self.pose {
+            None => return Some(Hazard::NoPose),
+            Some((_, at)) if now - at > self.pose_timeout_us => {
+                return Some(Hazard::PoseStale { age_s: age(at) });
+            }
+            Some(_) => {}
+        }
+        match self.last_image {
+            None => Some(Hazard::NoImage),
+            Some(at) if now - at > self.image_timeout_us => {
+                Some(Hazard::ImagesStale { age_s: age(at) })
+            }
+            Some(_) => None,
+        }
+    }
+
+    fn note_hazard(&mut self, hazard: Option<Hazard>) {
+        let same_kind = |a: &Option<Hazard>, b: &Option<Hazard>| match (a, b) {
+            (Some(a), Some(b)) => std::mem::discriminant(a) == std::mem::discriminant(b),
+            (None, None) => true,
+            _ => false,
+        };
+        if !same_kind(&self.hazard, &hazard) {
+            match &hazard {
+                Some(h) => tracing::warn!(hazard = %h, "commanding stop"),
+                None => tracing::info!("inputs fresh again: deciding on votes"),
+            }
+        }
+        self.hazard = hazard;
+    }
+
+    /// Decides the oldest waiting cycle with the votes it has.
+    fn decide_oldest(&mut self, now: i64, out: &mut Vec<Decided>) {
+        let Some(cycle) = self.pending.pop_front() else {
+            return;
+        };
+        let missing: Vec<String> = self
+            .expected
+            .iter()
+            .zip(&cycle.votes)
+            .filter(|(_, v)| v.is_none())
+            .map(|(name, _)| name.clone())
+            .collect();
+        for votes in cycle.votes.iter().flatten() {
+            // Sizes were checked on arrival.
+            let _ = self.arbiter.on_votes(votes);
+        }
+        let why = if missing.is_empty() {
+            Why::Complete
+        } else {
+            self.counts.deadline_decisions += 1;
+            Why::Deadline { missing }
+        };
+        self.decided = Some(cycle.utime);
+        out.push(self.decide(cycle.utime, why, now));
+    }
+
+    fn decide(&mut self, cycle: Utime, why: Why, now: i64) -> Decided {
+        self.last_decision = Some(now);
+        let hazard = self.hazard(now);
+        self.note_hazard(hazard.clone());
+        let (command, why) = match hazard {
+            Some(h) => {
+                self.counts.watchdog_stops += 1;
+                (SteeringCommand::stop(cycle), Why::Watchdog(h))
+            }
+            None => (self.arbiter.decide(cycle), why),
+        };
+        if !matches!(why, Why::Watchdog(_)) {
+            // Capture times map onto the wall clock through the newest pose.
+            let offset = self.pose.map(|(utime, at)| at - utime);
+            // Cells known only from OBSTACLE_CELLS are in the map once held
+            // long enough; the others came with the cycle.
+            let hold = self.hold_us;
+            let (now_in, later): (Vec<_>, Vec<_>) = self
+                .images
+                .drain(..)
+                .partition(|(capture, arrival)| arrival.is_some() || capture + hold <= cycle);
+            self.images = later;
+            for (capture, arrival) in now_in {
+                if let Some(arrival) = arrival {
+                    self.arrival_to_command_ms
+                        .add((now - arrival) as f64 * 1e-3);
+                }
+                if let Some(offset) = offset {
+                    self.capture_to_command_ms
+                        .add((now - (capture + offset)) as f64 * 1e-3);
+                }
+            }
+        }
+        self.publish(command, why, now)
+    }
+
+    fn publish(&mut self, command: SteeringCommand, why: Why, now: i64) -> Decided {
+        self.last_publish = Some(now);
+        self.counts.commands += 1;
+        if command.is_stop() {
+            self.counts.stops += 1;
+        }
+        Decided { command, why }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_arbiter::{ArbiterConfig, Votes};
+    use arcnav_vehicle::{ArcSet, ArcSetConfig, VehicleConfig};
+
+    fn votes(name: &str, utime: Utime, arcs: usize) -> BehaviourVotes {
+        let mut v = Votes::new(arcs);
+        for i in 0..arcs {
+            v.set(i, 0.5);
+        }
+        BehaviourVotes {
+            behaviour: name.into(),
+            utime,
+            votes: v,
+        }
+    }
+
+    fn arbiter_stage(now: i64) -> (ArbiterNode, usize) {
+        let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
+        let n = arcs.len();
+        let arbiter = Arbiter::new(&ArbiterConfig::default(), arcs, &VehicleConfig::default());
+        let expected = vec!["goal_seeking".into(), "obstacle_avoidance".into()];
+        let node = ArbiterNode::new(
+            arbiter,
+            expected,
+            &LiveConfig::default(),
+            &PipelineConfig::default(),
+            now,
+        );
+        (node, n)
+    }
+
+    /// The one command `f` decides, if any.
+    fn one(f: impl FnOnce(&mut Vec<Decided>)) -> Option<Decided> {
+        let mut out = Vec::new();
+        f(&mut out);
+        assert!(out.len() <= 1, "{out:?}");
+        out.pop()
+    }
+
+    #[test]
+    fn the_arbiter_decides_when_every_expected_behaviour_voted() {
+        let t0 = 1_000_000_000;
+        let (mut stage, n) = arbiter_stage(t0);
+        stage.on_pose(5_000_000, t0);
+        stage.on_perceived(4_900_000, t0 - 2_000);
+        let first = one(|o| stage.on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0 + 100, o).unwrap());
+        assert!(first.is_none());
+        let decided = one(|o| stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[(4_900_000, t0 - 2_000)], t0 + 200, o).unwrap())
+            .unwrap();
+        assert_eq!(decided.why, Why::Complete);
+        assert_eq!(decided.command.utime, 5_000_000);
+        assert!(decided.command.speed_mps > 0.0);
+        let latency = stage.arrival_to_command_ms.summary();
+        assert_eq!(latency.count, 1);
+        assert!((latency.max - 2.2).abs() < 1e-9);
+        // Capture 100 ms before the pose that arrived at t0: 100.2 ms.
+        assert!((stage.capture_to_command_ms.summary().max - 100.2).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_missing_behaviour_is_waited_for_until_the_deadline() {
+        let t0 = 1_000_000_000;
+        let (mut stage, n) = arbiter_stage(t0);
+        stage.on_pose(5_000_000, t0);
+        stage.on_perceived(5_000_000, t0);
+        assert!(
+            one(|o| stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[], t0, o).unwrap())
+                .is_none()
+        );
+        assert!(one(|o| stage.on_tick(t0 + 10_000, o)).is_none());
+        let decided = one(|o| stage.on_tick(t0 + 50_000, o)).unwrap();
+        assert_eq!(
+            decided.why,
+            Why::Deadline {
+                missing: vec!["goal_seeking".into()]
+            }
+        );
+        assert!(decided.command.speed_mps > 0.0);
+        assert_eq!(stage.counts().deadline_decisions, 1);
+    }
+
+    #[test]
+    fn the_watchdog_stops_on_stale_poses_images_or_silence() {
+        let t0 = 1_000_000_000;
+        let (mut stage, n) = arbiter_stage(t0);
+        // Nothing yet: stop, repeated at the command rate, not more often.
+        let first = one(|o| stage.on_tick(t0, o)).unwrap();
+        assert_eq!(first.why, Why::Watchdog(Hazard::NoPose));
+        assert!(first.command.is_stop());
+        assert!(one(|o| stage.on_tick(t0 + 50_000, o)).is_none());
+        assert!(one(|o| stage.on_tick(t0 + 100_000, o)).is_some());
+        // Fresh inputs and votes: driving.
+        let t1 = t0 + 200_000;
+        stage.on_pose(9_000_000, t1);
+        stage.on_perceived(9_000_000, t1);
+        for name in ["goal_seeking", "obstacle_avoidance"] {
+            one(|o| stage.on_votes(&votes(name, 9_000_000, n), &[], t1, o).unwrap());
+        }
+        assert!(one(|o| stage.on_tick(t1 + 100_000, o)).is_none());
+        // Poses stop: the next decision is a stop, and so is every tick.
+        let t2 = t1 + 600_000;
+        for name in ["goal_seeking", "obstacle_avoidance"] {
+            if let Some(d) = one(|o| stage.on_votes(&votes(name, 9_100_000, n), &[], t2, o).unwrap()) {
+                assert!(matches!(d.why, Why::Watchdog(Hazard::PoseStale { .. })));
+                assert!(d.command.is_stop());
+                // Stop at the sensor time of the cycle.
+                assert_eq!(d.command.utime, 9_100_000);
+            }
+        }
+        let tick = one(|o| stage.on_tick(t2 + 100_000, o)).unwrap();
+        assert!(matches!(tick.why, Why::Watchdog(Hazard::PoseStale { .. })));
+        // Extrapolated sensor clock.
+        assert_eq!(tick.command.utime, 9_000_000 + 700_000);
+        // Poses back but images stale.
+        let t3 = t2 + 1_000_000;
+        stage.on_pose(10_000_000, t3);
+        let tick = one(|o| stage.on_tick(t3, o)).unwrap();
+        assert!(matches!(
+            tick.why,
+            Why::Watchdog(Hazard::ImagesStale { .. })
+        ));
+        // Everything fresh but nobody votes: stop once vote_timeout_s passes.
+        let t4 = t3 + 1_100_000;
+        stage.on_pose(11_000_000, t4);
+        stage.on_perceived(11_000_000, t4);
+        let tick = one(|o| stage.on_tick(t4, o)).unwrap();
+        assert!(matches!(
+            tick.why,
+            Why::Watchdog(Hazard::NoDecisions { .. })
+        ));
+        assert!(stage.counts().watchdog_stops >= 4);
+        let last = stage.final_stop(t4 + 1);
+        assert_eq!(last.why, Why::Final);
+        assert!(last.command.is_stop());
+    }
+
+
+    #[test]
+    fn interleaved_cycles_are_each_decided_once_in_order_with_their_own_votes() {
+        let t0 = 1_000_000_000;
+        let (mut stage, n) = arbiter_stage(t0);
+        stage.on_pose(5_000_000, t0);
+        stage.on_perceived(5_000_000, t0);
+        let mut out = Vec::new();
+        // Obstacle avoidance runs a cycle ahead of goal seeking.
+        stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[], t0, &mut out).unwrap();
+        stage.on_votes(&votes("obstacle_avoidance", 5_100_000, n), &[], t0, &mut out).unwrap();
+        assert!(out.is_empty(), "no cycle is complete yet");
+        stage.on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0, &mut out).unwrap();
+        stage.on_votes(&votes("goal_seeking", 5_100_000, n), &[], t0, &mut out).unwrap();
+        let decided: Vec<(Utime, &Why)> = out.iter().map(|d| (d.command.utime, &d.why)).collect();
+        assert_eq!(
+            decided,
+            [(5_000_000, &Why::Complete), (5_100_000, &Why::Complete)]
+        );
+        // A newer complete cycle decides an older incomplete one first.
+        out.clear();
+        stage.on_votes(&votes("goal_seeking", 5_200_000, n), &[], t0, &mut out).unwrap();
+        stage.on_votes(&votes("goal_seeking", 5_300_000, n), &[], t0, &mut out).unwrap();
+        stage.on_votes(&votes("obstacle_avoidance", 5_300_000, n), &[], t0, &mut out).unwrap();
+        let times: Vec<Utime> = out.iter().map(|d| d.command.utime).collect();
+        assert_eq!(times, [5_200_000, 5_300_000]);
+        assert!(matches!(&out[0].why, Why::Deadline { missing } if missing == &["obstacle_avoidance"]));
+        // Votes for a cycle already decided are counted and dropped.
+        out.clear();
+        stage.on_votes(&votes("obstacle_avoidance", 5_200_000, n), &[], t0, &mut out).unwrap();
+        assert!(out.is_empty());
+        assert_eq!(stage.counts().late_votes, 1);
+    }
+
+    #[test]
+    fn reproducing_lockstep_a_cycle_waits_for_its_votes_up_to_the_vote_timeout() {
+        let t0 = 1_000_000_000;
+        let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
+        let n = arcs.len();
+        let arbiter = Arbiter::new(&ArbiterConfig::default(), arcs, &VehicleConfig::default());
+        let live = LiveConfig {
+            reproduce_lockstep: true,
+            ..LiveConfig::default()
+        };
+        let expected = vec!["goal_seeking".into(), "obstacle_avoidance".into()];
+        let mut stage = ArbiterNode::new(arbiter, expected, &live, &PipelineConfig::default(), t0);
+        stage.on_pose(5_000_000, t0);
+        stage.on_perceived(5_000_000, t0);
+        let mut out = Vec::new();
+        stage.on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0, &mut out).unwrap();
+        stage.on_tick(t0 + 500_000, &mut out);
+        assert!(out.is_empty(), "0.5 s late votes still complete the cycle");
+        stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[], t0 + 500_000, &mut out).unwrap();
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].why, Why::Complete);
+    }
+}

@@ -1,0 +1,119 @@
+//! The configured behaviours voting on one cycle (002 §6).
+
+use arcnav_arbiter::{BehaviourVotes, Votes};
+use arcnav_behaviours::{Behaviour, Mission, Progress, VoteContext};
+use arcnav_localmap::MapSnapshot;
+use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime};
+
+/// Behaviours voting over one arc set: snapshot + pose + mission → one vote
+/// set each. Every executor, benchmark and test that makes behaviours vote
+/// uses this type; it owns the vote buffers (allocated once) and what the
+/// behaviours see besides the map: the mission and the last command.
+pub struct BehaviourSet {
+    behaviours: Vec<Box<dyn Behaviour>>,
+    votes: Vec<BehaviourVotes>,
+    mission: Mission,
+    arcs: ArcSet,
+    last_command: Option<SteeringCommand>,
+    /// Map resets seen so far (see [`BehaviourSet::on_cycle`]).
+    resets: u64,
+}
+
+impl BehaviourSet {
+    pub fn new(behaviours: Vec<Box<dyn Behaviour>>, arcs: ArcSet) -> Self {
+        let votes = behaviours
+            .iter()
+            .map(|b| BehaviourVotes {
+                behaviour: b.name().to_owned(),
+                utime: 0,
+                votes: Votes::new(arcs.len()),
+            })
+            .collect();
+        Self {
+            behaviours,
+            votes,
+            mission: Mission::default(),
+            arcs,
+            last_command: None,
+            resets: 0,
+        }
+    }
+
+    /// The behaviours' names, in voting order.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.behaviours.iter().map(|b| b.name())
+    }
+
+    pub fn arcs(&self) -> &ArcSet {
+        &self.arcs
+    }
+
+    pub fn on_waypoints(&mut self, mission: Mission) {
+        self.mission = mission;
+    }
+
+    pub fn mission(&self) -> &Mission {
+        &self.mission
+    }
+
+    /// Every behaviour votes at `now` on `map` (in the vehicle frame of
+    /// `pose`). After a map reset (`resets` changed since the last call)
+    /// each first forgets what it carried between cycles.
+    pub fn on_cycle(
+        &mut self,
+        resets: u64,
+        now: Utime,
+        pose: &Pose,
+        map: &MapSnapshot,
+    ) -> &[BehaviourVotes] {
+        if resets != self.resets {
+            self.resets = resets;
+            self.reset();
+        }
+        self.vote(now, pose, map)
+    }
+
+    /// Every behaviour votes at `now` on `map`.
+    pub fn vote(&mut self, now: Utime, pose: &Pose, map: &MapSnapshot) -> &[BehaviourVotes] {
+        let ctx = VoteContext {
+            utime: now,
+            pose,
+            map,
+            mission: &self.mission,
+            arcs: &self.arcs,
+            last_command: self.last_command.as_ref(),
+        };
+        for (behaviour, out) in self.behaviours.iter_mut().zip(self.votes.iter_mut()) {
+            out.votes.clear();
+            out.utime = now;
+            behaviour.vote(&ctx, &mut out.votes);
+        }
+        &self.votes
+    }
+
+    /// The command the arbiter sent: every behaviour is debriefed, and the
+    /// next vote sees it as the last command.
+    pub fn on_command(&mut self, command: &SteeringCommand) {
+        for behaviour in &mut self.behaviours {
+            behaviour.debrief(command);
+        }
+        self.last_command = Some(*command);
+    }
+
+    /// The last command the arbiter sent.
+    pub fn last_command(&self) -> Option<&SteeringCommand> {
+        self.last_command.as_ref()
+    }
+
+    /// Forgets state carried between cycles (map reset, new mission).
+    pub fn reset(&mut self) {
+        for behaviour in &mut self.behaviours {
+            behaviour.reset();
+        }
+    }
+
+    /// The mission progress of the behaviour that follows waypoints.
+    pub fn progress(&self) -> Option<Progress> {
+        self.behaviours.iter().find_map(|b| b.progress())
+    }
+}

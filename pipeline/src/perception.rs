@@ -1,0 +1,171 @@
+//! Perception: range images and poses in, obstacle reports out (002 §4,
+//! *early traversability evaluation*: every image is judged on its own, with
+//! the pose at its capture time).
+
+use std::collections::VecDeque;
+
+use arcnav_perception::{
+    ImageStats, InOrder, ObstacleReport, PerceptionConfig, RangeImage, Runner, TerrainEvaluator,
+};
+use arcnav_vehicle::config::ConfigError;
+use arcnav_vehicle::time::seconds_to_micros;
+use arcnav_vehicle::{Pose, PoseHistory, Utime};
+use serde::Serialize;
+
+use crate::config::PipelineConfig;
+
+/// The most poses kept, whatever `pipeline.pose_history_s` says: 600 s (its
+/// largest value) of a 100 Hz stream, or 60 s of a 1 kHz one (~10 MB).
+const MAX_POSES: usize = 100_000;
+
+/// Why an image produced no report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct PerceptionDrops {
+    /// No pose around its capture time (too old for the history, or no pose
+    /// arrived in time).
+    pub no_pose: u64,
+    /// The evaluator refused it (malformed image).
+    pub invalid: u64,
+    /// Older than an image already evaluated from the same sensor.
+    pub out_of_order: u64,
+}
+
+/// Perception: range images + poses → obstacle reports.
+pub struct PerceptionNode {
+    evaluator: Box<dyn TerrainEvaluator>,
+    runner: Box<dyn Runner + Send>,
+    poses: PoseHistory,
+    waiting: VecDeque<RangeImage>,
+    max_waiting: usize,
+    max_gap_us: Utime,
+    newest_capture: Vec<(String, Utime)>,
+    pub images: u64,
+    pub reports: u64,
+    pub drops: PerceptionDrops,
+    pub totals: ImageStats,
+}
+
+impl PerceptionNode {
+    /// Built from `[perception]` and the pipeline timing (how long poses
+    /// are kept, how many images may wait for theirs, the largest hole in
+    /// the pose stream an image may be placed across). Errors name keys
+    /// relative to `[perception]`.
+    pub fn new(perception: &PerceptionConfig, timing: &PipelineConfig) -> Result<Self, ConfigError> {
+        Ok(Self {
+            evaluator: perception.build_evaluator()?,
+            runner: Box::new(InOrder),
+            poses: PoseHistory::spanning(
+                seconds_to_micros(timing.pose_history_s),
+                MAX_POSES,
+            ),
+            waiting: VecDeque::new(),
+            max_waiting: timing.max_waiting_images,
+            max_gap_us: seconds_to_micros(timing.max_pose_gap_s),
+            newest_capture: Vec::new(),
+            images: 0,
+            reports: 0,
+            drops: PerceptionDrops::default(),
+            totals: ImageStats::default(),
+        })
+    }
+
+    /// A pose; images waiting for it are evaluated (reports handed to `out`).
+    pub fn on_pose(&mut self, pose: &Pose, out: &mut dyn FnMut(ObstacleReport)) {
+        if let Err(e) = self.poses.push(*pose) {
+            tracing::debug!(%e, "pose not added to the perception history");
+            if matches!(e, arcnav_vehicle::PoseHistoryError::NotIncreasing { .. })
+                && pose.utime < self.newest_pose()
+            {
+                // Time went backwards (a log started over): start over.
+                self.poses.clear();
+                self.waiting.clear();
+                self.newest_capture.clear();
+                let _ = self.poses.push(*pose);
+            }
+        }
+        self.drain(out);
+    }
+
+    /// Hands independent parts of each evaluation to `runner` (threads of a
+    /// live executor); results are the same as without.
+    pub fn set_runner(&mut self, runner: Box<dyn Runner + Send>) {
+        self.runner = runner;
+    }
+
+    /// Images waiting for the pose at their capture time.
+    pub fn waiting(&self) -> usize {
+        self.waiting.len()
+    }
+
+    fn newest_pose(&self) -> Utime {
+        self.poses.newest().map_or(Utime::MIN, |p| p.utime)
+    }
+
+    /// A range image; evaluated as soon as the pose at its capture time is known.
+    pub fn on_image(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
+        self.images += 1;
+        self.waiting.push_back(image);
+        self.drain(out);
+    }
+
+    fn drain(&mut self, out: &mut dyn FnMut(ObstacleReport)) {
+        let newest = self.newest_pose();
+        while self
+            .waiting
+            .front()
+            .is_some_and(|image| image.utime <= newest)
+        {
+            if let Some(image) = self.waiting.pop_front() {
+                self.evaluate(image, out);
+            }
+        }
+        // Images whose pose never comes (a stopped pose stream) are dropped.
+        while self.waiting.len() > self.max_waiting {
+            self.waiting.pop_front();
+            self.drops.no_pose += 1;
+        }
+    }
+
+    fn evaluate(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
+        let pose = match self.poses.at_within(image.utime, self.max_gap_us) {
+            Ok(pose) => pose,
+            Err(e) => {
+                tracing::debug!(%e, image = image.utime, "image dropped: no pose at capture time");
+                self.drops.no_pose += 1;
+                return;
+            }
+        };
+        match self
+            .newest_capture
+            .iter_mut()
+            .find(|(s, _)| *s == image.sensor)
+        {
+            Some((_, newest)) if image.utime <= *newest => {
+                self.drops.out_of_order += 1;
+                return;
+            }
+            Some((_, newest)) => *newest = image.utime,
+            None => self
+                .newest_capture
+                .push((image.sensor.clone(), image.utime)),
+        }
+        let mut report = ObstacleReport::default();
+        match self.evaluator.evaluate_with(
+            &image,
+            &pose.world_from_vehicle,
+            &mut report,
+            &*self.runner,
+        ) {
+            Ok(stats) => {
+                self.totals.accumulate(&stats);
+                self.reports += 1;
+                out(report);
+            }
+            Err(e) => {
+                tracing::warn!(%e, image = image.utime, "image dropped by perception");
+                self.drops.invalid += 1;
+            }
+        }
+    }
+}
+

@@ -1,0 +1,231 @@
+//! The live executors' LCM side: the receive loop, decoding, routing what
+//! arrives to the nodes' threads, and publishing commands.
+
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use arcnav_behaviours::Mission;
+use arcnav_bus::lcmtypes::steering_command_t;
+use arcnav_bus::messages::{AnyMessage, channels};
+use arcnav_bus::transport::{Lcm, Publisher, ReceivedMessage, wall_clock_utime};
+use arcnav_perception::RangeImage;
+use arcnav_pipeline::{Decided, LiveConfig, Why};
+use arcnav_vehicle::Pose;
+use arcnav_vehicle::time::seconds_to_micros;
+use crossbeam_channel::Sender;
+
+use super::NodeStatus;
+use super::handoff::{Arrived, NewestWins, offer};
+use super::threaded::{LiveError, LiveOptions, ToArbiter};
+use crate::wire;
+
+/// Fires every `period` of wall clock (never when the period is zero).
+pub(crate) struct Ticker {
+    period_us: i64,
+    next: i64,
+}
+
+impl Ticker {
+    pub(crate) fn new(period_s: f64, now: i64) -> Self {
+        let period_us = seconds_to_micros(period_s);
+        Self {
+            period_us,
+            next: now + period_us,
+        }
+    }
+
+    pub(crate) fn due(&mut self, now: i64) -> bool {
+        if self.period_us <= 0 || now < self.next {
+            return false;
+        }
+        self.next = now + self.period_us;
+        true
+    }
+}
+
+/// Receives until `stop`: `on` gets each message (or `None` when `tick`
+/// passed without one) and the wall-clock time. A receive error is logged;
+/// fifty in a row end the loop with that error.
+pub(crate) fn pump(
+    lcm: &mut Lcm,
+    options: &LiveOptions,
+    tick: Duration,
+    mut on: impl FnMut(Option<ReceivedMessage>, i64),
+) -> Result<(), LiveError> {
+    let stop = &options.stop;
+    let deadline = stop.deadline();
+    let mut failures = 0;
+    tracing::info!("ready: receiving");
+    if let Some(ready) = &options.ready {
+        let _ = ready.send(());
+    }
+    while !stop.flag.load(Ordering::Relaxed) && deadline.is_none_or(|d| Instant::now() < d) {
+        match lcm.recv_timeout(tick) {
+            Ok(message) => {
+                failures = 0;
+                on(message, wall_clock_utime());
+            }
+            Err(e) => {
+                failures += 1;
+                tracing::warn!(%e, "LCM receive failed");
+                if failures >= 50 {
+                    return Err(LiveError::Receive(e));
+                }
+                std::thread::sleep(tick);
+                on(None, wall_clock_utime());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Decodes a received message; `None` (logged at debug, to be counted as
+/// dropped) when it is not an arcnav message or is malformed.
+pub(crate) fn decode(message: &ReceivedMessage) -> Option<AnyMessage> {
+    match AnyMessage::decode(&message.data) {
+        Ok(Some(m)) => Some(m),
+        Ok(None) => {
+            tracing::debug!(channel = %message.channel, "message of an unknown type dropped");
+            None
+        }
+        Err(e) => {
+            tracing::debug!(channel = %message.channel, %e, "undecodable message dropped");
+            None
+        }
+    }
+}
+
+/// Publishes a decided command on STEERING_COMMAND (and to the tap).
+pub(crate) fn publish_command(
+    publisher: &Publisher,
+    decided: &Decided,
+    tap: Option<&Sender<Decided>>,
+) {
+    if let Why::Deadline { missing } = &decided.why {
+        tracing::debug!(?missing, "decided at the deadline without every behaviour");
+    }
+    if let Err(e) = publisher.publish_message(
+        channels::STEERING_COMMAND,
+        &steering_command_t::from(&decided.command),
+    ) {
+        tracing::error!(%e, "cannot publish the steering command");
+    }
+    if let Some(tap) = tap {
+        let _ = tap.try_send(decided.clone());
+    }
+}
+
+/// Where the io loop sends what it receives (`None`: not subscribed).
+#[derive(Default)]
+pub(crate) struct IoRoutes {
+    pub perception_poses: Option<Sender<Pose>>,
+    pub map_poses: Option<Sender<Pose>>,
+    pub images: Option<NewestWins<Arrived<RangeImage>>>,
+    pub waypoints: Option<Sender<Mission>>,
+    pub(crate) arbiter: Option<Sender<ToArbiter>>,
+}
+
+impl IoRoutes {
+    /// Subscribes `lcm` to the channels these routes take.
+    pub(crate) fn subscribe(&self, lcm: &mut Lcm) -> Result<(), LiveError> {
+        if self.perception_poses.is_some() || self.map_poses.is_some() || self.arbiter.is_some() {
+            lcm.subscribe(channels::POSE);
+        }
+        if self.images.is_some() {
+            lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
+        }
+        if self.waypoints.is_some() {
+            lcm.subscribe(channels::WAYPOINTS);
+        }
+        Ok(())
+    }
+}
+
+/// The io thread: LCM in, routed to the nodes; returns when told to stop.
+pub(crate) fn io_loop(
+    lcm: &mut Lcm,
+    options: &LiveOptions,
+    live: &LiveConfig,
+    routes: IoRoutes,
+) -> Result<NodeStatus, LiveError> {
+    let mut status = NodeStatus::new("io");
+    let mut ticker = Ticker::new(live.status_period_s, wall_clock_utime());
+    let (mut poses, mut images, mut queue_full) = (0u64, 0u64, 0u64);
+    let mut refused = 0u64;
+    let result = pump(lcm, options, Duration::from_millis(20), |message, now| {
+        if let Some(message) = message {
+            status.handled += 1;
+            match decode(&message) {
+                Some(AnyMessage::Pose(msg)) => match Pose::try_from(&msg) {
+                    Ok(pose) => {
+                        poses += 1;
+                        for route in [&routes.perception_poses, &routes.map_poses]
+                            .into_iter()
+                            .flatten()
+                        {
+                            offer(route, pose, &mut queue_full);
+                        }
+                        if let Some(arbiter) = &routes.arbiter {
+                            offer(
+                                arbiter,
+                                ToArbiter::Pose(pose.utime, message.recv_utime),
+                                &mut queue_full,
+                            );
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(%e, "pose refused");
+                        refused += 1;
+                    }
+                },
+                Some(AnyMessage::RangeImage(msg)) => match wire::range_image_from_wire(msg) {
+                    Ok(image) => {
+                        images += 1;
+                        if let Some(slot) = &routes.images {
+                            slot.put(Arrived {
+                                item: image,
+                                wall: message.recv_utime,
+                            });
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(%e, channel = %message.channel, "range image refused");
+                        refused += 1;
+                    }
+                },
+                Some(AnyMessage::Waypoints(msg)) => match wire::mission_from_wire(&msg) {
+                    Ok(mission) => {
+                        if let Some(route) = &routes.waypoints {
+                            offer(route, mission, &mut queue_full);
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(%e, "waypoints refused");
+                        refused += 1;
+                    }
+                },
+                _ => refused += 1,
+            };
+        }
+        if ticker.due(now) {
+            status.dropped = refused + queue_full;
+            status.log();
+        }
+    });
+    let transport = lcm.stats();
+    status.dropped = refused + queue_full;
+    let depth = [&routes.perception_poses, &routes.map_poses]
+        .into_iter()
+        .flatten()
+        .map(Sender::len)
+        .max();
+    status.queue(depth.unwrap_or(0));
+    status.set("poses", poses);
+    status.set("images", images);
+    status.set("refused", refused);
+    status.set("queue_full", queue_full);
+    status.set("incomplete_messages", transport.reassembly.incomplete);
+    status.set("malformed_datagrams", transport.reassembly.malformed);
+    result.map(|()| status)
+}
+

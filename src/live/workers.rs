@@ -1,0 +1,312 @@
+//! The loops of the perception and local-map threads, shared by `arcnav
+//! run` and `arcnav node`: they wait for their inputs, hand them to the
+//! pipeline's nodes, and keep the nodes' figures.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use arcnav_bus::transport::wall_clock_utime;
+use arcnav_perception::{ObstacleReport, RangeImage};
+use arcnav_pipeline::{Cycle, DecisionCycle, LiveConfig, PerceptionNode};
+use arcnav_vehicle::{Pose, Utime};
+use crossbeam_channel::{Receiver, select};
+
+use super::handoff::{Arrived, Handoff};
+use super::io::Ticker;
+use super::threaded::LiveError;
+use super::{NodeStatus, Samples};
+use crate::config::Config;
+
+/// A helper thread for perception: the perception thread bins and judges
+/// half of each large image itself and hands the other half to it.
+pub struct PerceptionHelper(rayon::ThreadPool);
+
+impl PerceptionHelper {
+    pub fn new() -> Result<Self, LiveError> {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .thread_name(|_| "perception-helper".into())
+            .build()
+            .map(Self)
+            .map_err(|e| LiveError::Spawn {
+                node: "perception-helper",
+                source: std::io::Error::other(e),
+            })
+    }
+}
+
+impl arcnav_perception::Runner for PerceptionHelper {
+    fn run(&self, tasks: &mut [&mut (dyn FnMut() + Send)]) {
+        self.0.in_place_scope(|scope| {
+            let (first, rest) = tasks.split_at_mut(1);
+            for task in rest {
+                scope.spawn(move |_| task());
+            }
+            first.iter_mut().for_each(|task| task());
+        });
+    }
+}
+
+/// The perception node of a live run. A perception thread that polls for
+/// images (`live.perception_busy_poll`) hands half of each large image to a
+/// [`PerceptionHelper`]; one that sleeps evaluates the image alone, because
+/// the helper, asleep as well, would start its half only after its own
+/// wake-up (~0.7 ms on a 2-vCPU VM) and make the tail longer than the
+/// half saves (`cargo bench --bench live`, 128×2048: p99 arrival → command
+/// 4.0-5.0 ms alone, 4.4-16.6 ms with the sleeping helper).
+pub(crate) fn perception_node(config: &Config) -> Result<PerceptionNode, LiveError> {
+    let mut node = config.perception_node()?;
+    if config.live.perception_busy_poll {
+        node.set_runner(Box::new(PerceptionHelper::new()?));
+    }
+    Ok(node)
+}
+
+/// Perception on its own thread's loop: poses and the newest image in,
+/// reports (with their image's arrival time) out, until the inputs close.
+/// With `live.perception_busy_poll` it polls its inputs instead of sleeping.
+pub(crate) fn perception_worker(
+    mut node: PerceptionNode,
+    poses: Receiver<Pose>,
+    images: Receiver<Arrived<RangeImage>>,
+    replaced: Arc<AtomicU64>,
+    live: &LiveConfig,
+    mut out: impl FnMut(ObstacleReport, i64),
+) -> NodeStatus {
+    let wait = if live.perception_busy_poll {
+        Wait::Poll
+    } else {
+        Wait::Block
+    };
+    let status_period_s = live.status_period_s;
+    let mut status = NodeStatus::new("perception");
+    let mut busy = Samples::default();
+    let mut ticker = Ticker::new(status_period_s, wall_clock_utime());
+    let mut arrivals: VecDeque<(Utime, i64)> = VecDeque::new();
+    let mut reports = Vec::new();
+    let fill = |status: &mut NodeStatus, node: &PerceptionNode, busy: &Samples| {
+        let replaced = replaced.load(Ordering::Relaxed);
+        status.handled = node.reports;
+        status.busy_ms = busy.summary();
+        status.set_overruns(
+            replaced,
+            "range images replaced by newer ones before evaluation",
+        );
+        status.queue(node.waiting());
+        status.dropped =
+            replaced + node.drops.no_pose + node.drops.invalid + node.drops.out_of_order;
+        status.set("replaced_by_newer", replaced);
+        status.set("no_pose", node.drops.no_pose);
+        status.set("invalid", node.drops.invalid);
+        status.set("out_of_order", node.drops.out_of_order);
+    };
+    loop {
+        let event = next(&poses, &images, wait);
+        let started = Instant::now();
+        match event {
+            Next::First(pose) => node.on_pose(&pose, &mut |r| reports.push(r)),
+            Next::Second(Arrived { item, wall }) => {
+                for pose in poses.try_iter() {
+                    node.on_pose(&pose, &mut |r| reports.push(r));
+                }
+                if arrivals.len() >= 64 {
+                    arrivals.pop_front();
+                }
+                arrivals.push_back((item.utime, wall));
+                node.on_image(item, &mut |r| reports.push(r));
+            }
+            Next::Idle => {}
+            Next::Closed => break,
+        }
+        if !reports.is_empty() {
+            busy.add(started.elapsed().as_secs_f64() * 1e3);
+        }
+        status.set_overruns(
+            replaced.load(Ordering::Relaxed),
+            "range images replaced by newer ones before evaluation",
+        );
+        for report in reports.drain(..) {
+            let arrival = arrivals
+                .iter()
+                .find(|(utime, _)| *utime == report.utime)
+                .map_or_else(wall_clock_utime, |(_, wall)| *wall);
+            arrivals.retain(|(utime, _)| *utime > report.utime);
+            out(report, arrival);
+        }
+        if ticker.due(wall_clock_utime()) {
+            fill(&mut status, &node, &busy);
+            status.log();
+        }
+    }
+    fill(&mut status, &node, &busy);
+    status
+}
+
+enum Next<A, B> {
+    First(A),
+    Second(B),
+    /// Nothing for 100 ms.
+    Idle,
+    /// An input closed: the executor is shutting down.
+    Closed,
+}
+
+/// How a thread waits for its next message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Wait {
+    /// Sleeps until one comes.
+    Block,
+    /// Polls, yielding the core to any other runnable thread between polls
+    /// but never sleeping: the core stays awake.
+    Poll,
+}
+
+/// The next message of either receiver.
+fn next<A, B>(first: &Receiver<A>, second: &Receiver<B>, wait: Wait) -> Next<A, B> {
+    const IDLE: Duration = Duration::from_millis(100);
+    if wait == Wait::Block {
+        return select! {
+            recv(first) -> m => m.map_or(Next::Closed, Next::First),
+            recv(second) -> m => m.map_or(Next::Closed, Next::Second),
+            default(IDLE) => Next::Idle,
+        };
+    }
+    let since = Instant::now();
+    loop {
+        select! {
+            recv(first) -> m => return m.map_or(Next::Closed, Next::First),
+            recv(second) -> m => return m.map_or(Next::Closed, Next::Second),
+            default => {}
+        }
+        if since.elapsed() >= IDLE {
+            return Next::Idle;
+        }
+        std::thread::yield_now();
+    }
+}
+
+/// The local map of a live run: the pipeline's [`DecisionCycle`], its
+/// reports tagged with their image's wall-clock arrival. A pose's own cycle
+/// runs at once: at the map no other input shares a pose's time.
+pub(crate) struct MapStage {
+    pub cycle: DecisionCycle<i64>,
+    out: Vec<Cycle<i64>>,
+}
+
+impl MapStage {
+    pub fn new(config: &Config) -> Self {
+        Self {
+            cycle: config.decision_cycle(config.live_delivery()),
+            out: Vec::new(),
+        }
+    }
+
+    pub fn on_pose(&mut self, pose: Pose) {
+        self.cycle.on_pose(pose, &mut self.out);
+        self.cycle.advance(pose.utime, true, &mut self.out);
+    }
+
+    /// A report whose image arrived at wall-clock time `arrival`.
+    pub fn on_report(&mut self, report: ObstacleReport, arrival: i64) {
+        self.cycle.on_report(report, arrival, &mut self.out);
+    }
+
+    /// The cycles run since the last call.
+    pub fn cycles(&mut self) -> std::vec::Drain<'_, Cycle<i64>> {
+        self.out.drain(..)
+    }
+
+    /// The map's figures into `status`.
+    pub fn fill(&self, status: &mut NodeStatus) {
+        let counts = self.cycle.counts();
+        status.handled = counts.cycles;
+        status.queue(self.cycle.waiting());
+        status.set("event_cycles", counts.event_cycles);
+        status.set("late_reports", counts.late_reports);
+        status.set("skipped_cycles", counts.skipped_cycles);
+        status.set("clock_restarts", counts.restarts);
+        status.set("resets", counts.map_resets);
+        status.set("patches", self.cycle.map.map.len() as u64);
+    }
+}
+
+/// The local map's thread: poses and reports in, cycles out.
+pub(crate) fn map_worker(
+    mut map: MapStage,
+    poses: Receiver<Pose>,
+    reports: Receiver<Arrived<ObstacleReport>>,
+    cycles: Handoff<Cycle<i64>>,
+    status_period_s: f64,
+    period_s: f64,
+) -> NodeStatus {
+    let mut status = NodeStatus::new("localmap");
+    let mut busy = Samples::default();
+    let mut ticker = Ticker::new(status_period_s, wall_clock_utime());
+    let fill = |status: &mut NodeStatus, map: &MapStage, busy: &Samples, cycles: &Handoff<_>| {
+        map.fill(status);
+        status.busy_ms = busy.summary();
+        status.dropped = cycles.dropped();
+    };
+    loop {
+        let event = next(&poses, &reports, Wait::Block);
+        let started = Instant::now();
+        match event {
+            Next::First(pose) => map.on_pose(pose),
+            Next::Second(Arrived { item, wall }) => map.on_report(item, wall),
+            Next::Idle => {}
+            Next::Closed => break,
+        }
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        let mut ran = false;
+        for cycle in map.cycles() {
+            ran = true;
+            if !cycles.put(cycle) {
+                break;
+            }
+        }
+        if ran {
+            status.took(&mut busy, ms, period_s * 1e3);
+        }
+        if ticker.due(wall_clock_utime()) {
+            fill(&mut status, &map, &busy, &cycles);
+            status.log();
+        }
+    }
+    fill(&mut status, &map, &busy, &cycles);
+    status
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn next_brings_either_input_then_idle_then_closed_sleeping_or_polling() {
+        for wait in [Wait::Block, Wait::Poll] {
+            let (poses_tx, poses) = crossbeam_channel::bounded::<u8>(4);
+            let (images_tx, images) = crossbeam_channel::bounded::<&str>(4);
+            let late = std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(20));
+                images_tx.send("image").unwrap();
+                images_tx
+            });
+            assert!(
+                matches!(next(&poses, &images, wait), Next::Second("image")),
+                "{wait:?}"
+            );
+            poses_tx.send(7).unwrap();
+            assert!(matches!(next(&poses, &images, wait), Next::First(7)));
+            let images_tx = late.join().unwrap();
+            // Nothing for 100 ms: idle, so the status still gets logged.
+            let since = Instant::now();
+            assert!(matches!(next(&poses, &images, wait), Next::Idle));
+            assert!(since.elapsed() >= Duration::from_millis(100), "{wait:?}");
+            // An input closed: the executor is shutting down.
+            drop(images_tx);
+            assert!(matches!(next(&poses, &images, wait), Next::Closed));
+        }
+    }
+}
+
