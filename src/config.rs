@@ -636,4 +636,52 @@ mod tests {
         assert_eq!(config.arcs.count, 41);
         assert_eq!(config.vehicle, VehicleConfig::default());
     }
+
+    #[test]
+    fn a_weight_or_required_name_that_is_no_configured_behaviour_is_refused() {
+        let msg = parse_error("[arbiter.weights]\nobstacle_avoidence = 0.0\n");
+        assert_eq!(
+            msg,
+            "test.toml: invalid configuration: `arbiter.weights.obstacle_avoidence`: \
+             \"obstacle_avoidence\" is not a configured behaviour (configured: goal_seeking, obstacle_avoidance)"
+        );
+        let msg = parse_error("[arbiter]\nrequired = [\"goal_seekin\"]\n");
+        assert!(
+            msg.contains("`arbiter.required`: \"goal_seekin\" is not a configured behaviour"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_weights_table_changes_only_the_weights_it_names() {
+        let config = Config::from_toml("[arbiter.weights]\ngoal_seeking = 0.8\n", "t").unwrap();
+        assert_eq!(config.arbiter.weight("goal_seeking"), 0.8);
+        assert_eq!(config.arbiter.weight("obstacle_avoidance"), 1.0);
+    }
+
+    #[test]
+    fn a_cruise_speed_above_the_vehicles_top_speed_is_refused() {
+        let msg = parse_error("[arbiter]\ncruise_speed_mps = 12.0\n");
+        assert!(
+            msg.contains("`arbiter.cruise_speed_mps`: is 12 m/s, faster than the vehicle's top speed (vehicle.max_speed_mps = 10 m/s)"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn behaviours_are_built_from_the_tables_checked_at_load_and_follow_later_edits() {
+        let mut config =
+            Config::from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
+        let registry = Registry::builtin();
+        let arcs = config.arc_set().unwrap();
+        assert_eq!(config.build_behaviours(&registry, &arcs).unwrap().len(), 2);
+        // A table changed in code is checked when built.
+        config
+            .behaviours
+            .get_mut("goal_seeking")
+            .unwrap()
+            .insert("lookahed_m".into(), toml::Value::Float(3.0));
+        let err = config.build_behaviours(&registry, &arcs).err().unwrap();
+        assert_eq!(err.key, "behaviours.goal_seeking.lookahed_m");
+    }
 }

@@ -9,8 +9,8 @@ use std::sync::Arc;
 
 use arcnav::Config;
 use arcnav::mission::{MissionOptions, run_mission};
-use arcnav_arbiter::Votes;
-use arcnav_behaviours::{Mission, Registry, VoteContext};
+use arcnav_behaviours::Registry;
+use arcnav_pipeline::BehaviourSet;
 use arcnav_localmap::MapSnapshot;
 use arcnav_sim::World;
 use arcnav_vehicle::frames::planar_isometry;
@@ -64,43 +64,30 @@ fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
         vehicle: &config.vehicle,
         patch_size_m: 0.4,
     };
-    let mut behaviour = registry
+    let behaviour = registry
         .build("prefer_current", &toml::Table::new(), &setup)
         .unwrap();
+    let mut set = BehaviourSet::new(vec![behaviour], arcs.clone());
     let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
-    let (map, mission) = (MapSnapshot::default(), Mission::default());
-    let command = SteeringCommand {
+    let map = MapSnapshot::default();
+    // Without a command it has no opinion.
+    let votes = &set.vote(0, &pose, &map)[0].votes;
+    assert!(votes.values().iter().all(|&v| v == 0.0));
+    // After one, it prefers the arc it is on, and its neighbours in turn.
+    set.on_command(&SteeringCommand {
         utime: 0,
         curvature: arcs.curvatures()[25],
         speed_mps: 2.0,
         arc_index: Some(25),
         vote: 1.0,
-    };
-    let ctx = VoteContext {
-        utime: 0,
-        pose: &pose,
-        map: &map,
-        mission: &mission,
-        arcs: &arcs,
-        last_command: Some(&command),
-    };
-    let mut votes = Votes::new(arcs.len());
-    behaviour.vote(&ctx, &mut votes);
-    let v = votes.values();
+    });
+    let v = set.vote(100_000, &pose, &map)[0].votes.values();
     assert_eq!(v[25], 1.0);
     assert!(
         (v[21] - v[29]).abs() < 1e-6,
         "symmetric about the current arc"
     );
     assert!(v[25] > v[22] && v[22] > v[15] && v[15] > v[0]);
-    // Without a command it has no opinion.
-    let ctx = VoteContext {
-        last_command: None,
-        ..ctx
-    };
-    let mut votes = Votes::new(arcs.len());
-    behaviour.vote(&ctx, &mut votes);
-    assert!(votes.values().iter().all(|&v| v == 0.0));
 }
 
 #[test]

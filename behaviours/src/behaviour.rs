@@ -37,6 +37,27 @@ pub struct VoteContext<'a> {
     pub last_command: Option<&'a SteeringCommand>,
 }
 
+impl<'a> VoteContext<'a> {
+    /// What a behaviour sees at `utime` with no command sent yet (executors
+    /// build it in `arcnav_pipeline::BehaviourSet`, tests here).
+    pub fn new(
+        utime: Utime,
+        pose: &'a Pose,
+        map: &'a MapSnapshot,
+        mission: &'a Mission,
+        arcs: &'a ArcSet,
+    ) -> Self {
+        Self {
+            utime,
+            pose,
+            map,
+            mission,
+            arcs,
+            last_command: None,
+        }
+    }
+}
+
 /// What a behaviour is built with, besides its own TOML table.
 #[derive(Debug, Clone, Copy)]
 pub struct Setup<'a> {

@@ -57,8 +57,11 @@ struct Entry {
 #[derive(Clone)]
 pub struct Prepared {
     table: toml::Table,
-    build: std::sync::Arc<dyn Fn(&Setup<'_>) -> Box<dyn Behaviour> + Send + Sync>,
+    build: Constructor,
 }
+
+/// Builds a behaviour from a configuration checked once.
+type Constructor = std::sync::Arc<dyn Fn(&Setup<'_>) -> Box<dyn Behaviour> + Send + Sync>;
 
 impl Prepared {
     /// The table with every default filled in.

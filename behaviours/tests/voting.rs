@@ -61,14 +61,7 @@ fn avoidance_votes(cells: &[(f64, f64)]) -> Votes {
     let map = snapshot(cells);
     let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
     let mission = Mission::default();
-    let ctx = VoteContext {
-        utime: 0,
-        pose: &pose,
-        map: &map,
-        mission: &mission,
-        arcs: &arcs,
-        last_command: None,
-    };
+    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
     let mut votes = Votes::new(arcs.len());
     behaviour.vote(&ctx, &mut votes);
     votes
@@ -158,14 +151,7 @@ fn goal_votes(goal: (f64, f64)) -> Votes {
             radius_m: None,
         }],
     };
-    let ctx = VoteContext {
-        utime: 0,
-        pose: &pose,
-        map: &map,
-        mission: &mission,
-        arcs: &arcs,
-        last_command: None,
-    };
+    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
     let mut votes = Votes::new(arcs.len());
     behaviour.vote(&ctx, &mut votes);
     votes
@@ -222,14 +208,7 @@ fn goal_seeking_advances_through_the_waypoints_and_reports_the_mission_complete(
     };
     let mut vote_at = |x: f64| {
         let pose = Pose::at_rest(0, planar_isometry(x, 0.0, 0.0));
-        let ctx = VoteContext {
-            utime: 0,
-            pose: &pose,
-            map: &map,
-            mission: &mission,
-            arcs: &arcs,
-            last_command: None,
-        };
+        let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
         let mut votes = Votes::new(arcs.len());
         behaviour.vote(&ctx, &mut votes);
         (behaviour.progress().unwrap(), votes)
@@ -271,14 +250,7 @@ fn a_waypoint_passed_during_a_detour_counts_as_reached() {
     };
     // 7 m to the side of it, already 2 m past: 7.3 m away, under 2 × 5 m.
     let pose = Pose::at_rest(0, planar_isometry(22.0, 7.0, 0.0));
-    let ctx = VoteContext {
-        utime: 0,
-        pose: &pose,
-        map: &map,
-        mission: &mission,
-        arcs: &arcs,
-        last_command: None,
-    };
+    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
     let mut votes = Votes::new(arcs.len());
     behaviour.vote(&ctx, &mut votes);
     assert_eq!(behaviour.progress().unwrap().current, 1);
@@ -325,9 +297,11 @@ fn the_registry_builds_by_name_and_lists_the_known_ones_for_an_unknown_name() {
         panic!("a config error expected")
     };
     assert_eq!(err.key, "max_distance_m");
-    let full = registry
-        .normalise("goal_seeking", &table, &setup(&arcs, &vehicle))
+    let prepared = registry
+        .prepare("goal_seeking", &table, &setup(&arcs, &vehicle))
         .unwrap();
+    let full = prepared.table();
+    assert_eq!(prepared.build(&setup(&arcs, &vehicle)).name(), "goal_seeking");
     assert_eq!(full["lookahead_m"].as_float(), Some(12.0));
     assert_eq!(
         full["arrival_radius_m"].as_float(),
@@ -360,14 +334,7 @@ fn decide(
             radius_m: None,
         }],
     };
-    let ctx = VoteContext {
-        utime: 0,
-        pose: &pose,
-        map: &map,
-        mission: &mission,
-        arcs: &arcs,
-        last_command: None,
-    };
+    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
     for behaviour in &mut behaviours {
         let mut votes = Votes::new(arcs.len());
         behaviour.vote(&ctx, &mut votes);

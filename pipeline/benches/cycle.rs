@@ -1,14 +1,16 @@
 //! One full cycle: obstacle avoidance and goal seeking vote, the arbiter
 //! decides, over a map of 2 000 cells. Targets: ≤ 20 µs with 39 arcs,
 //! ≤ 0.3 ms with 1 000 arcs (1 001 here: the count is odd so that straight is
-//! one of the arcs). Run with `cargo bench -p arcnav-behaviours`.
+//! one of the arcs). Run with `cargo bench -p arcnav-pipeline`.
+//! The behaviours vote through [`BehaviourSet`], as in every executor.
 
-use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, Votes};
-use arcnav_behaviours::{Behaviour, Mission, Registry, Setup, VoteContext, Waypoint};
+use arcnav_arbiter::{Arbiter, ArbiterConfig};
+use arcnav_behaviours::{Behaviour, Mission, Registry, Setup, Waypoint};
 use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot};
 use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
 use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
+use arcnav_pipeline::BehaviourSet;
 use divan::{Bencher, black_box};
 
 fn main() {
@@ -65,7 +67,7 @@ fn bench_cycle(bencher: Bencher, arc_count: usize) {
     };
     let registry = Registry::builtin();
     let built = std::time::Instant::now();
-    let mut behaviours: Vec<Box<dyn Behaviour>> = ["obstacle_avoidance", "goal_seeking"]
+    let behaviours: Vec<Box<dyn Behaviour>> = ["obstacle_avoidance", "goal_seeking"]
         .iter()
         .map(|name| {
             registry
@@ -78,37 +80,20 @@ fn bench_cycle(bencher: Bencher, arc_count: usize) {
         built.elapsed().as_secs_f64() * 1e3
     );
     let mut arbiter = Arbiter::new(&ArbiterConfig::default(), arcs.clone(), &vehicle);
+    let mut behaviours = BehaviourSet::new(behaviours, arcs);
     let map = map();
     let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
-    let mission = Mission {
+    behaviours.on_waypoints(Mission {
         version: 1,
         waypoints: vec![Waypoint {
             x: 200.0,
             y: 40.0,
             radius_m: None,
         }],
-    };
-    let mut votes: Vec<BehaviourVotes> = behaviours
-        .iter()
-        .map(|b| BehaviourVotes {
-            behaviour: b.name().to_owned(),
-            utime: 0,
-            votes: Votes::new(arcs.len()),
-        })
-        .collect();
+    });
     bencher.bench_local(|| {
-        let ctx = VoteContext {
-            utime: 0,
-            pose: &pose,
-            map: black_box(&map),
-            mission: &mission,
-            arcs: &arcs,
-            last_command: None,
-        };
-        for (behaviour, out) in behaviours.iter_mut().zip(votes.iter_mut()) {
-            out.votes.clear();
-            behaviour.vote(&ctx, &mut out.votes);
-            let _ = arbiter.on_votes(out);
+        for votes in behaviours.vote(0, &pose, black_box(&map)) {
+            let _ = arbiter.on_votes(votes);
         }
         arbiter.decide(0)
     });

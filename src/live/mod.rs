@@ -209,28 +209,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn summaries_give_percentiles_of_the_newest_samples() {
-        let mut s = Samples::default();
-        assert_eq!(s.summary().count, 0);
-        for v in 1..=100 {
-            s.add(f64::from(v));
-        }
-        let sum = s.summary();
-        assert_eq!(sum.count, 100);
-        assert_eq!(sum.max, 100.0);
-        assert!((sum.mean - 50.5).abs() < 1e-12);
-        assert!((sum.p50 - 50.0).abs() <= 1.0);
-        assert!((sum.p99 - 99.0).abs() <= 1.0);
-        // Beyond KEPT, old samples leave the percentiles but not the count.
-        for _ in 0..Samples::KEPT {
-            s.add(1000.0);
-        }
-        let sum = s.summary();
-        assert_eq!(sum.p50, 1000.0);
-        assert_eq!(sum.count, 100 + Samples::KEPT as u64);
-    }
-
-    #[test]
     fn the_stats_table_names_every_node_and_latency() {
         let mut perception = NodeStatus::new("perception");
         perception.handled = 12;
