@@ -245,11 +245,20 @@ impl Config {
 
     /// Every name the arbiter's section gives must be a configured behaviour.
     fn arbiter_names_behaviours(&self) -> Result<(), ConfigError> {
-        let known = || self.behaviours.keys().cloned().collect::<Vec<_>>().join(", ");
+        let known = || {
+            self.behaviours
+                .keys()
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         let unknown = |key: String, name: &str| {
             ConfigError::new(
                 key,
-                format!("{name:?} is not a configured behaviour (configured: {})", known()),
+                format!(
+                    "{name:?} is not a configured behaviour (configured: {})",
+                    known()
+                ),
             )
         };
         if let Some(name) = self
@@ -305,7 +314,10 @@ impl Config {
     /// The configured behaviours, voting over the configured arcs.
     pub fn behaviour_set(&self, registry: &Registry) -> Result<BehaviourSet, ConfigError> {
         let arcs = self.arc_set()?;
-        Ok(BehaviourSet::new(self.build_behaviours(registry, &arcs)?, arcs))
+        Ok(BehaviourSet::new(
+            self.build_behaviours(registry, &arcs)?,
+            arcs,
+        ))
     }
 
     /// The perception node, from `[perception]` and `[pipeline]`.

@@ -29,10 +29,10 @@ use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::config::Config;
-use arcnav_pipeline::{Input, Sink, StageTimes};
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
 use crate::wire;
+use arcnav_pipeline::{Input, Sink, StageTimes};
 
 /// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
 pub const SIM_EPOCH_US: Utime = 1_767_225_600_000_000;

@@ -23,9 +23,9 @@ use arcnav_vehicle::{ArcSet, ConfigError, Pose, SteeringCommand, Utime};
 use serde::Serialize;
 
 use crate::config::Config;
-use arcnav_pipeline::{Input, Sink};
 use crate::recorder::{Recorder, WriteFailed};
 use crate::wire;
+use arcnav_pipeline::{Input, Sink};
 
 /// How to replay.
 #[derive(Debug, Clone, Default)]

@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock, mpsc};
 use std::time::{Duration, Instant};
 
 use arcnav::Config;
-use arcnav_pipeline::{Decided, Hazard, Why};
+use arcnav::live::clock::ManualClock;
 use arcnav::live::threaded::InProcess;
 use arcnav::mission::{MissionOptions, SIM_EPOCH_US, run_mission};
 use arcnav::replay::{ReplayOptions, replay};
@@ -26,6 +26,7 @@ use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::channels;
 use arcnav_bus::transport::Lcm;
 use arcnav_perception::SensorPreset;
+use arcnav_pipeline::{Decided, Hazard, Why};
 use arcnav_sim::World;
 use arcnav_testkit::{LcmReference, NetNs, temp_dir};
 use arcnav_vehicle::{CommandWatchdog, SteeringCommand, Utime};
@@ -230,6 +231,74 @@ fn assert_threaded_gives_lockstep(perception_busy_poll: bool) {
         ["io", "perception", "localmap", "behaviours", "arbiter"]
     );
     assert_eq!(report.nodes[1].dropped, 0, "{}", report.table());
+}
+
+/// The watchdogs read the executor's clock: a test moves it instead of
+/// waiting for it, and the executor stops the vehicle the moment poses are
+/// older than `live.pose_timeout_s` on that clock.
+#[test]
+fn the_watchdog_stops_on_the_executors_own_clock() {
+    let _serial = serial();
+    let config = config(SensorPreset::Erim, false);
+    let clock = ManualClock::starting_at(1_000_000_000_000);
+    let (tap, taken) = crossbeam_channel::unbounded::<Decided>();
+    let run = InProcess::start_with(
+        &config,
+        Registry::builtin(),
+        Some(tap),
+        Some(Arc::new(clock.clone())),
+    )
+    .unwrap();
+    // The first 3 s of the log, the clock following the log's time.
+    let mut log = LogReader::open(sim_log(SensorPreset::Erim)).unwrap();
+    let mut t0 = None;
+    while let Some(event) = log.next_event().unwrap() {
+        let t = event.timestamp;
+        let t0 = *t0.get_or_insert(t);
+        if t - t0 > 3_000_000 {
+            break;
+        }
+        if channels::is_input(&event.channel) {
+            clock.set(1_000_000_000_000 + (t - t0));
+            run.publisher()
+                .publish(&event.channel, &event.data)
+                .unwrap();
+            // Let the executor keep up with a log fed faster than real time.
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+    let wait_for = |what: &dyn Fn(&Decided) -> bool| {
+        let until = Instant::now() + Duration::from_secs(5);
+        while let Ok(d) = taken.recv_deadline(until) {
+            if what(&d) {
+                return Some(d);
+            }
+        }
+        None
+    };
+    assert!(
+        wait_for(&|d| !d.command.is_stop()).is_some(),
+        "the vehicle drove while poses and images were fresh"
+    );
+    while taken.try_recv().is_ok() {}
+    // No more poses: 0.4 s later on the clock, still fresh; 0.6 s, stop.
+    clock.advance(400_000);
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(
+        taken
+            .try_iter()
+            .all(|d| !matches!(d.why, Why::Watchdog(Hazard::PoseStale { .. }))),
+        "stopped before the pose timeout"
+    );
+    clock.advance(200_000);
+    let stop = wait_for(&|d| matches!(d.why, Why::Watchdog(Hazard::PoseStale { .. })))
+        .expect("a stop for stale poses");
+    assert!(stop.command.is_stop());
+    let Why::Watchdog(Hazard::PoseStale { age_s }) = stop.why else {
+        unreachable!()
+    };
+    assert!((0.5..0.65).contains(&age_s), "pose age {age_s} s");
+    run.stop().unwrap();
 }
 
 // ---------------------------------------------------------------------------
@@ -485,7 +554,10 @@ fn assert_reproduces(label: &str, received: &Received, log: &Path, config: &Conf
         .iter()
         .map(|t| format!("{:.2} s", (t - SIM_EPOCH_US) as f64 * 1e-6))
         .collect();
-    assert!(missing.is_empty(), "{label}: cycles not decided: {missing:?}");
+    assert!(
+        missing.is_empty(),
+        "{label}: cycles not decided: {missing:?}"
+    );
     assert_eq!(a.agreeing, a.compared, "{label}: {:.2}% agree", a.percent());
     // The last command is the final stop.
     assert!(

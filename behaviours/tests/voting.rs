@@ -301,7 +301,10 @@ fn the_registry_builds_by_name_and_lists_the_known_ones_for_an_unknown_name() {
         .prepare("goal_seeking", &table, &setup(&arcs, &vehicle))
         .unwrap();
     let full = prepared.table();
-    assert_eq!(prepared.build(&setup(&arcs, &vehicle)).name(), "goal_seeking");
+    assert_eq!(
+        prepared.build(&setup(&arcs, &vehicle)).name(),
+        "goal_seeking"
+    );
     assert_eq!(full["lookahead_m"].as_float(), Some(12.0));
     assert_eq!(
         full["arrival_radius_m"].as_float(),

@@ -8,9 +8,9 @@ use arcnav_arbiter::{Arbiter, ArbiterConfig};
 use arcnav_behaviours::{Behaviour, Mission, Registry, Setup, Waypoint};
 use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot};
 use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
+use arcnav_pipeline::BehaviourSet;
 use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
-use arcnav_pipeline::BehaviourSet;
 use divan::{Bencher, black_box};
 
 fn main() {

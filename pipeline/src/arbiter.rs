@@ -454,10 +454,23 @@ mod tests {
         let (mut stage, n) = arbiter_stage(t0);
         stage.on_pose(5_000_000, t0);
         stage.on_perceived(4_900_000, t0 - 2_000);
-        let first = one(|o| stage.on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0 + 100, o).unwrap());
+        let first = one(|o| {
+            stage
+                .on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0 + 100, o)
+                .unwrap()
+        });
         assert!(first.is_none());
-        let decided = one(|o| stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[(4_900_000, t0 - 2_000)], t0 + 200, o).unwrap())
-            .unwrap();
+        let decided = one(|o| {
+            stage
+                .on_votes(
+                    &votes("obstacle_avoidance", 5_000_000, n),
+                    &[(4_900_000, t0 - 2_000)],
+                    t0 + 200,
+                    o,
+                )
+                .unwrap()
+        })
+        .unwrap();
         assert_eq!(decided.why, Why::Complete);
         assert_eq!(decided.command.utime, 5_000_000);
         assert!(decided.command.speed_mps > 0.0);
@@ -475,8 +488,10 @@ mod tests {
         stage.on_pose(5_000_000, t0);
         stage.on_perceived(5_000_000, t0);
         assert!(
-            one(|o| stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[], t0, o).unwrap())
-                .is_none()
+            one(|o| stage
+                .on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[], t0, o)
+                .unwrap())
+            .is_none()
         );
         assert!(one(|o| stage.on_tick(t0 + 10_000, o)).is_none());
         let decided = one(|o| stage.on_tick(t0 + 50_000, o)).unwrap();
@@ -505,13 +520,21 @@ mod tests {
         stage.on_pose(9_000_000, t1);
         stage.on_perceived(9_000_000, t1);
         for name in ["goal_seeking", "obstacle_avoidance"] {
-            one(|o| stage.on_votes(&votes(name, 9_000_000, n), &[], t1, o).unwrap());
+            one(|o| {
+                stage
+                    .on_votes(&votes(name, 9_000_000, n), &[], t1, o)
+                    .unwrap()
+            });
         }
         assert!(one(|o| stage.on_tick(t1 + 100_000, o)).is_none());
         // Poses stop: the next decision is a stop, and so is every tick.
         let t2 = t1 + 600_000;
         for name in ["goal_seeking", "obstacle_avoidance"] {
-            if let Some(d) = one(|o| stage.on_votes(&votes(name, 9_100_000, n), &[], t2, o).unwrap()) {
+            if let Some(d) = one(|o| {
+                stage
+                    .on_votes(&votes(name, 9_100_000, n), &[], t2, o)
+                    .unwrap()
+            }) {
                 assert!(matches!(d.why, Why::Watchdog(Hazard::PoseStale { .. })));
                 assert!(d.command.is_stop());
                 // Stop at the sensor time of the cycle.
@@ -545,7 +568,6 @@ mod tests {
         assert!(last.command.is_stop());
     }
 
-
     #[test]
     fn interleaved_cycles_are_each_decided_once_in_order_with_their_own_votes() {
         let t0 = 1_000_000_000;
@@ -554,11 +576,29 @@ mod tests {
         stage.on_perceived(5_000_000, t0);
         let mut out = Vec::new();
         // Obstacle avoidance runs a cycle ahead of goal seeking.
-        stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[], t0, &mut out).unwrap();
-        stage.on_votes(&votes("obstacle_avoidance", 5_100_000, n), &[], t0, &mut out).unwrap();
+        stage
+            .on_votes(
+                &votes("obstacle_avoidance", 5_000_000, n),
+                &[],
+                t0,
+                &mut out,
+            )
+            .unwrap();
+        stage
+            .on_votes(
+                &votes("obstacle_avoidance", 5_100_000, n),
+                &[],
+                t0,
+                &mut out,
+            )
+            .unwrap();
         assert!(out.is_empty(), "no cycle is complete yet");
-        stage.on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0, &mut out).unwrap();
-        stage.on_votes(&votes("goal_seeking", 5_100_000, n), &[], t0, &mut out).unwrap();
+        stage
+            .on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0, &mut out)
+            .unwrap();
+        stage
+            .on_votes(&votes("goal_seeking", 5_100_000, n), &[], t0, &mut out)
+            .unwrap();
         let decided: Vec<(Utime, &Why)> = out.iter().map(|d| (d.command.utime, &d.why)).collect();
         assert_eq!(
             decided,
@@ -566,15 +606,35 @@ mod tests {
         );
         // A newer complete cycle decides an older incomplete one first.
         out.clear();
-        stage.on_votes(&votes("goal_seeking", 5_200_000, n), &[], t0, &mut out).unwrap();
-        stage.on_votes(&votes("goal_seeking", 5_300_000, n), &[], t0, &mut out).unwrap();
-        stage.on_votes(&votes("obstacle_avoidance", 5_300_000, n), &[], t0, &mut out).unwrap();
+        stage
+            .on_votes(&votes("goal_seeking", 5_200_000, n), &[], t0, &mut out)
+            .unwrap();
+        stage
+            .on_votes(&votes("goal_seeking", 5_300_000, n), &[], t0, &mut out)
+            .unwrap();
+        stage
+            .on_votes(
+                &votes("obstacle_avoidance", 5_300_000, n),
+                &[],
+                t0,
+                &mut out,
+            )
+            .unwrap();
         let times: Vec<Utime> = out.iter().map(|d| d.command.utime).collect();
         assert_eq!(times, [5_200_000, 5_300_000]);
-        assert!(matches!(&out[0].why, Why::Deadline { missing } if missing == &["obstacle_avoidance"]));
+        assert!(
+            matches!(&out[0].why, Why::Deadline { missing } if missing == &["obstacle_avoidance"])
+        );
         // Votes for a cycle already decided are counted and dropped.
         out.clear();
-        stage.on_votes(&votes("obstacle_avoidance", 5_200_000, n), &[], t0, &mut out).unwrap();
+        stage
+            .on_votes(
+                &votes("obstacle_avoidance", 5_200_000, n),
+                &[],
+                t0,
+                &mut out,
+            )
+            .unwrap();
         assert!(out.is_empty());
         assert_eq!(stage.counts().late_votes, 1);
     }
@@ -594,10 +654,19 @@ mod tests {
         stage.on_pose(5_000_000, t0);
         stage.on_perceived(5_000_000, t0);
         let mut out = Vec::new();
-        stage.on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0, &mut out).unwrap();
+        stage
+            .on_votes(&votes("goal_seeking", 5_000_000, n), &[], t0, &mut out)
+            .unwrap();
         stage.on_tick(t0 + 500_000, &mut out);
         assert!(out.is_empty(), "0.5 s late votes still complete the cycle");
-        stage.on_votes(&votes("obstacle_avoidance", 5_000_000, n), &[], t0 + 500_000, &mut out).unwrap();
+        stage
+            .on_votes(
+                &votes("obstacle_avoidance", 5_000_000, n),
+                &[],
+                t0 + 500_000,
+                &mut out,
+            )
+            .unwrap();
         assert_eq!(out.len(), 1);
         assert_eq!(out[0].why, Why::Complete);
     }

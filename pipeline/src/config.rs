@@ -124,7 +124,6 @@ impl LiveConfig {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

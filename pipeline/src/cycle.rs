@@ -337,7 +337,11 @@ mod tests {
         let mut out = Vec::new();
         // Poses every 20 ms from t = 1 s: cycles at 1.0, 1.1, 1.2 s.
         for k in 0..=10 {
-            live_pose(&mut c, pose(1_000_000 + k * 20_000, k as f64 * 0.04), &mut out);
+            live_pose(
+                &mut c,
+                pose(1_000_000 + k * 20_000, k as f64 * 0.04),
+                &mut out,
+            );
         }
         let times: Vec<Utime> = out.iter().map(|c| c.utime).collect();
         assert_eq!(times, vec![1_000_000, 1_100_000, 1_200_000]);

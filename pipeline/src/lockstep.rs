@@ -70,7 +70,13 @@ impl Sink for Discard {}
 pub struct Commands(pub Vec<SteeringCommand>);
 
 impl Sink for Commands {
-    fn on_command(&mut self, _: Utime, command: &SteeringCommand, _: Option<&Decision>, _: &MapSnapshot) {
+    fn on_command(
+        &mut self,
+        _: Utime,
+        command: &SteeringCommand,
+        _: Option<&Decision>,
+        _: &MapSnapshot,
+    ) {
         self.0.push(*command);
     }
 }

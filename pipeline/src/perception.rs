@@ -50,14 +50,14 @@ impl PerceptionNode {
     /// are kept, how many images may wait for theirs, the largest hole in
     /// the pose stream an image may be placed across). Errors name keys
     /// relative to `[perception]`.
-    pub fn new(perception: &PerceptionConfig, timing: &PipelineConfig) -> Result<Self, ConfigError> {
+    pub fn new(
+        perception: &PerceptionConfig,
+        timing: &PipelineConfig,
+    ) -> Result<Self, ConfigError> {
         Ok(Self {
             evaluator: perception.build_evaluator()?,
             runner: Box::new(InOrder),
-            poses: PoseHistory::spanning(
-                seconds_to_micros(timing.pose_history_s),
-                MAX_POSES,
-            ),
+            poses: PoseHistory::spanning(seconds_to_micros(timing.pose_history_s), MAX_POSES),
             waiting: VecDeque::new(),
             max_waiting: timing.max_waiting_images,
             max_gap_us: seconds_to_micros(timing.max_pose_gap_s),
@@ -168,4 +168,3 @@ impl PerceptionNode {
         }
     }
 }
-

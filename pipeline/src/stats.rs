@@ -69,7 +69,6 @@ impl Samples {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -85,7 +85,11 @@ impl<T> Handoff<T> {
     pub fn new(every: bool, capacity: usize) -> (Self, Receiver<T>, Arc<AtomicU64>) {
         if every {
             let (sender, receiver) = crossbeam_channel::bounded(capacity);
-            (Handoff::Every(sender), receiver, Arc::new(AtomicU64::new(0)))
+            (
+                Handoff::Every(sender),
+                receiver,
+                Arc::new(AtomicU64::new(0)),
+            )
         } else {
             let (slot, receiver, dropped) = newest_wins();
             (Handoff::NewestWins(slot), receiver, dropped)

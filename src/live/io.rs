@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use arcnav_behaviours::Mission;
 use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::messages::{AnyMessage, channels};
-use arcnav_bus::transport::{Lcm, Publisher, ReceivedMessage, wall_clock_utime};
+use arcnav_bus::transport::{Lcm, Publisher, ReceivedMessage};
 use arcnav_perception::RangeImage;
 use arcnav_pipeline::{Decided, LiveConfig, Why};
 use arcnav_vehicle::Pose;
@@ -53,6 +53,7 @@ pub(crate) fn pump(
     mut on: impl FnMut(Option<ReceivedMessage>, i64),
 ) -> Result<(), LiveError> {
     let stop = &options.stop;
+    let clock = options.clock();
     let deadline = stop.deadline();
     let mut failures = 0;
     tracing::info!("ready: receiving");
@@ -63,7 +64,7 @@ pub(crate) fn pump(
         match lcm.recv_timeout(tick) {
             Ok(message) => {
                 failures = 0;
-                on(message, wall_clock_utime());
+                on(message, clock.now_us());
             }
             Err(e) => {
                 failures += 1;
@@ -72,7 +73,7 @@ pub(crate) fn pump(
                     return Err(LiveError::Receive(e));
                 }
                 std::thread::sleep(tick);
-                on(None, wall_clock_utime());
+                on(None, clock.now_us());
             }
         }
     }
@@ -149,7 +150,7 @@ pub(crate) fn io_loop(
     routes: IoRoutes,
 ) -> Result<NodeStatus, LiveError> {
     let mut status = NodeStatus::new("io");
-    let mut ticker = Ticker::new(live.status_period_s, wall_clock_utime());
+    let mut ticker = Ticker::new(live.status_period_s, options.clock().now_us());
     let (mut poses, mut images, mut queue_full) = (0u64, 0u64, 0u64);
     let mut refused = 0u64;
     let result = pump(lcm, options, Duration::from_millis(20), |message, now| {
@@ -166,11 +167,7 @@ pub(crate) fn io_loop(
                             offer(route, pose, &mut queue_full);
                         }
                         if let Some(arbiter) = &routes.arbiter {
-                            offer(
-                                arbiter,
-                                ToArbiter::Pose(pose.utime, message.recv_utime),
-                                &mut queue_full,
-                            );
+                            offer(arbiter, ToArbiter::Pose(pose.utime, now), &mut queue_full);
                         }
                     }
                     Err(e) => {
@@ -184,7 +181,7 @@ pub(crate) fn io_loop(
                         if let Some(slot) = &routes.images {
                             slot.put(Arrived {
                                 item: image,
-                                wall: message.recv_utime,
+                                wall: now,
                             });
                         }
                     }
@@ -228,4 +225,3 @@ pub(crate) fn io_loop(
     status.set("malformed_datagrams", transport.reassembly.malformed);
     result.map(|()| status)
 }
-

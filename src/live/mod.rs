@@ -13,6 +13,7 @@
 //!
 //! [`Pipeline`]: arcnav_pipeline::Pipeline
 
+pub mod clock;
 pub mod handoff;
 pub mod io;
 pub mod node;
@@ -21,8 +22,8 @@ mod workers;
 
 use std::fmt::Write as _;
 
-pub use arcnav_pipeline::{LiveConfig, Samples, Summary};
 use arcnav_pipeline::ArbiterNode;
+pub use arcnav_pipeline::{LiveConfig, Samples, Summary};
 use serde::Serialize;
 
 /// What a node reports about itself (periodically through `tracing`, and in

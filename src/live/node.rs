@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use arcnav_behaviours::Registry;
 use arcnav_bus::messages::{AnyMessage, channels};
-use arcnav_bus::transport::{Lcm, wall_clock_utime};
+use arcnav_bus::transport::Lcm;
 use arcnav_pipeline::{ArbiterNode, BehaviourSet};
 
 use super::handoff;
@@ -86,10 +86,11 @@ fn perception(
     let (slot, images, replaced) = handoff::newest_wins();
     let (poses_tx, poses) = crossbeam_channel::bounded(config.live.queue_capacity);
     let live = config.live.clone();
+    let clock = options.clock();
     let worker = std::thread::Builder::new()
         .name("perception".into())
         .spawn(move || {
-            perception_worker(node, poses, images, replaced, &live, |report, _| {
+            perception_worker(node, poses, images, replaced, &live, clock, |report, _| {
                 if let Err(e) = publisher
                     .publish_message(channels::OBSTACLE_CELLS, &wire::obstacles_to_wire(&report))
                 {
@@ -118,7 +119,7 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
     let mut stage = MapStage::new(config);
     let mut status = NodeStatus::new("localmap");
     let mut busy = Samples::default();
-    let mut ticker = Ticker::new(config.live.status_period_s, wall_clock_utime());
+    let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
     let period_ms = 1e3 / config.pipeline.command_rate_hz;
     lcm.subscribe(channels::POSE);
     lcm.subscribe(channels::OBSTACLE_CELLS);
@@ -139,7 +140,7 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
                         }
                     },
                     Some(AnyMessage::ObstacleCells(msg)) => match wire::obstacles_from_wire(msg) {
-                        Ok(r) => stage.on_report(r, message.recv_utime),
+                        Ok(r) => stage.on_report(r, now),
                         Err(e) => {
                             tracing::warn!(%e, "obstacle cells refused");
                             status.dropped += 1;
@@ -195,7 +196,7 @@ fn behaviour(
     let mut node = BehaviourSet::new(vec![built], arcs.clone());
     let mut status = NodeStatus::new(&format!("behaviour {name}"));
     let mut busy = Samples::default();
-    let mut ticker = Ticker::new(config.live.status_period_s, wall_clock_utime());
+    let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
     let period_ms = 1e3 / config.pipeline.command_rate_hz;
     let channel = channels::arc_votes(name);
     lcm.subscribe(channels::LOCAL_MAP);
@@ -269,13 +270,13 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
         expected,
         &config.live,
         &config.pipeline,
-        wall_clock_utime(),
+        options.clock().now_us(),
     );
     let mut out = Vec::new();
     stage.measure_latency_from_cells();
     let mut status = NodeStatus::new("arbiter");
     let mut busy = Samples::default();
-    let mut ticker = Ticker::new(config.live.status_period_s, wall_clock_utime());
+    let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
     lcm.subscribe_regex(&format!("{}.*", channels::ARC_VOTES_PREFIX))?;
     lcm.subscribe(channels::POSE);
     lcm.subscribe(channels::OBSTACLE_CELLS);
@@ -301,9 +302,9 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
                         status.dropped += 1;
                     }
                 },
-                Some(AnyMessage::Pose(msg)) => stage.on_pose(msg.utime, message.recv_utime),
+                Some(AnyMessage::Pose(msg)) => stage.on_pose(msg.utime, now),
                 Some(AnyMessage::ObstacleCells(msg)) => {
-                    stage.on_perceived(msg.utime, message.recv_utime);
+                    stage.on_perceived(msg.utime, now);
                 }
                 _ => status.dropped += 1,
             }
@@ -319,7 +320,7 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
         }
     });
     // The final stop goes out whatever ended the loop.
-    let last = stage.final_stop(wall_clock_utime());
+    let last = stage.final_stop(options.clock().now_us());
     publish_command(&publisher, &last, tap.as_ref());
     result?;
     arbiter_status(&stage, &mut status);

@@ -30,13 +30,14 @@ use std::time::{Duration, Instant};
 
 use arcnav_arbiter::BehaviourVotes;
 use arcnav_behaviours::{Mission, Registry};
-use arcnav_bus::transport::{Lcm, Publisher, TransportError, wall_clock_utime};
+use arcnav_bus::transport::{Lcm, Publisher, TransportError};
 use arcnav_perception::{ObstacleReport, RangeImage};
 use arcnav_pipeline::{ArbiterNode, BehaviourSet, Cycle, Decided};
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::{Pose, SteeringCommand, Utime};
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, select};
 
+use super::clock::{Clock, SharedClock, WallClock};
 use super::handoff::{self, Arrived, Handoff};
 use super::io::{IoRoutes, Ticker, io_loop, publish_command};
 use super::workers::{MapStage, map_worker, perception_node, perception_worker};
@@ -72,6 +73,13 @@ pub struct StopWhen {
     pub after: Option<Duration>,
 }
 
+impl LiveOptions {
+    /// The executor's clock.
+    pub fn clock(&self) -> SharedClock {
+        self.clock.clone().unwrap_or_else(|| Arc::new(WallClock))
+    }
+}
+
 impl StopWhen {
     pub(crate) fn deadline(&self) -> Option<Instant> {
         self.after.map(|d| Instant::now() + d)
@@ -81,6 +89,9 @@ impl StopWhen {
 /// How a live executor runs.
 #[derive(Clone, Default)]
 pub struct LiveOptions {
+    /// The clock every watchdog, deadline and arrival time reads (default:
+    /// the wall clock).
+    pub clock: Option<SharedClock>,
     pub stop: StopWhen,
     /// Every published command, with why, is also sent here (tests, tools).
     pub command_tap: Option<Sender<Decided>>,
@@ -121,6 +132,7 @@ pub fn run(
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
     let started = Instant::now();
+    let clock = options.clock();
     let live = config.live.clone();
     let perception = perception_node(config)?;
     let map = MapStage::new(config);
@@ -130,7 +142,7 @@ pub fn run(
         config.expected_behaviours(),
         &live,
         &config.pipeline,
-        wall_clock_utime(),
+        clock.now_us(),
     );
     let period_s = 1.0 / config.pipeline.command_rate_hz;
     let capacity = live.queue_capacity;
@@ -149,16 +161,18 @@ pub fn run(
     let perception_thread = {
         let arbiter_tx = arbiter_tx.clone();
         let live = live.clone();
+        let clock = clock.clone();
         spawn("perception", move || {
+            let now = clock.clone();
             perception_worker(
                 perception,
                 perception_poses,
                 images,
                 replaced,
                 &live,
+                clock,
                 |report, arrival| {
-                    let _ =
-                        arbiter_tx.try_send(ToArbiter::Perceived(report.utime, wall_clock_utime()));
+                    let _ = arbiter_tx.try_send(ToArbiter::Perceived(report.utime, now.now_us()));
                     // Reports are never dropped: perception waits for the map.
                     let _ = reports_tx.send(Arrived {
                         item: report,
@@ -171,8 +185,17 @@ pub fn run(
 
     let map_thread = {
         let period = live.status_period_s;
+        let clock = clock.clone();
         spawn("localmap", move || {
-            map_worker(map, map_poses, reports, cycle_handoff, period, period_s)
+            map_worker(
+                map,
+                map_poses,
+                reports,
+                cycle_handoff,
+                &*clock,
+                period,
+                period_s,
+            )
         })?
     };
 
@@ -189,8 +212,9 @@ pub fn run(
         };
         let arbiter_tx = arbiter_tx.clone();
         let period = live.status_period_s;
+        let clock = clock.clone();
         spawn("behaviours", move || {
-            voter.run(cycles, &arbiter_tx, period, period_s)
+            voter.run(cycles, &arbiter_tx, &*clock, period, period_s)
         })?
     };
 
@@ -198,8 +222,9 @@ pub fn run(
         let tap = options.command_tap.clone();
         let period = live.status_period_s;
         let tick = Duration::from_secs_f64((period_s / 4.0).min(0.01));
+        let clock = clock.clone();
         spawn("arbiter", move || {
-            arbiter_worker(arbiter, arbiter_rx, tick, period, |decided| {
+            arbiter_worker(arbiter, arbiter_rx, &*clock, tick, period, |decided| {
                 publish_command(&publisher, decided, tap.as_ref());
                 let _ = commands_tx.try_send(decided.command);
             })
@@ -254,12 +279,13 @@ impl Voter {
         mut self,
         cycles: Receiver<Cycle<i64>>,
         arbiter: &Sender<ToArbiter>,
+        clock: &dyn Clock,
         status_period_s: f64,
         period_s: f64,
     ) -> NodeStatus {
         let mut status = NodeStatus::new("behaviours");
         let mut busy = Samples::default();
-        let mut ticker = Ticker::new(status_period_s, wall_clock_utime());
+        let mut ticker = Ticker::new(status_period_s, clock.now_us());
         loop {
             select! {
                 recv(cycles) -> cycle => {
@@ -289,7 +315,7 @@ impl Voter {
                 },
                 default(Duration::from_millis(100)) => {}
             }
-            if ticker.due(wall_clock_utime()) {
+            if ticker.due(clock.now_us()) {
                 status.busy_ms = busy.summary();
                 status.log();
             }
@@ -324,17 +350,18 @@ impl Voter {
 fn arbiter_worker(
     mut arbiter: ArbiterNode,
     inputs: Receiver<ToArbiter>,
+    clock: &dyn Clock,
     tick: Duration,
     status_period_s: f64,
     mut publish: impl FnMut(&Decided),
 ) -> (NodeStatus, ArbiterNode) {
     let mut status = NodeStatus::new("arbiter");
     let mut busy = Samples::default();
-    let mut ticker = Ticker::new(status_period_s, wall_clock_utime());
+    let mut ticker = Ticker::new(status_period_s, clock.now_us());
     let mut out = Vec::new();
     loop {
         let message = inputs.recv_timeout(tick);
-        let now = wall_clock_utime();
+        let now = clock.now_us();
         match message {
             Ok(ToArbiter::Pose(utime, wall)) => arbiter.on_pose(utime, wall),
             Ok(ToArbiter::Perceived(utime, wall)) => arbiter.on_perceived(utime, wall),
@@ -353,7 +380,7 @@ fn arbiter_worker(
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => break,
         }
-        arbiter.on_tick(wall_clock_utime(), &mut out);
+        arbiter.on_tick(clock.now_us(), &mut out);
         out.drain(..).for_each(|d| publish(&d));
         if ticker.due(now) {
             arbiter_status(&arbiter, &mut status);
@@ -361,7 +388,7 @@ fn arbiter_worker(
             status.log();
         }
     }
-    let last = arbiter.final_stop(wall_clock_utime());
+    let last = arbiter.final_stop(clock.now_us());
     publish(&last);
     arbiter_status(&arbiter, &mut status);
     status.busy_ms = busy.summary();
@@ -384,12 +411,23 @@ impl InProcess {
         registry: Registry,
         tap: Option<Sender<Decided>>,
     ) -> Result<Self, LiveError> {
+        Self::start_with(config, registry, tap, None)
+    }
+
+    /// Like [`InProcess::start`], on `clock` (`None`: the wall clock).
+    pub fn start_with(
+        config: &Config,
+        registry: Registry,
+        tap: Option<Sender<Decided>>,
+        clock: Option<SharedClock>,
+    ) -> Result<Self, LiveError> {
         let lcm = Lcm::new("memq://")?;
         let publisher = lcm.publisher();
         let (ready, is_ready) = crossbeam_channel::bounded(1);
         let options = LiveOptions {
             command_tap: tap,
             ready: Some(ready),
+            clock,
             ..LiveOptions::default()
         };
         let stop = Arc::clone(&options.stop.flag);
@@ -429,4 +467,3 @@ impl InProcess {
             .map_err(|_| LiveError::Panicked("arcnav-run"))?
     }
 }
-

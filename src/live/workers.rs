@@ -7,12 +7,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use arcnav_bus::transport::wall_clock_utime;
 use arcnav_perception::{ObstacleReport, RangeImage};
 use arcnav_pipeline::{Cycle, DecisionCycle, LiveConfig, PerceptionNode};
 use arcnav_vehicle::{Pose, Utime};
 use crossbeam_channel::{Receiver, select};
 
+use super::clock::{Clock, SharedClock};
 use super::handoff::{Arrived, Handoff};
 use super::io::Ticker;
 use super::threaded::LiveError;
@@ -73,6 +73,7 @@ pub(crate) fn perception_worker(
     images: Receiver<Arrived<RangeImage>>,
     replaced: Arc<AtomicU64>,
     live: &LiveConfig,
+    clock: SharedClock,
     mut out: impl FnMut(ObstacleReport, i64),
 ) -> NodeStatus {
     let wait = if live.perception_busy_poll {
@@ -83,7 +84,7 @@ pub(crate) fn perception_worker(
     let status_period_s = live.status_period_s;
     let mut status = NodeStatus::new("perception");
     let mut busy = Samples::default();
-    let mut ticker = Ticker::new(status_period_s, wall_clock_utime());
+    let mut ticker = Ticker::new(status_period_s, clock.now_us());
     let mut arrivals: VecDeque<(Utime, i64)> = VecDeque::new();
     let mut reports = Vec::new();
     let fill = |status: &mut NodeStatus, node: &PerceptionNode, busy: &Samples| {
@@ -131,11 +132,11 @@ pub(crate) fn perception_worker(
             let arrival = arrivals
                 .iter()
                 .find(|(utime, _)| *utime == report.utime)
-                .map_or_else(wall_clock_utime, |(_, wall)| *wall);
+                .map_or_else(|| clock.now_us(), |(_, wall)| *wall);
             arrivals.retain(|(utime, _)| *utime > report.utime);
             out(report, arrival);
         }
-        if ticker.due(wall_clock_utime()) {
+        if ticker.due(clock.now_us()) {
             fill(&mut status, &node, &busy);
             status.log();
         }
@@ -238,12 +239,13 @@ pub(crate) fn map_worker(
     poses: Receiver<Pose>,
     reports: Receiver<Arrived<ObstacleReport>>,
     cycles: Handoff<Cycle<i64>>,
+    clock: &dyn Clock,
     status_period_s: f64,
     period_s: f64,
 ) -> NodeStatus {
     let mut status = NodeStatus::new("localmap");
     let mut busy = Samples::default();
-    let mut ticker = Ticker::new(status_period_s, wall_clock_utime());
+    let mut ticker = Ticker::new(status_period_s, clock.now_us());
     let fill = |status: &mut NodeStatus, map: &MapStage, busy: &Samples, cycles: &Handoff<_>| {
         map.fill(status);
         status.busy_ms = busy.summary();
@@ -269,7 +271,7 @@ pub(crate) fn map_worker(
         if ran {
             status.took(&mut busy, ms, period_s * 1e3);
         }
-        if ticker.due(wall_clock_utime()) {
+        if ticker.due(clock.now_us()) {
             fill(&mut status, &map, &busy, &cycles);
             status.log();
         }
@@ -309,4 +311,3 @@ mod tests {
         }
     }
 }
-
