@@ -1,0 +1,66 @@
+//! `arcnav run` and `arcnav node …`: live operation on LCM.
+
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use crate::LiveArgs;
+use anyhow::Context as _;
+use arcnav::Config;
+use arcnav::live::node::NodeKind;
+use arcnav_behaviours::Registry;
+
+/// `arcnav run` (no node) or `arcnav node …`.
+pub fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> {
+    use arcnav::live::threaded::{LiveOptions, StopWhen};
+    let registry = Registry::builtin();
+    let config = match &args.config {
+        Some(p) => Config::load_with(p, &registry)?,
+        None => Config::default(),
+    };
+    let after = match args.duration {
+        Some(s) if s > 0.0 && s.is_finite() => Some(std::time::Duration::from_secs_f64(s)),
+        Some(s) => anyhow::bail!("--duration {s}: must be a positive number of seconds"),
+        None => None,
+    };
+    let flag = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // A second signal while shutting down exits at once.
+        signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&flag))
+            .context("cannot install the signal handlers")?;
+        signal_hook::flag::register(signal, Arc::clone(&flag))
+            .context("cannot install the signal handlers")?;
+    }
+    let lcm = arcnav_bus::transport::Lcm::new(&args.lcm)
+        .with_context(|| format!("cannot open LCM at {}", args.lcm))?;
+    let options = LiveOptions {
+        stop: StopWhen { flag, after },
+        ..LiveOptions::default()
+    };
+    let what = node
+        .as_ref()
+        .map_or("every node".to_owned(), |n| format!("node {n}"));
+    tracing::info!(
+        lcm = %args.lcm,
+        rate_hz = config.pipeline.command_rate_hz,
+        "starting {what}; Ctrl-C or SIGTERM stops"
+    );
+    let report = match &node {
+        None => arcnav::live::threaded::run(&config, &registry, lcm, &options)?,
+        Some(kind) => arcnav::live::node::run_node(kind, &config, &registry, lcm, &options)?,
+    };
+    tracing::info!(
+        commands = report.commands,
+        stops = report.stops,
+        "{what} stopped after {:.1} s",
+        report.wall_s
+    );
+    if args.stats {
+        print!("{}", report.table());
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,12 @@
+//! The commands of the `arcnav` tool, one file each; `main.rs` holds the
+//! command line they are called from.
+
+mod live;
+mod render;
+mod replay;
+mod sim;
+
+pub use live::live;
+pub use render::render;
+pub use replay::replay;
+pub use sim::sim;

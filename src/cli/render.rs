@@ -1,0 +1,51 @@
+//! `arcnav render`: the picture of one decision of a log.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use crate::RenderArgs;
+use arcnav::Config;
+use arcnav_behaviours::Registry;
+
+pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
+    use arcnav::replay::{ReplayOptions, replay as run_replay};
+    let registry = Registry::builtin();
+    let config = match &args.config {
+        Some(p) => Config::load_with(p, &registry)?,
+        None => Config::default(),
+    };
+    let options = ReplayOptions {
+        recorded_cells: args.recorded_cells,
+        stop_at_s: Some(args.at),
+        ..ReplayOptions::default()
+    };
+    let result = run_replay(&args.log, &config, &registry, &options, &mut |_| {})?;
+    let origin = result.span.map_or(0, |s| s.0);
+    let Some((at, decision, map)) = &result.kept else {
+        anyhow::bail!(
+            "no decision at or after {} s: the log spans {:.1} s and yielded {} decisions",
+            args.at,
+            result.span.map_or(0.0, |(a, b)| (b - a) as f64 * 1e-6),
+            result.cycles.len()
+        );
+    };
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("decision-{:.1}s.png", args.at)));
+    arcnav::render::snapshot_picture(
+        &out,
+        &config,
+        &result.arcs,
+        map,
+        Some(decision),
+        at - origin,
+        &[],
+    )?;
+    println!(
+        "decision at {:.2} s drawn to {}",
+        (at - origin) as f64 * 1e-6,
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,223 @@
+//! `arcnav replay`: a log through the pipeline, compared with what it recorded.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use crate::ReplayArgs;
+use anyhow::Context as _;
+use arcnav::Config;
+use arcnav_behaviours::Registry;
+
+pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
+    use arcnav::replay::{ReplayOptions, compare, replay as run_replay};
+    let registry = Registry::builtin();
+    let load = |path: &Option<PathBuf>| -> anyhow::Result<Config> {
+        Ok(match path {
+            Some(p) => Config::load_with(p, &registry)?,
+            None => Config::default(),
+        })
+    };
+    if let Some(speed) = args.speed {
+        anyhow::ensure!(speed > 0.0, "--speed {speed}: must be positive");
+    }
+    let options = ReplayOptions {
+        from_s: args.from,
+        to_s: args.to,
+        out: args.out.clone(),
+        waypoints: args.waypoints.as_deref().map(load_waypoints).transpose()?,
+        speed: args.speed,
+        recorded_cells: args.recorded_cells,
+        stop_at_s: None,
+    };
+    let size = std::fs::metadata(&args.log)
+        .with_context(|| format!("cannot read the log {}", args.log.display()))?
+        .len();
+    let bar = indicatif::ProgressBar::new(size);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} replaying [{bar:30}] {bytes}/{total_bytes} ({eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let mut runs = Vec::new();
+    let configs: Vec<(String, Config, ReplayOptions)> = match &args.compare_config {
+        Some(pair) => {
+            let (a, b) = (&pair[0], &pair[1]);
+            vec![
+                (
+                    a.display().to_string(),
+                    load(&Some(a.clone()))?,
+                    ReplayOptions {
+                        out: None,
+                        ..options.clone()
+                    },
+                ),
+                (
+                    b.display().to_string(),
+                    load(&Some(b.clone()))?,
+                    options.clone(),
+                ),
+            ]
+        }
+        None => vec![("replayed".to_owned(), load(&args.config)?, options.clone())],
+    };
+    for (label, config, opts) in &configs {
+        bar.set_position(0);
+        let result = run_replay(&args.log, config, &registry, opts, &mut |p| {
+            bar.set_position(p)
+        })?;
+        runs.push((label.clone(), config.clone(), result));
+    }
+    bar.finish_and_clear();
+    let (_, config, last) = &runs[runs.len() - 1];
+    let origin = last.span.map_or(0, |s| s.0);
+    let i = &last.inputs;
+    println!("log           {}", args.log.display());
+    println!(
+        "inputs        {} poses, {} range images, {} waypoint lists{}",
+        i.poses,
+        i.images,
+        i.waypoints,
+        if args.recorded_cells {
+            format!(", {} recorded obstacle reports", i.recorded_cells)
+        } else {
+            String::new()
+        }
+    );
+    if let Some((a, b)) = last.span {
+        println!("span          {:.1} s of log", (b - a) as f64 * 1e-6);
+    }
+    println!(
+        "decisions     {} recomputed{}",
+        last.cycles.len(),
+        args.out
+            .as_ref()
+            .map(|o| format!(", written to {}", o.display()))
+            .unwrap_or_default()
+    );
+    let weight_of = |c: &Config| {
+        let c = c.clone();
+        move |name: &str| c.arbiter.weight(name)
+    };
+    let mut comparisons = Vec::new();
+    if runs.len() == 2 {
+        let (wa, wb) = (weight_of(&runs[0].1), weight_of(&runs[1].1));
+        comparisons.push(compare(
+            (&runs[0].0, &runs[1].0),
+            &runs[0].2.cycles,
+            &runs[1].2.cycles,
+            (&wa, &wb),
+            origin,
+        ));
+    } else if !last.recorded.is_empty() {
+        let w = weight_of(config);
+        comparisons.push(compare(
+            ("recorded", "replayed"),
+            &last.recorded,
+            &last.cycles,
+            (&w, &w),
+            origin,
+        ));
+    } else {
+        println!("comparison    the log holds no STEERING_COMMAND to compare with");
+    }
+    for c in &comparisons {
+        println!(
+            "comparison    {} vs {}: {} decisions compared, {} agree ({:.2}%)",
+            c.a, c.b, c.compared, c.agreeing, c.agreement_percent
+        );
+        if let Some(d) = &c.first_divergence {
+            println!("              first divergence at {:.2} s", d.time_s);
+        }
+        if let Some(d) = &c.largest_curvature_difference {
+            println!(
+                "              largest curvature difference {:.4} 1/m at {:.2} s",
+                (d.a.curvature - d.b.curvature).abs(),
+                d.time_s
+            );
+        }
+        for d in c.differences.iter().take(args.show) {
+            let arc = |x: &arcnav::replay::Decided| {
+                x.arc.map_or("stop".to_owned(), |a| format!("arc {a}"))
+            };
+            println!(
+                "              {:>8.2} s  {}: {} at {:.2} m/s  {}: {} at {:.2} m/s{}",
+                d.time_s,
+                c.a,
+                arc(&d.a),
+                d.a.speed_mps,
+                c.b,
+                arc(&d.b),
+                d.b.speed_mps,
+                d.moved_by
+                    .as_ref()
+                    .map(|b| format!("  (moved by {b})"))
+                    .unwrap_or_default()
+            );
+        }
+        if c.differences.len() > args.show {
+            println!(
+                "              ... {} differences in all (--show N, --json FILE)",
+                c.differences.len()
+            );
+        }
+    }
+    let problems = &last.problems;
+    let lines = problems.lines();
+    if lines.is_empty() {
+        println!("problems      none: every input was used");
+    } else {
+        println!("problems      {}", lines[0]);
+        for line in &lines[1..] {
+            println!("              {line}");
+        }
+    }
+    if let Some(path) = &args.json {
+        let json = serde_json::json!({
+            "log": args.log.display().to_string(),
+            "inputs": last.inputs,
+            "decisions": last.cycles.len(),
+            "problems": problems,
+            "input_lost": problems.lost_input(),
+            "comparisons": comparisons,
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(if problems.lost_input() {
+        ExitCode::from(3)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+/// Waypoints from a TOML file with [[waypoints]] entries (a world file works).
+fn load_waypoints(path: &Path) -> anyhow::Result<arcnav_behaviours::Mission> {
+    #[derive(serde::Deserialize)]
+    struct File {
+        waypoints: Vec<arcnav_sim::world::WaypointSpec>,
+    }
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let file: File = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))
+        .with_context(|| "a waypoints file holds [[waypoints]] tables with position_m = [x, y]")?;
+    anyhow::ensure!(
+        !file.waypoints.is_empty(),
+        "{} holds no [[waypoints]]",
+        path.display()
+    );
+    Ok(arcnav_behaviours::Mission {
+        version: 1,
+        waypoints: file
+            .waypoints
+            .iter()
+            .map(|w| arcnav_behaviours::Waypoint {
+                x: w.position_m[0],
+                y: w.position_m[1],
+                radius_m: w.radius_m,
+            })
+            .collect(),
+    })
+}

@@ -1,0 +1,215 @@
+//! `arcnav sim`: a simulated mission and its summary.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use crate::{DifficultyArg, SensorArg, SimArgs};
+use anyhow::Context as _;
+use arcnav::Config;
+use arcnav::mission::{LogMode, MissionOptions, MissionProgress, run_mission};
+use arcnav_behaviours::Registry;
+use arcnav_perception::SensorPreset;
+use arcnav_sim::world::EMBEDDED;
+use arcnav_sim::{Difficulty, World};
+
+pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
+    if args.list {
+        println!("embedded worlds (arcnav sim --world NAME):");
+        for (name, description, _) in EMBEDDED {
+            println!("  {name:<14} {description}");
+        }
+        println!("or --world FILE.toml, or --seed N [--difficulty easy|moderate|hard]");
+        return Ok(ExitCode::SUCCESS);
+    }
+    let registry = Registry::builtin();
+    let mut config = match &args.config {
+        Some(path) => Config::load_with(path, &registry)?,
+        None => Config::default(),
+    };
+    if let Some(speed) = args.speed {
+        anyhow::ensure!(
+            speed > 0.0 && speed.is_finite(),
+            "--speed {speed}: a speed must be positive"
+        );
+        config.arbiter.cruise_speed_mps = speed;
+        config.vehicle.max_speed_mps = config.vehicle.max_speed_mps.max(speed);
+    }
+    if let Some(sensor) = args.sensor {
+        config.sensor.preset = match sensor {
+            SensorArg::Erim => SensorPreset::Erim,
+            SensorArg::Lidar64 => SensorPreset::Lidar64,
+            SensorArg::Lidar128 => SensorPreset::Lidar128,
+        };
+    }
+    if let Some(every) = args.snapshot_every {
+        anyhow::ensure!(
+            every > 0.0,
+            "--snapshot-every {every}: must be positive seconds"
+        );
+    }
+    config
+        .validate_with(&registry)
+        .context("the configuration with the command-line settings")?;
+    let world = match (&args.world, args.seed) {
+        (_, Some(seed)) => {
+            let difficulty = match args.difficulty {
+                DifficultyArg::Easy => Difficulty::Easy,
+                DifficultyArg::Moderate => Difficulty::Moderate,
+                DifficultyArg::Hard => Difficulty::Hard,
+            };
+            World::build(
+                arcnav_sim::generate(seed, difficulty),
+                "generated world",
+                None,
+            )?
+        }
+        (Some(name), None) if !Path::new(name).exists() && !name.ends_with(".toml") => {
+            match World::embedded(name) {
+                Some(world) => world?,
+                None => anyhow::bail!(
+                    "no embedded world named {name:?} and no file of that name (embedded: {})",
+                    EMBEDDED
+                        .iter()
+                        .map(|(n, _, _)| *n)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            }
+        }
+        (Some(file), None) => World::load(Path::new(file))?,
+        (None, None) => {
+            World::embedded("paper_loop").context("the default world is compiled in")??
+        }
+    };
+    if let Some(path) = &args.save_world {
+        let text = toml::to_string(&world.spec).context("serialising the world")?;
+        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        println!("world saved to {}", path.display());
+    }
+    let name = world.spec.name.clone();
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join(&name));
+    std::fs::create_dir_all(&out)
+        .with_context(|| format!("cannot create the output directory {}", out.display()))?;
+    let snapshot_dir = out.join("snapshots");
+    if args.snapshot_every.is_some() {
+        std::fs::create_dir_all(&snapshot_dir)
+            .with_context(|| format!("cannot create {}", snapshot_dir.display()))?;
+    }
+    let options = MissionOptions {
+        log: Some(out.join("mission.lcm")),
+        log_mode: if args.no_images {
+            LogMode::NoImages
+        } else {
+            LogMode::All
+        },
+        snapshot_every_s: args.snapshot_every,
+        snapshot_dir: Some(snapshot_dir),
+    };
+    let sensor = config.sensor.model().map_err(|e| e.within("sensor"))?;
+    eprintln!(
+        "arcnav sim: {name} ({} waypoints) with the {} sensor at {:.1} m/s cruise",
+        world.waypoints.len(),
+        sensor.id,
+        config.arbiter.cruise_speed_mps
+    );
+    let bar = indicatif::ProgressBar::new(world.waypoints.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} [{bar:30}] waypoint {pos}/{len} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let world = Arc::new(world);
+    let run = run_mission(
+        &config,
+        &registry,
+        Arc::clone(&world),
+        &options,
+        &mut |p: &MissionProgress| {
+            bar.set_position(p.waypoint as u64);
+            bar.set_message(format!(
+                "· {:.0} s · {:.0} m · {:.1} m/s",
+                p.sim_time_s, p.distance_m, p.speed_mps
+            ));
+        },
+    )?;
+    bar.finish_and_clear();
+    let config_path = out.join("config.toml");
+    std::fs::write(
+        &config_path,
+        format!("# the configuration of this run: replay with `arcnav replay mission.lcm --config config.toml`\n{}", config.to_toml()),
+    )
+    .with_context(|| format!("cannot write {}", config_path.display()))?;
+    let report_path = out.join("report.json");
+    std::fs::write(&report_path, serde_json::to_string_pretty(&run.report)?)
+        .with_context(|| format!("cannot write {}", report_path.display()))?;
+    let map_path = out.join("map.png");
+    arcnav::render::mission_picture(&map_path, &world, &run)?;
+    print_summary(&run.report, &out, &run.snapshots);
+    Ok(if run.report.success {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}
+
+fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[PathBuf]) {
+    let outcome = match r.outcome {
+        arcnav::mission::Outcome::Completed => "completed",
+        arcnav::mission::Outcome::Collision => "FAILED: collision",
+        arcnav::mission::Outcome::Timeout => "FAILED: time limit",
+        arcnav::mission::Outcome::Stuck => "FAILED: stuck",
+    };
+    println!("mission       {} on {} with {}", outcome, r.world, r.sensor);
+    println!("waypoints     {}/{}", r.waypoints_reached, r.waypoints);
+    println!(
+        "distance      {:.0} m in {:.0} s: average {:.2} m/s, max {:.2} m/s (cruise {:.2} m/s)",
+        r.distance_m, r.duration_s, r.average_speed_mps, r.max_speed_mps, r.cruise_speed_mps
+    );
+    println!(
+        "images        {} processed, {} dropped",
+        r.images, r.images_dropped
+    );
+    println!("collisions    {}", r.collisions.len());
+    for c in &r.collisions {
+        println!(
+            "              {} at ({:.1}, {:.1}) after {:.1} s",
+            c.cause,
+            c.position[0],
+            c.position[1],
+            (c.utime - arcnav::mission::SIM_EPOCH_US) as f64 * 1e-6
+        );
+    }
+    if let Some(gap) = r.closest_approach_m {
+        println!("closest       {gap:.2} m between the vehicle and a hazard");
+    }
+    let s = &r.stops;
+    println!(
+        "stops         {} stop commands in {} episodes (all arcs forbidden {}, no acceptable arc {}, required behaviour stale {})",
+        s.stop_commands, s.episodes, s.all_arcs_forbidden, s.no_acceptable_arc, s.required_stale
+    );
+    let t = &r.stage_times;
+    println!(
+        "stage time    perception {:.2} ms/image, local map {:.3} ms, behaviours {:.3} ms, arbiter {:.3} ms (mean per call)",
+        t.perception.mean_ms(),
+        t.localmap.mean_ms(),
+        t.behaviours.mean_ms(),
+        t.arbiter.mean_ms()
+    );
+    println!(
+        "simulation    {:.0} s simulated in {:.1} s ({:.0}× real time), rendering {:.1} ms/image",
+        r.duration_s, r.wall_time_s, r.realtime_factor, r.render_ms_mean
+    );
+    println!(
+        "outputs       {}/mission.lcm, report.json, map.png, config.toml{}",
+        out.display(),
+        if snapshots.is_empty() {
+            String::new()
+        } else {
+            format!(", {} snapshots in snapshots/", snapshots.len())
+        }
+    );
+}

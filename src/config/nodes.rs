@@ -1,0 +1,101 @@
+//! Building the pipeline's nodes from the configuration: each node from
+//! its own section, the behaviours from the tables checked at load.
+
+use arcnav_arbiter::Arbiter;
+use arcnav_behaviours::{Behaviour, Registry};
+use arcnav_pipeline::{
+    BehaviourSet, DecisionCycle, Delivery, LocalMapNode, PerceptionNode, Pipeline,
+};
+use arcnav_vehicle::{ArcSet, ConfigError};
+
+use super::{Config, behaviour_error};
+
+impl Config {
+    /// Builds the configured behaviour `name` (`None`: not configured), from
+    /// its table as prepared at load; a table changed since is prepared now.
+    pub fn build_behaviour(
+        &self,
+        registry: &Registry,
+        arcs: &ArcSet,
+        name: &str,
+    ) -> Option<Result<Box<dyn Behaviour>, ConfigError>> {
+        let table = self.behaviours.get(name)?;
+        let setup = self.setup(arcs);
+        Some(match self.prepared.0.get(name) {
+            Some(p) if p.table() == table => Ok(p.build(&setup)),
+            _ => registry
+                .prepare(name, table, &setup)
+                .map(|p| p.build(&setup))
+                .map_err(|e| behaviour_error(name, e)),
+        })
+    }
+
+    /// Builds every configured behaviour (in name order).
+    pub fn build_behaviours(
+        &self,
+        registry: &Registry,
+        arcs: &ArcSet,
+    ) -> Result<Vec<Box<dyn Behaviour>>, ConfigError> {
+        self.behaviours
+            .keys()
+            .filter_map(|name| self.build_behaviour(registry, arcs, name))
+            .collect()
+    }
+
+    /// The configured behaviours, voting over the configured arcs.
+    pub fn behaviour_set(&self, registry: &Registry) -> Result<BehaviourSet, ConfigError> {
+        let arcs = self.arc_set()?;
+        Ok(BehaviourSet::new(
+            self.build_behaviours(registry, &arcs)?,
+            arcs,
+        ))
+    }
+
+    /// The perception node, from `[perception]` and `[pipeline]`.
+    pub fn perception_node(&self) -> Result<PerceptionNode, ConfigError> {
+        PerceptionNode::new(&self.perception, &self.pipeline).map_err(|e| e.within("perception"))
+    }
+
+    /// The local map and its cycle clock, from `[localmap]`, the vehicle's
+    /// top speed and `[pipeline]`, with reports delivered as `delivery` says.
+    pub fn decision_cycle<T>(&self, delivery: Delivery) -> DecisionCycle<T> {
+        let map = LocalMapNode::new(&self.localmap, self.vehicle.max_speed_mps);
+        DecisionCycle::new(map, &self.pipeline, delivery)
+    }
+
+    /// How a live run delivers reports to the map (`[live]`).
+    pub fn live_delivery(&self) -> Delivery {
+        if self.live.reproduce_lockstep {
+            Delivery::held(&self.pipeline)
+        } else {
+            Delivery::OnArrival {
+                decide_at_once: self.live.decide_on_new_cells,
+            }
+        }
+    }
+
+    /// The DAMN arbiter, from `[arbiter]`, `[arcs]` and the vehicle.
+    pub fn arbiter(&self) -> Result<Arbiter, ConfigError> {
+        Ok(Arbiter::new(&self.arbiter, self.arc_set()?, &self.vehicle))
+    }
+
+    /// The lock-step executor with every node of this configuration.
+    pub fn lockstep(&self, registry: &Registry) -> Result<Pipeline, ConfigError> {
+        Ok(Pipeline::new(
+            self.perception_node()?,
+            self.decision_cycle(Delivery::held(&self.pipeline)),
+            self.behaviour_set(registry)?,
+            self.arbiter()?,
+        ))
+    }
+
+    /// The behaviours whose votes complete a cycle: every configured one
+    /// with a positive weight.
+    pub fn expected_behaviours(&self) -> Vec<String> {
+        self.behaviours
+            .keys()
+            .filter(|name| self.arbiter.weight(name) > 0.0)
+            .cloned()
+            .collect()
+    }
+}

@@ -1,0 +1,249 @@
+//! The configuration's loading, checks and messages.
+
+use super::*;
+
+fn parse_error(text: &str) -> String {
+    Config::from_toml(text, "test.toml")
+        .unwrap_err()
+        .to_string()
+}
+
+#[test]
+fn defaults_round_trip_through_toml() {
+    let defaults = Config::default();
+    let text = defaults.to_toml();
+    assert_eq!(Config::from_toml(&text, "round-trip").unwrap(), defaults);
+}
+
+#[test]
+fn the_shipped_default_toml_parses_and_equals_the_defaults() {
+    assert_eq!(
+        Config::from_toml(DEFAULT_TOML, "config/default.toml").unwrap(),
+        Config::default()
+    );
+}
+
+#[test]
+fn the_shipped_default_toml_documents_every_key() {
+    fn keys(prefix: &str, table: &toml::Table, out: &mut Vec<String>) {
+        for (k, v) in table {
+            let key = if prefix.is_empty() {
+                k.clone()
+            } else {
+                format!("{prefix}.{k}")
+            };
+            match v {
+                toml::Value::Table(t) => keys(&key, t, out),
+                _ => out.push(key),
+            }
+        }
+    }
+    let shipped: toml::Table = toml::from_str(DEFAULT_TOML).unwrap();
+    let defaults: toml::Table = toml::from_str(&Config::default().to_toml()).unwrap();
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    keys("", &shipped, &mut a);
+    keys("", &defaults, &mut b);
+    a.sort();
+    b.sort();
+    assert_eq!(
+        a, b,
+        "config/default.toml must hold exactly the configuration's keys"
+    );
+    // Every key carries a comment right above it or on its line.
+    let lines: Vec<&str> = DEFAULT_TOML.lines().collect();
+    for (i, line) in lines.iter().enumerate() {
+        let t = line.trim();
+        if t.is_empty() || t.starts_with('#') || t.starts_with('[') {
+            continue;
+        }
+        let commented = t.contains('#') || (i > 0 && lines[i - 1].trim().starts_with('#'));
+        assert!(
+            commented,
+            "line {} of config/default.toml has no comment: {t}",
+            i + 1
+        );
+    }
+}
+
+#[test]
+fn an_unknown_key_is_named_with_its_line() {
+    let msg = parse_error("[vehicle]\nwheelbase_m = 3.3\nwheel_base = 3.3\n");
+    assert!(
+        msg.starts_with(
+            "test.toml, line 3, `vehicle.wheel_base`: unknown field `wheel_base`, expected one of"
+        ),
+        "{msg}"
+    );
+}
+
+#[test]
+fn an_unknown_section_is_named() {
+    let msg = parse_error("[vehicel]\nwheelbase_m = 3.3\n");
+    assert!(
+        msg.starts_with("test.toml, line 1, `vehicel`: unknown field `vehicel`"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_wrong_type_is_named_with_its_line() {
+    let msg = parse_error("# comment\n[arcs]\ncount = \"many\"\n");
+    assert_eq!(
+        msg,
+        "test.toml, line 3, `arcs.count`: invalid type: string \"many\", expected usize"
+    );
+}
+
+#[test]
+fn an_out_of_range_value_is_named() {
+    let msg = parse_error("[vehicle]\nwidth_m = -2.0\n");
+    assert_eq!(
+        msg,
+        "test.toml: invalid configuration: `vehicle.width_m`: is -2, must be a finite number > 0"
+    );
+}
+
+#[test]
+fn a_contradictory_value_names_both_keys() {
+    let msg = parse_error("[vehicle]\nmin_turning_radius_m = 9.0\n");
+    assert!(
+        msg.starts_with("test.toml: invalid configuration: `arcs.min_radius_m`: is 8 m, tighter than the vehicle's minimum turning radius (vehicle.min_turning_radius_m = 9 m)"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_perception_region_smaller_than_the_map_window_is_refused() {
+    let msg = parse_error("[localmap]\nahead_m = 30.0\n");
+    assert!(
+        msg.starts_with("test.toml: invalid configuration: `perception.region.ahead_m`: is 22 m, less than localmap.ahead_m (30 m)"),
+        "{msg}"
+    );
+    let msg = parse_error("[perception.region]\nbehind_m = 5.0\n");
+    assert!(
+        msg.contains("`perception.region.behind_m`: is 5 m, less than localmap.behind_m (6 m)"),
+        "{msg}"
+    );
+    Config::from_toml(
+        "[localmap]\nahead_m = 30.0\n[perception.region]\nahead_m = 32.0\n",
+        "test.toml",
+    )
+    .unwrap();
+}
+
+#[test]
+fn a_perception_threshold_laxer_than_the_vehicle_is_refused() {
+    let msg = parse_error("[vehicle]\ntolerated_step_m = 0.15\n");
+    assert!(
+        msg.starts_with("test.toml: invalid configuration: `perception.cells.max_height_variation_m`: is 0.2, more than vehicle.tolerated_step_m (0.15)"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn an_unknown_sensor_preset_is_named() {
+    let msg = parse_error("[sensor]\npreset = \"velodyne\"\n");
+    assert!(
+        msg.starts_with(
+            "test.toml, line 2, `sensor.preset`: unknown variant `velodyne`, expected one of"
+        ),
+        "{msg}"
+    );
+}
+
+#[test]
+fn an_unknown_behaviour_lists_the_known_ones() {
+    let msg = parse_error("[behaviours.wall_follower]\ngain = 2.0\n");
+    assert_eq!(
+        msg,
+        "test.toml: invalid configuration: `behaviours.wall_follower`: unknown behaviour \"wall_follower\" (known: goal_seeking, obstacle_avoidance)"
+    );
+}
+
+#[test]
+fn a_bad_behaviour_key_is_named() {
+    let msg = parse_error("[behaviours.goal_seeking]\nlookahed_m = 3.0\n");
+    assert!(
+        msg.starts_with("test.toml: invalid configuration: `behaviours.goal_seeking.lookahed_m`: unknown field `lookahed_m`"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_behaviour_table_changes_only_its_keys_and_the_others_stay() {
+    let config = Config::from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
+    let goal = &config.behaviours["goal_seeking"];
+    assert_eq!(goal["lookahead_m"].as_float(), Some(14.0));
+    assert_eq!(goal["arrival_radius_m"].as_float(), Some(5.0));
+    assert!(config.behaviours.contains_key("obstacle_avoidance"));
+}
+
+#[test]
+fn a_syntax_error_gives_the_line() {
+    let msg = parse_error("[vehicle]\nwidth_m = \n");
+    assert!(msg.starts_with("test.toml, line 2"), "{msg}");
+}
+
+#[test]
+fn a_missing_file_is_named() {
+    let err = Config::load(Path::new("/nonexistent/arcnav.toml")).unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("cannot read configuration file /nonexistent/arcnav.toml")
+    );
+}
+
+#[test]
+fn partial_files_keep_the_other_defaults() {
+    let config = Config::from_toml("[arcs]\ncount = 41\n", "t").unwrap();
+    assert_eq!(config.arcs.count, 41);
+    assert_eq!(config.vehicle, VehicleConfig::default());
+}
+
+#[test]
+fn a_weight_or_required_name_that_is_no_configured_behaviour_is_refused() {
+    let msg = parse_error("[arbiter.weights]\nobstacle_avoidence = 0.0\n");
+    assert_eq!(
+        msg,
+        "test.toml: invalid configuration: `arbiter.weights.obstacle_avoidence`: \
+         \"obstacle_avoidence\" is not a configured behaviour (configured: goal_seeking, obstacle_avoidance)"
+    );
+    let msg = parse_error("[arbiter]\nrequired = [\"goal_seekin\"]\n");
+    assert!(
+        msg.contains("`arbiter.required`: \"goal_seekin\" is not a configured behaviour"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_weights_table_changes_only_the_weights_it_names() {
+    let config = Config::from_toml("[arbiter.weights]\ngoal_seeking = 0.8\n", "t").unwrap();
+    assert_eq!(config.arbiter.weight("goal_seeking"), 0.8);
+    assert_eq!(config.arbiter.weight("obstacle_avoidance"), 1.0);
+}
+
+#[test]
+fn a_cruise_speed_above_the_vehicles_top_speed_is_refused() {
+    let msg = parse_error("[arbiter]\ncruise_speed_mps = 12.0\n");
+    assert!(
+        msg.contains("`arbiter.cruise_speed_mps`: is 12 m/s, faster than the vehicle's top speed (vehicle.max_speed_mps = 10 m/s)"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn behaviours_are_built_from_the_tables_checked_at_load_and_follow_later_edits() {
+    let mut config =
+        Config::from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
+    let registry = Registry::builtin();
+    let arcs = config.arc_set().unwrap();
+    assert_eq!(config.build_behaviours(&registry, &arcs).unwrap().len(), 2);
+    // A table changed in code is checked when built.
+    config
+        .behaviours
+        .get_mut("goal_seeking")
+        .unwrap()
+        .insert("lookahed_m".into(), toml::Value::Float(3.0));
+    let err = config.build_behaviours(&registry, &arcs).err().unwrap();
+    assert_eq!(err.key, "behaviours.goal_seeking.lookahed_m");
+}
