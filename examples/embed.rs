@@ -93,9 +93,10 @@ pub fn drive(config: &Config) -> anyhow::Result<Arrival> {
             pipeline.input(Input::Image(image), &mut commands);
         }
         pipeline.run_until(utime, &mut commands);
-        if let Some(newest) = commands.0.drain(..).last() {
+        if let Some(newest) = commands.0.pop() {
             command = newest;
         }
+        commands.0.clear();
         // Your vehicle follows the command for 20 ms.
         let ds = command.speed_mps * 0.02;
         yaw += ds * command.curvature;
