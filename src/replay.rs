@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Registry};
 use arcnav_bus::lcmtypes::steering_command_t;
-use arcnav_bus::log::{LogReader, LogStats, LogWriteError};
+use arcnav_bus::log::{InTimeOrder, LogReader, LogStats, LogWriteError, ReorderWindow};
 use arcnav_bus::messages::{AnyMessage, TypedEvents, channels};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::ObstacleReport;
@@ -69,6 +69,14 @@ pub struct InputProblems {
     pub map_resets: u64,
     /// Known messages the replay does not consume (e.g. LOCAL_MAP), per channel.
     pub ignored: BTreeMap<String, u64>,
+    /// Events that came in the file after events logged later, fed in time
+    /// order (nothing lost).
+    pub reordered: u64,
+    /// The largest such lag, s.
+    pub max_reorder_lag_s: f64,
+    /// Events further out of time order than the reader's window: fed late,
+    /// after decisions that should have seen them.
+    pub fed_late: u64,
 }
 
 /// The log reader's counts.
@@ -102,6 +110,7 @@ impl InputProblems {
             || self.invalid_images > 0
             || self.images_without_pose > 0
             || self.images_out_of_order > 0
+            || self.fed_late > 0
     }
 
     /// One line per problem, for the summary.
@@ -122,6 +131,18 @@ impl InputProblems {
         }
         for (channel, n) in &self.undecodable {
             lines.push(format!("{n} undecodable message(s) on {channel}"));
+        }
+        if self.reordered > 0 {
+            lines.push(format!(
+                "{} event(s) stood in the file after events logged up to {:.2} s later: fed in time order",
+                self.reordered, self.max_reorder_lag_s
+            ));
+        }
+        if self.fed_late > 0 {
+            lines.push(format!(
+                "{} event(s) further out of time order than the reader's window: fed late",
+                self.fed_late
+            ));
         }
         for (what, n) in [
             ("invalid pose(s)", self.invalid_poses),
@@ -274,7 +295,7 @@ pub fn replay(
         path: path.to_owned(),
         source,
     })?;
-    let mut events = TypedEvents::new(reader);
+    let mut events = TypedEvents::new(InTimeOrder::new(reader, ReorderWindow::default()));
     let mut pipeline = config.lockstep(registry)?;
     pipeline.set_explain(options.stop_at_s.is_some());
     let arcs = pipeline.arcs().clone();
@@ -379,18 +400,21 @@ pub fn replay(
                 }
                 Err(_) => *problems.undecodable.entry(event.channel).or_default() += 1,
             },
+            // Decisions are keyed by their cycle's time (the message's own
+            // utime), as the replayed ones are: a logger stamps events when
+            // it receives them, later than the cycle.
             AnyMessage::SteeringCommand(msg) => {
                 recorded.insert(
-                    t,
+                    msg.utime,
                     Cycle {
                         command: SteeringCommand::from(&msg),
-                        votes: recorded_votes.remove(&t).unwrap_or_default(),
+                        votes: recorded_votes.remove(&msg.utime).unwrap_or_default(),
                     },
                 );
             }
             AnyMessage::ArcVotes(msg) => {
                 if let Ok(votes) = wire::votes_from_wire(&msg, &arcs) {
-                    recorded_votes.entry(t).or_default().push(votes);
+                    recorded_votes.entry(votes.utime).or_default().push(votes);
                 }
             }
             // Recomputed by the replay: the recorded ones are replaced.
@@ -413,6 +437,10 @@ pub fn replay(
     problems.invalid_images += drops.invalid;
     problems.map_resets = pipeline.cycle.counts().map_resets;
     problems.log = events.log_stats().into();
+    let order = *events.source().order();
+    problems.reordered = order.reordered;
+    problems.max_reorder_lag_s = order.max_lag_us as f64 * 1e-6;
+    problems.fed_late = order.beyond_window;
     problems.unknown_channels = events.stats().unknown.clone();
     for (channel, n) in &events.stats().undecodable {
         *problems.undecodable.entry(channel.clone()).or_default() += n;
@@ -469,7 +497,8 @@ pub struct Comparison {
     /// Decisions at the same times in both runs.
     pub compared: usize,
     pub agreeing: usize,
-    pub agreement_percent: f64,
+    /// `None` when no decision could be compared: never "100 %" of nothing.
+    pub agreement_percent: Option<f64>,
     pub largest_curvature_difference: Option<Difference>,
     pub first_divergence: Option<Difference>,
     pub differences: Vec<Difference>,
@@ -516,11 +545,8 @@ pub fn compare(
         b: labels.1.to_owned(),
         compared,
         agreeing: compared - differences.len(),
-        agreement_percent: if compared == 0 {
-            100.0
-        } else {
-            100.0 * (compared - differences.len()) as f64 / compared as f64
-        },
+        agreement_percent: (compared > 0)
+            .then(|| 100.0 * (compared - differences.len()) as f64 / compared as f64),
         largest_curvature_difference: largest,
         first_divergence: differences.first().cloned(),
         differences,

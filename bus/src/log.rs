@@ -257,12 +257,191 @@ impl<R: Read> Iterator for LogReader<R> {
     }
 }
 
+/// Where events come from: a log as written, or put in time order.
+pub trait EventSource {
+    /// The next event; `None` at the end.
+    fn next_event(&mut self) -> io::Result<Option<LogEvent>>;
+    /// What the underlying reader met.
+    fn stats(&self) -> &LogStats;
+    /// Bytes of the log consumed so far (for progress).
+    fn position(&self) -> u64;
+}
+
+impl<R: Read> EventSource for LogReader<R> {
+    fn next_event(&mut self) -> io::Result<Option<LogEvent>> {
+        LogReader::next_event(self)
+    }
+
+    fn stats(&self) -> &LogStats {
+        LogReader::stats(self)
+    }
+
+    fn position(&self) -> u64 {
+        LogReader::position(self)
+    }
+}
+
+/// How far [`InTimeOrder`] reads ahead to put events in time order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReorderWindow {
+    /// Events are held until the log has reached this far past them, µs.
+    pub horizon_us: i64,
+    /// ... or until this many bytes of event data are held.
+    pub max_bytes: usize,
+    /// ... or this many events.
+    pub max_events: usize,
+}
+
+impl Default for ReorderWindow {
+    /// 30 s of log, at most 64 MiB and 1 M events held.
+    fn default() -> Self {
+        Self {
+            horizon_us: 30_000_000,
+            max_bytes: 64 << 20,
+            max_events: 1 << 20,
+        }
+    }
+}
+
+/// How a log's order differed from time order.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct OrderStats {
+    /// Events that came in the file after an event logged later: put back
+    /// in time order.
+    pub reordered: u64,
+    /// Events further out of order than the window: returned as they came,
+    /// after later ones.
+    pub beyond_window: u64,
+    /// The largest lag of an event behind the latest logged before it, µs.
+    pub max_lag_us: i64,
+}
+
+struct Held(LogEvent, u64);
+
+impl PartialEq for Held {
+    fn eq(&self, other: &Self) -> bool {
+        (self.0.timestamp, self.1) == (other.0.timestamp, other.1)
+    }
+}
+impl Eq for Held {}
+impl PartialOrd for Held {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Held {
+    /// The earliest (then the first read) is the greatest: a max-heap pops it.
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        (other.0.timestamp, other.1).cmp(&(self.0.timestamp, self.1))
+    }
+}
+
+/// The events of a log in the order of their timestamps, as far as a
+/// bounded window allows. LCM logs are usually written in time order, but
+/// nothing requires it: a log merged from several, or written by a program
+/// that logs each channel in batches, is not, and played as written its
+/// events arrive late. Within the window, events equal in time keep their
+/// order in the file; a log already in order comes out unchanged.
+pub struct InTimeOrder<S> {
+    source: S,
+    window: ReorderWindow,
+    held: std::collections::BinaryHeap<Held>,
+    held_bytes: usize,
+    read: u64,
+    newest_read: Option<i64>,
+    newest_returned: Option<i64>,
+    ended: bool,
+    order: OrderStats,
+}
+
+impl<S: EventSource> InTimeOrder<S> {
+    pub fn new(source: S, window: ReorderWindow) -> Self {
+        Self {
+            source,
+            window,
+            held: std::collections::BinaryHeap::new(),
+            held_bytes: 0,
+            read: 0,
+            newest_read: None,
+            newest_returned: None,
+            ended: false,
+            order: OrderStats::default(),
+        }
+    }
+
+    pub fn order(&self) -> &OrderStats {
+        &self.order
+    }
+
+    fn must_release(&self) -> bool {
+        let (Some(earliest), Some(newest)) = (self.held.peek(), self.newest_read) else {
+            return false;
+        };
+        self.ended
+            || self.held_bytes >= self.window.max_bytes
+            || self.held.len() >= self.window.max_events
+            || newest.saturating_sub(earliest.0.timestamp) > self.window.horizon_us
+    }
+}
+
+impl<S: EventSource> EventSource for InTimeOrder<S> {
+    fn next_event(&mut self) -> io::Result<Option<LogEvent>> {
+        while !self.ended && !self.must_release() {
+            match self.source.next_event()? {
+                Some(event) => {
+                    let t = event.timestamp;
+                    if let Some(newest) = self.newest_read
+                        && t < newest
+                    {
+                        self.order.reordered += 1;
+                        self.order.max_lag_us = self.order.max_lag_us.max(newest - t);
+                        if self.newest_returned.is_some_and(|r| t < r) {
+                            self.order.beyond_window += 1;
+                        }
+                    }
+                    self.newest_read = Some(self.newest_read.map_or(t, |n| n.max(t)));
+                    self.held_bytes += event.data.len();
+                    self.held.push(Held(event, self.read));
+                    self.read += 1;
+                }
+                None => self.ended = true,
+            }
+        }
+        let Some(Held(event, _)) = self.held.pop() else {
+            return Ok(None);
+        };
+        self.held_bytes -= event.data.len();
+        self.newest_returned = Some(
+            self.newest_returned
+                .map_or(event.timestamp, |r| r.max(event.timestamp)),
+        );
+        Ok(Some(event))
+    }
+
+    fn stats(&self) -> &LogStats {
+        self.source.stats()
+    }
+
+    fn position(&self) -> u64 {
+        self.source.position()
+    }
+}
+
+impl<S: EventSource> Iterator for InTimeOrder<S> {
+    type Item = io::Result<LogEvent>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_event().transpose()
+    }
+}
+
 /// Plays the events of `log` whose channel `keep` accepts at `speed` × the
 /// pace they were logged at, handing each to `publish` on time (what
-/// `lcm-logplayer` does, for feeding an LCM instance in-process). Returns the
-/// number of events played.
-pub fn play<R: Read>(
-    log: LogReader<R>,
+/// `lcm-logplayer` does, for feeding an LCM instance in-process), in file
+/// order (put it [`InTimeOrder`] first to play it in time order). Returns
+/// the number of events played.
+pub fn play(
+    log: impl Iterator<Item = io::Result<LogEvent>>,
     speed: f64,
     keep: impl Fn(&str) -> bool,
     mut publish: impl FnMut(&LogEvent),
@@ -577,5 +756,62 @@ mod tests {
         );
         // At twice the pace, the last event (0.4 s in) comes after 0.2 s.
         assert!(seen[2].1 >= std::time::Duration::from_millis(200));
+    }
+
+    /// Events at these log times, in this file order.
+    fn log_at(times: &[i64]) -> Vec<u8> {
+        let mut writer = LogWriter::new(Vec::new());
+        for &t in times {
+            writer.write_event(t, "C", &t.to_be_bytes()).unwrap();
+        }
+        writer.into_inner()
+    }
+
+    fn in_order(bytes: &[u8], window: ReorderWindow) -> (Vec<i64>, OrderStats) {
+        let mut ordered = InTimeOrder::new(LogReader::new(bytes), window);
+        let times = ordered.by_ref().map(|e| e.unwrap().timestamp).collect();
+        (times, *ordered.order())
+    }
+
+    #[test]
+    fn events_out_of_time_order_within_the_window_come_out_in_time_order() {
+        let bytes = log_at(&[0, 20, 40, 10, 60, 30, 80, 50]);
+        let (times, order) = in_order(&bytes, ReorderWindow::default());
+        assert_eq!(times, [0, 10, 20, 30, 40, 50, 60, 80]);
+        assert_eq!(order.reordered, 3);
+        assert_eq!(order.max_lag_us, 30);
+        assert_eq!(order.beyond_window, 0);
+        // A log in order comes out as it is, equal times in file order.
+        let bytes = log_at(&[0, 5, 5, 9]);
+        let mut ordered = InTimeOrder::new(LogReader::new(&bytes[..]), ReorderWindow::default());
+        let data: Vec<Vec<u8>> = ordered.by_ref().map(|e| e.unwrap().data).collect();
+        let plain: Vec<Vec<u8>> = LogReader::new(&bytes[..])
+            .map(|e| e.unwrap().data)
+            .collect();
+        assert_eq!(data, plain);
+        assert_eq!(*ordered.order(), OrderStats::default());
+    }
+
+    #[test]
+    fn events_further_out_of_order_than_the_window_are_counted_and_come_late() {
+        // 100 events 1 s apart, then one logged at 2 s: 98 s late.
+        let mut times: Vec<i64> = (0..100).map(|k| k * 1_000_000).collect();
+        times.push(2_000_000);
+        let window = ReorderWindow {
+            horizon_us: 10_000_000,
+            ..ReorderWindow::default()
+        };
+        let (out, order) = in_order(&log_at(&times), window);
+        assert_eq!(out.len(), 101, "nothing is lost");
+        assert_eq!(order.beyond_window, 1);
+        assert_eq!(order.max_lag_us, 97_000_000);
+        // The held events are bounded by count (and bytes) too.
+        let window = ReorderWindow {
+            max_events: 4,
+            ..ReorderWindow::default()
+        };
+        let (out, order) = in_order(&log_at(&[10, 20, 30, 40, 50, 60, 5]), window);
+        assert_eq!(out, [10, 20, 30, 5, 40, 50, 60]);
+        assert_eq!(order.beyond_window, 1);
     }
 }

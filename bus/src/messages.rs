@@ -11,7 +11,7 @@ use crate::lcmtypes::{
     arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, steering_command_t,
     waypoints_t,
 };
-use crate::log::{LogReader, LogStats};
+use crate::log::{EventSource, LogStats};
 
 /// The channel names arcnav publishes and listens to.
 pub mod channels {
@@ -134,13 +134,13 @@ pub struct TypedStats {
 
 /// The arcnav messages of a log, in log order; unknown types are skipped and
 /// counted, as are messages that do not decode (with a warning).
-pub struct TypedEvents<R> {
-    log: LogReader<R>,
+pub struct TypedEvents<S> {
+    log: S,
     stats: TypedStats,
 }
 
-impl<R: std::io::Read> TypedEvents<R> {
-    pub fn new(log: LogReader<R>) -> Self {
+impl<S: EventSource> TypedEvents<S> {
+    pub fn new(log: S) -> Self {
         Self {
             log,
             stats: TypedStats::default(),
@@ -149,6 +149,11 @@ impl<R: std::io::Read> TypedEvents<R> {
 
     pub fn stats(&self) -> &TypedStats {
         &self.stats
+    }
+
+    /// Where the events come from.
+    pub fn source(&self) -> &S {
+        &self.log
     }
 
     pub fn log_stats(&self) -> &LogStats {
@@ -161,7 +166,7 @@ impl<R: std::io::Read> TypedEvents<R> {
     }
 }
 
-impl<R: std::io::Read> Iterator for TypedEvents<R> {
+impl<S: EventSource> Iterator for TypedEvents<S> {
     type Item = std::io::Result<TypedEvent>;
 
     fn next(&mut self) -> Option<Self::Item> {
@@ -337,7 +342,7 @@ mod tests {
             .write_message(4, "STEERING_COMMAND", &steering_command_t::default())
             .unwrap();
         let bytes = writer.into_inner();
-        let mut typed = TypedEvents::new(LogReader::new(bytes.as_slice()));
+        let mut typed = TypedEvents::new(crate::log::LogReader::new(bytes.as_slice()));
         let events: Vec<TypedEvent> = typed.by_ref().map(Result::unwrap).collect();
         let channels: Vec<&str> = events.iter().map(|e| e.channel.as_str()).collect();
         assert_eq!(channels, ["POSE", "STEERING_COMMAND"]);

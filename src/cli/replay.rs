@@ -123,9 +123,16 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         println!("comparison    the log holds no STEERING_COMMAND to compare with");
     }
     for c in &comparisons {
+        let Some(percent) = c.agreement_percent else {
+            println!(
+                "comparison    {} vs {}: nothing to compare: no decision of one is at the time of a decision of the other",
+                c.a, c.b
+            );
+            continue;
+        };
         println!(
-            "comparison    {} vs {}: {} decisions compared, {} agree ({:.2}%)",
-            c.a, c.b, c.compared, c.agreeing, c.agreement_percent
+            "comparison    {} vs {}: {} decisions compared, {} agree ({percent:.2}%)",
+            c.a, c.b, c.compared, c.agreeing
         );
         if let Some(d) = &c.first_divergence {
             println!("              first divergence at {:.2} s", d.time_s);
