@@ -634,6 +634,72 @@ fn arcnav_run_reproduces_the_lockstep_replay_over_udp_multicast() {
     assert!(stats.contains("image arrival→command"), "{stats}");
 }
 
+/// Rewrites `source` with the reference LCM's own log writer (Python), as a
+/// logger on the vehicle would have written it: each range image logged
+/// 0.1 s after its capture, the events in the order they were logged.
+fn rewritten_by_the_reference(reference: &LcmReference, source: &Path, target: &Path) {
+    const SCRIPT: &str = r#"
+import sys, lcm
+events = []
+for i, e in enumerate(lcm.EventLog(sys.argv[1], "r")):
+    late = 100000 if e.channel.startswith("RANGE_IMAGE") else 0
+    events.append((e.timestamp + late, i, e.channel, e.data))
+events.sort()
+out = lcm.EventLog(sys.argv[2], "w", overwrite=True)
+for t, _, channel, data in events:
+    out.write_event(t, channel, data)
+out.close()
+"#;
+    let status = reference
+        .python()
+        .args(["-c", SCRIPT])
+        .arg(source)
+        .arg(target)
+        .status()
+        .unwrap();
+    assert!(status.success(), "the reference writer failed");
+}
+
+/// A log the reference LCM wrote, images 0.1 s behind their capture as a
+/// logger sees them, played by `lcm-logplayer` into `arcnav run`: perception
+/// evaluates every image as it comes, and the vehicle drives while it plays.
+#[test]
+fn a_log_written_by_the_reference_lcm_drives_the_vehicle_live() {
+    let Some(mut net) = Net::erim("reference-log", config(SensorPreset::Erim, false)) else {
+        return;
+    };
+    let log = temp_dir("live-reference-log").join("reference.lcm");
+    rewritten_by_the_reference(&net.reference, &net.log, &log);
+    net.log = log;
+    let ((played, stats), received) = recording(&net.ns, || {
+        let run = net.arcnav("run", &["run", "--stats"]);
+        run.wait_ready();
+        let started = Instant::now();
+        assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
+        let played = (started, Instant::now());
+        run.signal("TERM");
+        let (code, out) = run.finish();
+        assert_eq!(code, Some(0));
+        (played, out)
+    });
+    eprintln!("{stats}");
+    let driving = received
+        .iter()
+        .filter(|(at, c)| (played.0..played.1).contains(at) && !c.is_stop())
+        .count();
+    // 20 s of log at 10 commands a second: it drove from the first images on.
+    assert!(
+        driving >= 150,
+        "{driving} commands drove while the log played"
+    );
+    let perception = stats
+        .lines()
+        .find(|l| l.starts_with("perception"))
+        .unwrap_or_else(|| panic!("no perception row in:\n{stats}"));
+    assert!(perception.contains("late 0"), "{perception}");
+    assert!(perception.contains("replaced_by_newer 0"), "{perception}");
+}
+
 /// When the first command after `after` that is a stop arrived, and whether
 /// every command from then on (until `until`) is a stop.
 fn stop_after(received: &Received, after: Instant, until: Instant) -> Option<(Duration, bool)> {

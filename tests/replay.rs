@@ -469,3 +469,26 @@ fn decisions_stamped_by_a_logger_are_compared_by_their_cycle_time() {
     );
     assert_eq!(nothing.agreement_percent, None);
 }
+
+/// The reported live defect's log (`../shared/repro/live_no_images.lcm`,
+/// written by the reference Python LCM): every pose is in the file before
+/// every image, so played as written the images arrive 10 s late. Read in
+/// time order, each image is evaluated when it was logged.
+#[test]
+fn the_reported_log_with_every_image_after_every_pose_is_replayed_in_time_order() {
+    let path = arcnav_testkit::workspace_root().join("../shared/repro/live_no_images.lcm");
+    if !path.exists() {
+        arcnav_testkit::missing(&format!("{} (the shared repro log)", path.display()));
+        return;
+    }
+    let result = replay_with_defaults(&path);
+    assert_eq!(result.inputs.images, 20);
+    assert_eq!(result.problems.reordered, 20);
+    assert!(result.problems.max_reorder_lag_s > 9.0);
+    assert_eq!(result.problems.fed_late, 0);
+    assert!(
+        !result.problems.lost_input(),
+        "{:?}",
+        result.problems.lines()
+    );
+}

@@ -43,7 +43,15 @@ pub struct PerceptionNode {
     pub reports: u64,
     pub drops: PerceptionDrops,
     pub totals: ImageStats,
+    /// Images that arrived more than [`LATE_US`] after their capture time
+    /// on the pose clock (still evaluated), and the latest of them, µs.
+    pub late: u64,
+    pub max_lateness_us: Utime,
 }
+
+/// An image this long behind the newest pose has arrived late: the vehicle
+/// drove on without its cells (a feed out of time order, say), µs.
+pub const LATE_US: Utime = 1_000_000;
 
 impl PerceptionNode {
     /// Built from `[perception]` and the pipeline timing (how long poses
@@ -66,6 +74,8 @@ impl PerceptionNode {
             reports: 0,
             drops: PerceptionDrops::default(),
             totals: ImageStats::default(),
+            late: 0,
+            max_lateness_us: 0,
         })
     }
 
@@ -104,6 +114,20 @@ impl PerceptionNode {
     /// A range image; evaluated as soon as the pose at its capture time is known.
     pub fn on_image(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
         self.images += 1;
+        let lateness = self.newest_pose().saturating_sub(image.utime);
+        if lateness > LATE_US {
+            self.late += 1;
+            self.max_lateness_us = self.max_lateness_us.max(lateness);
+            if self.late.is_power_of_two() {
+                tracing::warn!(
+                    late = self.late,
+                    sensor = %image.sensor,
+                    "a range image arrived {:.2} s after its capture time (the pose clock had \
+                     moved on): is the feed out of time order, e.g. a log not sorted by time?",
+                    lateness as f64 * 1e-6
+                );
+            }
+        }
         self.waiting.push_back(image);
         self.drain(out);
     }
@@ -166,5 +190,32 @@ impl PerceptionNode {
                 self.drops.invalid += 1;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_perception::SensorModel;
+    use arcnav_vehicle::frames::planar_isometry;
+
+    #[test]
+    fn an_image_arriving_more_than_a_second_after_its_capture_is_counted_late_and_still_evaluated()
+    {
+        let mut node =
+            PerceptionNode::new(&PerceptionConfig::default(), &PipelineConfig::default()).unwrap();
+        let mut reports = 0;
+        for k in 0..=150 {
+            let pose = Pose::at_rest(k * 20_000, planar_isometry(0.0, 0.0, 0.0));
+            node.on_pose(&pose, &mut |_| reports += 1);
+        }
+        let sensor = SensorModel::erim();
+        // Newest pose at 3 s: an image of 0.5 s is late, evaluated all the same.
+        node.on_image(sensor.blank_image(500_000), &mut |_| reports += 1);
+        assert_eq!((node.late, node.max_lateness_us), (1, 2_500_000));
+        assert_eq!(reports, 1);
+        // One of 2.5 s is on time.
+        node.on_image(sensor.blank_image(2_500_000), &mut |_| reports += 1);
+        assert_eq!((node.late, reports), (1, 2));
     }
 }

@@ -102,6 +102,7 @@ pub(crate) fn perception_worker(
         status.set("no_pose", node.drops.no_pose);
         status.set("invalid", node.drops.invalid);
         status.set("out_of_order", node.drops.out_of_order);
+        status.set("late", node.late);
     };
     loop {
         let event = next(&poses, &images, wait);
