@@ -13,6 +13,7 @@
 pub mod config;
 pub mod live;
 pub mod mission;
+pub mod output;
 mod recorder;
 pub mod render;
 pub mod replay;

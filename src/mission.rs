@@ -519,6 +519,7 @@ pub fn run_mission(
             0.0
         },
     };
+    sink.log.finish()?;
     Ok(MissionRun {
         report,
         track: sink.track,

@@ -11,6 +11,7 @@ use arcnav_bus::messages::channels;
 use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::{ArcSet, Utime};
 
+use crate::output::Staged;
 use crate::wire;
 
 /// A write to the output log failed.
@@ -23,21 +24,47 @@ pub(crate) struct WriteFailed {
 /// An optional output log and the first error of the run (of any kind `E`
 /// can hold): once an error is kept, nothing more is written.
 pub(crate) struct Recorder<'a, E> {
-    out: Option<(&'a Path, LogWriter<BufWriter<File>>)>,
+    out: Option<(&'a Path, LogWriter<BufWriter<File>>, Staged)>,
     pub error: Option<E>,
 }
 
 impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
-    /// Creates (truncates) the log at `path`, if there is one.
+    /// Starts the log at `path`, if there is one: written beside it and
+    /// put in its place by [`Recorder::finish`], so a run that fails or is
+    /// interrupted leaves any old file at `path` as it was.
     pub fn create(path: Option<&'a Path>) -> Result<Self, (PathBuf, std::io::Error)> {
         let out = match path {
             Some(path) => {
-                let file = File::create(path).map_err(|e| (path.to_owned(), e))?;
-                Some((path, LogWriter::new(BufWriter::new(file))))
+                let (staged, file) = Staged::create(path).map_err(|e| (path.to_owned(), e))?;
+                Some((path, LogWriter::new(BufWriter::new(file)), staged))
             }
             None => None,
         };
         Ok(Self { out, error: None })
+    }
+
+    /// Completes the log: flushed, synced and renamed into place, unless an
+    /// error was kept (returned; the partial log is removed).
+    pub fn finish(&mut self) -> Result<(), E> {
+        if let Some(e) = self.error.take() {
+            self.out = None;
+            return Err(e);
+        }
+        let Some((path, writer, staged)) = self.out.take() else {
+            return Ok(());
+        };
+        let failed = |source: std::io::Error| {
+            E::from(WriteFailed {
+                path: path.to_path_buf(),
+                source: LogWriteError::Io(source),
+            })
+        };
+        let file = writer
+            .into_inner()
+            .into_inner()
+            .map_err(|e| failed(e.into_error()))?;
+        file.sync_all().map_err(failed)?;
+        staged.commit().map_err(failed)
     }
 
     /// Writes `message` on `channel` at `at`.
@@ -71,7 +98,7 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
         &mut self,
         write: impl FnOnce(&mut LogWriter<BufWriter<File>>) -> Result<(), LogWriteError>,
     ) {
-        if let Some((path, writer)) = &mut self.out
+        if let Some((path, writer, _)) = &mut self.out
             && self.error.is_none()
             && let Err(source) = write(writer)
         {

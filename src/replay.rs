@@ -338,14 +338,16 @@ pub fn replay(
             break;
         }
         if let Some(at) = options.stop_at_s {
-            sink.keep_at = Some(origin + (at * 1e6) as Utime);
+            sink.keep_at = Some(origin.saturating_add((at * 1e6) as Utime));
             if sink.kept.is_some() {
                 break;
             }
         }
         if let Some(speed) = options.speed {
-            let due = Duration::from_secs_f64(((t - origin) as f64 * 1e-6 / speed).max(0.0));
-            if let Some(wait) = due.checked_sub(wall_start.elapsed()) {
+            // A pace that overflows a Duration (absurd speeds or times) is
+            // not waited for.
+            let due = Duration::try_from_secs_f64((t - origin) as f64 * 1e-6 / speed);
+            if let Some(wait) = due.ok().and_then(|d| d.checked_sub(wall_start.elapsed())) {
                 std::thread::sleep(wait);
             }
         }
@@ -428,9 +430,7 @@ pub fn replay(
         }
     }
     pipeline.run_until(last_time, &mut sink);
-    if let Some(e) = sink.out.error.take() {
-        return Err(e);
-    }
+    sink.out.finish()?;
     let drops = pipeline.perception.drops;
     problems.images_without_pose = drops.no_pose;
     problems.images_out_of_order = drops.out_of_order;

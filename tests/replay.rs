@@ -492,3 +492,92 @@ fn the_reported_log_with_every_image_after_every_pose_is_replayed_in_time_order(
         result.problems.lines()
     );
 }
+
+/// A copy of the short course's log under `name`, to be damaged or overwritten.
+fn copy_of_log(tag: &str, name: &str) -> PathBuf {
+    let path = dir(tag).join(name);
+    std::fs::copy(sim_log(), &path).unwrap();
+    path
+}
+
+#[test]
+fn an_output_that_is_the_input_log_is_refused_and_the_log_stays_whole() {
+    let log = copy_of_log("overwrite", "mission.lcm");
+    let before = std::fs::read(&log).unwrap();
+    let link = dir("overwrite").join("link.lcm");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink(&log, &link).unwrap();
+    let l = log.to_str().unwrap();
+    for args in [
+        vec!["replay", l, "--out", l],
+        vec!["replay", l, "--json", l],
+        vec!["replay", l, "--out", link.to_str().unwrap()],
+        vec!["render", l, "--at", "5", "--out", l],
+    ] {
+        let (code, stdout, stderr) = arcnav(&args);
+        assert_eq!(code, 1, "{args:?}: {stdout}");
+        assert!(stderr.contains("refusing to write"), "{args:?}: {stderr}");
+        assert!(stderr.contains("it is the log"), "{args:?}: {stderr}");
+        assert!(
+            std::fs::read(&log).unwrap() == before,
+            "{args:?} changed the log"
+        );
+    }
+    // The same file for two outputs.
+    let json = dir("overwrite").join("both");
+    let j = json.to_str().unwrap();
+    let (code, _, stderr) = arcnav(&["replay", l, "--out", j, "--json", j]);
+    assert_eq!(code, 1, "{stderr}");
+}
+
+#[test]
+fn a_finished_replay_replaces_the_old_output_and_leaves_no_temporary() {
+    // (A run that fails keeps the old file: see arcnav::output's tests.)
+    let log = copy_of_log("staged", "mission.lcm");
+    let out = dir("staged").join("out.lcm");
+    std::fs::write(&out, b"old").unwrap();
+    let (code, stdout, stderr) = arcnav(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(std::fs::metadata(&out).unwrap().len() > 1000);
+    let left: Vec<_> = std::fs::read_dir(dir("staged"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".partial"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}
+
+#[test]
+fn absurd_numbers_on_the_command_line_are_refused_with_the_flag_named() {
+    let l = sim_log().to_str().unwrap();
+    for (args, says) in [
+        (vec!["replay", l, "--speed", "1e-30"], "--speed 0.00000"),
+        (vec!["replay", l, "--speed", "inf"], "--speed inf"),
+        (vec!["replay", l, "--from", "NaN"], "--from NaN"),
+        (
+            vec!["replay", l, "--from", "30", "--to", "10"],
+            "the range is empty",
+        ),
+        (vec!["render", l, "--at", "NaN"], "--at NaN"),
+        (vec!["render", l, "--at", "inf"], "--at inf"),
+        (vec!["render", l, "--at", "1e13"], "--at 10000000000000"),
+    ] {
+        let (code, stdout, stderr) = arcnav(&args);
+        assert_eq!(code, 1, "{args:?}: {stdout}");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+    }
+    // A file of random bytes: nothing could be read, and it says so.
+    let noise = dir("noise").join("noise.lcm");
+    let bytes: Vec<u8> = (0..100_000u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    std::fs::write(&noise, bytes).unwrap();
+    let (code, _, stderr) = arcnav(&["render", noise.to_str().unwrap(), "--at", "1"]);
+    assert_eq!(code, 1);
+    assert!(stderr.contains("no LCM event could be read"), "{stderr}");
+}

@@ -14,6 +14,18 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         Some(p) => Config::load_with(p, &registry)?,
         None => Config::default(),
     };
+    anyhow::ensure!(
+        args.at.is_finite() && (0.0..=1e9).contains(&args.at),
+        "--at {}: must be a number of seconds from the log's start, 0 or more",
+        args.at
+    );
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("decision-{:.1}s.png", args.at)));
+    let mut inputs = vec![("the log", args.log.as_path())];
+    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
+    arcnav::output::check_outputs(&[&out], &inputs)?;
     let options = ReplayOptions {
         recorded_cells: args.recorded_cells,
         stop_at_s: Some(args.at),
@@ -21,6 +33,13 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
     };
     let result = run_replay(&args.log, &config, &registry, &options, &mut |_| {})?;
     let origin = result.span.map_or(0, |s| s.0);
+    let log = &result.problems.log;
+    anyhow::ensure!(
+        log.events > 0,
+        "no LCM event could be read from {} ({} bytes skipped as damaged): is it an LCM log?",
+        args.log.display(),
+        log.skipped_bytes + log.truncated_tail_bytes
+    );
     let Some((at, decision, map)) = &result.kept else {
         anyhow::bail!(
             "no decision at or after {} s: the log spans {:.1} s and yielded {} decisions",
@@ -29,10 +48,6 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
             result.cycles.len()
         );
     };
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("decision-{:.1}s.png", args.at)));
     arcnav::render::snapshot_picture(
         &out,
         &config,

@@ -18,8 +18,35 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         })
     };
     if let Some(speed) = args.speed {
-        anyhow::ensure!(speed > 0.0, "--speed {speed}: must be positive");
+        anyhow::ensure!(
+            speed.is_finite() && (1e-3..=1e6).contains(&speed),
+            "--speed {speed}: must be 0.001 to 1000000 (times real time)"
+        );
     }
+    for (flag, value) in [("--from", args.from), ("--to", args.to)] {
+        if let Some(s) = value {
+            anyhow::ensure!(
+                s.is_finite() && s >= 0.0,
+                "{flag} {s}: must be a number of seconds from the log's start, 0 or more"
+            );
+        }
+    }
+    if let (Some(from), Some(to)) = (args.from, args.to) {
+        anyhow::ensure!(from < to, "--from {from} --to {to}: the range is empty");
+    }
+    let mut inputs = vec![("the log", args.log.as_path())];
+    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
+    inputs.extend(args.waypoints.as_deref().map(|w| ("the waypoints file", w)));
+    for c in args.compare_config.iter().flatten() {
+        inputs.push(("a configuration", c.as_path()));
+    }
+    let outputs: Vec<&std::path::Path> = args
+        .out
+        .iter()
+        .chain(&args.json)
+        .map(PathBuf::as_path)
+        .collect();
+    arcnav::output::check_outputs(&outputs, &inputs)?;
     let options = ReplayOptions {
         from_s: args.from,
         to_s: args.to,
@@ -189,7 +216,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             "input_lost": problems.lost_input(),
             "comparisons": comparisons,
         });
-        std::fs::write(path, serde_json::to_string_pretty(&json)?)
+        arcnav::output::write_file(path, serde_json::to_string_pretty(&json)?.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(if problems.lost_input() {

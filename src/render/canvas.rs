@@ -236,10 +236,16 @@ impl Canvas {
         self.text(x, y, size, c, text);
     }
 
+    /// Writes the PNG (in full or not at all: see [`crate::output`]).
     pub fn save(&self, path: &Path) -> Result<(), RenderError> {
-        self.pixmap.save_png(path).map_err(|e| RenderError::Write {
+        let failed = |reason: String| RenderError::Write {
             path: path.display().to_string(),
-            reason: e.to_string(),
-        })
+            reason,
+        };
+        let png = self
+            .pixmap
+            .encode_png()
+            .map_err(|e| failed(e.to_string()))?;
+        crate::output::write_file(path, &png).map_err(|e| failed(e.to_string()))
     }
 }
