@@ -113,15 +113,15 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> io::Result<()> {
 mod tests {
     use super::*;
 
-    fn dir() -> PathBuf {
-        let d = std::env::temp_dir().join(format!("arcnav-output-{}", std::process::id()));
+    fn dir(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("arcnav-output-{tag}-{}", std::process::id()));
         std::fs::create_dir_all(&d).unwrap();
         d
     }
 
     #[test]
     fn an_output_that_is_an_input_is_refused_also_through_a_link() {
-        let d = dir();
+        let d = dir("links");
         let log = d.join("in.lcm");
         std::fs::write(&log, b"log").unwrap();
         let link = d.join("link.lcm");
@@ -137,7 +137,7 @@ mod tests {
 
     #[test]
     fn a_staged_file_replaces_the_old_one_only_when_committed() {
-        let d = dir();
+        let d = dir("staged");
         let path = d.join("kept.json");
         std::fs::write(&path, b"old").unwrap();
         {
