@@ -230,7 +230,7 @@ impl Sink for MissionSink<'_> {
         {
             *next = at + seconds_to_micros(*every);
             let path = dir.join(format!(
-                "snapshot-{:07.1}s.png",
+                "snapshot-{:08.3}s.png",
                 micros_to_seconds(at - SIM_EPOCH_US)
             ));
             match render::snapshot_picture(

@@ -566,11 +566,28 @@ fn absurd_numbers_on_the_command_line_are_refused_with_the_flag_named() {
         (vec!["render", l, "--at", "NaN"], "--at NaN"),
         (vec!["render", l, "--at", "inf"], "--at inf"),
         (vec!["render", l, "--at", "1e13"], "--at 10000000000000"),
+        (
+            vec!["sim", "--snapshot-every", "inf"],
+            "--snapshot-every inf",
+        ),
+        (
+            vec!["sim", "--world", "short_course", "--snapshot-every", "0.01"],
+            "shorter than one decision cycle",
+        ),
     ] {
         let (code, stdout, stderr) = arcnav(&args);
         assert_eq!(code, 1, "{args:?}: {stdout}");
         assert!(stderr.contains(says), "{args:?}: {stderr}");
     }
+    // A waypoint that is not a number.
+    let waypoints = dir("nan-waypoint").join("w.toml");
+    std::fs::write(&waypoints, "[[waypoints]]\nposition_m = [nan, 4.0]\n").unwrap();
+    let (code, _, stderr) = arcnav(&["replay", l, "--waypoints", waypoints.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("waypoint 1: position_m [NaN, 4.0] is not finite"),
+        "{stderr}"
+    );
     // A file of random bytes: nothing could be read, and it says so.
     let noise = dir("noise").join("noise.lcm");
     let bytes: Vec<u8> = (0..100_000u32)

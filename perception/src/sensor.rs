@@ -29,6 +29,13 @@ pub enum SensorPreset {
     Custom,
 }
 
+/// The longest sensor id: it names a channel, `RANGE_IMAGE_<ID>`.
+pub const MAX_SENSOR_ID_LEN: usize = 64;
+
+/// The largest range image as a message, bytes: what LCM carries in one
+/// message and one log event (2^28).
+pub const MAX_IMAGE_BYTES: usize = 1 << 28;
+
 /// A sensor described field by field (`preset = "custom"`). The defaults
 /// are the ERIM preset's values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -103,6 +110,15 @@ impl SensorConfig {
                 format!("{:?} must be letters, digits or _", c.id),
             ));
         }
+        if c.id.len() > MAX_SENSOR_ID_LEN {
+            return Err(ConfigError::new(
+                key("id"),
+                format!(
+                    "is {} characters long, must be at most {MAX_SENSOR_ID_LEN} (it names the channel RANGE_IMAGE_<ID>)",
+                    c.id.len()
+                ),
+            ));
+        }
         if !(1..=4096).contains(&c.rows) {
             return Err(ConfigError::new(
                 key("rows"),
@@ -113,6 +129,20 @@ impl SensorConfig {
             return Err(ConfigError::new(
                 key("cols"),
                 format!("is {}, must be 1 to 65536", c.cols),
+            ));
+        }
+        // ranges, then elevations and azimuths, 4 bytes each; the rest is small.
+        let bytes = 4 * (c.rows * c.cols + c.rows + c.cols) + 256;
+        if bytes > MAX_IMAGE_BYTES {
+            return Err(ConfigError::new(
+                key("cols"),
+                format!(
+                    "a {}×{} image is {:.1} MiB as a message; an LCM message and a log event hold at most {} MiB",
+                    c.rows,
+                    c.cols,
+                    bytes as f64 / f64::from(1 << 20),
+                    MAX_IMAGE_BYTES >> 20
+                ),
             ));
         }
         config::in_range(&key("elevation_top_deg"), c.elevation_top_deg, -90.0, 90.0)?;
@@ -403,5 +433,30 @@ mod tests {
             SensorConfig::default().custom,
             SensorModel::erim().to_custom()
         );
+    }
+
+    #[test]
+    fn a_sensor_larger_than_a_message_can_carry_or_with_a_long_id_is_refused_at_validation() {
+        let mut config = SensorConfig {
+            preset: SensorPreset::Custom,
+            ..Default::default()
+        };
+        config.custom.rows = 4096;
+        config.custom.cols = 65_536;
+        let err = config.validate().unwrap_err();
+        assert_eq!(err.key, "custom.cols");
+        assert!(
+            err.reason.contains("4096×65536 image is 1024.3 MiB"),
+            "{}",
+            err.reason
+        );
+        // 128 × 2048 (a 128-beam lidar) is far inside.
+        config.custom.rows = 128;
+        config.custom.cols = 2048;
+        assert!(config.validate().is_ok());
+        config.custom.id = "x".repeat(990);
+        let err = config.validate().unwrap_err();
+        assert_eq!(err.key, "custom.id");
+        assert!(err.reason.contains("990 characters"), "{}", err.reason);
     }
 }

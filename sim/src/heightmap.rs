@@ -29,6 +29,10 @@ pub struct HeightGrid {
     pub values: Vec<f32>,
 }
 
+/// The largest height file read: 1 GiB (a 16 384² grid of doubles is 2 GiB;
+/// resample such a DEM before use).
+pub const MAX_HEIGHT_FILE_BYTES: u64 = 1 << 30;
+
 impl HeightGrid {
     /// Loads `.npy` or `.asc` by extension; `resolution`/`origin` are
     /// required for `.npy` and override the header of `.asc` when given.
@@ -41,7 +45,8 @@ impl HeightGrid {
             path: path.to_owned(),
             reason,
         };
-        let bytes = std::fs::read(path).map_err(|e| fail(format!("cannot read it: {e}")))?;
+        let bytes = arcnav_vehicle::files::read_bounded(path, MAX_HEIGHT_FILE_BYTES)
+            .map_err(|e| fail(format!("cannot read it: {e}")))?;
         let extension = path
             .extension()
             .and_then(|e| e.to_str())

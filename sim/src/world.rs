@@ -84,6 +84,22 @@ pub struct WaypointSpec {
     pub radius_m: Option<f64>,
 }
 
+impl WaypointSpec {
+    /// Why this is no waypoint (a position or radius that is not a finite
+    /// number, a radius that is not positive), if it is not.
+    pub fn problem(&self) -> Option<String> {
+        if !self.position_m.iter().all(|v| v.is_finite()) {
+            return Some(format!("position_m {:?} is not finite", self.position_m));
+        }
+        match self.radius_m {
+            Some(r) if !(r.is_finite() && r > 0.0) => {
+                Some(format!("radius_m {r} must be a positive number of metres"))
+            }
+            _ => None,
+        }
+    }
+}
+
 /// A round feature rising from the ground: boulder, tree trunk or bush.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -460,7 +476,7 @@ impl World {
 
     /// Reads a world file; height files are found relative to it.
     pub fn load(path: &Path) -> Result<World, WorldError> {
-        let text = std::fs::read_to_string(path).map_err(|e| WorldError::Read {
+        let text = arcnav_vehicle::files::read_text(path).map_err(|e| WorldError::Read {
             path: path.to_owned(),
             reason: e.to_string(),
         })?;
@@ -555,6 +571,9 @@ impl World {
             )));
         }
         for (i, w) in spec.waypoints.iter().enumerate() {
+            if let Some(problem) = w.problem() {
+                return Err(invalid(format!("waypoint {}: {problem}", i + 1)));
+            }
             if !inside(w.position_m) {
                 return Err(invalid(format!(
                     "waypoint {} at {:?} is off the map",

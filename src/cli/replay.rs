@@ -232,8 +232,8 @@ fn load_waypoints(path: &Path) -> anyhow::Result<arcnav_behaviours::Mission> {
     struct File {
         waypoints: Vec<arcnav_sim::world::WaypointSpec>,
     }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text = arcnav_vehicle::files::read_text(path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
     let file: File = toml::from_str(&text)
         .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))
         .with_context(|| "a waypoints file holds [[waypoints]] tables with position_m = [x, y]")?;
@@ -242,6 +242,11 @@ fn load_waypoints(path: &Path) -> anyhow::Result<arcnav_behaviours::Mission> {
         "{} holds no [[waypoints]]",
         path.display()
     );
+    for (i, w) in file.waypoints.iter().enumerate() {
+        if let Some(problem) = w.problem() {
+            anyhow::bail!("{}: waypoint {}: {problem}", path.display(), i + 1);
+        }
+    }
     Ok(arcnav_behaviours::Mission {
         version: 1,
         waypoints: file

@@ -44,8 +44,8 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     }
     if let Some(every) = args.snapshot_every {
         anyhow::ensure!(
-            every > 0.0,
-            "--snapshot-every {every}: must be positive seconds"
+            every.is_finite() && every > 0.0,
+            "--snapshot-every {every}: must be a positive number of seconds"
         );
     }
     config
@@ -95,7 +95,12 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     std::fs::create_dir_all(&out)
         .with_context(|| format!("cannot create the output directory {}", out.display()))?;
     let snapshot_dir = out.join("snapshots");
-    if args.snapshot_every.is_some() {
+    if let Some(every) = args.snapshot_every {
+        let period = 1.0 / config.pipeline.command_rate_hz;
+        anyhow::ensure!(
+            every >= period,
+            "--snapshot-every {every}: shorter than one decision cycle ({period} s at pipeline.command_rate_hz)"
+        );
         std::fs::create_dir_all(&snapshot_dir)
             .with_context(|| format!("cannot create {}", snapshot_dir.display()))?;
     }

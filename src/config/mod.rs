@@ -148,10 +148,11 @@ impl fmt::Display for Location {
 impl Config {
     /// Reads, parses and validates a TOML file; missing keys keep their defaults.
     pub fn load(path: &Path) -> Result<Self, ConfigLoadError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text =
+            arcnav_vehicle::files::read_text(path).map_err(|source| ConfigLoadError::Read {
+                path: path.to_owned(),
+                source,
+            })?;
         Self::from_toml(&text, &path.display().to_string())
     }
 
@@ -204,10 +205,11 @@ impl Config {
 
     /// Reads, parses and validates a file with behaviours from `registry`.
     pub fn load_with(path: &Path, registry: &Registry) -> Result<Self, ConfigLoadError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text =
+            arcnav_vehicle::files::read_text(path).map_err(|source| ConfigLoadError::Read {
+                path: path.to_owned(),
+                source,
+            })?;
         Self::from_toml_with(&text, &path.display().to_string(), registry)
     }
 
@@ -276,6 +278,16 @@ impl Config {
             .find(|name| !self.behaviours.contains_key(*name))
         {
             return Err(unknown("arbiter.required".into(), name));
+        }
+        if self
+            .behaviours
+            .keys()
+            .all(|name| self.arbiter.weight(name) <= 0.0)
+        {
+            return Err(ConfigError::new(
+                "arbiter.weights",
+                "every configured behaviour has weight 0: nothing would vote and the vehicle would never move",
+            ));
         }
         Ok(())
     }

@@ -247,3 +247,23 @@ fn behaviours_are_built_from_the_tables_checked_at_load_and_follow_later_edits()
     let err = config.build_behaviours(&registry, &arcs).err().unwrap();
     assert_eq!(err.key, "behaviours.goal_seeking.lookahed_m");
 }
+
+#[test]
+fn an_endless_configuration_file_is_refused_not_read_until_memory_runs_out() {
+    let err = Config::load(Path::new("/dev/zero"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with("cannot read configuration file /dev/zero: it is larger than 16 MiB"),
+        "{err}"
+    );
+}
+
+#[test]
+fn weights_that_leave_no_behaviour_voting_are_refused() {
+    let msg = parse_error("[arbiter.weights]\nobstacle_avoidance = 0.0\ngoal_seeking = 0.0\n");
+    assert!(
+        msg.contains("`arbiter.weights`: every configured behaviour has weight 0"),
+        "{msg}"
+    );
+}

@@ -12,6 +12,7 @@
 pub mod arcs;
 pub mod command;
 pub mod config;
+pub mod files;
 pub mod frames;
 pub mod model;
 pub mod motion;
