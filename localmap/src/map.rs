@@ -125,7 +125,15 @@ pub enum InsertError {
     TooManySensors { sensor: String },
     #[error("report holds a cell at ({x}, {y}), which is not a finite position")]
     BadCell { x: f64, y: f64 },
+    #[error(
+        "report's field-of-view footprint has a vertex at ({x}, {y}), not a place within {MAX_COORDINATE_M} m of the origin"
+    )]
+    BadFootprint { x: f64, y: f64 },
 }
+
+/// The farthest a footprint vertex may be from the world origin, m: no
+/// local frame on Earth reaches further (a larger value is damage).
+pub const MAX_COORDINATE_M: f64 = 1e8;
 
 /// What one insertion did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -313,6 +321,15 @@ impl LocalMap {
             self.stats.reports_refused += 1;
             return Err(InsertError::BadCell { x: bad.x, y: bad.y });
         }
+        if let Some(bad) = report
+            .fov
+            .vertices
+            .iter()
+            .find(|v| !(v.x.abs() <= MAX_COORDINATE_M && v.y.abs() <= MAX_COORDINATE_M))
+        {
+            self.stats.reports_refused += 1;
+            return Err(InsertError::BadFootprint { x: bad.x, y: bad.y });
+        }
         let sensor = self.sensor_index(&report.sensor).inspect_err(|_| {
             self.stats.reports_refused += 1;
         })?;
@@ -383,11 +400,16 @@ impl LocalMap {
     }
 
     fn prune(&mut self, report: &ObstacleReport, sensor_bit: u32, stamp: u64) -> u32 {
-        if report.fov.is_empty() {
+        // Only the rows the map has patches in are rasterised: a footprint
+        // reaching far beyond the window costs no more than one inside it.
+        let rows = self.patches.iter().fold(None, |r: Option<(i64, i64)>, p| {
+            Some(r.map_or((p.j, p.j), |(lo, hi)| (lo.min(p.j), hi.max(p.j))))
+        });
+        let Some(rows) = rows.filter(|_| !report.fov.is_empty()) else {
             return 0;
-        }
+        };
         self.coverage
-            .rasterise(&report.fov, self.config.patch_size_m);
+            .rasterise(&report.fov, self.config.patch_size_m, rows);
         let mut pruned = 0;
         let mut index = 0;
         while index < self.patches.len() {

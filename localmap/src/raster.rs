@@ -21,20 +21,24 @@ pub struct Coverage {
 
 impl Coverage {
     /// Prepares lookups of `polygon` for patches of `patch_size` (patch (i, j)
-    /// spans [i·s, (i+1)·s) × [j·s, (j+1)·s) in the world).
-    pub fn rasterise(&mut self, polygon: &FovPolygon, patch_size: f64) {
+    /// spans [i·s, (i+1)·s) × [j·s, (j+1)·s) in the world), in patch rows
+    /// `rows` only (the rows the map has patches in): the work and memory
+    /// are bounded by those rows, however far the polygon reaches.
+    pub fn rasterise(&mut self, polygon: &FovPolygon, patch_size: f64, rows: (i64, i64)) {
         self.rows = 0;
         self.patch_size = patch_size;
         let Some((min, max)) = polygon.bounds() else {
             return;
         };
-        let row_of = |y: f64| (y / patch_size - 0.5).ceil() as i64;
+        // Saturating casts: a vertex at 1e15 m gives a row far outside `rows`.
+        let row_of = |y: f64| ((y / patch_size - 0.5).ceil() as i64).clamp(rows.0, rows.1 + 1);
         self.j0 = row_of(min.y);
-        self.rows = (row_of(max.y) - self.j0 + 1).max(0) as usize;
-        // Rows whose centre line y = (j + 0.5)·s an edge crosses (half-open in y).
+        self.rows = (row_of(max.y).min(rows.1) - self.j0 + 1).max(0) as usize;
+        // Rows whose centre line y = (j + 0.5)·s an edge crosses (half-open
+        // in y), within `rows`.
         let span = |a: f64, b: f64| {
             let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
-            (row_of(lo), row_of(hi))
+            (row_of(lo), row_of(hi).min(rows.1 + 1))
         };
         let vertices = &polygon.vertices;
         let edges =
@@ -99,7 +103,7 @@ mod tests {
             Point2::new(1.2, 3.3),
         ]);
         let mut coverage = Coverage::default();
-        coverage.rasterise(&polygon, 0.4);
+        coverage.rasterise(&polygon, 0.4, (-1000, 1000));
         let mut inside = 0;
         for i in -10..60 {
             for j in -30..30 {
@@ -116,9 +120,42 @@ mod tests {
     }
 
     #[test]
+    fn a_polygon_reaching_far_beyond_the_rows_asked_for_costs_only_those_rows() {
+        // 40 000 km across: the whole raster would be 10^11 rows.
+        let polygon = FovPolygon::new(vec![
+            Point2::new(-2e7, -2e7),
+            Point2::new(2e7, -2e7),
+            Point2::new(2e7, 2e7),
+            Point2::new(-2e7, 2e7),
+        ]);
+        let mut coverage = Coverage::default();
+        coverage.rasterise(&polygon, 0.4, (-50, 50));
+        assert!(
+            coverage.crossings.len() <= 2 * 101,
+            "{}",
+            coverage.crossings.len()
+        );
+        assert!(coverage.covers(0, 0) && coverage.covers(1000, -50) && coverage.covers(-7, 50));
+        assert!(
+            !coverage.covers(0, 51),
+            "rows not asked for are not covered"
+        );
+        // Rows asked for outside the polygon: nothing covered.
+        let small = FovPolygon::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(4.0, 0.0),
+            Point2::new(4.0, 4.0),
+        ]);
+        coverage.rasterise(&small, 0.4, (100, 200));
+        assert!((100..=200).all(|j| !coverage.covers(1, j)));
+        coverage.rasterise(&small, 0.4, (-200, -100));
+        assert!((-200..=-100).all(|j| !coverage.covers(1, j)));
+    }
+
+    #[test]
     fn an_empty_polygon_covers_nothing() {
         let mut coverage = Coverage::default();
-        coverage.rasterise(&FovPolygon::default(), 0.4);
+        coverage.rasterise(&FovPolygon::default(), 0.4, (-1000, 1000));
         assert!(!coverage.covers(0, 0));
     }
 }

@@ -413,3 +413,48 @@ fn bad_reports_are_refused_with_a_reason() {
     ));
     assert_eq!(map.stats().reports_refused, 2);
 }
+
+#[test]
+fn a_footprint_reaching_around_the_earth_still_prunes_and_an_absurd_one_is_refused_and_counted() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    map.insert(&report(
+        100,
+        "erim",
+        &[(10.0, 0.0)],
+        rectangle(4.0, 25.0, -8.0, 8.0),
+    ))
+    .unwrap();
+    // 4·10^7 m across (took 2.4 GB before footprints were clipped to the
+    // rows the map holds): prunes the phantom like any footprint over it.
+    let outcome = map
+        .insert(&report(
+            200_000,
+            "erim",
+            &[],
+            rectangle(-2e7, 2e7, -2e7, 2e7),
+        ))
+        .unwrap();
+    assert_eq!(outcome.pruned, 1);
+    // A vertex at 10^15 m is damage, not a place: refused, counted.
+    let refused = map.stats().reports_refused;
+    let err = map
+        .insert(&report(
+            400_000,
+            "erim",
+            &[],
+            rectangle(4.0, 1e15, -8.0, 8.0),
+        ))
+        .unwrap_err();
+    assert!(matches!(err, InsertError::BadFootprint { .. }), "{err}");
+    assert_eq!(map.stats().reports_refused, refused + 1);
+    let err = map
+        .insert(&report(
+            500_000,
+            "erim",
+            &[],
+            rectangle(4.0, f64::NAN, -8.0, 8.0),
+        ))
+        .unwrap_err();
+    assert!(matches!(err, InsertError::BadFootprint { .. }), "{err}");
+}
