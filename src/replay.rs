@@ -77,6 +77,19 @@ pub struct InputProblems {
     /// Events further out of time order than the reader's window: fed late,
     /// after decisions that should have seen them.
     pub fed_late: u64,
+    /// Times the log starts over (a channel goes back in time: logs
+    /// concatenated): replayed as consecutive runs.
+    pub log_restarts: u64,
+    /// Decision cycles not run because the pose clock jumped ahead by more
+    /// than a second (a gap in the log, a corrupt time).
+    pub skipped_cycles: u64,
+    /// Times the pose clock went backwards and the cycle clock restarted.
+    pub clock_restarts: u64,
+    /// Obstacle reports the local map refused (see the log at -v).
+    pub reports_refused: u64,
+    /// OBSTACLE_CELLS in a log with no range image, replayed without
+    /// `--recorded-cells`: nothing was perceived.
+    pub cells_unused: u64,
 }
 
 /// The log reader's counts.
@@ -111,6 +124,8 @@ impl InputProblems {
             || self.images_without_pose > 0
             || self.images_out_of_order > 0
             || self.fed_late > 0
+            || self.reports_refused > 0
+            || self.cells_unused > 0
     }
 
     /// One line per problem, for the summary.
@@ -136,6 +151,36 @@ impl InputProblems {
             lines.push(format!(
                 "{} event(s) stood in the file after events logged up to {:.2} s later: fed in time order",
                 self.reordered, self.max_reorder_lag_s
+            ));
+        }
+        if self.log_restarts > 0 {
+            lines.push(format!(
+                "the log starts over {} time(s) (its channels go back in time): replayed as consecutive runs",
+                self.log_restarts
+            ));
+        }
+        if self.skipped_cycles > 0 {
+            lines.push(format!(
+                "{} decision cycle(s) skipped: the pose clock jumped ahead by more than 1 s",
+                self.skipped_cycles
+            ));
+        }
+        if self.clock_restarts > 0 {
+            lines.push(format!(
+                "the pose clock went backwards {} time(s): the decision cycle restarted there",
+                self.clock_restarts
+            ));
+        }
+        if self.reports_refused > 0 {
+            lines.push(format!(
+                "{} obstacle report(s) refused by the local map (-v says why)",
+                self.reports_refused
+            ));
+        }
+        if self.cells_unused > 0 {
+            lines.push(format!(
+                "the log holds {} OBSTACLE_CELLS and no range image: nothing was perceived (replay with --recorded-cells to use them)",
+                self.cells_unused
             ));
         }
         if self.fed_late > 0 {
@@ -313,8 +358,8 @@ pub fn replay(
     let mut recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>> = BTreeMap::new();
     let (mut inputs, mut problems) = (InputCounts::default(), InputProblems::default());
     let mut span: Option<(Utime, Utime)> = None;
-    let mut last_time = Utime::MIN;
     let mut waypoints_given = false;
+    let mut recorded_cells = 0u64;
     if let Some(mission) = &options.waypoints {
         pipeline.input(Input::Waypoints(mission.clone()), &mut sink);
         waypoints_given = true;
@@ -362,7 +407,6 @@ pub fn replay(
                 Ok(pose) => {
                     inputs.poses += 1;
                     sink.out.message(t, channel, &msg);
-                    last_time = last_time.max(pose.utime);
                     pipeline.input(Input::Pose(pose), &mut sink);
                 }
                 Err(e) => {
@@ -420,7 +464,7 @@ pub fn replay(
                 }
             }
             // Recomputed by the replay: the recorded ones are replaced.
-            AnyMessage::ObstacleCells(_) => {}
+            AnyMessage::ObstacleCells(_) => recorded_cells += 1,
             AnyMessage::RangeImage(_) | AnyMessage::Waypoints(_) | AnyMessage::LocalMap(_) => {
                 *problems.ignored.entry(event.channel).or_default() += 1;
             }
@@ -429,18 +473,30 @@ pub fn replay(
             return Err(e);
         }
     }
-    pipeline.run_until(last_time, &mut sink);
+    // The cycles due by the newest pose (of the last run, when the log
+    // starts over; never those an absurd pose time would claim).
+    if let Some(newest) = pipeline.pose().map(|p| p.utime) {
+        pipeline.run_until(newest, &mut sink);
+    }
     sink.out.finish()?;
     let drops = pipeline.perception.drops;
     problems.images_without_pose = drops.no_pose;
     problems.images_out_of_order = drops.out_of_order;
     problems.invalid_images += drops.invalid;
-    problems.map_resets = pipeline.cycle.counts().map_resets;
+    let counts = pipeline.cycle.counts();
+    problems.map_resets = counts.map_resets;
+    problems.skipped_cycles = counts.skipped_cycles;
+    problems.clock_restarts = counts.restarts;
+    problems.reports_refused = pipeline.cycle.map.map.stats().reports_refused;
     problems.log = events.log_stats().into();
     let order = *events.source().order();
     problems.reordered = order.reordered;
     problems.max_reorder_lag_s = order.max_lag_us as f64 * 1e-6;
     problems.fed_late = order.beyond_window;
+    problems.log_restarts = order.restarts;
+    if inputs.images == 0 && !options.recorded_cells {
+        problems.cells_unused = recorded_cells;
+    }
     problems.unknown_channels = events.stats().unknown.clone();
     for (channel, n) in &events.stats().undecodable {
         *problems.undecodable.entry(channel.clone()).or_default() += n;

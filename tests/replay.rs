@@ -598,3 +598,71 @@ fn absurd_numbers_on_the_command_line_are_refused_with_the_flag_named() {
     assert_eq!(code, 1);
     assert!(stderr.contains("no LCM event could be read"), "{stderr}");
 }
+
+#[test]
+fn a_log_replayed_twice_in_a_row_is_two_runs_and_says_so() {
+    let twice = dir("twice").join("twice.lcm");
+    let once = std::fs::read(sim_log()).unwrap();
+    std::fs::write(&twice, [once.as_slice(), once.as_slice()].concat()).unwrap();
+    let (a, b) = (replay_with_defaults(sim_log()), replay_with_defaults(&twice));
+    // Every decision of both runs (the cycle times repeat: the second run's
+    // replace the first's in the keyed table, so count the commands).
+    assert_eq!(b.inputs.poses, 2 * a.inputs.poses);
+    assert_eq!(b.problems.log_restarts, 1);
+    assert_eq!(b.problems.clock_restarts, 1);
+    assert_eq!(b.problems.fed_late, 0);
+    assert_eq!(b.cycles.len(), a.cycles.len());
+    let lines = b.problems.lines().join("\n");
+    assert!(lines.contains("the log starts over 1 time(s)"), "{lines}");
+    assert!(lines.contains("the pose clock went backwards 1 time(s)"), "{lines}");
+}
+
+#[test]
+fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
+    use arcnav_bus::codec::Message as _;
+    use arcnav_bus::lcmtypes::pose_t;
+    // One pose stamped i64::MAX in the middle of the log.
+    let events: Vec<_> = LogReader::open(sim_log()).unwrap().map(Result::unwrap).collect();
+    let middle = events.len() / 2;
+    let (at, data) = events
+        .iter()
+        .skip(middle)
+        .find(|e| e.channel == "POSE")
+        .map(|e| (e.timestamp, e.data.clone()))
+        .unwrap();
+    let mut pose = pose_t::decode(&data).unwrap();
+    pose.utime = i64::MAX;
+    let jumped = dir("end-of-time").join("jumped.lcm");
+    let mut writer = LogWriter::create(&jumped).unwrap();
+    for (k, e) in events.iter().enumerate() {
+        writer.write_event(e.timestamp, &e.channel, &e.data).unwrap();
+        if k == middle {
+            writer.write_message(at, "POSE", &pose).unwrap();
+        }
+    }
+    drop(writer);
+    let started = std::time::Instant::now();
+    let (a, b) = (replay_with_defaults(sim_log()), replay_with_defaults(&jumped));
+    assert!(started.elapsed().as_secs() < 60, "took {:?}", started.elapsed());
+    assert!(b.problems.skipped_cycles > 1_000_000, "{}", b.problems.skipped_cycles);
+    // At most a cycle or two around the absurd pose differ in number.
+    assert!(
+        b.cycles.len().abs_diff(a.cycles.len()) <= 3,
+        "{} vs {} decisions",
+        b.cycles.len(),
+        a.cycles.len()
+    );
+    let lines = b.problems.lines().join("\n");
+    assert!(lines.contains("decision cycle(s) skipped"), "{lines}");
+}
+
+#[test]
+fn a_log_without_images_replayed_without_its_cells_says_nothing_was_perceived() {
+    let cells_only = dir("cells-only").join("cells.lcm");
+    filtered(sim_log(), &cells_only, |channel, _| !channel.starts_with("RANGE_IMAGE"));
+    let (code, stdout, _) = arcnav(&["replay", cells_only.to_str().unwrap()]);
+    assert_eq!(code, 3, "{stdout}");
+    assert!(stdout.contains("no range image: nothing was perceived"), "{stdout}");
+    let (code, stdout, _) = arcnav(&["replay", cells_only.to_str().unwrap(), "--recorded-cells"]);
+    assert_eq!(code, 0, "{stdout}");
+}

@@ -314,6 +314,9 @@ pub struct OrderStats {
     pub beyond_window: u64,
     /// The largest lag of an event behind the latest logged before it, µs.
     pub max_lag_us: i64,
+    /// Times a channel went back in time (a log that starts over, logs
+    /// concatenated): what came before is returned first, then the new run.
+    pub restarts: u64,
 }
 
 struct Held(LogEvent, u64);
@@ -342,6 +345,12 @@ impl Ord for Held {
 /// that logs each channel in batches, is not, and played as written its
 /// events arrive late. Within the window, events equal in time keep their
 /// order in the file; a log already in order comes out unchanged.
+///
+/// One channel's events are taken to be in the order they were logged:
+/// only between channels may the file be out of order. An event older than
+/// the previous one of its own channel (or as old, when the log has moved
+/// on since) starts the log over (two logs concatenated, a clock reset):
+/// everything before it is returned first.
 pub struct InTimeOrder<S> {
     source: S,
     window: ReorderWindow,
@@ -350,9 +359,17 @@ pub struct InTimeOrder<S> {
     read: u64,
     newest_read: Option<i64>,
     newest_returned: Option<i64>,
+    /// The newest time of each channel (at most [`MAX_TRACKED_CHANNELS`]).
+    channels: std::collections::HashMap<String, i64>,
+    /// The first event of a new run, waiting until the old one is out.
+    restart: Option<LogEvent>,
     ended: bool,
     order: OrderStats,
 }
+
+/// Channels whose own order [`InTimeOrder`] follows; a log with more
+/// (damage, or a generator of names) has the rest reordered without it.
+const MAX_TRACKED_CHANNELS: usize = 4096;
 
 impl<S: EventSource> InTimeOrder<S> {
     pub fn new(source: S, window: ReorderWindow) -> Self {
@@ -364,8 +381,48 @@ impl<S: EventSource> InTimeOrder<S> {
             read: 0,
             newest_read: None,
             newest_returned: None,
+            channels: std::collections::HashMap::new(),
+            restart: None,
             ended: false,
             order: OrderStats::default(),
+        }
+    }
+
+    /// Takes `event` into the window.
+    fn hold(&mut self, event: LogEvent) {
+        let t = event.timestamp;
+        if let Some(newest) = self.newest_read
+            && t < newest
+        {
+            self.order.reordered += 1;
+            self.order.max_lag_us = self.order.max_lag_us.max(newest - t);
+            if self.newest_returned.is_some_and(|r| t < r) {
+                self.order.beyond_window += 1;
+            }
+        }
+        self.newest_read = Some(self.newest_read.map_or(t, |n| n.max(t)));
+        self.held_bytes += event.data.len();
+        self.held.push(Held(event, self.read));
+        self.read += 1;
+    }
+
+    /// True when `event` is older than its channel's previous event, or as
+    /// old while the log has moved on since (the same event again).
+    fn starts_over(&mut self, event: &LogEvent) -> bool {
+        let t = event.timestamp;
+        let moved_on = self.newest_read.is_some_and(|n| t < n);
+        match self.channels.get_mut(&event.channel) {
+            Some(last) if t < *last || (t == *last && moved_on) => true,
+            Some(last) => {
+                *last = t;
+                false
+            }
+            None => {
+                if self.channels.len() < MAX_TRACKED_CHANNELS {
+                    self.channels.insert(event.channel.clone(), t);
+                }
+                false
+            }
         }
     }
 
@@ -378,6 +435,7 @@ impl<S: EventSource> InTimeOrder<S> {
             return false;
         };
         self.ended
+            || self.restart.is_some()
             || self.held_bytes >= self.window.max_bytes
             || self.held.len() >= self.window.max_events
             || newest.saturating_sub(earliest.0.timestamp) > self.window.horizon_us
@@ -386,24 +444,21 @@ impl<S: EventSource> InTimeOrder<S> {
 
 impl<S: EventSource> EventSource for InTimeOrder<S> {
     fn next_event(&mut self) -> io::Result<Option<LogEvent>> {
-        while !self.ended && !self.must_release() {
+        if self.held.is_empty()
+            && let Some(first) = self.restart.take()
+        {
+            // The old run is out: the new one starts afresh.
+            self.order.restarts += 1;
+            self.channels.clear();
+            self.newest_read = None;
+            self.newest_returned = None;
+            self.starts_over(&first);
+            self.hold(first);
+        }
+        while self.restart.is_none() && !self.ended && !self.must_release() {
             match self.source.next_event()? {
-                Some(event) => {
-                    let t = event.timestamp;
-                    if let Some(newest) = self.newest_read
-                        && t < newest
-                    {
-                        self.order.reordered += 1;
-                        self.order.max_lag_us = self.order.max_lag_us.max(newest - t);
-                        if self.newest_returned.is_some_and(|r| t < r) {
-                            self.order.beyond_window += 1;
-                        }
-                    }
-                    self.newest_read = Some(self.newest_read.map_or(t, |n| n.max(t)));
-                    self.held_bytes += event.data.len();
-                    self.held.push(Held(event, self.read));
-                    self.read += 1;
-                }
+                Some(event) if self.starts_over(&event) => self.restart = Some(event),
+                Some(event) => self.hold(event),
                 None => self.ended = true,
             }
         }
@@ -758,11 +813,11 @@ mod tests {
         assert!(seen[2].1 >= std::time::Duration::from_millis(200));
     }
 
-    /// Events at these log times, in this file order.
-    fn log_at(times: &[i64]) -> Vec<u8> {
+    /// Events at these log times on these channels, in this file order.
+    fn log_at(events: &[(i64, &str)]) -> Vec<u8> {
         let mut writer = LogWriter::new(Vec::new());
-        for &t in times {
-            writer.write_event(t, "C", &t.to_be_bytes()).unwrap();
+        for &(t, channel) in events {
+            writer.write_event(t, channel, &t.to_be_bytes()).unwrap();
         }
         writer.into_inner()
     }
@@ -774,34 +829,52 @@ mod tests {
     }
 
     #[test]
-    fn events_out_of_time_order_within_the_window_come_out_in_time_order() {
-        let bytes = log_at(&[0, 20, 40, 10, 60, 30, 80, 50]);
+    fn channels_out_of_time_order_with_each_other_come_out_in_time_order() {
+        let bytes = log_at(&[
+            (0, "A"),
+            (20, "A"),
+            (40, "A"),
+            (10, "B"),
+            (60, "A"),
+            (30, "B"),
+            (80, "A"),
+            (50, "B"),
+        ]);
         let (times, order) = in_order(&bytes, ReorderWindow::default());
         assert_eq!(times, [0, 10, 20, 30, 40, 50, 60, 80]);
         assert_eq!(order.reordered, 3);
         assert_eq!(order.max_lag_us, 30);
-        assert_eq!(order.beyond_window, 0);
+        assert_eq!((order.beyond_window, order.restarts), (0, 0));
         // A log in order comes out as it is, equal times in file order.
-        let bytes = log_at(&[0, 5, 5, 9]);
+        let bytes = log_at(&[(0, "A"), (5, "A"), (5, "B"), (9, "A")]);
         let mut ordered = InTimeOrder::new(LogReader::new(&bytes[..]), ReorderWindow::default());
-        let data: Vec<Vec<u8>> = ordered.by_ref().map(|e| e.unwrap().data).collect();
-        let plain: Vec<Vec<u8>> = LogReader::new(&bytes[..])
-            .map(|e| e.unwrap().data)
-            .collect();
-        assert_eq!(data, plain);
+        let events: Vec<LogEvent> = ordered.by_ref().map(Result::unwrap).collect();
+        let plain: Vec<LogEvent> = LogReader::new(&bytes[..]).map(Result::unwrap).collect();
+        assert_eq!(events, plain);
         assert_eq!(*ordered.order(), OrderStats::default());
     }
 
     #[test]
+    fn a_log_that_starts_over_is_two_runs_not_one_interleaved() {
+        // The same log twice (`cat log log`): each channel goes back in time.
+        let run = [(0, "A"), (10, "B"), (20, "A"), (30, "B")];
+        let twice: Vec<(i64, &str)> = run.iter().chain(&run).copied().collect();
+        let (times, order) = in_order(&log_at(&twice), ReorderWindow::default());
+        assert_eq!(times, [0, 10, 20, 30, 0, 10, 20, 30]);
+        assert_eq!(order.restarts, 1);
+        assert_eq!((order.reordered, order.beyond_window), (0, 0));
+    }
+
+    #[test]
     fn events_further_out_of_order_than_the_window_are_counted_and_come_late() {
-        // 100 events 1 s apart, then one logged at 2 s: 98 s late.
-        let mut times: Vec<i64> = (0..100).map(|k| k * 1_000_000).collect();
-        times.push(2_000_000);
+        // 100 events 1 s apart, then one of another channel logged at 2 s: 98 s late.
+        let mut events: Vec<(i64, &str)> = (0..100).map(|k| (k * 1_000_000, "A")).collect();
+        events.push((2_000_000, "B"));
         let window = ReorderWindow {
             horizon_us: 10_000_000,
             ..ReorderWindow::default()
         };
-        let (out, order) = in_order(&log_at(&times), window);
+        let (out, order) = in_order(&log_at(&events), window);
         assert_eq!(out.len(), 101, "nothing is lost");
         assert_eq!(order.beyond_window, 1);
         assert_eq!(order.max_lag_us, 97_000_000);
@@ -810,7 +883,8 @@ mod tests {
             max_events: 4,
             ..ReorderWindow::default()
         };
-        let (out, order) = in_order(&log_at(&[10, 20, 30, 40, 50, 60, 5]), window);
+        let events = [(10, "A"), (20, "A"), (30, "A"), (40, "A"), (50, "A"), (60, "A"), (5, "B")];
+        let (out, order) = in_order(&log_at(&events), window);
         assert_eq!(out, [10, 20, 30, 5, 40, 50, 60]);
         assert_eq!(order.beyond_window, 1);
     }
