@@ -69,6 +69,10 @@ pub struct InputProblems {
     pub map_resets: u64,
     /// Known messages the replay does not consume (e.g. LOCAL_MAP), per channel.
     pub ignored: BTreeMap<String, u64>,
+    /// Messages of a known type on a channel that is not arcnav's for that
+    /// type (`POSE_GPS_RAW`, `STEERING_COMMAND_TELEOP`), per channel: another
+    /// program's, skipped.
+    pub foreign: BTreeMap<String, u64>,
     /// Events that came in the file after events logged later, fed in time
     /// order (nothing lost).
     pub reordered: u64,
@@ -216,6 +220,11 @@ impl InputProblems {
         }
         for (channel, n) in &self.ignored {
             lines.push(format!("{n} message(s) on {channel} not used by replay"));
+        }
+        for (channel, n) in &self.foreign {
+            lines.push(format!(
+                "{n} message(s) on {channel}, not an arcnav channel for their type (another program's: skipped)"
+            ));
         }
         lines
     }
@@ -402,6 +411,10 @@ pub fn replay(
             progress(position);
         }
         let channel = event.channel.as_str();
+        if !event.message.on_its_channel(channel) {
+            *problems.foreign.entry(event.channel).or_default() += 1;
+            continue;
+        }
         match event.message {
             AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
                 Ok(pose) => {

@@ -604,7 +604,10 @@ fn a_log_replayed_twice_in_a_row_is_two_runs_and_says_so() {
     let twice = dir("twice").join("twice.lcm");
     let once = std::fs::read(sim_log()).unwrap();
     std::fs::write(&twice, [once.as_slice(), once.as_slice()].concat()).unwrap();
-    let (a, b) = (replay_with_defaults(sim_log()), replay_with_defaults(&twice));
+    let (a, b) = (
+        replay_with_defaults(sim_log()),
+        replay_with_defaults(&twice),
+    );
     // Every decision of both runs (the cycle times repeat: the second run's
     // replace the first's in the keyed table, so count the commands).
     assert_eq!(b.inputs.poses, 2 * a.inputs.poses);
@@ -614,7 +617,10 @@ fn a_log_replayed_twice_in_a_row_is_two_runs_and_says_so() {
     assert_eq!(b.cycles.len(), a.cycles.len());
     let lines = b.problems.lines().join("\n");
     assert!(lines.contains("the log starts over 1 time(s)"), "{lines}");
-    assert!(lines.contains("the pose clock went backwards 1 time(s)"), "{lines}");
+    assert!(
+        lines.contains("the pose clock went backwards 1 time(s)"),
+        "{lines}"
+    );
 }
 
 #[test]
@@ -622,7 +628,10 @@ fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
     use arcnav_bus::codec::Message as _;
     use arcnav_bus::lcmtypes::pose_t;
     // One pose stamped i64::MAX in the middle of the log.
-    let events: Vec<_> = LogReader::open(sim_log()).unwrap().map(Result::unwrap).collect();
+    let events: Vec<_> = LogReader::open(sim_log())
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
     let middle = events.len() / 2;
     let (at, data) = events
         .iter()
@@ -635,16 +644,29 @@ fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
     let jumped = dir("end-of-time").join("jumped.lcm");
     let mut writer = LogWriter::create(&jumped).unwrap();
     for (k, e) in events.iter().enumerate() {
-        writer.write_event(e.timestamp, &e.channel, &e.data).unwrap();
+        writer
+            .write_event(e.timestamp, &e.channel, &e.data)
+            .unwrap();
         if k == middle {
             writer.write_message(at, "POSE", &pose).unwrap();
         }
     }
     drop(writer);
     let started = std::time::Instant::now();
-    let (a, b) = (replay_with_defaults(sim_log()), replay_with_defaults(&jumped));
-    assert!(started.elapsed().as_secs() < 60, "took {:?}", started.elapsed());
-    assert!(b.problems.skipped_cycles > 1_000_000, "{}", b.problems.skipped_cycles);
+    let (a, b) = (
+        replay_with_defaults(sim_log()),
+        replay_with_defaults(&jumped),
+    );
+    assert!(
+        started.elapsed().as_secs() < 60,
+        "took {:?}",
+        started.elapsed()
+    );
+    assert!(
+        b.problems.skipped_cycles > 1_000_000,
+        "{}",
+        b.problems.skipped_cycles
+    );
     // At most a cycle or two around the absurd pose differ in number.
     assert!(
         b.cycles.len().abs_diff(a.cycles.len()) <= 3,
@@ -659,10 +681,64 @@ fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
 #[test]
 fn a_log_without_images_replayed_without_its_cells_says_nothing_was_perceived() {
     let cells_only = dir("cells-only").join("cells.lcm");
-    filtered(sim_log(), &cells_only, |channel, _| !channel.starts_with("RANGE_IMAGE"));
+    filtered(sim_log(), &cells_only, |channel, _| {
+        !channel.starts_with("RANGE_IMAGE")
+    });
     let (code, stdout, _) = arcnav(&["replay", cells_only.to_str().unwrap()]);
     assert_eq!(code, 3, "{stdout}");
-    assert!(stdout.contains("no range image: nothing was perceived"), "{stdout}");
+    assert!(
+        stdout.contains("no range image: nothing was perceived"),
+        "{stdout}"
+    );
     let (code, stdout, _) = arcnav(&["replay", cells_only.to_str().unwrap(), "--recorded-cells"]);
     assert_eq!(code, 0, "{stdout}");
+}
+
+#[test]
+fn messages_on_other_programs_channels_are_listed_and_never_taken_as_inputs() {
+    use arcnav_bus::codec::Message as _;
+    use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
+    // A second pose stream 50 m off, and a teleoperation stream that steers
+    // hard left, beside the log's own.
+    let mixed = dir("foreign").join("mixed.lcm");
+    let mut writer = LogWriter::create(&mixed).unwrap();
+    for e in LogReader::open(sim_log()).unwrap().map(Result::unwrap) {
+        writer
+            .write_event(e.timestamp, &e.channel, &e.data)
+            .unwrap();
+        if e.channel == "POSE" {
+            let mut gps = pose_t::decode(&e.data).unwrap();
+            gps.position[0] += 50.0;
+            writer
+                .write_message(e.timestamp, "POSE_GPS_RAW", &gps)
+                .unwrap();
+        }
+        if e.channel == "STEERING_COMMAND" {
+            let mut teleop = steering_command_t::decode(&e.data).unwrap();
+            teleop.curvature = 0.125;
+            teleop.arc_index = 38;
+            writer
+                .write_message(e.timestamp, "STEERING_COMMAND_TELEOP", &teleop)
+                .unwrap();
+        }
+    }
+    drop(writer);
+    let (a, b) = (
+        replay_with_defaults(sim_log()),
+        replay_with_defaults(&mixed),
+    );
+    assert_eq!(b.problems.map_resets, 0);
+    assert_eq!(b.inputs.poses, a.inputs.poses);
+    assert_eq!(b.recorded.len(), a.recorded.len());
+    let commands = |r: &ReplayResult| r.cycles.values().map(|c| c.command).collect::<Vec<_>>();
+    assert_eq!(commands(&a), commands(&b));
+    let recorded = |r: &ReplayResult| r.recorded.values().map(|c| c.command).collect::<Vec<_>>();
+    assert_eq!(recorded(&a), recorded(&b));
+    assert_eq!(b.problems.foreign.len(), 2, "{:?}", b.problems.foreign);
+    assert!(!b.problems.lost_input());
+    let lines = b.problems.lines().join("\n");
+    assert!(
+        lines.contains("on POSE_GPS_RAW, not an arcnav channel"),
+        "{lines}"
+    );
 }

@@ -213,9 +213,17 @@ impl<R: Read> LogReader<R> {
                 continue;
             };
             let channel = channel.to_owned();
-            // An event whose declared span hides another plausible event
-            // header lied about its length: drop it and resynchronise.
-            if hides_event(&self.available()[4..total]) {
+            // A well-formed event (the next one starts right after it, or the
+            // log ends there) is trusted whole, as the reference reader
+            // does, whatever its data holds. One that is not, and whose
+            // declared span hides another plausible event header, lied about
+            // its length: drop it and resynchronise.
+            let well_formed = if self.fill(total + 4)? {
+                self.available()[total..total + 4] == SYNC_BYTES
+            } else {
+                self.available().len() == total
+            };
+            if !well_formed && hides_event(&self.available()[4..total]) {
                 self.corrupt()?;
                 continue;
             }
@@ -722,13 +730,38 @@ mod tests {
     #[test]
     fn an_event_with_a_lying_length_is_dropped_and_the_next_one_found() {
         let mut bytes = log_of(&[(1, "A", b"first"), (2, "B", b"second"), (3, "C", b"third")]);
-        // Corrupt A's data length so that it swallows B.
-        bytes[24..28].copy_from_slice(&40i32.to_be_bytes());
+        // Corrupt A's data length so that it swallows B and ends inside C
+        // (a length that ended exactly on C's sync word would make A a
+        // well-formed event holding B's bytes: trusted, as the reference does).
+        bytes[24..28].copy_from_slice(&41i32.to_be_bytes());
         let (events, stats) = read_all(&bytes);
         let channels: Vec<_> = events.iter().map(|e| e.channel.as_str()).collect();
         assert_eq!(channels, ["B", "C"]);
         assert_eq!(stats.corrupt_events, 1);
         assert!(stats.skipped_bytes > 0);
+    }
+
+    #[test]
+    fn a_valid_event_whose_data_holds_a_sync_word_and_a_header_is_read_whole() {
+        // A range image's bytes may hold anything, an event header included.
+        let inner = log_of(&[(5, "RANGE_IMAGE", b"payload")]);
+        let mut data = vec![7u8; 100];
+        data.extend_from_slice(&inner);
+        data.extend_from_slice(&[9u8; 100]);
+        let bytes = log_of(&[
+            (1, "POSE", b"p"),
+            (2, "RANGE_IMAGE", &data),
+            (3, "POSE", b"q"),
+        ]);
+        let (events, stats) = read_all(&bytes);
+        assert_eq!(events.len(), 3);
+        assert_eq!(events[1].data, data);
+        assert_eq!(stats.skipped_bytes, 0);
+        assert_eq!(stats.corrupt_events, 0);
+        // As the last event of the log too.
+        let bytes = log_of(&[(1, "POSE", b"p"), (2, "RANGE_IMAGE", &data)]);
+        let (events, stats) = read_all(&bytes);
+        assert_eq!((events.len(), stats.skipped_bytes), (2, 0));
     }
 
     #[test]
@@ -883,7 +916,15 @@ mod tests {
             max_events: 4,
             ..ReorderWindow::default()
         };
-        let events = [(10, "A"), (20, "A"), (30, "A"), (40, "A"), (50, "A"), (60, "A"), (5, "B")];
+        let events = [
+            (10, "A"),
+            (20, "A"),
+            (30, "A"),
+            (40, "A"),
+            (50, "A"),
+            (60, "A"),
+            (5, "B"),
+        ];
         let (out, order) = in_order(&log_at(&events), window);
         assert_eq!(out, [10, 20, 30, 5, 40, 50, 60]);
         assert_eq!(order.beyond_window, 1);

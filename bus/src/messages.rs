@@ -99,6 +99,32 @@ impl AnyMessage {
         }
     }
 
+    /// True when `channel` is where the wire contract puts this message's
+    /// type (`POSE`, `RANGE_IMAGE[_<SENSOR>]`, `ARC_VOTES_<NAME>`, ...). A
+    /// message of a known type elsewhere (a second pose stream on
+    /// `POSE_GPS_RAW`, a teleoperation stream on `STEERING_COMMAND_TELEOP`)
+    /// is another program's, not an input of arcnav's.
+    pub fn on_its_channel(&self, channel: &str) -> bool {
+        use channels::*;
+        match self {
+            Self::Pose(_) => channel == POSE,
+            Self::RangeImage(_) => {
+                channel == RANGE_IMAGE
+                    || channel
+                        .strip_prefix(RANGE_IMAGE)
+                        .and_then(|rest| rest.strip_prefix('_'))
+                        .is_some_and(|sensor| !sensor.is_empty())
+            }
+            Self::SteeringCommand(_) => channel == STEERING_COMMAND,
+            Self::ArcVotes(_) => channel
+                .strip_prefix(ARC_VOTES_PREFIX)
+                .is_some_and(|name| !name.is_empty()),
+            Self::ObstacleCells(_) => channel == OBSTACLE_CELLS,
+            Self::Waypoints(_) => channel == WAYPOINTS,
+            Self::LocalMap(_) => channel == LOCAL_MAP,
+        }
+    }
+
     /// The LCM type name.
     pub fn type_name(&self) -> &'static str {
         match self {

@@ -84,7 +84,11 @@ pub(crate) fn pump(
 /// dropped) when it is not an arcnav message or is malformed.
 pub(crate) fn decode(message: &ReceivedMessage) -> Option<AnyMessage> {
     match AnyMessage::decode(&message.data) {
-        Ok(Some(m)) => Some(m),
+        Ok(Some(m)) if m.on_its_channel(&message.channel) => Some(m),
+        Ok(Some(m)) => {
+            tracing::debug!(channel = %message.channel, kind = m.type_name(), "message on a channel not arcnav's for its type dropped");
+            None
+        }
         Ok(None) => {
             tracing::debug!(channel = %message.channel, "message of an unknown type dropped");
             None
