@@ -94,6 +94,11 @@ pub struct InputProblems {
     /// OBSTACLE_CELLS in a log with no range image, replayed without
     /// `--recorded-cells`: nothing was perceived.
     pub cells_unused: u64,
+    /// The log holds no pose: nothing could be placed or decided.
+    pub no_poses: bool,
+    /// Images still waiting for the pose at their capture time when the log
+    /// ended (the pose stream stops before them).
+    pub images_unplaced: u64,
 }
 
 /// The log reader's counts.
@@ -130,6 +135,8 @@ impl InputProblems {
             || self.fed_late > 0
             || self.reports_refused > 0
             || self.cells_unused > 0
+            || self.no_poses
+            || self.images_unplaced > 0
     }
 
     /// One line per problem, for the summary.
@@ -179,6 +186,20 @@ impl InputProblems {
             lines.push(format!(
                 "{} obstacle report(s) refused by the local map (-v says why)",
                 self.reports_refused
+            ));
+        }
+        if self.log.events == 0 {
+            lines.push(format!(
+                "no LCM event could be read from the log ({} bytes skipped as damaged): is it an LCM log?",
+                self.log.skipped_bytes + self.log.truncated_tail_bytes
+            ));
+        } else if self.no_poses {
+            lines.push("the log holds no POSE: nothing could be placed or decided".into());
+        }
+        if self.images_unplaced > 0 {
+            lines.push(format!(
+                "{} image(s) never evaluated: the pose stream ends before their capture time",
+                self.images_unplaced
             ));
         }
         if self.cells_unused > 0 {
@@ -337,6 +358,9 @@ impl Sink for ReplaySink<'_> {
     }
 }
 
+/// The longest step of log time `--speed` waits out, µs.
+const MAX_PACED_STEP_US: Utime = 60_000_000;
+
 /// Replays the log at `path`.
 pub fn replay(
     path: &Path,
@@ -376,6 +400,7 @@ pub fn replay(
     }
     let (wall_start, mut first_time) = (Instant::now(), None::<Utime>);
     let mut last_progress = 0;
+    let mut paced: Option<(Utime, Utime)> = None;
     while let Some(event) = events.next() {
         let event = event.map_err(|source| ReplayError::Read {
             path: path.to_owned(),
@@ -383,6 +408,8 @@ pub fn replay(
         })?;
         let t = event.timestamp;
         let origin = *first_time.get_or_insert(t);
+        // The pace's origin, shifted past jumps, and the newest time paced.
+        let paced = paced.get_or_insert((t, t));
         span = Some(span.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
         let since = (t - origin) as f64 * 1e-6;
         if options.from_s.is_some_and(|from| since < from) {
@@ -398,9 +425,18 @@ pub fn replay(
             }
         }
         if let Some(speed) = options.speed {
-            // A pace that overflows a Duration (absurd speeds or times) is
-            // not waited for.
-            let due = Duration::try_from_secs_f64((t - origin) as f64 * 1e-6 / speed);
+            // Log time jumping ahead by more than a minute (a gap, a corrupt
+            // time) is not waited out: the pace carries on from there.
+            let step = t - paced.1;
+            if step > MAX_PACED_STEP_US {
+                tracing::warn!(
+                    jump_s = step as f64 * 1e-6,
+                    "the log's time jumps ahead: not waited for"
+                );
+                paced.0 += step;
+            }
+            paced.1 = paced.1.max(t);
+            let due = Duration::try_from_secs_f64((t - paced.0) as f64 * 1e-6 / speed);
             if let Some(wait) = due.ok().and_then(|d| d.checked_sub(wall_start.elapsed())) {
                 std::thread::sleep(wait);
             }
@@ -502,6 +538,8 @@ pub fn replay(
     problems.clock_restarts = counts.restarts;
     problems.reports_refused = pipeline.cycle.map.map.stats().reports_refused;
     problems.log = events.log_stats().into();
+    problems.no_poses = inputs.poses == 0;
+    problems.images_unplaced = pipeline.perception.waiting() as u64;
     let order = *events.source().order();
     problems.reordered = order.reordered;
     problems.max_reorder_lag_s = order.max_lag_us as f64 * 1e-6;

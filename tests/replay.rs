@@ -742,3 +742,54 @@ fn messages_on_other_programs_channels_are_listed_and_never_taken_as_inputs() {
         "{lines}"
     );
 }
+
+#[test]
+fn an_empty_log_or_one_without_poses_is_never_a_success() {
+    let empty = dir("empty").join("empty.lcm");
+    std::fs::write(&empty, b"").unwrap();
+    let (code, stdout, _) = arcnav(&["replay", empty.to_str().unwrap()]);
+    assert_eq!(code, 3, "{stdout}");
+    assert!(stdout.contains("no LCM event could be read"), "{stdout}");
+    assert!(!stdout.contains("every input was used"), "{stdout}");
+    let no_poses = dir("empty").join("no-poses.lcm");
+    filtered(sim_log(), &no_poses, |channel, _| channel != "POSE");
+    let (code, stdout, _) = arcnav(&["replay", no_poses.to_str().unwrap()]);
+    assert_eq!(code, 3, "{stdout}");
+    assert!(stdout.contains("the log holds no POSE"), "{stdout}");
+    assert!(!stdout.contains("100.00"), "{stdout}");
+    // The images are all counted: unplaced ones are said.
+    let result = replay_with_defaults(&no_poses);
+    assert!(result.problems.images_unplaced + result.problems.images_without_pose > 0);
+}
+
+#[test]
+fn a_paced_replay_does_not_wait_out_a_jump_in_log_time() {
+    // The first 5 s of the log, then one pose logged a year later.
+    let jumped = dir("pace").join("jumped.lcm");
+    let mut writer = LogWriter::create(&jumped).unwrap();
+    let mut first = None;
+    for e in LogReader::open(sim_log()).unwrap().map(Result::unwrap) {
+        let t0 = *first.get_or_insert(e.timestamp);
+        if e.timestamp - t0 > 5_000_000 {
+            if e.channel == "POSE" {
+                writer
+                    .write_event(t0 + 365 * 86_400_000_000, "POSE", &e.data)
+                    .unwrap();
+                break;
+            }
+            continue;
+        }
+        writer
+            .write_event(e.timestamp, &e.channel, &e.data)
+            .unwrap();
+    }
+    drop(writer);
+    let started = std::time::Instant::now();
+    let (code, stdout, stderr) = arcnav(&["replay", jumped.to_str().unwrap(), "--speed", "100"]);
+    assert!(
+        started.elapsed().as_secs() < 20,
+        "took {:?}",
+        started.elapsed()
+    );
+    assert!(code == 0 || code == 3, "{stdout}{stderr}");
+}

@@ -100,6 +100,29 @@ impl WaypointSpec {
     }
 }
 
+/// The dotted key of the first number in `spec` that is NaN or infinite.
+fn first_non_finite(spec: &WorldSpec) -> Option<String> {
+    fn walk(value: &toml::Value, key: &str) -> Option<String> {
+        match value {
+            toml::Value::Float(f) if !f.is_finite() => Some(key.to_owned()),
+            toml::Value::Table(t) => t.iter().find_map(|(k, v)| {
+                let key = if key.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{key}.{k}")
+                };
+                walk(v, &key)
+            }),
+            toml::Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .find_map(|(i, v)| walk(v, &format!("{key}[{i}]"))),
+            _ => None,
+        }
+    }
+    walk(&toml::Value::try_from(spec).ok()?, "")
+}
+
 /// A round feature rising from the ground: boulder, tree trunk or bush.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -514,6 +537,9 @@ impl World {
             origin: origin.to_owned(),
             message,
         };
+        if let Some(key) = first_non_finite(&spec) {
+            return Err(invalid(format!("{key} is not a finite number")));
+        }
         let t = &spec.terrain;
         if !(t.size_m[0] > 0.0
             && t.size_m[1] > 0.0
@@ -547,6 +573,22 @@ impl World {
                     _ => file.clone(),
                 };
                 let grid = HeightGrid::load(&path, t.heightmap_resolution_m, t.heightmap_origin_m)?;
+                let g = grid.bounds();
+                let overlap = |lo: f64, hi: f64, a: f64, b: f64| (hi.min(b) - lo.max(a)).max(0.0);
+                let covered = overlap(g[0], g[2], bounds[0], bounds[2])
+                    * overlap(g[1], g[3], bounds[1], bounds[3]);
+                if covered < 0.5 * t.size_m[0] * t.size_m[1] {
+                    return Err(invalid(format!(
+                        "the height file {} covers {:.3} m × {:.3} m from ({}, {}), less than half of the {} m × {} m world: is heightmap_resolution_m (or its origin) right?",
+                        path.display(),
+                        g[2] - g[0],
+                        g[3] - g[1],
+                        g[0],
+                        g[1],
+                        t.size_m[0],
+                        t.size_m[1]
+                    )));
+                }
                 Base::File {
                     grid,
                     scale: t.heightmap_scale,

@@ -155,3 +155,51 @@ fn height_files_are_read_and_resampled() {
         "{err}"
     );
 }
+
+#[test]
+fn numbers_that_are_not_finite_are_refused_naming_their_key() {
+    let wp = "[[waypoints]]\nposition_m = [30.0, 0.0]\n";
+    for (extra, key) in [
+        ("heading_deg = nan\n", "start.heading_deg"),
+        (
+            "[[trees]]\nposition_m = [10.0, 10.0]\nradius_m = inf\nheight_m = 3.0\n",
+            "trees[0].radius_m",
+        ),
+        (
+            "[[waypoints]]\nposition_m = [20.0, 0.0]\nradius_m = -2.0\n",
+            "radius_m -2 must be a positive",
+        ),
+    ] {
+        let text = if extra.starts_with("heading") {
+            format!("{BASE}{extra}{wp}")
+        } else {
+            format!("{BASE}{wp}{extra}")
+        };
+        let err = error_of(&text);
+        assert!(err.contains(key), "{extra}: {err}");
+    }
+    let err = error_of(&format!(
+        "{}{wp}",
+        BASE.replace("[start]", "hills_amplitude_m = nan\n[start]")
+    ));
+    assert!(
+        err.contains("terrain.hills_amplitude_m is not a finite number"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_height_file_covering_a_sliver_of_the_world_is_refused() {
+    let dir = std::env::temp_dir().join(format!("arcnav-worlds-sliver-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // 150 nm across for a 100 m world: the resolution is in the wrong unit.
+    let asc = "ncols 4\nnrows 4\nxllcorner 0\nyllcorner 0\ncellsize 0.00000005\n0 0 0 0\n0 4 4 0\n0 4 4 0\n0 0 0 0\n";
+    std::fs::write(dir.join("dem.asc"), asc).unwrap();
+    let text = "name = \"dem\"\n[terrain]\norigin_m = [-50.0, -50.0]\nsize_m = [100.0, 100.0]\nheightmap = \"dem.asc\"\n[start]\nposition_m = [-45.0, -45.0]\n[[waypoints]]\nposition_m = [0.0, 0.0]\n";
+    std::fs::write(dir.join("w.toml"), text).unwrap();
+    let err = World::load(&dir.join("w.toml")).unwrap_err().to_string();
+    assert!(
+        err.contains("less than half of the 100 m × 100 m world"),
+        "{err}"
+    );
+}
