@@ -11,6 +11,8 @@
 //! `arcnav` binary.
 
 pub mod config;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod live;
 pub mod mission;
 pub mod output;

@@ -358,6 +358,41 @@ impl Sink for ReplaySink<'_> {
     }
 }
 
+/// A waypoints file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[error("{0} (a waypoints file holds [[waypoints]] tables with position_m = [x, y])")]
+pub struct WaypointsError(String);
+
+/// Waypoints from the text of a TOML file with `[[waypoints]]` entries (a
+/// world file works).
+pub fn parse_waypoints(text: &str) -> Result<Mission, WaypointsError> {
+    #[derive(serde::Deserialize)]
+    struct File {
+        waypoints: Vec<arcnav_sim::world::WaypointSpec>,
+    }
+    let file: File = toml::from_str(text).map_err(|e| WaypointsError(e.message().to_owned()))?;
+    if file.waypoints.is_empty() {
+        return Err(WaypointsError("no [[waypoints]]".into()));
+    }
+    for (i, w) in file.waypoints.iter().enumerate() {
+        if let Some(problem) = w.problem() {
+            return Err(WaypointsError(format!("waypoint {}: {problem}", i + 1)));
+        }
+    }
+    Ok(Mission {
+        version: 1,
+        waypoints: file
+            .waypoints
+            .iter()
+            .map(|w| arcnav_behaviours::Waypoint {
+                x: w.position_m[0],
+                y: w.position_m[1],
+                radius_m: w.radius_m,
+            })
+            .collect(),
+    })
+}
+
 /// The longest step of log time `--speed` waits out, µs.
 const MAX_PACED_STEP_US: Utime = 60_000_000;
 

@@ -119,8 +119,11 @@ impl<R: Read> LogReader<R> {
                 self.start = 0;
             }
             let want = n.max(MIN_BUFFER);
-            if self.buf.len() < want {
-                self.buf.resize(want, 0);
+            if self.buf.len() < want && self.end == self.buf.len() {
+                // Grown as the bytes come, not to what a header claims: a
+                // damaged length of 256 MiB costs only the bytes that exist.
+                let grown = (self.buf.len() * 2).clamp(MIN_BUFFER, want);
+                self.buf.resize(grown, 0);
             } else if self.buf.len() > 4 * want && self.end < want {
                 // A huge event has passed: give the memory back.
                 self.buf.truncate(want);

@@ -47,6 +47,21 @@ impl HeightGrid {
         };
         let bytes = arcnav_vehicle::files::read_bounded(path, MAX_HEIGHT_FILE_BYTES)
             .map_err(|e| fail(format!("cannot read it: {e}")))?;
+        Self::parse(path, bytes, resolution, origin)
+    }
+
+    /// Parses the bytes of the height file `path` (named in messages, its
+    /// extension telling the format).
+    pub fn parse(
+        path: &Path,
+        bytes: Vec<u8>,
+        resolution: Option<f64>,
+        origin: Option<[f64; 2]>,
+    ) -> Result<Self, HeightmapError> {
+        let fail = |reason: String| HeightmapError {
+            path: path.to_owned(),
+            reason,
+        };
         let extension = path
             .extension()
             .and_then(|e| e.to_str())
@@ -295,7 +310,9 @@ fn parse_asc(text: &str) -> Result<HeightGrid, String> {
             get("yllcorner")? + cell / 2.0,
         ),
     };
-    let mut values = Vec::with_capacity(rows.saturating_mul(cols).min(1 << 28));
+    // Sized by what the text can hold (a value and a separator at least),
+    // not by what the header claims.
+    let mut values = Vec::with_capacity(rows.saturating_mul(cols).min(text.len() / 2 + 1));
     for token in lines.flat_map(str::split_whitespace) {
         let v: f64 = token
             .parse()
@@ -306,11 +323,10 @@ fn parse_asc(text: &str) -> Result<HeightGrid, String> {
             v as f32
         });
     }
-    if values.len() != rows * cols {
+    if rows.checked_mul(cols) != Some(values.len()) {
         return Err(format!(
-            "holds {} values, ncols × nrows is {}",
-            values.len(),
-            rows * cols
+            "holds {} values, ncols × nrows is {cols} × {rows}",
+            values.len()
         ));
     }
     Ok(HeightGrid {

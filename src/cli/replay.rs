@@ -228,35 +228,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
 
 /// Waypoints from a TOML file with [[waypoints]] entries (a world file works).
 fn load_waypoints(path: &Path) -> anyhow::Result<arcnav_behaviours::Mission> {
-    #[derive(serde::Deserialize)]
-    struct File {
-        waypoints: Vec<arcnav_sim::world::WaypointSpec>,
-    }
     let text = arcnav_vehicle::files::read_text(path)
         .with_context(|| format!("cannot read {}", path.display()))?;
-    let file: File = toml::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))
-        .with_context(|| "a waypoints file holds [[waypoints]] tables with position_m = [x, y]")?;
-    anyhow::ensure!(
-        !file.waypoints.is_empty(),
-        "{} holds no [[waypoints]]",
-        path.display()
-    );
-    for (i, w) in file.waypoints.iter().enumerate() {
-        if let Some(problem) = w.problem() {
-            anyhow::bail!("{}: waypoint {}: {problem}", path.display(), i + 1);
-        }
-    }
-    Ok(arcnav_behaviours::Mission {
-        version: 1,
-        waypoints: file
-            .waypoints
-            .iter()
-            .map(|w| arcnav_behaviours::Waypoint {
-                x: w.position_m[0],
-                y: w.position_m[1],
-                radius_m: w.radius_m,
-            })
-            .collect(),
-    })
+    arcnav::replay::parse_waypoints(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }

@@ -8,8 +8,13 @@
 //!   and `224.0.0.0/4` routed to it. Live traffic in tests runs only there,
 //!   never on the host's network.
 //!
+//! - [`alloc::Largest`]: an allocator that remembers the largest allocation,
+//!   for tests that input never allocates from an unchecked size.
+//!
 //! A missing tool skips a test with a loud message locally; under `CI=true`
 //! it fails the test with the reason instead.
+
+pub mod alloc;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

@@ -250,6 +250,12 @@ impl Reassembler {
         let set = self.sets.remove(&from).ok_or(Malformed)?;
         self.bytes -= set.bytes;
         let channel = set.channel.ok_or(Malformed)?;
+        // Every fragment came: they must add up to the size the header
+        // claims before that size is allocated.
+        if set.bytes != set.msg_size {
+            self.stats.malformed += 1;
+            return Ok(None);
+        }
         let mut data = Vec::with_capacity(set.msg_size);
         for (_, (offset, part)) in set.parts {
             if offset != data.len() {
@@ -376,6 +382,24 @@ mod tests {
             r.on_datagram(sender(1), &d[d.len() - 1], t0 + FRAGMENT_EXPIRY)
                 .is_none()
         );
+    }
+
+    #[test]
+    fn a_fragment_claiming_a_huge_message_allocates_only_what_came() {
+        // One fragment of one, 10 bytes, claiming a 256 MiB message: it
+        // completes the set by count, not by size, and is malformed.
+        let mut packet = Vec::new();
+        packet.extend_from_slice(&MAGIC_LONG.to_be_bytes());
+        packet.extend_from_slice(&7u32.to_be_bytes());
+        packet.extend_from_slice(&(MAX_MESSAGE_SIZE as u32).to_be_bytes());
+        packet.extend_from_slice(&0u32.to_be_bytes());
+        packet.extend_from_slice(&0u16.to_be_bytes());
+        packet.extend_from_slice(&1u16.to_be_bytes());
+        packet.extend_from_slice(b"X\0tenbytes!");
+        let mut r = Reassembler::default();
+        assert!(r.on_datagram(sender(1), &packet, Instant::now()).is_none());
+        assert_eq!(r.stats().malformed, 1);
+        assert_eq!(r.pending(), 0);
     }
 
     #[test]

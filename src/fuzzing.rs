@@ -1,0 +1,162 @@
+//! The bodies of the fuzz targets: each takes arbitrary bytes as a file,
+//! datagram or message would bring them, and must return without panicking,
+//! hanging or allocating from an unchecked size. `fuzz/` runs them under
+//! libFuzzer (`cargo +nightly fuzz run NAME`); `tests/fuzz_corpus.rs` runs
+//! them over the committed corpora on stable, so the suite catches a
+//! regression without a fuzzer. See DEVELOPERS.md.
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use arcnav_bus::codec::Message;
+use arcnav_bus::lcmtypes::{
+    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, steering_command_t,
+    waypoints_t,
+};
+use arcnav_bus::log::{InTimeOrder, LogReader, ReorderWindow};
+use arcnav_bus::messages::{AnyMessage, TypedEvents};
+use arcnav_bus::transport::udpm::Reassembler;
+use arcnav_sim::World;
+use arcnav_sim::heightmap::HeightGrid;
+use arcnav_vehicle::VehicleConfig;
+
+use crate::Config;
+
+/// A fuzz target: arbitrary bytes in, nothing out.
+pub type Target = fn(&[u8]);
+
+/// Every target, by the name `cargo fuzz` and the corpus directory use.
+pub const TARGETS: &[(&str, Target)] = &[
+    ("lcm_messages", lcm_messages),
+    ("event_log", event_log),
+    ("udpm_fragments", udpm_fragments),
+    ("configuration", configuration),
+    ("world", world),
+    ("height_file", height_file),
+    ("waypoints", waypoints),
+];
+
+/// LCM message decoding: by fingerprint, and as each type whatever the
+/// fingerprint says; what decodes converts to arcnav's types or is refused.
+pub fn lcm_messages(data: &[u8]) {
+    if let Ok(Some(message)) = AnyMessage::decode(data) {
+        let _ = message.on_its_channel("POSE");
+        match message {
+            AnyMessage::Pose(m) => drop(arcnav_vehicle::Pose::try_from(&m)),
+            AnyMessage::RangeImage(m) => drop(crate::wire::range_image_from_wire(m)),
+            AnyMessage::ObstacleCells(m) => drop(crate::wire::obstacles_from_wire(m)),
+            AnyMessage::Waypoints(m) => drop(crate::wire::mission_from_wire(&m)),
+            AnyMessage::LocalMap(m) => drop(crate::wire::map_from_wire(&m)),
+            AnyMessage::SteeringCommand(m) => {
+                let _ = arcnav_vehicle::SteeringCommand::from(&m);
+            }
+            AnyMessage::ArcVotes(_) => {}
+        }
+    }
+    let _ = pose_t::decode(data);
+    let _ = range_image_t::decode(data);
+    let _ = steering_command_t::decode(data);
+    let _ = arc_votes_t::decode(data);
+    let _ = obstacle_cells_t::decode(data);
+    let _ = waypoints_t::decode(data);
+    let _ = local_map_t::decode(data);
+}
+
+/// The event-log reader, in file order and in time order (a small window,
+/// so restarts and stragglers are exercised), decoding what it reads.
+pub fn event_log(data: &[u8]) {
+    let reader = LogReader::new(data);
+    let window = ReorderWindow {
+        horizon_us: 1_000_000,
+        max_bytes: 1 << 16,
+        max_events: 64,
+    };
+    let mut events = TypedEvents::new(InTimeOrder::new(reader, window));
+    for event in events.by_ref() {
+        if event.is_err() {
+            break;
+        }
+    }
+    let mut plain = LogReader::new(data);
+    while let Ok(Some(_)) = plain.next_event() {}
+    let stats = plain.stats();
+    assert!(stats.skipped_bytes + stats.truncated_tail_bytes <= data.len() as u64);
+}
+
+/// UDP multicast reassembly: `data` is a series of datagrams, each a
+/// 2-byte big-endian length and its bytes, from two senders, 10 ms apart.
+pub fn udpm_fragments(data: &[u8]) {
+    let mut reassembler = Reassembler::default();
+    let start = Instant::now();
+    let senders = [
+        SocketAddr::from((Ipv4Addr::LOCALHOST, 7667)),
+        SocketAddr::from((Ipv4Addr::LOCALHOST, 7668)),
+    ];
+    let mut rest = data;
+    let mut k = 0u64;
+    while let [a, b, tail @ ..] = rest {
+        let len = usize::from(u16::from_be_bytes([*a, *b])).min(tail.len());
+        let (datagram, next) = tail.split_at(len);
+        let now = start + Duration::from_millis(10 * k);
+        if let Some((_, message)) =
+            reassembler.on_datagram(senders[(k % 2) as usize], datagram, now)
+        {
+            assert!(message.len() <= arcnav_bus::transport::udpm::MAX_MESSAGE_SIZE);
+        }
+        rest = next;
+        k += 1;
+    }
+}
+
+/// The configuration file: parsed and checked, and what it sizes (the
+/// perception grid, the local map's ring, the arc set) built.
+pub fn configuration(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data)
+        && let Ok(config) = Config::from_toml(text, "fuzz.toml")
+    {
+        let _ = config.perception_node();
+        let _ = config.decision_cycle::<()>(arcnav_pipeline::Delivery::held(&config.pipeline));
+        let _ = config.arbiter();
+    }
+}
+
+/// World files (without height files, which are their own target).
+pub fn world(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if text.contains("heightmap") {
+        return;
+    }
+    if let Ok(world) = World::from_toml(text, "fuzz.toml", None) {
+        let _ = world.validate_for(&VehicleConfig::default(), "fuzz.toml");
+        let _ = world.height(world.start.0[0], world.start.0[1]);
+    }
+}
+
+/// Height files: the first byte picks `.npy` (even) or `.asc` (odd).
+pub fn height_file(data: &[u8]) {
+    let Some((first, bytes)) = data.split_first() else {
+        return;
+    };
+    let name = if first % 2 == 0 { "h.npy" } else { "h.asc" };
+    if let Ok(grid) = HeightGrid::parse(Path::new(name), bytes.to_vec(), Some(0.5), None) {
+        let b = grid.bounds();
+        assert!(b.iter().all(|v| v.is_finite()));
+    }
+}
+
+/// `--waypoints` files.
+pub fn waypoints(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data)
+        && let Ok(mission) = crate::replay::parse_waypoints(text)
+    {
+        assert!(
+            mission
+                .waypoints
+                .iter()
+                .all(|w| w.x.is_finite() && w.y.is_finite())
+        );
+    }
+}
