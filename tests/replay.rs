@@ -626,8 +626,9 @@ fn a_log_replayed_twice_in_a_row_is_two_runs_and_says_so() {
 #[test]
 fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
     use arcnav_bus::codec::Message as _;
-    use arcnav_bus::lcmtypes::pose_t;
-    // One pose stamped i64::MAX in the middle of the log.
+    use arcnav_bus::lcmtypes::{pose_t, waypoints_t};
+    // One pose stamped i64::MAX in the middle of the log, and the waypoints
+    // again, stamped i64::MAX too.
     let events: Vec<_> = LogReader::open(sim_log())
         .unwrap()
         .map(Result::unwrap)
@@ -641,6 +642,12 @@ fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
         .unwrap();
     let mut pose = pose_t::decode(&data).unwrap();
     pose.utime = i64::MAX;
+    let mut waypoints = events
+        .iter()
+        .find(|e| e.channel == "WAYPOINTS")
+        .map(|e| waypoints_t::decode(&e.data).unwrap())
+        .unwrap();
+    waypoints.utime = i64::MAX;
     let jumped = dir("end-of-time").join("jumped.lcm");
     let mut writer = LogWriter::create(&jumped).unwrap();
     for (k, e) in events.iter().enumerate() {
@@ -649,6 +656,11 @@ fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
             .unwrap();
         if k == middle {
             writer.write_message(at, "POSE", &pose).unwrap();
+        }
+        if k == middle / 2 {
+            writer
+                .write_message(e.timestamp, "WAYPOINTS", &waypoints)
+                .unwrap();
         }
     }
     drop(writer);
