@@ -41,12 +41,13 @@ impl HeightGrid {
         resolution: Option<f64>,
         origin: Option<[f64; 2]>,
     ) -> Result<Self, HeightmapError> {
-        let fail = |reason: String| HeightmapError {
-            path: path.to_owned(),
-            reason,
-        };
-        let bytes = arcnav_vehicle::files::read_bounded(path, MAX_HEIGHT_FILE_BYTES)
-            .map_err(|e| fail(format!("cannot read it: {e}")))?;
+        let bytes =
+            arcnav_vehicle::files::read_bounded(path, MAX_HEIGHT_FILE_BYTES).map_err(|e| {
+                HeightmapError {
+                    path: path.to_owned(),
+                    reason: format!("cannot read it: {e}"),
+                }
+            })?;
         Self::parse(path, bytes, resolution, origin)
     }
 

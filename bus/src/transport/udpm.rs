@@ -385,24 +385,6 @@ mod tests {
     }
 
     #[test]
-    fn a_fragment_claiming_a_huge_message_allocates_only_what_came() {
-        // One fragment of one, 10 bytes, claiming a 256 MiB message: it
-        // completes the set by count, not by size, and is malformed.
-        let mut packet = Vec::new();
-        packet.extend_from_slice(&MAGIC_LONG.to_be_bytes());
-        packet.extend_from_slice(&7u32.to_be_bytes());
-        packet.extend_from_slice(&(MAX_MESSAGE_SIZE as u32).to_be_bytes());
-        packet.extend_from_slice(&0u32.to_be_bytes());
-        packet.extend_from_slice(&0u16.to_be_bytes());
-        packet.extend_from_slice(&1u16.to_be_bytes());
-        packet.extend_from_slice(b"X\0tenbytes!");
-        let mut r = Reassembler::default();
-        assert!(r.on_datagram(sender(1), &packet, Instant::now()).is_none());
-        assert_eq!(r.stats().malformed, 1);
-        assert_eq!(r.pending(), 0);
-    }
-
-    #[test]
     fn a_new_message_from_the_same_sender_replaces_an_unfinished_one() {
         let mut r = Reassembler::default();
         let now = Instant::now();
