@@ -69,7 +69,9 @@ pub struct Decided {
 }
 
 /// The arbiter node of a live run: the DAMN [`Arbiter`] with what live
-/// operation needs around it. Votes are gathered per cycle (their `utime`):
+/// operation needs around it. Only the expected behaviours' votes are
+/// fused, and none stamped ahead of the sensor clock. Votes are gathered
+/// per cycle (their `utime`):
 /// a cycle is decided when every expected behaviour has voted for it, or at
 /// its deadline, and cycles are decided in order, each once. Its watchdog
 /// commands stop when poses, evaluated images or decisions stop coming;
@@ -128,7 +130,17 @@ pub struct ArbiterCounts {
     pub deadline_decisions: u64,
     /// Votes for a cycle already decided (dropped).
     pub late_votes: u64,
+    /// Votes from a behaviour the arbiter does not wait for (not configured,
+    /// or weight 0): never fused.
+    pub ignored_votes: u64,
+    /// Votes stamped more than [`FUTURE_TOLERANCE_US`] after the sensor
+    /// clock: refused (they would never go stale).
+    pub future_votes: u64,
 }
+
+/// How far ahead of the sensor clock (the newest pose, extrapolated on the
+/// wall clock) a vote may be stamped, µs.
+pub const FUTURE_TOLERANCE_US: Utime = 500_000;
 
 impl ArbiterNode {
     /// `expected`: the behaviours whose votes complete a cycle. `now`: wall
@@ -219,11 +231,16 @@ impl ArbiterNode {
         out: &mut Vec<Decided>,
     ) -> Result<(), VoteSizeError> {
         let Some(slot) = self.expected.iter().position(|e| *e == votes.behaviour) else {
-            // Not waited for: fused from the next decision on.
-            return self.arbiter.on_votes(votes);
+            // Not a configured behaviour with a weight: a stray publisher.
+            self.counts.ignored_votes += 1;
+            return Ok(());
         };
         if votes.votes.len() != self.arbiter.arcs().len() {
             return self.arbiter.on_votes(votes);
+        }
+        if votes.utime > self.sensor_time(now).saturating_add(FUTURE_TOLERANCE_US) {
+            self.counts.future_votes += 1;
+            return Ok(());
         }
         if self.decided.is_some_and(|d| votes.utime < d) {
             self.counts.late_votes += 1;
@@ -637,6 +654,46 @@ mod tests {
             .unwrap();
         assert!(out.is_empty());
         assert_eq!(stage.counts().late_votes, 1);
+    }
+
+    #[test]
+    fn votes_of_an_unconfigured_behaviour_or_from_the_future_change_nothing() {
+        let t0 = 1_000_000_000;
+        let (mut stage, n) = arbiter_stage(t0);
+        stage.on_pose(5_000_000, t0);
+        stage.on_perceived(5_000_000, t0);
+        let mut out = Vec::new();
+        // A stray publisher vetoing every arc, and obstacle avoidance
+        // stamped a minute ahead.
+        let mut stray = votes("anything", 5_000_000, n);
+        for i in 0..n {
+            stray.votes.veto(i, None);
+        }
+        stage.on_votes(&stray, &[], t0, &mut out).unwrap();
+        stage
+            .on_votes(
+                &votes("obstacle_avoidance", 65_000_000, n),
+                &[],
+                t0,
+                &mut out,
+            )
+            .unwrap();
+        assert_eq!(stage.counts().ignored_votes, 1);
+        assert_eq!(stage.counts().future_votes, 1);
+        // The real cycle is decided, driving, and later cycles still are.
+        for t in [5_000_000, 5_100_000] {
+            stage.on_pose(t, t0);
+            for name in ["goal_seeking", "obstacle_avoidance"] {
+                stage
+                    .on_votes(&votes(name, t, n), &[], t0, &mut out)
+                    .unwrap();
+            }
+        }
+        let decided: Vec<(Utime, bool)> = out
+            .iter()
+            .map(|d| (d.command.utime, d.command.is_stop()))
+            .collect();
+        assert_eq!(decided, [(5_000_000, false), (5_100_000, false)]);
     }
 
     #[test]

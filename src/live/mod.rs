@@ -117,6 +117,8 @@ pub(crate) fn arbiter_status(node: &ArbiterNode, status: &mut NodeStatus) {
     status.set("watchdog_stops", counts.watchdog_stops);
     status.set("deadline_decisions", counts.deadline_decisions);
     status.set("late_votes", counts.late_votes);
+    status.set("ignored_votes", counts.ignored_votes);
+    status.set("future_votes", counts.future_votes);
     let stats = node.arbiter.stats();
     status.set("required_stale", stats.stops_required_stale);
     status.set("rejected_votes", stats.rejected_votes);
