@@ -97,7 +97,7 @@ pub struct InputProblems {
     /// The log holds no pose: nothing could be placed or decided.
     pub no_poses: bool,
     /// Images still waiting for the pose at their capture time when the log
-    /// ended (the pose stream stops before them).
+    /// ended or started over (the pose stream stops before them).
     pub images_unplaced: u64,
 }
 
@@ -574,7 +574,8 @@ pub fn replay(
     problems.reports_refused = pipeline.cycle.map.map.stats().reports_refused;
     problems.log = events.log_stats().into();
     problems.no_poses = inputs.poses == 0;
-    problems.images_unplaced = pipeline.perception.waiting() as u64;
+    problems.images_unplaced =
+        pipeline.perception.waiting() as u64 + pipeline.perception.drops.clock_restart;
     let order = *events.source().order();
     problems.reordered = order.reordered;
     problems.max_reorder_lag_s = order.max_lag_us as f64 * 1e-6;

@@ -28,6 +28,9 @@ pub struct PerceptionDrops {
     pub invalid: u64,
     /// Older than an image already evaluated from the same sensor.
     pub out_of_order: u64,
+    /// Waiting for their pose when the pose clock went backwards (a log
+    /// that starts over): their poses will never come.
+    pub clock_restart: u64,
 }
 
 /// Perception: range images + poses → obstacle reports.
@@ -88,6 +91,7 @@ impl PerceptionNode {
             {
                 // Time went backwards (a log started over): start over.
                 self.poses.clear();
+                self.drops.clock_restart += self.waiting.len() as u64;
                 self.waiting.clear();
                 self.newest_capture.clear();
                 let _ = self.poses.push(*pose);
