@@ -700,6 +700,32 @@ fn a_log_written_by_the_reference_lcm_drives_the_vehicle_live() {
     assert!(perception.contains("replaced_by_newer 0"), "{perception}");
 }
 
+/// On a multicast URL whose traffic leaves the host, `arcnav run` says what
+/// is open; with ttl=0 it says nothing of the kind.
+#[test]
+fn multicast_beyond_the_host_is_warned_about() {
+    let _serial = serial();
+    let Some(ns) = NetNs::require("ttl-warning") else {
+        return;
+    };
+    for (url, warned) in [
+        ("udpm://239.255.76.67:7667?ttl=1", true),
+        ("udpm://239.255.76.67:7667?ttl=0", false),
+    ] {
+        let run = Proc::arcnav(&ns, "run", &["run", "--lcm", url, "--duration", "0.3"]);
+        run.wait_ready();
+        let stderr = Arc::clone(&run.stderr);
+        let (code, _) = run.finish();
+        assert_eq!(code, Some(0));
+        let stderr = stderr.lock().unwrap();
+        assert_eq!(
+            stderr.contains("multicast leaves this host"),
+            warned,
+            "{url}:\n{stderr}"
+        );
+    }
+}
+
 /// When the first command after `after` that is a stop arrived, and whether
 /// every command from then on (until `until`) is a stop.
 fn stop_after(received: &Received, after: Instant, until: Instant) -> Option<(Duration, bool)> {

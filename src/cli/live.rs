@@ -31,6 +31,17 @@ pub fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> 
         signal_hook::flag::register(signal, Arc::clone(&flag))
             .context("cannot install the signal handlers")?;
     }
+    if let Ok(arcnav_bus::transport::url::LcmUrl::Udpm(url)) = args.lcm.parse()
+        && url.ttl > 0
+    {
+        tracing::warn!(
+            lcm = %args.lcm,
+            "multicast leaves this host (ttl={}) and LCM has no authentication: any machine on \
+             the network can publish STEERING_COMMAND, ARC_VOTES_*, WAYPOINTS or POSE and be \
+             believed (votes from behaviours that are not configured are ignored)",
+            url.ttl
+        );
+    }
     let lcm = arcnav_bus::transport::Lcm::new(&args.lcm)
         .with_context(|| format!("cannot open LCM at {}", args.lcm))?;
     let options = LiveOptions {
