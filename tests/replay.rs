@@ -579,6 +579,10 @@ fn absurd_numbers_on_the_command_line_are_refused_with_the_flag_named() {
         assert_eq!(code, 1, "{args:?}: {stdout}");
         assert!(stderr.contains(says), "{args:?}: {stderr}");
     }
+    // An endless configuration file: refused, its cause said once.
+    let (code, _, stderr) = arcnav(&["config", "--check", "/dev/zero"]);
+    assert_eq!(code, 1);
+    assert_eq!(stderr.matches("larger than 16 MiB").count(), 1, "{stderr}");
     // A waypoint that is not a number.
     let waypoints = dir("nan-waypoint").join("w.toml");
     std::fs::write(&waypoints, "[[waypoints]]\nposition_m = [nan, 4.0]\n").unwrap();
