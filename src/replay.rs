@@ -428,6 +428,8 @@ pub fn replay(
     let mut span: Option<(Utime, Utime)> = None;
     let mut waypoints_given = false;
     let mut recorded_cells = 0u64;
+    let mut skipped_mission = None;
+    let mut past_to = false;
     if let Some(mission) = &options.waypoints {
         pipeline.input(Input::Waypoints(mission.clone()), &mut sink);
         waypoints_given = true;
@@ -448,11 +450,36 @@ pub fn replay(
         span = Some(span.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
         let since = (t - origin) as f64 * 1e-6;
         if options.from_s.is_some_and(|from| since < from) {
+            // The mission in force at --from still holds there: the newest
+            // waypoints before it are fed when the replay starts.
+            if let AnyMessage::Waypoints(msg) = &event.message
+                && !waypoints_given
+                && event.message.on_its_channel(&event.channel)
+            {
+                skipped_mission = Some((t, event.channel.clone(), msg.clone()));
+            }
             continue;
         }
-        if options.to_s.is_some_and(|to| since > to) {
-            break;
+        if let Some((at, channel, msg)) = skipped_mission.take() {
+            match wire::mission_from_wire(&msg) {
+                Ok(mission) => {
+                    inputs.waypoints += 1;
+                    sink.out.message(at, &channel, &msg);
+                    pipeline.input(Input::Waypoints(mission), &mut sink);
+                }
+                Err(_) => *problems.undecodable.entry(channel).or_default() += 1,
+            }
         }
+        if options.to_s.is_some_and(|to| since > to) {
+            // Past the end: one event alone may be a damaged time (a flipped
+            // bit); two in a row end the replay.
+            if past_to {
+                break;
+            }
+            past_to = true;
+            continue;
+        }
+        past_to = false;
         if let Some(at) = options.stop_at_s {
             sink.keep_at = Some(origin.saturating_add((at * 1e6) as Utime));
             if sink.kept.is_some() {

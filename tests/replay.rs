@@ -809,3 +809,109 @@ fn a_paced_replay_does_not_wait_out_a_jump_in_log_time() {
     );
     assert!(code == 0 || code == 3, "{stdout}{stderr}");
 }
+
+#[test]
+fn a_replay_from_the_middle_keeps_the_mission_sent_before_it() {
+    let options = ReplayOptions {
+        from_s: Some(10.0),
+        ..ReplayOptions::default()
+    };
+    let result = replay(
+        sim_log(),
+        &Config::default(),
+        &Registry::builtin(),
+        &options,
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_eq!(result.inputs.waypoints, 1, "the waypoints sent at 0 s");
+    let comparison = compare(
+        ("recorded", "replayed"),
+        &result.recorded,
+        &result.cycles,
+        (&|_: &str| 1.0, &|_: &str| 1.0),
+        0,
+    );
+    let percent = comparison.agreement_percent.unwrap();
+    eprintln!(
+        "from 10 s: {} compared, {percent:.1}% agree",
+        comparison.compared
+    );
+    // The map starts empty at 10 s, so a few decisions near obstacles
+    // differ; without the mission nearly all did (1 in 313).
+    assert!(percent > 95.0, "{percent:.1}% agree");
+}
+
+#[test]
+fn reports_from_more_sensors_than_the_map_tracks_are_counted_and_said() {
+    use arcnav_bus::codec::Message as _;
+    use arcnav_bus::lcmtypes::obstacle_cells_t;
+    // The recorded cells, each image from another of 40 sensors (the map
+    // tracks 32).
+    let many = dir("sensors").join("many.lcm");
+    let mut writer = LogWriter::create(&many).unwrap();
+    let mut k = 0;
+    for e in LogReader::open(sim_log()).unwrap().map(Result::unwrap) {
+        if e.channel == "OBSTACLE_CELLS" {
+            let mut cells = obstacle_cells_t::decode(&e.data).unwrap();
+            cells.sensor = format!("sensor{}", k % 40);
+            k += 1;
+            writer
+                .write_message(e.timestamp, &e.channel, &cells)
+                .unwrap();
+        } else {
+            writer
+                .write_event(e.timestamp, &e.channel, &e.data)
+                .unwrap();
+        }
+    }
+    drop(writer);
+    let (code, stdout, _) = arcnav(&["replay", many.to_str().unwrap(), "--recorded-cells"]);
+    assert_eq!(code, 3, "{stdout}");
+    assert!(
+        stdout.contains("obstacle report(s) refused by the local map"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn a_flipped_bit_in_one_events_log_time_does_not_end_the_replay_early() {
+    // One pose 2^40 µs (12.7 days) late in the log's time, 2 s in.
+    let flipped = dir("flipped").join("flipped.lcm");
+    let mut writer = LogWriter::create(&flipped).unwrap();
+    let mut first = None;
+    let mut done = false;
+    for e in LogReader::open(sim_log()).unwrap().map(Result::unwrap) {
+        let t0 = *first.get_or_insert(e.timestamp);
+        let t = if !done && e.channel == "POSE" && e.timestamp - t0 > 2_000_000 {
+            done = true;
+            e.timestamp + (1 << 40)
+        } else {
+            e.timestamp
+        };
+        writer.write_event(t, &e.channel, &e.data).unwrap();
+    }
+    drop(writer);
+    let to = |path: &Path| {
+        let options = ReplayOptions {
+            to_s: Some(8.0),
+            ..ReplayOptions::default()
+        };
+        replay(
+            path,
+            &Config::default(),
+            &Registry::builtin(),
+            &options,
+            &mut |_| {},
+        )
+        .unwrap()
+        .cycles
+        .len()
+    };
+    let (a, b) = (to(sim_log()), to(&flipped));
+    assert!(a > 70, "{a} decisions in 8 s");
+    assert!(
+        b.abs_diff(a) <= 1,
+        "{b} decisions with the flipped bit, {a} without"
+    );
+}
