@@ -6,7 +6,8 @@
 //! kept aside for comparison, or, with `recorded_cells`, the recorded cells
 //! replace perception). The same log and configuration give the same output
 //! byte for byte. Nothing in the input can panic the replay: damaged or
-//! foreign input is skipped and counted, and the [`InputProblems`] say what.
+//! foreign input is skipped and counted, and the [`InputProblems`] say what
+//! ([`problems`]); [`compare`] sets two runs' decisions side by side.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -15,12 +16,18 @@ use std::time::{Duration, Instant};
 use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Registry};
 use arcnav_bus::lcmtypes::steering_command_t;
-use arcnav_bus::log::{InTimeOrder, LogReader, LogStats, LogWriteError, ReorderWindow};
+use arcnav_bus::log::{InTimeOrder, LogReader, LogWriteError, ReorderWindow};
 use arcnav_bus::messages::{AnyMessage, TypedEvents, channels};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::{ArcSet, ConfigError, Pose, SteeringCommand, Utime};
 use serde::Serialize;
+
+mod compare;
+mod problems;
+
+pub use compare::{Comparison, Decided, Difference, WeightOf, compare};
+pub use problems::{InputProblems, LogSummary};
 
 use crate::config::Config;
 use crate::recorder::{Recorder, WriteFailed};
@@ -46,209 +53,6 @@ pub struct ReplayOptions {
     /// Keep the decision and map of the first cycle at or after this many
     /// seconds (for `arcnav render`), and stop there.
     pub stop_at_s: Option<f64>,
-}
-
-/// What could not be used, and why. Any of it but `unknown_channels` and
-/// `ignored` means input was lost.
-#[derive(Debug, Clone, Default, Serialize)]
-pub struct InputProblems {
-    pub log: LogSummary,
-    /// Messages of types arcnav does not know, per channel (e.g. LCM_SELF_TEST).
-    pub unknown_channels: BTreeMap<String, u64>,
-    /// Messages with a known fingerprint that do not decode, per channel.
-    pub undecodable: BTreeMap<String, u64>,
-    /// Poses that are not poses (bad quaternion, non-finite values).
-    pub invalid_poses: u64,
-    /// Range images that are not images (bad mount, sizes, angles).
-    pub invalid_images: u64,
-    /// Images with no pose around their capture time.
-    pub images_without_pose: u64,
-    /// Images older than one already evaluated from the same sensor.
-    pub images_out_of_order: u64,
-    /// Times the pose jumped or ran backwards and the local map was reset.
-    pub map_resets: u64,
-    /// Known messages the replay does not consume (e.g. LOCAL_MAP), per channel.
-    pub ignored: BTreeMap<String, u64>,
-    /// Messages of a known type on a channel that is not arcnav's for that
-    /// type (`POSE_GPS_RAW`, `STEERING_COMMAND_TELEOP`), per channel: another
-    /// program's, skipped.
-    pub foreign: BTreeMap<String, u64>,
-    /// Events that came in the file after events logged later, fed in time
-    /// order (nothing lost).
-    pub reordered: u64,
-    /// The largest such lag, s.
-    pub max_reorder_lag_s: f64,
-    /// Events further out of time order than the reader's window: fed late,
-    /// after decisions that should have seen them.
-    pub fed_late: u64,
-    /// Times the log starts over (a channel goes back in time: logs
-    /// concatenated): replayed as consecutive runs.
-    pub log_restarts: u64,
-    /// Decision cycles not run because the pose clock jumped ahead by more
-    /// than a second (a gap in the log, a corrupt time).
-    pub skipped_cycles: u64,
-    /// Times the pose clock went backwards and the cycle clock restarted.
-    pub clock_restarts: u64,
-    /// Obstacle reports the local map refused (see the log at -v).
-    pub reports_refused: u64,
-    /// OBSTACLE_CELLS in a log with no range image, replayed without
-    /// `--recorded-cells`: nothing was perceived.
-    pub cells_unused: u64,
-    /// The log holds no pose: nothing could be placed or decided.
-    pub no_poses: bool,
-    /// Images still waiting for the pose at their capture time when the log
-    /// ended or started over (the pose stream stops before them).
-    pub images_unplaced: u64,
-}
-
-/// The log reader's counts.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
-pub struct LogSummary {
-    pub events: u64,
-    pub skipped_bytes: u64,
-    pub corrupt_events: u64,
-    pub truncated_tail_bytes: u64,
-}
-
-impl From<&LogStats> for LogSummary {
-    fn from(s: &LogStats) -> Self {
-        Self {
-            events: s.events,
-            skipped_bytes: s.skipped_bytes,
-            corrupt_events: s.corrupt_events,
-            truncated_tail_bytes: s.truncated_tail_bytes,
-        }
-    }
-}
-
-impl InputProblems {
-    /// True when some input could not be used.
-    pub fn lost_input(&self) -> bool {
-        self.log.skipped_bytes > 0
-            || self.log.corrupt_events > 0
-            || self.log.truncated_tail_bytes > 0
-            || !self.undecodable.is_empty()
-            || self.invalid_poses > 0
-            || self.invalid_images > 0
-            || self.images_without_pose > 0
-            || self.images_out_of_order > 0
-            || self.fed_late > 0
-            || self.reports_refused > 0
-            || self.cells_unused > 0
-            || self.no_poses
-            || self.images_unplaced > 0
-    }
-
-    /// One line per problem, for the summary.
-    pub fn lines(&self) -> Vec<String> {
-        let mut lines = Vec::new();
-        let l = &self.log;
-        if l.skipped_bytes > 0 {
-            lines.push(format!(
-                "{} bytes of damaged log skipped ({} corrupt events)",
-                l.skipped_bytes, l.corrupt_events
-            ));
-        }
-        if l.truncated_tail_bytes > 0 {
-            lines.push(format!(
-                "log ends mid-event: {} bytes of a truncated last event",
-                l.truncated_tail_bytes
-            ));
-        }
-        for (channel, n) in &self.undecodable {
-            lines.push(format!("{n} undecodable message(s) on {channel}"));
-        }
-        if self.reordered > 0 {
-            lines.push(format!(
-                "{} event(s) stood in the file after events logged up to {:.2} s later: fed in time order",
-                self.reordered, self.max_reorder_lag_s
-            ));
-        }
-        if self.log_restarts > 0 {
-            lines.push(format!(
-                "the log starts over {} time(s) (its channels go back in time): replayed as consecutive runs",
-                self.log_restarts
-            ));
-        }
-        if self.skipped_cycles > 0 {
-            lines.push(format!(
-                "{} decision cycle(s) skipped: the pose clock jumped ahead by more than 1 s",
-                self.skipped_cycles
-            ));
-        }
-        if self.clock_restarts > 0 {
-            lines.push(format!(
-                "the pose clock went backwards {} time(s): the decision cycle restarted there",
-                self.clock_restarts
-            ));
-        }
-        if self.reports_refused > 0 {
-            lines.push(format!(
-                "{} obstacle report(s) refused by the local map (-v says why)",
-                self.reports_refused
-            ));
-        }
-        if self.log.events == 0 {
-            lines.push(format!(
-                "no LCM event could be read from the log ({} bytes skipped as damaged): is it an LCM log?",
-                self.log.skipped_bytes + self.log.truncated_tail_bytes
-            ));
-        } else if self.no_poses {
-            lines.push("the log holds no POSE: nothing could be placed or decided".into());
-        }
-        if self.images_unplaced > 0 {
-            lines.push(format!(
-                "{} image(s) never evaluated: the pose stream ends before their capture time",
-                self.images_unplaced
-            ));
-        }
-        if self.cells_unused > 0 {
-            lines.push(format!(
-                "the log holds {} OBSTACLE_CELLS and no range image: nothing was perceived (replay with --recorded-cells to use them)",
-                self.cells_unused
-            ));
-        }
-        if self.fed_late > 0 {
-            lines.push(format!(
-                "{} event(s) further out of time order than the reader's window: fed late",
-                self.fed_late
-            ));
-        }
-        for (what, n) in [
-            ("invalid pose(s)", self.invalid_poses),
-            ("invalid range image(s)", self.invalid_images),
-            (
-                "image(s) skipped: no pose around the capture time",
-                self.images_without_pose,
-            ),
-            (
-                "image(s) skipped: older than one already evaluated",
-                self.images_out_of_order,
-            ),
-            (
-                "local map reset(s): the pose jumped or ran backwards",
-                self.map_resets,
-            ),
-        ] {
-            if n > 0 {
-                lines.push(format!("{n} {what}"));
-            }
-        }
-        for (channel, n) in &self.unknown_channels {
-            lines.push(format!(
-                "{n} message(s) of an unknown type on {channel} (skipped)"
-            ));
-        }
-        for (channel, n) in &self.ignored {
-            lines.push(format!("{n} message(s) on {channel} not used by replay"));
-        }
-        for (channel, n) in &self.foreign {
-            lines.push(format!(
-                "{n} message(s) on {channel}, not an arcnav channel for their type (another program's: skipped)"
-            ));
-        }
-        lines
-    }
 }
 
 /// Inputs used.
@@ -624,139 +428,4 @@ pub fn replay(
         kept: sink.kept,
         arcs,
     })
-}
-
-/// A behaviour's weight by name, for attributing changes.
-pub type WeightOf<'a> = &'a dyn Fn(&str) -> f64;
-
-/// A decision that differs between two runs.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Difference {
-    /// Seconds from the log's start.
-    pub time_s: f64,
-    pub utime: Utime,
-    pub a: Decided,
-    pub b: Decided,
-    /// The behaviour whose (weighted) votes moved the choice from a's arc to b's most.
-    pub moved_by: Option<String>,
-}
-
-/// One side of a difference.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Decided {
-    pub arc: Option<usize>,
-    pub curvature: f64,
-    pub speed_mps: f64,
-}
-
-impl From<&SteeringCommand> for Decided {
-    fn from(c: &SteeringCommand) -> Self {
-        Self {
-            arc: c.arc_index,
-            curvature: c.curvature,
-            speed_mps: c.speed_mps,
-        }
-    }
-}
-
-/// How two runs of a log compare.
-#[derive(Debug, Clone, Serialize)]
-pub struct Comparison {
-    pub a: String,
-    pub b: String,
-    /// Decisions at the same times in both runs.
-    pub compared: usize,
-    pub agreeing: usize,
-    /// `None` when no decision could be compared: never "100 %" of nothing.
-    pub agreement_percent: Option<f64>,
-    pub largest_curvature_difference: Option<Difference>,
-    pub first_divergence: Option<Difference>,
-    pub differences: Vec<Difference>,
-}
-
-/// Compares decisions of `a` and `b` at the times both made one.
-/// `weights_a`/`weights_b` give each behaviour's weight, to attribute changes.
-pub fn compare(
-    labels: (&str, &str),
-    a: &BTreeMap<Utime, Cycle>,
-    b: &BTreeMap<Utime, Cycle>,
-    weights: (WeightOf<'_>, WeightOf<'_>),
-    origin: Utime,
-) -> Comparison {
-    let mut differences = Vec::new();
-    let mut compared = 0;
-    for (t, ca) in a {
-        let Some(cb) = b.get(t) else { continue };
-        compared += 1;
-        let same = ca.command.arc_index == cb.command.arc_index
-            && (ca.command.speed_mps - cb.command.speed_mps).abs() < 1e-6
-            && (ca.command.curvature - cb.command.curvature).abs() < 1e-9;
-        if same {
-            continue;
-        }
-        differences.push(Difference {
-            time_s: (*t - origin) as f64 * 1e-6,
-            utime: *t,
-            a: Decided::from(&ca.command),
-            b: Decided::from(&cb.command),
-            moved_by: attribute(ca, cb, weights),
-        });
-    }
-    let largest = differences
-        .iter()
-        .max_by(|x, y| {
-            (x.a.curvature - x.b.curvature)
-                .abs()
-                .total_cmp(&(y.a.curvature - y.b.curvature).abs())
-        })
-        .cloned();
-    Comparison {
-        a: labels.0.to_owned(),
-        b: labels.1.to_owned(),
-        compared,
-        agreeing: compared - differences.len(),
-        agreement_percent: (compared > 0)
-            .then(|| 100.0 * (compared - differences.len()) as f64 / compared as f64),
-        largest_curvature_difference: largest,
-        first_divergence: differences.first().cloned(),
-        differences,
-    }
-}
-
-/// Which behaviour's weighted votes moved the choice from a's arc to b's
-/// most: for each behaviour, how much more it favours b's arc over a's in
-/// run b than in run a.
-fn attribute(a: &Cycle, b: &Cycle, weights: (WeightOf<'_>, WeightOf<'_>)) -> Option<String> {
-    let (arc_a, arc_b) = (a.command.arc_index?, b.command.arc_index?);
-    let preference = |cycle: &Cycle, name: &str, weight: f64| -> f64 {
-        cycle
-            .votes
-            .iter()
-            .find(|v| v.behaviour == name)
-            .map_or(0.0, |v| {
-                weight
-                    * f64::from(
-                        v.votes.vote(arc_b).unwrap_or(0.0) - v.votes.vote(arc_a).unwrap_or(0.0),
-                    )
-            })
-    };
-    let mut names: Vec<&str> = a
-        .votes
-        .iter()
-        .chain(&b.votes)
-        .map(|v| v.behaviour.as_str())
-        .collect();
-    names.sort_unstable();
-    names.dedup();
-    names
-        .into_iter()
-        .map(|name| {
-            (
-                name,
-                preference(b, name, (weights.1)(name)) - preference(a, name, (weights.0)(name)),
-            )
-        })
-        .filter(|(_, shift)| *shift > 1e-9)
-        .max_by(|x, y| x.1.total_cmp(&y.1))
-        .map(|(name, _)| name.to_owned())
 }
