@@ -558,7 +558,33 @@ fn assert_reproduces(label: &str, received: &Received, log: &Path, config: &Conf
         missing.is_empty(),
         "{label}: cycles not decided: {missing:?}"
     );
-    assert_eq!(a.agreeing, a.compared, "{label}: {:.2}% agree", a.percent());
+    // A cycle may differ only where the live safety watchdog stopped the
+    // vehicle (poses or images late on a loaded machine: it has no
+    // counterpart in lock-step); every decision on votes is lock-step's.
+    let (from, to) = (
+        SIM_EPOCH_US + (first_s * 1e6) as i64,
+        SIM_EPOCH_US + (LOG_S * 1e6) as i64,
+    );
+    let differing: Vec<String> = expected
+        .range(from..to)
+        .filter_map(|(t, e)| {
+            let got = live.get(t)?;
+            let same = got.arc_index == e.arc_index && (got.speed_mps - e.speed_mps).abs() < 1e-6;
+            (!same && !got.is_stop()).then(|| {
+                format!(
+                    "{:.2} s: arc {:?} vs {:?}",
+                    (t - SIM_EPOCH_US) as f64 * 1e-6,
+                    got.arc_index,
+                    e.arc_index
+                )
+            })
+        })
+        .collect();
+    assert!(
+        differing.is_empty(),
+        "{label}: decided otherwise: {differing:?}"
+    );
+    assert!(a.percent() >= 95.0, "{label}: {:.2}% agree", a.percent());
     // The last command is the final stop.
     assert!(
         received.last().unwrap().1.is_stop(),
