@@ -127,22 +127,10 @@ impl InputProblems {
                 self.log_restarts
             ));
         }
-        if self.skipped_cycles > 0 {
-            lines.push(format!(
-                "{} decision cycle(s) skipped: the pose clock jumped ahead by more than 1 s",
-                self.skipped_cycles
-            ));
-        }
         if self.clock_restarts > 0 {
             lines.push(format!(
                 "the pose clock went backwards {} time(s): the decision cycle restarted there",
                 self.clock_restarts
-            ));
-        }
-        if self.reports_refused > 0 {
-            lines.push(format!(
-                "{} obstacle report(s) refused by the local map (-v says why)",
-                self.reports_refused
             ));
         }
         if self.log.events == 0 {
@@ -153,22 +141,10 @@ impl InputProblems {
         } else if self.no_poses {
             lines.push("the log holds no POSE: nothing could be placed or decided".into());
         }
-        if self.images_unplaced > 0 {
-            lines.push(format!(
-                "{} image(s) never evaluated: the pose stream ends before their capture time",
-                self.images_unplaced
-            ));
-        }
         if self.cells_unused > 0 {
             lines.push(format!(
                 "the log holds {} OBSTACLE_CELLS and no range image: nothing was perceived (replay with --recorded-cells to use them)",
                 self.cells_unused
-            ));
-        }
-        if self.fed_late > 0 {
-            lines.push(format!(
-                "{} event(s) further out of time order than the reader's window: fed late",
-                self.fed_late
             ));
         }
         for (what, n) in [
@@ -185,6 +161,22 @@ impl InputProblems {
             (
                 "local map reset(s): the pose jumped or ran backwards",
                 self.map_resets,
+            ),
+            (
+                "decision cycle(s) skipped: the pose clock jumped ahead by more than 1 s",
+                self.skipped_cycles,
+            ),
+            (
+                "obstacle report(s) refused by the local map (-v says why)",
+                self.reports_refused,
+            ),
+            (
+                "image(s) never evaluated: the pose stream ends before their capture time",
+                self.images_unplaced,
+            ),
+            (
+                "event(s) further out of time order than the reader's window: fed late",
+                self.fed_late,
             ),
         ] {
             if n > 0 {
