@@ -4,6 +4,10 @@
 //! The `_two_threads` variant hands half of the binning and of the cell
 //! judging to a helper thread (a one-thread rayon pool, as the live
 //! executors do; the result is identical).
+//! The `_without_drop_offs` variants turn `[perception.drop_off]` off
+//! (the classifier then runs without the column walk, as before drop-offs
+//! existed); at the end the cost of drop-off detection is printed as the
+//! relative difference (target: within 10 %).
 //! Run with `cargo bench -p arcnav-perception`.
 
 use arcnav_perception::scene::HeightFunction;
@@ -16,6 +20,50 @@ use divan::{Bencher, black_box};
 
 fn main() {
     divan::main();
+    drop_off_cost();
+}
+
+/// Times `evaluate` with drop-off detection on and off, alternating
+/// rounds so both see the same machine load, and prints the difference.
+fn drop_off_cost() {
+    println!("\ncost of drop-off detection (median of 15 rounds, one core):");
+    for sensor in [SensorModel::erim(), SensorModel::lidar128()] {
+        let image = scene_image(&sensor);
+        let mut evaluators = [true, false].map(|enabled| {
+            let mut config = PerceptionConfig::default();
+            config.drop_off.enabled = enabled;
+            config.build_evaluator().unwrap_or_else(|e| panic!("{e}"))
+        });
+        let mut report = ObstacleReport::default();
+        let iterations = (4_000_000 / image.range.len()).max(5);
+        let mut rounds: [Vec<f64>; 2] = Default::default();
+        for _ in 0..15 {
+            for (evaluator, times) in evaluators.iter_mut().zip(&mut rounds) {
+                let start = std::time::Instant::now();
+                for _ in 0..iterations {
+                    let _ = black_box(evaluator.evaluate(
+                        black_box(&image),
+                        &Isometry::identity(),
+                        &mut report,
+                    ));
+                }
+                times.push(start.elapsed().as_secs_f64() / iterations as f64);
+            }
+        }
+        let [with, without] = rounds.map(|mut times| {
+            times.sort_by(f64::total_cmp);
+            times[times.len() / 2]
+        });
+        println!(
+            "  {:>8} {:>4}x{:<4}: {:8.1} µs with, {:8.1} µs without: {:+.1} %",
+            sensor.id,
+            image.rows(),
+            image.cols(),
+            with * 1e6,
+            without * 1e6,
+            100.0 * (with / without - 1.0)
+        );
+    }
 }
 
 /// Rolling ground with ridges, scattered 40-80 cm rocks and a ditch.
@@ -66,10 +114,17 @@ fn bench_image(bencher: Bencher, sensor: SensorModel) {
 }
 
 fn bench_image_with(bencher: Bencher, sensor: SensorModel, runner: &dyn Runner) {
+    bench_configured(bencher, sensor, runner, &PerceptionConfig::default());
+}
+
+fn bench_configured(
+    bencher: Bencher,
+    sensor: SensorModel,
+    runner: &dyn Runner,
+    config: &PerceptionConfig,
+) {
     let image = scene_image(&sensor);
-    let mut evaluator = PerceptionConfig::default()
-        .build_evaluator()
-        .unwrap_or_else(|e| panic!("{e}"));
+    let mut evaluator = config.build_evaluator().unwrap_or_else(|e| panic!("{e}"));
     let mut report = ObstacleReport::default();
     let stats = evaluator
         .evaluate(&image, &Isometry::identity(), &mut report)
@@ -114,4 +169,25 @@ fn lidar_128x2048_two_threads(bencher: Bencher) {
         .build()
         .unwrap_or_else(|e| panic!("{e}"));
     bench_image_with(bencher, SensorModel::lidar128(), &Helpers(pool));
+}
+
+fn without_drop_offs() -> PerceptionConfig {
+    let mut config = PerceptionConfig::default();
+    config.drop_off.enabled = false;
+    config
+}
+
+#[divan::bench]
+fn erim_64x256_without_drop_offs(bencher: Bencher) {
+    bench_configured(bencher, SensorModel::erim(), &InOrder, &without_drop_offs());
+}
+
+#[divan::bench]
+fn lidar_128x2048_without_drop_offs(bencher: Bencher) {
+    bench_configured(
+        bencher,
+        SensorModel::lidar128(),
+        &InOrder,
+        &without_drop_offs(),
+    );
 }

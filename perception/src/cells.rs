@@ -13,9 +13,16 @@
 //!   the tolerated step above or below its own;
 //!
 //! (a) and (b) only with at least 5 points, "to avoid frequent erroneous
-//! classification". Untraversable cells are grouped into 8-connected regions.
-//! Only cells with data are evaluated; nothing is interpolated; nothing is
-//! carried from one image to the next.
+//! classification". And, what a cell's own points cannot show:
+//!
+//! - (d) **drop-off**: it holds the near edge of ground the image did not see,
+//!   wider than the vehicle bridges, beyond which the ground drops away (see
+//!   [`DropOffRule::judge`]). Each image column is walked from its highest
+//!   beam down, far returns to near ones, while the rows are binned.
+//!
+//! Untraversable cells are grouped into 8-connected regions. Only cells
+//! with data are evaluated; nothing is interpolated; nothing is carried
+//! from one image to the next.
 //!
 //! Work is proportional to the valid pixels: the grid itself is only a map
 //! from cell to slot (4 bytes a cell, so it stays in cache); the
@@ -147,6 +154,10 @@ struct BeamTrig {
     sin_el: Vec<f32>,
     cos_az: Vec<f32>,
     sin_az: Vec<f32>,
+    /// The rows from the highest beam to the lowest: the order rows are
+    /// binned in, so each column is walked from its far returns to its near
+    /// ones.
+    order: Vec<u32>,
 }
 
 impl BeamTrig {
@@ -154,6 +165,10 @@ impl BeamTrig {
         if self.elevation != elevation {
             self.elevation.clear();
             self.elevation.extend_from_slice(elevation);
+            self.order.clear();
+            self.order.extend(0..elevation.len() as u32);
+            self.order
+                .sort_by(|&a, &b| elevation[b as usize].total_cmp(&elevation[a as usize]));
             self.cos_el.clear();
             self.sin_el.clear();
             for &e in elevation {
@@ -200,6 +215,208 @@ struct Bins {
     counts: [u32; 4],
     /// The row being binned, projected.
     row: ProjectedRow,
+    /// The part's columns walked from their far returns to their near ones.
+    walk: Walk,
+    /// Grid indices of the cells found at the near edge of a drop-off.
+    drop_offs: Vec<u32>,
+}
+
+/// The last two returns of each column of a part, walking the columns
+/// from the highest beam down (far to near): horizontal distance from the
+/// sensor and height, level frame, one array each (so a row's step is
+/// vectorised). `d = ∞`: none yet.
+#[derive(Debug, Default)]
+struct Walk {
+    d: Vec<f32>,
+    z: Vec<f32>,
+    beyond_d: Vec<f32>,
+    beyond_z: Vec<f32>,
+    /// Per pixel of the row: its gap to the column's previous return is
+    /// longer than the vehicle bridges and the ground beyond lower.
+    long_gap: Vec<bool>,
+}
+
+impl Walk {
+    fn start(&mut self, columns: usize) {
+        for (values, start) in [
+            (&mut self.d, f32::INFINITY),
+            (&mut self.z, 0.0),
+            (&mut self.beyond_d, f32::INFINITY),
+            (&mut self.beyond_z, 0.0),
+        ] {
+            values.clear();
+            values.resize(columns, start);
+        }
+    }
+
+    /// One row's step: finds the returns whose gap to the column's previous
+    /// return is long, has `rule` judge them (rarely any: flat ground's
+    /// returns lie closer together than a wheel bridges out to 13 m for
+    /// the ERIM), then moves every column that has a return on.
+    #[inline(always)]
+    fn step(&mut self, row: &Row, points: &ProjectedRow, drop_offs: &mut Vec<u32>) {
+        let n = points.index.len();
+        let rule = &row.projection.drop_off;
+        let (max_gap, min_depth, depth_per_m) = (rule.max_gap, rule.min_depth, rule.depth_per_m);
+        self.long_gap.resize(n, false);
+        let (index, d, z) = (&points.index[..n], &points.d[..n], &points.z[..n]);
+        let (wd, wz, bd, bz) = (
+            &mut self.d[..n],
+            &mut self.z[..n],
+            &mut self.beyond_d[..n],
+            &mut self.beyond_z[..n],
+        );
+        let long_gap = &mut self.long_gap[..n];
+        let (mut any, mut walking) = (false, false);
+        for k in 0..n {
+            walking |= index[k] <= OUTSIDE_GRID;
+            // Only a near edge in the region can be flagged. Far returns lie
+            // farther apart than a wheel bridges: only those with ground
+            // lower beyond (or none) go to the rule.
+            let long = (index[k] < OUTSIDE_GRID)
+                & (wd[k] - d[k] > max_gap)
+                & ((wd[k] == f32::INFINITY) | (z[k] - wz[k] > min_depth + depth_per_m * d[k]));
+            long_gap[k] = long;
+            any |= long;
+        }
+        if any {
+            for k in (0..n).filter(|&k| long_gap[k]) {
+                let previous = Previous {
+                    d: wd[k],
+                    z: wz[k],
+                    beyond_d: bd[k],
+                    beyond_z: bz[k],
+                };
+                if rule.judge(
+                    row.projection,
+                    &previous,
+                    (d[k], z[k]),
+                    row.position,
+                    row.first_col + k,
+                ) {
+                    drop_offs.push(index[k]);
+                }
+            }
+        }
+        // Selected by bit masks: written as `if`, the compiler branches
+        // per pixel instead of blending eight at a time.
+        let select = |mask: u32, new: f32, old: f32| {
+            f32::from_bits((new.to_bits() & mask) | (old.to_bits() & !mask))
+        };
+        if !walking {
+            // A row of sky (or of nothing in range) leaves every column as it was.
+            return;
+        }
+        // Returns in range, in the region or not, walk on; others do not.
+        for k in 0..n {
+            let mask = 0u32.wrapping_sub(u32::from(index[k] <= OUTSIDE_GRID));
+            bd[k] = select(mask, wd[k], bd[k]);
+            bz[k] = select(mask, wz[k], bz[k]);
+            wd[k] = select(mask, d[k], wd[k]);
+            wz[k] = select(mask, z[k], wz[k]);
+        }
+    }
+}
+
+/// A column's last two returns (see [`Walk`]).
+#[derive(Debug, Clone, Copy)]
+struct Previous {
+    d: f32,
+    z: f32,
+    beyond_d: f32,
+    beyond_z: f32,
+}
+
+/// The drop-off rule (`[perception.drop_off]`) with what it needs of the
+/// image being binned.
+#[derive(Clone, Copy)]
+struct DropOffRule<'a> {
+    /// A gap up to this long is bridged (∞: detection off), m.
+    max_gap: f32,
+    min_depth: f32,
+    depth_per_m: f32,
+    noise: f32,
+    /// tan of the tolerated slope.
+    tan_slope: f32,
+    /// Rows, highest beam first.
+    order: &'a [u32],
+}
+
+impl DropOffRule<'_> {
+    /// Whether the return (`d`, `z`) of row `order[position]`, column `col`,
+    /// whose column's previous returns (farther, higher beams) are `walk`,
+    /// is the near edge of a drop-off. Called only when the gap to the
+    /// previous return is longer than `max_gap` (or there is none).
+    ///
+    /// With the return beyond the gap at (d_f, z_f), the near edge at (d, z)
+    /// is a drop-off when the ground beyond lies lower than
+    /// δ = δ0 + Δ·d (000 §4.2's gap rule, here in the units a column gives:
+    /// ground continuing level from the near edge returns at or above z,
+    /// however sparse far returns are), and
+    /// - falls away more steeply than the tolerated slope:
+    ///   `z - z_f > tan(max_slope)·(d_f - d)`, or
+    /// - is the foot of a wall: the next return beyond rises from it more
+    ///   steeply than the tolerated slope (a hole's far side).
+    ///
+    /// The far side of a crest falling away gently, seen beyond its
+    /// shadow, is neither. With no return beyond at all, it is a drop-off
+    /// when the two beams above would have met level ground within range
+    /// (one missing pixel is a dropout; beams that would have met the
+    /// ground beyond the range see nothing anyway).
+    #[cold]
+    #[inline(never)]
+    fn judge(
+        &self,
+        projection: &Projection,
+        walk: &Previous,
+        (d, z): (f32, f32),
+        position: usize,
+        col: usize,
+    ) -> bool {
+        if walk.d == f32::INFINITY {
+            return self.nothing_seen_beyond(projection, (d, z), position, col);
+        }
+        let (gap, depth) = (walk.d - d, z - walk.z);
+        if depth <= self.min_depth + self.depth_per_m * d {
+            return false;
+        }
+        if depth > self.tan_slope * gap {
+            return true;
+        }
+        walk.beyond_d < f32::INFINITY
+            && walk.beyond_z - walk.z
+                > self.tan_slope * (walk.beyond_d - walk.d).max(0.0) + self.noise
+    }
+
+    fn nothing_seen_beyond(
+        &self,
+        projection: &Projection,
+        (d, z): (f32, f32),
+        position: usize,
+        col: usize,
+    ) -> bool {
+        let (Some(&above), Some(&two_above)) = (
+            self.order.get(position.wrapping_sub(1)),
+            self.order.get(position.wrapping_sub(2)),
+        ) else {
+            return false;
+        };
+        // Where a beam would meet level ground at the near edge's height:
+        // (distance along the beam, horizontal distance from the sensor).
+        let level_hit = |row: u32| {
+            let [x, y, dz] = projection.direction(row as usize, col);
+            let t = (z - projection.t[2]) / dz;
+            (dz < 0.0 && t > 0.0).then(|| (t, t * x.hypot(y)))
+        };
+        // Both beams found nothing: the unseen stretch reaches at least
+        // to where the higher one would have met level ground.
+        match (level_hit(above), level_hit(two_above)) {
+            (Some(_), Some((t, horizontal))) => {
+                horizontal - d > self.max_gap && t <= projection.max_range
+            }
+            _ => false,
+        }
+    }
 }
 
 /// One row of a part, projected: per pixel its cell (or why it has none)
@@ -210,6 +427,8 @@ struct ProjectedRow {
     dx: Vec<f32>,
     dy: Vec<f32>,
     z: Vec<f32>,
+    /// Horizontal distance from the sensor.
+    d: Vec<f32>,
 }
 
 /// `ProjectedRow::index` of a pixel that has no cell, by reason (all above
@@ -226,6 +445,8 @@ impl Bins {
             column_rows: Vec::new(),
             counts: [0; 4],
             row: ProjectedRow::default(),
+            walk: Walk::default(),
+            drop_offs: Vec::new(),
         }
     }
 
@@ -297,13 +518,23 @@ fn gather(row: u32, points: &ProjectedRow, bins: &mut Bins, run: Cell) -> Cell {
             *sum += term;
         }
         valid += 1;
-        // The column's highest and lowest valid rows give its far and near
-        // return, for the field of view.
-        span.0 = span.0.min(row);
+        // The column's first and last valid rows (highest beam first) give
+        // its far and near return, for the field of view.
+        span.0 = if span.0 == u32::MAX { row } else { span.0 };
         span.1 = row;
     }
     bins.counts = [no_return, out_of_range, outside_grid, valid];
     run!()
+}
+
+/// The row a [`Walk`] steps through: its place in the walk order, and
+/// what the drop-off rule needs.
+#[derive(Clone, Copy)]
+struct Row<'a> {
+    position: usize,
+    /// The image column of the part's first column.
+    first_col: usize,
+    projection: &'a Projection<'a>,
 }
 
 /// Adds the points of `cell` to the cell of the same index.
@@ -341,9 +572,16 @@ struct Projection<'a> {
     hi: [f32; 2],
     min_range: f32,
     max_range: f32,
+    drop_off: DropOffRule<'a>,
 }
 
 impl Projection<'_> {
+    /// The unit direction of beam (`row`, `col`) in the level frame.
+    fn direction(&self, row: usize, col: usize) -> [f32; 3] {
+        let (ce, se) = (self.cos_el[row], self.sin_el[row]);
+        std::array::from_fn(|axis| ce * self.column_terms[axis][col] + se * self.r2[axis])
+    }
+
     /// Projects and bins the valid pixels of `columns` into `bins`, with
     /// the AVX2 instruction set where the processor has it (the same
     /// arithmetic, so the same result: Rust never fuses a multiply and an add
@@ -369,14 +607,40 @@ impl Projection<'_> {
     /// points into the bins in pixel order.
     #[inline(always)]
     fn bin_portable(&self, columns: std::ops::Range<usize>, bins: &mut Bins) {
+        if self.drop_off.max_gap.is_finite() {
+            self.bin_rows::<true>(columns, bins);
+        } else {
+            self.bin_rows::<false>(columns, bins);
+        }
+    }
+
+    #[inline(always)]
+    fn bin_rows<const DROP_OFFS: bool>(&self, columns: std::ops::Range<usize>, bins: &mut Bins) {
         let mut points = std::mem::take(&mut bins.row);
         bins.column_rows.clear();
         bins.column_rows.resize(columns.len(), (u32::MAX, 0));
+        bins.walk.start(columns.len());
+        bins.drop_offs.clear();
         bins.counts = [0; 4];
         let mut run = Cell::new(u32::MAX);
-        for (row, ranges) in self.ranges.chunks_exact(self.cols.max(1)).enumerate() {
-            self.project_row(row, &ranges[columns.clone()], columns.start, &mut points);
-            run = gather(row as u32, &points, bins, run);
+        let cols = self.cols.max(1);
+        for (position, &row) in self.drop_off.order.iter().enumerate() {
+            let ranges = &self.ranges[row as usize * cols..][..cols];
+            self.project_row::<DROP_OFFS>(
+                row as usize,
+                &ranges[columns.clone()],
+                columns.start,
+                &mut points,
+            );
+            if DROP_OFFS {
+                let row = Row {
+                    position,
+                    first_col: columns.start,
+                    projection: self,
+                };
+                bins.walk.step(&row, &points, &mut bins.drop_offs);
+            }
+            run = gather(row, &points, bins, run);
         }
         if run.count > 0 {
             put(&mut bins.slots, &mut bins.cells, &run);
@@ -384,11 +648,18 @@ impl Projection<'_> {
         bins.row = points;
     }
 
-    /// Projects the pixels `ranges` of `row`, from column `first` on, into `out`.
+    /// Projects the pixels `ranges` of `row`, from column `first` on, into
+    /// `out` (with each pixel's horizontal distance when `DISTANCE`).
     #[inline(always)]
-    fn project_row(&self, row: usize, ranges: &[f32], first: usize, out: &mut ProjectedRow) {
+    fn project_row<const DISTANCE: bool>(
+        &self,
+        row: usize,
+        ranges: &[f32],
+        first: usize,
+        out: &mut ProjectedRow,
+    ) {
         let n = ranges.len();
-        for buffer in [&mut out.dx, &mut out.dy, &mut out.z] {
+        for buffer in [&mut out.dx, &mut out.dy, &mut out.z, &mut out.d] {
             buffer.resize(n, 0.0);
         }
         out.index.resize(n, 0);
@@ -402,17 +673,21 @@ impl Projection<'_> {
         let [ux, uy, uz] = self.column_terms;
         let columns = first..first + n;
         let (ux, uy, uz) = (&ux[columns.clone()], &uy[columns.clone()], &uz[columns]);
-        let (index, dx, dy, z) = (
+        let (index, dx, dy, z, d) = (
             &mut out.index[..n],
             &mut out.dx[..n],
             &mut out.dy[..n],
             &mut out.z[..n],
+            &mut out.d[..n],
         );
         for k in 0..n {
             let range = ranges[k];
             let x = (ce * ux[k] + v[0]) * range + t[0];
             let y = (ce * uy[k] + v[1]) * range + t[1];
             z[k] = (ce * uz[k] + v[2]) * range + t[2];
+            if DISTANCE {
+                d[k] = ((x - t[0]) * (x - t[0]) + (y - t[1]) * (y - t[1])).sqrt();
+            }
             let fx = (x + ox) * inv_cell;
             let fy = (y + oy) * inv_cell;
             // NaN fails every comparison, so these tests keep only valid
@@ -455,6 +730,12 @@ pub struct CellClassifier {
     min_range: f32,
     max_range: f32,
     fov_max_vertices: usize,
+    /// `[perception.drop_off]`: (max gap, or ∞ when off; δ0; Δ; noise).
+    drop_off: (f32, f32, f32, f32),
+    /// tan of the tolerated slope (criterion b's), for drop-offs.
+    tan_slope: f32,
+    /// Grid indices of this image's drop-off cells (the parts' merged).
+    drop_offs: Vec<u32>,
     /// The grid over the region, in the level frame. Points are binned only
     /// `grid.margin` cells away from its edge, so every neighbour a window
     /// reaches exists.
@@ -497,6 +778,22 @@ impl CellClassifier {
             min_range: config.min_range_m as f32,
             max_range: config.max_range_m as f32,
             fov_max_vertices: config.fov_max_vertices,
+            drop_off: {
+                let d = &config.drop_off;
+                let max_gap = if d.enabled {
+                    d.max_gap_m
+                } else {
+                    f64::INFINITY
+                };
+                (
+                    max_gap as f32,
+                    d.min_depth_m as f32,
+                    d.depth_per_m as f32,
+                    d.noise_m as f32,
+                )
+            },
+            tan_slope: c.max_slope_deg.to_radians().tan() as f32,
+            drop_offs: Vec::new(),
             grid,
             window,
             neighbours: [-s - 1, -s, -s + 1, -1, 1, s - 1, s, s + 1],
@@ -554,6 +851,14 @@ impl CellClassifier {
             ],
             min_range: self.min_range.max(f32::MIN_POSITIVE),
             max_range: self.max_range,
+            drop_off: DropOffRule {
+                max_gap: self.drop_off.0,
+                min_depth: self.drop_off.1,
+                depth_per_m: self.drop_off.2,
+                noise: self.drop_off.3,
+                tan_slope: self.tan_slope,
+                order: &self.trig.order,
+            },
         };
         let parts: [std::ops::Range<usize>; PARTS] =
             std::array::from_fn(|k| cols * k / PARTS..cols * (k + 1) / PARTS);
@@ -582,6 +887,10 @@ impl CellClassifier {
                     self.fov.add(col, x, y);
                 }
             }
+        }
+        self.drop_offs.clear();
+        for bins in &self.bins {
+            self.drop_offs.extend_from_slice(&bins.drop_offs);
         }
         let (first, rest) = self.bins.split_at_mut(1);
         for other in rest {
@@ -629,6 +938,10 @@ impl CellClassifier {
         let this = &*self;
         runner.run(&mut [&mut || this.judge(0, low), &mut || this.judge(half, high)]);
         self.labels = labels;
+        for &index in &self.drop_offs {
+            let slot = self.bins[0].slots[index as usize];
+            self.labels[slot as usize].0.insert(Reasons::DROP_OFF);
+        }
         for &(reasons, _) in &self.labels {
             stats.cells_evaluated += 1;
             if !reasons.is_empty() {

@@ -26,6 +26,8 @@ pub struct PerceptionConfig {
     pub region: RegionConfig,
     /// The per-cell classifier of 002 §4.
     pub cells: CellsConfig,
+    /// The near edges of unseen ground (holes, trenches, ledges).
+    pub drop_off: DropOffConfig,
 }
 
 impl Default for PerceptionConfig {
@@ -37,6 +39,46 @@ impl Default for PerceptionConfig {
             fov_max_vertices: 128,
             region: RegionConfig::default(),
             cells: CellsConfig::default(),
+            drop_off: DropOffConfig::default(),
+        }
+    }
+}
+
+/// Lives in `[perception.drop_off]`: where the returns of an image column
+/// leave a stretch of ground unseen, the near edge of that stretch is
+/// untraversable (reason `drop_off`) when the stretch is wider than the
+/// vehicle rolls across and the ground beyond it is a hole's far side, falls
+/// away more steeply than the tolerated slope, or is not seen at all. See
+/// `cells.rs` for the rule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DropOffConfig {
+    /// Detect drop-offs at all.
+    pub enabled: bool,
+    /// An unseen stretch at most this long is bridged, m (default: the
+    /// vehicle's [`VehicleConfig::bridgeable_gap_m`], 0.77 m).
+    pub max_gap_m: f64,
+    /// δ0 of δ = δ0 + Δ·r (000 §4.2): the ground beyond the gap must lie at
+    /// least this far below the near edge, m (default: the tolerated step;
+    /// a smaller step down is driven).
+    pub min_depth_m: f64,
+    /// Δ of δ = δ0 + Δ·r: per metre of horizontal distance from the sensor,
+    /// for the height error of far returns (beam divergence, pose), m/m.
+    pub depth_per_m: f64,
+    /// Range noise allowance when deciding that the ground beyond the gap
+    /// rises as a wall (a hole's far side), m.
+    pub noise_m: f64,
+}
+
+impl Default for DropOffConfig {
+    fn default() -> Self {
+        let vehicle = VehicleConfig::default();
+        Self {
+            enabled: true,
+            max_gap_m: bridgeable_gap_m(&vehicle),
+            min_depth_m: vehicle.tolerated_step_m,
+            depth_per_m: 0.0025,
+            noise_m: 0.05,
         }
     }
 }
@@ -222,6 +264,11 @@ impl PerceptionConfig {
                 format!("is {}, must be 1, 3, 5, 7 or 9", c.slope_window_cells),
             ));
         }
+        let d = &self.drop_off;
+        config::positive("drop_off.max_gap_m", d.max_gap_m)?;
+        config::positive("drop_off.min_depth_m", d.min_depth_m)?;
+        config::in_range("drop_off.depth_per_m", d.depth_per_m, 0.0, 0.1)?;
+        config::in_range("drop_off.noise_m", d.noise_m, 0.0, 1.0)?;
         let too_lax = |key: &str, value: f64, vehicle_key: &str, limit: f64| {
             (value > limit).then(|| {
                 ConfigError::new(
@@ -251,6 +298,18 @@ impl PerceptionConfig {
                 "max_slope_deg",
                 vehicle.max_slope_deg,
             ),
+            too_lax(
+                "drop_off.max_gap_m",
+                d.max_gap_m,
+                "wheel_radius_m and tolerated_step_m allow",
+                bridgeable_gap_m(vehicle),
+            ),
+            too_lax(
+                "drop_off.min_depth_m",
+                d.min_depth_m,
+                "tolerated_step_m",
+                vehicle.tolerated_step_m,
+            ),
         ];
         checks.into_iter().flatten().next().map_or(Ok(()), Err)
     }
@@ -268,6 +327,12 @@ impl PerceptionConfig {
             )),
         }
     }
+}
+
+/// The vehicle's bridgeable gap, rounded up to the centimetre
+/// `config/default.toml` writes it with.
+fn bridgeable_gap_m(vehicle: &VehicleConfig) -> f64 {
+    (vehicle.bridgeable_gap_m() * 100.0).ceil() / 100.0
 }
 
 /// The most cells the classifier's grid may have (256 MiB of slots).

@@ -25,11 +25,16 @@ impl Reasons {
     pub const SLOPE: Self = Self(2);
     /// The elevation jumps between the cell and a neighbour (criterion c).
     pub const DISCONTINUITY: Self = Self(4);
+    /// The near edge of ground the image did not see, wider than the
+    /// vehicle bridges, beyond which the ground drops away (a hole, a
+    /// trench, a ledge).
+    pub const DROP_OFF: Self = Self(8);
     /// Every reason, with its name, in bit order.
-    pub const ALL: [(Self, &'static str); 3] = [
+    pub const ALL: [(Self, &'static str); 4] = [
         (Self::HEIGHT_VARIATION, "height variation"),
         (Self::SLOPE, "slope"),
         (Self::DISCONTINUITY, "discontinuity"),
+        (Self::DROP_OFF, "drop-off"),
     ];
 
     pub const fn bits(self) -> u8 {
@@ -137,7 +142,7 @@ pub struct ImageStats {
     pub untraversable: u32,
     /// Untraversable cells per reason, in [`Reasons::ALL`] order (a cell
     /// with two reasons counts in both).
-    pub by_reason: [u32; 3],
+    pub by_reason: [u32; 4],
     pub regions: u32,
 }
 

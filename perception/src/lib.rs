@@ -24,7 +24,7 @@ pub mod scene;
 pub mod sensor;
 
 pub use cells::CellClassifier;
-pub use config::{CellsConfig, PerceptionConfig, RegionConfig};
+pub use config::{CellsConfig, DropOffConfig, PerceptionConfig, RegionConfig};
 pub use evaluator::{
     ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner,
     TerrainEvaluator,

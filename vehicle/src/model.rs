@@ -37,6 +37,10 @@ pub struct VehicleConfig {
     pub tolerated_step_m: f64,
     /// Steepest slope the vehicle drives on, degrees.
     pub max_slope_deg: f64,
+    /// Radius of the wheels, m (M998: 37" tyres, 0.47 m). With the
+    /// tolerated step it sets the widest gap the vehicle rolls across
+    /// ([`VehicleConfig::bridgeable_gap_m`]).
+    pub wheel_radius_m: f64,
 }
 
 impl Default for VehicleConfig {
@@ -56,6 +60,7 @@ impl Default for VehicleConfig {
             ground_clearance_m: 0.4,
             tolerated_step_m: 0.2,
             max_slope_deg: 25.0,
+            wheel_radius_m: 0.47,
         }
     }
 }
@@ -76,6 +81,7 @@ impl VehicleConfig {
         config::positive("ground_clearance_m", self.ground_clearance_m)?;
         config::positive("tolerated_step_m", self.tolerated_step_m)?;
         config::in_range("max_slope_deg", self.max_slope_deg, 0.1, 89.0)?;
+        config::positive("wheel_radius_m", self.wheel_radius_m)?;
         if self.rear_overhang_m >= self.length_m {
             return Err(ConfigError::new(
                 "rear_overhang_m",
@@ -96,6 +102,19 @@ impl VehicleConfig {
             ));
         }
         Ok(())
+    }
+
+    /// The widest gap in the ground a wheel rolls across, m: a wheel of
+    /// radius R spanning a gap of width w sags `R - sqrt(R² - (w/2)²)` into
+    /// it, and the sag may be at most the tolerated step s, so
+    /// `w = 2·sqrt(2·R·s - s²)` (0.77 m for the HMMWV: R = 0.47 m,
+    /// s = 0.2 m). A wheel smaller than the step bridges its diameter.
+    pub fn bridgeable_gap_m(&self) -> f64 {
+        let (r, s) = (
+            self.wheel_radius_m,
+            self.tolerated_step_m.min(self.wheel_radius_m),
+        );
+        2.0 * (2.0 * r * s - s * s).max(0.0).sqrt()
     }
 
     /// The body outline in the vehicle frame.
