@@ -7,7 +7,7 @@
 //! and, at the sensor's rate, a range image ray-cast from the true pose. The
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -17,7 +17,7 @@ use arcnav_behaviours::{Mission, Registry, Waypoint};
 use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
 use arcnav_bus::messages::channels;
 use arcnav_localmap::MapSnapshot;
-use arcnav_perception::{ObstacleReport, SensorModel};
+use arcnav_perception::{ObstacleReport, Reasons, SensorModel};
 use arcnav_sim::drape::drape;
 use arcnav_sim::rng::Rng;
 use arcnav_sim::tiles::TileCache;
@@ -96,6 +96,9 @@ pub struct MissionReport {
     pub cruise_speed_mps: f64,
     pub images: u64,
     pub images_dropped: u64,
+    /// Untraversable cells perception reported, summed over the images,
+    /// per reason (a cell with two reasons counts in both).
+    pub untraversable_cells: BTreeMap<&'static str, u64>,
     pub collisions: Vec<Collision>,
     /// Smallest gap between the footprint and a true hazard, m.
     pub closest_approach_m: Option<f64>,
@@ -498,6 +501,11 @@ pub fn run_mission(
         cruise_speed_mps: config.arbiter.cruise_speed_mps,
         images,
         images_dropped: drops.no_pose + drops.invalid + drops.out_of_order,
+        untraversable_cells: Reasons::ALL
+            .iter()
+            .zip(pipeline.perception.totals.by_reason)
+            .map(|(&(_, name), count)| (name, u64::from(count)))
+            .collect(),
         collisions: truth.collisions.clone(),
         closest_approach_m: truth
             .closest_approach_m

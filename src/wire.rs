@@ -8,7 +8,7 @@ use arcnav_bus::lcmtypes::{
     arc_votes_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t, range_image_t,
     waypoints_t,
 };
-use arcnav_localmap::{MapSnapshot, Patch};
+use arcnav_localmap::{MapSnapshot, Patch, SeenGround};
 use arcnav_perception::{
     BeamTable, FovPolygon, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region,
 };
@@ -165,6 +165,12 @@ pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
         vetoed: votes.votes.vetoed().to_vec(),
         has_speed_vote: votes.votes.speed_mps().is_some(),
         speed_vote: votes.votes.speed_mps().unwrap_or(0.0),
+        arc_speed: votes
+            .votes
+            .arc_speeds()
+            .iter()
+            .map(|&s| if s.is_finite() { s } else { -1.0 })
+            .collect(),
     }
 }
 
@@ -203,6 +209,12 @@ pub fn votes_from_wire(msg: &arc_votes_t, arcs: &ArcSet) -> Result<BehaviourVote
     }
     if msg.has_speed_vote {
         votes.vote_speed(msg.speed_vote);
+    }
+    for (i, &speed) in msg.arc_speed.iter().enumerate() {
+        // Negative: no limit; NaN is no number of m/s: 0.
+        if speed >= 0.0 || speed.is_nan() {
+            votes.limit_arc_speed(i, f64::from(speed));
+        }
     }
     Ok(BehaviourVotes {
         behaviour: msg.behaviour.clone(),
@@ -296,6 +308,10 @@ pub fn map_to_wire(cycle_utime: Utime, pose: &Pose, map: &MapSnapshot, resets: u
         velocity: [pose.velocity.x, pose.velocity.y, pose.velocity.z],
         yaw_rate: pose.yaw_rate,
         resets: i32::try_from(resets).unwrap_or(i32::MAX),
+        seen_origin: [map.seen.i0, map.seen.j0],
+        seen_side: map.seen.side as i32,
+        num_seen_words: map.seen.words.len() as i32,
+        seen: map.seen.words.iter().map(|&w| w as i64).collect(),
     }
 }
 
@@ -347,6 +363,23 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
         patch.z_max = p.z_max;
         patches.push(patch);
     }
+    let side = u32::try_from(msg.seen_side)
+        .ok()
+        .filter(|&side| (side as usize).pow(2).div_ceil(64) == msg.seen.len())
+        .ok_or_else(|| {
+            invalid(format!(
+                "seen ground of side {} needs {} words, the message holds {}",
+                msg.seen_side,
+                (msg.seen_side.max(0) as usize).pow(2).div_ceil(64),
+                msg.seen.len()
+            ))
+        })?;
+    let seen = SeenGround {
+        i0: msg.seen_origin[0],
+        j0: msg.seen_origin[1],
+        side,
+        words: msg.seen.iter().map(|&w| w as u64).collect(),
+    };
     Ok(MapMessage {
         cycle_utime: msg.cycle_utime,
         pose: Pose {
@@ -360,6 +393,7 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
             world_from_vehicle,
             patch_size_m: size,
             patches,
+            seen,
         },
         resets: u64::try_from(msg.resets).unwrap_or(0),
     })
@@ -453,6 +487,8 @@ mod tests {
         votes.set(3, 0.5);
         votes.veto(19, Some([1.0, 2.0]));
         votes.vote_speed(1.5);
+        votes.limit_arc_speed(4, 2.25);
+        votes.limit_arc_speed(5, 0.0);
         let bv = BehaviourVotes {
             behaviour: "obstacle_avoidance".into(),
             utime: 9,
@@ -462,6 +498,8 @@ mod tests {
         assert_eq!(back.votes.values(), bv.votes.values());
         assert_eq!(back.votes.vetoed(), bv.votes.vetoed());
         assert_eq!(back.votes.speed_mps(), Some(1.5));
+        assert_eq!(back.votes.arc_speeds(), bv.votes.arc_speeds());
+        assert_eq!(back.votes.arc_speed(5), Some(0.0));
         let other = ArcSet::new(&ArcSetConfig {
             count: 39,
             min_radius_m: 10.0,
@@ -523,6 +561,13 @@ mod tests {
             world_from_vehicle: pose.world_from_vehicle,
             patch_size_m: 0.4,
             patches: vec![far, Patch::at(0, -1), Patch::at(123_456, -7)],
+            seen: {
+                let mut seen = SeenGround::new(-30, 40, 57);
+                seen.insert(-30, 40);
+                seen.insert(26, 96);
+                seen.insert(0, 77);
+                seen
+            },
         };
         let back = map_from_wire(&map_to_wire(1_020, &pose, &map, 2)).unwrap();
         assert_eq!(back.cycle_utime, 1_020);
@@ -536,6 +581,11 @@ mod tests {
                 < 1e-9
         );
         assert_eq!(back.map.patches, map.patches);
+        assert_eq!(back.map.seen, map.seen);
+        assert!(back.map.seen.contains(26, 96) && !back.map.seen.contains(26, 95));
+        let mut bad = map_to_wire(1_020, &pose, &map, 2);
+        bad.seen_side = 58;
+        assert!(map_from_wire(&bad).is_err(), "seen words do not match its side");
         let mut bad = map_to_wire(1_020, &pose, &map, 2);
         bad.patches[0].world_x = f64::NAN;
         assert!(map_from_wire(&bad).is_err());

@@ -290,7 +290,6 @@ impl Arbiter {
         self.fused.fill(0.0);
         self.vetoed.fill(false);
         let mut total_weight = 0.0;
-        let mut speed_vote: Option<(String, f64)> = None;
         for input in &self.inputs {
             if input.weight <= 0.0 || !self.fresh(input, now) {
                 continue;
@@ -308,11 +307,6 @@ impl Arbiter {
             {
                 *fused += w * vote;
                 *vetoed |= veto;
-            }
-            if let Some(speed) = votes.speed_mps()
-                && speed_vote.as_ref().is_none_or(|(_, s)| speed < *s)
-            {
-                speed_vote = Some((input.name.clone(), speed));
             }
         }
         if total_weight <= 0.0 {
@@ -351,6 +345,22 @@ impl Arbiter {
             return Err(StopReason::NoAcceptableArc { best_vote });
         }
         let curvature = self.peak_curvature(best);
+        // The lowest speed a behaviour accepts, on the arc driven or on any.
+        let mut speed_vote: Option<(String, f64)> = None;
+        for input in &self.inputs {
+            if input.weight <= 0.0 || !self.fresh(input, now) {
+                continue;
+            }
+            let Some((_, votes)) = &input.latest else {
+                continue;
+            };
+            let speeds = votes.speed_mps().into_iter().chain(votes.arc_speed(best));
+            if let Some(speed) = speeds.reduce(f64::min)
+                && speed_vote.as_ref().is_none_or(|(_, s)| speed < *s)
+            {
+                speed_vote = Some((input.name.clone(), speed));
+            }
+        }
         let mut limits = vec![
             ("cruise".to_owned(), self.config.cruise_speed_mps),
             ("vehicle".to_owned(), self.max_speed_mps),

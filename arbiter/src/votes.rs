@@ -13,6 +13,8 @@ pub struct Votes {
     vetoed: Vec<bool>,
     causes: Vec<Option<[f32; 2]>>,
     speed_mps: Option<f64>,
+    /// Per arc: the highest speed accepted on it (∞: no limit).
+    arc_speeds: Vec<f32>,
 }
 
 impl Votes {
@@ -23,6 +25,7 @@ impl Votes {
             vetoed: vec![false; arcs],
             causes: vec![None; arcs],
             speed_mps: None,
+            arc_speeds: vec![f32::INFINITY; arcs],
         }
     }
 
@@ -40,6 +43,7 @@ impl Votes {
         self.vetoed.fill(false);
         self.causes.fill(None);
         self.speed_mps = None;
+        self.arc_speeds.fill(f32::INFINITY);
     }
 
     /// Sets the vote of arc `index`, clamped to [-1, 1] (NaN counts as -1).
@@ -72,6 +76,31 @@ impl Votes {
         });
     }
 
+    /// The highest speed this behaviour accepts on arc `index`, m/s
+    /// (negative or NaN: 0): applies when that arc is driven.
+    pub fn limit_arc_speed(&mut self, index: usize, speed_mps: f64) {
+        if let Some(limit) = self.arc_speeds.get_mut(index) {
+            *limit = if speed_mps.is_nan() {
+                0.0
+            } else {
+                speed_mps.max(0.0) as f32
+            };
+        }
+    }
+
+    /// The speed limit on arc `index`, if this behaviour set one.
+    pub fn arc_speed(&self, index: usize) -> Option<f64> {
+        self.arc_speeds
+            .get(index)
+            .filter(|s| s.is_finite())
+            .map(|&s| f64::from(s))
+    }
+
+    /// Per arc: the speed limit, ∞ where none.
+    pub fn arc_speeds(&self) -> &[f32] {
+        &self.arc_speeds
+    }
+
     pub fn values(&self) -> &[f32] {
         &self.values
     }
@@ -102,6 +131,7 @@ impl Votes {
         self.vetoed.clone_from(&other.vetoed);
         self.causes.clone_from(&other.causes);
         self.speed_mps = other.speed_mps;
+        self.arc_speeds.clone_from(&other.arc_speeds);
     }
 }
 
@@ -131,6 +161,13 @@ mod tests {
         assert_eq!(v.causes()[3], Some([5.0, 0.0]));
         v.vote_speed(-2.0);
         assert_eq!(v.speed_mps(), Some(0.0));
+        v.limit_arc_speed(1, 3.5);
+        v.limit_arc_speed(2, f64::NAN);
+        v.limit_arc_speed(7, 1.0);
+        assert_eq!(
+            (v.arc_speed(0), v.arc_speed(1), v.arc_speed(2)),
+            (None, Some(3.5), Some(0.0))
+        );
         v.clear();
         assert_eq!(v, Votes::new(5));
     }

@@ -16,5 +16,5 @@ pub mod registry;
 
 pub use behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
 pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
-pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig};
+pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig, UnseenGround};
 pub use registry::{Plugin, Prepared, Registry, RegistryError};

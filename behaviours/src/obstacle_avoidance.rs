@@ -16,6 +16,16 @@
 //! cells are rasterised into a small bitmap and each arc walks its masks in
 //! distance order: most arcs are decided by one pass over the widest band.
 //! Map patches are squares, so the footprint is grown by half a patch.
+//!
+//! Ground no image has seen is not free ground (000 §4.2 treats unknown
+//! height as an obstacle). `unseen_ground` sets what it is:
+//! - `slow` (default): each arc's speed is limited so that the vehicle can
+//!   stop within the ground seen along it (and within its free distance
+//!   minus `stop_margin_m`, as before): `v·t + v²/2a = room`;
+//! - `obstacle`: unseen ground is an obstacle like a cell;
+//! - `free`: it is ignored (the paper's behaviour).
+//!
+//! The ground under the vehicle's footprint counts as seen: it stands there.
 
 use std::collections::HashMap;
 
@@ -49,6 +59,21 @@ pub struct ObstacleAvoidanceConfig {
     pub speed_vote: bool,
     pub stop_margin_m: f64,
     pub reaction_s: f64,
+    /// What ground no image has seen is: slow (drive only as fast as the
+    /// vehicle can stop within seen ground), obstacle, or free.
+    pub unseen_ground: UnseenGround,
+}
+
+/// What obstacle avoidance makes of ground no image has seen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UnseenGround {
+    /// Drive only as fast as the vehicle can stop within seen ground.
+    Slow,
+    /// Unseen ground is an obstacle (000 §4.2).
+    Obstacle,
+    /// Unseen ground is free (002's behaviour).
+    Free,
 }
 
 impl Default for ObstacleAvoidanceConfig {
@@ -63,6 +88,7 @@ impl Default for ObstacleAvoidanceConfig {
             speed_vote: true,
             stop_margin_m: 2.0,
             reaction_s: 0.75,
+            unseen_ground: UnseenGround::Slow,
         }
     }
 }
@@ -122,6 +148,10 @@ pub struct ObstacleAvoidance {
     margins: Vec<f64>,
     deceleration: f64,
     bitmap: Vec<u64>,
+    /// Cells whose ground no image has seen (same layout as `bitmap`).
+    unseen: Vec<u64>,
+    /// Cells under the vehicle's footprint now: never unseen.
+    under_vehicle: Vec<u64>,
     /// Map patch index per grid cell that holds one (u32::MAX otherwise).
     causes: Vec<u32>,
     set_cells: Vec<u32>,
@@ -175,9 +205,20 @@ impl ObstacleAvoidance {
             .iter()
             .map(|arc| build_template(arc, &footprint, &margins, &grid, reach))
             .collect();
+        let mut under_vehicle = vec![0; rows * words_per_row];
+        for row in 0..rows {
+            for column in 0..columns {
+                let p = grid.centre(row, column);
+                if (body.x_min..=body.x_max).contains(&p.x) && p.y.abs() <= body.half_width {
+                    under_vehicle[row * words_per_row + column / 64] |= 1 << (column % 64);
+                }
+            }
+        }
         Self {
             deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
             bitmap: vec![0; rows * words_per_row],
+            unseen: vec![0; rows * words_per_row],
+            under_vehicle,
             causes: vec![u32::MAX; rows * columns],
             set_cells: Vec::new(),
             free: vec![f64::INFINITY; setup.arcs.len()],
@@ -212,11 +253,29 @@ impl ObstacleAvoidance {
         }
     }
 
+    /// Marks the cells whose ground no image has seen.
+    fn rasterise_unseen(&mut self, ctx: &VoteContext<'_>) {
+        let seen = ctx.map.seen_lookup();
+        let grid = &self.grid;
+        for row in 0..grid.rows {
+            let words = &mut self.unseen[row * grid.words_per_row..][..grid.words_per_row];
+            words.fill(0);
+            for column in 0..grid.columns {
+                let p = grid.centre(row, column);
+                if !seen(p.x, p.y) {
+                    words[column / 64] |= 1 << (column % 64);
+                }
+            }
+            let under = &self.under_vehicle[row * grid.words_per_row..][..grid.words_per_row];
+            for (word, under) in words.iter_mut().zip(under) {
+                *word &= !under;
+            }
+        }
+    }
+
     /// The first entry of `band` that holds a map cell within `reach`.
     fn first_hit<'t>(&self, band: &'t [Entry], reach: f32) -> Option<&'t Entry> {
-        band.iter()
-            .take_while(|e| e.s <= reach)
-            .find(|e| self.bitmap[e.word as usize] & e.mask != 0)
+        first_in(&self.bitmap, band, reach)
     }
 
     /// The map cell behind a hit entry, vehicle frame.
@@ -229,6 +288,13 @@ impl ObstacleAvoidance {
         let patch = ctx.map.patches.get(*patch as usize)?;
         Some([patch.x, patch.y])
     }
+}
+
+/// The first entry of `band` within `reach` that holds a cell of `bitmap`.
+fn first_in<'t>(bitmap: &[u64], band: &'t [Entry], reach: f32) -> Option<&'t Entry> {
+    band.iter()
+        .take_while(|e| e.s <= reach)
+        .find(|e| bitmap[e.word as usize] & e.mask != 0)
 }
 
 fn build_template(
@@ -307,6 +373,15 @@ impl Behaviour for ObstacleAvoidance {
 
     fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
         self.rasterise(ctx);
+        let policy = self.config.unseen_ground;
+        if policy != UnseenGround::Free {
+            self.rasterise_unseen(ctx);
+            if policy == UnseenGround::Obstacle {
+                for (cell, unseen) in self.bitmap.iter_mut().zip(&self.unseen) {
+                    *cell |= unseen;
+                }
+            }
+        }
         let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
         let reach = max as f32;
         let widest = self.margins.len() - 1;
@@ -337,15 +412,26 @@ impl Behaviour for ObstacleAvoidance {
                 self.config.near_miss_penalty * (1.0 - clearance / self.config.near_miss_m);
             votes.set(arc, (1.0 - penalty) as f32);
         }
-        if self.config.speed_vote {
-            let free = (0..votes.len())
-                .filter(|&i| !votes.is_vetoed(i))
-                .map(|i| self.free[i].min(max))
-                .fold(0.0, f64::max);
-            // v·t + v²/2a = free - margin, solved for v.
-            let (a, t) = (self.deceleration, self.config.reaction_s);
-            let room = (free - self.config.stop_margin_m).max(0.0);
-            votes.vote_speed(-a * t + ((a * t).powi(2) + 2.0 * a * room).sqrt());
+        if !self.config.speed_vote {
+            return;
+        }
+        // Per arc, the speed at which the vehicle stops in time on it:
+        // v·t + v²/2a = room, solved for v.
+        let (a, t) = (self.deceleration, self.config.reaction_s);
+        let stopping_speed =
+            |room: f64| -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt();
+        for arc in 0..self.templates.len().min(votes.len()) {
+            if votes.is_vetoed(arc) {
+                continue;
+            }
+            let mut room = self.free[arc].min(max) - self.config.stop_margin_m;
+            if policy == UnseenGround::Slow
+                && let Some(unseen) = first_in(&self.unseen, &self.templates[arc].bands[0], reach)
+            {
+                // Stop before the first unseen ground the footprint meets.
+                room = room.min(f64::from(unseen.s));
+            }
+            votes.limit_arc_speed(arc, stopping_speed(room));
         }
     }
 }

@@ -37,6 +37,10 @@ pub struct LocalMapConfig {
     pub max_pose_jump_m: f64,
     /// What a jump or time running backwards does.
     pub on_pose_jump: JumpPolicy,
+    /// Ground within this distance of the vehicle's first pose (and of the
+    /// pose after a reset) counts as seen: the vehicle stands there, and no
+    /// sensor sees the ground right in front of the bumper, m.
+    pub assume_seen_m: f64,
 }
 
 impl Default for LocalMapConfig {
@@ -50,6 +54,7 @@ impl Default for LocalMapConfig {
             cross_sensor_pruning: false,
             max_pose_jump_m: 2.0,
             on_pose_jump: JumpPolicy::Reset,
+            assume_seen_m: 8.0,
         }
     }
 }
@@ -62,6 +67,7 @@ impl LocalMapConfig {
         config::positive("half_width_m", self.half_width_m)?;
         config::non_negative("behind_m", self.behind_m)?;
         config::positive("max_pose_jump_m", self.max_pose_jump_m)?;
+        config::in_range("assume_seen_m", self.assume_seen_m, 0.0, 100.0)?;
         if self.misses_to_drop == 0 {
             return Err(ConfigError::new(
                 "misses_to_drop",

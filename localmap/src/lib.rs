@@ -14,4 +14,5 @@ pub mod raster;
 pub use config::{JumpPolicy, LocalMapConfig};
 pub use map::{
     InsertError, InsertOutcome, JumpReason, LocalMap, MapSnapshot, MapStats, Patch, PoseUpdate,
+    SeenGround,
 };

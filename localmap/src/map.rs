@@ -13,6 +13,10 @@
 //!   miss, so out-of-order reports never prune what newer images confirmed.
 //! - **The loop** ([`LocalMap::update`]): with the current pose every patch is
 //!   re-expressed in the vehicle frame and those outside the window dropped.
+//! - **Seen ground**: the ground each image observed (its footprint) is
+//!   marked per patch in the same scrolling grid, so unseen ground is never
+//!   mistaken for free ground; ground around the first pose counts as seen
+//!   (`assume_seen_m`).
 //! - **Snapshots**: immutable, vehicle frame, behind an `Arc`.
 //!
 //! Patches live in a scrolling ring-buffer grid (a power-of-two square that
@@ -159,6 +163,56 @@ pub struct MapStats {
     pub rejected_poses: u64,
 }
 
+/// Which patches of a square of the world some image observed: patch
+/// (`i0 + c`, `j0 + r`) is bit `r·side + c` of `words`.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct SeenGround {
+    pub i0: i64,
+    pub j0: i64,
+    pub side: u32,
+    pub words: Vec<u64>,
+}
+
+impl SeenGround {
+    /// A square of `side` patches from (`i0`, `j0`), nothing seen.
+    pub fn new(i0: i64, j0: i64, side: u32) -> Self {
+        Self {
+            i0,
+            j0,
+            side,
+            words: vec![0; (side as usize * side as usize).div_ceil(64)],
+        }
+    }
+
+    fn bit(&self, i: i64, j: i64) -> Option<usize> {
+        let (c, r) = (i.checked_sub(self.i0)?, j.checked_sub(self.j0)?);
+        let side = i64::from(self.side);
+        ((0..side).contains(&c) && (0..side).contains(&r)).then(|| (r * side + c) as usize)
+    }
+
+    /// Whether world patch (`i`, `j`) was seen (outside the square: no).
+    pub fn contains(&self, i: i64, j: i64) -> bool {
+        self.bit(i, j).is_some_and(|b| {
+            self.words
+                .get(b / 64)
+                .is_some_and(|w| w & (1 << (b % 64)) != 0)
+        })
+    }
+
+    pub fn insert(&mut self, i: i64, j: i64) {
+        if let Some(b) = self.bit(i, j)
+            && let Some(word) = self.words.get_mut(b / 64)
+        {
+            *word |= 1 << (b % 64);
+        }
+    }
+
+    /// Patches seen.
+    pub fn count(&self) -> u32 {
+        self.words.iter().map(|w| w.count_ones()).sum()
+    }
+}
+
 /// An immutable view of the map in the vehicle frame, cheap to share.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct MapSnapshot {
@@ -168,9 +222,29 @@ pub struct MapSnapshot {
     pub world_from_vehicle: Isometry,
     pub patch_size_m: f64,
     pub patches: Vec<Patch>,
+    /// The ground observed around the vehicle (the window's square).
+    pub seen: SeenGround,
 }
 
 impl MapSnapshot {
+    /// Whether the ground at vehicle-frame (`x`, `y`) has been seen.
+    pub fn is_seen(&self, x: f64, y: f64) -> bool {
+        self.seen_lookup()(x, y)
+    }
+
+    /// [`MapSnapshot::is_seen`] with the pose's trigonometry done once, for
+    /// many lookups.
+    pub fn seen_lookup(&self) -> impl Fn(f64, f64) -> bool + '_ {
+        let t = self.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&self.world_from_vehicle).sin_cos();
+        let inverse = 1.0 / self.patch_size_m;
+        move |x, y| {
+            let (wx, wy) = (t.x + cos * x - sin * y, t.y + sin * x + cos * y);
+            self.seen
+                .contains((wx * inverse).floor() as i64, (wy * inverse).floor() as i64)
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.patches.len()
     }
@@ -195,8 +269,16 @@ pub struct LocalMap {
     epoch_start: Utime,
     stamp: u64,
     coverage: Coverage,
+    /// Per ring slot: the world patch whose ground some image observed
+    /// (`UNSEEN` if none): a slot the window scrolled past holds another
+    /// patch's index, so nothing needs clearing as the vehicle moves.
+    seen: Vec<(i64, i64)>,
+    /// Ground around the next accepted pose is to be marked seen.
+    assume_seen_pending: bool,
     stats: MapStats,
 }
+
+const UNSEEN: (i64, i64) = (i64::MIN, i64::MIN);
 
 impl LocalMap {
     /// An empty map; `max_speed_mps` (the vehicle's) bounds plausible motion
@@ -219,6 +301,8 @@ impl LocalMap {
             epoch_start: Utime::MIN,
             stamp: 0,
             coverage: Coverage::default(),
+            seen: vec![UNSEEN; side * side],
+            assume_seen_pending: true,
             stats: MapStats::default(),
         }
     }
@@ -258,6 +342,8 @@ impl LocalMap {
     pub fn reset(&mut self, utime: Utime) {
         self.patches.clear();
         self.slots.fill(EMPTY);
+        self.seen.fill(UNSEEN);
+        self.assume_seen_pending = true;
         self.epoch_start = utime;
         self.stats.resets += 1;
     }
@@ -399,17 +485,84 @@ impl LocalMap {
         Ok(outcome)
     }
 
-    fn prune(&mut self, report: &ObstacleReport, sensor_bit: u32, stamp: u64) -> u32 {
-        // Only the rows the map has patches in are rasterised: a footprint
-        // reaching far beyond the window costs no more than one inside it.
-        let rows = self.patches.iter().fold(None, |r: Option<(i64, i64)>, p| {
-            Some(r.map_or((p.j, p.j), |(lo, hi)| (lo.min(p.j), hi.max(p.j))))
-        });
-        let Some(rows) = rows.filter(|_| !report.fov.is_empty()) else {
-            return 0;
+    /// The square of world patches that covers the window around the
+    /// current pose (`None` before the first pose): first (i, j) and side.
+    fn window_square(&self) -> Option<(i64, i64, u32)> {
+        let pose = self.pose.as_ref()?;
+        let c = &self.config;
+        let radius = c.ahead_m.max(c.behind_m).hypot(c.half_width_m);
+        let t = pose.world_from_vehicle.translation.vector;
+        let s = c.patch_size_m;
+        let reach = (radius / s).ceil() as i64 + 1;
+        let (i, j) = ((t.x / s).floor() as i64, (t.y / s).floor() as i64);
+        Some((i - reach, j - reach, (2 * reach + 1) as u32))
+    }
+
+    fn mark_seen(&mut self, i: i64, j: i64) {
+        let slot = self.slot_index(i, j);
+        self.seen[slot] = (i, j);
+    }
+
+    /// Marks the ground within `assume_seen_m` of the current pose seen.
+    fn assume_seen_around_pose(&mut self) {
+        let Some(pose) = self.pose else {
+            return;
+        };
+        let (s, r) = (self.config.patch_size_m, self.config.assume_seen_m);
+        let t = pose.world_from_vehicle.translation.vector;
+        let (lo_i, hi_i) = (
+            ((t.x - r) / s).floor() as i64,
+            ((t.x + r) / s).floor() as i64,
+        );
+        let (lo_j, hi_j) = (
+            ((t.y - r) / s).floor() as i64,
+            ((t.y + r) / s).floor() as i64,
+        );
+        for j in lo_j..=hi_j {
+            for i in lo_i..=hi_i {
+                let (cx, cy) = self.patch_centre(i, j);
+                if (cx - t.x).hypot(cy - t.y) <= r {
+                    self.mark_seen(i, j);
+                }
+            }
+        }
+    }
+
+    /// Marks the report's observed footprint seen within the window, and
+    /// prepares the footprint's coverage of the rows of the window and of
+    /// the patches (for pruning). False when the footprint is empty.
+    fn observe(&mut self, report: &ObstacleReport) -> bool {
+        if report.fov.is_empty() {
+            return false;
+        }
+        let square = self.window_square();
+        // Only these rows are rasterised: a footprint reaching far beyond
+        // the window costs no more than one inside it.
+        let rows = self
+            .patches
+            .iter()
+            .map(|p| (p.j, p.j))
+            .chain(square.map(|(_, j0, side)| (j0, j0 + i64::from(side) - 1)))
+            .reduce(|(lo, hi), (a, b)| (lo.min(a), hi.max(b)));
+        let Some(rows) = rows else {
+            return false;
         };
         self.coverage
             .rasterise(&report.fov, self.config.patch_size_m, rows);
+        if let Some((i0, _, side)) = square {
+            let coverage = std::mem::take(&mut self.coverage);
+            coverage.for_each_covered((i0, i0 + i64::from(side) - 1), |i, j| {
+                self.mark_seen(i, j);
+            });
+            self.coverage = coverage;
+        }
+        true
+    }
+
+    fn prune(&mut self, report: &ObstacleReport, sensor_bit: u32, stamp: u64) -> u32 {
+        if !self.observe(report) {
+            return 0;
+        }
         let mut pruned = 0;
         let mut index = 0;
         while index < self.patches.len() {
@@ -460,6 +613,8 @@ impl LocalMap {
                         tracing::warn!(%reason, patches = self.patches.len(), "local map reset");
                         self.reset(pose.utime);
                         self.pose = Some(*pose);
+                        self.assume_seen_pending = false;
+                        self.assume_seen_around_pose();
                         return PoseUpdate::Reset(reason);
                     }
                     JumpPolicy::Reject => {
@@ -471,6 +626,10 @@ impl LocalMap {
             }
         }
         self.pose = Some(*pose);
+        if self.assume_seen_pending {
+            self.assume_seen_pending = false;
+            self.assume_seen_around_pose();
+        }
         let t = pose.world_from_vehicle.translation.vector;
         let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
         let s = self.config.patch_size_m;
@@ -503,6 +662,23 @@ impl LocalMap {
                 .map_or_else(Isometry::identity, |p| p.world_from_vehicle),
             patch_size_m: self.config.patch_size_m,
             patches: self.patches.clone(),
+            seen: self.seen_ground(),
         })
+    }
+
+    /// The seen ground of the square around the window.
+    pub fn seen_ground(&self) -> SeenGround {
+        let Some((i0, j0, side)) = self.window_square() else {
+            return SeenGround::default();
+        };
+        let mut seen = SeenGround::new(i0, j0, side);
+        for j in j0..j0 + i64::from(side) {
+            for i in i0..i0 + i64::from(side) {
+                if self.seen[self.slot_index(i, j)] == (i, j) {
+                    seen.insert(i, j);
+                }
+            }
+        }
+        seen
     }
 }

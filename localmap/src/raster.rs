@@ -85,6 +85,25 @@ impl Coverage {
         let row = &self.crossings[self.row_start[r] as usize..self.row_start[r + 1] as usize];
         row.iter().take_while(|&&c| c <= x).count() % 2 == 1
     }
+
+    /// Calls `visit(i, j)` for every patch whose centre lies inside, with
+    /// `i` within `columns` (inclusive).
+    pub fn for_each_covered(&self, columns: (i64, i64), mut visit: impl FnMut(i64, i64)) {
+        for r in 0..self.rows {
+            let row = &self.crossings[self.row_start[r] as usize..self.row_start[r + 1] as usize];
+            let j = self.j0 + r as i64;
+            for pair in row.chunks_exact(2) {
+                // Centres (i + 0.5)·s in [pair[0], pair[1]).
+                let first = (pair[0] / self.patch_size - 0.5).ceil();
+                let end = (pair[1] / self.patch_size - 0.5).ceil();
+                let first = (first.max(columns.0 as f64)) as i64;
+                let end = (end.min(columns.1 as f64 + 1.0)) as i64;
+                for i in first..end {
+                    visit(i, j);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -117,6 +136,12 @@ mod tests {
             }
         }
         assert!(inside > 500);
+        let mut visited = 0;
+        coverage.for_each_covered((-10, 59), |i, j| {
+            assert!(coverage.covers(i, j), "({i}, {j})");
+            visited += 1;
+        });
+        assert_eq!(visited, inside, "every covered patch is visited once");
     }
 
     #[test]

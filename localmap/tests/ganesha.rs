@@ -458,3 +458,59 @@ fn a_footprint_reaching_around_the_earth_still_prunes_and_an_absurd_one_is_refus
         .unwrap_err();
     assert!(matches!(err, InsertError::BadFootprint { .. }), "{err}");
 }
+
+#[test]
+fn the_map_knows_which_ground_has_been_seen() {
+    let mut map = map_with(LocalMapConfig {
+        assume_seen_m: 3.0,
+        ..LocalMapConfig::default()
+    });
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    let snapshot = map.snapshot();
+    // Around the first pose the vehicle stands on ground it knows.
+    assert!(snapshot.is_seen(0.0, 0.0) && snapshot.is_seen(2.5, 0.0));
+    assert!(!snapshot.is_seen(5.0, 0.0) && !snapshot.is_seen(0.0, -5.0));
+    // An image that observed 5-15 m ahead, ±4 m.
+    map.insert(&report(
+        SECOND,
+        "erim",
+        &[],
+        rectangle(5.0, 15.0, -4.0, 4.0),
+    ))
+    .unwrap();
+    let snapshot = map.snapshot();
+    for (x, y, seen) in [
+        (5.3, 0.0, true),
+        (14.7, 3.7, true),
+        (10.0, -3.7, true),
+        (15.5, 0.0, false),
+        (10.0, 4.5, false),
+        (4.0, 0.0, false),
+    ] {
+        assert_eq!(snapshot.is_seen(x, y), seen, "({x}, {y})");
+    }
+    // Patches of 0.4 m whose centre lies within 3 m of the origin.
+    let disc = (-8..8)
+        .flat_map(|i| (-8..8).map(move |j| (i, j)))
+        .filter(|&(i, j)| (0.4 * (f64::from(i) + 0.5)).hypot(0.4 * (f64::from(j) + 0.5)) <= 3.0)
+        .count() as u32;
+    assert_eq!(
+        snapshot.seen.count(),
+        25 * 20 + disc,
+        "footprint + start disc"
+    );
+    // The window moves on 40 m: everything seen is behind it; as the
+    // ring reuses those slots for new ground, none of it reads as seen.
+    for (k, x) in [10.0, 20.0, 30.0, 40.0].into_iter().enumerate() {
+        let update = map.update(&pose_at((2 + k as i64) * SECOND, x, 0.0, 0.0));
+        assert_eq!(update, PoseUpdate::Accepted);
+    }
+    let snapshot = map.snapshot();
+    assert_eq!(snapshot.seen.count(), 0);
+    assert!(!snapshot.is_seen(0.0, 0.0) && !snapshot.is_seen(-30.0, 0.0));
+    // A reset forgets what was seen, except around the new pose.
+    map.update(&pose_at(6 * SECOND, 500.0, 0.0, 0.0));
+    let snapshot = map.snapshot();
+    assert_eq!(snapshot.seen.count(), disc, "start disc only");
+    assert!(snapshot.is_seen(0.0, 0.0));
+}

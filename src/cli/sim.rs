@@ -178,6 +178,12 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         "images        {} processed, {} dropped",
         r.images, r.images_dropped
     );
+    let cells: Vec<String> = r
+        .untraversable_cells
+        .iter()
+        .map(|(reason, n)| format!("{reason} {n}"))
+        .collect();
+    println!("cells         untraversable: {}", cells.join(", "));
     println!("collisions    {}", r.collisions.len());
     for c in &r.collisions {
         println!(

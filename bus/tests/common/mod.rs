@@ -33,6 +33,7 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         vetoed: (0..39).map(|i| i % 5 == 0).collect(),
         has_speed_vote: true,
         speed_vote: 3.0,
+        arc_speed: (0..39).map(|i| i as f32 * 0.25 - 1.0).collect(),
     };
     let cells = obstacle_cells_t {
         utime: 1_700_000_000_800_000,
@@ -84,6 +85,10 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         velocity: [2.5, -0.5, 0.0],
         yaw_rate: 0.125,
         resets: 2,
+        seen_origin: [-70, 25],
+        seen_side: 9,
+        num_seen_words: 2,
+        seen: vec![0x0123_4567_89ab_cdef, -5],
     };
     vec![
         ("pose_t", AnyMessage::Pose(pose)),
@@ -253,6 +258,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     vetoed: (0..n).map(|_| rng.below(2) == 1).collect(),
                     has_speed_vote: rng.below(2) == 1,
                     speed_vote: rng.f64(),
+                    arc_speed: (0..n).map(|_| rng.f32()).collect(),
                 }),
             )
         }
@@ -322,6 +328,10 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     velocity: [rng.f64(), rng.f64(), rng.f64()],
                     yaw_rate: rng.f64(),
                     resets: rng.next_u64() as i32,
+                    seen_origin: [rng.next_u64() as i64, rng.next_u64() as i64],
+                    seen_side: rng.next_u64() as i32,
+                    num_seen_words: n as i32,
+                    seen: (0..n).map(|_| rng.next_u64() as i64).collect(),
                 }),
             )
         }
