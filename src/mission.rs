@@ -142,8 +142,11 @@ pub struct MissionRun {
     pub track: Vec<TrackPoint>,
     /// Where images were taken.
     pub image_positions: Vec<[f64; 2]>,
-    /// World patches that were ever in the local map (i, j) and the patch size.
-    pub obstacle_patches: BTreeSet<(i64, i64)>,
+    /// World patches that were ever in the local map (i, j), with the
+    /// union of their reasons, and the patch size.
+    pub obstacle_patches: BTreeMap<(i64, i64), Reasons>,
+    /// World patches whose ground some image observed during the mission.
+    pub seen_patches: BTreeSet<(i64, i64)>,
     pub patch_size_m: f64,
     pub snapshots: Vec<PathBuf>,
 }
@@ -185,7 +188,8 @@ struct MissionSink<'a> {
     curvature_change: (f64, u64),
     stops: StopStats,
     stopped: bool,
-    patches: BTreeSet<(i64, i64)>,
+    patches: BTreeMap<(i64, i64), Reasons>,
+    seen: BTreeSet<(i64, i64)>,
     snapshot: Option<(f64, &'a Path, Utime)>,
     snapshots: Vec<PathBuf>,
     config: &'a Config,
@@ -226,7 +230,26 @@ impl Sink for MissionSink<'_> {
             }
         }
         self.stopped = command.is_stop();
-        self.patches.extend(map.patches.iter().map(|p| (p.i, p.j)));
+        for p in &map.patches {
+            self.patches
+                .entry((p.i, p.j))
+                .or_default()
+                .insert(p.reasons);
+        }
+        // The seen ground, for the picture: every 10th decision is enough
+        // (the vehicle moves less than the window meanwhile).
+        if self.commands.len() % 10 == 1 {
+            let seen = &map.seen;
+            let side = i64::from(seen.side);
+            for (w, &word) in seen.words.iter().enumerate() {
+                let mut bits = word;
+                while bits != 0 {
+                    let b = w as i64 * 64 + i64::from(bits.trailing_zeros());
+                    bits &= bits - 1;
+                    self.seen.insert((seen.i0 + b % side, seen.j0 + b / side));
+                }
+            }
+        }
         if let Some((every, dir, next)) = &mut self.snapshot
             && at >= *next
             && self.log.error.is_none()
@@ -316,7 +339,8 @@ pub fn run_mission(
         curvature_change: (0.0, 0),
         stops: StopStats::default(),
         stopped: false,
-        patches: BTreeSet::new(),
+        patches: BTreeMap::new(),
+        seen: BTreeSet::new(),
         snapshot: match (options.snapshot_every_s, &options.snapshot_dir) {
             (Some(every), Some(dir)) => Some((every, dir.as_path(), t0)),
             _ => None,
@@ -533,6 +557,7 @@ pub fn run_mission(
         track: sink.track,
         image_positions,
         obstacle_patches: sink.patches,
+        seen_patches: sink.seen,
         patch_size_m: config.localmap.patch_size_m,
         snapshots: sink.snapshots,
     })

@@ -585,7 +585,10 @@ mod tests {
         assert!(back.map.seen.contains(26, 96) && !back.map.seen.contains(26, 95));
         let mut bad = map_to_wire(1_020, &pose, &map, 2);
         bad.seen_side = 58;
-        assert!(map_from_wire(&bad).is_err(), "seen words do not match its side");
+        assert!(
+            map_from_wire(&bad).is_err(),
+            "seen words do not match its side"
+        );
         let mut bad = map_to_wire(1_020, &pose, &map, 2);
         bad.patches[0].world_x = f64::NAN;
         assert!(map_from_wire(&bad).is_err());

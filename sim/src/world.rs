@@ -470,7 +470,7 @@ pub struct World {
 }
 
 /// The worlds compiled into arcnav: name, description, TOML.
-pub const EMBEDDED: [(&str, &str, &str); 3] = [
+pub const EMBEDDED: [(&str, &str, &str); 4] = [
     (
         "paper_loop",
         "the paper's mission (002 §3): a 1 km loop through hills, rocks, trees, bushes, ditches and banks, 10 waypoints ~100 m apart",
@@ -485,6 +485,11 @@ pub const EMBEDDED: [(&str, &str, &str); 3] = [
         "open_field",
         "gentle open ground and three waypoints, no obstacles: a smoke test",
         include_str!("../worlds/open_field.toml"),
+    ),
+    (
+        "drop_offs",
+        "trenches, a pit and oblique ditches: negative obstacles seen as missing ground",
+        include_str!("../worlds/drop_offs.toml"),
     ),
 ];
 

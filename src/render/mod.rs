@@ -6,6 +6,7 @@ use std::path::Path;
 
 use arcnav_arbiter::Decision;
 use arcnav_localmap::MapSnapshot;
+use arcnav_perception::Reasons;
 use arcnav_sim::{FeatureKind, World};
 use arcnav_vehicle::{ArcSet, Utime};
 
@@ -110,11 +111,18 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
             canvas.polyline(&[(ax, ay), (bx, by)], c, (2.0 * r).max(2.0), false);
         }
     }
-    // What the local map held: the paper's "obstacle regions shown as black dots".
+    // The ground the images observed, lighter.
     let s = run.patch_size_m;
-    for &(i, j) in &run.obstacle_patches {
+    let side = (s * scale) as f32;
+    for &(i, j) in &run.seen_patches {
         let (x, y) = to_px(i as f64 * s, (j + 1) as f64 * s);
-        canvas.fill_rect(x, y, (s * scale) as f32, (s * scale) as f32, [0, 0, 0, 200]);
+        canvas.fill_rect(x, y, side, side, SEEN);
+    }
+    // What the local map held: the paper's "obstacle regions shown as black
+    // dots", drop-offs in their own colour.
+    for (&(i, j), &reasons) in &run.obstacle_patches {
+        let (x, y) = to_px(i as f64 * s, (j + 1) as f64 * s);
+        canvas.fill_rect(x, y, side, side, patch_color(reasons, 200));
     }
     // The path, coloured by speed.
     let top = run.track.iter().map(|p| p.speed_mps).fold(0.5, f64::max);
@@ -185,9 +193,23 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         50.0,
         14.0,
         BLACK,
-        &format!("black: cells in the local map · white: images · circles: waypoints ({} reached) · {:.1} m/px", r.waypoints_reached, 1.0 / scale),
+        &format!("black: cells in the local map · orange: drop-offs · light: ground seen · white: images · circles: waypoints ({} reached) · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
     );
     canvas.save(path)
+}
+
+/// Ground observed by some image (mission picture: a light veil).
+const SEEN: [u8; 4] = [255, 255, 255, 90];
+/// Ground no image observed (snapshot picture).
+const UNSEEN: [u8; 4] = [200, 200, 205, 255];
+
+/// A map patch's colour: orange when a drop-off, black otherwise.
+fn patch_color(reasons: Reasons, alpha: u8) -> [u8; 4] {
+    if reasons.contains(Reasons::DROP_OFF) {
+        [235, 120, 20, alpha]
+    } else {
+        [20, 20, 20, alpha]
+    }
 }
 
 /// One decision: the local map in the vehicle frame with the arcs coloured by
@@ -223,12 +245,32 @@ pub fn snapshot_picture(
         let (_, y) = to_px(m as f32, 0.0);
         canvas.text(3.0, y + 4.0, 11.0, [120, 120, 120, 255], &format!("{m} m"));
     }
-    // Map patches.
+    // Ground no image has seen, shaded: a grid of the patch size in the
+    // vehicle frame, each cell judged at its centre.
     let s = map.patch_size_m as f32;
+    let seen = map.seen_lookup();
+    let cells = |from: f32, to: f32| (from / s).floor() as i32..(to / s).ceil() as i32;
+    for gx in cells(-x_behind, x_ahead) {
+        for gy in cells(-half, half) {
+            let (cx, cy) = ((gx as f32 + 0.5) * s, (gy as f32 + 0.5) * s);
+            if !seen(f64::from(cx), f64::from(cy)) {
+                let (x, y) = to_px(cx + s / 2.0, cy + s / 2.0);
+                canvas.fill_rect(x, y, s * ppm, s * ppm, UNSEEN);
+            }
+        }
+    }
+    // Map patches, drop-offs in their own colour.
     for p in &map.patches {
         let (x, y) = to_px(p.x + s / 2.0, p.y + s / 2.0);
-        canvas.fill_rect(x, y, s * ppm, s * ppm, [30, 30, 30, 255]);
+        canvas.fill_rect(x, y, s * ppm, s * ppm, patch_color(p.reasons, 255));
     }
+    canvas.text(
+        6.0,
+        map_h as f32 - 8.0,
+        12.0,
+        [60, 60, 60, 255],
+        "grey: ground not seen · black: cells · orange: drop-offs",
+    );
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);
     let reach = 18.0;
