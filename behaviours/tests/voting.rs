@@ -13,6 +13,7 @@ use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot};
 use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
 use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
+use nalgebra::Point2;
 
 const FRONT: f64 = 4.0;
 
@@ -29,8 +30,21 @@ fn setup<'a>(arcs: &'a ArcSet, vehicle: &'a VehicleConfig) -> Setup<'a> {
 }
 
 /// A map with cells at the given vehicle-frame positions (vehicle at the origin heading east).
+/// The map after one image that saw everything around the vehicle and
+/// reported `cells`.
 fn snapshot(cells: &[(f64, f64)]) -> MapSnapshot {
-    let mut map = LocalMap::new(&LocalMapConfig::default(), 10.0);
+    snapshot_seeing(cells, 40.0)
+}
+
+/// ... that saw the ground within `reach` of the vehicle (a square).
+fn snapshot_seeing(cells: &[(f64, f64)], reach: f64) -> MapSnapshot {
+    let mut map = LocalMap::new(
+        &LocalMapConfig {
+            assume_seen_m: 0.0,
+            ..LocalMapConfig::default()
+        },
+        10.0,
+    );
     map.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
     let report = ObstacleReport {
         utime: 0,
@@ -48,23 +62,38 @@ fn snapshot(cells: &[(f64, f64)]) -> MapSnapshot {
             })
             .collect(),
         regions: vec![],
-        fov: FovPolygon::default(),
+        fov: FovPolygon::new(vec![
+            Point2::new(-reach, -reach),
+            Point2::new(reach, -reach),
+            Point2::new(reach, reach),
+            Point2::new(-reach, reach),
+        ]),
     };
     map.insert(&report).unwrap();
     (*map.snapshot()).clone()
 }
 
 fn avoidance_votes(cells: &[(f64, f64)]) -> Votes {
+    avoidance_votes_on(&snapshot(cells), ObstacleAvoidanceConfig::default())
+}
+
+fn avoidance_votes_on(map: &MapSnapshot, config: ObstacleAvoidanceConfig) -> Votes {
     let (arcs, vehicle) = (arcs(), VehicleConfig::default());
-    let mut behaviour =
-        ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, &vehicle));
-    let map = snapshot(cells);
+    let mut behaviour = ObstacleAvoidance::new(config, &setup(&arcs, &vehicle));
     let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
     let mission = Mission::default();
-    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
+    let ctx = VoteContext::new(0, &pose, map, &mission, &arcs);
     let mut votes = Votes::new(arcs.len());
     behaviour.vote(&ctx, &mut votes);
     votes
+}
+
+/// The highest speed obstacle avoidance accepts on any arc it allows.
+fn best_speed(votes: &Votes) -> f64 {
+    (0..votes.len())
+        .filter(|&i| !votes.is_vetoed(i))
+        .filter_map(|i| votes.arc_speed(i))
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -119,19 +148,53 @@ fn a_near_miss_lowers_the_vote_of_the_arc_passing_beside_it() {
 fn an_empty_map_makes_every_arc_clear() {
     let votes = avoidance_votes(&[]);
     assert!(votes.values().iter().all(|&v| v == 1.0));
-    assert!(votes.speed_mps().unwrap() > 5.0);
+    assert!((0..votes.len()).all(|i| votes.arc_speed(i).unwrap() > 5.0));
+}
+
+#[test]
+fn unseen_ground_slows_forbids_or_is_ignored_as_configured() {
+    use arcnav_behaviours::UnseenGround;
+    let straight = 19;
+    // Only the ground within 8 m of the vehicle was seen (the body reaches
+    // 4 m ahead): 4 m of seen ground ahead of the bumper.
+    let map = snapshot_seeing(&[], 8.0);
+    let config = |unseen_ground| ObstacleAvoidanceConfig {
+        unseen_ground,
+        ..ObstacleAvoidanceConfig::default()
+    };
+    let slow = avoidance_votes_on(&map, config(UnseenGround::Slow));
+    let seen = avoidance_votes(&[]);
+    let (a, t): (f64, f64) = (1.5, 0.75);
+    // v·t + v²/2a = 4 m (less half a patch): about 2.5 m/s.
+    let limit = -a * t + ((a * t).powi(2) + 2.0 * a * 4.0).sqrt();
+    let v = slow.arc_speed(straight).unwrap();
+    assert!(
+        v <= limit && v > 0.8 * limit,
+        "{v} m/s, stopping within 4 m: {limit}"
+    );
+    assert!(seen.arc_speed(straight).unwrap() > 2.0 * v);
+    assert!(
+        slow.values().iter().all(|&v| v == 1.0),
+        "slow does not steer"
+    );
+    // As an obstacle, unseen ground 4 m ahead forbids every arc.
+    let obstacle = avoidance_votes_on(&map, config(UnseenGround::Obstacle));
+    assert!((0..obstacle.len()).all(|i| obstacle.is_vetoed(i)));
+    // Free: as if it had been seen.
+    let free = avoidance_votes_on(&map, config(UnseenGround::Free));
+    assert_eq!(free, seen);
 }
 
 #[test]
 fn being_boxed_in_slows_the_speed_vote() {
     // A wall 7 m ahead alone is avoided by turning: no reason to slow down.
     let ahead: Vec<(f64, f64)> = (-25..=25).map(|k| (FRONT + 7.0, k as f64 * 0.4)).collect();
-    let open = avoidance_votes(&[]).speed_mps().unwrap();
-    assert_eq!(avoidance_votes(&ahead).speed_mps().unwrap(), open);
+    let open = best_speed(&avoidance_votes(&[]));
+    assert_eq!(best_speed(&avoidance_votes(&ahead)), open);
     // With walls 5 m to each side as well, every arc ends within ~8 m.
     let mut boxed = ahead;
     boxed.extend((5..=27).flat_map(|k| [(k as f64 * 0.4, 5.0), (k as f64 * 0.4, -5.0)]));
-    let slowed = avoidance_votes(&boxed).speed_mps().unwrap();
+    let slowed = best_speed(&avoidance_votes(&boxed));
     assert!(
         slowed < 0.7 * open,
         "{slowed} m/s boxed in, {open} m/s in the open"

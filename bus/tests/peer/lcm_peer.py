@@ -57,6 +57,7 @@ def samples(arcnav):
     m.vetoed = [i % 5 == 0 for i in range(39)]
     m.has_speed_vote = True
     m.speed_vote = 3.0
+    m.arc_speed = [i * 0.25 - 1.0 for i in range(39)]
     out["arc_votes_t"] = m
 
     m = arcnav.obstacle_cells_t()
@@ -111,6 +112,10 @@ def samples(arcnav):
     m.velocity = [2.5, -0.5, 0.0]
     m.yaw_rate = 0.125
     m.resets = 2
+    m.seen_origin = [-70, 25]
+    m.seen_side = 9
+    m.num_seen_words = 2
+    m.seen = [0x0123_4567_89AB_CDEF, -5]
     out["local_map_t"] = m
     return out
 
