@@ -239,16 +239,7 @@ impl Sink for MissionSink<'_> {
         // The seen ground, for the picture: every 10th decision is enough
         // (the vehicle moves less than the window meanwhile).
         if self.commands.len() % 10 == 1 {
-            let seen = &map.seen;
-            let side = i64::from(seen.side);
-            for (w, &word) in seen.words.iter().enumerate() {
-                let mut bits = word;
-                while bits != 0 {
-                    let b = w as i64 * 64 + i64::from(bits.trailing_zeros());
-                    bits &= bits - 1;
-                    self.seen.insert((seen.i0 + b % side, seen.j0 + b / side));
-                }
-            }
+            self.seen.extend(map.seen.iter());
         }
         if let Some((every, dir, next)) = &mut self.snapshot
             && at >= *next

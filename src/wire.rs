@@ -365,12 +365,12 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
     }
     let side = u32::try_from(msg.seen_side)
         .ok()
-        .filter(|&side| (side as usize).pow(2).div_ceil(64) == msg.seen.len())
+        .filter(|&side| SeenGround::words_for(side) == msg.seen.len())
         .ok_or_else(|| {
             invalid(format!(
                 "seen ground of side {} needs {} words, the message holds {}",
                 msg.seen_side,
-                (msg.seen_side.max(0) as usize).pow(2).div_ceil(64),
+                SeenGround::words_for(msg.seen_side.max(0) as u32),
                 msg.seen.len()
             ))
         })?;

@@ -250,6 +250,15 @@ impl Arbiter {
             .is_some_and(|(utime, _)| now - *utime <= self.timeout_us)
     }
 
+    /// The inputs whose votes take part in a decision at `now` (weighted
+    /// and fresh), with those votes.
+    fn used(&self, now: Utime) -> impl Iterator<Item = (&Input, &Votes)> + '_ {
+        self.inputs
+            .iter()
+            .filter(move |input| input.weight > 0.0 && self.fresh(input, now))
+            .filter_map(|input| input.latest.as_ref().map(|(_, votes)| (input, votes)))
+    }
+
     /// Fuses the fresh votes into a command at time `now`.
     pub fn decide(&mut self, now: Utime) -> SteeringCommand {
         self.stats.decisions += 1;
@@ -329,11 +338,8 @@ impl Arbiter {
         let Some(best) = best else {
             return Err(StopReason::AllArcsForbidden {
                 vetoes: self
-                    .inputs
-                    .iter()
-                    .filter(|input| input.weight > 0.0 && self.fresh(input, now))
-                    .filter_map(|input| {
-                        let (_, votes) = input.latest.as_ref()?;
+                    .used(now)
+                    .filter_map(|(input, votes)| {
                         let count = votes.vetoed().iter().filter(|&&v| v).count();
                         (count > 0).then(|| (input.name.clone(), count))
                     })
@@ -347,13 +353,7 @@ impl Arbiter {
         let curvature = self.peak_curvature(best);
         // The lowest speed a behaviour accepts, on the arc driven or on any.
         let mut speed_vote: Option<(String, f64)> = None;
-        for input in &self.inputs {
-            if input.weight <= 0.0 || !self.fresh(input, now) {
-                continue;
-            }
-            let Some((_, votes)) = &input.latest else {
-                continue;
-            };
+        for (input, votes) in self.used(now) {
             let speeds = votes.speed_mps().into_iter().chain(votes.arc_speed(best));
             if let Some(speed) = speeds.reduce(f64::min)
                 && speed_vote.as_ref().is_none_or(|(_, s)| speed < *s)

@@ -74,7 +74,7 @@ impl LocalMapConfig {
                 "is 0, must be at least 1",
             ));
         }
-        let radius = self.ahead_m.max(self.behind_m).hypot(self.half_width_m);
+        let radius = self.radius_m();
         let cells = 2.0 * radius / self.patch_size_m;
         if cells > 8192.0 {
             return Err(ConfigError::new(
@@ -86,6 +86,12 @@ impl LocalMapConfig {
             ));
         }
         Ok(())
+    }
+
+    /// The farthest the window reaches from the vehicle origin, whatever
+    /// the heading, m.
+    pub fn radius_m(&self) -> f64 {
+        self.ahead_m.max(self.behind_m).hypot(self.half_width_m)
     }
 
     /// True when a vehicle-frame position lies inside the window.

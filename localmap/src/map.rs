@@ -180,8 +180,28 @@ impl SeenGround {
             i0,
             j0,
             side,
-            words: vec![0; (side as usize * side as usize).div_ceil(64)],
+            words: vec![0; Self::words_for(side)],
         }
+    }
+
+    /// The words a square of `side` patches takes.
+    pub fn words_for(side: u32) -> usize {
+        (side as usize).pow(2).div_ceil(64)
+    }
+
+    /// The patches seen, as world indices (i, j).
+    pub fn iter(&self) -> impl Iterator<Item = (i64, i64)> + '_ {
+        let side = i64::from(self.side);
+        self.words.iter().enumerate().flat_map(move |(w, &word)| {
+            std::iter::successors((word != 0).then_some(word), |&bits| {
+                let rest = bits & (bits - 1);
+                (rest != 0).then_some(rest)
+            })
+            .map(move |bits| {
+                let b = w as i64 * 64 + i64::from(bits.trailing_zeros());
+                (self.i0 + b % side, self.j0 + b / side)
+            })
+        })
     }
 
     fn bit(&self, i: i64, j: i64) -> Option<usize> {
@@ -284,10 +304,7 @@ impl LocalMap {
     /// An empty map; `max_speed_mps` (the vehicle's) bounds plausible motion
     /// between poses. Call `config.validate()` first.
     pub fn new(config: &LocalMapConfig, max_speed_mps: f64) -> Self {
-        let radius = config
-            .ahead_m
-            .max(config.behind_m)
-            .hypot(config.half_width_m);
+        let radius = config.radius_m();
         let side = ((2.0 * radius / config.patch_size_m).ceil() as usize + 2).next_power_of_two();
         Self {
             config: config.clone(),
@@ -489,11 +506,9 @@ impl LocalMap {
     /// current pose (`None` before the first pose): first (i, j) and side.
     fn window_square(&self) -> Option<(i64, i64, u32)> {
         let pose = self.pose.as_ref()?;
-        let c = &self.config;
-        let radius = c.ahead_m.max(c.behind_m).hypot(c.half_width_m);
         let t = pose.world_from_vehicle.translation.vector;
-        let s = c.patch_size_m;
-        let reach = (radius / s).ceil() as i64 + 1;
+        let s = self.config.patch_size_m;
+        let reach = (self.config.radius_m() / s).ceil() as i64 + 1;
         let (i, j) = ((t.x / s).floor() as i64, (t.y / s).floor() as i64);
         Some((i - reach, j - reach, (2 * reach + 1) as u32))
     }

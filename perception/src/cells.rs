@@ -344,7 +344,7 @@ struct DropOffRule<'a> {
 
 impl DropOffRule<'_> {
     /// Whether the return (`d`, `z`) of row `order[position]`, column `col`,
-    /// whose column's previous returns (farther, higher beams) are `walk`,
+    /// whose column's previous returns (farther, higher beams) are `previous`,
     /// is the near edge of a drop-off. Called only when the gap to the
     /// previous return is longer than `max_gap` (or there is none).
     ///
@@ -368,24 +368,24 @@ impl DropOffRule<'_> {
     fn judge(
         &self,
         projection: &Projection,
-        walk: &Previous,
+        previous: &Previous,
         (d, z): (f32, f32),
         position: usize,
         col: usize,
     ) -> bool {
-        if walk.d == f32::INFINITY {
+        if previous.d == f32::INFINITY {
             return self.nothing_seen_beyond(projection, (d, z), position, col);
         }
-        let (gap, depth) = (walk.d - d, z - walk.z);
+        let (gap, depth) = (previous.d - d, z - previous.z);
         if depth <= self.min_depth + self.depth_per_m * d {
             return false;
         }
         if depth > self.tan_slope * gap {
             return true;
         }
-        walk.beyond_d < f32::INFINITY
-            && walk.beyond_z - walk.z
-                > self.tan_slope * (walk.beyond_d - walk.d).max(0.0) + self.noise
+        previous.beyond_d < f32::INFINITY
+            && previous.beyond_z - previous.z
+                > self.tan_slope * (previous.beyond_d - previous.d).max(0.0) + self.noise
     }
 
     fn nothing_seen_beyond(
@@ -730,10 +730,9 @@ pub struct CellClassifier {
     min_range: f32,
     max_range: f32,
     fov_max_vertices: usize,
-    /// `[perception.drop_off]`: (max gap, or ∞ when off; δ0; Δ; noise).
-    drop_off: (f32, f32, f32, f32),
-    /// tan of the tolerated slope (criterion b's), for drop-offs.
-    tan_slope: f32,
+    /// `[perception.drop_off]`, without a beam order: each image's binning
+    /// uses it with the order of its rows.
+    drop_off: DropOffRule<'static>,
     /// Grid indices of this image's drop-off cells (the parts' merged).
     drop_offs: Vec<u32>,
     /// The grid over the region, in the level frame. Points are binned only
@@ -780,19 +779,19 @@ impl CellClassifier {
             fov_max_vertices: config.fov_max_vertices,
             drop_off: {
                 let d = &config.drop_off;
-                let max_gap = if d.enabled {
-                    d.max_gap_m
-                } else {
-                    f64::INFINITY
-                };
-                (
-                    max_gap as f32,
-                    d.min_depth_m as f32,
-                    d.depth_per_m as f32,
-                    d.noise_m as f32,
-                )
+                DropOffRule {
+                    max_gap: if d.enabled {
+                        d.max_gap_m
+                    } else {
+                        f64::INFINITY
+                    } as f32,
+                    min_depth: d.min_depth_m as f32,
+                    depth_per_m: d.depth_per_m as f32,
+                    noise: d.noise_m as f32,
+                    tan_slope: c.max_slope_deg.to_radians().tan() as f32,
+                    order: &[],
+                }
             },
-            tan_slope: c.max_slope_deg.to_radians().tan() as f32,
             drop_offs: Vec::new(),
             grid,
             window,
@@ -852,12 +851,8 @@ impl CellClassifier {
             min_range: self.min_range.max(f32::MIN_POSITIVE),
             max_range: self.max_range,
             drop_off: DropOffRule {
-                max_gap: self.drop_off.0,
-                min_depth: self.drop_off.1,
-                depth_per_m: self.drop_off.2,
-                noise: self.drop_off.3,
-                tan_slope: self.tan_slope,
                 order: &self.trig.order,
+                ..self.drop_off
             },
         };
         let parts: [std::ops::Range<usize>; PARTS] =
