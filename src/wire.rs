@@ -10,7 +10,8 @@ use arcnav_bus::lcmtypes::{
 };
 use arcnav_localmap::{MapSnapshot, Patch, SeenGround};
 use arcnav_perception::{
-    BeamTable, FovPolygon, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region,
+    BeamTable, FovPolygon, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region, Shadow,
+    Shadows,
 };
 use arcnav_vehicle::frames::{FrameError, isometry_from_parts, rotation_to_wxyz};
 use arcnav_vehicle::{ArcSet, Isometry, Pose, Utime};
@@ -94,6 +95,14 @@ pub fn obstacles_to_wire(report: &ObstacleReport) -> obstacle_cells_t {
             .collect(),
         num_fov: report.fov.vertices.len() as i32,
         fov: report.fov.vertices.iter().map(|v| [v.x, v.y]).collect(),
+        shadow_origin: [report.shadows.origin.x, report.shadows.origin.y],
+        num_shadows: report.shadows.sectors.len() as i32,
+        shadows: report
+            .shadows
+            .sectors
+            .iter()
+            .map(|s| [s.azimuth, s.half_width, s.near, s.far])
+            .collect(),
     }
 }
 
@@ -143,6 +152,25 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
             "field-of-view polygon has a vertex that is not finite".into(),
         ));
     }
+    if !msg.shadow_origin.iter().all(|v| v.is_finite()) {
+        return Err(invalid("shadow origin is not finite".into()));
+    }
+    let mut sectors = Vec::with_capacity(msg.shadows.len());
+    for &[azimuth, half_width, near, far] in &msg.shadows {
+        let shadow = Shadow {
+            azimuth,
+            half_width,
+            near,
+            far,
+        };
+        if !shadow.is_valid() {
+            return Err(invalid(format!(
+                "shadow [{azimuth}, {half_width}, {near}, {far}] is not a column's: direction and distances must be finite, half width 0 to {} rad, 0 <= near <= far",
+                Shadow::MAX_HALF_WIDTH
+            )));
+        }
+        sectors.push(shadow);
+    }
     Ok(ObstacleReport {
         utime: msg.utime,
         sensor: msg.sensor,
@@ -150,6 +178,10 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
         cells,
         regions,
         fov: FovPolygon::new(msg.fov.iter().map(|v| Point2::new(v[0], v[1])).collect()),
+        shadows: Shadows {
+            origin: Point2::new(msg.shadow_origin[0], msg.shadow_origin[1]),
+            sectors,
+        },
     })
 }
 
@@ -470,13 +502,33 @@ mod tests {
                 Point2::new(10.0, 0.0),
                 Point2::new(5.0, 5.0),
             ]),
+            shadows: Shadows {
+                origin: Point2::new(-1.0, 0.5),
+                sectors: vec![Shadow {
+                    azimuth: 0.25,
+                    half_width: 0.003,
+                    near: 6.5,
+                    far: 9.0,
+                }],
+            },
         };
         let back = obstacles_from_wire(obstacles_to_wire(&report)).unwrap();
         assert_eq!(back.cells, report.cells);
         assert_eq!(back.regions, report.regions);
         assert_eq!(back.fov, report.fov);
+        assert_eq!(back.shadows, report.shadows);
         let mut bad = obstacles_to_wire(&report);
         bad.cells[0].region = -1;
+        assert!(obstacles_from_wire(bad).is_err());
+        // A shadow wider than a column, or with its ends swapped, is refused.
+        for shadow in [[0.25, 1.5, 6.5, 9.0], [0.25, 0.003, 9.0, 6.5]] {
+            let mut bad = obstacles_to_wire(&report);
+            bad.shadows[0] = shadow;
+            let error = obstacles_from_wire(bad).unwrap_err().to_string();
+            assert!(error.contains("shadow"), "{error}");
+        }
+        let mut bad = obstacles_to_wire(&report);
+        bad.shadow_origin[1] = f64::NAN;
         assert!(obstacles_from_wire(bad).is_err());
     }
 

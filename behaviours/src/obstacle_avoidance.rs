@@ -20,12 +20,16 @@
 //! Ground no image has seen is not free ground (000 §4.2 treats unknown
 //! height as an obstacle). `unseen_ground` sets what it is:
 //! - `slow` (default): each arc's speed is limited so that the vehicle can
-//!   stop within the ground seen along it (and within its free distance
-//!   minus `stop_margin_m`, as before): `v·t + v²/2a = room`;
+//!   stop `stop_margin_m` short of the ground not seen along it (and of
+//!   its free distance, as before): `v·t + v²/2a = room`. An arc whose
+//!   unseen ground lies closer than the vehicle, braking as hard as it can
+//!   from the speed it has, would stop in is forbidden: turning onto it, its
+//!   limit would come too late;
 //! - `obstacle`: unseen ground is an obstacle like a cell;
 //! - `free`: it is ignored (the paper's behaviour).
 //!
-//! The ground under the vehicle's footprint counts as seen: it stands there.
+//! The ground under the vehicle up to its front axle counts as seen: it
+//! stands there (the front overhang does not: it may hang over a ledge).
 
 use std::collections::HashMap;
 
@@ -130,6 +134,15 @@ impl Grid {
             .then_some((fx as usize, fy as usize))
     }
 
+    /// The first cell of `bitmap` that `entry` holds (it must hold one).
+    fn first_cell(&self, entry: &Entry, bitmap: &[u64]) -> (usize, usize) {
+        let hits = bitmap[entry.word as usize] & entry.mask;
+        let row = entry.word as usize / self.words_per_row;
+        let column =
+            (entry.word as usize % self.words_per_row) * 64 + hits.trailing_zeros() as usize;
+        (row, column)
+    }
+
     fn centre(&self, row: usize, column: usize) -> Point2<f64> {
         Point2::new(
             self.x0 + (row as f64 + 0.5) * self.resolution,
@@ -146,11 +159,14 @@ pub struct ObstacleAvoidance {
     templates: Vec<Template>,
     /// Margin of band b (0 for the footprint itself).
     margins: Vec<f64>,
+    /// Deceleration the speed limits assume (half the vehicle's best), m/s².
     deceleration: f64,
+    /// The vehicle's best deceleration, m/s².
+    max_deceleration: f64,
     bitmap: Vec<u64>,
     /// Cells whose ground no image has seen (same layout as `bitmap`).
     unseen: Vec<u64>,
-    /// Cells under the vehicle's footprint now: never unseen.
+    /// Cells under the vehicle up to its front axle: never unseen.
     under_vehicle: Vec<u64>,
     /// Map patch index per grid cell that holds one (u32::MAX otherwise).
     causes: Vec<u32>,
@@ -205,17 +221,24 @@ impl ObstacleAvoidance {
             .iter()
             .map(|arc| build_template(arc, &footprint, &margins, &grid, reach))
             .collect();
+        // The ground the wheels stand on: from the rear bumper to the
+        // front axle. Not the front overhang: crept forward onto ground no
+        // image has seen (a ledge in a lidar's blind zone), it must still
+        // stop the vehicle.
+        // As wide as the footprint swept (the body and half a patch).
+        let wheels = footprint.x_min..=setup.vehicle.wheelbase_m.min(body.x_max);
         let mut under_vehicle = vec![0; rows * words_per_row];
         for row in 0..rows {
             for column in 0..columns {
                 let p = grid.centre(row, column);
-                if (body.x_min..=body.x_max).contains(&p.x) && p.y.abs() <= body.half_width {
+                if wheels.contains(&p.x) && p.y.abs() <= footprint.half_width {
                     under_vehicle[row * words_per_row + column / 64] |= 1 << (column % 64);
                 }
             }
         }
         Self {
             deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
+            max_deceleration: setup.vehicle.max_deceleration_mps2,
             bitmap: vec![0; rows * words_per_row],
             unseen: vec![0; rows * words_per_row],
             under_vehicle,
@@ -280,10 +303,7 @@ impl ObstacleAvoidance {
 
     /// The map cell behind a hit entry, vehicle frame.
     fn cause(&self, entry: &Entry, ctx: &VoteContext<'_>) -> Option<[f32; 2]> {
-        let hits = self.bitmap[entry.word as usize] & entry.mask;
-        let row = entry.word as usize / self.grid.words_per_row;
-        let column =
-            (entry.word as usize % self.grid.words_per_row) * 64 + hits.trailing_zeros() as usize;
+        let (row, column) = self.grid.first_cell(entry, &self.bitmap);
         let patch = self.causes.get(row * self.grid.columns + column)?;
         let patch = ctx.map.patches.get(*patch as usize)?;
         Some([patch.x, patch.y])
@@ -420,6 +440,10 @@ impl Behaviour for ObstacleAvoidance {
         let (a, t) = (self.deceleration, self.config.reaction_s);
         let stopping_speed =
             |room: f64| -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt();
+        // How far the vehicle runs before it stands, braking as hard as it
+        // can from its speed now.
+        let speed = ctx.pose.velocity.norm();
+        let braking = speed * t + speed * speed / (2.0 * self.max_deceleration);
         for arc in 0..self.templates.len().min(votes.len()) {
             if votes.is_vetoed(arc) {
                 continue;
@@ -428,8 +452,19 @@ impl Behaviour for ObstacleAvoidance {
             if policy == UnseenGround::Slow
                 && let Some(unseen) = first_in(&self.unseen, &self.templates[arc].bands[0], reach)
             {
-                // Stop before the first unseen ground the footprint meets.
-                room = room.min(f64::from(unseen.s));
+                // Stop `stop_margin_m` before the first unseen ground the
+                // footprint meets (its patch may begin past the edge);
+                // an arc the vehicle can no longer stop on before it, at
+                // the speed it has, is forbidden: its speed limit would
+                // come too late.
+                let distance = f64::from(unseen.s);
+                if distance < braking {
+                    let (row, column) = self.grid.first_cell(unseen, &self.unseen);
+                    let p = self.grid.centre(row, column);
+                    votes.veto(arc, Some([p.x as f32, p.y as f32]));
+                    continue;
+                }
+                room = room.min(distance - self.config.stop_margin_m);
             }
             votes.limit_arc_speed(arc, stopping_speed(room));
         }

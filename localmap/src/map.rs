@@ -7,16 +7,19 @@
 //!   into world-aligned patches (0.40 m), each keeping first/last-seen time,
 //!   confirmations, sensors, reasons and heights.
 //! - **Consistency pruning**: a patch whose centre lies in the observed
-//!   footprint of a newer image from a sensor that reported it, and which that
-//!   image did not report again, takes a miss; after `misses_to_drop` misses
-//!   it is dropped. An image older than a patch's last confirmation counts no
-//!   miss, so out-of-order reports never prune what newer images confirmed.
+//!   footprint of a newer image from a sensor that reported it, and which
+//!   that image did not report again, takes a miss; after `misses_to_drop`
+//!   misses it is dropped. Shadows count as in the footprint, as in 002 §5
+//!   (tried the other way, more drop-off cells stayed and the vehicle found
+//!   its way round other trenches, not more of them). An image older than a
+//!   patch's last confirmation counts no miss, so out-of-order reports never
+//!   prune what newer images confirmed.
 //! - **The loop** ([`LocalMap::update`]): with the current pose every patch is
 //!   re-expressed in the vehicle frame and those outside the window dropped.
-//! - **Seen ground**: the ground each image observed (its footprint) is
-//!   marked per patch in the same scrolling grid, so unseen ground is never
-//!   mistaken for free ground; ground around the first pose counts as seen
-//!   (`assume_seen_m`).
+//! - **Seen ground**: the ground each image observed (its footprint, less
+//!   the shadows beyond edges it could not see into) is marked per patch in
+//!   the same scrolling grid, so unseen ground is never mistaken for free
+//!   ground; ground around the first pose counts as seen (`assume_seen_m`).
 //! - **Snapshots**: immutable, vehicle frame, behind an `Arc`.
 //!
 //! Patches live in a scrolling ring-buffer grid (a power-of-two square that
@@ -26,7 +29,7 @@
 
 use std::sync::Arc;
 
-use arcnav_perception::{ObstacleReport, Reasons};
+use arcnav_perception::{ObstacleReport, Reasons, ShadowIndex};
 use arcnav_vehicle::frames::yaw_of;
 use arcnav_vehicle::time::micros_to_seconds;
 use arcnav_vehicle::{Isometry, Pose, Utime};
@@ -289,6 +292,8 @@ pub struct LocalMap {
     epoch_start: Utime,
     stamp: u64,
     coverage: Coverage,
+    /// Scratch: the shadows of the report being inserted.
+    shadows: ShadowIndex,
     /// Per ring slot: the world patch whose ground some image observed
     /// (`UNSEEN` if none): a slot the window scrolled past holds another
     /// patch's index, so nothing needs clearing as the vehicle moves.
@@ -318,6 +323,7 @@ impl LocalMap {
             epoch_start: Utime::MIN,
             stamp: 0,
             coverage: Coverage::default(),
+            shadows: ShadowIndex::default(),
             seen: vec![UNSEEN; side * side],
             assume_seen_pending: true,
             stats: MapStats::default(),
@@ -564,14 +570,25 @@ impl LocalMap {
         };
         self.coverage
             .rasterise(&report.fov, self.config.patch_size_m, rows);
+        self.shadows.build(&report.shadows);
         if let Some((i0, _, side)) = square {
             let coverage = std::mem::take(&mut self.coverage);
             coverage.for_each_covered((i0, i0 + i64::from(side) - 1), |i, j| {
-                self.mark_seen(i, j);
+                // Ground in the footprint but out of sight was not seen.
+                if !self.in_shadow(i, j) {
+                    self.mark_seen(i, j);
+                }
             });
             self.coverage = coverage;
         }
         true
+    }
+
+    /// Whether the centre of patch (`i`, `j`) lies in a shadow of the
+    /// report being inserted.
+    fn in_shadow(&self, i: i64, j: i64) -> bool {
+        let (x, y) = self.patch_centre(i, j);
+        self.shadows.contains(x, y)
     }
 
     fn prune(&mut self, report: &ObstacleReport, sensor_bit: u32, stamp: u64) -> u32 {

@@ -53,6 +53,7 @@ fn report(utime: Utime, sensor: &str, cells: &[(f64, f64)], fov: FovPolygon) -> 
         cells: cells.iter().map(|&(x, y)| cell(x, y)).collect(),
         regions: vec![],
         fov,
+        shadows: Default::default(),
     }
 }
 

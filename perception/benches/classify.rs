@@ -130,13 +130,14 @@ fn bench_configured(
         .evaluate(&image, &Isometry::identity(), &mut report)
         .unwrap_or_else(|e| panic!("{e}"));
     println!(
-        "{}: {} pixels, {} valid points, {} cells, {} untraversable in {} regions",
+        "{}: {} pixels, {} valid points, {} cells, {} untraversable in {} regions, {} shadows",
         sensor.id,
         stats.pixels,
         stats.valid_points,
         stats.cells_evaluated,
         stats.untraversable,
-        stats.regions
+        stats.regions,
+        report.shadows.sectors.len()
     );
     bencher
         .counter(ItemsCount::new(stats.valid_points))

@@ -41,6 +41,9 @@ use crate::evaluator::{
 };
 use crate::fov::FovBuilder;
 use crate::image::RangeImage;
+use crate::shadow::Shadow;
+
+use std::f32::consts::{PI, TAU};
 
 #[derive(Debug, Clone, Copy)]
 struct Cell {
@@ -145,6 +148,11 @@ impl PlaneSums {
     }
 }
 
+/// The same direction in (-π, π].
+fn turn(angle: f32) -> f32 {
+    (angle + PI).rem_euclid(TAU) - PI
+}
+
 /// The trig of the last beam table seen, so a sensor's table is processed once.
 #[derive(Debug, Default)]
 struct BeamTrig {
@@ -217,8 +225,8 @@ struct Bins {
     row: ProjectedRow,
     /// The part's columns walked from their far returns to their near ones.
     walk: Walk,
-    /// Grid indices of the cells found at the near edge of a drop-off.
-    drop_offs: Vec<u32>,
+    /// Drop-offs and shadows the walk found.
+    found: Found,
 }
 
 /// The last two returns of each column of a part, walking the columns
@@ -252,9 +260,10 @@ impl Walk {
     /// One row's step: finds the returns whose gap to the column's previous
     /// return is long, has `rule` judge them (rarely any: flat ground's
     /// returns lie closer together than a wheel bridges out to 13 m for
-    /// the ERIM), then moves every column that has a return on.
+    /// the ERIM), then moves every column that has a return on. A long gap
+    /// with a return beyond is a shadow, drop-off or not.
     #[inline(always)]
-    fn step(&mut self, row: &Row, points: &ProjectedRow, drop_offs: &mut Vec<u32>) {
+    fn step(&mut self, row: &Row, points: &ProjectedRow, found: &mut Found) {
         let n = points.index.len();
         let rule = &row.projection.drop_off;
         let (max_gap, min_depth, depth_per_m) = (rule.max_gap, rule.min_depth, rule.depth_per_m);
@@ -287,14 +296,12 @@ impl Walk {
                     beyond_d: bd[k],
                     beyond_z: bz[k],
                 };
-                if rule.judge(
-                    row.projection,
-                    &previous,
-                    (d[k], z[k]),
-                    row.position,
-                    row.first_col + k,
-                ) {
-                    drop_offs.push(index[k]);
+                let col = row.first_col + k;
+                if rule.judge(row.projection, &previous, (d[k], z[k]), row.position, col) {
+                    found.drop_offs.push(index[k]);
+                }
+                if previous.d < f32::INFINITY {
+                    found.shadows.push((col as u32, d[k], previous.d));
                 }
             }
         }
@@ -315,6 +322,23 @@ impl Walk {
             wd[k] = select(mask, d[k], wd[k]);
             wz[k] = select(mask, z[k], wz[k]);
         }
+    }
+}
+
+/// What a [`Walk`] finds in a part's columns.
+#[derive(Debug, Default)]
+struct Found {
+    /// Grid indices of the cells at the near edge of a drop-off.
+    drop_offs: Vec<u32>,
+    /// Shadows: (image column, distance of the edge, of the return beyond),
+    /// level frame.
+    shadows: Vec<(u32, f32, f32)>,
+}
+
+impl Found {
+    fn clear(&mut self) {
+        self.drop_offs.clear();
+        self.shadows.clear();
     }
 }
 
@@ -446,7 +470,7 @@ impl Bins {
             counts: [0; 4],
             row: ProjectedRow::default(),
             walk: Walk::default(),
-            drop_offs: Vec::new(),
+            found: Found::default(),
         }
     }
 
@@ -620,7 +644,7 @@ impl Projection<'_> {
         bins.column_rows.clear();
         bins.column_rows.resize(columns.len(), (u32::MAX, 0));
         bins.walk.start(columns.len());
-        bins.drop_offs.clear();
+        bins.found.clear();
         bins.counts = [0; 4];
         let mut run = Cell::new(u32::MAX);
         let cols = self.cols.max(1);
@@ -638,7 +662,7 @@ impl Projection<'_> {
                     first_col: columns.start,
                     projection: self,
                 };
-                bins.walk.step(&row, &points, &mut bins.drop_offs);
+                bins.walk.step(&row, &points, &mut bins.found);
             }
             run = gather(row, &points, bins, run);
         }
@@ -735,6 +759,10 @@ pub struct CellClassifier {
     drop_off: DropOffRule<'static>,
     /// Grid indices of this image's drop-off cells (the parts' merged).
     drop_offs: Vec<u32>,
+    /// This image's shadows (the parts' merged): (column, edge, beyond).
+    shadows: Vec<(u32, f32, f32)>,
+    /// The sensor's position in the level frame, this image.
+    sensor_xy: [f32; 2],
     /// The grid over the region, in the level frame. Points are binned only
     /// `grid.margin` cells away from its edge, so every neighbour a window
     /// reaches exists.
@@ -793,6 +821,8 @@ impl CellClassifier {
                 }
             },
             drop_offs: Vec::new(),
+            shadows: Vec::new(),
+            sensor_xy: [0.0; 2],
             grid,
             window,
             neighbours: [-s - 1, -s, -s + 1, -1, 1, s - 1, s, s + 1],
@@ -884,9 +914,12 @@ impl CellClassifier {
             }
         }
         self.drop_offs.clear();
+        self.shadows.clear();
         for bins in &self.bins {
-            self.drop_offs.extend_from_slice(&bins.drop_offs);
+            self.drop_offs.extend_from_slice(&bins.found.drop_offs);
+            self.shadows.extend_from_slice(&bins.found.shadows);
         }
+        self.sensor_xy = [t[0], t[1]];
         let (first, rest) = self.bins.split_at_mut(1);
         for other in rest {
             first[0].absorb(other);
@@ -1057,6 +1090,45 @@ impl CellClassifier {
         }
     }
 
+    /// Writes the image's shadows, in the world frame, into `report`. A
+    /// column's sector reaches halfway to the farther of its neighbours'
+    /// directions (in the level frame, where a tilted sensor's columns
+    /// spread wider than in its own).
+    fn emit_shadows(&self, world_from_level: &Isometry, report: &mut ObstacleReport) {
+        let [ux, uy, _] = &self.column_terms;
+        let cols = ux.len();
+        // The angle between the horizontal directions of two columns, as
+        // its sine (columns are well under 0.1 rad apart): no trigonometry.
+        let between = |a: usize, b: usize| {
+            let cross = ux[a] * uy[b] - uy[a] * ux[b];
+            cross.abs() / (ux[a].hypot(uy[a]) * ux[b].hypot(uy[b]))
+        };
+        let yaw = arcnav_vehicle::frames::yaw_of(world_from_level) as f32;
+        let origin = world_from_level
+            * nalgebra::Point3::new(
+                f64::from(self.sensor_xy[0]),
+                f64::from(self.sensor_xy[1]),
+                0.0,
+            );
+        report.shadows.origin = nalgebra::Point2::new(origin.x, origin.y);
+        for &(col, near, far) in &self.shadows {
+            let col = col as usize;
+            let spacing = [col.checked_sub(1), (col + 1 < cols).then_some(col + 1)]
+                .into_iter()
+                .flatten()
+                .map(|n| between(col, n))
+                .fold(0.0f32, f32::max);
+            report.shadows.sectors.push(Shadow {
+                azimuth: turn(uy[col].atan2(ux[col]) + yaw),
+                // A hair wider, so neighbouring columns' sectors overlap
+                // rather than leave a rounding gap between them.
+                half_width: (0.51 * spacing).min(Shadow::MAX_HALF_WIDTH),
+                near,
+                far,
+            });
+        }
+    }
+
     fn reset_touched(&mut self) {
         let bins = &mut self.bins[0];
         for cell in &bins.cells {
@@ -1112,6 +1184,7 @@ impl TerrainEvaluator for CellClassifier {
         self.emit(&world_from_level, report, &mut stats);
         self.fov
             .finish(&world_from_level, self.fov_max_vertices, &mut report.fov);
+        self.emit_shadows(&world_from_level, report);
         self.reset_touched();
         Ok(stats)
     }

@@ -12,6 +12,7 @@ use arcnav_vehicle::{Isometry, Utime};
 
 use crate::fov::FovPolygon;
 use crate::image::{ImageError, RangeImage};
+use crate::shadow::Shadows;
 
 /// Why a cell is untraversable (a bit set; evaluators may combine reasons).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, PartialOrd, Ord)]
@@ -111,6 +112,9 @@ pub struct ObstacleReport {
     pub regions: Vec<Region>,
     /// The ground the image actually observed, world frame.
     pub fov: FovPolygon,
+    /// The parts of `fov` the image did not see: beyond edges, out of
+    /// sight (empty when the evaluator does not tell).
+    pub shadows: Shadows,
 }
 
 impl ObstacleReport {
@@ -121,6 +125,7 @@ impl ObstacleReport {
         self.cells.clear();
         self.regions.clear();
         self.fov.vertices.clear();
+        self.shadows.clear();
     }
 }
 

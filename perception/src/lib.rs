@@ -11,6 +11,7 @@
 //! - [`evaluator`]: the [`TerrainEvaluator`] trait and its output;
 //! - [`cells`]: the paper's per-cell classifier;
 //! - [`fov`]: the observed footprint polygon;
+//! - [`shadow`]: the ground in it the image did not see;
 //! - [`scene`]: analytic scenes for tests and benchmarks;
 //! - [`config`]: `[perception]` and the evaluator registry.
 
@@ -22,6 +23,7 @@ pub mod image;
 pub mod raycast;
 pub mod scene;
 pub mod sensor;
+pub mod shadow;
 
 pub use cells::CellClassifier;
 pub use config::{CellsConfig, DropOffConfig, PerceptionConfig, RegionConfig};
@@ -33,3 +35,4 @@ pub use fov::FovPolygon;
 pub use image::{BeamTable, ImageError, RangeImage};
 pub use raycast::RayCast;
 pub use sensor::{SensorConfig, SensorModel, SensorPreset};
+pub use shadow::{Shadow, ShadowIndex, Shadows};

@@ -47,6 +47,7 @@ fn map() -> MapSnapshot {
             cells: cells.clone(),
             regions: vec![],
             fov: FovPolygon::default(),
+            shadows: Default::default(),
         };
         local.insert(&report).expect("valid cells");
     }

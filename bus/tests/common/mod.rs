@@ -52,6 +52,9 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
             .collect(),
         num_fov: 4,
         fov: vec![[0.0, 0.0], [10.0, -5.0], [20.0, 0.0], [10.0, 5.0]],
+        shadow_origin: [-1.5, 2.25],
+        num_shadows: 2,
+        shadows: vec![[0.25, 0.0625, 6.5, 9.0], [-3.0, 0.001953125, 12.0, 12.5]],
     };
     let waypoints = waypoints_t {
         utime: 1_700_000_000_900_000,
@@ -263,7 +266,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
             )
         }
         4 => {
-            let (n, f) = (rng.len(), rng.len());
+            let (n, f, s) = (rng.len(), rng.len(), rng.len());
             (
                 "obstacle_cells_t",
                 AnyMessage::ObstacleCells(obstacle_cells_t {
@@ -283,6 +286,9 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                         .collect(),
                     num_fov: f as i32,
                     fov: (0..f).map(|_| [rng.f64(), rng.f64()]).collect(),
+                    shadow_origin: [rng.f64(), rng.f64()],
+                    num_shadows: s as i32,
+                    shadows: (0..s).map(|_| std::array::from_fn(|_| rng.f32())).collect(),
                 }),
             )
         }

@@ -77,6 +77,9 @@ def samples(arcnav):
         m.cells.append(c)
     m.num_fov = 4
     m.fov = [[0.0, 0.0], [10.0, -5.0], [20.0, 0.0], [10.0, 5.0]]
+    m.shadow_origin = [-1.5, 2.25]
+    m.num_shadows = 2
+    m.shadows = [[0.25, 0.0625, 6.5, 9.0], [-3.0, 0.001953125, 12.0, 12.5]]
     out["obstacle_cells_t"] = m
 
     m = arcnav.waypoints_t()
