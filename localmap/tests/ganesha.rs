@@ -4,7 +4,8 @@
 use arcnav_localmap::{InsertError, JumpPolicy, JumpReason, LocalMap, LocalMapConfig, PoseUpdate};
 use arcnav_perception::scene::HeightFunction;
 use arcnav_perception::{
-    FovPolygon, ObstacleCell, ObstacleReport, PerceptionConfig, Reasons, SensorModel,
+    FovPolygon, ObstacleCell, ObstacleReport, PerceptionConfig, Reasons, SensorModel, Shadow,
+    Shadows,
 };
 use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{Pose, PoseHistory, Utime};
@@ -514,4 +515,51 @@ fn the_map_knows_which_ground_has_been_seen() {
     let snapshot = map.snapshot();
     assert_eq!(snapshot.seen.count(), disc, "start disc only");
     assert!(snapshot.is_seen(0.0, 0.0));
+}
+
+#[test]
+fn ground_in_a_shadow_is_not_seen_and_an_old_cell_there_is_still_pruned() {
+    let mut map = map_with(LocalMapConfig {
+        assume_seen_m: 0.0,
+        ..LocalMapConfig::default()
+    });
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    // A cell 12 m ahead, seen by an image that observed only the ground
+    // around it; then an image that observed 5-15 m ahead but whose columns
+    // straight ahead (±0.1 rad) lost sight of the ground from 10 to 13 m
+    // (beyond an edge).
+    map.insert(&report(
+        SECOND / 2,
+        "erim",
+        &[(12.0, 0.0)],
+        rectangle(11.6, 12.4, -0.4, 0.4),
+    ))
+    .unwrap();
+    let mut image = report(SECOND, "erim", &[], rectangle(5.0, 15.0, -4.0, 4.0));
+    image.shadows = Shadows {
+        origin: Point2::new(0.0, 0.0),
+        sectors: (-10..=10)
+            .map(|k| Shadow {
+                azimuth: k as f32 * 0.01,
+                half_width: 0.0051,
+                near: 10.0,
+                far: 13.0,
+            })
+            .collect(),
+    };
+    let outcome = map.insert(&image).unwrap();
+    let snapshot = map.snapshot();
+    for (x, y, seen) in [
+        (9.7, 0.0, true),
+        (10.5, 0.0, false),
+        (12.5, 0.9, false),
+        (12.5, -0.9, false),
+        (12.5, 2.0, true),
+        (13.5, 0.0, true),
+    ] {
+        assert_eq!(snapshot.is_seen(x, y), seen, "({x}, {y})");
+    }
+    // Pruning keeps 002 §5's footprint: the cell, not reported again, goes.
+    assert_eq!(outcome.pruned, 1);
+    assert!(snapshot.patches.is_empty());
 }
