@@ -13,8 +13,11 @@
 //! - [`messages`]: decoding by fingerprint into [`messages::AnyMessage`], the
 //!   channel names, and conversions to the vehicle crate's types;
 //! - [`transport`][]: `udpm://` (UDP multicast, `LC02` and fragmented `LC03`)
-//!   and in-process `memq://`.
+//!   and in-process `memq://`;
+//! - [`auth`]: a group key, HMAC-SHA256 trailers and the checks that refuse
+//!   forged, replayed and stale messages.
 
+pub mod auth;
 pub mod codec;
 pub mod lcmtypes;
 pub mod log;
