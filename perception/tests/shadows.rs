@@ -4,7 +4,7 @@
 //! not only the vehicle's).
 
 use arcnav_perception::scene::HeightFunction;
-use arcnav_perception::{ObstacleReport, PerceptionConfig, SensorModel, ShadowIndex};
+use arcnav_perception::{ObstacleReport, PerceptionConfig, RangeImage, SensorModel, ShadowIndex};
 use arcnav_vehicle::Isometry;
 use arcnav_vehicle::frames::planar_isometry;
 
@@ -26,12 +26,16 @@ fn report(sensor: &SensorModel, height: impl Fn(f64, f64) -> f64 + Sync) -> Obst
         let p = inverse * nalgebra::Point3::new(x, y, 0.0);
         height(p.x, p.y)
     };
-    let image = sensor.render(0, &pose(), &HeightFunction::new(in_world));
+    evaluate(&sensor.render(0, &pose(), &HeightFunction::new(in_world)))
+}
+
+/// The report of `image`, taken from [`pose`].
+fn evaluate(image: &RangeImage) -> ObstacleReport {
     let mut report = ObstacleReport::default();
     PerceptionConfig::default()
         .build_evaluator()
         .unwrap()
-        .evaluate(&image, &pose(), &mut report)
+        .evaluate(image, &pose(), &mut report)
         .unwrap();
     report
 }
@@ -119,12 +123,7 @@ fn level_ground_and_dropouts_cast_no_shadow_and_a_rock_casts_its_own() {
                 *range = 0.0;
             }
         }
-        let mut dropouts = ObstacleReport::default();
-        PerceptionConfig::default()
-            .build_evaluator()
-            .unwrap()
-            .evaluate(&image, &pose(), &mut dropouts)
-            .unwrap();
+        let dropouts = evaluate(&image);
         assert!(dropouts.shadows.is_empty(), "{id}: dropouts");
         // A 0.6 m rock of 1 m across, 10 m ahead: the ground right behind
         // it is hidden, the ground beside it and in front of it is not.
