@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Registry, Waypoint};
-use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
+use arcnav_bus::lcmtypes::pose_t;
 use arcnav_bus::messages::channels;
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, Reasons, SensorModel};
@@ -212,11 +212,7 @@ impl Sink for MissionSink<'_> {
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.log.message(
-            at,
-            channels::STEERING_COMMAND,
-            &steering_command_t::from(command),
-        );
+        self.log.command(at, command);
         self.commands.push(*command);
         if let Some(previous) = self.previous_curvature {
             self.curvature_change.0 += (command.curvature - previous).abs();

@@ -6,10 +6,11 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use arcnav_arbiter::BehaviourVotes;
+use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::log::{LogWriteError, LogWriter};
 use arcnav_bus::messages::channels;
 use arcnav_perception::ObstacleReport;
-use arcnav_vehicle::{ArcSet, Utime};
+use arcnav_vehicle::{ArcSet, SteeringCommand, Utime};
 
 use crate::output::Staged;
 use crate::wire;
@@ -83,6 +84,15 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
             at,
             channels::OBSTACLE_CELLS,
             &wire::obstacles_to_wire(report),
+        );
+    }
+
+    /// Writes the arbiter's command on STEERING_COMMAND.
+    pub fn command(&mut self, at: Utime, command: &SteeringCommand) {
+        self.message(
+            at,
+            channels::STEERING_COMMAND,
+            &steering_command_t::from(command),
         );
     }
 

@@ -222,10 +222,10 @@ impl ObstacleAvoidance {
             .map(|arc| build_template(arc, &footprint, &margins, &grid, reach))
             .collect();
         // The ground the wheels stand on: from the rear bumper to the
-        // front axle. Not the front overhang: crept forward onto ground no
+        // front axle, as wide as the footprint swept (the body and half a
+        // patch). Not the front overhang: crept forward onto ground no
         // image has seen (a ledge in a lidar's blind zone), it must still
         // stop the vehicle.
-        // As wide as the footprint swept (the body and half a patch).
         let wheels = footprint.x_min..=setup.vehicle.wheelbase_m.min(body.x_max);
         let mut under_vehicle = vec![0; rows * words_per_row];
         for row in 0..rows {

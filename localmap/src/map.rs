@@ -570,8 +570,8 @@ impl LocalMap {
         };
         self.coverage
             .rasterise(&report.fov, self.config.patch_size_m, rows);
-        self.shadows.build(&report.shadows);
         if let Some((i0, _, side)) = square {
+            self.shadows.build(&report.shadows);
             let coverage = std::mem::take(&mut self.coverage);
             coverage.for_each_covered((i0, i0 + i64::from(side) - 1), |i, j| {
                 // Ground in the footprint but out of sight was not seen.

@@ -32,7 +32,7 @@
 //! 3-vector per column and per row is computed.
 
 use arcnav_vehicle::Isometry;
-use arcnav_vehicle::frames::level_frame;
+use arcnav_vehicle::frames::{level_frame, wrap_angle};
 
 use crate::config::{GridShape, PerceptionConfig};
 use crate::evaluator::{
@@ -42,8 +42,6 @@ use crate::evaluator::{
 use crate::fov::FovBuilder;
 use crate::image::RangeImage;
 use crate::shadow::Shadow;
-
-use std::f32::consts::{PI, TAU};
 
 #[derive(Debug, Clone, Copy)]
 struct Cell {
@@ -146,11 +144,6 @@ impl PlaneSums {
         let b = (cxx * cyz - cxy * cxz) / det;
         Some(a * a + b * b)
     }
-}
-
-/// The same direction in (-π, π].
-fn turn(angle: f32) -> f32 {
-    (angle + PI).rem_euclid(TAU) - PI
 }
 
 /// The trig of the last beam table seen, so a sensor's table is processed once.
@@ -1103,7 +1096,7 @@ impl CellClassifier {
             let cross = ux[a] * uy[b] - uy[a] * ux[b];
             cross.abs() / (ux[a].hypot(uy[a]) * ux[b].hypot(uy[b]))
         };
-        let yaw = arcnav_vehicle::frames::yaw_of(world_from_level) as f32;
+        let yaw = arcnav_vehicle::frames::yaw_of(world_from_level);
         let origin = world_from_level
             * nalgebra::Point3::new(
                 f64::from(self.sensor_xy[0]),
@@ -1119,7 +1112,7 @@ impl CellClassifier {
                 .map(|n| between(col, n))
                 .fold(0.0f32, f32::max);
             report.shadows.sectors.push(Shadow {
-                azimuth: turn(uy[col].atan2(ux[col]) + yaw),
+                azimuth: wrap_angle(f64::from(uy[col].atan2(ux[col])) + yaw) as f32,
                 // A hair wider, so neighbouring columns' sectors overlap
                 // rather than leave a rounding gap between them.
                 half_width: (0.51 * spacing).min(Shadow::MAX_HALF_WIDTH),

@@ -14,6 +14,7 @@
 //! return. [`ShadowIndex`] answers "is this point in a shadow" for a whole
 //! report at the cost of an `atan2` and a few comparisons.
 
+use arcnav_vehicle::frames::wrap_angle;
 use nalgebra::Point2;
 
 /// One column's shadow, world frame.
@@ -133,10 +134,8 @@ impl ShadowIndex {
         let (start, end) = (self.starts[b] as usize, self.starts[b + 1] as usize);
         self.entries[start..end].iter().any(|&k| {
             let s = &self.sectors[k as usize];
-            let off = (azimuth - s.azimuth + std::f32::consts::PI)
-                .rem_euclid(std::f32::consts::TAU)
-                - std::f32::consts::PI;
-            off.abs() <= s.half_width && (s.near..=s.far).contains(&distance)
+            let off = wrap_angle(f64::from(azimuth - s.azimuth));
+            off.abs() <= f64::from(s.half_width) && (s.near..=s.far).contains(&distance)
         })
     }
 }

@@ -15,9 +15,8 @@ use std::time::{Duration, Instant};
 
 use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Registry};
-use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::log::{InTimeOrder, LogReader, LogWriteError, ReorderWindow};
-use arcnav_bus::messages::{AnyMessage, TypedEvents, channels};
+use arcnav_bus::messages::{AnyMessage, TypedEvents};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::{ArcSet, ConfigError, Pose, SteeringCommand, Utime};
@@ -142,11 +141,7 @@ impl Sink for ReplaySink<'_> {
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.out.message(
-            at,
-            channels::STEERING_COMMAND,
-            &steering_command_t::from(command),
-        );
+        self.out.command(at, command);
         self.cycles.insert(
             at,
             Cycle {
