@@ -203,6 +203,12 @@ pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
             .iter()
             .map(|&s| if s.is_finite() { s } else { -1.0 })
             .collect(),
+        reverse_clear: votes
+            .votes
+            .reverse_clearances()
+            .iter()
+            .map(|&m| if m.is_nan() { -1.0 } else { m })
+            .collect(),
     }
 }
 
@@ -246,6 +252,12 @@ pub fn votes_from_wire(msg: &arc_votes_t, arcs: &ArcSet) -> Result<BehaviourVote
         // Negative: no limit; NaN is no number of m/s: 0.
         if speed >= 0.0 || speed.is_nan() {
             votes.limit_arc_speed(i, f64::from(speed));
+        }
+    }
+    for (i, &metres) in msg.reverse_clear.iter().enumerate() {
+        // Negative: no opinion; NaN is no number of metres: 0.
+        if metres >= 0.0 || metres.is_nan() {
+            votes.set_reverse_clearance(i, f64::from(metres));
         }
     }
     Ok(BehaviourVotes {
@@ -541,6 +553,8 @@ mod tests {
         votes.vote_speed(1.5);
         votes.limit_arc_speed(4, 2.25);
         votes.limit_arc_speed(5, 0.0);
+        votes.set_reverse_clearance(6, 3.5);
+        votes.set_reverse_clearance(7, 0.0);
         let bv = BehaviourVotes {
             behaviour: "obstacle_avoidance".into(),
             utime: 9,
@@ -552,6 +566,15 @@ mod tests {
         assert_eq!(back.votes.speed_mps(), Some(1.5));
         assert_eq!(back.votes.arc_speeds(), bv.votes.arc_speeds());
         assert_eq!(back.votes.arc_speed(5), Some(0.0));
+        assert_eq!(
+            (
+                back.votes.reverse_clearance(6),
+                back.votes.reverse_clearance(7),
+                back.votes.reverse_clearance(8)
+            ),
+            (Some(3.5), Some(0.0), None),
+            "backing-up clearances: given, zero, no opinion"
+        );
         let other = ArcSet::new(&ArcSetConfig {
             count: 39,
             min_radius_m: 10.0,

@@ -4,9 +4,10 @@ use arcnav_vehicle::Utime;
 
 /// What a behaviour thinks of every arc: a vote in [-1, 1] per arc (index
 /// order of the `ArcSet`), arcs it forbids outright (a veto: no weighted sum
-/// can make such an arc win), the map cell that caused each veto, and an
-/// optional speed limit. Buffers are sized once for the arc set; behaviours
-/// fill them in place.
+/// can make such an arc win), the map cell that caused each veto, an
+/// optional speed limit, and — for behaviours that check the ground behind
+/// the vehicle — how far it can back up along each arc. Buffers are sized
+/// once for the arc set; behaviours fill them in place.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Votes {
     values: Vec<f32>,
@@ -15,6 +16,8 @@ pub struct Votes {
     speed_mps: Option<f64>,
     /// Per arc: the highest speed accepted on it (∞: no limit).
     arc_speeds: Vec<f32>,
+    /// Per arc: metres the vehicle may back up along it (NaN: no opinion).
+    reverse_clear: Vec<f32>,
 }
 
 impl Votes {
@@ -26,6 +29,7 @@ impl Votes {
             causes: vec![None; arcs],
             speed_mps: None,
             arc_speeds: vec![f32::INFINITY; arcs],
+            reverse_clear: vec![f32::NAN; arcs],
         }
     }
 
@@ -44,6 +48,7 @@ impl Votes {
         self.causes.fill(None);
         self.speed_mps = None;
         self.arc_speeds.fill(f32::INFINITY);
+        self.reverse_clear.fill(f32::NAN);
     }
 
     /// Sets the vote of arc `index`, clamped to [-1, 1] (NaN counts as -1).
@@ -96,6 +101,33 @@ impl Votes {
             .map(|&s| f64::from(s))
     }
 
+    /// How far the vehicle may back up along arc `index` (its curvature,
+    /// driven backwards), m (negative or NaN: 0). Behaviours that never set
+    /// it have no opinion on backing up.
+    pub fn set_reverse_clearance(&mut self, index: usize, metres: f64) {
+        if let Some(clear) = self.reverse_clear.get_mut(index) {
+            *clear = if metres.is_nan() {
+                0.0
+            } else {
+                metres.max(0.0) as f32
+            };
+        }
+    }
+
+    /// How far the vehicle may back up along arc `index`, if this behaviour
+    /// said.
+    pub fn reverse_clearance(&self, index: usize) -> Option<f64> {
+        self.reverse_clear
+            .get(index)
+            .filter(|m| !m.is_nan())
+            .map(|&m| f64::from(m))
+    }
+
+    /// Per arc: the backing-up clearance, NaN where none was given.
+    pub fn reverse_clearances(&self) -> &[f32] {
+        &self.reverse_clear
+    }
+
     /// Per arc: the speed limit, ∞ where none.
     pub fn arc_speeds(&self) -> &[f32] {
         &self.arc_speeds
@@ -132,6 +164,7 @@ impl Votes {
         self.causes.clone_from(&other.causes);
         self.speed_mps = other.speed_mps;
         self.arc_speeds.clone_from(&other.arc_speeds);
+        self.reverse_clear.clone_from(&other.reverse_clear);
     }
 }
 

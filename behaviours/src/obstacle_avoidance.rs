@@ -30,6 +30,16 @@
 //!
 //! The ground under the vehicle up to its front axle counts as seen: it
 //! stands there (the front overhang does not: it may hang over a ledge).
+//!
+//! **Backing up** (`reverse_reach_m` > 0): the same sweep, mirrored. Driven
+//! backwards along curvature k, the vehicle covers the mirror image (x → -x)
+//! of what a vehicle with its body mirrored covers driving forwards along
+//! k, so the backward sweeps are forward templates of the mirrored body
+//! (grown by `reverse_margin_m`) over a grid of the ground behind, read with
+//! x negated. Each arc's clearance — how far the vehicle can back along it
+//! before its body meets a cell or ground no image has seen — goes out with
+//! the votes ([`Votes::set_reverse_clearance`]); the arbiter backs up only
+//! along arcs clear for the distance it needs.
 
 use std::collections::HashMap;
 
@@ -66,6 +76,11 @@ pub struct ObstacleAvoidanceConfig {
     /// What ground no image has seen is: slow (drive only as fast as the
     /// vehicle can stop within seen ground), obstacle, or free.
     pub unseen_ground: UnseenGround,
+    /// Backward arcs are checked this far, m (0: no opinion on backing up,
+    /// so the arbiter never backs up).
+    pub reverse_reach_m: f64,
+    /// Clearance kept to each side of the body when backing up, m.
+    pub reverse_margin_m: f64,
 }
 
 /// What obstacle avoidance makes of ground no image has seen.
@@ -93,6 +108,8 @@ impl Default for ObstacleAvoidanceConfig {
             stop_margin_m: 2.0,
             reaction_s: 0.75,
             unseen_ground: UnseenGround::Slow,
+            reverse_reach_m: 5.0,
+            reverse_margin_m: 0.3,
         }
     }
 }
@@ -151,108 +168,50 @@ impl Grid {
     }
 }
 
-/// The obstacle-avoidance behaviour.
+/// The map rasterised into a vehicle-frame grid: its cells, the ground no
+/// image has seen, and which map patch set each cell. With `mirror` -1 the
+/// grid holds the ground behind the vehicle with x negated (backing up).
 #[derive(Debug, Clone)]
-pub struct ObstacleAvoidance {
-    config: ObstacleAvoidanceConfig,
+struct Raster {
     grid: Grid,
-    templates: Vec<Template>,
-    /// Margin of band b (0 for the footprint itself).
-    margins: Vec<f64>,
-    /// Deceleration the speed limits assume (half the vehicle's best), m/s².
-    deceleration: f64,
-    /// The vehicle's best deceleration, m/s².
-    max_deceleration: f64,
+    /// 1 for the ground ahead, -1 for the mirrored ground behind.
+    mirror: f64,
     bitmap: Vec<u64>,
     /// Cells whose ground no image has seen (same layout as `bitmap`).
     unseen: Vec<u64>,
-    /// Cells under the vehicle up to its front axle: never unseen.
-    under_vehicle: Vec<u64>,
+    /// Cells the vehicle stands on: never unseen.
+    standing: Vec<u64>,
     /// Map patch index per grid cell that holds one (u32::MAX otherwise).
     causes: Vec<u32>,
     set_cells: Vec<u32>,
-    /// Per arc: first collision distance (∞ if none within max), for speed.
-    free: Vec<f64>,
 }
 
-impl ObstacleAvoidance {
-    /// Precomputes the swept bands of every arc.
-    pub fn new(config: ObstacleAvoidanceConfig, setup: &Setup<'_>) -> Self {
-        let half_patch = setup.patch_size_m / 2.0;
-        let body = setup.vehicle.footprint();
-        let footprint = Footprint {
-            x_min: body.x_min - half_patch,
-            x_max: body.x_max + half_patch,
-            half_width: body.half_width + half_patch,
-        };
-        let bands = config.near_miss_bands as usize;
-        let margins: Vec<f64> = (0..=bands)
-            .map(|b| config.near_miss_m * b as f64 / bands.max(1) as f64)
-            .collect();
-        let widest = footprint.widened(config.near_miss_m);
-        let reach = config.max_distance_m;
-        // Grid bounds: every outline of the widest band along every arc.
-        let (mut lo, mut hi) = (
-            Point2::new(f64::MAX, f64::MAX),
-            Point2::new(f64::MIN, f64::MIN),
-        );
-        for arc in setup.arcs.iter() {
-            for outline in arc.swept(widest, reach).outlines(0.25) {
-                for corner in outline {
-                    lo = lo.inf(&corner);
-                    hi = hi.sup(&corner);
-                }
-            }
-        }
-        let r = config.grid_resolution_m;
-        let rows = ((hi.x - lo.x) / r).ceil() as usize + 1;
-        let columns = ((hi.y - lo.y) / r).ceil() as usize + 1;
-        let words_per_row = columns.div_ceil(64);
-        let grid = Grid {
-            x0: lo.x,
-            y0: lo.y,
-            resolution: r,
-            rows,
-            columns,
-            words_per_row,
-        };
-        let templates = setup
-            .arcs
-            .iter()
-            .map(|arc| build_template(arc, &footprint, &margins, &grid, reach))
-            .collect();
-        // The ground the wheels stand on: from the rear bumper to the
-        // front axle, as wide as the footprint swept (the body and half a
-        // patch). Not the front overhang: crept forward onto ground no
-        // image has seen (a ledge in a lidar's blind zone), it must still
-        // stop the vehicle.
-        let wheels = footprint.x_min..=setup.vehicle.wheelbase_m.min(body.x_max);
-        let mut under_vehicle = vec![0; rows * words_per_row];
-        for row in 0..rows {
-            for column in 0..columns {
+impl Raster {
+    /// A raster over `grid`; `standing(p)` tells the vehicle-frame points
+    /// the vehicle stands on.
+    fn new(grid: Grid, mirror: f64, standing: impl Fn(Point2<f64>) -> bool) -> Self {
+        let words = grid.rows * grid.words_per_row;
+        let mut mask = vec![0; words];
+        for row in 0..grid.rows {
+            for column in 0..grid.columns {
                 let p = grid.centre(row, column);
-                if wheels.contains(&p.x) && p.y.abs() <= footprint.half_width {
-                    under_vehicle[row * words_per_row + column / 64] |= 1 << (column % 64);
+                if standing(Point2::new(mirror * p.x, p.y)) {
+                    mask[row * grid.words_per_row + column / 64] |= 1 << (column % 64);
                 }
             }
         }
         Self {
-            deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
-            max_deceleration: setup.vehicle.max_deceleration_mps2,
-            bitmap: vec![0; rows * words_per_row],
-            unseen: vec![0; rows * words_per_row],
-            under_vehicle,
-            causes: vec![u32::MAX; rows * columns],
+            bitmap: vec![0; words],
+            unseen: vec![0; words],
+            standing: mask,
+            causes: vec![u32::MAX; grid.rows * grid.columns],
             set_cells: Vec::new(),
-            free: vec![f64::INFINITY; setup.arcs.len()],
-            config,
+            mirror,
             grid,
-            templates,
-            margins,
         }
     }
 
-    /// Rasterises the map into the bitmap (clearing the last cycle's cells).
+    /// Rasterises the map's cells (clearing the last cycle's).
     fn rasterise(&mut self, ctx: &VoteContext<'_>) {
         for &cell in &self.set_cells {
             let (row, column) = (
@@ -264,7 +223,8 @@ impl ObstacleAvoidance {
         }
         self.set_cells.clear();
         for (index, patch) in ctx.map.patches.iter().enumerate() {
-            let Some((row, column)) = self.grid.cell(f64::from(patch.x), f64::from(patch.y)) else {
+            let (x, y) = (self.mirror * f64::from(patch.x), f64::from(patch.y));
+            let Some((row, column)) = self.grid.cell(x, y) else {
                 continue;
             };
             self.bitmap[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
@@ -285,20 +245,15 @@ impl ObstacleAvoidance {
             words.fill(0);
             for column in 0..grid.columns {
                 let p = grid.centre(row, column);
-                if !seen(p.x, p.y) {
+                if !seen(self.mirror * p.x, p.y) {
                     words[column / 64] |= 1 << (column % 64);
                 }
             }
-            let under = &self.under_vehicle[row * grid.words_per_row..][..grid.words_per_row];
-            for (word, under) in words.iter_mut().zip(under) {
-                *word &= !under;
+            let standing = &self.standing[row * grid.words_per_row..][..grid.words_per_row];
+            for (word, standing) in words.iter_mut().zip(standing) {
+                *word &= !standing;
             }
         }
-    }
-
-    /// The first entry of `band` that holds a map cell within `reach`.
-    fn first_hit<'t>(&self, band: &'t [Entry], reach: f32) -> Option<&'t Entry> {
-        first_in(&self.bitmap, band, reach)
     }
 
     /// The map cell behind a hit entry, vehicle frame.
@@ -307,6 +262,157 @@ impl ObstacleAvoidance {
         let patch = self.causes.get(row * self.grid.columns + column)?;
         let patch = ctx.map.patches.get(*patch as usize)?;
         Some([patch.x, patch.y])
+    }
+}
+
+/// The backward sweeps: one band per arc over a mirrored raster.
+#[derive(Debug, Clone)]
+struct Reverse {
+    raster: Raster,
+    bands: Vec<Vec<Entry>>,
+    /// Scratch: cells and unseen ground together.
+    blocked: Vec<u64>,
+}
+
+/// The grid covering every outline of `footprint` swept `reach` along
+/// every arc.
+fn grid_around(arcs: &arcnav_vehicle::ArcSet, footprint: Footprint, reach: f64, r: f64) -> Grid {
+    let (mut lo, mut hi) = (
+        Point2::new(f64::MAX, f64::MAX),
+        Point2::new(f64::MIN, f64::MIN),
+    );
+    for arc in arcs.iter() {
+        for outline in arc.swept(footprint, reach).outlines(0.25) {
+            for corner in outline {
+                lo = lo.inf(&corner);
+                hi = hi.sup(&corner);
+            }
+        }
+    }
+    let rows = ((hi.x - lo.x) / r).ceil() as usize + 1;
+    let columns = ((hi.y - lo.y) / r).ceil() as usize + 1;
+    Grid {
+        x0: lo.x,
+        y0: lo.y,
+        resolution: r,
+        rows,
+        columns,
+        words_per_row: columns.div_ceil(64),
+    }
+}
+
+/// The obstacle-avoidance behaviour.
+#[derive(Debug, Clone)]
+pub struct ObstacleAvoidance {
+    config: ObstacleAvoidanceConfig,
+    ahead: Raster,
+    templates: Vec<Template>,
+    /// Margin of band b (0 for the footprint itself).
+    margins: Vec<f64>,
+    /// Deceleration the speed limits assume (half the vehicle's best), m/s².
+    deceleration: f64,
+    /// The vehicle's best deceleration, m/s².
+    max_deceleration: f64,
+    reverse: Option<Reverse>,
+    /// Per arc: first collision distance (∞ if none within max), for speed.
+    free: Vec<f64>,
+}
+
+impl ObstacleAvoidance {
+    /// Precomputes the swept bands of every arc.
+    pub fn new(config: ObstacleAvoidanceConfig, setup: &Setup<'_>) -> Self {
+        let half_patch = setup.patch_size_m / 2.0;
+        let body = setup.vehicle.footprint();
+        let footprint = Footprint {
+            x_min: body.x_min - half_patch,
+            x_max: body.x_max + half_patch,
+            half_width: body.half_width + half_patch,
+        };
+        let bands = config.near_miss_bands as usize;
+        let margins: Vec<f64> = (0..=bands)
+            .map(|b| config.near_miss_m * b as f64 / bands.max(1) as f64)
+            .collect();
+        let reach = config.max_distance_m;
+        let r = config.grid_resolution_m;
+        let grid = grid_around(setup.arcs, footprint.widened(config.near_miss_m), reach, r);
+        let templates = setup
+            .arcs
+            .iter()
+            .map(|arc| build_template(arc, &footprint, &margins, &grid, reach))
+            .collect();
+        // The ground the wheels stand on: from the rear bumper to the
+        // front axle, as wide as the footprint swept (the body and half a
+        // patch). Not the front overhang: crept forward onto ground no
+        // image has seen (a ledge in a lidar's blind zone), it must still
+        // stop the vehicle.
+        let wheels = footprint.x_min..=setup.vehicle.wheelbase_m.min(body.x_max);
+        let ahead = Raster::new(grid, 1.0, |p| {
+            wheels.contains(&p.x) && p.y.abs() <= footprint.half_width
+        });
+        let reverse = (config.reverse_reach_m > 0.0).then(|| {
+            // The body mirrored (x -> -x), grown by the margin.
+            let mirrored = Footprint {
+                x_min: -footprint.x_max,
+                x_max: -footprint.x_min,
+                half_width: footprint.half_width + config.reverse_margin_m,
+            };
+            let grid = grid_around(setup.arcs, mirrored, config.reverse_reach_m, r);
+            let bands = setup
+                .arcs
+                .iter()
+                .map(|arc| {
+                    let template =
+                        build_template(arc, &mirrored, &[0.0], &grid, config.reverse_reach_m);
+                    template.bands.into_iter().next().unwrap_or_default()
+                })
+                .collect();
+            // Backing up, the whole body stands on seen ground (the
+            // overhang over ground it drove across).
+            let raster = Raster::new(grid, -1.0, |p| footprint.contains(p));
+            Reverse {
+                blocked: vec![0; raster.bitmap.len()],
+                raster,
+                bands,
+            }
+        });
+        Self {
+            deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
+            max_deceleration: setup.vehicle.max_deceleration_mps2,
+            free: vec![f64::INFINITY; setup.arcs.len()],
+            config,
+            ahead,
+            templates,
+            margins,
+            reverse,
+        }
+    }
+
+    /// The first entry of `band` that holds a map cell within `reach`.
+    fn first_hit<'t>(&self, band: &'t [Entry], reach: f32) -> Option<&'t Entry> {
+        first_in(&self.ahead.bitmap, band, reach)
+    }
+
+    /// Each arc's clearance backing up: cells and unseen ground stop it.
+    fn vote_reverse(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
+        let Some(reverse) = &mut self.reverse else {
+            return;
+        };
+        let reach = self.config.reverse_reach_m;
+        reverse.raster.rasterise(ctx);
+        reverse.raster.rasterise_unseen(ctx);
+        for ((blocked, cell), unseen) in reverse
+            .blocked
+            .iter_mut()
+            .zip(&reverse.raster.bitmap)
+            .zip(&reverse.raster.unseen)
+        {
+            *blocked = cell | unseen;
+        }
+        for (arc, band) in reverse.bands.iter().enumerate().take(votes.len()) {
+            let clear = first_in(&reverse.blocked, band, reach as f32)
+                .map_or(reach, |hit| f64::from(hit.s));
+            votes.set_reverse_clearance(arc, clear);
+        }
     }
 }
 
@@ -392,12 +498,14 @@ impl Behaviour for ObstacleAvoidance {
     }
 
     fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
-        self.rasterise(ctx);
+        self.vote_reverse(ctx, votes);
+        self.ahead.rasterise(ctx);
         let policy = self.config.unseen_ground;
         if policy != UnseenGround::Free {
-            self.rasterise_unseen(ctx);
+            self.ahead.rasterise_unseen(ctx);
             if policy == UnseenGround::Obstacle {
-                for (cell, unseen) in self.bitmap.iter_mut().zip(&self.unseen) {
+                let ahead = &mut self.ahead;
+                for (cell, unseen) in ahead.bitmap.iter_mut().zip(&ahead.unseen) {
                     *cell |= unseen;
                 }
             }
@@ -416,7 +524,7 @@ impl Behaviour for ObstacleAvoidance {
                 let distance = f64::from(hit.s);
                 self.free[arc] = distance;
                 if distance < min {
-                    let cause = self.cause(hit, ctx);
+                    let cause = self.ahead.cause(hit, ctx);
                     votes.veto(arc, cause);
                 } else {
                     votes.set(arc, -(1.0 - (distance - min) / (max - min)) as f32);
@@ -450,7 +558,8 @@ impl Behaviour for ObstacleAvoidance {
             }
             let mut room = self.free[arc].min(max) - self.config.stop_margin_m;
             if policy == UnseenGround::Slow
-                && let Some(unseen) = first_in(&self.unseen, &self.templates[arc].bands[0], reach)
+                && let Some(unseen) =
+                    first_in(&self.ahead.unseen, &self.templates[arc].bands[0], reach)
             {
                 // Stop `stop_margin_m` before the first unseen ground the
                 // footprint meets (its patch may begin past the edge);
@@ -459,8 +568,9 @@ impl Behaviour for ObstacleAvoidance {
                 // come too late.
                 let distance = f64::from(unseen.s);
                 if distance < braking {
-                    let (row, column) = self.grid.first_cell(unseen, &self.unseen);
-                    let p = self.grid.centre(row, column);
+                    let grid = &self.ahead.grid;
+                    let (row, column) = grid.first_cell(unseen, &self.ahead.unseen);
+                    let p = grid.centre(row, column);
                     votes.veto(arc, Some([p.x as f32, p.y as f32]));
                     continue;
                 }
@@ -504,6 +614,8 @@ impl Plugin for ObstacleAvoidance {
         config::in_range("grid_resolution_m", c.grid_resolution_m, 0.05, 1.0)?;
         config::non_negative("stop_margin_m", c.stop_margin_m)?;
         config::non_negative("reaction_s", c.reaction_s)?;
+        config::in_range("reverse_reach_m", c.reverse_reach_m, 0.0, 20.0)?;
+        config::in_range("reverse_margin_m", c.reverse_margin_m, 0.0, 2.0)?;
         Ok(())
     }
 

@@ -49,7 +49,7 @@ fn snapshot_seeing_from(cells: &[(f64, f64)], near: f64, reach: f64) -> MapSnaps
             assume_seen_m: 0.0,
             ..LocalMapConfig::default()
         },
-        10.0,
+        &VehicleConfig::default(),
     );
     map.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
     let report = ObstacleReport {
@@ -241,6 +241,50 @@ fn ground_under_the_front_overhang_must_have_been_seen() {
         ObstacleAvoidanceConfig::default(),
     );
     assert!(best_speed(&ahead) > 1.0);
+}
+
+#[test]
+fn backing_up_is_checked_against_the_cells_and_the_unseen_ground_behind() {
+    let reach = ObstacleAvoidanceConfig::default().reverse_reach_m;
+    let clearance = |votes: &Votes, arc: usize| votes.reverse_clearance(arc).unwrap();
+    // Open seen ground: every backward arc is clear as far as it is checked.
+    let open = avoidance_votes(&[]);
+    assert!((0..39).all(|arc| clearance(&open, arc) == reach));
+    // A rock 2 m behind the rear bumper (x = -0.6 m), 1.5 m left of the
+    // centre line (its patch's centre 1.4 m; the body with half a patch
+    // and the margin reaches 1.6 m): straight back meets it after ~2 m less
+    // the half patch and grid rounding. Backing with the wheels turned
+    // right swings the tail away from it: the body's flank meets it only
+    // after ~3.5 m, as the nose swings out. Turned left, the tail stays on
+    // it (the inner side of the turn moves least).
+    let rock = avoidance_votes(&[(-2.6, 1.5)]);
+    let straight = clearance(&rock, 19);
+    assert!((1.4..=2.0).contains(&straight), "{straight} m");
+    let all: Vec<f64> = (0..39).map(|arc| clearance(&rock, arc)).collect();
+    assert!((3.0..reach).contains(&all[0]), "hard right: {all:?}");
+    assert!(all[38] < straight + 0.5, "hard left: {all:?}");
+    // Ground behind the vehicle no image has seen (only ahead of the rear
+    // axle was seen): the body may not back onto it.
+    let blind = avoidance_votes_on(
+        &snapshot_seeing_from(&[], 0.0, 20.0),
+        ObstacleAvoidanceConfig::default(),
+    );
+    assert!(
+        (0..39).all(|arc| clearance(&blind, arc) < 0.5),
+        "{:?}",
+        blind.reverse_clearances()
+    );
+    // The forward votes do not change with what lies behind.
+    assert_eq!(rock.values(), open.values());
+    // reverse_reach_m = 0: no opinion on backing up.
+    let off = avoidance_votes_on(
+        &snapshot(&[]),
+        ObstacleAvoidanceConfig {
+            reverse_reach_m: 0.0,
+            ..Default::default()
+        },
+    );
+    assert!((0..39).all(|arc| off.reverse_clearance(arc).is_none()));
 }
 
 #[test]

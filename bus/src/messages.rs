@@ -280,10 +280,10 @@ impl From<&SteeringCommand> for steering_command_t {
 }
 
 impl From<&steering_command_t> for SteeringCommand {
-    /// Values a vehicle must not act on (negative or non-finite speed,
-    /// non-finite curvature) become a stop.
+    /// Values a vehicle must not act on (non-finite speed or curvature)
+    /// become a stop. A negative speed backs the vehicle up along the arc.
     fn from(msg: &steering_command_t) -> Self {
-        let sane = msg.curvature.is_finite() && msg.speed.is_finite() && msg.speed >= 0.0;
+        let sane = msg.curvature.is_finite() && msg.speed.is_finite();
         if !sane {
             return SteeringCommand::stop(msg.utime);
         }
@@ -352,6 +352,13 @@ mod tests {
             vote: 0.5,
         };
         assert!(SteeringCommand::from(&weird).is_stop());
+        let back_up = steering_command_t {
+            speed: -1.0,
+            ..weird
+        };
+        let command = SteeringCommand::from(&back_up);
+        assert!(command.is_reverse(), "{command:?}");
+        assert_eq!((command.speed_mps, command.curvature), (-1.0, 0.1));
     }
 
     #[test]

@@ -11,8 +11,8 @@ use std::cell::Cell;
 
 use arcnav_localmap::{LocalMap, LocalMapConfig};
 use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
-use arcnav_vehicle::Pose;
 use arcnav_vehicle::frames::planar_isometry;
+use arcnav_vehicle::{Pose, VehicleConfig};
 use divan::{Bencher, black_box};
 use nalgebra::Point2;
 
@@ -68,7 +68,7 @@ fn footprint() -> FovPolygon {
 #[divan::bench(args = [1_000, 10_000, 100_000])]
 fn insert_loop_snapshot(bencher: Bencher, n: usize) {
     let config = config();
-    let mut map = LocalMap::new(&config, 10.0);
+    let mut map = LocalMap::new(&config, &VehicleConfig::default());
     map.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
     let all = cells(n);
     // Fill the map with every cell, then cycle on an image seeing 200 of them.

@@ -20,6 +20,9 @@
 //!   the shadows beyond edges it could not see into) is marked per patch in
 //!   the same scrolling grid, so unseen ground is never mistaken for free
 //!   ground; ground around the first pose counts as seen (`assume_seen_m`).
+//! - **Under the vehicle**: patches under the vehicle's body are cleared
+//!   at every pose and insertion, counted and logged: the ground it stands
+//!   on bears it, and a cell there would veto every arc.
 //! - **Snapshots**: immutable, vehicle frame, behind an `Arc`.
 //!
 //! Patches live in a scrolling ring-buffer grid (a power-of-two square that
@@ -29,10 +32,12 @@
 
 use std::sync::Arc;
 
+use nalgebra::Point2;
+
 use arcnav_perception::{ObstacleReport, Reasons, ShadowIndex};
 use arcnav_vehicle::frames::yaw_of;
 use arcnav_vehicle::time::micros_to_seconds;
-use arcnav_vehicle::{Isometry, Pose, Utime};
+use arcnav_vehicle::{Footprint, Isometry, Pose, Utime, VehicleConfig};
 
 use crate::config::{JumpPolicy, LocalMapConfig};
 use crate::raster::Coverage;
@@ -164,6 +169,8 @@ pub struct MapStats {
     pub dropped_outside_window: u64,
     pub resets: u64,
     pub rejected_poses: u64,
+    /// Patches removed because the vehicle's body stands on them.
+    pub cleared_under_vehicle: u64,
 }
 
 /// Which patches of a square of the world some image observed: patch
@@ -282,6 +289,8 @@ impl MapSnapshot {
 pub struct LocalMap {
     config: LocalMapConfig,
     max_speed_mps: f64,
+    /// The vehicle's body: patches inside it are cleared.
+    body: Footprint,
     mask: i64,
     side: usize,
     slots: Vec<u32>,
@@ -306,14 +315,16 @@ pub struct LocalMap {
 const UNSEEN: (i64, i64) = (i64::MIN, i64::MIN);
 
 impl LocalMap {
-    /// An empty map; `max_speed_mps` (the vehicle's) bounds plausible motion
-    /// between poses. Call `config.validate()` first.
-    pub fn new(config: &LocalMapConfig, max_speed_mps: f64) -> Self {
+    /// An empty map for `vehicle`: its top speed bounds plausible motion
+    /// between poses, and patches under its body are cleared. Call
+    /// `config.validate()` first.
+    pub fn new(config: &LocalMapConfig, vehicle: &VehicleConfig) -> Self {
         let radius = config.radius_m();
         let side = ((2.0 * radius / config.patch_size_m).ceil() as usize + 2).next_power_of_two();
         Self {
             config: config.clone(),
-            max_speed_mps,
+            max_speed_mps: vehicle.max_speed_mps,
+            body: vehicle.footprint(),
             mask: side as i64 - 1,
             side,
             slots: vec![EMPTY; side * side],
@@ -501,6 +512,9 @@ impl LocalMap {
             outcome.new_patches += 1;
         }
         outcome.pruned = self.prune(report, sensor_bit, stamp);
+        if self.pose.is_some() {
+            self.clear_under_vehicle();
+        }
         self.stats.reports += 1;
         self.stats.new_patches += u64::from(outcome.new_patches);
         self.stats.confirmations += u64::from(outcome.confirmed_patches);
@@ -682,7 +696,33 @@ impl LocalMap {
             patch.y = vy as f32;
             index += 1;
         }
+        self.clear_under_vehicle();
         PoseUpdate::Accepted
+    }
+
+    /// Removes the patches whose centre lies under the vehicle's body: it
+    /// stands there, so that ground bears it, whatever an image made of it
+    /// (a slope cell flagged from afar, a cell placed late). Each is
+    /// counted and logged with its reasons.
+    fn clear_under_vehicle(&mut self) {
+        let mut index = 0;
+        while index < self.patches.len() {
+            let patch = &self.patches[index];
+            let centre = Point2::new(f64::from(patch.x), f64::from(patch.y));
+            if self.body.contains(centre) {
+                tracing::debug!(
+                    i = patch.i,
+                    j = patch.j,
+                    reasons = %patch.reasons.names(),
+                    confirmations = patch.confirmations,
+                    "cell under the vehicle cleared"
+                );
+                self.remove(index);
+                self.stats.cleared_under_vehicle += 1;
+                continue;
+            }
+            index += 1;
+        }
     }
 
     /// The map as it stands, in the vehicle frame of the last update.

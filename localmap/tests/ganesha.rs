@@ -8,7 +8,7 @@ use arcnav_perception::{
     Shadows,
 };
 use arcnav_vehicle::frames::planar_isometry;
-use arcnav_vehicle::{Pose, PoseHistory, Utime};
+use arcnav_vehicle::{Pose, PoseHistory, Utime, VehicleConfig};
 use nalgebra::Point2;
 
 const SECOND: Utime = 1_000_000;
@@ -19,7 +19,7 @@ fn map() -> LocalMap {
 
 fn map_with(config: LocalMapConfig) -> LocalMap {
     config.validate().unwrap();
-    LocalMap::new(&config, 10.0)
+    LocalMap::new(&config, &VehicleConfig::default())
 }
 
 fn pose_at(utime: Utime, x: f64, y: f64, yaw: f64) -> Pose {
@@ -562,4 +562,44 @@ fn ground_in_a_shadow_is_not_seen_and_an_old_cell_there_is_still_pruned() {
     // Pruning keeps 002 §5's footprint: the cell, not reported again, goes.
     assert_eq!(outcome.pruned, 1);
     assert!(snapshot.patches.is_empty());
+}
+
+#[test]
+fn cells_under_the_vehicle_are_cleared_and_counted() {
+    // Body: 0.6 m behind the rear axle to 4.0 m ahead, 1.1 m each side.
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    // A cell 2 m ahead (a slope cell the vehicle will drive onto), one
+    // beside the body and one ahead of its bumper; the image saw none of
+    // the ground below so nothing prunes them.
+    let cells = [(6.1, 0.1), (6.1, 1.9), (10.1, 0.1)];
+    map.insert(&report(0, "erim", &cells, rectangle(30.0, 40.0, -5.0, 5.0)))
+        .unwrap();
+    assert_eq!(map.len(), 3);
+    // The vehicle drives 4 m forward: the first cell is now under its
+    // bonnet (2.1 m ahead of the rear axle), the second 0.8 m beside its
+    // flank, the third beyond its bumper.
+    map.update(&pose_at(SECOND, 4.0, 0.0, 0.0));
+    let kept = positions(&map);
+    assert_eq!(kept.len(), 2, "{kept:?}");
+    assert!(
+        kept.iter().all(|&(x, y)| y.abs() > 1.1 || x > 4.0),
+        "{kept:?}"
+    );
+    assert_eq!(map.stats().cleared_under_vehicle, 1);
+    // A late report placing a cell under the body is cleared at once too
+    // (it was captured before the vehicle drove there).
+    map.insert(&report(
+        SECOND / 2,
+        "erim",
+        &[(5.0, -0.5)],
+        rectangle(30.0, 40.0, -5.0, 5.0),
+    ))
+    .unwrap();
+    assert_eq!(map.len(), 2);
+    assert_eq!(map.stats().cleared_under_vehicle, 2);
+    // Turning on the spot sweeps the body over the flank cell.
+    map.update(&pose_at(2 * SECOND, 4.0, 0.0, 0.5));
+    assert_eq!(map.len(), 1, "{:?}", positions(&map));
+    assert_eq!(map.stats().cleared_under_vehicle, 3);
 }

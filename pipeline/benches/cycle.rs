@@ -19,7 +19,7 @@ fn main() {
 
 /// 2 000 distinct patches scattered over the window (deterministic).
 fn map() -> MapSnapshot {
-    let mut local = LocalMap::new(&LocalMapConfig::default(), 10.0);
+    let mut local = LocalMap::new(&LocalMapConfig::default(), &VehicleConfig::default());
     local.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
     let mut cells = Vec::new();
     let mut k: u64 = 1;

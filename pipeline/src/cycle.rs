@@ -27,7 +27,7 @@ use std::sync::Arc;
 use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot, PoseUpdate};
 use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::time::seconds_to_micros;
-use arcnav_vehicle::{Pose, Utime};
+use arcnav_vehicle::{Pose, Utime, VehicleConfig};
 use serde::Serialize;
 
 use crate::config::PipelineConfig;
@@ -42,11 +42,11 @@ pub struct LocalMapNode {
 }
 
 impl LocalMapNode {
-    /// Built from `[localmap]` and the vehicle's top speed (a pose that
-    /// moves faster is a jump, and resets the map).
-    pub fn new(config: &LocalMapConfig, max_speed_mps: f64) -> Self {
+    /// Built from `[localmap]` and the vehicle (a pose that moves faster
+    /// than its top speed is a jump, and resets the map).
+    pub fn new(config: &LocalMapConfig, vehicle: &VehicleConfig) -> Self {
         Self {
-            map: LocalMap::new(config, max_speed_mps),
+            map: LocalMap::new(config, vehicle),
         }
     }
 
@@ -328,7 +328,7 @@ mod tests {
 
     fn cycle(delivery: Delivery) -> DecisionCycle<i64> {
         let timing = PipelineConfig::default();
-        let map = LocalMapNode::new(&LocalMapConfig::default(), 10.0);
+        let map = LocalMapNode::new(&LocalMapConfig::default(), &VehicleConfig::default());
         DecisionCycle::new(map, &timing, delivery)
     }
 

@@ -59,7 +59,7 @@ impl Config {
     /// The local map and its cycle clock, from `[localmap]`, the vehicle's
     /// top speed and `[pipeline]`, with reports delivered as `delivery` says.
     pub fn decision_cycle<T>(&self, delivery: Delivery) -> DecisionCycle<T> {
-        let map = LocalMapNode::new(&self.localmap, self.vehicle.max_speed_mps);
+        let map = LocalMapNode::new(&self.localmap, &self.vehicle);
         DecisionCycle::new(map, &self.pipeline, delivery)
     }
 

@@ -26,7 +26,7 @@ pub struct PlanarState {
     pub y: f64,
     /// Heading, radians CCW from world x, wrapped to (-π, π].
     pub yaw: f64,
-    /// Speed, m/s (never negative: arcnav drives forwards).
+    /// Speed along the heading, m/s (negative: backing up).
     pub speed_mps: f64,
     /// Curvature being driven, 1/m.
     pub curvature: f64,
@@ -148,11 +148,15 @@ impl MotionModel {
         let dt = micros_to_seconds(end - self.utime);
         let limits = &self.limits;
         let k_target = clamp_abs(self.target_curvature, limits.max_curvature);
-        let v_target = self.target_speed_mps.clamp(0.0, limits.max_speed_mps);
+        let mut v_target = clamp_abs(self.target_speed_mps, limits.max_speed_mps);
         let k0 = self.state.curvature;
         let v0 = self.state.speed_mps;
+        // From forwards to backwards (or back): brake to a stand first.
+        if v0 * v_target < 0.0 {
+            v_target = 0.0;
+        }
         let (k1, k_mean) = ramp(k0, k_target, limits.max_curvature_rate, dt);
-        let accel = if v_target >= v0 {
+        let accel = if v_target.abs() > v0.abs() {
             limits.max_acceleration_mps2
         } else {
             limits.max_deceleration_mps2
@@ -291,6 +295,41 @@ mod tests {
         model.command(SteeringCommand::stop(5_000_000));
         assert_relative_eq!(model.advance_to(5_500_000).speed_mps, 2.0, epsilon = 1e-12);
         assert_eq!(model.advance_to(7_000_000).speed_mps, 0.0);
+    }
+
+    #[test]
+    fn a_negative_speed_backs_along_the_arc_after_braking_to_a_stand() {
+        let limits = MotionLimits {
+            max_acceleration_mps2: 1.0,
+            max_deceleration_mps2: 2.0,
+            ..MotionLimits::unlimited()
+        };
+        let mut model = MotionModel::new(limits, PlanarState::default(), 0);
+        model.command(drive(0.0, 2.0));
+        model.advance_to(2_000_000);
+        let x_forward = model.state().x;
+        // Asked to back up while rolling forwards at 2 m/s, it first brakes
+        // to a stand (1 s at 2 m/s², 1 m) ...
+        model.command(SteeringCommand {
+            utime: 2_000_000,
+            ..drive(0.0, -1.0)
+        });
+        let braked = model.advance_to(3_000_000);
+        assert_relative_eq!(braked.speed_mps, 0.0, epsilon = 1e-9);
+        assert_relative_eq!(braked.x, x_forward + 1.0, epsilon = 1e-6);
+        // ... then backs up. With the wheels turned left the rear axle moves
+        // to -x and +y and the nose swings right (yaw falls).
+        model.command(SteeringCommand {
+            utime: 3_000_000,
+            ..drive(0.125, -1.0)
+        });
+        let s = model.advance_to(3_000_000 + seconds_to_micros(1.0 + 8.0 * FRAC_PI_2));
+        assert_relative_eq!(s.speed_mps, -1.0, epsilon = 1e-9);
+        // 0.5 m while reaching 1 m/s, then a quarter circle of radius 8 m.
+        let turned = (0.5 + 8.0 * FRAC_PI_2) / 8.0;
+        assert_relative_eq!(s.yaw, -turned, epsilon = 1e-6);
+        assert_relative_eq!(s.x, braked.x - 8.0 * turned.sin(), epsilon = 1e-5);
+        assert_relative_eq!(s.y, 8.0 * (1.0 - turned.cos()), epsilon = 1e-5);
     }
 
     #[test]

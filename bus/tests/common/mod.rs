@@ -34,6 +34,7 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         has_speed_vote: true,
         speed_vote: 3.0,
         arc_speed: (0..39).map(|i| i as f32 * 0.25 - 1.0).collect(),
+        reverse_clear: (0..39).map(|i| i as f32 * 0.125 - 0.5).collect(),
     };
     let cells = obstacle_cells_t {
         utime: 1_700_000_000_800_000,
@@ -262,6 +263,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     has_speed_vote: rng.below(2) == 1,
                     speed_vote: rng.f64(),
                     arc_speed: (0..n).map(|_| rng.f32()).collect(),
+                    reverse_clear: (0..n).map(|_| rng.f32()).collect(),
                 }),
             )
         }
