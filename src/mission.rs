@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use arcnav_arbiter::{BehaviourVotes, Decision};
+use arcnav_arbiter::{BehaviourVotes, Decision, RecoveryStats};
 use arcnav_behaviours::{Mission, Registry, Waypoint};
 use arcnav_bus::lcmtypes::pose_t;
 use arcnav_bus::messages::channels;
@@ -103,6 +103,11 @@ pub struct MissionReport {
     /// Smallest gap between the footprint and a true hazard, m.
     pub closest_approach_m: Option<f64>,
     pub stops: StopStats,
+    /// Backing up when blocked.
+    pub recovery: RecoveryStats,
+    /// Counters behaviours keep (the route planner's plans and re-plans),
+    /// by behaviour.
+    pub behaviour_counters: BTreeMap<String, BTreeMap<&'static str, u64>>,
     /// Mean |change of curvature| between consecutive commands, 1/m: how
     /// much the vehicle weaves.
     pub steering_activity: f64,
@@ -115,7 +120,7 @@ pub struct MissionReport {
 }
 
 /// Stop commands during the mission.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct StopStats {
     pub stop_commands: u64,
     /// Runs of consecutive stop commands.
@@ -124,6 +129,10 @@ pub struct StopStats {
     pub required_stale: u64,
     pub all_arcs_forbidden: u64,
     pub no_acceptable_arc: u64,
+    /// Stops after recoveries were used up.
+    pub stuck: u64,
+    /// Seconds standing, by why.
+    pub stopped_s: BTreeMap<&'static str, f64>,
 }
 
 /// A point of the driven path.
@@ -491,6 +500,15 @@ pub fn run_mission(
     stops.required_stale = arbiter.stops_required_stale;
     stops.all_arcs_forbidden = arbiter.stops_all_forbidden;
     stops.no_acceptable_arc = arbiter.stops_no_acceptable;
+    stops.stuck = arbiter.stops_stuck;
+    stops.stopped_s = arbiter.stopped.seconds().into_iter().collect();
+    let recovery = *pipeline.arbiter.recovery_stats();
+    let behaviour_counters = pipeline
+        .behaviours
+        .counters()
+        .into_iter()
+        .map(|(name, counters)| (name, counters.into_iter().collect()))
+        .collect();
     let reached = pipeline.behaviours.progress().map_or(0, |p| p.current);
     let drops = pipeline.perception.drops;
     let wall_time = wall.elapsed().as_secs_f64();
@@ -523,6 +541,8 @@ pub fn run_mission(
             .is_finite()
             .then_some(truth.closest_approach_m),
         stops,
+        recovery,
+        behaviour_counters,
         steering_activity: sink.curvature_change.0 / sink.curvature_change.1.max(1) as f64,
         map_resets: pipeline.cycle.counts().map_resets,
         stage_times: pipeline.times,

@@ -203,12 +203,7 @@ pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
             .iter()
             .map(|&s| if s.is_finite() { s } else { -1.0 })
             .collect(),
-        reverse_clear: votes
-            .votes
-            .reverse_clearances()
-            .iter()
-            .map(|&m| if m.is_nan() { -1.0 } else { m })
-            .collect(),
+        reverse_clear: votes.votes.reverse_clearances().to_vec(),
     }
 }
 

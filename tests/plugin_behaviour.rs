@@ -16,6 +16,9 @@ use arcnav_sim::World;
 use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, SteeringCommand};
 
+static LOCALMAP: std::sync::LazyLock<arcnav_localmap::LocalMapConfig> =
+    std::sync::LazyLock::new(arcnav_localmap::LocalMapConfig::default);
+
 #[test]
 fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() {
     let err = Config::from_toml(prefer_current::CONFIG, "example")
@@ -62,7 +65,7 @@ fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
     let setup = arcnav_behaviours::Setup {
         arcs: &arcs,
         vehicle: &config.vehicle,
-        patch_size_m: 0.4,
+        localmap: &LOCALMAP,
     };
     let behaviour = registry
         .build("prefer_current", &toml::Table::new(), &setup)

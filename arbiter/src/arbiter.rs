@@ -22,6 +22,7 @@ use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{ArcSet, SteeringCommand, Utime, VehicleConfig};
 
 use crate::config::ArbiterConfig;
+use crate::recovery::{self, Behind, Recovery, RecoveryStats};
 use crate::votes::{BehaviourVotes, Votes};
 
 /// Why the arbiter commanded stop.
@@ -38,6 +39,8 @@ pub enum StopReason {
     AllArcsForbidden { vetoes: Vec<(String, usize)> },
     /// The best fused vote is below `min_acceptable_vote`.
     NoAcceptableArc { best_vote: f32 },
+    /// Blocked again after `attempts` recoveries in a row.
+    Stuck { attempts: u32, blocked: String },
 }
 
 impl std::fmt::Display for StopReason {
@@ -71,6 +74,12 @@ impl std::fmt::Display for StopReason {
                 write!(
                     f,
                     "the best arc's fused vote {best_vote:.2} is below the acceptable minimum"
+                )
+            }
+            StopReason::Stuck { attempts, blocked } => {
+                write!(
+                    f,
+                    "stuck: {blocked} after backing up {attempts} times without getting through"
                 )
             }
         }
@@ -113,6 +122,44 @@ pub struct Decision {
     pub speed_limits: Vec<(String, f64)>,
 }
 
+/// Time spent standing, by why, µs: from each stop command to the next
+/// decision.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StopTime {
+    pub no_votes_us: u64,
+    pub required_stale_us: u64,
+    pub all_arcs_forbidden_us: u64,
+    pub no_acceptable_arc_us: u64,
+    /// Arcs allowed, but every one's speed limit was 0 (ground unseen,
+    /// cells right ahead).
+    pub speed_limited_us: u64,
+    /// A behaviour asked to stop (a mission complete).
+    pub asked_us: u64,
+    pub stuck_us: u64,
+}
+
+impl StopTime {
+    /// (why, seconds) for the non-zero ones.
+    pub fn seconds(&self) -> Vec<(&'static str, f64)> {
+        [
+            ("no votes", self.no_votes_us),
+            ("required behaviour stale", self.required_stale_us),
+            ("all arcs forbidden", self.all_arcs_forbidden_us),
+            ("no acceptable arc", self.no_acceptable_arc_us),
+            ("speed limited to 0", self.speed_limited_us),
+            ("asked to stop", self.asked_us),
+            ("stuck", self.stuck_us),
+        ]
+        .into_iter()
+        .filter(|(_, us)| *us > 0)
+        .map(|(why, us)| (why, us as f64 * 1e-6))
+        .collect()
+    }
+}
+
+/// Picks the [`StopTime`] counter a stop feeds.
+type StopCounter = fn(&mut StopTime) -> &mut u64;
+
 /// Counts of decisions.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ArbiterStats {
@@ -121,7 +168,12 @@ pub struct ArbiterStats {
     pub stops_required_stale: u64,
     pub stops_all_forbidden: u64,
     pub stops_no_acceptable: u64,
+    /// Stops after recoveries were used up.
+    pub stops_stuck: u64,
+    /// Decisions that backed the vehicle up.
+    pub reverse_commands: u64,
     pub rejected_votes: u64,
+    pub stopped: StopTime,
 }
 
 #[derive(Debug, Clone)]
@@ -147,6 +199,14 @@ pub struct Arbiter {
     explain: bool,
     decision: Option<Decision>,
     stats: ArbiterStats,
+    recovery: Recovery,
+    /// Per arc: the fused vote before vetoes (which way the behaviours
+    /// would like to go).
+    preference: Vec<f32>,
+    /// Per arc: the least backing-up clearance of the fresh votes.
+    clearance: Vec<Option<f64>>,
+    /// The last stop: when, and the stop-time counter it feeds.
+    last_stop: Option<(Utime, StopCounter)>,
 }
 
 impl Arbiter {
@@ -175,6 +235,10 @@ impl Arbiter {
             explain: false,
             decision: None,
             stats: ArbiterStats::default(),
+            recovery: Recovery::new(&config.recovery, vehicle),
+            preference: vec![0.0; n],
+            clearance: vec![None; n],
+            last_stop: None,
         };
         for name in &config.required {
             arbiter.input_index(name);
@@ -192,6 +256,16 @@ impl Arbiter {
 
     pub fn stats(&self) -> &ArbiterStats {
         &self.stats
+    }
+
+    /// What backing up did.
+    pub fn recovery_stats(&self) -> &RecoveryStats {
+        &self.recovery.stats
+    }
+
+    /// True while the arbiter is backing the vehicle up.
+    pub fn is_backing_up(&self) -> bool {
+        self.recovery.is_backing()
     }
 
     /// Keeps a [`Decision`] record of every decision (costs copies).
@@ -259,10 +333,49 @@ impl Arbiter {
             .filter_map(|input| input.latest.as_ref().map(|(_, votes)| (input, votes)))
     }
 
-    /// Fuses the fresh votes into a command at time `now`.
+    /// Fuses the fresh votes into a command at time `now`; backs the
+    /// vehicle up when the way forward stays blocked (see
+    /// [`crate::recovery`]).
     pub fn decide(&mut self, now: Utime) -> SteeringCommand {
         self.stats.decisions += 1;
-        let outcome = self.fuse(now);
+        let mut outcome = self.fuse(now);
+        let creep = self.config.recovery.creep_mps;
+        if let Some((since, counter)) = self.last_stop.take() {
+            *counter(&mut self.stats.stopped) += u64::try_from(now - since).unwrap_or(0);
+        }
+        let stop_asked = self
+            .used(now)
+            .any(|(_, votes)| votes.speed_mps().is_some_and(|s| s <= creep));
+        let (blocked, safe) = match &outcome {
+            // Standing although arcs are allowed: their speed limits
+            // (unseen ground, cells right ahead) hold it, unless some
+            // behaviour asks to stop (a mission complete).
+            Ok((command, _)) => (command.speed_mps < creep && !stop_asked, true),
+            Err(StopReason::AllArcsForbidden { .. } | StopReason::NoAcceptableArc { .. }) => {
+                (true, true)
+            }
+            Err(_) => (false, false),
+        };
+        self.gather_clearance(now);
+        let behind = Behind {
+            clearance: &self.clearance,
+            preference: &self.preference,
+            curvatures: self.arcs.curvatures(),
+        };
+        match self.recovery.step(now, blocked, safe, &behind) {
+            recovery::Outcome::Keep => {}
+            recovery::Outcome::Back(command) => {
+                self.stats.reverse_commands += 1;
+                outcome = Ok((command, vec![("recovery".to_owned(), -command.speed_mps)]));
+            }
+            recovery::Outcome::Exhausted { attempts } => {
+                let blocked = match &outcome {
+                    Err(reason) => reason.to_string(),
+                    Ok(_) => "every allowed arc's speed limit is 0".to_owned(),
+                };
+                outcome = Err(StopReason::Stuck { attempts, blocked });
+            }
+        }
         let command = match &outcome {
             Ok((command, _)) => *command,
             Err(reason) => {
@@ -271,10 +384,24 @@ impl Arbiter {
                     StopReason::RequiredStale { .. } => self.stats.stops_required_stale += 1,
                     StopReason::AllArcsForbidden { .. } => self.stats.stops_all_forbidden += 1,
                     StopReason::NoAcceptableArc { .. } => self.stats.stops_no_acceptable += 1,
+                    StopReason::Stuck { .. } => self.stats.stops_stuck += 1,
                 }
                 SteeringCommand::stop(now)
             }
         };
+        if command.is_stop() {
+            let counter: StopCounter = match &outcome {
+                Err(StopReason::NoVotes) => |t| &mut t.no_votes_us,
+                Err(StopReason::RequiredStale { .. }) => |t| &mut t.required_stale_us,
+                Err(StopReason::AllArcsForbidden { .. }) => |t| &mut t.all_arcs_forbidden_us,
+                Err(StopReason::NoAcceptableArc { .. }) => |t| &mut t.no_acceptable_arc_us,
+                Err(StopReason::Stuck { .. }) => |t| &mut t.stuck_us,
+                Ok(_) if stop_asked => |t| &mut t.asked_us,
+                Ok(_) => |t| &mut t.speed_limited_us,
+            };
+            self.last_stop = Some((now, counter));
+        }
+        self.recovery.sent(now, &command);
         if self.explain {
             let (stop, limits) = match outcome {
                 Ok((_, limits)) => (None, limits),
@@ -283,6 +410,20 @@ impl Arbiter {
             self.decision = Some(self.explanation(now, command, stop, limits));
         }
         command
+    }
+
+    /// Per arc, the least backing-up clearance the fresh votes give.
+    fn gather_clearance(&mut self, now: Utime) {
+        let mut clearance = std::mem::take(&mut self.clearance);
+        clearance.fill(None);
+        for (_, votes) in self.used(now) {
+            for (slot, arc) in clearance.iter_mut().zip(0..) {
+                if let Some(c) = votes.reverse_clearance(arc) {
+                    *slot = Some(slot.map_or(c, |s: f64| s.min(c)));
+                }
+            }
+        }
+        self.clearance = clearance;
     }
 
     #[allow(clippy::type_complexity)]
@@ -322,7 +463,13 @@ impl Arbiter {
             return Err(StopReason::NoVotes);
         }
         let scale = (1.0 / total_weight) as f32;
-        for (fused, &vetoed) in self.fused.iter_mut().zip(&self.vetoed) {
+        for ((fused, preference), &vetoed) in self
+            .fused
+            .iter_mut()
+            .zip(self.preference.iter_mut())
+            .zip(&self.vetoed)
+        {
+            *preference = *fused * scale;
             *fused = if vetoed { -1.0 } else { *fused * scale };
         }
         self.smooth();

@@ -3,6 +3,8 @@
 use std::collections::BTreeMap;
 
 use arcnav_vehicle::config::{self, ConfigError};
+
+use crate::recovery::RecoveryConfig;
 use serde::{Deserialize, Serialize};
 
 /// Lives in `[arbiter]`; the weights in `[arbiter.weights]`.
@@ -36,6 +38,8 @@ pub struct ArbiterConfig {
     /// keep their defaults.
     #[serde(deserialize_with = "weights_over_defaults")]
     pub weights: BTreeMap<String, f64>,
+    /// Backing up when the way forward is blocked (`[arbiter.recovery]`).
+    pub recovery: RecoveryConfig,
 }
 
 fn weights_over_defaults<'de, D: serde::Deserializer<'de>>(
@@ -63,6 +67,7 @@ impl Default for ArbiterConfig {
                 ("obstacle_avoidance".into(), 1.0),
                 ("goal_seeking".into(), 0.5),
             ]),
+            recovery: RecoveryConfig::default(),
         }
     }
 }
@@ -95,6 +100,7 @@ impl ArbiterConfig {
         for (name, weight) in &self.weights {
             config::non_negative(&format!("weights.{name}"), *weight)?;
         }
+        self.recovery.validate().map_err(|e| e.within("recovery"))?;
         Ok(())
     }
 

@@ -6,8 +6,12 @@
 
 pub mod arbiter;
 pub mod config;
+pub mod recovery;
 pub mod votes;
 
-pub use arbiter::{Arbiter, ArbiterStats, Decision, InputExplanation, StopReason, VoteSizeError};
+pub use arbiter::{
+    Arbiter, ArbiterStats, Decision, InputExplanation, StopReason, StopTime, VoteSizeError,
+};
 pub use config::ArbiterConfig;
+pub use recovery::{RecoveryConfig, RecoveryStats};
 pub use votes::{BehaviourVotes, Votes};

@@ -2,6 +2,9 @@
 
 use arcnav_vehicle::Utime;
 
+/// A backing-up clearance nobody gave.
+const NO_OPINION: f32 = -1.0;
+
 /// What a behaviour thinks of every arc: a vote in [-1, 1] per arc (index
 /// order of the `ArcSet`), arcs it forbids outright (a veto: no weighted sum
 /// can make such an arc win), the map cell that caused each veto, an
@@ -16,7 +19,7 @@ pub struct Votes {
     speed_mps: Option<f64>,
     /// Per arc: the highest speed accepted on it (∞: no limit).
     arc_speeds: Vec<f32>,
-    /// Per arc: metres the vehicle may back up along it (NaN: no opinion).
+    /// Per arc: metres the vehicle may back up along it (negative: no opinion).
     reverse_clear: Vec<f32>,
 }
 
@@ -29,7 +32,7 @@ impl Votes {
             causes: vec![None; arcs],
             speed_mps: None,
             arc_speeds: vec![f32::INFINITY; arcs],
-            reverse_clear: vec![f32::NAN; arcs],
+            reverse_clear: vec![NO_OPINION; arcs],
         }
     }
 
@@ -48,7 +51,7 @@ impl Votes {
         self.causes.fill(None);
         self.speed_mps = None;
         self.arc_speeds.fill(f32::INFINITY);
-        self.reverse_clear.fill(f32::NAN);
+        self.reverse_clear.fill(NO_OPINION);
     }
 
     /// Sets the vote of arc `index`, clamped to [-1, 1] (NaN counts as -1).
@@ -119,11 +122,11 @@ impl Votes {
     pub fn reverse_clearance(&self, index: usize) -> Option<f64> {
         self.reverse_clear
             .get(index)
-            .filter(|m| !m.is_nan())
+            .filter(|&&m| m >= 0.0)
             .map(|&m| f64::from(m))
     }
 
-    /// Per arc: the backing-up clearance, NaN where none was given.
+    /// Per arc: the backing-up clearance, negative where none was given.
     pub fn reverse_clearances(&self) -> &[f32] {
         &self.reverse_clear
     }
@@ -200,6 +203,16 @@ mod tests {
         assert_eq!(
             (v.arc_speed(0), v.arc_speed(1), v.arc_speed(2)),
             (None, Some(3.5), Some(0.0))
+        );
+        v.set_reverse_clearance(0, 2.5);
+        v.set_reverse_clearance(1, f64::NAN);
+        assert_eq!(
+            (
+                v.reverse_clearance(0),
+                v.reverse_clearance(1),
+                v.reverse_clearance(2)
+            ),
+            (Some(2.5), Some(0.0), None)
         );
         v.clear();
         assert_eq!(v, Votes::new(5));

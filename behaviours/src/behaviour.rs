@@ -1,7 +1,7 @@
 //! The behaviour trait and what a behaviour sees.
 
 use arcnav_arbiter::Votes;
-use arcnav_localmap::MapSnapshot;
+use arcnav_localmap::{LocalMapConfig, MapSnapshot};
 use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime, VehicleConfig};
 
 /// A point to reach, world frame.
@@ -63,8 +63,9 @@ impl<'a> VoteContext<'a> {
 pub struct Setup<'a> {
     pub arcs: &'a ArcSet,
     pub vehicle: &'a VehicleConfig,
-    /// Side of the local map's patches, m (a patch is a square, its position its centre).
-    pub patch_size_m: f64,
+    /// The local map: its window, and its patches' side (a patch is a
+    /// square, its position its centre).
+    pub localmap: &'a LocalMapConfig,
 }
 
 /// How far a mission has come.
@@ -102,6 +103,12 @@ pub trait Behaviour: Send {
     /// Progress through the mission, for behaviours that follow one.
     fn progress(&self) -> Option<Progress> {
         None
+    }
+
+    /// Counts worth reporting (a planner's re-plans, say), by name, for
+    /// mission reports and `--stats`.
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        Vec::new()
     }
 }
 

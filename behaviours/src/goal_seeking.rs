@@ -15,7 +15,7 @@ use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::wrap_angle;
 use serde::{Deserialize, Serialize};
 
-use crate::behaviour::{Behaviour, Mission, Progress, Setup, VoteContext};
+use crate::behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
 use crate::registry::Plugin;
 
 /// Lives in `[behaviours.goal_seeking]`.
@@ -41,23 +41,45 @@ impl Default for GoalSeekingConfig {
     }
 }
 
-/// The goal-seeking behaviour.
+/// Where a vehicle is in its list of waypoints: the one sought, advanced
+/// past those reached (within their arrival radius, or behind the vehicle
+/// within `pass_radius_factor` radii), restarted when the list changes.
+/// Shared by the goal-directed behaviours.
 #[derive(Debug, Clone)]
-pub struct GoalSeeking {
-    config: GoalSeekingConfig,
+pub(crate) struct WaypointTracker {
+    arrival_radius_m: f64,
+    pass_radius_factor: f64,
     mission_version: Option<i64>,
     waypoints: usize,
     current: usize,
 }
 
-impl GoalSeeking {
-    pub fn new(config: GoalSeekingConfig) -> Self {
+impl WaypointTracker {
+    pub fn new(arrival_radius_m: f64, pass_radius_factor: f64) -> Self {
         Self {
-            config,
+            arrival_radius_m,
+            pass_radius_factor,
             mission_version: None,
             waypoints: 0,
             current: 0,
         }
+    }
+
+    /// The waypoint to seek from `ctx`'s pose (`None`: complete or nothing
+    /// to do), and its index.
+    pub fn seek<'m>(&mut self, ctx: &VoteContext<'m>) -> Option<(usize, &'m Waypoint)> {
+        if self.mission_version != Some(ctx.mission.version) {
+            self.mission_version = Some(ctx.mission.version);
+            self.current = 0;
+        }
+        self.waypoints = ctx.mission.waypoints.len();
+        let position = ctx.pose.position();
+        self.advance(ctx.mission, position.x, position.y, ctx.pose.yaw());
+        let mission: &'m Mission = ctx.mission;
+        mission
+            .waypoints
+            .get(self.current)
+            .map(|w| (self.current, w))
     }
 
     /// Moves past every waypoint already reached from (x, y) heading `yaw`.
@@ -66,16 +88,68 @@ impl GoalSeeking {
             let radius = w
                 .radius_m
                 .filter(|r| *r > 0.0)
-                .unwrap_or(self.config.arrival_radius_m);
+                .unwrap_or(self.arrival_radius_m);
             let (dx, dy) = (w.x - x, w.y - y);
             let distance = dx.hypot(dy);
             let ahead = dx * yaw.cos() + dy * yaw.sin();
-            let passed = ahead < 0.0 && distance < radius * self.config.pass_radius_factor;
+            let passed = ahead < 0.0 && distance < radius * self.pass_radius_factor;
             if distance <= radius || passed {
                 self.current += 1;
             } else {
                 break;
             }
+        }
+    }
+
+    pub fn reset(&mut self) {
+        self.current = 0;
+        self.mission_version = None;
+    }
+
+    pub fn progress(&self) -> Progress {
+        Progress {
+            current: self.current.min(self.waypoints),
+            waypoints: self.waypoints,
+            complete: self.waypoints > 0 && self.current >= self.waypoints,
+        }
+    }
+}
+
+/// Votes for the arcs that head for world point `target`: each arc's vote
+/// is the cosine of the angle between the vehicle's heading after
+/// `lookahead_m` along it (or the distance to the target, if nearer) and
+/// the direction from there to the target.
+pub(crate) fn vote_towards(
+    ctx: &VoteContext<'_>,
+    target: [f64; 2],
+    lookahead_m: f64,
+    votes: &mut Votes,
+) {
+    let position = ctx.pose.position();
+    // The target in the vehicle frame.
+    let (dx, dy) = (target[0] - position.x, target[1] - position.y);
+    let (sin, cos) = ctx.pose.yaw().sin_cos();
+    let (gx, gy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+    let lookahead = lookahead_m.min(gx.hypot(gy));
+    for (index, arc) in ctx.arcs.iter().enumerate() {
+        let end = arc.pose_at(lookahead);
+        let bearing = (gy - end.position.y).atan2(gx - end.position.x);
+        votes.set(index, wrap_angle(bearing - end.heading).cos() as f32);
+    }
+}
+
+/// The goal-seeking behaviour.
+#[derive(Debug, Clone)]
+pub struct GoalSeeking {
+    config: GoalSeekingConfig,
+    tracker: WaypointTracker,
+}
+
+impl GoalSeeking {
+    pub fn new(config: GoalSeekingConfig) -> Self {
+        Self {
+            tracker: WaypointTracker::new(config.arrival_radius_m, config.pass_radius_factor),
+            config,
         }
     }
 }
@@ -86,42 +160,20 @@ impl Behaviour for GoalSeeking {
     }
 
     fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
-        if self.mission_version != Some(ctx.mission.version) {
-            self.mission_version = Some(ctx.mission.version);
-            self.current = 0;
-        }
-        self.waypoints = ctx.mission.waypoints.len();
-        let position = ctx.pose.position();
-        let yaw = ctx.pose.yaw();
-        self.advance(ctx.mission, position.x, position.y, yaw);
-        let Some(goal) = ctx.mission.waypoints.get(self.current) else {
+        let Some((_, goal)) = self.tracker.seek(ctx) else {
             // Complete (or nothing to do): no opinion on steering, and stop.
             votes.vote_speed(0.0);
             return;
         };
-        // The waypoint in the vehicle frame.
-        let (dx, dy) = (goal.x - position.x, goal.y - position.y);
-        let (sin, cos) = yaw.sin_cos();
-        let (gx, gy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
-        let lookahead = self.config.lookahead_m.min(gx.hypot(gy));
-        for (index, arc) in ctx.arcs.iter().enumerate() {
-            let end = arc.pose_at(lookahead);
-            let bearing = (gy - end.position.y).atan2(gx - end.position.x);
-            votes.set(index, wrap_angle(bearing - end.heading).cos() as f32);
-        }
+        vote_towards(ctx, [goal.x, goal.y], self.config.lookahead_m, votes);
     }
 
     fn reset(&mut self) {
-        self.current = 0;
-        self.mission_version = None;
+        self.tracker.reset();
     }
 
     fn progress(&self) -> Option<Progress> {
-        Some(Progress {
-            current: self.current.min(self.waypoints),
-            waypoints: self.waypoints,
-            complete: self.waypoints > 0 && self.current >= self.waypoints,
-        })
+        Some(self.tracker.progress())
     }
 }
 

@@ -7,14 +7,17 @@
 //!   snapshot, pose, mission, arcs); lifecycle hooks with default bodies;
 //! - [`Registry`]: builds behaviours by name from their TOML tables; plug in
 //!   your own with [`Plugin`] and `registry.add::<Mine>()`;
-//! - [`ObstacleAvoidance`] and [`GoalSeeking`], the paper's two behaviours.
+//! - [`ObstacleAvoidance`] and [`GoalSeeking`], the paper's two behaviours;
+//! - [`Route`], a D* Lite route planner voting for the arcs along its path.
 
 pub mod behaviour;
 pub mod goal_seeking;
 pub mod obstacle_avoidance;
 pub mod registry;
+pub mod route;
 
 pub use behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
 pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
 pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig, UnseenGround};
 pub use registry::{Plugin, Prepared, Registry, RegistryError};
+pub use route::{Route, RouteConfig, RouteStats};

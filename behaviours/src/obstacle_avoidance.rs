@@ -321,7 +321,7 @@ pub struct ObstacleAvoidance {
 impl ObstacleAvoidance {
     /// Precomputes the swept bands of every arc.
     pub fn new(config: ObstacleAvoidanceConfig, setup: &Setup<'_>) -> Self {
-        let half_patch = setup.patch_size_m / 2.0;
+        let half_patch = setup.localmap.patch_size_m / 2.0;
         let body = setup.vehicle.footprint();
         let footprint = Footprint {
             x_min: body.x_min - half_patch,

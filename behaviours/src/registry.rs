@@ -129,12 +129,14 @@ impl Registry {
         Self::default()
     }
 
-    /// The behaviours arcnav ships: obstacle avoidance and goal seeking.
+    /// The behaviours arcnav ships: obstacle avoidance, goal seeking and
+    /// the route planner.
     pub fn builtin() -> Self {
         let mut registry = Self::new();
         registry
             .add::<crate::ObstacleAvoidance>()
-            .add::<crate::GoalSeeking>();
+            .add::<crate::GoalSeeking>()
+            .add::<crate::Route>();
         registry
     }
 

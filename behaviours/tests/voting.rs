@@ -15,6 +15,9 @@ use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
 use nalgebra::Point2;
 
+static LOCALMAP: std::sync::LazyLock<arcnav_localmap::LocalMapConfig> =
+    std::sync::LazyLock::new(arcnav_localmap::LocalMapConfig::default);
+
 const FRONT: f64 = 4.0;
 
 fn arcs() -> ArcSet {
@@ -25,7 +28,7 @@ fn setup<'a>(arcs: &'a ArcSet, vehicle: &'a VehicleConfig) -> Setup<'a> {
     Setup {
         arcs,
         vehicle,
-        patch_size_m: 0.4,
+        localmap: &LOCALMAP,
     }
 }
 
@@ -425,7 +428,10 @@ fn a_waypoint_passed_during_a_detour_counts_as_reached() {
 fn the_registry_builds_by_name_and_lists_the_known_ones_for_an_unknown_name() {
     let (arcs, vehicle) = (arcs(), VehicleConfig::default());
     let registry = Registry::builtin();
-    assert_eq!(registry.names(), ["goal_seeking", "obstacle_avoidance"]);
+    assert_eq!(
+        registry.names(),
+        ["goal_seeking", "obstacle_avoidance", "route"]
+    );
     let table: toml::Table = toml::from_str("lookahead_m = 12.0").unwrap();
     let behaviour = registry
         .build("goal_seeking", &table, &setup(&arcs, &vehicle))
@@ -440,7 +446,7 @@ fn the_registry_builds_by_name_and_lists_the_known_ones_for_an_unknown_name() {
         .unwrap_err();
     assert_eq!(
         err.to_string(),
-        "unknown behaviour \"wall_follower\" (known: goal_seeking, obstacle_avoidance)"
+        "unknown behaviour \"wall_follower\" (known: goal_seeking, obstacle_avoidance, route)"
     );
     let bad: toml::Table = toml::from_str("lookahed_m = 12.0").unwrap();
     let RegistryError::Config(err) = registry

@@ -13,6 +13,9 @@ use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
 use divan::{Bencher, black_box};
 
+static LOCALMAP: std::sync::LazyLock<arcnav_localmap::LocalMapConfig> =
+    std::sync::LazyLock::new(arcnav_localmap::LocalMapConfig::default);
+
 fn main() {
     divan::main();
 }
@@ -64,7 +67,7 @@ fn bench_cycle(bencher: Bencher, arc_count: usize) {
     let setup = Setup {
         arcs: &arcs,
         vehicle: &vehicle,
-        patch_size_m: 0.4,
+        localmap: &LOCALMAP,
     };
     let registry = Registry::builtin();
     let built = std::time::Instant::now();

@@ -112,6 +112,15 @@ impl BehaviourSet {
         }
     }
 
+    /// Each behaviour's counters (those that keep any), by behaviour name.
+    pub fn counters(&self) -> Vec<(String, Vec<(&'static str, u64)>)> {
+        self.behaviours
+            .iter()
+            .map(|b| (b.name().to_owned(), b.counters()))
+            .filter(|(_, counters)| !counters.is_empty())
+            .collect()
+    }
+
     /// The mission progress of the behaviour that follows waypoints.
     pub fn progress(&self) -> Option<Progress> {
         self.behaviours.iter().find_map(|b| b.progress())

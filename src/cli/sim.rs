@@ -199,9 +199,31 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     }
     let s = &r.stops;
     println!(
-        "stops         {} stop commands in {} episodes (all arcs forbidden {}, no acceptable arc {}, required behaviour stale {})",
-        s.stop_commands, s.episodes, s.all_arcs_forbidden, s.no_acceptable_arc, s.required_stale
+        "stops         {} stop commands in {} episodes (all arcs forbidden {}, no acceptable arc {}, required behaviour stale {}, stuck {})",
+        s.stop_commands,
+        s.episodes,
+        s.all_arcs_forbidden,
+        s.no_acceptable_arc,
+        s.required_stale,
+        s.stuck
     );
+    if !s.stopped_s.is_empty() {
+        let why: Vec<String> = s
+            .stopped_s
+            .iter()
+            .map(|(why, seconds)| format!("{why} {seconds:.1} s"))
+            .collect();
+        println!("stopped       {}", why.join(", "));
+    }
+    let rec = &r.recovery;
+    println!(
+        "recoveries    {} (backed {:.1} m; blocked with no way back {} decisions, out of recoveries {})",
+        rec.recoveries, rec.backed_m, rec.no_way_back, rec.exhausted
+    );
+    for (behaviour, counters) in &r.behaviour_counters {
+        let counts: Vec<String> = counters.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        println!("{:<13} {}", behaviour, counts.join(", "));
+    }
     let t = &r.stage_times;
     println!(
         "stage time    perception {:.2} ms/image, local map {:.3} ms, behaviours {:.3} ms, arbiter {:.3} ms (mean per call)",

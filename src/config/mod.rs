@@ -222,7 +222,7 @@ impl Config {
         Setup {
             arcs,
             vehicle: &self.vehicle,
-            patch_size_m: self.localmap.patch_size_m,
+            localmap: &self.localmap,
         }
     }
 

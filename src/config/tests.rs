@@ -156,7 +156,7 @@ fn an_unknown_behaviour_lists_the_known_ones() {
     let msg = parse_error("[behaviours.wall_follower]\ngain = 2.0\n");
     assert_eq!(
         msg,
-        "test.toml: invalid configuration: `behaviours.wall_follower`: unknown behaviour \"wall_follower\" (known: goal_seeking, obstacle_avoidance)"
+        "test.toml: invalid configuration: `behaviours.wall_follower`: unknown behaviour \"wall_follower\" (known: goal_seeking, obstacle_avoidance, route)"
     );
 }
 

@@ -1,0 +1,477 @@
+//! Route (`route`): finds the way around what the local map has shown, as
+//! D* voting in DAMN did (Stentz & Hebert, 1995) and 004 re-plans a blocked
+//! stretch of its global path.
+//!
+//! - **Memory**: a world-frame grid of `cell_m` cells over `size_m` square
+//!   around the vehicle (re-centred, keeping what overlaps, when the
+//!   vehicle has moved a quarter of it from the centre). Each cycle, every
+//!   cell wholly inside the local map's window takes what the map says: an
+//!   obstacle if a patch lies in it, free if its ground was seen and no
+//!   patch does; cells outside the window keep what they were last shown.
+//! - **Costs**: free ground 1, ground never seen `unseen_cost`, an obstacle
+//!   impassable; ground next to an obstacle (within one cell) costs
+//!   `1 + clearance_cost` times more, within two cells `1 + clearance_cost/4`
+//!   times (the vehicle is wider than a cell: obstacle avoidance decides
+//!   the last metre, the route keeps away from narrow gaps).
+//! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
+//!   vehicle, repaired incrementally as cells change and as the vehicle
+//!   moves; from scratch only for a new waypoint or a re-centred memory. A
+//!   waypoint outside the memory is sought where the line to it leaves it.
+//! - **Votes**: for the arcs that head for the point of the path
+//!   `lookahead_m` from the vehicle, scored as goal seeking scores arcs
+//!   towards a waypoint. With no path (the waypoint walled off) it says so
+//!   once and votes towards the waypoint itself.
+
+pub mod dstar;
+
+use arcnav_arbiter::Votes;
+use arcnav_localmap::{LocalMapConfig, MapSnapshot};
+use arcnav_vehicle::config::{self, ConfigError};
+use arcnav_vehicle::frames::yaw_of;
+use serde::{Deserialize, Serialize};
+
+use crate::behaviour::{Behaviour, Progress, Setup, VoteContext};
+use crate::goal_seeking::{WaypointTracker, vote_towards};
+use crate::registry::Plugin;
+use dstar::{DStarLite, PlannerStats};
+
+/// Lives in `[behaviours.route]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RouteConfig {
+    /// Side of the square of world remembered around the vehicle, m.
+    pub size_m: f64,
+    /// Side of a memory cell, m (≤ 1 m).
+    pub cell_m: f64,
+    /// Arcs head for the point of the path this far from the vehicle, m.
+    pub lookahead_m: f64,
+    /// Cost of crossing ground no image has seen, relative to seen free ground.
+    pub unseen_cost: f64,
+    /// Extra cost of ground next to an obstacle (half a vehicle width away).
+    pub clearance_cost: f64,
+    /// A waypoint is reached within this distance (unless it has its own), m.
+    pub arrival_radius_m: f64,
+    /// A waypoint behind the vehicle and within this many arrival radii is passed.
+    pub pass_radius_factor: f64,
+    /// Vertices a cycle's planning may expand at most (it carries on next cycle).
+    pub max_expansions: u64,
+}
+
+impl Default for RouteConfig {
+    fn default() -> Self {
+        Self {
+            size_m: 200.0,
+            cell_m: 1.0,
+            lookahead_m: 8.0,
+            unseen_cost: 2.0,
+            clearance_cost: 4.0,
+            arrival_radius_m: 5.0,
+            pass_radius_factor: 2.0,
+            max_expansions: 200_000,
+        }
+    }
+}
+
+const UNKNOWN: u8 = 0;
+const FREE: u8 = 1;
+const OBSTACLE: u8 = 2;
+
+/// What the route behaviour did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RouteStats {
+    pub planner: PlannerStats,
+    /// Times the memory was re-centred on the vehicle.
+    pub recentres: u64,
+    /// Cycles with no path to the waypoint.
+    pub no_path_cycles: u64,
+    /// Memory cells that changed state, in all.
+    pub cell_changes: u64,
+}
+
+/// The route behaviour.
+#[derive(Debug, Clone)]
+pub struct Route {
+    config: RouteConfig,
+    tracker: WaypointTracker,
+    /// The local map's window (cells wholly inside it follow the map).
+    window: LocalMapConfig,
+    side: usize,
+    /// World cell index of memory cell (0, 0); `None` before the first cycle.
+    origin: Option<(i64, i64)>,
+    state: Vec<u8>,
+    costs: Vec<f32>,
+    planner: DStarLite,
+    /// The waypoint being planned to and its memory cell.
+    goal: Option<(usize, usize)>,
+    hits: Vec<u32>,
+    stamp: u32,
+    changed: Vec<usize>,
+    path: Vec<usize>,
+    has_path: bool,
+    stats: RouteStats,
+}
+
+impl Route {
+    pub fn new(config: RouteConfig, setup: &Setup<'_>) -> Self {
+        let side = (config.size_m / config.cell_m).round() as usize;
+        let n = side * side;
+        Self {
+            tracker: WaypointTracker::new(config.arrival_radius_m, config.pass_radius_factor),
+            window: setup.localmap.clone(),
+            side,
+            origin: None,
+            state: vec![UNKNOWN; n],
+            costs: vec![0.0; n],
+            planner: DStarLite::new(side, 1.0),
+            goal: None,
+            hits: vec![0; n],
+            stamp: 0,
+            changed: Vec::new(),
+            path: Vec::new(),
+            has_path: false,
+            stats: RouteStats::default(),
+            config,
+        }
+    }
+
+    pub fn stats(&self) -> RouteStats {
+        RouteStats {
+            planner: self.planner.stats,
+            ..self.stats
+        }
+    }
+
+    /// True when the last plan found a path to the waypoint.
+    pub fn has_path(&self) -> bool {
+        self.has_path
+    }
+
+    /// Bytes the memory and the planner hold.
+    pub fn memory_bytes(&self) -> usize {
+        let n = self.side * self.side;
+        // state, costs, hits; the planner's g, rhs, queued key, marks.
+        n * (1 + 4 + 4) + n * (4 + 4 + 12 + 4) + self.path.capacity() * 8
+    }
+
+    /// Memory cell of world point (x, y), if inside.
+    fn cell_at(&self, x: f64, y: f64) -> Option<usize> {
+        let (i0, j0) = self.origin?;
+        let (i, j) = (
+            (x / self.config.cell_m).floor() as i64 - i0,
+            (y / self.config.cell_m).floor() as i64 - j0,
+        );
+        let side = self.side as i64;
+        ((0..side).contains(&i) && (0..side).contains(&j)).then(|| (j * side + i) as usize)
+    }
+
+    /// World centre of memory cell `c`.
+    fn centre(&self, c: usize) -> [f64; 2] {
+        let (i0, j0) = self.origin.unwrap_or((0, 0));
+        let (i, j) = ((c % self.side) as i64 + i0, (c / self.side) as i64 + j0);
+        [
+            (i as f64 + 0.5) * self.config.cell_m,
+            (j as f64 + 0.5) * self.config.cell_m,
+        ]
+    }
+
+    /// Centres the memory on (x, y) when the vehicle has left the middle
+    /// half of it (keeping the cells that overlap); true when it moved.
+    fn recentre(&mut self, x: f64, y: f64) -> bool {
+        let cell = self.config.cell_m;
+        let half = (self.side / 2) as i64;
+        let wanted = (
+            (x / cell).floor() as i64 - half,
+            (y / cell).floor() as i64 - half,
+        );
+        if let Some((i0, j0)) = self.origin {
+            let quarter = (self.side / 4) as i64;
+            if (wanted.0 - i0).abs() < quarter && (wanted.1 - j0).abs() < quarter {
+                return false;
+            }
+            let mut state = vec![UNKNOWN; self.state.len()];
+            let side = self.side as i64;
+            for (c, slot) in state.iter_mut().enumerate() {
+                let (i, j) = (
+                    (c as i64 % side) + wanted.0 - i0,
+                    (c as i64 / side) + wanted.1 - j0,
+                );
+                if (0..side).contains(&i) && (0..side).contains(&j) {
+                    *slot = self.state[(j * side + i) as usize];
+                }
+            }
+            self.state = state;
+            self.stats.recentres += 1;
+        }
+        self.origin = Some(wanted);
+        for c in 0..self.costs.len() {
+            self.costs[c] = self.cost_of(c);
+        }
+        true
+    }
+
+    /// The cost of crossing cell `c` (see the module docs).
+    fn cost_of(&self, c: usize) -> f32 {
+        let base = match self.state[c] {
+            OBSTACLE => return f32::INFINITY,
+            FREE => 1.0,
+            _ => self.config.unseen_cost as f32,
+        };
+        let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
+        let side = self.side as i64;
+        let mut nearest = 3;
+        for dy in -2..=2i64 {
+            for dx in -2..=2i64 {
+                let (nx, ny) = (x + dx, y + dy);
+                if (0..side).contains(&nx)
+                    && (0..side).contains(&ny)
+                    && self.state[(ny * side + nx) as usize] == OBSTACLE
+                {
+                    nearest = nearest.min(dx.abs().max(dy.abs()));
+                }
+            }
+        }
+        let factor = match nearest {
+            1 => 1.0 + self.config.clearance_cost,
+            2 => 1.0 + self.config.clearance_cost / 4.0,
+            _ => 1.0,
+        };
+        base * factor as f32
+    }
+
+    /// Sets cell `c`'s state; re-costs the cells around it that change.
+    fn set_state(&mut self, c: usize, state: u8) {
+        if self.state[c] == state {
+            return;
+        }
+        self.state[c] = state;
+        self.stats.cell_changes += 1;
+        let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
+        let side = self.side as i64;
+        for dy in -2..=2i64 {
+            for dx in -2..=2i64 {
+                let (nx, ny) = (x + dx, y + dy);
+                if (0..side).contains(&nx) && (0..side).contains(&ny) {
+                    let n = (ny * side + nx) as usize;
+                    let cost = self.cost_of(n);
+                    if cost != self.costs[n] {
+                        self.costs[n] = cost;
+                        self.changed.push(n);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Takes what the local map shows into the memory.
+    fn integrate(&mut self, map: &MapSnapshot) {
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.hits.fill(0);
+            self.stamp = 1;
+        }
+        let s = map.patch_size_m;
+        for patch in &map.patches {
+            let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
+            if let Some(c) = self.cell_at(x, y) {
+                self.hits[c] = self.stamp;
+            }
+        }
+        let t = map.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&map.world_from_vehicle).sin_cos();
+        let cell = self.config.cell_m;
+        // A cell follows the map only when wholly inside its window.
+        let margin = cell * std::f64::consts::FRAC_1_SQRT_2;
+        let w = self.window.clone();
+        let inside = |vx: f64, vy: f64| {
+            vx >= -w.behind_m + margin
+                && vx <= w.ahead_m - margin
+                && vy.abs() <= w.half_width_m - margin
+        };
+        let reach = w.radius_m();
+        let (lo_x, hi_x) = (
+            ((t.x - reach) / cell).floor(),
+            ((t.x + reach) / cell).ceil(),
+        );
+        let (lo_y, hi_y) = (
+            ((t.y - reach) / cell).floor(),
+            ((t.y + reach) / cell).ceil(),
+        );
+        for j in lo_y as i64..=hi_y as i64 {
+            for i in lo_x as i64..=hi_x as i64 {
+                let (x, y) = ((i as f64 + 0.5) * cell, (j as f64 + 0.5) * cell);
+                let Some(c) = self.cell_at(x, y) else {
+                    continue;
+                };
+                let hit = self.hits[c] == self.stamp;
+                let (dx, dy) = (x - t.x, y - t.y);
+                let (vx, vy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+                if inside(vx, vy) {
+                    let seen = map
+                        .seen
+                        .contains((x / s).floor() as i64, (y / s).floor() as i64);
+                    if hit {
+                        self.set_state(c, OBSTACLE);
+                    } else if seen {
+                        self.set_state(c, FREE);
+                    }
+                } else if hit {
+                    self.set_state(c, OBSTACLE);
+                }
+            }
+        }
+    }
+
+    /// The memory cell to plan to for waypoint (x, y): its own, or where
+    /// the line from the vehicle to it leaves the memory.
+    fn goal_cell(&self, from: [f64; 2], to: [f64; 2]) -> Option<usize> {
+        if let Some(c) = self.cell_at(to[0], to[1]) {
+            return Some(c);
+        }
+        let (i0, j0) = self.origin?;
+        let cell = self.config.cell_m;
+        // The memory shrunk by a cell, in world metres.
+        let lo = [(i0 as f64 + 1.0) * cell, (j0 as f64 + 1.0) * cell];
+        let hi = [
+            (i0 as f64 + self.side as f64 - 1.0) * cell,
+            (j0 as f64 + self.side as f64 - 1.0) * cell,
+        ];
+        let d = [to[0] - from[0], to[1] - from[1]];
+        let mut t = 1.0f64;
+        for axis in 0..2 {
+            if d[axis] > 0.0 {
+                t = t.min((hi[axis] - from[axis]) / d[axis]);
+            } else if d[axis] < 0.0 {
+                t = t.min((lo[axis] - from[axis]) / d[axis]);
+            }
+        }
+        self.cell_at(from[0] + t * d[0], from[1] + t * d[1])
+    }
+}
+
+impl Behaviour for Route {
+    fn name(&self) -> &str {
+        Self::NAME
+    }
+
+    fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
+        let Some((index, waypoint)) = self.tracker.seek(ctx) else {
+            votes.vote_speed(0.0);
+            return;
+        };
+        let target = [waypoint.x, waypoint.y];
+        let position = ctx.pose.position();
+        let here = [position.x, position.y];
+        let moved = self.recentre(here[0], here[1]);
+        self.changed.clear();
+        self.integrate(ctx.map);
+        let (Some(start), Some(goal)) = (
+            self.cell_at(here[0], here[1]),
+            match self.goal {
+                Some((i, c)) if i == index && !moved => Some(c),
+                _ => self.goal_cell(here, target),
+            },
+        ) else {
+            vote_towards(ctx, target, self.config.lookahead_m, votes);
+            return;
+        };
+        if moved || self.goal != Some((index, goal)) {
+            self.goal = Some((index, goal));
+            self.planner.reset(start, goal);
+        } else {
+            self.planner.move_start(start);
+            self.planner.cells_changed(&self.costs, &self.changed);
+        }
+        let found = self.planner.plan(&self.costs, self.config.max_expansions);
+        if !found {
+            self.stats.no_path_cycles += 1;
+            if self.has_path || self.stats.no_path_cycles == 1 {
+                tracing::warn!(
+                    waypoint = index,
+                    "route: no path to the waypoint through what the map has shown"
+                );
+            }
+            self.has_path = false;
+            vote_towards(ctx, target, self.config.lookahead_m, votes);
+            return;
+        }
+        self.has_path = true;
+        // The point of the path `lookahead_m` from the vehicle.
+        let steps = (2.0 * self.config.lookahead_m / self.config.cell_m).ceil() as usize + 2;
+        self.planner.path(&self.costs, steps, &mut self.path);
+        let reach = self.config.lookahead_m;
+        let carrot = if self
+            .goal
+            .is_some_and(|(_, c)| self.cell_at(target[0], target[1]) == Some(c))
+            && (target[0] - here[0]).hypot(target[1] - here[1]) <= reach
+        {
+            target
+        } else {
+            self.path
+                .iter()
+                .map(|&c| self.centre(c))
+                .find(|p| (p[0] - here[0]).hypot(p[1] - here[1]) >= reach)
+                .or_else(|| self.path.last().map(|&c| self.centre(c)))
+                .unwrap_or(target)
+        };
+        vote_towards(ctx, carrot, self.config.lookahead_m, votes);
+    }
+
+    fn reset(&mut self) {
+        self.tracker.reset();
+        self.origin = None;
+        self.goal = None;
+        self.state.fill(UNKNOWN);
+        self.has_path = false;
+    }
+
+    fn progress(&self) -> Option<Progress> {
+        Some(self.tracker.progress())
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        let planner = &self.planner.stats;
+        vec![
+            ("plans", planner.plans),
+            ("replans", planner.replans),
+            ("expansions", planner.expansions),
+            ("recentres", self.stats.recentres),
+            ("no_path_cycles", self.stats.no_path_cycles),
+        ]
+    }
+}
+
+impl Plugin for Route {
+    const NAME: &'static str = "route";
+    type Config = RouteConfig;
+
+    fn validate(c: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
+        config::in_range("cell_m", c.cell_m, 0.1, 1.0)?;
+        config::in_range("size_m", c.size_m, 10.0, 2000.0)?;
+        let cells = (c.size_m / c.cell_m).round();
+        if cells > 4000.0 {
+            return Err(ConfigError::new(
+                "size_m",
+                format!(
+                    "is {} m: {cells} cells of {} m across, more than 4000 (use larger cells or a smaller area)",
+                    c.size_m, c.cell_m
+                ),
+            ));
+        }
+        config::positive("lookahead_m", c.lookahead_m)?;
+        config::in_range("unseen_cost", c.unseen_cost, 1.0, 100.0)?;
+        config::in_range("clearance_cost", c.clearance_cost, 0.0, 100.0)?;
+        config::positive("arrival_radius_m", c.arrival_radius_m)?;
+        config::non_negative("pass_radius_factor", c.pass_radius_factor)?;
+        if c.max_expansions == 0 {
+            return Err(ConfigError::new(
+                "max_expansions",
+                "is 0, must be at least 1",
+            ));
+        }
+        Ok(())
+    }
+
+    fn build(config: Self::Config, setup: &Setup<'_>) -> Self {
+        Self::new(config, setup)
+    }
+}
