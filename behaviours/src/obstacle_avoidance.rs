@@ -269,7 +269,8 @@ impl Raster {
 #[derive(Debug, Clone)]
 struct Reverse {
     raster: Raster,
-    bands: Vec<Vec<Entry>>,
+    /// Per arc: the body's band, and the band grown by the margin.
+    bands: Vec<[Vec<Entry>; 2]>,
     /// Scratch: cells and unseen ground together.
     blocked: Vec<u64>,
 }
@@ -350,20 +351,35 @@ impl ObstacleAvoidance {
             wheels.contains(&p.x) && p.y.abs() <= footprint.half_width
         });
         let reverse = (config.reverse_reach_m > 0.0).then(|| {
-            // The body mirrored (x -> -x), grown by the margin.
+            // The body mirrored (x -> -x).
             let mirrored = Footprint {
                 x_min: -footprint.x_max,
                 x_max: -footprint.x_min,
-                half_width: footprint.half_width + config.reverse_margin_m,
+                half_width: footprint.half_width,
             };
-            let grid = grid_around(setup.arcs, mirrored, config.reverse_reach_m, r);
+            let margin = config.reverse_margin_m;
+            let grid = grid_around(
+                setup.arcs,
+                mirrored.widened(margin),
+                config.reverse_reach_m,
+                r,
+            );
             let bands = setup
                 .arcs
                 .iter()
                 .map(|arc| {
-                    let template =
-                        build_template(arc, &mirrored, &[0.0], &grid, config.reverse_reach_m);
-                    template.bands.into_iter().next().unwrap_or_default()
+                    let template = build_template(
+                        arc,
+                        &mirrored,
+                        &[0.0, margin],
+                        &grid,
+                        config.reverse_reach_m,
+                    );
+                    let mut bands = template.bands.into_iter();
+                    [
+                        bands.next().unwrap_or_default(),
+                        bands.next().unwrap_or_default(),
+                    ]
                 })
                 .collect();
             // Backing up, the whole body stands on seen ground (the
@@ -408,9 +424,22 @@ impl ObstacleAvoidance {
         {
             *blocked = cell | unseen;
         }
-        for (arc, band) in reverse.bands.iter().enumerate().take(votes.len()) {
-            let clear = first_in(&reverse.blocked, band, reach as f32)
-                .map_or(reach, |hit| f64::from(hit.s));
+        for (arc, [body, margin]) in reverse.bands.iter().enumerate().take(votes.len()) {
+            // The body may not meet a cell or unseen ground; the margin
+            // beside it may not close on a cell. Cells already inside the
+            // margin where the vehicle stands (s = 0: a trunk beside the
+            // flank) are left to the body's band.
+            let body_hit = first_in(&reverse.blocked, body, reach as f32).map(|hit| hit.s);
+            let margin_hit = margin
+                .iter()
+                .filter(|e| e.s > 0.0)
+                .take_while(|e| e.s <= reach as f32)
+                .find(|e| reverse.raster.bitmap[e.word as usize] & e.mask != 0)
+                .map(|hit| hit.s);
+            let clear = body_hit
+                .into_iter()
+                .chain(margin_hit)
+                .fold(reach, |clear, s| clear.min(f64::from(s)));
             votes.set_reverse_clearance(arc, clear);
         }
     }
