@@ -65,7 +65,8 @@ impl Default for ArbiterConfig {
             max_lateral_accel_mps2: 1.5,
             weights: BTreeMap::from([
                 ("obstacle_avoidance".into(), 1.0),
-                ("goal_seeking".into(), 0.5),
+                ("route".into(), 0.5),
+                ("goal_seeking".into(), 0.0),
             ]),
             recovery: RecoveryConfig::default(),
         }

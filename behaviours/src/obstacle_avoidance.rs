@@ -324,8 +324,11 @@ impl ObstacleAvoidance {
     pub fn new(config: ObstacleAvoidanceConfig, setup: &Setup<'_>) -> Self {
         let half_patch = setup.localmap.patch_size_m / 2.0;
         let body = setup.vehicle.footprint();
+        // The body grown by half a patch ahead and to the sides (the local
+        // map clears patches overlapping its flanks), not behind: driving
+        // forwards, what lies behind the rear bumper stays behind.
         let footprint = Footprint {
-            x_min: body.x_min - half_patch,
+            x_min: body.x_min,
             x_max: body.x_max + half_patch,
             half_width: body.half_width + half_patch,
         };
@@ -351,10 +354,11 @@ impl ObstacleAvoidance {
             wheels.contains(&p.x) && p.y.abs() <= footprint.half_width
         });
         let reverse = (config.reverse_reach_m > 0.0).then(|| {
-            // The body mirrored (x -> -x).
+            // The body mirrored (x -> -x), grown behind and to the sides:
+            // backing up, what lies ahead of the front bumper stays there.
             let mirrored = Footprint {
-                x_min: -footprint.x_max,
-                x_max: -footprint.x_min,
+                x_min: -body.x_max,
+                x_max: -(body.x_min - half_patch),
                 half_width: footprint.half_width,
             };
             let margin = config.reverse_margin_m;
@@ -384,7 +388,11 @@ impl ObstacleAvoidance {
                 .collect();
             // Backing up, the whole body stands on seen ground (the
             // overhang over ground it drove across).
-            let raster = Raster::new(grid, -1.0, |p| footprint.contains(p));
+            let standing = Footprint {
+                x_min: body.x_min - half_patch,
+                ..footprint
+            };
+            let raster = Raster::new(grid, -1.0, |p| standing.contains(p));
             Reverse {
                 blocked: vec![0; raster.bitmap.len()],
                 raster,

@@ -289,7 +289,7 @@ impl MapSnapshot {
 pub struct LocalMap {
     config: LocalMapConfig,
     max_speed_mps: f64,
-    /// The vehicle's body: patches inside it are cleared.
+    /// The vehicle's body, widened by half a patch: patches inside are cleared.
     body: Footprint,
     mask: i64,
     side: usize,
@@ -324,7 +324,10 @@ impl LocalMap {
         Self {
             config: config.clone(),
             max_speed_mps: vehicle.max_speed_mps,
-            body: vehicle.footprint(),
+            // Patches whose square overlaps the body's flanks: obstacle
+            // avoidance grows the body by half a patch to each side, and
+            // a cell there would touch every arc, forwards and backwards.
+            body: vehicle.footprint().widened(config.patch_size_m / 2.0),
             mask: side as i64 - 1,
             side,
             slots: vec![EMPTY; side * side],
@@ -700,10 +703,11 @@ impl LocalMap {
         PoseUpdate::Accepted
     }
 
-    /// Removes the patches whose centre lies under the vehicle's body: it
-    /// stands there, so that ground bears it, whatever an image made of it
-    /// (a slope cell flagged from afar, a cell placed late). Each is
-    /// counted and logged with its reasons.
+    /// Removes the patches whose centre lies under the vehicle's body (or
+    /// whose square overlaps its flanks): it stands there, so that ground
+    /// bears it, whatever an image made of it (a slope cell flagged from
+    /// afar, a cell placed late, the foot of a boulder it brushes past).
+    /// Each is counted and logged with its reasons.
     fn clear_under_vehicle(&mut self) {
         let mut index = 0;
         while index < self.patches.len() {

@@ -206,7 +206,7 @@ fn a_weight_or_required_name_that_is_no_configured_behaviour_is_refused() {
     assert_eq!(
         msg,
         "test.toml: invalid configuration: `arbiter.weights.obstacle_avoidence`: \
-         \"obstacle_avoidence\" is not a configured behaviour (configured: goal_seeking, obstacle_avoidance)"
+         \"obstacle_avoidence\" is not a configured behaviour (configured: goal_seeking, obstacle_avoidance, route)"
     );
     let msg = parse_error("[arbiter]\nrequired = [\"goal_seekin\"]\n");
     assert!(
@@ -237,7 +237,7 @@ fn behaviours_are_built_from_the_tables_checked_at_load_and_follow_later_edits()
         Config::from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
     let registry = Registry::builtin();
     let arcs = config.arc_set().unwrap();
-    assert_eq!(config.build_behaviours(&registry, &arcs).unwrap().len(), 2);
+    assert_eq!(config.build_behaviours(&registry, &arcs).unwrap().len(), 3);
     // A table changed in code is checked when built.
     config
         .behaviours
@@ -261,7 +261,7 @@ fn an_endless_configuration_file_is_refused_not_read_until_memory_runs_out() {
 
 #[test]
 fn weights_that_leave_no_behaviour_voting_are_refused() {
-    let msg = parse_error("[arbiter.weights]\nobstacle_avoidance = 0.0\ngoal_seeking = 0.0\n");
+    let msg = parse_error("[arbiter.weights]\nobstacle_avoidance = 0.0\nroute = 0.0\n");
     assert!(
         msg.contains("`arbiter.weights`: every configured behaviour has weight 0"),
         "{msg}"
