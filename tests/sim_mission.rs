@@ -355,3 +355,64 @@ fn trenches_too_wide_to_see_into_are_never_driven_into() {
         let _ = std::fs::remove_dir_all(&out);
     }
 }
+
+/// 017's four situations: a forest, a hillside from a DEM, a cul-de-sac
+/// with the waypoint behind it, and generated moderate world 4 (boxed in
+/// after a U-turn). Each used to end stopped for good; with the route
+/// behaviour, footprint clearing and backing up each completes at 2.5 m/s
+/// with the ERIM and no collision. In the cul-de-sac the way out needs
+/// both: the route turns the vehicle round, backing up makes room.
+#[test]
+fn forest_hillside_cul_de_sac_and_boxed_in_worlds_complete() {
+    let world = |name: &str| format!("{}/tests/worlds/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    let runs: Vec<(&str, Vec<String>)> = vec![
+        ("cul_de_sac", vec!["--world".into(), world("cul_de_sac")]),
+        ("forest", vec!["--world".into(), world("forest")]),
+        ("hillside", vec!["--world".into(), world("hillside")]),
+        ("seed4", vec!["--seed".into(), "4".into()]),
+    ];
+    let reports: Vec<(&str, Value, String)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = runs
+            .iter()
+            .map(|(tag, args)| {
+                scope.spawn(move || {
+                    let out = out_dir(&format!("stuck-{tag}"));
+                    let mut all = vec!["sim", "--out", out.to_str().unwrap()];
+                    all.extend(args.iter().map(String::as_str));
+                    let (_, stdout, stderr) = arcnav(&all);
+                    let report = std::fs::read_to_string(out.join("report.json"))
+                        .unwrap_or_else(|e| panic!("{tag}: no report ({e}):\n{stdout}\n{stderr}"));
+                    let _ = std::fs::remove_dir_all(&out);
+                    (*tag, serde_json::from_str(&report).unwrap(), stdout)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for (tag, report, stdout) in &reports {
+        assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
+        assert_eq!(
+            report["collisions"].as_array().unwrap().len(),
+            0,
+            "{tag}:\n{stdout}"
+        );
+        assert!(
+            report["behaviour_counters"]["route"]["plans"]
+                .as_u64()
+                .unwrap()
+                >= 1
+        );
+    }
+    let cul_de_sac = &reports[0].1;
+    assert!(
+        cul_de_sac["recovery"]["recoveries"].as_u64().unwrap() >= 1,
+        "the U is left by backing up: {cul_de_sac}"
+    );
+    assert!(cul_de_sac["recovery"]["backed_m"].as_f64().unwrap() > 2.0);
+    assert!(
+        cul_de_sac["behaviour_counters"]["route"]["replans"]
+            .as_u64()
+            .unwrap()
+            > 10
+    );
+}
