@@ -604,10 +604,7 @@ fn distributed_nodes_reproduce_the_lockstep_replay_over_udp_multicast() {
             "obstacle_avoidance",
             &["node", "behaviour", "obstacle_avoidance", "--stats"],
         ),
-        (
-            "goal_seeking",
-            &["node", "behaviour", "goal_seeking", "--stats"],
-        ),
+        ("route", &["node", "behaviour", "route", "--stats"]),
         ("arbiter", &["node", "arbiter", "--stats"]),
     ];
     let (stats, received) = recording(&net.ns, || {
@@ -773,7 +770,7 @@ fn killing_obstacle_avoidance_makes_the_arbiter_stop_within_its_timeout() {
         let procs = vec![
             net.arcnav("perception", &["node", "perception"]),
             net.arcnav("localmap", &["node", "localmap"]),
-            net.arcnav("goal_seeking", &["node", "behaviour", "goal_seeking"]),
+            net.arcnav("route", &["node", "behaviour", "route"]),
             net.arcnav("arbiter", &["node", "arbiter"]),
         ];
         let oa = net.arcnav(
