@@ -26,7 +26,7 @@ fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() 
         .to_string();
     assert!(
         err.contains(
-            "unknown behaviour \"prefer_current\" (known: goal_seeking, obstacle_avoidance)"
+            "unknown behaviour \"prefer_current\" (known: goal_seeking, obstacle_avoidance, route)"
         ),
         "{err}"
     );
@@ -45,7 +45,12 @@ fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() 
         .collect();
     assert_eq!(
         names,
-        ["goal_seeking", "obstacle_avoidance", "prefer_current"]
+        [
+            "goal_seeking",
+            "obstacle_avoidance",
+            "prefer_current",
+            "route"
+        ]
     );
     let bad = prefer_current::CONFIG.replace("width_arcs = 4.0", "width_arcs = 0.0");
     let err = Config::from_toml_with(&bad, "example", &registry)

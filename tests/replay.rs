@@ -837,9 +837,10 @@ fn a_replay_from_the_middle_keeps_the_mission_sent_before_it() {
         "from 10 s: {} compared, {percent:.1}% agree",
         comparison.compared
     );
-    // The map starts empty at 10 s, so a few decisions near obstacles
-    // differ; without the mission nearly all did (1 in 313).
-    assert!(percent > 95.0, "{percent:.1}% agree");
+    // The map and the route's memory start empty at 10 s, so decisions
+    // near obstacles differ (90 % agree with route, 95 % with goal
+    // seeking alone); without the mission nearly none did (1 in 313).
+    assert!(percent > 85.0, "{percent:.1}% agree");
 }
 
 #[test]

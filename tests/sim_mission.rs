@@ -78,7 +78,8 @@ fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
             .or_default()
             .push(event.timestamp);
         if let AnyMessage::SteeringCommand(c) = &event.message {
-            assert!(c.speed >= 0.0 && c.curvature.abs() <= 0.125 + 1e-9);
+            // Backing up (negative speed) only ever at the recovery speed.
+            assert!(c.speed >= -1.0 && c.curvature.abs() <= 0.125 + 1e-9);
         }
     }
     assert!(!events.log_stats().lost_anything());
@@ -89,6 +90,7 @@ fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
         [
             "ARC_VOTES_GOAL_SEEKING",
             "ARC_VOTES_OBSTACLE_AVOIDANCE",
+            "ARC_VOTES_ROUTE",
             "OBSTACLE_CELLS",
             "POSE",
             "RANGE_IMAGE_ERIM",
@@ -281,12 +283,14 @@ fn the_drop_offs_world_completes_without_falling_into_anything() {
         );
         let _ = std::fs::remove_dir_all(&out);
     }
-    // Without drop-off detection and with unseen ground free: the trench.
+    // 002's system (no drop-off detection, unseen ground free, goal
+    // seeking): the trench.
     let out = out_dir("drop-off-disabled");
     let config = out.with_extension("toml");
     std::fs::write(
         &config,
-        "[perception.drop_off]\nenabled = false\n[behaviours.obstacle_avoidance]\nunseen_ground = \"free\"\n",
+        "[perception.drop_off]\nenabled = false\n[behaviours.obstacle_avoidance]\nunseen_ground = \"free\"\n\
+         [arbiter.weights]\nroute = 0.0\ngoal_seeking = 0.5\n",
     )
     .unwrap();
     let (code, stdout, _) = arcnav(&[

@@ -14,11 +14,15 @@ fn arbiter(config: ArbiterConfig) -> Arbiter {
     )
 }
 
+/// No smoothing; goal seeking weighted 0.5, as 002 weighted it (the
+/// shipped defaults give that weight to the route behaviour).
 fn plain() -> ArbiterConfig {
-    ArbiterConfig {
+    let mut config = ArbiterConfig {
         smoothing_sigma_arcs: 0.0,
         ..Default::default()
-    }
+    };
+    config.weights.insert("goal_seeking".into(), 0.5);
+    config
 }
 
 fn votes(behaviour: &str, utime: i64, f: impl Fn(usize) -> f32) -> BehaviourVotes {

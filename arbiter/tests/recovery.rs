@@ -37,7 +37,7 @@ fn blocked(utime: i64, clear: impl Fn(usize) -> Option<f64>, goal: usize) -> [Be
             votes: avoid,
         },
         BehaviourVotes {
-            behaviour: "goal_seeking".into(),
+            behaviour: "route".into(),
             utime,
             votes: seek,
         },
