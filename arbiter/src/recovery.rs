@@ -20,8 +20,9 @@
 //! clear enough to stop on.
 
 use arcnav_vehicle::config::{self, ConfigError};
+use arcnav_vehicle::motion::speed_ramp;
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
-use arcnav_vehicle::{SteeringCommand, Utime, VehicleConfig};
+use arcnav_vehicle::{MotionLimits, SteeringCommand, Utime, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
 /// Lives in `[arbiter.recovery]`.
@@ -126,8 +127,8 @@ enum Mode {
 #[derive(Debug, Clone)]
 pub(crate) struct Recovery {
     config: RecoveryConfig,
-    acceleration: f64,
-    deceleration: f64,
+    /// The vehicle's acceleration limits, for the speed estimate.
+    limits: MotionLimits,
     mode: Mode,
     blocked_since: Option<Utime>,
     attempts: u32,
@@ -152,8 +153,7 @@ impl Recovery {
     pub fn new(config: &RecoveryConfig, vehicle: &VehicleConfig) -> Self {
         Self {
             config: config.clone(),
-            acceleration: vehicle.max_acceleration_mps2,
-            deceleration: vehicle.max_deceleration_mps2,
+            limits: MotionLimits::from_vehicle(vehicle),
             mode: Mode::Forward,
             blocked_since: None,
             attempts: 0,
@@ -176,21 +176,8 @@ impl Recovery {
         };
         self.last = Some((now, target));
         let dt = micros_to_seconds(now - since).max(0.0);
-        let v0 = self.speed_estimate;
-        // Through zero the vehicle brakes to a stand first.
-        let target = if v0 * target < 0.0 { 0.0 } else { target };
-        let rate = if target.abs() > v0.abs() {
-            self.acceleration
-        } else {
-            self.deceleration
-        };
-        let reach = (target - v0).abs() / rate;
-        let (v1, distance) = if reach >= dt {
-            let v1 = v0 + (rate * dt).copysign(target - v0);
-            (v1, 0.5 * (v0 + v1) * dt)
-        } else {
-            (target, 0.5 * (v0 + target) * reach + target * (dt - reach))
-        };
+        let (v1, mean) = speed_ramp(self.speed_estimate, target, &self.limits, dt);
+        let distance = mean * dt;
         self.speed_estimate = v1;
         if distance > 0.0 {
             self.forward_since_recovery_m += distance;
@@ -237,13 +224,13 @@ impl Recovery {
             let clear = behind.clearance.get(arc).copied().flatten().unwrap_or(0.0);
             // Room to stand before what is behind, at the speed it has.
             let v = self.speed_estimate.abs();
-            let braking = v * v / (2.0 * self.deceleration);
+            let braking = v * v / (2.0 * self.limits.max_deceleration_mps2);
             if remaining > 0.0 && clear - self.config.margin_m > braking {
                 let room = (clear - self.config.margin_m).min(remaining + braking);
                 let speed = self
                     .config
                     .speed_mps
-                    .min((2.0 * self.deceleration * room.max(0.0)).sqrt());
+                    .min((2.0 * self.limits.max_deceleration_mps2 * room.max(0.0)).sqrt());
                 return Outcome::Back(SteeringCommand {
                     utime: now,
                     curvature: behind.curvatures[arc],

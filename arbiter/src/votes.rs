@@ -2,6 +2,11 @@
 
 use arcnav_vehicle::Utime;
 
+/// `value`, with negative values and NaN (no number of m/s or metres) as 0.
+fn zero_or_more(value: f64) -> f64 {
+    if value.is_nan() { 0.0 } else { value.max(0.0) }
+}
+
 /// A backing-up clearance nobody gave.
 const NO_OPINION: f32 = -1.0;
 
@@ -77,22 +82,14 @@ impl Votes {
 
     /// Votes the highest speed this behaviour accepts, m/s (negative: 0).
     pub fn vote_speed(&mut self, speed_mps: f64) {
-        self.speed_mps = Some(if speed_mps.is_nan() {
-            0.0
-        } else {
-            speed_mps.max(0.0)
-        });
+        self.speed_mps = Some(zero_or_more(speed_mps));
     }
 
     /// The highest speed this behaviour accepts on arc `index`, m/s
     /// (negative or NaN: 0): applies when that arc is driven.
     pub fn limit_arc_speed(&mut self, index: usize, speed_mps: f64) {
         if let Some(limit) = self.arc_speeds.get_mut(index) {
-            *limit = if speed_mps.is_nan() {
-                0.0
-            } else {
-                speed_mps.max(0.0) as f32
-            };
+            *limit = zero_or_more(speed_mps) as f32;
         }
     }
 
@@ -109,11 +106,7 @@ impl Votes {
     /// it have no opinion on backing up.
     pub fn set_reverse_clearance(&mut self, index: usize, metres: f64) {
         if let Some(clear) = self.reverse_clear.get_mut(index) {
-            *clear = if metres.is_nan() {
-                0.0
-            } else {
-                metres.max(0.0) as f32
-            };
+            *clear = zero_or_more(metres) as f32;
         }
     }
 

@@ -438,12 +438,9 @@ impl ObstacleAvoidance {
             // margin where the vehicle stands (s = 0: a trunk beside the
             // flank) are left to the body's band.
             let body_hit = first_in(&reverse.blocked, body, reach as f32).map(|hit| hit.s);
-            let margin_hit = margin
-                .iter()
-                .filter(|e| e.s > 0.0)
-                .take_while(|e| e.s <= reach as f32)
-                .find(|e| reverse.raster.bitmap[e.word as usize] & e.mask != 0)
-                .map(|hit| hit.s);
+            let moving = margin.partition_point(|e| e.s <= 0.0);
+            let margin_hit =
+                first_in(&reverse.raster.bitmap, &margin[moving..], reach as f32).map(|hit| hit.s);
             let clear = body_hit
                 .into_iter()
                 .chain(margin_hit)

@@ -496,8 +496,7 @@ impl LocalMap {
                 // No pose yet: placed at the first update.
                 None => (0.0, 0.0),
             };
-            self.slots[slot] = self.patches.len() as u32;
-            self.patches.push(Patch {
+            let patch = Patch {
                 i,
                 j,
                 x: vx as f32,
@@ -511,11 +510,14 @@ impl LocalMap {
                 z_min: cell.z_min,
                 z_max: cell.z_max,
                 stamp,
-            });
+            };
+            self.slots[slot] = self.patches.len() as u32;
+            self.patches.push(patch);
             outcome.new_patches += 1;
         }
         outcome.pruned = self.prune(report, sensor_bit, stamp);
         if self.pose.is_some() {
+            // Cells placed under the vehicle (captured before it drove there).
             self.clear_under_vehicle();
         }
         self.stats.reports += 1;
@@ -697,36 +699,49 @@ impl LocalMap {
             }
             patch.x = vx as f32;
             patch.y = vy as f32;
-            index += 1;
-        }
-        self.clear_under_vehicle();
-        PoseUpdate::Accepted
-    }
-
-    /// Removes the patches whose centre lies under the vehicle's body (or
-    /// whose square overlaps its flanks): it stands there, so that ground
-    /// bears it, whatever an image made of it (a slope cell flagged from
-    /// afar, a cell placed late, the foot of a boulder it brushes past).
-    /// Each is counted and logged with its reasons.
-    fn clear_under_vehicle(&mut self) {
-        let mut index = 0;
-        while index < self.patches.len() {
-            let patch = &self.patches[index];
-            let centre = Point2::new(f64::from(patch.x), f64::from(patch.y));
-            if self.body.contains(centre) {
-                tracing::debug!(
-                    i = patch.i,
-                    j = patch.j,
-                    reasons = %patch.reasons.names(),
-                    confirmations = patch.confirmations,
-                    "cell under the vehicle cleared"
-                );
+            let patch = *patch;
+            if self.under_vehicle(&patch) {
                 self.remove(index);
-                self.stats.cleared_under_vehicle += 1;
                 continue;
             }
             index += 1;
         }
+        PoseUpdate::Accepted
+    }
+
+    /// Removes every patch under the vehicle (see [`Self::under_vehicle`]).
+    fn clear_under_vehicle(&mut self) {
+        let mut index = 0;
+        while index < self.patches.len() {
+            let patch = self.patches[index];
+            if self.under_vehicle(&patch) {
+                self.remove(index);
+                continue;
+            }
+            index += 1;
+        }
+    }
+
+    /// True (counted and logged with its reasons) when `patch`'s centre, in
+    /// the vehicle frame, lies under the vehicle's body or its square
+    /// overlaps the body's flanks: the vehicle stands there, so that ground
+    /// bears it, whatever an image made of it (a slope cell flagged from
+    /// afar, a cell placed late, the foot of a boulder it brushes past).
+    /// Such patches are removed.
+    fn under_vehicle(&mut self, patch: &Patch) -> bool {
+        let centre = Point2::new(f64::from(patch.x), f64::from(patch.y));
+        if !self.body.contains(centre) {
+            return false;
+        }
+        tracing::debug!(
+            i = patch.i,
+            j = patch.j,
+            reasons = %patch.reasons.names(),
+            confirmations = patch.confirmations,
+            "cell under the vehicle cleared"
+        );
+        self.stats.cleared_under_vehicle += 1;
+        true
     }
 
     /// The map as it stands, in the vehicle frame of the last update.

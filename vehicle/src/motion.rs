@@ -148,20 +148,10 @@ impl MotionModel {
         let dt = micros_to_seconds(end - self.utime);
         let limits = &self.limits;
         let k_target = clamp_abs(self.target_curvature, limits.max_curvature);
-        let mut v_target = clamp_abs(self.target_speed_mps, limits.max_speed_mps);
+        let v_target = clamp_abs(self.target_speed_mps, limits.max_speed_mps);
         let k0 = self.state.curvature;
-        let v0 = self.state.speed_mps;
-        // From forwards to backwards (or back): brake to a stand first.
-        if v0 * v_target < 0.0 {
-            v_target = 0.0;
-        }
         let (k1, k_mean) = ramp(k0, k_target, limits.max_curvature_rate, dt);
-        let accel = if v_target.abs() > v0.abs() {
-            limits.max_acceleration_mps2
-        } else {
-            limits.max_deceleration_mps2
-        };
-        let (v1, v_mean) = ramp(v0, v_target, accel, dt);
+        let (v1, v_mean) = speed_ramp(self.state.speed_mps, v_target, limits, dt);
         let distance = v_mean * dt;
         let k = k_mean;
         let (x, y, yaw) = (self.state.x, self.state.y, self.state.yaw);
@@ -184,6 +174,20 @@ impl MotionModel {
         };
         self.utime = end;
     }
+}
+
+/// The speed moving from `v0` towards `target` for `dt` seconds within the
+/// acceleration limits (speeding up at `max_acceleration_mps2`, slowing at
+/// `max_deceleration_mps2`; from forwards to backwards it brakes to a stand
+/// first): its final value and its mean over the interval.
+pub fn speed_ramp(v0: f64, target: f64, limits: &MotionLimits, dt: f64) -> (f64, f64) {
+    let target = if v0 * target < 0.0 { 0.0 } else { target };
+    let rate = if target.abs() > v0.abs() {
+        limits.max_acceleration_mps2
+    } else {
+        limits.max_deceleration_mps2
+    };
+    ramp(v0, target, rate, dt)
 }
 
 fn clamp_abs(value: f64, limit: f64) -> f64 {
