@@ -24,8 +24,12 @@ pub struct LocalMapConfig {
     pub ahead_m: f64,
     /// ... and this far to each side, m (002 §5: 10 m).
     pub half_width_m: f64,
-    /// ... and this far behind the origin, so cells beside the vehicle in a
-    /// tight turn are kept, m (the paper's window starts at 0).
+    /// ... and this far behind the origin, m (the paper's window starts at
+    /// 0). Cells beside the vehicle in a tight turn are kept, and so is the
+    /// ground the vehicle may have to back up over: ground that left the
+    /// window is forgotten (cells and seen ground alike), so backing up
+    /// goes at most this far, less the rear overhang, behind the farthest
+    /// point reached.
     pub behind_m: f64,
     /// A cell is dropped after this many newer overlapping images of a
     /// sensor that reported it did not report it again (002 §5: 1).
@@ -49,7 +53,7 @@ impl Default for LocalMapConfig {
             patch_size_m: 0.4,
             ahead_m: 20.0,
             half_width_m: 10.0,
-            behind_m: 6.0,
+            behind_m: 20.0,
             misses_to_drop: 1,
             cross_sensor_pruning: false,
             max_pose_jump_m: 2.0,

@@ -20,6 +20,9 @@
 //!   the shadows beyond edges it could not see into) is marked per patch in
 //!   the same scrolling grid, so unseen ground is never mistaken for free
 //!   ground; ground around the first pose counts as seen (`assume_seen_m`).
+//!   Ground that leaves the window is forgotten with its patches: seen
+//!   ground whose cells were dropped would read as free when the vehicle
+//!   comes back to it (backing out of a cul-de-sac past a bank's end).
 //! - **Under the vehicle**: patches under the vehicle's body are cleared
 //!   at every pose and insertion, counted and logged: the ground it stands
 //!   on bears it, and a cell there would veto every arc.
@@ -706,7 +709,34 @@ impl LocalMap {
             }
             index += 1;
         }
+        self.forget_seen_outside_window();
         PoseUpdate::Accepted
+    }
+
+    /// Forgets the seen ground that has left the window, as its patches
+    /// were dropped: what the map no longer holds, it has not seen.
+    fn forget_seen_outside_window(&mut self) {
+        let Some(pose) = self.pose else {
+            return;
+        };
+        let t = pose.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
+        let s = self.config.patch_size_m;
+        for slot in &mut self.seen {
+            if *slot == UNSEEN {
+                continue;
+            }
+            let (dx, dy) = (
+                (slot.0 as f64 + 0.5) * s - t.x,
+                (slot.1 as f64 + 0.5) * s - t.y,
+            );
+            if !self
+                .config
+                .in_window(cos * dx + sin * dy, -sin * dx + cos * dy)
+            {
+                *slot = UNSEEN;
+            }
+        }
     }
 
     /// Removes every patch under the vehicle (see [`Self::under_vehicle`]).

@@ -113,7 +113,10 @@ fn a_report_600_ms_late_lands_where_the_obstacle_is() {
 
 #[test]
 fn cells_are_dropped_at_each_window_boundary() {
-    let mut map = map();
+    let mut map = map_with(LocalMapConfig {
+        behind_m: 6.0,
+        ..LocalMapConfig::default()
+    });
     let origin = pose_at(0, 0.0, 0.0, 0.0);
     map.update(&origin);
     // Heading east: vehicle x = world x. Window: -6 ≤ x ≤ 20, |y| ≤ 10.
@@ -515,6 +518,40 @@ fn the_map_knows_which_ground_has_been_seen() {
     let snapshot = map.snapshot();
     assert_eq!(snapshot.seen.count(), disc, "start disc only");
     assert!(snapshot.is_seen(0.0, 0.0));
+}
+
+#[test]
+fn ground_that_left_the_window_is_forgotten_with_its_cells() {
+    // Backing up over ground whose cells were dropped must not find it
+    // seen and free: the bank's end the vehicle drove past is still there.
+    let mut map = map_with(LocalMapConfig {
+        behind_m: 6.0,
+        assume_seen_m: 0.0,
+        ..LocalMapConfig::default()
+    });
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    map.insert(&report(
+        SECOND / 10,
+        "erim",
+        &[(8.0, 3.0)],
+        rectangle(2.0, 18.0, -6.0, 6.0),
+    ))
+    .unwrap();
+    assert!(map.snapshot().is_seen(5.0, 0.0));
+    // 16 m on, the cell (8 m behind) and the ground around it have left
+    // the window; 2 m behind is still held.
+    map.update(&pose_at(SECOND, 8.0, 0.0, 0.0));
+    map.update(&pose_at(2 * SECOND, 16.0, 0.0, 0.0));
+    let snapshot = map.snapshot();
+    assert!(snapshot.patches.is_empty());
+    assert!(!snapshot.is_seen(-8.0, 3.0) && !snapshot.is_seen(-11.0, 0.0));
+    assert!(snapshot.is_seen(-2.0, 0.0) && snapshot.is_seen(1.5, -5.5));
+    // Backing 10 m: the ground around the dropped cell stays unseen.
+    map.update(&pose_at(3 * SECOND, 11.0, 0.0, 0.0));
+    map.update(&pose_at(4 * SECOND, 6.0, 0.0, 0.0));
+    let snapshot = map.snapshot();
+    assert!(!snapshot.is_seen(2.0, 3.0), "the dropped cell's ground");
+    assert!(!snapshot.is_seen(-2.0, 0.0) && snapshot.is_seen(5.0, 0.0));
 }
 
 #[test]

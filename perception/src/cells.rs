@@ -580,7 +580,9 @@ struct Projection<'a> {
     r2: [f32; 3],
     t: [f32; 3],
     cell_size: f32,
-    /// The grid's corner, negated.
+    /// The grid's corner, negated, in whole cells: a point's cell is
+    /// `floor(x / cell) + offset`, so cell edges lie on multiples of the
+    /// cell size from the vehicle origin whatever the region's extent.
     offset: [f32; 2],
     /// Cells per grid row.
     stride: usize,
@@ -705,8 +707,8 @@ impl Projection<'_> {
             if DISTANCE {
                 d[k] = ((x - t[0]) * (x - t[0]) + (y - t[1]) * (y - t[1])).sqrt();
             }
-            let fx = (x + ox) * inv_cell;
-            let fy = (y + oy) * inv_cell;
+            let fx = x * inv_cell + ox;
+            let fy = y * inv_cell + oy;
             // NaN fails every comparison, so these tests keep only valid
             // returns; clamped, the cell is computed for every pixel.
             let in_range = range >= min_range && range <= max_range;
@@ -729,8 +731,8 @@ impl Projection<'_> {
             } else {
                 OUTSIDE_GRID
             };
-            dx[k] = x - ((ix as f32 + 0.5) * cell - ox);
-            dy[k] = y - ((iy as f32 + 0.5) * cell - oy);
+            dx[k] = x - (ix as f32 + 0.5 - ox) * cell;
+            dy[k] = y - (iy as f32 + 0.5 - oy) * cell;
         }
     }
 }
@@ -864,7 +866,7 @@ impl CellClassifier {
             r2,
             t,
             cell_size: self.cell_size,
-            offset: self.grid.origin.map(|o| -o),
+            offset: self.grid.corner,
             stride: self.grid.cols,
             lo: [self.grid.margin as f32; 2],
             hi: [
@@ -1069,9 +1071,9 @@ impl CellClassifier {
                 cell.index as usize % self.grid.cols,
                 cell.index as usize / self.grid.cols,
             );
-            let [ox, oy] = self.grid.origin;
-            let cx = f64::from((ix as f32 + 0.5) * self.cell_size + ox);
-            let cy = f64::from((iy as f32 + 0.5) * self.cell_size + oy);
+            let [ox, oy] = self.grid.corner;
+            let cx = f64::from((ix as f32 + 0.5 - ox) * self.cell_size);
+            let cy = f64::from((iy as f32 + 0.5 - oy) * self.cell_size);
             report.cells.push(ObstacleCell {
                 x: origin.x + cos * cx - sin * cy,
                 y: origin.y + sin * cx + cos * cy,

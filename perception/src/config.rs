@@ -86,8 +86,8 @@ impl Default for DropOffConfig {
 /// Lives in `[perception.region]`: only the ground inside this box around
 /// the vehicle (in its gravity-aligned frame: x ahead, y left) is evaluated.
 /// The local map drops at once what lies outside its window (002 §5), so
-/// the default is that window (0-20 m ahead, ±10 m, 6 m behind) with 2 m to
-/// spare: a 360° lidar's image then costs a third less.
+/// the default is that window (0-20 m ahead, ±10 m, 20 m behind) with 2 m
+/// to spare.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RegionConfig {
@@ -103,7 +103,7 @@ impl Default for RegionConfig {
     fn default() -> Self {
         Self {
             ahead_m: 22.0,
-            behind_m: 8.0,
+            behind_m: 22.0,
             half_width_m: 12.0,
         }
     }
@@ -116,7 +116,10 @@ impl Default for RegionConfig {
 pub(crate) struct GridShape {
     pub cols: usize,
     pub rows: usize,
-    pub origin: [f32; 2],
+    /// The vehicle origin's distance from the first cell's corner, in
+    /// whole cells per axis: cell `i` spans `(i - corner) * cell` to
+    /// `(i + 1 - corner) * cell`.
+    pub corner: [f32; 2],
     pub margin: usize,
 }
 
@@ -174,10 +177,7 @@ impl PerceptionConfig {
         GridShape {
             cols: behind + cells(self.region.ahead_m) + margin,
             rows: 2 * right,
-            origin: [
-                -(behind as f64 * cell) as f32,
-                -(right as f64 * cell) as f32,
-            ],
+            corner: [behind as f32, right as f32],
             margin,
         }
     }

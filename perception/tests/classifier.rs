@@ -111,14 +111,16 @@ fn flat_ground_has_no_untraversable_cell() {
 
 #[test]
 fn a_30_cm_step_is_untraversable_along_its_edge_and_nowhere_else() {
-    let (report, _) = erim_at_origin(|x, _| if x >= 10.0 { 0.3 } else { 0.0 });
-    let n = all_within(&report, 9.7, 10.3, -25.0, 25.0);
+    let (report, _) = erim_at_origin(|x, _| if x >= 10.1 { 0.3 } else { 0.0 });
+    let n = all_within(&report, 9.8, 10.4, -25.0, 25.0);
     assert!(
         n >= 20,
         "the step edge is found along its length: {n} cells"
     );
-    // A step is an elevation change: the edge cell holds both levels (height
-    // variation), the cells beside it see the jump (discontinuity); a few
+    // A step is an elevation change: the cell the face runs through holds
+    // both levels (height variation); whether cells beside it also see a
+    // jump (discontinuity) depends on where the face falls within the 20 cm
+    // cells (here mid-cell: the face's returns bridge the levels); a few
     // sparse edge cells fit only a steep plane.
     let elevation_change = Reasons::HEIGHT_VARIATION.union(Reasons::DISCONTINUITY);
     let by_change = report
@@ -130,8 +132,7 @@ fn a_30_cm_step_is_untraversable_along_its_edge_and_nowhere_else() {
         by_change * 10 >= n * 9,
         "{by_change} of {n} cells see the elevation change"
     );
-    assert!(count_with(&report, Reasons::DISCONTINUITY) > 0);
-    assert!(count_with(&report, Reasons::HEIGHT_VARIATION) > 0);
+    assert!(count_with(&report, Reasons::HEIGHT_VARIATION) * 10 >= n * 9);
 }
 
 #[test]
@@ -328,7 +329,7 @@ fn a_lidar_sees_all_around_but_not_its_blind_zone() {
 
 /// A box 12 m behind, one 30 m ahead and one 10 m ahead, seen by a 360° lidar.
 fn three_boxes(x: f64, y: f64) -> f64 {
-    let boxes = [(-12.5, -11.5), (29.5, 30.5), (9.5, 10.5)];
+    let boxes = [(-25.5, -24.5), (29.5, 30.5), (9.5, 10.5)];
     if boxes
         .iter()
         .any(|&(x0, x1)| inside(x, y, x0, x1, -0.5, 0.5))
@@ -356,9 +357,9 @@ fn only_the_region_around_the_vehicle_is_evaluated() {
     };
     let near = PerceptionConfig::default();
     let (r, wide) = (&near.region, &mut PerceptionConfig::default());
-    assert_eq!((r.ahead_m, r.behind_m, r.half_width_m), (22.0, 8.0, 12.0));
+    assert_eq!((r.ahead_m, r.behind_m, r.half_width_m), (22.0, 22.0, 12.0));
     wide.region.ahead_m = 35.0;
-    wide.region.behind_m = 15.0;
+    wide.region.behind_m = 30.0;
     let (cropped, cropped_stats) = evaluate(&near);
     let (whole, whole_stats) = evaluate(wide);
 
@@ -369,7 +370,7 @@ fn only_the_region_around_the_vehicle_is_evaluated() {
             .filter(|c| (x0..=x1).contains(&c.x) && c.y.abs() <= 0.8)
             .count()
     };
-    for (x0, x1) in [(-12.8, -11.2), (29.2, 30.8)] {
+    for (x0, x1) in [(-25.8, -24.2), (29.2, 30.8)] {
         assert_eq!(count(&cropped, x0, x1), 0, "box at {x0} m lies outside");
         assert!(count(&whole, x0, x1) >= 2, "box at {x0} m: {whole_stats:?}");
     }
@@ -378,7 +379,7 @@ fn only_the_region_around_the_vehicle_is_evaluated() {
         cropped
             .cells
             .iter()
-            .all(|c| (-8.0..=22.0).contains(&c.x) && c.y.abs() <= 12.0),
+            .all(|c| (-22.0..=22.0).contains(&c.x) && c.y.abs() <= 12.0),
         "every cell lies in the region"
     );
     // Outside the region, returns are counted, not evaluated; inside it
@@ -396,7 +397,7 @@ fn only_the_region_around_the_vehicle_is_evaluated() {
         report
             .cells
             .iter()
-            .filter(|c| (-7.6..=21.6).contains(&c.x) && c.y.abs() <= 11.6)
+            .filter(|c| (-21.6..=21.6).contains(&c.x) && c.y.abs() <= 11.6)
             .map(|c| (c.x.to_bits(), c.y.to_bits(), c.reasons))
             .collect::<Vec<_>>()
     };

@@ -121,7 +121,7 @@ fn a_perception_region_smaller_than_the_map_window_is_refused() {
     );
     let msg = parse_error("[perception.region]\nbehind_m = 5.0\n");
     assert!(
-        msg.contains("`perception.region.behind_m`: is 5 m, less than localmap.behind_m (6 m)"),
+        msg.contains("`perception.region.behind_m`: is 5 m, less than localmap.behind_m (20 m)"),
         "{msg}"
     );
     Config::from_toml(
