@@ -458,6 +458,53 @@ impl Verifier {
     }
 }
 
+/// Which channels carry trailers, and the key: what `[bus.auth]` sets up
+/// for a transport ([`crate::transport::Lcm::authenticate`]).
+#[derive(Debug, Clone)]
+pub struct AuthPolicy {
+    key: GroupKey,
+    freshness: Freshness,
+    channels: Vec<regex::Regex>,
+}
+
+impl AuthPolicy {
+    /// `channels` are patterns matched against whole channel names
+    /// (`ARC_VOTES_.*`), as LCM subscriptions are.
+    pub fn new(
+        key: GroupKey,
+        freshness: Freshness,
+        channels: &[String],
+    ) -> Result<Self, regex::Error> {
+        let channels = channels
+            .iter()
+            .map(|pattern| regex::Regex::new(&format!("^(?:{pattern})$")))
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            key,
+            freshness,
+            channels,
+        })
+    }
+
+    /// Why `pattern` cannot name channels, if it cannot.
+    pub fn pattern_error(pattern: &str) -> Option<String> {
+        regex::Regex::new(pattern).err().map(|e| e.to_string())
+    }
+
+    /// Whether messages on `channel` are signed and verified.
+    pub fn covers(&self, channel: &str) -> bool {
+        self.channels.iter().any(|re| re.is_match(channel))
+    }
+
+    pub fn signer(&self) -> Signer {
+        Signer::new(self.key.clone())
+    }
+
+    pub fn verifier(&self) -> Verifier {
+        Verifier::new(self.key.clone(), self.freshness)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -31,19 +31,46 @@ pub fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> 
         signal_hook::flag::register(signal, Arc::clone(&flag))
             .context("cannot install the signal handlers")?;
     }
+    let base = args
+        .config
+        .as_deref()
+        .and_then(std::path::Path::parent)
+        .unwrap_or(std::path::Path::new("."));
+    let auth = &config.bus.auth;
+    let policy = auth.policy(base).with_context(|| {
+        format!(
+            "authentication is configured ([bus.auth] key_file = {:?}) but its key cannot be used",
+            auth.key_file
+        )
+    })?;
     if let Ok(arcnav_bus::transport::url::LcmUrl::Udpm(url)) = args.lcm.parse()
         && url.ttl > 0
     {
-        tracing::warn!(
-            lcm = %args.lcm,
-            "multicast leaves this host (ttl={}) and LCM has no authentication: any machine on \
-             the network can publish STEERING_COMMAND, ARC_VOTES_*, WAYPOINTS or POSE and be \
-             believed (votes from behaviours that are not configured are ignored)",
-            url.ttl
-        );
+        if policy.is_none() {
+            tracing::warn!(
+                lcm = %args.lcm,
+                "multicast leaves this host (ttl={}) and authentication is off: any machine on \
+                 the network can publish STEERING_COMMAND, ARC_VOTES_*, WAYPOINTS or POSE and be \
+                 believed (votes from behaviours that are not configured are ignored); set \
+                 [bus.auth] key_file to sign and verify them",
+                url.ttl
+            );
+        } else {
+            tracing::info!(
+                lcm = %args.lcm,
+                channels = ?auth.channels,
+                "multicast leaves this host (ttl={}); messages on the authenticated channels \
+                 without a valid, fresh tag are refused, other channels are open",
+                url.ttl
+            );
+        }
     }
-    let lcm = arcnav_bus::transport::Lcm::new(&args.lcm)
+    let mut lcm = arcnav_bus::transport::Lcm::new(&args.lcm)
         .with_context(|| format!("cannot open LCM at {}", args.lcm))?;
+    if let Some(policy) = policy {
+        tracing::info!(key = %auth.key_path(base).display(), channels = ?auth.channels, "authentication on");
+        lcm = lcm.authenticate(policy);
+    }
     let options = LiveOptions {
         stop: StopWhen { flag, after },
         ..LiveOptions::default()

@@ -6,7 +6,10 @@
 //! that name the file, the line and the dotted key. Building the
 //! pipeline's nodes from it is in [`nodes`].
 
+mod bus;
 mod nodes;
+
+pub use bus::{BusAuthConfig, BusConfig};
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -40,6 +43,7 @@ pub struct Config {
     pub arbiter: ArbiterConfig,
     pub pipeline: PipelineConfig,
     pub live: LiveConfig,
+    pub bus: BusConfig,
     pub sim: SimConfig,
     /// One table per active behaviour, `[behaviours.NAME]`. The built-in
     /// behaviours are always present (set their weight to 0 to skip them);
@@ -75,6 +79,7 @@ impl Default for Config {
             arbiter: ArbiterConfig::default(),
             pipeline: PipelineConfig::default(),
             live: LiveConfig::default(),
+            bus: BusConfig::default(),
             sim: SimConfig::default(),
             behaviours: default_behaviours(),
             prepared: PreparedBehaviours::default(),
@@ -328,6 +333,7 @@ impl Config {
         }
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
         self.live.validate().map_err(|e| e.within("live"))?;
+        self.bus.validate().map_err(|e| e.within("bus"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
         Ok(())
     }

@@ -29,6 +29,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use socket2::{Domain, Protocol, Socket, Type};
 
+use crate::auth::{AuthPolicy, AuthStats, Refusal, Signer, Verifier};
 use crate::codec::{EncodeError, Message};
 use udpm::{MAX_CHANNEL_LEN, MAX_MESSAGE_SIZE, Reassembler, ReassemblyStats};
 pub use url::{DEFAULT_URL, LcmUrl, UdpmUrl, UrlError};
@@ -107,6 +108,8 @@ enum Sender {
 #[derive(Clone)]
 pub struct Publisher {
     sender: Arc<Sender>,
+    /// Signs messages on the channels the policy covers.
+    auth: Option<Arc<(AuthPolicy, Mutex<Signer>)>>,
 }
 
 impl Publisher {
@@ -117,6 +120,16 @@ impl Publisher {
                 channel: channel.to_owned(),
             });
         }
+        let signed;
+        let data = match &self.auth {
+            Some(auth) if auth.0.covers(channel) => {
+                let mut signer = auth.1.lock().unwrap_or_else(|e| e.into_inner());
+                let now = u64::try_from(wall_clock_utime()).unwrap_or(0);
+                signed = signer.sign(channel, data, now);
+                &signed[..]
+            }
+            _ => data,
+        };
         if data.len() > MAX_MESSAGE_SIZE {
             return Err(TransportError::MessageTooLarge { len: data.len() });
         }
@@ -172,6 +185,8 @@ pub struct Lcm {
     next_id: u64,
     /// Messages received on no subscribed channel.
     unsubscribed: u64,
+    /// Checks messages on the channels the policy covers.
+    verifier: Option<(AuthPolicy, Verifier)>,
 }
 
 impl Lcm {
@@ -200,12 +215,32 @@ impl Lcm {
             url: parsed,
             publisher: Publisher {
                 sender: Arc::new(publisher),
+                auth: None,
             },
             receiver,
             subscriptions: Vec::new(),
             next_id: 0,
             unsubscribed: 0,
+            verifier: None,
         })
+    }
+
+    /// Signs what this instance publishes on the channels `policy` covers
+    /// and refuses (counts, never delivers) what it receives there without
+    /// a valid, fresh tag (see [`crate::auth`]). Call it before handing out
+    /// publishers: those taken earlier do not sign.
+    #[must_use]
+    pub fn authenticate(mut self, policy: AuthPolicy) -> Self {
+        self.publisher.auth = Some(Arc::new((policy.clone(), Mutex::new(policy.signer()))));
+        let verifier = policy.verifier();
+        self.verifier = Some((policy, verifier));
+        self
+    }
+
+    /// What authentication accepted and refused, per channel (`None` when
+    /// it is off).
+    pub fn auth_stats(&self) -> Option<&AuthStats> {
+        self.verifier.as_ref().map(|(_, v)| v.stats())
     }
 
     pub fn url(&self) -> &LcmUrl {
@@ -277,14 +312,29 @@ impl Lcm {
             let Some((channel, data)) = self.recv_any(deadline)? else {
                 return Ok(None);
             };
-            if self.wanted(&channel) {
-                return Ok(Some(ReceivedMessage {
-                    channel,
-                    data,
-                    recv_utime: wall_clock_utime(),
-                }));
+            if !self.wanted(&channel) {
+                self.unsubscribed += 1;
+                continue;
             }
-            self.unsubscribed += 1;
+            let recv_utime = wall_clock_utime();
+            let mut data = data;
+            if let Some((policy, verifier)) = &mut self.verifier
+                && policy.covers(&channel)
+            {
+                let now = u64::try_from(recv_utime).unwrap_or(0);
+                match verifier.verify(&channel, &data, now).map(<[u8]>::len) {
+                    Ok(len) => data.truncate(len),
+                    Err(refusal) => {
+                        log_refusal(&channel, refusal, verifier.stats());
+                        continue;
+                    }
+                }
+            }
+            return Ok(Some(ReceivedMessage {
+                channel,
+                data,
+                recv_utime,
+            }));
         }
     }
 
@@ -357,6 +407,24 @@ impl Lcm {
             },
             unsubscribed: self.unsubscribed,
         }
+    }
+}
+
+/// Warns of the first refusal of each reason on a channel and of every
+/// thousandth after it; all are counted in [`AuthStats`].
+fn log_refusal(channel: &str, refusal: Refusal, stats: &AuthStats) {
+    let index = Refusal::ALL.iter().position(|&r| r == refusal).unwrap_or(0);
+    let count = stats
+        .channels
+        .get(channel)
+        .map_or(0, |counts| counts.refused[index]);
+    if count % 1000 == 1 {
+        tracing::warn!(
+            channel,
+            %refusal,
+            count,
+            "message refused: authentication is on for this channel"
+        );
     }
 }
 
