@@ -40,6 +40,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
 
 use hmac::{Hmac, Mac};
+
+use crate::transport::ChannelFilter;
 use sha2::Sha256;
 
 type HmacSha256 = Hmac<Sha256>;
@@ -244,6 +246,11 @@ impl Refusal {
         Refusal::Replayed,
     ];
 
+    /// Its place in [`Refusal::ALL`] (and in [`ChannelCounts::refused`]).
+    pub fn index(self) -> usize {
+        Refusal::ALL.iter().position(|&r| r == self).unwrap_or(0)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Refusal::Unauthenticated => "unauthenticated",
@@ -303,6 +310,10 @@ pub struct AuthStats {
 }
 
 impl AuthStats {
+    pub fn accepted_total(&self) -> u64 {
+        self.channels.values().map(|c| c.accepted).sum()
+    }
+
     pub fn refused_total(&self) -> u64 {
         self.channels
             .values()
@@ -417,8 +428,7 @@ impl Verifier {
         match outcome {
             Ok(_) => counts.accepted += 1,
             Err(refusal) => {
-                let index = Refusal::ALL.iter().position(|&r| r == refusal).unwrap_or(0);
-                counts.refused[index] += 1;
+                counts.refused[refusal.index()] += 1;
             }
         }
         outcome
@@ -464,7 +474,7 @@ impl Verifier {
 pub struct AuthPolicy {
     key: GroupKey,
     freshness: Freshness,
-    channels: Vec<regex::Regex>,
+    channels: Vec<ChannelFilter>,
 }
 
 impl AuthPolicy {
@@ -477,7 +487,7 @@ impl AuthPolicy {
     ) -> Result<Self, regex::Error> {
         let channels = channels
             .iter()
-            .map(|pattern| regex::Regex::new(&format!("^(?:{pattern})$")))
+            .map(|pattern| ChannelFilter::pattern(pattern))
             .collect::<Result<_, _>>()?;
         Ok(Self {
             key,
@@ -488,12 +498,12 @@ impl AuthPolicy {
 
     /// Why `pattern` cannot name channels, if it cannot.
     pub fn pattern_error(pattern: &str) -> Option<String> {
-        regex::Regex::new(pattern).err().map(|e| e.to_string())
+        ChannelFilter::pattern(pattern).err().map(|e| e.to_string())
     }
 
     /// Whether messages on `channel` are signed and verified.
     pub fn covers(&self, channel: &str) -> bool {
-        self.channels.iter().any(|re| re.is_match(channel))
+        self.channels.iter().any(|filter| filter.matches(channel))
     }
 
     pub fn signer(&self) -> Signer {

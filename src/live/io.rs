@@ -228,8 +228,7 @@ pub(crate) fn io_loop(
     status.set("incomplete_messages", transport.reassembly.incomplete);
     status.set("malformed_datagrams", transport.reassembly.malformed);
     if let Some(auth) = lcm.auth_stats() {
-        let accepted = auth.channels.values().map(|c| c.accepted).sum::<u64>();
-        status.set("auth_accepted", accepted);
+        status.set("auth_accepted", auth.accepted_total());
         status.set("auth_refused", auth.refused_total());
         for line in auth.refusal_lines() {
             tracing::warn!("authentication: {line}");

@@ -78,6 +78,12 @@ pub enum ChannelFilter {
 }
 
 impl ChannelFilter {
+    /// A filter matching channel names that `pattern` matches as a whole
+    /// (`ARC_VOTES_.*`), as the reference's subscriptions do.
+    pub fn pattern(pattern: &str) -> Result<Self, regex::Error> {
+        regex::Regex::new(&format!("^(?:{pattern})$")).map(Self::Regex)
+    }
+
     pub fn matches(&self, channel: &str) -> bool {
         match self {
             Self::Exact(name) => name == channel,
@@ -274,13 +280,11 @@ impl Lcm {
     /// Receives messages on every channel matching `pattern` as a whole
     /// (`ARC_VOTES_.*`), like the reference's `subscribe`.
     pub fn subscribe_regex(&mut self, pattern: &str) -> Result<SubscriptionId, TransportError> {
-        let re = regex::Regex::new(&format!("^(?:{pattern})$")).map_err(|e| {
-            TransportError::BadPattern {
-                pattern: pattern.to_owned(),
-                reason: e.to_string(),
-            }
+        let filter = ChannelFilter::pattern(pattern).map_err(|e| TransportError::BadPattern {
+            pattern: pattern.to_owned(),
+            reason: e.to_string(),
         })?;
-        Ok(self.add(ChannelFilter::Regex(re)))
+        Ok(self.add(filter))
     }
 
     fn add(&mut self, filter: ChannelFilter) -> SubscriptionId {
@@ -309,7 +313,7 @@ impl Lcm {
     ) -> Result<Option<ReceivedMessage>, TransportError> {
         let deadline = Instant::now() + timeout;
         loop {
-            let Some((channel, data)) = self.recv_any(deadline)? else {
+            let Some((channel, mut data)) = self.recv_any(deadline)? else {
                 return Ok(None);
             };
             if !self.wanted(&channel) {
@@ -317,7 +321,6 @@ impl Lcm {
                 continue;
             }
             let recv_utime = wall_clock_utime();
-            let mut data = data;
             if let Some((policy, verifier)) = &mut self.verifier
                 && policy.covers(&channel)
             {
@@ -413,11 +416,10 @@ impl Lcm {
 /// Warns of the first refusal of each reason on a channel and of every
 /// thousandth after it; all are counted in [`AuthStats`].
 fn log_refusal(channel: &str, refusal: Refusal, stats: &AuthStats) {
-    let index = Refusal::ALL.iter().position(|&r| r == refusal).unwrap_or(0);
     let count = stats
         .channels
         .get(channel)
-        .map_or(0, |counts| counts.refused[index]);
+        .map_or(0, |counts| counts.refused[refusal.index()]);
     if count % 1000 == 1 {
         tracing::warn!(
             channel,
