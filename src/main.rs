@@ -52,6 +52,15 @@ enum Command {
         #[command(subcommand)]
         node: NodeCommand,
     },
+    /// The vehicle's side of the command interface, for a controller to run
+    /// beside it: takes STEERING_COMMAND from the bus (only commands with a
+    /// valid, fresh tag when [bus.auth] is on; forged, tampered, replayed and
+    /// expired ones are refused and counted) and, at --rate, hands over what
+    /// to execute: the newest command while it is fresh, a stop when
+    /// commands stop arriving within --timeout, and a stop when it exits.
+    /// Out as JSON lines (--print) and/or as plain STEERING_COMMAND on the
+    /// controller's own LCM link (--forward).
+    Vehicle(VehicleArgs),
     /// Picture of one decision of a log: the local map, the vehicle, the arcs
     /// coloured by fused vote, each behaviour's votes and who vetoed what.
     Render(RenderArgs),
@@ -181,6 +190,28 @@ struct LiveArgs {
     duration: Option<f64>,
 }
 
+#[derive(Debug, clap::Args)]
+struct VehicleArgs {
+    #[command(flatten)]
+    live: LiveArgs,
+    /// Hand over what to execute this often, Hz.
+    #[arg(long, value_name = "HZ", default_value_t = 50.0)]
+    rate: f64,
+    /// Stop when the newest accepted command was received longer ago than
+    /// this, s (default: three command periods, 3 / pipeline.command_rate_hz).
+    #[arg(long, value_name = "S")]
+    timeout: Option<f64>,
+    /// Print what to execute on stdout, one JSON line per tick: wall_us,
+    /// state (following, no_command_yet, stale, shutting_down),
+    /// command_utime, curvature, speed_mps, arc_index.
+    #[arg(long)]
+    print: bool,
+    /// Republish what to execute, unsigned, as STEERING_COMMAND on this LCM
+    /// URL: the controller's own link, e.g. udpm://239.255.76.68:7669?ttl=0.
+    #[arg(long, value_name = "URL")]
+    forward: Option<String>,
+}
+
 #[derive(Debug, Subcommand)]
 enum NodeCommand {
     /// Range images + poses → OBSTACLE_CELLS.
@@ -266,6 +297,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Replay(args) => cli::replay(args),
         Command::Render(args) => cli::render(args),
         Command::Run(args) => cli::live(None, args),
+        Command::Vehicle(args) => cli::vehicle(args),
         Command::Node { node } => match node {
             NodeCommand::Perception(args) => cli::live(Some(NodeKind::Perception), args),
             NodeCommand::Localmap(args) => cli::live(Some(NodeKind::LocalMap), args),

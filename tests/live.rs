@@ -20,11 +20,12 @@ use arcnav::live::threaded::InProcess;
 use arcnav::mission::{MissionOptions, SIM_EPOCH_US, run_mission};
 use arcnav::replay::{ReplayOptions, replay};
 use arcnav_behaviours::Registry;
+use arcnav_bus::auth::{AuthPolicy, GroupKey, Signer, TRAILER_LEN};
 use arcnav_bus::codec::Message as _;
 use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::channels;
-use arcnav_bus::transport::Lcm;
+use arcnav_bus::transport::{Lcm, wall_clock_utime};
 use arcnav_perception::SensorPreset;
 use arcnav_pipeline::{Decided, Hazard, Why};
 use arcnav_sim::World;
@@ -1006,4 +1007,403 @@ fn flood_log(config: &Config) -> PathBuf {
         path
     })
     .clone()
+}
+
+// ---------------------------------------------------------------------------
+// An attacker on an authenticated bus.
+
+/// A group key file, readable by its owner only.
+fn key_file(dir: &Path, fill: u8) -> PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let path = dir.join("group.key");
+    let hex: String = (0..32).map(|i| format!("{:02x}", fill ^ i)).collect();
+    std::fs::write(&path, hex).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    path
+}
+
+/// What the attacker sent, by kind.
+type Sent = BTreeMap<&'static str, u64>;
+
+/// An attacker inside the namespace until `stop`. It has no key but can
+/// read and write the bus, and holds a second, unconfigured behaviour's
+/// process that does have the group key (`insider`). Every 50 ms it sends
+/// forged commands (unsigned and signed with another key: full left at
+/// 7.5 m/s) and obstacle-avoidance votes vetoing every arc (unsigned and
+/// with another key), the same vetoes from the key holder as
+/// ARC_VOTES_INTRUDER, and as obstacle avoidance stamped 10 s ahead; every
+/// authentic command and vote it sees it replays at once and 1.5 s later,
+/// and sends each command again with its speed changed and its tag kept.
+fn attack(stop: &std::sync::atomic::AtomicBool, insider: AuthPolicy) -> Sent {
+    use arcnav_bus::lcmtypes::arc_votes_t;
+    use std::collections::{HashSet, VecDeque};
+    const OA: &str = "ARC_VOTES_OBSTACLE_AVOIDANCE";
+    let mut lcm = Lcm::new("").unwrap();
+    lcm.subscribe(channels::STEERING_COMMAND);
+    lcm.subscribe(OA);
+    let bus = lcm.publisher();
+    let mut outsider = Signer::new(GroupKey::new(&[0x66; 32]).unwrap());
+    let mut insider = insider.signer();
+    // What it sent itself, never taken for authentic.
+    let mut own: HashSet<Vec<u8>> = HashSet::new();
+    let mut sent = Sent::new();
+    let mut send =
+        |own: &mut HashSet<Vec<u8>>, kind: &'static str, channel: &str, data: Vec<u8>| {
+            bus.publish(channel, &data).unwrap();
+            own.insert(data);
+            *sent.entry(kind).or_default() += 1;
+        };
+    let now_us = || u64::try_from(wall_clock_utime()).unwrap();
+    let strip = |data: &[u8]| data[..data.len() - TRAILER_LEN].to_vec();
+    let mut later: VecDeque<(Instant, String, Vec<u8>)> = VecDeque::new();
+    let mut latest_votes: Option<arc_votes_t> = None;
+    let mut next = Instant::now();
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        if let Some(m) = lcm.recv_timeout(Duration::from_millis(5)).unwrap()
+            && m.data.len() > TRAILER_LEN
+            && !own.contains(&m.data)
+        {
+            send(&mut own, "replayed at once", &m.channel, m.data.clone());
+            later.push_back((
+                Instant::now() + Duration::from_millis(1500),
+                m.channel.clone(),
+                m.data.clone(),
+            ));
+            if m.channel == OA {
+                latest_votes = arc_votes_t::decode(&strip(&m.data)).ok();
+            } else {
+                // The speed (after fingerprint, utime and curvature) at
+                // 7.5 m/s, the tag kept.
+                let mut tampered = m.data.clone();
+                tampered[24..32].copy_from_slice(&7.5f64.to_be_bytes());
+                send(&mut own, "tampered", &m.channel, tampered);
+            }
+        }
+        while later
+            .front()
+            .is_some_and(|(at, _, _)| *at <= Instant::now())
+        {
+            let (_, channel, data) = later.pop_front().unwrap();
+            send(&mut own, "replayed late", &channel, data);
+        }
+        if Instant::now() < next {
+            continue;
+        }
+        next += Duration::from_millis(50);
+        let forged = steering_command_t {
+            utime: 0,
+            curvature: 0.125,
+            speed: 7.5,
+            arc_index: 38,
+            vote: 1.0,
+        }
+        .encode()
+        .unwrap();
+        send(
+            &mut own,
+            "unsigned",
+            channels::STEERING_COMMAND,
+            forged.clone(),
+        );
+        let signed = outsider.sign(channels::STEERING_COMMAND, &forged, now_us());
+        send(&mut own, "another key", channels::STEERING_COMMAND, signed);
+        let Some(votes) = &latest_votes else {
+            continue;
+        };
+        let mut veto = votes.clone();
+        veto.votes.iter_mut().for_each(|v| *v = -1.0);
+        veto.vetoed.iter_mut().for_each(|v| *v = true);
+        let vetoes = veto.encode().unwrap();
+        send(&mut own, "unsigned", OA, vetoes.clone());
+        send(
+            &mut own,
+            "another key",
+            OA,
+            outsider.sign(OA, &vetoes, now_us()),
+        );
+        let mut intruder = veto.clone();
+        intruder.behaviour = "intruder".into();
+        let intruder = intruder.encode().unwrap();
+        let signed = insider.sign("ARC_VOTES_INTRUDER", &intruder, now_us());
+        send(&mut own, "unconfigured", "ARC_VOTES_INTRUDER", signed);
+        let mut ahead = veto;
+        ahead.utime += 10_000_000;
+        let signed = insider.sign(OA, &ahead.encode().unwrap(), now_us());
+        send(&mut own, "from the future", OA, signed);
+    }
+    sent
+}
+
+/// Commands as the vehicle's own verifier sees them: the authentic ones
+/// (arrival, command), how many it refused, and every message as received
+/// (tags and all) written to `log`.
+struct Heard {
+    authentic: Received,
+    refused: u64,
+}
+
+fn hear<T>(ns: &NetNs, policy: &AuthPolicy, log: &Path, body: impl FnOnce() -> T) -> (T, Heard) {
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let (ready_tx, ready) = mpsc::channel();
+    std::thread::scope(|scope| {
+        let recorder = scope.spawn(|| {
+            ns.run(|| {
+                let mut lcm = Lcm::new("").unwrap();
+                lcm.subscribe(channels::STEERING_COMMAND);
+                let mut writer = arcnav_bus::log::LogWriter::create(log).unwrap();
+                let mut verifier = policy.verifier();
+                let mut heard = Heard {
+                    authentic: Vec::new(),
+                    refused: 0,
+                };
+                ready_tx.send(()).unwrap();
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() else {
+                        continue;
+                    };
+                    writer
+                        .write_event(m.recv_utime, &m.channel, &m.data)
+                        .unwrap();
+                    let now = u64::try_from(m.recv_utime).unwrap();
+                    match verifier.verify(&m.channel, &m.data, now) {
+                        Ok(message) => {
+                            let msg = steering_command_t::decode(message).unwrap();
+                            heard
+                                .authentic
+                                .push((Instant::now(), SteeringCommand::from(&msg)));
+                        }
+                        Err(_) => heard.refused += 1,
+                    }
+                }
+                heard
+            })
+        });
+        ready.recv().unwrap();
+        let out = body();
+        std::thread::sleep(Duration::from_millis(300));
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        (out, recorder.join().unwrap())
+    })
+}
+
+/// The per-reason refusals a process warned of for `channel` at exit
+/// ("CHANNEL: N refused (unauthenticated a, bad tag b, …), M accepted").
+fn refusals(stderr: &str, channel: &str) -> BTreeMap<String, u64> {
+    let prefix = format!("authentication: {channel}: ");
+    let Some(line) = stderr
+        .lines()
+        .find_map(|l| l.split_once(&prefix).map(|(_, r)| r))
+    else {
+        return BTreeMap::new();
+    };
+    let reasons = line
+        .split_once('(')
+        .and_then(|(_, r)| r.split_once(')'))
+        .map_or("", |(r, _)| r);
+    reasons
+        .split(", ")
+        .filter_map(|r| {
+            let (name, n) = r.rsplit_once(' ')?;
+            Some((name.to_owned(), n.parse().ok()?))
+        })
+        .collect()
+}
+
+/// A counter of a node in a `--json` report.
+fn counter(json: &Path, name: &str) -> u64 {
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+    report["nodes"][0]["counters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c[0] == name)
+        .and_then(|c| c[1].as_u64())
+        .unwrap_or_else(|| panic!("no counter {name} in {}", json.display()))
+}
+
+/// With `[bus.auth]` on, an attacker on the bus — forged commands, forged
+/// all-veto votes, replays, tampering, an unconfigured behaviour holding the
+/// key, votes from the future — changes nothing: the arbiter's commands are
+/// lock-step's, cycle for cycle, as in the run without it; the vehicle
+/// bridge executes only those; every refusal is counted by reason; and the
+/// Python verifier, reading the commands as the vehicle received them,
+/// accepts exactly the authentic ones.
+#[test]
+fn an_attacker_on_an_authenticated_bus_changes_no_command() {
+    let dir = temp_dir("live-attack");
+    let mut config = config(SensorPreset::Erim, true);
+    config.bus.auth.key_file = key_file(&dir, 0x3c);
+    let policy = config.bus.auth.policy(&dir).unwrap().unwrap();
+    let Some(net) = Net::erim("attack", config) else {
+        return;
+    };
+    let (arbiter_json, vehicle_json) = (dir.join("arbiter.json"), dir.join("vehicle.json"));
+    let nodes: [(&str, Vec<&str>); 6] = [
+        ("perception", vec!["node", "perception"]),
+        ("localmap", vec!["node", "localmap"]),
+        (
+            "obstacle_avoidance",
+            vec!["node", "behaviour", "obstacle_avoidance"],
+        ),
+        ("route", vec!["node", "behaviour", "route"]),
+        (
+            "arbiter",
+            vec!["node", "arbiter", "--json", arbiter_json.to_str().unwrap()],
+        ),
+        (
+            "vehicle",
+            vec![
+                "vehicle",
+                "--print",
+                "--rate",
+                "100",
+                "--json",
+                vehicle_json.to_str().unwrap(),
+            ],
+        ),
+    ];
+    let heard_log = dir.join("heard.lcm");
+    let ((sent, stderr, executed), heard) = hear(&net.ns, &policy, &heard_log, || {
+        let procs: Vec<Proc> = nodes
+            .iter()
+            .map(|(name, args)| net.arcnav(name, args))
+            .collect();
+        procs.iter().for_each(Proc::wait_ready);
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let sent = std::thread::scope(|scope| {
+            let attacker = scope.spawn(|| net.ns.run(|| attack(&stop, policy.clone())));
+            // The log's inputs, WAYPOINTS signed with the group key.
+            net.ns.run(|| {
+                let lcm = Lcm::new("").unwrap().authenticate(policy.clone());
+                feed(&net.log, 1.0, |channel, data| {
+                    lcm.publish(channel, data).unwrap()
+                });
+            });
+            std::thread::sleep(Duration::from_millis(300));
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            attacker.join().unwrap()
+        });
+        procs.iter().for_each(|p| p.signal("TERM"));
+        let mut stderr = BTreeMap::new();
+        let mut executed = String::new();
+        for p in procs {
+            let (name, text) = (p.name.clone(), Arc::clone(&p.stderr));
+            let (code, out) = p.finish();
+            assert_eq!(code, Some(0), "{name}");
+            stderr.insert(name.clone(), text.lock().unwrap().clone());
+            if name == "vehicle" {
+                executed = out;
+            }
+        }
+        (sent, stderr, executed)
+    });
+    eprintln!("attacker sent: {sent:?}");
+    for kind in [
+        "unsigned",
+        "another key",
+        "replayed at once",
+        "replayed late",
+        "tampered",
+        "unconfigured",
+        "from the future",
+    ] {
+        assert!(
+            sent.get(kind).copied().unwrap_or(0) >= 20,
+            "attacker sent {sent:?}"
+        );
+    }
+
+    // The mission's commands are lock-step's, as without the attacker.
+    assert_reproduces("under attack", &heard.authentic, &net.log, &net.config);
+
+    // The vehicle executed only authentic commands, and drove.
+    let authentic = by_time(&heard.authentic);
+    let ticks: Vec<serde_json::Value> = executed
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let mut states: BTreeMap<String, usize> = BTreeMap::new();
+    for tick in &ticks {
+        *states.entry(tick["state"].to_string()).or_default() += 1;
+        if tick["state"] != "following" {
+            assert_eq!(tick["speed_mps"], 0.0, "{tick}");
+            continue;
+        }
+        let utime = tick["command_utime"].as_i64().unwrap();
+        let sent = authentic
+            .get(&utime)
+            .unwrap_or_else(|| panic!("the vehicle followed a command arcnav never sent: {tick}"));
+        // JSON keeps 17 digits; serde_json reads them back to within an ulp.
+        let same = |key: &str, value: f64| (tick[key].as_f64().unwrap() - value).abs() < 1e-12;
+        assert!(
+            same("speed_mps", sent.speed_mps) && same("curvature", sent.curvature),
+            "{tick} vs {sent:?}"
+        );
+        assert_eq!(
+            tick["arc_index"].as_u64().map(|a| a as usize),
+            sent.arc_index
+        );
+    }
+    eprintln!("vehicle ticks: {states:?}");
+    // 20 s of log at 100 ticks a second.
+    let following = states.get("\"following\"").copied().unwrap_or(0);
+    assert!(
+        following >= 1500,
+        "the vehicle followed commands for {following} ticks"
+    );
+    assert_eq!(ticks.last().unwrap()["state"], "shutting_down");
+
+    // Refused, each for what it is, where it arrived.
+    let reasons = ["unauthenticated", "bad tag", "replayed", "expired"];
+    for (process, channel) in [
+        ("vehicle", "STEERING_COMMAND"),
+        ("arbiter", "ARC_VOTES_OBSTACLE_AVOIDANCE"),
+        ("obstacle_avoidance", "STEERING_COMMAND"),
+    ] {
+        let counted = refusals(&stderr[process], channel);
+        eprintln!("{process} refused on {channel}: {counted:?}");
+        for reason in reasons {
+            assert!(
+                counted.get(reason).copied().unwrap_or(0) >= 10,
+                "{process} on {channel}: {counted:?}\n{}",
+                stderr[process]
+            );
+        }
+    }
+    assert!(counter(&vehicle_json, "auth_refused") >= 200);
+    // The key holder that is not configured, and the votes from the future.
+    assert!(counter(&arbiter_json, "ignored_votes") >= 100);
+    assert!(counter(&arbiter_json, "future_votes") >= 100);
+
+    // The Python verifier, on the commands as received, tags and all.
+    let key = net.config.bus.auth.key_path(&dir);
+    let python = net
+        .reference
+        .python()
+        .arg(arcnav_testkit::workspace_root().join("examples/verify_command.py"))
+        .arg(&key)
+        .arg(&heard_log)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&python.stdout);
+    let summary = text.lines().last().unwrap_or_default();
+    assert_eq!(
+        summary,
+        format!(
+            "{} accepted, {} refused",
+            heard.authentic.len(),
+            heard.refused
+        ),
+        "{}",
+        String::from_utf8_lossy(&python.stderr)
+    );
+    assert_eq!(python.status.code(), Some(1), "some were refused: exit 1");
+    for reason in reasons {
+        assert!(
+            text.contains(&format!("refused: {reason}")),
+            "python verifier: no {reason}"
+        );
+    }
 }

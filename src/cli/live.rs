@@ -4,18 +4,73 @@ use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use crate::LiveArgs;
+use crate::{LiveArgs, VehicleArgs};
 use anyhow::Context as _;
 use arcnav::Config;
+use arcnav::live::LiveReport;
 use arcnav::live::node::NodeKind;
+use arcnav::live::threaded::StopWhen;
 use arcnav_behaviours::Registry;
+use arcnav_bus::transport::Lcm;
 
 /// `arcnav run` (no node) or `arcnav node …`.
 pub fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> {
-    use arcnav::live::threaded::{LiveOptions, StopWhen};
+    use arcnav::live::threaded::LiveOptions;
     let registry = Registry::builtin();
+    let Started {
+        config, lcm, stop, ..
+    } = start(&args, &registry)?;
+    let options = LiveOptions {
+        stop,
+        ..LiveOptions::default()
+    };
+    let what = node
+        .as_ref()
+        .map_or("every node".to_owned(), |n| format!("node {n}"));
+    tracing::info!(
+        lcm = %args.lcm,
+        rate_hz = config.pipeline.command_rate_hz,
+        "starting {what}; Ctrl-C or SIGTERM stops"
+    );
+    let report = match &node {
+        None => arcnav::live::threaded::run(&config, &registry, lcm, &options)?,
+        Some(kind) => arcnav::live::node::run_node(kind, &config, &registry, lcm, &options)?,
+    };
+    tracing::info!(
+        commands = report.commands,
+        stops = report.stops,
+        "{what} stopped after {:.1} s",
+        report.wall_s
+    );
+    finish(&args, &report)
+}
+
+/// `--stats` and `--json`.
+fn finish(args: &LiveArgs, report: &LiveReport) -> anyhow::Result<ExitCode> {
+    if args.stats {
+        print!("{}", report.table());
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(report)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// What every live command starts from.
+struct Started {
+    config: Config,
+    /// Authenticating when `[bus.auth]` names a key.
+    lcm: Lcm,
+    stop: StopWhen,
+    authenticated: bool,
+}
+
+/// Loads the configuration, installs the signal handlers, reads the key
+/// and opens LCM; warns when multicast leaves the host unauthenticated.
+fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
     let config = match &args.config {
-        Some(p) => Config::load_with(p, &registry)?,
+        Some(p) => Config::load_with(p, registry)?,
         None => Config::default(),
     };
     let after = match args.duration {
@@ -67,38 +122,112 @@ pub fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> 
     }
     let mut lcm = arcnav_bus::transport::Lcm::new(&args.lcm)
         .with_context(|| format!("cannot open LCM at {}", args.lcm))?;
+    let authenticated = policy.is_some();
     if let Some(policy) = policy {
         tracing::info!(key = %auth.key_path(base).display(), channels = ?auth.channels, "authentication on");
         lcm = lcm.authenticate(policy);
     }
-    let options = LiveOptions {
+    Ok(Started {
+        config,
+        lcm,
         stop: StopWhen { flag, after },
+        authenticated,
+    })
+}
+
+/// `arcnav vehicle`: verified commands in, what to execute out.
+pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
+    use arcnav::live::threaded::LiveOptions;
+    use arcnav::live::vehicle::{BridgeOptions, run_bridge};
+    use arcnav_bus::lcmtypes::steering_command_t;
+    use arcnav_bus::messages::channels;
+    use std::io::Write as _;
+
+    let live = &args.live;
+    if !(args.rate > 0.0 && args.rate <= 1000.0) {
+        anyhow::bail!("--rate {}: must be in (0, 1000] Hz", args.rate);
+    }
+    let registry = Registry::builtin();
+    let Started {
+        config,
+        lcm,
+        stop,
+        authenticated,
+    } = start(live, &registry)?;
+    let timeout_s = args
+        .timeout
+        .unwrap_or(3.0 / config.pipeline.command_rate_hz);
+    if !(timeout_s > 0.0 && timeout_s.is_finite()) {
+        anyhow::bail!("--timeout {timeout_s}: must be a positive number of seconds");
+    }
+    if !authenticated {
+        tracing::warn!(
+            lcm = %live.lcm,
+            "authentication is off: this vehicle follows any STEERING_COMMAND published on the \
+             bus; set [bus.auth] key_file to follow only commands signed with the group key"
+        );
+    } else if !config.bus.auth.covers(channels::STEERING_COMMAND) {
+        anyhow::bail!(
+            "[bus.auth] channels {:?} do not include STEERING_COMMAND: the vehicle would follow \
+             unsigned commands; add \"STEERING_COMMAND\"",
+            config.bus.auth.channels
+        );
+    }
+    let forward = match &args.forward {
+        Some(url) if url == &live.lcm => anyhow::bail!(
+            "--forward {url} is the bus the commands come from: give the controller a link of its \
+             own (e.g. udpm://239.255.76.68:7669?ttl=0)"
+        ),
+        Some(url) => Some(
+            Lcm::new(url)
+                .with_context(|| format!("cannot open LCM at --forward {url}"))?
+                .publisher(),
+        ),
+        None => None,
+    };
+    let options = LiveOptions {
+        stop,
         ..LiveOptions::default()
     };
-    let what = node
-        .as_ref()
-        .map_or("every node".to_owned(), |n| format!("node {n}"));
-    tracing::info!(
-        lcm = %args.lcm,
-        rate_hz = config.pipeline.command_rate_hz,
-        "starting {what}; Ctrl-C or SIGTERM stops"
-    );
-    let report = match &node {
-        None => arcnav::live::threaded::run(&config, &registry, lcm, &options)?,
-        Some(kind) => arcnav::live::node::run_node(kind, &config, &registry, lcm, &options)?,
+    let bridge = BridgeOptions {
+        rate_hz: args.rate,
+        timeout_s,
+        status_period_s: config.live.status_period_s,
     };
     tracing::info!(
+        lcm = %live.lcm,
+        rate_hz = args.rate,
+        timeout_s,
+        forward = args.forward.as_deref().unwrap_or("-"),
+        "vehicle bridge: executing verified commands, stop when none arrive within the timeout; \
+         Ctrl-C or SIGTERM stops"
+    );
+    let mut stdout = std::io::stdout().lock();
+    let mut forward_failed = false;
+    let report = run_bridge(lcm, &options, &bridge, |executed| {
+        if args.print {
+            match serde_json::to_string(executed) {
+                Ok(line) => {
+                    let _ = writeln!(stdout, "{line}");
+                }
+                Err(e) => tracing::error!(%e, "cannot write the command as JSON"),
+            }
+        }
+        if let Some(publisher) = &forward {
+            let msg = steering_command_t::from(&executed.command());
+            if let Err(e) = publisher.publish_message(channels::STEERING_COMMAND, &msg)
+                && !forward_failed
+            {
+                forward_failed = true;
+                tracing::error!(%e, "cannot forward the command to the controller");
+            }
+        }
+    })?;
+    drop(stdout);
+    tracing::info!(
         commands = report.commands,
-        stops = report.stops,
-        "{what} stopped after {:.1} s",
+        "vehicle bridge stopped after {:.1} s",
         report.wall_s
     );
-    if args.stats {
-        print!("{}", report.table());
-    }
-    if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-    }
-    Ok(ExitCode::SUCCESS)
+    finish(live, &report)
 }

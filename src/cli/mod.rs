@@ -6,7 +6,7 @@ mod render;
 mod replay;
 mod sim;
 
-pub use live::live;
+pub use live::{live, vehicle};
 pub use render::render;
 pub use replay::replay;
 pub use sim::sim;

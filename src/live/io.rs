@@ -34,21 +34,29 @@ impl Ticker {
         }
     }
 
+    /// Whether the next firing is due at `now`. Firings keep to the period
+    /// on average however late each is noticed; one noticed more than a
+    /// period late starts the count again from `now`.
     pub(crate) fn due(&mut self, now: i64) -> bool {
         if self.period_us <= 0 || now < self.next {
             return false;
         }
-        self.next = now + self.period_us;
+        self.next += self.period_us;
+        if self.next <= now {
+            self.next = now + self.period_us;
+        }
         true
     }
 }
 
 /// Receives until `stop`: `on` gets each message (or `None` when `tick`
 /// passed without one) and the wall-clock time. A receive error is logged;
-/// fifty in a row end the loop with that error.
+/// fifty in a row end the loop with that error. With authentication on, a
+/// status line of what it accepted and refused every `status_period_s`.
 pub(crate) fn pump(
     lcm: &mut Lcm,
     options: &LiveOptions,
+    status_period_s: f64,
     tick: Duration,
     mut on: impl FnMut(Option<ReceivedMessage>, i64),
 ) -> Result<(), LiveError> {
@@ -56,6 +64,7 @@ pub(crate) fn pump(
     let clock = options.clock();
     let deadline = stop.deadline();
     let mut failures = 0;
+    let mut status = Ticker::new(status_period_s, clock.now_us());
     tracing::info!("ready: receiving");
     if let Some(ready) = &options.ready {
         let _ = ready.send(());
@@ -76,8 +85,30 @@ pub(crate) fn pump(
                 on(None, clock.now_us());
             }
         }
+        if status.due(clock.now_us())
+            && let Some(auth) = lcm.auth_stats()
+        {
+            tracing::info!(
+                accepted = auth.accepted_total(),
+                refused = auth.refused_total(),
+                "status authentication {}",
+                auth.refusal_lines().join("; ")
+            );
+        }
     }
     Ok(())
+}
+
+/// The transport's authentication counts into `status`, and a warning per
+/// channel where messages were refused (nothing when authentication is off).
+pub(crate) fn auth_status(lcm: &Lcm, status: &mut NodeStatus) {
+    if let Some(auth) = lcm.auth_stats() {
+        status.set("auth_accepted", auth.accepted_total());
+        status.set("auth_refused", auth.refused_total());
+        for line in auth.refusal_lines() {
+            tracing::warn!(node = %status.node, "authentication: {line}");
+        }
+    }
 }
 
 /// Decodes a received message; `None` (logged at debug, to be counted as
@@ -157,62 +188,68 @@ pub(crate) fn io_loop(
     let mut ticker = Ticker::new(live.status_period_s, options.clock().now_us());
     let (mut poses, mut images, mut queue_full) = (0u64, 0u64, 0u64);
     let mut refused = 0u64;
-    let result = pump(lcm, options, Duration::from_millis(20), |message, now| {
-        if let Some(message) = message {
-            status.handled += 1;
-            match decode(&message) {
-                Some(AnyMessage::Pose(msg)) => match Pose::try_from(&msg) {
-                    Ok(pose) => {
-                        poses += 1;
-                        for route in [&routes.perception_poses, &routes.map_poses]
-                            .into_iter()
-                            .flatten()
-                        {
-                            offer(route, pose, &mut queue_full);
+    let result = pump(
+        lcm,
+        options,
+        live.status_period_s,
+        Duration::from_millis(20),
+        |message, now| {
+            if let Some(message) = message {
+                status.handled += 1;
+                match decode(&message) {
+                    Some(AnyMessage::Pose(msg)) => match Pose::try_from(&msg) {
+                        Ok(pose) => {
+                            poses += 1;
+                            for route in [&routes.perception_poses, &routes.map_poses]
+                                .into_iter()
+                                .flatten()
+                            {
+                                offer(route, pose, &mut queue_full);
+                            }
+                            if let Some(arbiter) = &routes.arbiter {
+                                offer(arbiter, ToArbiter::Pose(pose.utime, now), &mut queue_full);
+                            }
                         }
-                        if let Some(arbiter) = &routes.arbiter {
-                            offer(arbiter, ToArbiter::Pose(pose.utime, now), &mut queue_full);
+                        Err(e) => {
+                            tracing::warn!(%e, "pose refused");
+                            refused += 1;
                         }
-                    }
-                    Err(e) => {
-                        tracing::warn!(%e, "pose refused");
-                        refused += 1;
-                    }
-                },
-                Some(AnyMessage::RangeImage(msg)) => match wire::range_image_from_wire(msg) {
-                    Ok(image) => {
-                        images += 1;
-                        if let Some(slot) = &routes.images {
-                            slot.put(Arrived {
-                                item: image,
-                                wall: now,
-                            });
+                    },
+                    Some(AnyMessage::RangeImage(msg)) => match wire::range_image_from_wire(msg) {
+                        Ok(image) => {
+                            images += 1;
+                            if let Some(slot) = &routes.images {
+                                slot.put(Arrived {
+                                    item: image,
+                                    wall: now,
+                                });
+                            }
                         }
-                    }
-                    Err(e) => {
-                        tracing::warn!(%e, channel = %message.channel, "range image refused");
-                        refused += 1;
-                    }
-                },
-                Some(AnyMessage::Waypoints(msg)) => match wire::mission_from_wire(&msg) {
-                    Ok(mission) => {
-                        if let Some(route) = &routes.waypoints {
-                            offer(route, mission, &mut queue_full);
+                        Err(e) => {
+                            tracing::warn!(%e, channel = %message.channel, "range image refused");
+                            refused += 1;
                         }
-                    }
-                    Err(e) => {
-                        tracing::warn!(%e, "waypoints refused");
-                        refused += 1;
-                    }
-                },
-                _ => refused += 1,
-            };
-        }
-        if ticker.due(now) {
-            status.dropped = refused + queue_full;
-            status.log();
-        }
-    });
+                    },
+                    Some(AnyMessage::Waypoints(msg)) => match wire::mission_from_wire(&msg) {
+                        Ok(mission) => {
+                            if let Some(route) = &routes.waypoints {
+                                offer(route, mission, &mut queue_full);
+                            }
+                        }
+                        Err(e) => {
+                            tracing::warn!(%e, "waypoints refused");
+                            refused += 1;
+                        }
+                    },
+                    _ => refused += 1,
+                };
+            }
+            if ticker.due(now) {
+                status.dropped = refused + queue_full;
+                status.log();
+            }
+        },
+    );
     let transport = lcm.stats();
     status.dropped = refused + queue_full;
     let depth = [&routes.perception_poses, &routes.map_poses]
@@ -227,12 +264,6 @@ pub(crate) fn io_loop(
     status.set("queue_full", queue_full);
     status.set("incomplete_messages", transport.reassembly.incomplete);
     status.set("malformed_datagrams", transport.reassembly.malformed);
-    if let Some(auth) = lcm.auth_stats() {
-        status.set("auth_accepted", auth.accepted_total());
-        status.set("auth_refused", auth.refused_total());
-        for line in auth.refusal_lines() {
-            tracing::warn!("authentication: {line}");
-        }
-    }
+    auth_status(lcm, &mut status);
     result.map(|()| status)
 }

@@ -18,6 +18,7 @@ pub mod handoff;
 pub mod io;
 pub mod node;
 pub mod threaded;
+pub mod vehicle;
 mod workers;
 
 use std::fmt::Write as _;

@@ -22,7 +22,7 @@ use arcnav_bus::transport::Lcm;
 use arcnav_pipeline::{ArbiterNode, BehaviourSet};
 
 use super::handoff;
-use super::io::{IoRoutes, Ticker, decode, io_loop, publish_command, pump};
+use super::io::{IoRoutes, Ticker, auth_status, decode, io_loop, publish_command, pump};
 use super::threaded::{LiveError, LiveOptions};
 use super::workers::{MapStage, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
@@ -127,6 +127,7 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
     pump(
         &mut lcm,
         options,
+        config.live.status_period_s,
         Duration::from_millis(50),
         |message, now| {
             let started = Instant::now();
@@ -165,6 +166,7 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
     )?;
     stage.fill(&mut status);
     status.busy_ms = busy.summary();
+    auth_status(&lcm, &mut status);
     Ok(report(vec![status]))
 }
 
@@ -206,6 +208,7 @@ fn behaviour(
     pump(
         &mut lcm,
         options,
+        config.live.status_period_s,
         Duration::from_millis(50),
         |message, now| {
             if let Some(message) = message {
@@ -255,6 +258,7 @@ fn behaviour(
         },
     )?;
     status.busy_ms = busy.summary();
+    auth_status(&lcm, &mut status);
     Ok(report(vec![status]))
 }
 
@@ -283,48 +287,55 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
     let publisher = lcm.publisher();
     let tap = options.command_tap.clone();
     let tick = Duration::from_secs_f64((0.25 / config.pipeline.command_rate_hz).min(0.01));
-    let result = pump(&mut lcm, options, tick, |message, now| {
-        if let Some(message) = message {
-            match decode(&message) {
-                Some(AnyMessage::ArcVotes(msg)) => match wire::votes_from_wire(&msg, &arcs) {
-                    Ok(votes) => {
-                        let started = Instant::now();
-                        match stage.on_votes(&votes, &[], now, &mut out) {
-                            Ok(()) if !out.is_empty() => {
-                                busy.add(started.elapsed().as_secs_f64() * 1e3);
+    let result = pump(
+        &mut lcm,
+        options,
+        config.live.status_period_s,
+        tick,
+        |message, now| {
+            if let Some(message) = message {
+                match decode(&message) {
+                    Some(AnyMessage::ArcVotes(msg)) => match wire::votes_from_wire(&msg, &arcs) {
+                        Ok(votes) => {
+                            let started = Instant::now();
+                            match stage.on_votes(&votes, &[], now, &mut out) {
+                                Ok(()) if !out.is_empty() => {
+                                    busy.add(started.elapsed().as_secs_f64() * 1e3);
+                                }
+                                Ok(()) => {}
+                                Err(e) => tracing::warn!(%e, "votes refused"),
                             }
-                            Ok(()) => {}
-                            Err(e) => tracing::warn!(%e, "votes refused"),
                         }
+                        Err(e) => {
+                            tracing::warn!(%e, channel = %message.channel, "votes refused");
+                            status.dropped += 1;
+                        }
+                    },
+                    Some(AnyMessage::Pose(msg)) => stage.on_pose(msg.utime, now),
+                    Some(AnyMessage::ObstacleCells(msg)) => {
+                        stage.on_perceived(msg.utime, now);
                     }
-                    Err(e) => {
-                        tracing::warn!(%e, channel = %message.channel, "votes refused");
-                        status.dropped += 1;
-                    }
-                },
-                Some(AnyMessage::Pose(msg)) => stage.on_pose(msg.utime, now),
-                Some(AnyMessage::ObstacleCells(msg)) => {
-                    stage.on_perceived(msg.utime, now);
+                    _ => status.dropped += 1,
                 }
-                _ => status.dropped += 1,
             }
-        }
-        stage.on_tick(now, &mut out);
-        for decided in out.drain(..) {
-            publish_command(&publisher, &decided, tap.as_ref());
-        }
-        if ticker.due(now) {
-            arbiter_status(&stage, &mut status);
-            status.busy_ms = busy.summary();
-            status.log();
-        }
-    });
+            stage.on_tick(now, &mut out);
+            for decided in out.drain(..) {
+                publish_command(&publisher, &decided, tap.as_ref());
+            }
+            if ticker.due(now) {
+                arbiter_status(&stage, &mut status);
+                status.busy_ms = busy.summary();
+                status.log();
+            }
+        },
+    );
     // The final stop goes out whatever ended the loop.
     let last = stage.final_stop(options.clock().now_us());
     publish_command(&publisher, &last, tap.as_ref());
     result?;
     arbiter_status(&stage, &mut status);
     status.busy_ms = busy.summary();
+    auth_status(&lcm, &mut status);
     Ok(LiveReport {
         commands: stage.counts().commands,
         stops: stage.counts().stops,

@@ -31,6 +31,17 @@ impl CommandWatchdog {
         self.latest = Some((now, command));
     }
 
+    /// Whether, at `now`, the newest command is fresh enough to execute.
+    pub fn is_following(&self, now: Utime) -> bool {
+        self.latest
+            .is_some_and(|(received, _)| now - received <= self.timeout_us)
+    }
+
+    /// Whether any command has been received.
+    pub fn has_received(&self) -> bool {
+        self.latest.is_some()
+    }
+
     /// What to execute at `now`.
     pub fn command_at(&mut self, now: Utime) -> SteeringCommand {
         match self.latest {
@@ -67,9 +78,12 @@ mod tests {
     fn a_fresh_command_is_executed_and_a_silent_stream_stops_the_vehicle() {
         let mut w = CommandWatchdog::new(500_000);
         assert!(w.command_at(0).is_stop(), "nothing received yet: stop");
+        assert!(!w.has_received() && !w.is_following(0));
         w.on_command(1_000_000, drive(1_000_000));
         assert_eq!(w.command_at(1_400_000).speed_mps, 2.0);
+        assert!(w.is_following(1_400_000));
         assert!(w.command_at(1_600_000).is_stop(), "0.6 s of silence");
+        assert!(w.has_received() && !w.is_following(1_600_000));
         assert!(w.command_at(1_700_000).is_stop());
         assert_eq!(w.trips, 1, "one trip per silence");
         w.on_command(2_000_000, drive(2_000_000));

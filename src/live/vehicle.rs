@@ -1,0 +1,166 @@
+//! `arcnav vehicle`: the vehicle's side of the command interface, as a small
+//! bridge a vehicle controller runs beside it.
+//!
+//! It takes `STEERING_COMMAND` from the bus — through a transport that
+//! verifies each command's tag and freshness when `[bus.auth]` is on, so a
+//! forged, tampered, replayed or expired command never reaches it — feeds
+//! the accepted ones to a [`CommandWatchdog`], and at its own rate hands the
+//! controller what to execute: the newest accepted command while it is
+//! fresh, a stop when commands stop coming. When it stops (signal,
+//! `--duration`), the last thing it hands over is a stop.
+
+use std::time::Duration;
+
+use arcnav_bus::codec::Message as _;
+use arcnav_bus::lcmtypes::steering_command_t;
+use arcnav_bus::messages::channels;
+use arcnav_bus::transport::Lcm;
+use arcnav_vehicle::time::seconds_to_micros;
+use arcnav_vehicle::{CommandWatchdog, SteeringCommand};
+use serde::Serialize;
+
+use super::io::{Ticker, auth_status, pump};
+use super::threaded::{LiveError, LiveOptions};
+use super::{LiveReport, NodeStatus};
+
+/// How the bridge runs.
+#[derive(Debug, Clone, Copy)]
+pub struct BridgeOptions {
+    /// What to execute is handed over this often, Hz.
+    pub rate_hz: f64,
+    /// A command received longer ago than this is not executed: stop, s.
+    pub timeout_s: f64,
+    /// Status lines this often (0: none), s.
+    pub status_period_s: f64,
+}
+
+/// Why the vehicle executes what it does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Execution {
+    /// The newest accepted command, received within the timeout.
+    Following,
+    /// Stopped: no command accepted yet.
+    NoCommandYet,
+    /// Stopped: the newest accepted command is older than the timeout.
+    Stale,
+    /// Stopped: the bridge is shutting down.
+    ShuttingDown,
+}
+
+/// What the controller is told to execute at one tick.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Executed {
+    /// The bridge's clock (µs since the Unix epoch).
+    pub wall_us: i64,
+    pub state: Execution,
+    /// The command's own stamp (the arbiter's cycle time); the tick's time
+    /// for stops the bridge makes itself.
+    pub command_utime: i64,
+    pub curvature: f64,
+    pub speed_mps: f64,
+    pub arc_index: Option<usize>,
+}
+
+impl Executed {
+    fn new(wall_us: i64, state: Execution, command: &SteeringCommand) -> Self {
+        Self {
+            wall_us,
+            state,
+            command_utime: command.utime,
+            curvature: command.curvature,
+            speed_mps: command.speed_mps,
+            arc_index: command.arc_index,
+        }
+    }
+
+    /// The command to execute.
+    pub fn command(&self) -> SteeringCommand {
+        match self.state {
+            Execution::Following => SteeringCommand {
+                utime: self.command_utime,
+                curvature: self.curvature,
+                speed_mps: self.speed_mps,
+                arc_index: self.arc_index,
+                vote: 0.0,
+            },
+            _ => SteeringCommand::stop(self.command_utime),
+        }
+    }
+}
+
+/// Runs the bridge on `lcm` until `options.stop`; `execute` gets what to
+/// execute at every tick, and a stop last.
+pub fn run_bridge(
+    mut lcm: Lcm,
+    options: &LiveOptions,
+    bridge: &BridgeOptions,
+    mut execute: impl FnMut(&Executed),
+) -> Result<LiveReport, LiveError> {
+    let started = std::time::Instant::now();
+    let clock = options.clock();
+    let mut watchdog = CommandWatchdog::new(seconds_to_micros(bridge.timeout_s));
+    let mut status = NodeStatus::new("vehicle");
+    let (mut malformed, mut following, mut stopped) = (0u64, 0u64, 0u64);
+    let mut tick = Ticker::new(1.0 / bridge.rate_hz, clock.now_us());
+    let mut report = Ticker::new(bridge.status_period_s, clock.now_us());
+    lcm.subscribe(channels::STEERING_COMMAND);
+    let wait = Duration::from_secs_f64((0.25 / bridge.rate_hz).min(0.005));
+    pump(
+        &mut lcm,
+        options,
+        bridge.status_period_s,
+        wait,
+        |message, now| {
+            if let Some(message) = message {
+                match steering_command_t::decode(&message.data) {
+                    Ok(msg) => {
+                        status.handled += 1;
+                        watchdog.on_command(now, SteeringCommand::from(&msg));
+                    }
+                    Err(e) => {
+                        malformed += 1;
+                        tracing::warn!(%e, "a STEERING_COMMAND that is not a steering_command_t was dropped");
+                    }
+                }
+            }
+            if tick.due(now) {
+                let state = if watchdog.is_following(now) {
+                    Execution::Following
+                } else if watchdog.has_received() {
+                    Execution::Stale
+                } else {
+                    Execution::NoCommandYet
+                };
+                match state {
+                    Execution::Following => following += 1,
+                    _ => stopped += 1,
+                }
+                let command = watchdog.command_at(now);
+                execute(&Executed::new(now, state, &command));
+            }
+            if report.due(now) {
+                status.dropped = malformed;
+                status.set("watchdog_trips", watchdog.trips);
+                status.log();
+            }
+        },
+    )?;
+    let now = clock.now_us();
+    execute(&Executed::new(
+        now,
+        Execution::ShuttingDown,
+        &SteeringCommand::stop(now),
+    ));
+    status.dropped = malformed;
+    status.set("ticks_following", following);
+    status.set("ticks_stopped", stopped + 1);
+    status.set("watchdog_trips", watchdog.trips);
+    auth_status(&lcm, &mut status);
+    Ok(LiveReport {
+        wall_s: started.elapsed().as_secs_f64(),
+        commands: status.handled,
+        nodes: vec![status],
+        ..LiveReport::default()
+    })
+}
