@@ -62,3 +62,126 @@ fn config_check_without_a_file_is_a_usage_error() {
     assert_eq!(code, 2);
     assert!(stderr.contains("<FILE>"), "{stderr}");
 }
+
+/// A configuration naming `key` as its group key, in its own directory.
+fn keyed_config(tag: &str, key: Option<(&str, u32)>, extra: &str) -> (PathBuf, PathBuf) {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = std::env::temp_dir().join(format!("arcnav-cli-key-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let key_path = dir.join("group.key");
+    if let Some((text, mode)) = key {
+        std::fs::write(&key_path, text).unwrap();
+        std::fs::set_permissions(&key_path, std::fs::Permissions::from_mode(mode)).unwrap();
+    }
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!("[bus.auth]\nkey_file = \"group.key\"\n{extra}"),
+    )
+    .unwrap();
+    (config, key_path)
+}
+
+const GOOD_KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff\n";
+
+/// A key that cannot be used stops every live command at start, before it
+/// opens the bus, with a message naming the file and what to do.
+#[test]
+fn live_commands_refuse_a_key_they_cannot_use_and_name_the_file() {
+    let cases = [
+        ("missing", None, "cannot read it"),
+        ("world", Some((GOOD_KEY, 0o644)), "readable by everyone"),
+        ("group", Some((GOOD_KEY, 0o640)), "readable by its group"),
+        ("short", Some(("0011223344556677\n", 0o600)), "8-byte key"),
+        ("not-hex", Some(("arcnav\n", 0o600)), "not a hex digit"),
+    ];
+    for (tag, key, expect) in cases {
+        let (config, key_path) = keyed_config(tag, key, "");
+        let config = config.to_str().unwrap();
+        for command in [
+            &["run"][..],
+            &["node", "arbiter"],
+            &["node", "behaviour", "obstacle_avoidance"],
+            &["vehicle"],
+        ] {
+            let args: Vec<&str> = command
+                .iter()
+                .copied()
+                .chain(["--lcm", "memq://", "--config", config, "--duration", "0.1"])
+                .collect();
+            let (code, _, stderr) = arcnav(&args);
+            assert_eq!(code, 1, "{args:?}: {stderr}");
+            assert!(
+                stderr.contains(expect) && stderr.contains(&key_path.display().to_string()),
+                "{tag}, {args:?}: {stderr}"
+            );
+        }
+    }
+}
+
+/// The vehicle bridge refuses set-ups that would let unverified commands
+/// through, and says how to fix them.
+#[test]
+fn the_vehicle_bridge_refuses_to_follow_unsigned_commands_or_itself() {
+    let (config, _) = keyed_config(
+        "uncovered",
+        Some((GOOD_KEY, 0o600)),
+        "channels = [\"ARC_VOTES_.*\"]\n",
+    );
+    let config = config.to_str().unwrap();
+    let (code, _, stderr) = arcnav(&["vehicle", "--lcm", "memq://", "--config", config]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains("do not include STEERING_COMMAND"),
+        "{stderr}"
+    );
+    let (code, _, stderr) = arcnav(&[
+        "vehicle",
+        "--lcm",
+        "memq://",
+        "--forward",
+        "memq://",
+        "--duration",
+        "0.1",
+    ]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains("is the bus the commands come from"),
+        "{stderr}"
+    );
+    let (code, _, stderr) = arcnav(&["vehicle", "--lcm", "memq://", "--rate", "0"]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(stderr.contains("--rate 0"), "{stderr}");
+}
+
+/// With authentication off the bridge still runs (off is the default), says
+/// it follows anyone, and hands over stops until a command comes, then a
+/// final stop.
+#[test]
+fn the_vehicle_bridge_without_commands_executes_stops() {
+    let (code, stdout, stderr) = arcnav(&[
+        "vehicle",
+        "--lcm",
+        "memq://",
+        "--print",
+        "--rate",
+        "50",
+        "--duration",
+        "0.3",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stderr.contains("authentication is off"), "{stderr}");
+    let ticks: Vec<serde_json::Value> = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(ticks.len() >= 10, "{stdout}");
+    let (last, before) = ticks.split_last().unwrap();
+    assert!(
+        before
+            .iter()
+            .all(|t| t["state"] == "no_command_yet" && t["speed_mps"] == 0.0)
+    );
+    assert_eq!(last["state"], "shutting_down");
+}

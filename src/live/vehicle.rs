@@ -164,3 +164,76 @@ pub fn run_bridge(
         ..LiveReport::default()
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::live::threaded::StopWhen;
+
+    /// Stops before the first command, the command while it is fresh, stops
+    /// once it is stale, and a stop last: in that order, and only that.
+    #[test]
+    fn the_bridge_follows_a_fresh_command_and_stops_when_it_goes_stale() {
+        let lcm = Lcm::new("memq://").unwrap();
+        let publisher = lcm.publisher();
+        let options = LiveOptions {
+            stop: StopWhen {
+                after: Some(Duration::from_millis(600)),
+                ..StopWhen::default()
+            },
+            ..LiveOptions::default()
+        };
+        let bridge = BridgeOptions {
+            rate_hz: 100.0,
+            timeout_s: 0.1,
+            status_period_s: 0.0,
+        };
+        let sender = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(150));
+            let command = SteeringCommand {
+                utime: 42,
+                curvature: 0.05,
+                speed_mps: 2.0,
+                arc_index: Some(25),
+                vote: 0.8,
+            };
+            publisher
+                .publish_message(
+                    channels::STEERING_COMMAND,
+                    &steering_command_t::from(&command),
+                )
+                .unwrap();
+            publisher
+                .publish(channels::STEERING_COMMAND, b"not a command")
+                .unwrap();
+        });
+        let mut ticks = Vec::new();
+        let report = run_bridge(lcm, &options, &bridge, |e| ticks.push(*e)).unwrap();
+        sender.join().unwrap();
+        let states: Vec<Execution> = ticks.iter().map(|t| t.state).collect();
+        let mut runs = states.clone();
+        runs.dedup();
+        assert_eq!(
+            runs,
+            [
+                Execution::NoCommandYet,
+                Execution::Following,
+                Execution::Stale,
+                Execution::ShuttingDown
+            ],
+            "{states:?}"
+        );
+        for tick in &ticks {
+            let command = tick.command();
+            match tick.state {
+                Execution::Following => {
+                    assert_eq!((command.utime, command.speed_mps), (42, 2.0));
+                }
+                _ => assert!(command.is_stop()),
+            }
+        }
+        let status = &report.nodes[0];
+        assert_eq!((status.handled, status.dropped), (1, 1), "{status:?}");
+        assert!(status.counters.contains(&("watchdog_trips".to_owned(), 1)));
+    }
+}
