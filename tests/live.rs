@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, mpsc};
 use std::time::{Duration, Instant};
 
@@ -433,33 +434,42 @@ fn logplayer(
 /// Steering commands as a vehicle receives them: (arrival, command).
 type Received = Vec<(Instant, SteeringCommand)>;
 
-/// Records STEERING_COMMAND inside `ns` while `body` runs.
-fn recording<T>(ns: &NetNs, body: impl FnOnce() -> T) -> (T, Received) {
-    let stop = std::sync::atomic::AtomicBool::new(false);
+/// Runs `listen` inside `ns` while `body` runs: `body` starts once
+/// `listen` says it is ready, and `listen` stops when told, 300 ms after
+/// `body` returned (late commands, the final stop, still arrive).
+fn listening<T, R: Send>(
+    ns: &NetNs,
+    listen: impl FnOnce(&AtomicBool, &mpsc::Sender<()>) -> R + Send,
+    body: impl FnOnce() -> T,
+) -> (T, R) {
+    let stop = AtomicBool::new(false);
     let (ready_tx, ready) = mpsc::channel();
     std::thread::scope(|scope| {
-        let recorder = scope.spawn(|| {
-            ns.run(|| {
-                let mut lcm = Lcm::new("").unwrap();
-                lcm.subscribe(channels::STEERING_COMMAND);
-                ready_tx.send(()).unwrap();
-                let mut got = Vec::new();
-                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                    if let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() {
-                        let msg = steering_command_t::decode(&m.data).unwrap();
-                        got.push((Instant::now(), SteeringCommand::from(&msg)));
-                    }
-                }
-                got
-            })
-        });
+        let listener = scope.spawn(|| ns.run(|| listen(&stop, &ready_tx)));
         ready.recv().unwrap();
         let out = body();
-        // Late commands (the final stop) still arrive.
         std::thread::sleep(Duration::from_millis(300));
-        stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        (out, recorder.join().unwrap())
+        stop.store(true, Ordering::Relaxed);
+        (out, listener.join().unwrap())
     })
+}
+
+/// Records STEERING_COMMAND inside `ns` while `body` runs.
+fn recording<T>(ns: &NetNs, body: impl FnOnce() -> T) -> (T, Received) {
+    let listen = |stop: &AtomicBool, ready: &mpsc::Sender<()>| {
+        let mut lcm = Lcm::new("").unwrap();
+        lcm.subscribe(channels::STEERING_COMMAND);
+        ready.send(()).unwrap();
+        let mut got = Vec::new();
+        while !stop.load(Ordering::Relaxed) {
+            if let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() {
+                let msg = steering_command_t::decode(&m.data).unwrap();
+                got.push((Instant::now(), SteeringCommand::from(&msg)));
+            }
+        }
+        got
+    };
+    listening(ns, listen, body)
 }
 
 /// The commands published at cycle times (heartbeat stops sit between them).
@@ -1034,7 +1044,7 @@ type Sent = BTreeMap<&'static str, u64>;
 /// ARC_VOTES_INTRUDER, and as obstacle avoidance stamped 10 s ahead; every
 /// authentic command and vote it sees it replays at once and 1.5 s later,
 /// and sends each command again with its speed changed and its tag kept.
-fn attack(stop: &std::sync::atomic::AtomicBool, insider: AuthPolicy) -> Sent {
+fn attack(stop: &AtomicBool, insider: AuthPolicy) -> Sent {
     use arcnav_bus::lcmtypes::arc_votes_t;
     use std::collections::{HashSet, VecDeque};
     const OA: &str = "ARC_VOTES_OBSTACLE_AVOIDANCE";
@@ -1058,7 +1068,7 @@ fn attack(stop: &std::sync::atomic::AtomicBool, insider: AuthPolicy) -> Sent {
     let mut later: VecDeque<(Instant, String, Vec<u8>)> = VecDeque::new();
     let mut latest_votes: Option<arc_votes_t> = None;
     let mut next = Instant::now();
-    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+    while !stop.load(Ordering::Relaxed) {
         if let Some(m) = lcm.recv_timeout(Duration::from_millis(5)).unwrap()
             && m.data.len() > TRAILER_LEN
             && !own.contains(&m.data)
@@ -1143,47 +1153,37 @@ struct Heard {
 }
 
 fn hear<T>(ns: &NetNs, policy: &AuthPolicy, log: &Path, body: impl FnOnce() -> T) -> (T, Heard) {
-    let stop = std::sync::atomic::AtomicBool::new(false);
-    let (ready_tx, ready) = mpsc::channel();
-    std::thread::scope(|scope| {
-        let recorder = scope.spawn(|| {
-            ns.run(|| {
-                let mut lcm = Lcm::new("").unwrap();
-                lcm.subscribe(channels::STEERING_COMMAND);
-                let mut writer = arcnav_bus::log::LogWriter::create(log).unwrap();
-                let mut verifier = policy.verifier();
-                let mut heard = Heard {
-                    authentic: Vec::new(),
-                    refused: 0,
-                };
-                ready_tx.send(()).unwrap();
-                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                    let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() else {
-                        continue;
-                    };
-                    writer
-                        .write_event(m.recv_utime, &m.channel, &m.data)
-                        .unwrap();
-                    let now = u64::try_from(m.recv_utime).unwrap();
-                    match verifier.verify(&m.channel, &m.data, now) {
-                        Ok(message) => {
-                            let msg = steering_command_t::decode(message).unwrap();
-                            heard
-                                .authentic
-                                .push((Instant::now(), SteeringCommand::from(&msg)));
-                        }
-                        Err(_) => heard.refused += 1,
-                    }
+    let listen = |stop: &AtomicBool, ready: &mpsc::Sender<()>| {
+        let mut lcm = Lcm::new("").unwrap();
+        lcm.subscribe(channels::STEERING_COMMAND);
+        let mut writer = arcnav_bus::log::LogWriter::create(log).unwrap();
+        let mut verifier = policy.verifier();
+        let mut heard = Heard {
+            authentic: Vec::new(),
+            refused: 0,
+        };
+        ready.send(()).unwrap();
+        while !stop.load(Ordering::Relaxed) {
+            let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() else {
+                continue;
+            };
+            writer
+                .write_event(m.recv_utime, &m.channel, &m.data)
+                .unwrap();
+            let now = u64::try_from(m.recv_utime).unwrap();
+            match verifier.verify(&m.channel, &m.data, now) {
+                Ok(message) => {
+                    let msg = steering_command_t::decode(message).unwrap();
+                    heard
+                        .authentic
+                        .push((Instant::now(), SteeringCommand::from(&msg)));
                 }
-                heard
-            })
-        });
-        ready.recv().unwrap();
-        let out = body();
-        std::thread::sleep(Duration::from_millis(300));
-        stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        (out, recorder.join().unwrap())
-    })
+                Err(_) => heard.refused += 1,
+            }
+        }
+        heard
+    };
+    listening(ns, listen, body)
 }
 
 /// The per-reason refusals a process warned of for `channel` at exit
@@ -1270,7 +1270,7 @@ fn an_attacker_on_an_authenticated_bus_changes_no_command() {
             .map(|(name, args)| net.arcnav(name, args))
             .collect();
         procs.iter().for_each(Proc::wait_ready);
-        let stop = std::sync::atomic::AtomicBool::new(false);
+        let stop = AtomicBool::new(false);
         let sent = std::thread::scope(|scope| {
             let attacker = scope.spawn(|| net.ns.run(|| attack(&stop, policy.clone())));
             // The log's inputs, WAYPOINTS signed with the group key.
@@ -1281,7 +1281,7 @@ fn an_attacker_on_an_authenticated_bus_changes_no_command() {
                 });
             });
             std::thread::sleep(Duration::from_millis(300));
-            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            stop.store(true, Ordering::Relaxed);
             attacker.join().unwrap()
         });
         procs.iter().for_each(|p| p.signal("TERM"));
