@@ -19,6 +19,7 @@ pub mod output;
 mod recorder;
 pub mod render;
 pub mod replay;
+pub mod sweep;
 pub mod wire;
 
 pub use config::Config;

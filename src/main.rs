@@ -33,6 +33,14 @@ enum Command {
     /// to --out; exit status 0 only when the mission completes without a
     /// collision.
     Sim(SimArgs),
+    /// Run missions on many worlds under many settings, on every core: each
+    /// world (--world, --seeds) with each combination of the values given to
+    /// --set (or in --grid). Writes table.csv/json (one row per run),
+    /// summary.csv/json (one per setting) and sweep.png to --out, keeping
+    /// each run's row as it finishes: an interrupted sweep carries on with
+    /// --resume. Exit status 0 when every run was done (whatever its outcome),
+    /// 130 when interrupted.
+    Sweep(SweepArgs),
     /// Replay an LCM log (POSE, RANGE_IMAGE, WAYPOINTS) through perception,
     /// local map, behaviours and arbiter in log time; write the recomputed
     /// decisions to --out and compare them with the ones the log recorded.
@@ -112,6 +120,40 @@ struct SimArgs {
     /// Save the world (e.g. a generated one) as TOML to this file.
     #[arg(long, value_name = "FILE")]
     save_world: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+struct SweepArgs {
+    /// A world: an embedded world's name (arcnav sim --list) or a world file;
+    /// repeatable.
+    #[arg(long = "world", value_name = "NAME|FILE")]
+    worlds: Vec<String>,
+    /// Generated worlds from seeds A up to B (B excluded), e.g. 0..50.
+    #[arg(long, value_name = "A..B")]
+    seeds: Option<String>,
+    /// Difficulty of the generated worlds.
+    #[arg(long, value_enum, default_value = "moderate", requires = "seeds")]
+    difficulty: DifficultyArg,
+    /// A configuration key and the values to run it at, e.g.
+    /// arbiter.cruise_speed_mps=2.5,4,6; repeatable: every combination runs.
+    #[arg(long = "set", value_name = "KEY=V1,V2,…")]
+    sets: Vec<String>,
+    /// A TOML file of keys to sweep, each with its values:
+    /// "arbiter.cruise_speed_mps" = [2.5, 4.0, 6.0].
+    #[arg(long, value_name = "FILE")]
+    grid: Option<PathBuf>,
+    /// Base configuration (defaults merged with it) the settings change.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Output directory.
+    #[arg(long, default_value = "out/sweep")]
+    out: PathBuf,
+    /// Carry on an interrupted sweep in --out (the same worlds and settings).
+    #[arg(long)]
+    resume: bool,
+    /// Runs at a time (default: one per core).
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -236,6 +278,16 @@ enum DifficultyArg {
     Hard,
 }
 
+impl From<DifficultyArg> for arcnav_sim::Difficulty {
+    fn from(d: DifficultyArg) -> Self {
+        match d {
+            DifficultyArg::Easy => Self::Easy,
+            DifficultyArg::Moderate => Self::Moderate,
+            DifficultyArg::Hard => Self::Hard,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum SensorArg {
     Erim,
@@ -245,7 +297,13 @@ enum SensorArg {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    init_logging(cli.verbose, cli.quiet);
+    // A sweep's many missions would bury its progress in their log lines:
+    // warnings only, unless asked.
+    let quiet = match cli.command {
+        Command::Sweep(_) if cli.verbose == 0 => cli.quiet.max(1),
+        _ => cli.quiet,
+    };
+    init_logging(cli.verbose, quiet);
     match run(cli.command) {
         Ok(code) => code,
         Err(err) => {
@@ -294,6 +352,7 @@ fn init_logging(verbose: u8, quiet: u8) {
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
         Command::Sim(args) => cli::sim(args),
+        Command::Sweep(args) => cli::sweep(args),
         Command::Replay(args) => cli::replay(args),
         Command::Render(args) => cli::render(args),
         Command::Run(args) => cli::live(None, args),

@@ -5,8 +5,10 @@ mod live;
 mod render;
 mod replay;
 mod sim;
+mod sweep;
 
 pub use live::{live, vehicle};
 pub use render::render;
 pub use replay::replay;
 pub use sim::sim;
+pub use sweep::sweep;

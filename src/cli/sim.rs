@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use crate::{DifficultyArg, SensorArg, SimArgs};
+use crate::{SensorArg, SimArgs};
 use anyhow::Context as _;
 use arcnav::Config;
 use arcnav::mission::{LogMode, MissionOptions, MissionProgress, run_mission};
@@ -53,31 +53,14 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         .context("the configuration with the command-line settings")?;
     let world = match (&args.world, args.seed) {
         (_, Some(seed)) => {
-            let difficulty = match args.difficulty {
-                DifficultyArg::Easy => Difficulty::Easy,
-                DifficultyArg::Moderate => Difficulty::Moderate,
-                DifficultyArg::Hard => Difficulty::Hard,
-            };
+            let difficulty: Difficulty = args.difficulty.into();
             World::build(
                 arcnav_sim::generate(seed, difficulty),
                 "generated world",
                 None,
             )?
         }
-        (Some(name), None) if !Path::new(name).exists() && !name.ends_with(".toml") => {
-            match World::embedded(name) {
-                Some(world) => world?,
-                None => anyhow::bail!(
-                    "no embedded world named {name:?} and no file of that name (embedded: {})",
-                    EMBEDDED
-                        .iter()
-                        .map(|(n, _, _)| *n)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            }
-        }
-        (Some(file), None) => World::load(Path::new(file))?,
+        (Some(name), None) => named_world(name)?,
         (None, None) => {
             World::embedded("paper_loop").context("the default world is compiled in")??
         }
@@ -245,4 +228,22 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
             format!(", {} snapshots in snapshots/", snapshots.len())
         }
     );
+}
+
+/// An embedded world by name, or a world file.
+pub(crate) fn named_world(name: &str) -> anyhow::Result<World> {
+    if Path::new(name).exists() || name.ends_with(".toml") {
+        return Ok(World::load(Path::new(name))?);
+    }
+    match World::embedded(name) {
+        Some(world) => Ok(world?),
+        None => anyhow::bail!(
+            "no embedded world named {name:?} and no file of that name (embedded: {})",
+            EMBEDDED
+                .iter()
+                .map(|(n, _, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
 }

@@ -14,8 +14,10 @@ use crate::config::Config;
 use crate::mission::{MissionRun, TrackPoint};
 
 mod canvas;
+mod sweep;
 
 pub use canvas::{BLACK, BLUE, Canvas, RED, RenderError, Rgba, WHITE, speed_color, vote_color};
+pub use sweep::sweep_picture;
 
 /// The whole mission: shaded terrain, hazards, the obstacle cells the local
 /// map held, the path coloured by speed, image positions, waypoints and

@@ -1,0 +1,373 @@
+//! `arcnav sweep`: missions over worlds × settings on every core, one table.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use arcnav::Config;
+use arcnav::mission::{MissionOptions, run_mission};
+use arcnav::sweep::{
+    Finished, Plan, PlanIdentity, Row, RowLog, SweepWorld, axes, parse_set, read_grid, settings,
+    summarise, summary_csv, table_csv,
+};
+use arcnav_behaviours::Registry;
+use arcnav_sim::{Difficulty, World};
+use rayon::prelude::*;
+
+use super::sim::named_world;
+use crate::SweepArgs;
+
+const PLAN_FILE: &str = "sweep.json";
+
+/// The exit status of an interrupted sweep (as for SIGINT).
+const INTERRUPTED: u8 = 130;
+
+pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
+    let registry = Arc::new(Registry::builtin());
+    let plan = plan(&args, &registry)?;
+    let out = &args.out;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create the output directory {}", out.display()))?;
+    let finished = prepare(out, &plan, args.resume)?;
+    let jobs = match args.jobs {
+        Some(0) => anyhow::bail!("--jobs 0: at least one run at a time"),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, usize::from),
+    };
+    let done: std::collections::BTreeSet<usize> = finished.rows.iter().map(|r| r.run).collect();
+    let pending: Vec<usize> = (0..plan.runs()).filter(|r| !done.contains(r)).collect();
+    eprintln!(
+        "arcnav sweep: {} worlds × {} settings = {} runs{}, {} at a time; results in {}",
+        plan.worlds.len(),
+        plan.settings.len(),
+        plan.runs(),
+        if done.is_empty() {
+            String::new()
+        } else {
+            format!(" ({} already done)", done.len())
+        },
+        jobs,
+        out.display()
+    );
+    if finished.unreadable > 0 {
+        eprintln!(
+            "  {} cut-off line(s) in {} ignored: those runs are done again",
+            finished.unreadable,
+            RowLog::FILE
+        );
+    }
+    let interrupted = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&interrupted))
+            .context("cannot install the signal handlers")?;
+        signal_hook::flag::register(signal, Arc::clone(&interrupted))
+            .context("cannot install the signal handlers")?;
+    }
+    let started = Instant::now();
+    let ran = run_pending(&plan, registry, &pending, jobs, out, &interrupted)?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let rows = RowLog::read(out, plan.runs())
+        .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?
+        .rows;
+    write_tables(out, &plan, &rows)?;
+    if !ran.is_empty() {
+        let busy: f64 = ran.iter().map(|r| r.wall_time_s).sum();
+        eprintln!(
+            "{} runs in {elapsed:.1} s with {jobs} at a time: the runs kept {:.0} % of that busy \
+             ({busy:.1} s of simulation)",
+            ran.len(),
+            100.0 * busy / (elapsed * jobs as f64).max(1e-9)
+        );
+    }
+    print_summary(&plan, &rows);
+    if rows.len() < plan.runs() {
+        eprintln!(
+            "interrupted: {} of {} runs done, kept in {}; the same command with --resume carries on",
+            rows.len(),
+            plan.runs(),
+            out.display()
+        );
+        return Ok(ExitCode::from(INTERRUPTED));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Worlds and settings, every one loaded and validated before any run.
+fn plan(args: &SweepArgs, registry: &Registry) -> anyhow::Result<Plan> {
+    let base = match &args.config {
+        Some(path) => Config::load_with(path, registry)?,
+        None => Config::default(),
+    };
+    let sets = args
+        .sets
+        .iter()
+        .map(|s| parse_set(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let grid = match &args.grid {
+        Some(path) => read_grid(path)?,
+        None => Vec::new(),
+    };
+    let axes = axes(&base, &sets, &grid)?;
+    let settings = settings(&base, &axes, registry)?;
+    let mut worlds = Vec::new();
+    for name in &args.worlds {
+        let world = named_world(name).with_context(|| format!("--world {name}"))?;
+        worlds.push(SweepWorld {
+            label: name.clone(),
+            world: Arc::new(world),
+        });
+    }
+    if let Some(range) = &args.seeds {
+        let difficulty: Difficulty = args.difficulty.into();
+        for seed in parse_seeds(range)? {
+            let label = format!("seed {seed} ({difficulty:?})").to_lowercase();
+            let world = World::build(arcnav_sim::generate(seed, difficulty), &label, None)?;
+            worlds.push(SweepWorld {
+                label,
+                world: Arc::new(world),
+            });
+        }
+    }
+    anyhow::ensure!(
+        !worlds.is_empty(),
+        "no worlds: give --world NAME|FILE (repeatable) and/or --seeds A..B"
+    );
+    for (i, w) in worlds.iter().enumerate() {
+        anyhow::ensure!(
+            !worlds[..i].iter().any(|o| o.label == w.label),
+            "world {} is given twice",
+            w.label
+        );
+        for s in &settings {
+            w.world
+                .validate_for(&s.config.vehicle, &w.label)
+                .with_context(|| format!("setting {}", s.label(&axes)))?;
+        }
+    }
+    Ok(Plan {
+        worlds,
+        axes,
+        settings,
+    })
+}
+
+/// `A..B`: seeds A up to B, B excluded.
+fn parse_seeds(range: &str) -> anyhow::Result<std::ops::Range<u64>> {
+    let bad = || anyhow::anyhow!("--seeds {range:?}: expected A..B, e.g. 0..50 (B excluded)");
+    let (a, b) = range.split_once("..").ok_or_else(bad)?;
+    let (a, b): (u64, u64) = (
+        a.trim().parse().map_err(|_| bad())?,
+        b.trim().parse().map_err(|_| bad())?,
+    );
+    anyhow::ensure!(a < b, "--seeds {range}: no seeds (B must be above A)");
+    anyhow::ensure!(b - a <= 100_000, "--seeds {range}: more than 100000 worlds");
+    Ok(a..b)
+}
+
+/// Checks `out` against the plan: a fresh directory gets the plan, a
+/// resumed one must hold the same plan; the finished rows.
+fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
+    let plan_path = out.join(PLAN_FILE);
+    let identity = plan.identity();
+    let earlier: Option<PlanIdentity> = match std::fs::read_to_string(&plan_path) {
+        Ok(text) => Some(
+            serde_json::from_str(&text)
+                .with_context(|| format!("{} is not a sweep plan", plan_path.display()))?,
+        ),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(e).with_context(|| format!("cannot read {}", plan_path.display())),
+    };
+    let finished = RowLog::read(out, plan.runs())
+        .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?;
+    match (resume, earlier) {
+        (true, Some(earlier)) if earlier != identity => anyhow::bail!(
+            "--resume: {} holds another sweep ({}); resume it with the command that started it, \
+             or give another --out",
+            out.display(),
+            difference(&earlier, &identity)
+        ),
+        (true, None) => anyhow::bail!(
+            "--resume: {} holds no sweep to carry on (no {PLAN_FILE})",
+            out.display()
+        ),
+        (false, _) if !finished.rows.is_empty() => anyhow::bail!(
+            "{} already holds {} finished runs of a sweep: --resume carries it on, or give \
+             another --out (nothing was overwritten)",
+            out.display(),
+            finished.rows.len()
+        ),
+        _ => {}
+    }
+    arcnav::output::write_file(
+        &plan_path,
+        serde_json::to_string_pretty(&identity)?.as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", plan_path.display()))?;
+    Ok(finished)
+}
+
+/// What differs between two plans, said briefly.
+fn difference(a: &PlanIdentity, b: &PlanIdentity) -> String {
+    if a.worlds != b.worlds {
+        format!("worlds {:?}, not {:?}", a.worlds, b.worlds)
+    } else if a.keys != b.keys || a.settings != b.settings {
+        format!("settings of {:?}, not {:?}", a.keys, b.keys)
+    } else {
+        "the same settings over another base configuration".into()
+    }
+}
+
+/// Runs `pending` on `jobs` threads, appending each row to the rows file
+/// as it finishes; stops starting runs when `interrupted`, and then returns
+/// without waiting for the runs under way. The rows of this call.
+fn run_pending(
+    plan: &Plan,
+    registry: Arc<Registry>,
+    pending: &[usize],
+    jobs: usize,
+    out: &Path,
+    interrupted: &AtomicBool,
+) -> anyhow::Result<Vec<Row>> {
+    let mut log = RowLog::append(out)
+        .with_context(|| format!("cannot write {}", out.join(RowLog::FILE).display()))?;
+    let bar = indicatif::ProgressBar::new(plan.runs() as u64);
+    bar.set_position((plan.runs() - pending.len()) as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{bar:30}] {pos}/{len} runs · {elapsed} · {eta} left · {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .thread_name(|i| format!("sweep-{i}"))
+        .build()
+        .context("cannot start the sweep's threads")?;
+    let (tx, rx) = crossbeam_channel::unbounded::<Row>();
+    let plan_ref = plan.clone();
+    let work: Vec<usize> = pending.to_vec();
+    // Detached: an interrupted sweep leaves the runs under way behind.
+    let stop = Arc::new(AtomicBool::new(false));
+    let stop_workers = Arc::clone(&stop);
+    std::thread::spawn(move || {
+        pool.install(|| {
+            work.par_iter().with_max_len(1).for_each(|&run| {
+                if stop_workers.load(Ordering::Relaxed) {
+                    return;
+                }
+                let _ = tx.send(one_run(&plan_ref, &registry, run));
+            });
+        });
+    });
+    let mut ran = Vec::new();
+    let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    while ran.len() < pending.len() {
+        if interrupted.load(Ordering::Relaxed) {
+            stop.store(true, Ordering::Relaxed);
+            break;
+        }
+        match rx.recv_timeout(Duration::from_millis(100)) {
+            Ok(row) => {
+                log.push(&row).with_context(|| {
+                    format!("cannot write {}", out.join(RowLog::FILE).display())
+                })?;
+                let line = format!(
+                    "{} · {}: {}{}",
+                    row.world,
+                    plan.settings[row.setting].label(&plan.axes),
+                    row.outcome,
+                    if row.success {
+                        format!(", {:.2} m/s", row.average_speed_mps)
+                    } else {
+                        String::new()
+                    }
+                );
+                bar.inc(1);
+                if terminal {
+                    bar.set_message(line);
+                } else {
+                    eprintln!("[{}/{}] {line}", bar.position(), plan.runs());
+                }
+                ran.push(row);
+            }
+            Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    bar.finish_and_clear();
+    Ok(ran)
+}
+
+/// One mission; a run that cannot start is a row with outcome `error`.
+fn one_run(plan: &Plan, registry: &Registry, run: usize) -> Row {
+    let (world, s, setting) = plan.run(run);
+    match run_mission(
+        &setting.config,
+        registry,
+        Arc::clone(&world.world),
+        &MissionOptions::default(),
+        &mut |_| {},
+    ) {
+        Ok(done) => Row::new(run, &world.label, s, &setting.values, &done.report),
+        Err(e) => Row::failed(run, &world.label, s, &setting.values, &e.to_string()),
+    }
+}
+
+fn write_tables(out: &Path, plan: &Plan, rows: &[Row]) -> anyhow::Result<()> {
+    let write = |name: &str, bytes: &[u8]| -> anyhow::Result<PathBuf> {
+        let path = out.join(name);
+        arcnav::output::write_file(&path, bytes)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        Ok(path)
+    };
+    let summary = summarise(plan, rows);
+    write("table.csv", table_csv(plan, rows).as_bytes())?;
+    write("table.json", serde_json::to_string_pretty(rows)?.as_bytes())?;
+    write("summary.csv", summary_csv(plan, &summary).as_bytes())?;
+    write(
+        "summary.json",
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    let keys: Vec<String> = plan.axes.iter().map(|a| a.key.clone()).collect();
+    let title = format!(
+        "arcnav sweep: {} of {} runs, {} worlds × {} settings",
+        rows.len(),
+        plan.runs(),
+        plan.worlds.len(),
+        plan.settings.len()
+    );
+    arcnav::render::sweep_picture(&out.join("sweep.png"), &title, &keys, &summary)?;
+    Ok(())
+}
+
+fn print_summary(plan: &Plan, rows: &[Row]) {
+    let summary = summarise(plan, rows);
+    let labels: Vec<String> = summary
+        .iter()
+        .map(|s| plan.settings[s.setting].label(&plan.axes))
+        .collect();
+    let w = labels
+        .iter()
+        .map(|l| l.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(7);
+    println!(
+        "{:<w$}  {:>9} {:>9} {:>16} {:>10}",
+        "setting", "completed", "mean m/s", "closest approach", "collisions"
+    );
+    for (s, label) in summary.iter().zip(labels) {
+        println!(
+            "{label:<w$}  {:>9} {:>9.2} {:>16} {:>10}",
+            format!("{}/{}", s.successes, s.runs),
+            s.mean_speed_mps,
+            s.worst_closest_approach_m
+                .map_or("-".into(), |m| format!("{m:.2} m")),
+            s.collisions
+        );
+    }
+}
