@@ -180,20 +180,34 @@ fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", plan_path.display())),
     };
-    let finished = RowLog::read(out, plan.runs())
-        .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?;
-    match (resume, earlier) {
-        (true, Some(earlier)) if earlier != identity => anyhow::bail!(
+    match (resume, &earlier) {
+        (true, Some(earlier)) if *earlier != identity => anyhow::bail!(
             "--resume: {} holds another sweep ({}); resume it with the command that started it, \
              or give another --out",
             out.display(),
-            difference(&earlier, &identity)
+            difference(earlier, &identity)
         ),
         (true, None) => anyhow::bail!(
             "--resume: {} holds no sweep to carry on (no {PLAN_FILE})",
             out.display()
         ),
-        (false, _) if !finished.rows.is_empty() => anyhow::bail!(
+        _ => {}
+    }
+    let finished = if earlier.is_some() {
+        RowLog::read(out, plan.runs())
+            .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?
+    } else if out.join(RowLog::FILE).exists() {
+        anyhow::bail!(
+            "{} holds a {} but no {PLAN_FILE}: not a sweep this version can carry on; give \
+             another --out",
+            out.display(),
+            RowLog::FILE
+        )
+    } else {
+        Finished::default()
+    };
+    match resume {
+        false if !finished.rows.is_empty() => anyhow::bail!(
             "{} already holds {} finished runs of a sweep: --resume carries it on, or give \
              another --out (nothing was overwritten)",
             out.display(),

@@ -1,0 +1,274 @@
+//! `arcnav sweep` as a user runs it: the table, the summary, the picture,
+//! reproducibility, interruption and resumption, and bad input refused
+//! before any run.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use arcnav_testkit::temp_dir;
+
+/// Two short worlds × two cruise speeds, each run at most 25 simulated s.
+const PLAN: [&str; 10] = [
+    "--world",
+    "short_course",
+    "--seeds",
+    "3..4",
+    "--difficulty",
+    "easy",
+    "--set",
+    "arbiter.cruise_speed_mps=2.5,4",
+    "--set",
+    "sim.time_limit_s=25",
+];
+
+fn sweep(args: &[&str], out: &Path) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_arcnav"));
+    command
+        .arg("sweep")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .stdin(Stdio::null());
+    command
+}
+
+fn run(args: &[&str], out: &Path) -> Output {
+    sweep(args, out).output().unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// table.csv without its wall-time column (what the machine's load sets).
+fn table_without_wall_time(out: &Path) -> String {
+    let csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let wall = header.iter().position(|h| *h == "wall_time_s").unwrap();
+    csv.lines()
+        .map(|line| {
+            let mut fields: Vec<&str> = line.split(',').collect();
+            fields.remove(wall);
+            fields.join(",")
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn json(path: PathBuf) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn a_sweep_writes_a_reproducible_table_a_consistent_summary_and_a_picture() {
+    let out = temp_dir("sweep-a");
+    let first = run(&PLAN, &out);
+    assert_eq!(first.status.code(), Some(0), "{}", text(&first.stderr));
+
+    // One row per world × setting, in plan order, with the right settings.
+    let rows = json(out.join("table.json"));
+    let rows = rows.as_array().unwrap();
+    let got: Vec<(String, String, String)> = rows
+        .iter()
+        .map(|r| {
+            (
+                r["world"].as_str().unwrap().to_owned(),
+                r["values"][0].as_str().unwrap().to_owned(),
+                r["values"][1].as_str().unwrap().to_owned(),
+            )
+        })
+        .collect();
+    let want = |w: &str, v: &str| (w.to_owned(), v.to_owned(), "25.0".to_owned());
+    assert_eq!(
+        got,
+        [
+            want("short_course", "2.5"),
+            want("short_course", "4.0"),
+            want("seed 3 (easy)", "2.5"),
+            want("seed 3 (easy)", "4.0"),
+        ]
+    );
+    for r in rows {
+        assert!(r["duration_s"].as_f64().unwrap() <= 25.0 + 1e-9, "{r}");
+        assert!(r["distance_m"].as_f64().unwrap() > 10.0, "it drove: {r}");
+    }
+    let csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 5, "{csv}");
+    assert!(
+        csv.starts_with("run,world,arbiter.cruise_speed_mps,sim.time_limit_s,outcome,"),
+        "{csv}"
+    );
+
+    // The summary is the rows', setting by setting.
+    let summary = json(out.join("summary.json"));
+    let summary = summary.as_array().unwrap();
+    assert_eq!(summary.len(), 2);
+    for s in summary {
+        let of: Vec<&serde_json::Value> = rows
+            .iter()
+            .filter(|r| r["setting"] == s["setting"])
+            .collect();
+        assert_eq!(s["runs"].as_u64().unwrap(), of.len() as u64);
+        let successes = of.iter().filter(|r| r["success"] == true).count();
+        assert_eq!(s["successes"].as_u64().unwrap(), successes as u64);
+        let speed = of
+            .iter()
+            .map(|r| r["average_speed_mps"].as_f64().unwrap())
+            .sum::<f64>()
+            / of.len() as f64;
+        assert!((s["mean_speed_mps"].as_f64().unwrap() - speed).abs() < 1e-9);
+        let worst = of
+            .iter()
+            .filter_map(|r| r["closest_approach_m"].as_f64())
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(s["worst_closest_approach_m"].as_f64().unwrap(), worst);
+    }
+    // A faster cruise drives faster on average.
+    assert!(summary[1]["mean_speed_mps"].as_f64() > summary[0]["mean_speed_mps"].as_f64());
+
+    // The picture decodes.
+    let png = tiny_skia::Pixmap::load_png(out.join("sweep.png")).unwrap();
+    assert!(png.width() >= 500 && png.height() >= 400);
+
+    // The same command, elsewhere: the same table.
+    let again = temp_dir("sweep-b");
+    let second = run(&PLAN, &again);
+    assert_eq!(second.status.code(), Some(0), "{}", text(&second.stderr));
+    assert_eq!(
+        table_without_wall_time(&out),
+        table_without_wall_time(&again)
+    );
+
+    // A finished sweep is not overwritten by another.
+    let refused = run(&PLAN, &out);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(text(&refused.stderr).contains("--resume carries it on"));
+}
+
+#[test]
+fn an_interrupted_sweep_resumed_gives_the_table_of_an_uninterrupted_one() {
+    let whole = temp_dir("sweep-whole");
+    let done = run(&PLAN, &whole);
+    assert_eq!(done.status.code(), Some(0), "{}", text(&done.stderr));
+
+    // One run at a time; interrupted once the first row is on disk.
+    let out = temp_dir("sweep-cut");
+    let args: Vec<&str> = PLAN.iter().copied().chain(["--jobs", "1"]).collect();
+    let child = sweep(&args, &out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let rows = out.join("rows.jsonl");
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while std::fs::read_to_string(&rows).map_or(0, |t| t.lines().count()) < 1 {
+        assert!(Instant::now() < deadline, "no row after 120 s");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let cut = child.wait_with_output().unwrap();
+    let stderr = text(&cut.stderr);
+    assert_eq!(cut.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("--resume carries on"), "{stderr}");
+    let kept = std::fs::read_to_string(&rows).unwrap().lines().count();
+    assert!((1..4).contains(&kept), "{kept} rows kept");
+    // The partial tables hold what was done.
+    let partial = std::fs::read_to_string(out.join("table.csv")).unwrap();
+    assert_eq!(partial.lines().count(), 1 + kept);
+
+    let resumed = run(&[&args[..], &["--resume"]].concat(), &out);
+    let stderr = text(&resumed.stderr);
+    assert_eq!(resumed.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!("({kept} already done)")),
+        "{stderr}"
+    );
+    assert_eq!(
+        table_without_wall_time(&out),
+        table_without_wall_time(&whole)
+    );
+
+    // Resuming with other settings is refused.
+    let other: Vec<&str> = PLAN
+        .iter()
+        .map(|a| {
+            if *a == "arbiter.cruise_speed_mps=2.5,4" {
+                "arbiter.cruise_speed_mps=3"
+            } else {
+                a
+            }
+        })
+        .chain(["--resume"])
+        .collect();
+    let refused = run(&other, &out);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(text(&refused.stderr).contains("holds another sweep"));
+}
+
+#[test]
+fn bad_settings_and_worlds_are_refused_before_any_run_by_name() {
+    let grid_dir = temp_dir("sweep-grid");
+    let empty_grid = grid_dir.join("empty.toml");
+    std::fs::write(&empty_grid, "\"arbiter.cruise_speed_mps\" = []\n").unwrap();
+    let no_keys = grid_dir.join("none.toml");
+    std::fs::write(&no_keys, "# nothing\n").unwrap();
+    let broken_world = grid_dir.join("broken.toml");
+    std::fs::write(&broken_world, "name = \"broken\"\n[terrain\n").unwrap();
+    let (empty, none, broken) = (
+        empty_grid.to_str().unwrap(),
+        no_keys.to_str().unwrap(),
+        broken_world.to_str().unwrap(),
+    );
+    let cases: [(&[&str], &str); 8] = [
+        (
+            &["--world", "short_course", "--set", "arbiter.cruise_speed=3"],
+            "`arbiter.cruise_speed`: no such key",
+        ),
+        (
+            &[
+                "--world",
+                "short_course",
+                "--set",
+                "arbiter.cruise_speed_mps=fast",
+            ],
+            "`arbiter.cruise_speed_mps` = fast",
+        ),
+        (
+            &[
+                "--world",
+                "short_course",
+                "--set",
+                "arbiter.cruise_speed_mps=4,true",
+            ],
+            "is boolean, the key takes float",
+        ),
+        (
+            &["--world", "short_course", "--grid", empty],
+            "`arbiter.cruise_speed_mps` is swept over no values",
+        ),
+        (
+            &["--world", "short_course", "--grid", none],
+            "lists no keys",
+        ),
+        (&["--world", broken], "broken.toml"),
+        (
+            &["--world", "no_such_world"],
+            "no embedded world named \"no_such_world\"",
+        ),
+        (&["--set", "arbiter.cruise_speed_mps=3"], "no worlds"),
+    ];
+    for (args, expect) in cases {
+        let out = temp_dir("sweep-bad");
+        std::fs::remove_dir(&out).unwrap();
+        let refused = run(args, &out);
+        let stderr = text(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(expect), "{args:?}: {stderr}");
+        assert!(!out.exists(), "{args:?}: a run started");
+    }
+}
