@@ -442,14 +442,25 @@ fn listening<T, R: Send>(
     listen: impl FnOnce(&AtomicBool, &mpsc::Sender<()>) -> R + Send,
     body: impl FnOnce() -> T,
 ) -> (T, R) {
+    /// Tells the listener to stop however `body` ends (a failed assertion
+    /// in it must not leave the test waiting for the listener forever).
+    struct StopOnDrop<'a>(&'a AtomicBool);
+    impl Drop for StopOnDrop<'_> {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
     let stop = AtomicBool::new(false);
     let (ready_tx, ready) = mpsc::channel();
     std::thread::scope(|scope| {
         let listener = scope.spawn(|| ns.run(|| listen(&stop, &ready_tx)));
         ready.recv().unwrap();
-        let out = body();
-        std::thread::sleep(Duration::from_millis(300));
-        stop.store(true, Ordering::Relaxed);
+        let out = {
+            let _stop = StopOnDrop(&stop);
+            let out = body();
+            std::thread::sleep(Duration::from_millis(300));
+            out
+        };
         (out, listener.join().unwrap())
     })
 }
@@ -1406,4 +1417,135 @@ fn an_attacker_on_an_authenticated_bus_changes_no_command() {
             "python verifier: no {reason}"
         );
     }
+}
+
+// ---------------------------------------------------------------------------
+// A behaviour in Python.
+
+/// A child process that does not outlive a failed test.
+struct KillOnDrop(Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The mean heading of the log's poses, rad.
+fn mean_heading(log: &Path) -> f64 {
+    use arcnav_bus::lcmtypes::pose_t;
+    let mut reader = LogReader::open(log).unwrap();
+    let (mut s, mut c) = (0.0, 0.0);
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::POSE {
+            let q = pose_t::decode(&event.data).unwrap().orientation;
+            let yaw =
+                (2.0 * (q[0] * q[3] + q[1] * q[2])).atan2(1.0 - 2.0 * (q[2] * q[2] + q[3] * q[3]));
+            s += yaw.sin();
+            c += yaw.cos();
+        }
+    }
+    s.atan2(c)
+}
+
+/// `examples/python/heading_hold.py`, run with the reference `lcm` package
+/// beside `arcnav run` and named in `live.external_behaviours`: it gets the
+/// local map each cycle, its votes reach the arbiter, and with its weight
+/// they pull the decisions towards its heading (60° left of the course);
+/// every other behaviour's votes are as in the lock-step replay without it.
+#[test]
+fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
+    let mut config = config(SensorPreset::Erim, true);
+    config.live.external_behaviours = vec!["heading_hold".into()];
+    config.arbiter.weights.insert("heading_hold".into(), 1.0);
+    let Some(net) = Net::erim("python", config) else {
+        return;
+    };
+    let types = net.reference.generate_python(
+        &std::fs::read_dir(arcnav_testkit::workspace_root().join("bus/lcmtypes"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect::<Vec<_>>(),
+        &temp_dir("python-types"),
+    );
+    let heading = mean_heading(&net.log) + 60f64.to_radians();
+    let json = temp_dir("python-run").join("run.json");
+    let (python_stderr, received) = recording(&net.ns, || {
+        let mut python = KillOnDrop(
+            net.ns
+                .command(net.reference.python_path())
+                .arg(arcnav_testkit::workspace_root().join("examples/python/heading_hold.py"))
+                .args(["--heading-deg", &heading.to_degrees().to_string()])
+                .env("PYTHONPATH", &types)
+                .env("PYTHONUNBUFFERED", "1")
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let mut lines = BufReader::new(python.0.stderr.take().unwrap()).lines();
+        let first = lines.next().unwrap().unwrap();
+        assert!(first.contains("holding heading"), "{first}");
+        let run = net.arcnav("run", &["run", "--json", json.to_str().unwrap()]);
+        run.wait_ready();
+        assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
+        std::thread::sleep(Duration::from_millis(300));
+        run.signal("TERM");
+        let (code, _) = run.finish();
+        assert_eq!(code, Some(0));
+        Command::new("kill")
+            .args(["-TERM", &python.0.id().to_string()])
+            .status()
+            .unwrap();
+        let stderr: Vec<String> = lines.map_while(Result::ok).collect();
+        let status = python.0.wait().unwrap();
+        assert!(status.success(), "heading_hold: {status}\n{}", stderr.join("\n"));
+        stderr.join("\n")
+    });
+    eprintln!("heading_hold: {python_stderr}");
+    // It voted on every cycle, and the arbiter took its votes.
+    assert!(
+        counter(&json, "external_votes") >= 190,
+        "{}",
+        std::fs::read_to_string(&json).unwrap()
+    );
+    let voted: u64 = python_stderr
+        .rsplit("voted on ")
+        .next()
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap();
+    assert!(voted >= 190, "{python_stderr}");
+
+    // Against lock-step without it: decisions moved, and to the left.
+    let without = lockstep(&net.log, &{
+        let mut c = net.config.clone();
+        c.live.external_behaviours.clear();
+        c
+    });
+    let with = by_time(&received);
+    let (mut compared, mut moved, mut shift) = (0, 0, 0.0);
+    for (t, base) in &without {
+        let Some(got) = with.get(t) else { continue };
+        if got.is_stop() || base.is_stop() {
+            continue;
+        }
+        compared += 1;
+        if got.arc_index != base.arc_index {
+            moved += 1;
+        }
+        shift += got.curvature - base.curvature;
+    }
+    let mean_shift = shift / f64::from(compared.max(1));
+    eprintln!(
+        "with heading_hold at weight 1: {moved} of {compared} driving decisions moved, mean curvature shift {mean_shift:+.4} 1/m"
+    );
+    assert!(compared >= 150, "{compared} decisions compared");
+    assert!(moved * 5 >= compared, "only {moved} of {compared} moved");
+    assert!(
+        mean_shift > 0.005,
+        "not towards the left: {mean_shift:+.4} 1/m"
+    );
 }

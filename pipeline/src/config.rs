@@ -90,6 +90,12 @@ pub struct LiveConfig {
     /// a sleep takes much longer than one after another (2-vCPU VM,
     /// 128×2048 at 10 Hz, image arrival to command: median 2.9-3.2 → 2.0-2.5 ms).
     pub perception_busy_poll: bool,
+    /// Behaviours that run in processes of their own (a Python script, a
+    /// program in another language): they take LOCAL_MAP and publish their
+    /// votes on ARC_VOTES_<NAME> with `behaviour` = NAME. The arbiter fuses
+    /// them with their weight in `[arbiter.weights]` (and waits for them
+    /// like any other), and `arcnav run` publishes LOCAL_MAP for them.
+    pub external_behaviours: Vec<String>,
 }
 
 impl Default for LiveConfig {
@@ -103,6 +109,7 @@ impl Default for LiveConfig {
             status_period_s: 10.0,
             queue_capacity: 1024,
             perception_busy_poll: false,
+            external_behaviours: Vec::new(),
         }
     }
 }
@@ -119,6 +126,28 @@ impl LiveConfig {
                 "queue_capacity",
                 format!("is {}, must be 8 to 1000000", self.queue_capacity),
             ));
+        }
+        for (i, name) in self.external_behaviours.iter().enumerate() {
+            let plain = !name.is_empty()
+                && name.len() <= 64
+                && name
+                    .bytes()
+                    .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_');
+            if !plain {
+                return Err(ConfigError::new(
+                    "external_behaviours",
+                    format!(
+                        "{name:?} is not a behaviour name: lower-case letters, digits and _ \
+                         (its votes come on ARC_VOTES_<NAME in upper case>)"
+                    ),
+                ));
+            }
+            if self.external_behaviours[..i].contains(name) {
+                return Err(ConfigError::new(
+                    "external_behaviours",
+                    format!("{name:?} is listed twice"),
+                ));
+            }
         }
         Ok(())
     }

@@ -250,14 +250,24 @@ impl Config {
         Ok(PreparedBehaviours(Arc::new(prepared)))
     }
 
-    /// Every name the arbiter's section gives must be a configured behaviour.
+    /// Every name the arbiter's section gives must be a configured behaviour
+    /// (weights may also name `live.external_behaviours`; `required` may
+    /// not: `arcnav sim` and `arcnav replay` run without them).
     fn arbiter_names_behaviours(&self) -> Result<(), ConfigError> {
         let known = || {
-            self.behaviours
+            let mut known = self
+                .behaviours
                 .keys()
                 .cloned()
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join(", ");
+            if !self.live.external_behaviours.is_empty() {
+                known.push_str(&format!(
+                    "; external: {}",
+                    self.live.external_behaviours.join(", ")
+                ));
+            }
+            known
         };
         let unknown = |key: String, name: &str| {
             ConfigError::new(
@@ -268,12 +278,9 @@ impl Config {
                 ),
             )
         };
-        if let Some(name) = self
-            .arbiter
-            .weights
-            .keys()
-            .find(|name| !self.behaviours.contains_key(*name))
-        {
+        if let Some(name) = self.arbiter.weights.keys().find(|name| {
+            !self.behaviours.contains_key(*name) && !self.live.external_behaviours.contains(name)
+        }) {
             return Err(unknown(format!("arbiter.weights.{name}"), name));
         }
         if let Some(name) = self
@@ -333,6 +340,20 @@ impl Config {
         }
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
         self.live.validate().map_err(|e| e.within("live"))?;
+        if let Some(name) = self
+            .live
+            .external_behaviours
+            .iter()
+            .find(|name| self.behaviours.contains_key(*name))
+        {
+            return Err(ConfigError::new(
+                "live.external_behaviours",
+                format!(
+                    "{name:?} is also configured under [behaviours.{name}]: one behaviour, one \
+                     process (remove one of them)"
+                ),
+            ));
+        }
         self.bus.validate().map_err(|e| e.within("bus"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
         Ok(())

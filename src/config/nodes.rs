@@ -94,6 +94,7 @@ impl Config {
     pub fn expected_behaviours(&self) -> Vec<String> {
         self.behaviours
             .keys()
+            .chain(&self.live.external_behaviours)
             .filter(|name| self.arbiter.weight(name) > 0.0)
             .cloned()
             .collect()

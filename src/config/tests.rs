@@ -216,6 +216,44 @@ fn a_weight_or_required_name_that_is_no_configured_behaviour_is_refused() {
 }
 
 #[test]
+fn external_behaviours_are_weighted_and_expected_but_never_required_or_doubled() {
+    let config = Config::from_toml(
+        "[live]\nexternal_behaviours = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.5\n",
+        "t",
+    )
+    .unwrap();
+    assert!(config.expected_behaviours().contains(&"heading_hold".to_owned()));
+    let unweighted = Config::from_toml(
+        "[live]\nexternal_behaviours = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.0\n",
+        "t",
+    )
+    .unwrap();
+    assert!(!unweighted.expected_behaviours().contains(&"heading_hold".to_owned()));
+    for (toml, expect) in [
+        (
+            "[live]\nexternal_behaviours = [\"Heading Hold\"]\n",
+            "\"Heading Hold\" is not a behaviour name",
+        ),
+        (
+            "[live]\nexternal_behaviours = [\"x\", \"x\"]\n",
+            "\"x\" is listed twice",
+        ),
+        (
+            "[live]\nexternal_behaviours = [\"route\"]\n",
+            "\"route\" is also configured under [behaviours.route]",
+        ),
+        (
+            "[live]\nexternal_behaviours = [\"x\"]\n[arbiter]\nrequired = [\"x\"]\n",
+            "`arbiter.required`: \"x\" is not a configured behaviour (configured: goal_seeking, \
+             obstacle_avoidance, route; external: x)",
+        ),
+    ] {
+        let msg = parse_error(toml);
+        assert!(msg.contains(expect), "{msg}");
+    }
+}
+
+#[test]
 fn a_weights_table_changes_only_the_weights_it_names() {
     let config = Config::from_toml("[arbiter.weights]\ngoal_seeking = 0.8\n", "t").unwrap();
     assert_eq!(config.arbiter.weight("goal_seeking"), 0.8);

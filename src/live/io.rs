@@ -10,8 +10,8 @@ use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_bus::transport::{Lcm, Publisher, ReceivedMessage};
 use arcnav_perception::RangeImage;
 use arcnav_pipeline::{Decided, LiveConfig, Why};
-use arcnav_vehicle::Pose;
 use arcnav_vehicle::time::seconds_to_micros;
+use arcnav_vehicle::{ArcSet, Pose};
 use crossbeam_channel::Sender;
 
 use super::NodeStatus;
@@ -159,6 +159,15 @@ pub(crate) struct IoRoutes {
     pub images: Option<NewestWins<Arrived<RangeImage>>>,
     pub waypoints: Option<Sender<Mission>>,
     pub(crate) arbiter: Option<Sender<ToArbiter>>,
+    /// Behaviours in processes of their own, whose votes go to `arbiter`.
+    pub external: Option<External>,
+}
+
+/// Behaviours that vote from other processes, and the arc set their votes
+/// must match.
+pub struct External {
+    pub names: Vec<String>,
+    pub arcs: ArcSet,
 }
 
 impl IoRoutes {
@@ -172,6 +181,9 @@ impl IoRoutes {
         }
         if self.waypoints.is_some() {
             lcm.subscribe(channels::WAYPOINTS);
+        }
+        for name in self.external.iter().flat_map(|e| &e.names) {
+            lcm.subscribe(&channels::arc_votes(name));
         }
         Ok(())
     }
@@ -187,7 +199,7 @@ pub(crate) fn io_loop(
     let mut status = NodeStatus::new("io");
     let mut ticker = Ticker::new(live.status_period_s, options.clock().now_us());
     let (mut poses, mut images, mut queue_full) = (0u64, 0u64, 0u64);
-    let mut refused = 0u64;
+    let (mut refused, mut external_votes) = (0u64, 0u64);
     let result = pump(
         lcm,
         options,
@@ -241,6 +253,35 @@ pub(crate) fn io_loop(
                             refused += 1;
                         }
                     },
+                    Some(AnyMessage::ArcVotes(msg)) => match (&routes.external, &routes.arbiter) {
+                        (Some(external), Some(arbiter))
+                            if channels::arc_votes(&msg.behaviour) == message.channel
+                                && external.names.contains(&msg.behaviour) =>
+                        {
+                            match wire::votes_from_wire(&msg, &external.arcs) {
+                                Ok(votes) => {
+                                    external_votes += 1;
+                                    let votes = ToArbiter::Votes {
+                                        votes: vec![votes],
+                                        images: Vec::new(),
+                                    };
+                                    offer(arbiter, votes, &mut queue_full);
+                                }
+                                Err(e) => {
+                                    tracing::warn!(%e, channel = %message.channel, "votes refused");
+                                    refused += 1;
+                                }
+                            }
+                        }
+                        _ => {
+                            tracing::warn!(
+                                channel = %message.channel,
+                                behaviour = %msg.behaviour,
+                                "votes refused: not an external behaviour's, on its own channel"
+                            );
+                            refused += 1;
+                        }
+                    },
                     _ => refused += 1,
                 };
             }
@@ -261,6 +302,9 @@ pub(crate) fn io_loop(
     status.set("poses", poses);
     status.set("images", images);
     status.set("refused", refused);
+    if routes.external.is_some() {
+        status.set("external_votes", external_votes);
+    }
     status.set("queue_full", queue_full);
     status.set("incomplete_messages", transport.reassembly.incomplete);
     status.set("malformed_datagrams", transport.reassembly.malformed);

@@ -39,10 +39,12 @@ use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, select};
 
 use super::clock::{Clock, SharedClock, WallClock};
 use super::handoff::{self, Arrived, Handoff};
-use super::io::{IoRoutes, Ticker, io_loop, publish_command};
+use super::io::{External, IoRoutes, Ticker, io_loop, publish_command};
 use super::workers::{MapStage, map_worker, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
 use crate::config::Config;
+use crate::wire;
+use arcnav_bus::messages::channels;
 
 /// A live executor that cannot run.
 #[derive(Debug, thiserror::Error)]
@@ -137,6 +139,7 @@ pub fn run(
     let perception = perception_node(config)?;
     let map = MapStage::new(config);
     let behaviours = config.behaviour_set(registry)?;
+    let arcs = config.arc_set()?;
     let arbiter = ArbiterNode::new(
         config.arbiter()?,
         config.expected_behaviours(),
@@ -209,6 +212,7 @@ pub fn run(
                 .reproduce_lockstep
                 .then(|| Duration::from_secs_f64(config.arbiter.vote_timeout_s)),
             awaiting: None,
+            map_out: (!live.external_behaviours.is_empty()).then(|| lcm.publisher()),
         };
         let arbiter_tx = arbiter_tx.clone();
         let period = live.status_period_s;
@@ -231,12 +235,17 @@ pub fn run(
         })?
     };
 
+    let external = (!live.external_behaviours.is_empty()).then(|| External {
+        names: live.external_behaviours.clone(),
+        arcs: arcs.clone(),
+    });
     let routes = IoRoutes {
         perception_poses: Some(perception_poses_tx),
         map_poses: Some(map_poses_tx),
         images: Some(image_slot),
         waypoints: Some(waypoints_tx),
         arbiter: Some(arbiter_tx),
+        external,
     };
     routes.subscribe(&mut lcm)?;
     let io_status = io_loop(&mut lcm, options, &live, routes);
@@ -272,6 +281,8 @@ struct Voter {
     /// cycle voted on last (`awaiting`).
     debrief_wait: Option<Duration>,
     awaiting: Option<Utime>,
+    /// Publishes each cycle's LOCAL_MAP for behaviours in other processes.
+    map_out: Option<Publisher>,
 }
 
 impl Voter {
@@ -302,6 +313,12 @@ impl Voter {
                         self.awaiting = Some(cycle.utime);
                     }
                     let _ = arbiter.send(ToArbiter::Votes { votes, images: cycle.images });
+                    if let Some(out) = &self.map_out {
+                        let msg = wire::map_to_wire(cycle.utime, &cycle.pose, &cycle.map, cycle.resets);
+                        if let Err(e) = out.publish_message(channels::LOCAL_MAP, &msg) {
+                            tracing::error!(%e, "cannot publish the local map");
+                        }
+                    }
                 },
                 recv(self.commands) -> command => {
                     if let Ok(command) = command {
