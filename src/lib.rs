@@ -12,6 +12,7 @@
 
 pub mod config;
 #[doc(hidden)]
+pub mod export;
 pub mod fuzzing;
 pub mod live;
 pub mod mission;

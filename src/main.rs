@@ -72,6 +72,12 @@ enum Command {
     /// Picture of one decision of a log: the local map, the vehicle, the arcs
     /// coloured by fused vote, each behaviour's votes and who vetoed what.
     Render(RenderArgs),
+    /// Write an LCM log as MCAP, the format Foxglove opens: range images as
+    /// point clouds in the vehicle frame, obstacle cells, local map and
+    /// waypoints as 3-D scenes, the pose and world → vehicle transforms, the
+    /// arcs coloured by fused vote, each behaviour's votes and the command as
+    /// plottable series. Every message keeps its log time.
+    Export(ExportArgs),
     /// Print the effective configuration (defaults merged with FILE) as TOML,
     /// or validate FILE with --check.
     Config {
@@ -120,6 +126,22 @@ struct SimArgs {
     /// Save the world (e.g. a generated one) as TOML to this file.
     #[arg(long, value_name = "FILE")]
     save_world: Option<PathBuf>,
+    /// Also write the run as MCAP for Foxglove to this file (as arcnav export).
+    #[arg(long, value_name = "FILE")]
+    mcap: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+struct ExportArgs {
+    /// The LCM event log (arcnav sim's mission.lcm, lcm-logger's, arcnav replay --out's).
+    log: PathBuf,
+    /// The MCAP file to write.
+    #[arg(long, value_name = "FILE")]
+    mcap: PathBuf,
+    /// Configuration (arc set and arbiter weights for the fused votes drawn
+    /// on /arcs; default: the defaults).
+    #[arg(long)]
+    config: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -355,6 +377,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Sweep(args) => cli::sweep(args),
         Command::Replay(args) => cli::replay(args),
         Command::Render(args) => cli::render(args),
+        Command::Export(args) => cli::export(args),
         Command::Run(args) => cli::live(None, args),
         Command::Vehicle(args) => cli::vehicle(args),
         Command::Node { node } => match node {

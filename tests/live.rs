@@ -1501,7 +1501,11 @@ fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
             .unwrap();
         let stderr: Vec<String> = lines.map_while(Result::ok).collect();
         let status = python.0.wait().unwrap();
-        assert!(status.success(), "heading_hold: {status}\n{}", stderr.join("\n"));
+        assert!(
+            status.success(),
+            "heading_hold: {status}\n{}",
+            stderr.join("\n")
+        );
         stderr.join("\n")
     });
     eprintln!("heading_hold: {python_stderr}");

@@ -8,7 +8,7 @@ mod sim;
 mod sweep;
 
 pub use live::{live, vehicle};
-pub use render::render;
+pub use render::{export, render};
 pub use replay::replay;
 pub use sim::sim;
 pub use sweep::sweep;

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use crate::RenderArgs;
+use crate::{ExportArgs, RenderArgs};
 use arcnav::Config;
 use arcnav_behaviours::Registry;
 
@@ -63,4 +63,54 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// `arcnav export LOG --mcap OUT`.
+pub fn export(args: ExportArgs) -> anyhow::Result<ExitCode> {
+    let registry = Registry::builtin();
+    let config = match &args.config {
+        Some(p) => Config::load_with(p, &registry)?,
+        None => Config::default(),
+    };
+    let mut inputs = vec![("the log", args.log.as_path())];
+    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
+    arcnav::output::check_outputs(&[&args.mcap], &inputs)?;
+    write_mcap(&args.log, &args.mcap, &config)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Exports `log` to `mcap` and says what it wrote and skipped.
+pub(crate) fn write_mcap(
+    log: &std::path::Path,
+    mcap: &std::path::Path,
+    config: &Config,
+) -> anyhow::Result<()> {
+    let summary = arcnav::export::export_mcap(log, mcap, config)?;
+    anyhow::ensure!(
+        summary.events > 0,
+        "no LCM event could be read from {} ({} bytes skipped as damaged): is it an LCM log?",
+        log.display(),
+        summary.damaged_bytes
+    );
+    let written: u64 = summary.topics.values().sum();
+    println!(
+        "{}: {written} messages on {} topics from {} events of {}",
+        mcap.display(),
+        summary.topics.len(),
+        summary.events,
+        log.display()
+    );
+    for (topic, n) in &summary.topics {
+        println!("  {topic:<34} {n}");
+    }
+    for (channel, (n, why)) in &summary.skipped {
+        eprintln!("  skipped {n} on {channel}: {why}");
+    }
+    if summary.damaged_bytes > 0 {
+        eprintln!(
+            "  skipped {} damaged bytes of the log",
+            summary.damaged_bytes
+        );
+    }
+    Ok(())
 }

@@ -137,6 +137,9 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     let map_path = out.join("map.png");
     arcnav::render::mission_picture(&map_path, &world, &run)?;
     print_summary(&run.report, &out, &run.snapshots);
+    if let Some(mcap) = &args.mcap {
+        super::render::write_mcap(&out.join("mission.lcm"), mcap, &config)?;
+    }
     Ok(if run.report.success {
         ExitCode::SUCCESS
     } else {

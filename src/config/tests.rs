@@ -222,13 +222,21 @@ fn external_behaviours_are_weighted_and_expected_but_never_required_or_doubled()
         "t",
     )
     .unwrap();
-    assert!(config.expected_behaviours().contains(&"heading_hold".to_owned()));
+    assert!(
+        config
+            .expected_behaviours()
+            .contains(&"heading_hold".to_owned())
+    );
     let unweighted = Config::from_toml(
         "[live]\nexternal_behaviours = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.0\n",
         "t",
     )
     .unwrap();
-    assert!(!unweighted.expected_behaviours().contains(&"heading_hold".to_owned()));
+    assert!(
+        !unweighted
+            .expected_behaviours()
+            .contains(&"heading_hold".to_owned())
+    );
     for (toml, expect) in [
         (
             "[live]\nexternal_behaviours = [\"Heading Hold\"]\n",

@@ -1,0 +1,533 @@
+//! `arcnav export LOG --mcap OUT`: an LCM log as an MCAP file that Foxglove
+//! opens as a scene, written through Foxglove's own SDK (the `foxglove`
+//! crate: its MCAP writer and its published protobuf schemas).
+//!
+//! | LCM channel | MCAP topic | schema |
+//! |---|---|---|
+//! | POSE | `/pose` (world frame) and `/tf` (world → vehicle) | `foxglove.PoseInFrame`, `foxglove.FrameTransforms` |
+//! | RANGE_IMAGE* | `/range_image*`: x, y, z, range per return, vehicle frame | `foxglove.PointCloud` |
+//! | OBSTACLE_CELLS | `/obstacle_cells`: a cube per cell, world frame | `foxglove.SceneUpdate` |
+//! | LOCAL_MAP | `/local_map`: a cube per patch, world frame | `foxglove.SceneUpdate` |
+//! | WAYPOINTS | `/waypoints`: a sphere per waypoint, arrival radius | `foxglove.SceneUpdate` |
+//! | ARC_VOTES_NAME | `/arc_votes_name`: votes, vetoes, speed vote | JSON (`arcnav.ArcVotes`) |
+//! | STEERING_COMMAND | `/steering_command`: curvature, speed, arc, vote | JSON (`arcnav.SteeringCommand`) |
+//! | STEERING_COMMAND | `/arcs`: every arc coloured by the fused vote of that cycle's logged votes, the chosen one wider, vehicle frame | `foxglove.SceneUpdate` |
+//!
+//! Each message keeps its log time; each topic holds as many messages as
+//! its channel in the log. Messages on channels that are not arcnav's, or
+//! that do not decode, are counted and skipped.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use arcnav_arbiter::Arbiter;
+use arcnav_bus::log::LogReader;
+use arcnav_bus::messages::AnyMessage;
+use arcnav_vehicle::{ArcSet, Isometry};
+use foxglove::schemas::{
+    Color, CubePrimitive, FrameTransform, FrameTransforms, LinePrimitive, PackedElementField,
+    Point3, Pose, PoseInFrame, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp,
+    Vector3, line_primitive, packed_element_field,
+};
+use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
+use serde::Serialize;
+
+use crate::config::Config;
+use crate::wire;
+
+/// An export that could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("cannot write {path}: {reason}")]
+    Write { path: String, reason: String },
+    #[error("invalid configuration: {0}")]
+    Config(#[from] arcnav_vehicle::ConfigError),
+}
+
+/// What an export wrote and skipped.
+#[derive(Debug, Default, Clone, Serialize)]
+pub struct ExportSummary {
+    pub events: u64,
+    /// Messages written per topic.
+    pub topics: BTreeMap<String, u64>,
+    /// Events skipped, per channel, with why.
+    pub skipped: BTreeMap<String, (u64, String)>,
+    /// Bytes of the log that were not LCM events.
+    pub damaged_bytes: u64,
+}
+
+impl ExportSummary {
+    fn skip(&mut self, channel: &str, why: impl Into<String>) {
+        let entry = self
+            .skipped
+            .entry(channel.to_owned())
+            .or_insert((0, why.into()));
+        entry.0 += 1;
+    }
+}
+
+/// The topic of an LCM channel.
+pub fn topic(channel: &str) -> String {
+    format!("/{}", channel.to_ascii_lowercase())
+}
+
+fn timestamp(utime: i64) -> Timestamp {
+    let utime = u64::try_from(utime).unwrap_or(0);
+    Timestamp::new_checked(
+        u32::try_from(utime / 1_000_000).unwrap_or(u32::MAX),
+        u32::try_from((utime % 1_000_000) * 1000).unwrap_or(0),
+    )
+    .unwrap_or(Timestamp::MAX)
+}
+
+fn nanos(utime: i64) -> u64 {
+    u64::try_from(utime).unwrap_or(0).saturating_mul(1000)
+}
+
+fn rgba(c: [f64; 4]) -> Color {
+    Color {
+        r: c[0],
+        g: c[1],
+        b: c[2],
+        a: c[3],
+    }
+}
+
+fn at(x: f64, y: f64, z: f64) -> Option<Pose> {
+    Some(Pose {
+        position: Some(Vector3 { x, y, z }),
+        orientation: Some(Quaternion {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            w: 1.0,
+        }),
+    })
+}
+
+/// Red (-1) through yellow (0) to green (+1), as `arcnav render` draws votes.
+fn vote_color(v: f32) -> Color {
+    let [r, g, b, _] = crate::render::vote_color(v);
+    rgba([
+        f64::from(r) / 255.0,
+        f64::from(g) / 255.0,
+        f64::from(b) / 255.0,
+        1.0,
+    ])
+}
+
+/// The typed channels, made as their topics first appear.
+struct Topics {
+    ctx: Arc<Context>,
+    transforms: Option<Channel<FrameTransforms>>,
+    poses: Option<Channel<PoseInFrame>>,
+    clouds: BTreeMap<String, Channel<foxglove::schemas::PointCloud>>,
+    scenes: BTreeMap<String, Channel<SceneUpdate>>,
+    json: BTreeMap<String, Arc<RawChannel>>,
+}
+
+impl Topics {
+    fn scene(&mut self, topic: &str) -> &Channel<SceneUpdate> {
+        let ctx = &self.ctx;
+        self.scenes
+            .entry(topic.to_owned())
+            .or_insert_with(|| ctx.channel_builder(topic).build())
+    }
+
+    fn json(&mut self, topic: &str, schema_name: &str, schema: &'static str) -> Arc<RawChannel> {
+        let ctx = &self.ctx;
+        if let Some(channel) = self.json.get(topic) {
+            return Arc::clone(channel);
+        }
+        let channel = ctx
+            .channel_builder(topic)
+            .message_encoding("json")
+            .schema(Schema::new(schema_name, "jsonschema", schema.as_bytes()))
+            .build_raw();
+        match channel {
+            Ok(channel) => {
+                self.json.insert(topic.to_owned(), Arc::clone(&channel));
+                channel
+            }
+            // Topics are unique here; the SDK refuses only a duplicate.
+            Err(e) => unreachable!("a new JSON topic {topic}: {e}"),
+        }
+    }
+}
+
+const VOTES_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"behaviour":{"type":"string"},"curvature":{"type":"array","items":{"type":"number"}},"votes":{"type":"array","items":{"type":"number"}},"vetoed":{"type":"array","items":{"type":"boolean"}},"speed_vote":{"type":["number","null"]}}}"#;
+const COMMAND_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"curvature":{"type":"number"},"speed_mps":{"type":"number"},"arc_index":{"type":"integer"},"vote":{"type":"number"}}}"#;
+
+/// Writes `log` as MCAP to `out`; the arc set and the fused votes follow
+/// `config`.
+pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSummary, ExportError> {
+    let arcs = config.arc_set()?;
+    let mut arbiter: Arbiter = config.arbiter()?;
+    let mut reader = LogReader::open(log).map_err(|source| ExportError::Read {
+        path: log.display().to_string(),
+        source,
+    })?;
+    let write_error = |reason: String| ExportError::Write {
+        path: out.display().to_string(),
+        reason,
+    };
+    let ctx = Context::new();
+    let writer = ctx
+        .mcap_writer()
+        .create_new_buffered_file(out)
+        .map_err(|e| write_error(e.to_string()))?;
+    let mut topics = Topics {
+        ctx: Arc::clone(&ctx),
+        transforms: None,
+        poses: None,
+        clouds: BTreeMap::new(),
+        scenes: BTreeMap::new(),
+        json: BTreeMap::new(),
+    };
+    let mut summary = ExportSummary::default();
+    loop {
+        let event = match reader.next_event() {
+            Ok(Some(event)) => event,
+            Ok(None) => break,
+            Err(source) => {
+                return Err(ExportError::Read {
+                    path: log.display().to_string(),
+                    source,
+                });
+            }
+        };
+        summary.events += 1;
+        let time = PartialMetadata::with_log_time(nanos(event.timestamp));
+        let message = match AnyMessage::decode(&event.data) {
+            Ok(Some(m)) if m.on_its_channel(&event.channel) => m,
+            Ok(Some(m)) => {
+                summary.skip(
+                    &event.channel,
+                    format!("a {} on a channel not arcnav's for it", m.type_name()),
+                );
+                continue;
+            }
+            Ok(None) => {
+                summary.skip(&event.channel, "not an arcnav message type");
+                continue;
+            }
+            Err(e) => {
+                summary.skip(&event.channel, format!("does not decode: {e}"));
+                continue;
+            }
+        };
+        let mut wrote = |topic: &str| *summary.topics.entry(topic.to_owned()).or_default() += 1;
+        match message {
+            AnyMessage::Pose(msg) => {
+                let [w, x, y, z] = msg.orientation;
+                let [px, py, pz] = msg.position;
+                let rotation = Some(Quaternion { x, y, z, w });
+                let translation = Some(Vector3 {
+                    x: px,
+                    y: py,
+                    z: pz,
+                });
+                let transforms = topics
+                    .transforms
+                    .get_or_insert_with(|| ctx.channel_builder("/tf").build());
+                transforms.log_with_meta(
+                    &FrameTransforms {
+                        transforms: vec![FrameTransform {
+                            timestamp: Some(timestamp(msg.utime)),
+                            parent_frame_id: "world".into(),
+                            child_frame_id: "vehicle".into(),
+                            translation,
+                            rotation,
+                        }],
+                    },
+                    time,
+                );
+                wrote("/tf");
+                let poses = topics
+                    .poses
+                    .get_or_insert_with(|| ctx.channel_builder("/pose").build());
+                poses.log_with_meta(
+                    &PoseInFrame {
+                        timestamp: Some(timestamp(msg.utime)),
+                        frame_id: "world".into(),
+                        pose: Some(Pose {
+                            position: translation,
+                            orientation: rotation,
+                        }),
+                    },
+                    time,
+                );
+                wrote("/pose");
+            }
+            AnyMessage::RangeImage(msg) => {
+                let topic = topic(&event.channel);
+                match wire::range_image_from_wire(msg) {
+                    Ok(image) => {
+                        let cloud = point_cloud(&image);
+                        let ctx = &ctx;
+                        topics
+                            .clouds
+                            .entry(topic.clone())
+                            .or_insert_with(|| ctx.channel_builder(topic.as_str()).build())
+                            .log_with_meta(&cloud, time);
+                        wrote(&topic);
+                    }
+                    Err(e) => summary.skip(&event.channel, format!("range image refused: {e}")),
+                }
+            }
+            AnyMessage::ObstacleCells(msg) => {
+                let cubes = msg
+                    .cells
+                    .iter()
+                    .map(|c| {
+                        let height = f64::from((c.z_max - c.z_min).max(0.05));
+                        CubePrimitive {
+                            pose: at(c.x, c.y, f64::from(c.z_min) + height / 2.0),
+                            size: Some(Vector3 {
+                                x: f64::from(msg.cell_size),
+                                y: f64::from(msg.cell_size),
+                                z: height,
+                            }),
+                            color: Some(rgba([0.85, 0.15, 0.1, 0.8])),
+                        }
+                    })
+                    .collect();
+                let entity = SceneEntity {
+                    timestamp: Some(timestamp(msg.utime)),
+                    frame_id: "world".into(),
+                    id: format!("cells {}", msg.sensor),
+                    cubes,
+                    ..SceneEntity::default()
+                };
+                topics.scene("/obstacle_cells").log_with_meta(
+                    &SceneUpdate {
+                        deletions: Vec::new(),
+                        entities: vec![entity],
+                    },
+                    time,
+                );
+                wrote("/obstacle_cells");
+            }
+            AnyMessage::LocalMap(msg) => {
+                let cubes = msg
+                    .patches
+                    .iter()
+                    .map(|p| {
+                        let height = f64::from((p.z_max - p.z_min).max(0.05));
+                        CubePrimitive {
+                            pose: at(p.world_x, p.world_y, f64::from(p.z_min) + height / 2.0),
+                            size: Some(Vector3 {
+                                x: f64::from(msg.patch_size),
+                                y: f64::from(msg.patch_size),
+                                z: height,
+                            }),
+                            color: Some(rgba([0.55, 0.2, 0.65, 0.6])),
+                        }
+                    })
+                    .collect();
+                let entity = SceneEntity {
+                    timestamp: Some(timestamp(msg.utime)),
+                    frame_id: "world".into(),
+                    id: "local_map".into(),
+                    cubes,
+                    ..SceneEntity::default()
+                };
+                topics.scene("/local_map").log_with_meta(
+                    &SceneUpdate {
+                        deletions: Vec::new(),
+                        entities: vec![entity],
+                    },
+                    time,
+                );
+                wrote("/local_map");
+            }
+            AnyMessage::Waypoints(msg) => {
+                let spheres = msg
+                    .position
+                    .iter()
+                    .zip(&msg.radius)
+                    .map(|(p, &r)| {
+                        let d = 2.0 * f64::from(r).max(1.0);
+                        SpherePrimitive {
+                            pose: at(p[0], p[1], 0.0),
+                            size: Some(Vector3 { x: d, y: d, z: 0.5 }),
+                            color: Some(rgba([0.1, 0.4, 0.9, 0.5])),
+                        }
+                    })
+                    .collect();
+                let entity = SceneEntity {
+                    timestamp: Some(timestamp(msg.utime)),
+                    frame_id: "world".into(),
+                    id: "waypoints".into(),
+                    spheres,
+                    ..SceneEntity::default()
+                };
+                topics.scene("/waypoints").log_with_meta(
+                    &SceneUpdate {
+                        deletions: Vec::new(),
+                        entities: vec![entity],
+                    },
+                    time,
+                );
+                wrote("/waypoints");
+            }
+            AnyMessage::ArcVotes(msg) => {
+                let topic = topic(&event.channel);
+                if let Ok(votes) = wire::votes_from_wire(&msg, &arcs) {
+                    // Votes over another arc set are drawn but not fused.
+                    let _ = arbiter.on_votes(&votes);
+                }
+                let json = serde_json::json!({
+                    "utime": msg.utime,
+                    "behaviour": msg.behaviour,
+                    "curvature": msg.curvature,
+                    "votes": msg.votes,
+                    "vetoed": msg.vetoed,
+                    "speed_vote": msg.has_speed_vote.then_some(msg.speed_vote),
+                });
+                topics
+                    .json(&topic, "arcnav.ArcVotes", VOTES_SCHEMA)
+                    .log_with_meta(json.to_string().as_bytes(), time);
+                wrote(&topic);
+            }
+            AnyMessage::SteeringCommand(msg) => {
+                let json = serde_json::json!({
+                    "utime": msg.utime,
+                    "curvature": msg.curvature,
+                    "speed_mps": msg.speed,
+                    "arc_index": msg.arc_index,
+                    "vote": msg.vote,
+                });
+                topics
+                    .json(
+                        "/steering_command",
+                        "arcnav.SteeringCommand",
+                        COMMAND_SCHEMA,
+                    )
+                    .log_with_meta(json.to_string().as_bytes(), time);
+                wrote("/steering_command");
+                arbiter.decide(msg.utime);
+                let fused = arbiter
+                    .decision()
+                    .map(|d| d.fused.clone())
+                    .unwrap_or_default();
+                let chosen = usize::try_from(msg.arc_index).ok();
+                let entity = SceneEntity {
+                    timestamp: Some(timestamp(msg.utime)),
+                    frame_id: "vehicle".into(),
+                    id: "arcs".into(),
+                    lines: arc_lines(&arcs, &fused, chosen),
+                    ..SceneEntity::default()
+                };
+                topics.scene("/arcs").log_with_meta(
+                    &SceneUpdate {
+                        deletions: Vec::new(),
+                        entities: vec![entity],
+                    },
+                    time,
+                );
+                wrote("/arcs");
+            }
+        }
+    }
+    let stats = reader.stats();
+    summary.damaged_bytes = stats.skipped_bytes + stats.truncated_tail_bytes;
+    writer.close().map_err(|e| write_error(e.to_string()))?;
+    Ok(summary)
+}
+
+/// Each arc as a 12 m polyline from the vehicle origin, coloured by its
+/// fused vote (grey when there is none), the chosen one wider.
+fn arc_lines(arcs: &ArcSet, fused: &[f32], chosen: Option<usize>) -> Vec<LinePrimitive> {
+    const LENGTH_M: f64 = 12.0;
+    arcs.curvatures()
+        .iter()
+        .enumerate()
+        .map(|(i, &k)| {
+            let points = (0..=24)
+                .map(|s| {
+                    let s = LENGTH_M * f64::from(s) / 24.0;
+                    let (x, y) = if k.abs() < 1e-9 {
+                        (s, 0.0)
+                    } else {
+                        ((k * s).sin() / k, (1.0 - (k * s).cos()) / k)
+                    };
+                    Point3 { x, y, z: 0.3 }
+                })
+                .collect();
+            let color = fused
+                .get(i)
+                .map_or(rgba([0.6, 0.6, 0.6, 0.6]), |&v| vote_color(v));
+            LinePrimitive {
+                r#type: line_primitive::Type::LineStrip as i32,
+                pose: at(0.0, 0.0, 0.0),
+                thickness: if Some(i) == chosen { 0.12 } else { 0.04 },
+                scale_invariant: false,
+                points,
+                color: Some(color),
+                ..LinePrimitive::default()
+            }
+        })
+        .collect()
+}
+
+/// The returns of an image as x, y, z (vehicle frame) and range, float32.
+fn point_cloud(image: &arcnav_perception::RangeImage) -> foxglove::schemas::PointCloud {
+    let mount: &Isometry = &image.vehicle_from_sensor;
+    let cols = image.cols();
+    let mut data = Vec::with_capacity(image.range.len() * 16);
+    for (i, &r) in image.range.iter().enumerate() {
+        if !(r.is_finite() && r > 0.0) {
+            continue;
+        }
+        let Some(d) = image.beams.direction(i / cols, i % cols) else {
+            continue;
+        };
+        let r64 = f64::from(r);
+        let p = mount * nalgebra::Point3::new(d[0] * r64, d[1] * r64, d[2] * r64);
+        for v in [p.x as f32, p.y as f32, p.z as f32, r] {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let field = |name: &str, offset: u32| PackedElementField {
+        name: name.into(),
+        offset,
+        r#type: packed_element_field::NumericType::Float32 as i32,
+    };
+    foxglove::schemas::PointCloud {
+        timestamp: Some(timestamp(image.utime)),
+        frame_id: "vehicle".into(),
+        pose: at(0.0, 0.0, 0.0),
+        point_stride: 16,
+        fields: vec![
+            field("x", 0),
+            field("y", 4),
+            field("z", 8),
+            field("range", 12),
+        ],
+        data: data.into(),
+    }
+}
+
+/// How many returns an image holds (the points of its cloud).
+pub fn returns(image: &arcnav_perception::RangeImage) -> usize {
+    image
+        .range
+        .iter()
+        .enumerate()
+        .filter(|(i, r)| {
+            r.is_finite()
+                && **r > 0.0
+                && image
+                    .beams
+                    .direction(i / image.cols(), i % image.cols())
+                    .is_some()
+        })
+        .count()
+}
