@@ -75,11 +75,14 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
     write_tables(out, &plan, &rows)?;
     if !ran.is_empty() {
         let busy: f64 = ran.iter().map(|r| r.wall_time_s).sum();
+        let cores = elapsed * jobs as f64;
         eprintln!(
-            "{} runs in {elapsed:.1} s with {jobs} at a time: the runs kept {:.0} % of that busy \
-             ({busy:.1} s of simulation)",
+            "{} runs in {elapsed:.1} s, {jobs} at a time: the runs took {busy:.1} s, {:.0} % of \
+             the {cores:.1} s of {jobs} threads; CPU used {:.1} s ({:.0} % of {jobs} cores)",
             ran.len(),
-            100.0 * busy / (elapsed * jobs as f64).max(1e-9)
+            100.0 * busy / cores.max(1e-9),
+            cpu_seconds(),
+            100.0 * cpu_seconds() / cores.max(1e-9)
         );
     }
     print_summary(&plan, &rows);
@@ -384,4 +387,19 @@ fn print_summary(plan: &Plan, rows: &[Row]) {
             s.collisions
         );
     }
+}
+
+/// CPU time this process has used (user + system), s.
+fn cpu_seconds() -> f64 {
+    let mut usage = std::mem::MaybeUninit::<libc::rusage>::zeroed();
+    // SAFETY: getrusage fills the rusage it is given, a valid pointer to
+    // zeroed memory of the right type, and reports failure by its result.
+    let ok = unsafe { libc::getrusage(libc::RUSAGE_SELF, usage.as_mut_ptr()) } == 0;
+    if !ok {
+        return f64::NAN;
+    }
+    // SAFETY: zero-initialised and, getrusage having succeeded, filled.
+    let usage = unsafe { usage.assume_init() };
+    let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    seconds(usage.ru_utime) + seconds(usage.ru_stime)
 }
