@@ -111,6 +111,21 @@ fn at(x: f64, y: f64, z: f64) -> Option<Pose> {
     })
 }
 
+/// A box on the ground cell centred at (x, y), `size` across, from `z_min`
+/// to `z_max` (at least 5 cm tall), world frame.
+fn cell_cube(x: f64, y: f64, size: f32, z: [f32; 2], color: [f64; 4]) -> CubePrimitive {
+    let height = f64::from((z[1] - z[0]).max(0.05));
+    CubePrimitive {
+        pose: at(x, y, f64::from(z[0]) + height / 2.0),
+        size: Some(Vector3 {
+            x: f64::from(size),
+            y: f64::from(size),
+            z: height,
+        }),
+        color: Some(rgba(color)),
+    }
+}
+
 /// Red (-1) through yellow (0) to green (+1), as `arcnav render` draws votes.
 fn vote_color(v: f32) -> Color {
     let [r, g, b, _] = crate::render::vote_color(v);
@@ -133,11 +148,32 @@ struct Topics {
 }
 
 impl Topics {
-    fn scene(&mut self, topic: &str) -> &Channel<SceneUpdate> {
+    /// Logs `entity` (stamped `utime`, in `frame`) as the one entity of a
+    /// scene update on `topic`.
+    fn scene(
+        &mut self,
+        topic: &str,
+        utime: i64,
+        frame: &str,
+        entity: SceneEntity,
+        time: PartialMetadata,
+    ) {
         let ctx = &self.ctx;
+        let entity = SceneEntity {
+            timestamp: Some(timestamp(utime)),
+            frame_id: frame.into(),
+            ..entity
+        };
         self.scenes
             .entry(topic.to_owned())
             .or_insert_with(|| ctx.channel_builder(topic).build())
+            .log_with_meta(
+                &SceneUpdate {
+                    deletions: Vec::new(),
+                    entities: vec![entity],
+                },
+                time,
+            );
     }
 
     fn json(&mut self, topic: &str, schema_name: &str, schema: &'static str) -> Arc<RawChannel> {
@@ -286,32 +322,21 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                     .cells
                     .iter()
                     .map(|c| {
-                        let height = f64::from((c.z_max - c.z_min).max(0.05));
-                        CubePrimitive {
-                            pose: at(c.x, c.y, f64::from(c.z_min) + height / 2.0),
-                            size: Some(Vector3 {
-                                x: f64::from(msg.cell_size),
-                                y: f64::from(msg.cell_size),
-                                z: height,
-                            }),
-                            color: Some(rgba([0.85, 0.15, 0.1, 0.8])),
-                        }
+                        cell_cube(
+                            c.x,
+                            c.y,
+                            msg.cell_size,
+                            [c.z_min, c.z_max],
+                            [0.85, 0.15, 0.1, 0.8],
+                        )
                     })
                     .collect();
                 let entity = SceneEntity {
-                    timestamp: Some(timestamp(msg.utime)),
-                    frame_id: "world".into(),
                     id: format!("cells {}", msg.sensor),
                     cubes,
                     ..SceneEntity::default()
                 };
-                topics.scene("/obstacle_cells").log_with_meta(
-                    &SceneUpdate {
-                        deletions: Vec::new(),
-                        entities: vec![entity],
-                    },
-                    time,
-                );
+                topics.scene("/obstacle_cells", msg.utime, "world", entity, time);
                 wrote("/obstacle_cells");
             }
             AnyMessage::LocalMap(msg) => {
@@ -319,32 +344,22 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                     .patches
                     .iter()
                     .map(|p| {
-                        let height = f64::from((p.z_max - p.z_min).max(0.05));
-                        CubePrimitive {
-                            pose: at(p.world_x, p.world_y, f64::from(p.z_min) + height / 2.0),
-                            size: Some(Vector3 {
-                                x: f64::from(msg.patch_size),
-                                y: f64::from(msg.patch_size),
-                                z: height,
-                            }),
-                            color: Some(rgba([0.55, 0.2, 0.65, 0.6])),
-                        }
+                        let z = [p.z_min, p.z_max];
+                        cell_cube(
+                            p.world_x,
+                            p.world_y,
+                            msg.patch_size,
+                            z,
+                            [0.55, 0.2, 0.65, 0.6],
+                        )
                     })
                     .collect();
                 let entity = SceneEntity {
-                    timestamp: Some(timestamp(msg.utime)),
-                    frame_id: "world".into(),
                     id: "local_map".into(),
                     cubes,
                     ..SceneEntity::default()
                 };
-                topics.scene("/local_map").log_with_meta(
-                    &SceneUpdate {
-                        deletions: Vec::new(),
-                        entities: vec![entity],
-                    },
-                    time,
-                );
+                topics.scene("/local_map", msg.utime, "world", entity, time);
                 wrote("/local_map");
             }
             AnyMessage::Waypoints(msg) => {
@@ -362,19 +377,11 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                     })
                     .collect();
                 let entity = SceneEntity {
-                    timestamp: Some(timestamp(msg.utime)),
-                    frame_id: "world".into(),
                     id: "waypoints".into(),
                     spheres,
                     ..SceneEntity::default()
                 };
-                topics.scene("/waypoints").log_with_meta(
-                    &SceneUpdate {
-                        deletions: Vec::new(),
-                        entities: vec![entity],
-                    },
-                    time,
-                );
+                topics.scene("/waypoints", msg.utime, "world", entity, time);
                 wrote("/waypoints");
             }
             AnyMessage::ArcVotes(msg) => {
@@ -419,19 +426,11 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                     .unwrap_or_default();
                 let chosen = usize::try_from(msg.arc_index).ok();
                 let entity = SceneEntity {
-                    timestamp: Some(timestamp(msg.utime)),
-                    frame_id: "vehicle".into(),
                     id: "arcs".into(),
                     lines: arc_lines(&arcs, &fused, chosen),
                     ..SceneEntity::default()
                 };
-                topics.scene("/arcs").log_with_meta(
-                    &SceneUpdate {
-                        deletions: Vec::new(),
-                        entities: vec![entity],
-                    },
-                    time,
-                );
+                topics.scene("/arcs", msg.utime, "vehicle", entity, time);
                 wrote("/arcs");
             }
         }

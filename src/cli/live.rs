@@ -1,8 +1,6 @@
 //! `arcnav run` and `arcnav node …`: live operation on LCM.
 
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 use crate::{LiveArgs, VehicleArgs};
 use anyhow::Context as _;
@@ -78,14 +76,7 @@ fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
         Some(s) => anyhow::bail!("--duration {s}: must be a positive number of seconds"),
         None => None,
     };
-    let flag = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        // A second signal while shutting down exits at once.
-        signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&flag))
-            .context("cannot install the signal handlers")?;
-        signal_hook::flag::register(signal, Arc::clone(&flag))
-            .context("cannot install the signal handlers")?;
-    }
+    let flag = super::interrupt_flag()?;
     let base = args
         .config
         .as_deref()

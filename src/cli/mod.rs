@@ -12,3 +12,18 @@ pub use render::{export, render};
 pub use replay::replay;
 pub use sim::sim;
 pub use sweep::sweep;
+
+/// Set by the first SIGINT or SIGTERM; a second one while shutting down
+/// exits at once.
+fn interrupt_flag() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use anyhow::Context as _;
+    use std::sync::Arc;
+    let flag = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&flag))
+            .context("cannot install the signal handlers")?;
+        signal_hook::flag::register(signal, Arc::clone(&flag))
+            .context("cannot install the signal handlers")?;
+    }
+    Ok(flag)
+}

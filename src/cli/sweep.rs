@@ -59,13 +59,7 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
             RowLog::FILE
         );
     }
-    let interrupted = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&interrupted))
-            .context("cannot install the signal handlers")?;
-        signal_hook::flag::register(signal, Arc::clone(&interrupted))
-            .context("cannot install the signal handlers")?;
-    }
+    let interrupted = super::interrupt_flag()?;
     let started = Instant::now();
     let ran = run_pending(&plan, registry, &pending, jobs, out, &interrupted)?;
     let elapsed = started.elapsed().as_secs_f64();
