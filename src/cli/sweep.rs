@@ -344,12 +344,13 @@ fn write_tables(out: &Path, plan: &Plan, rows: &[Row]) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
     let keys: Vec<String> = plan.axes.iter().map(|a| a.key.clone()).collect();
+    let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
     let title = format!(
-        "arcnav sweep: {} of {} runs, {} worlds × {} settings",
+        "arcnav sweep: {} of {}, {} × {}",
         rows.len(),
-        plan.runs(),
-        plan.worlds.len(),
-        plan.settings.len()
+        count(plan.runs(), "run"),
+        count(plan.worlds.len(), "world"),
+        count(plan.settings.len(), "setting")
     );
     arcnav::render::sweep_picture(&out.join("sweep.png"), &title, &keys, &summary)?;
     Ok(())

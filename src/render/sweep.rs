@@ -72,7 +72,7 @@ pub fn sweep_picture(
     );
     // The settings under the bars: one line per swept key.
     for (i, s) in summary.iter().enumerate() {
-        let x = left + slot * i as f32 + 3.0;
+        let x = left + slot * (i as f32 + 0.15);
         for (line, value) in s.values.iter().enumerate() {
             let fits = ((slot - 4.0) / 6.5).max(1.0) as usize;
             let short: String = value.chars().take(fits).collect();
@@ -148,13 +148,13 @@ fn bars(
             color,
         );
         if p.slot >= 30.0 {
-            c.text(
-                x + p.slot * 0.15,
-                p.top + p.height - h - 4.0,
-                10.0,
-                BLACK,
-                caption,
-            );
+            // Above the bar, or inside it in white where a full bar leaves no room.
+            let (y, ink) = if h > p.height - 14.0 {
+                (p.top + p.height - h + 12.0, WHITE)
+            } else {
+                (p.top + p.height - h - 4.0, BLACK)
+            };
+            c.text(x + p.slot * 0.15 + 2.0, y, 10.0, ink, caption);
         }
     }
     c.fill_rect(p.left, p.top + p.height, width, 1.5, BLACK);
