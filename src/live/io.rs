@@ -111,6 +111,37 @@ pub(crate) fn auth_status(lcm: &Lcm, status: &mut NodeStatus) {
     }
 }
 
+/// Messages refused because their content is unusable, counted by what
+/// they were; the 1st, 2nd, 4th, 8th… of each is warned of, so a flood of
+/// bad input cannot flood the log.
+#[derive(Debug, Default)]
+pub(crate) struct Refused {
+    counts: std::collections::BTreeMap<&'static str, u64>,
+    /// Warnings logged.
+    warned: u64,
+}
+
+impl Refused {
+    /// Counts one refusal of a `what`.
+    pub(crate) fn refuse(
+        &mut self,
+        what: &'static str,
+        channel: &str,
+        why: &dyn std::fmt::Display,
+    ) {
+        let count = self.counts.entry(what).or_default();
+        *count += 1;
+        if count.is_power_of_two() {
+            self.warned += 1;
+            tracing::warn!(%channel, count = *count, "{what} refused: {why}");
+        }
+    }
+
+    pub(crate) fn total(&self) -> u64 {
+        self.counts.values().sum()
+    }
+}
+
 /// Decodes a received message; `None` (logged at debug, to be counted as
 /// dropped) when it is not an arcnav message or is malformed.
 pub(crate) fn decode(message: &ReceivedMessage) -> Option<AnyMessage> {
@@ -199,7 +230,7 @@ pub(crate) fn io_loop(
     let mut status = NodeStatus::new("io");
     let mut ticker = Ticker::new(live.status_period_s, options.clock().now_us());
     let (mut poses, mut images, mut queue_full) = (0u64, 0u64, 0u64);
-    let (mut refused, mut external_votes) = (0u64, 0u64);
+    let (mut bad, mut undecodable, mut external_votes) = (Refused::default(), 0u64, 0u64);
     let result = pump(
         lcm,
         options,
@@ -222,10 +253,7 @@ pub(crate) fn io_loop(
                                 offer(arbiter, ToArbiter::Pose(pose.utime, now), &mut queue_full);
                             }
                         }
-                        Err(e) => {
-                            tracing::warn!(%e, "pose refused");
-                            refused += 1;
-                        }
+                        Err(e) => bad.refuse("pose", &message.channel, &e),
                     },
                     Some(AnyMessage::RangeImage(msg)) => match wire::range_image_from_wire(msg) {
                         Ok(image) => {
@@ -237,10 +265,7 @@ pub(crate) fn io_loop(
                                 });
                             }
                         }
-                        Err(e) => {
-                            tracing::warn!(%e, channel = %message.channel, "range image refused");
-                            refused += 1;
-                        }
+                        Err(e) => bad.refuse("range image", &message.channel, &e),
                     },
                     Some(AnyMessage::Waypoints(msg)) => match wire::mission_from_wire(&msg) {
                         Ok(mission) => {
@@ -248,10 +273,7 @@ pub(crate) fn io_loop(
                                 offer(route, mission, &mut queue_full);
                             }
                         }
-                        Err(e) => {
-                            tracing::warn!(%e, "waypoints refused");
-                            refused += 1;
-                        }
+                        Err(e) => bad.refuse("waypoints", &message.channel, &e),
                     },
                     Some(AnyMessage::ArcVotes(msg)) => match (&routes.external, &routes.arbiter) {
                         (Some(external), Some(arbiter))
@@ -267,31 +289,29 @@ pub(crate) fn io_loop(
                                     };
                                     offer(arbiter, votes, &mut queue_full);
                                 }
-                                Err(e) => {
-                                    tracing::warn!(%e, channel = %message.channel, "votes refused");
-                                    refused += 1;
-                                }
+                                Err(e) => bad.refuse("votes", &message.channel, &e),
                             }
                         }
-                        _ => {
-                            tracing::warn!(
-                                channel = %message.channel,
-                                behaviour = %msg.behaviour,
-                                "votes refused: not an external behaviour's, on its own channel"
-                            );
-                            refused += 1;
-                        }
+                        _ => bad.refuse(
+                            "votes",
+                            &message.channel,
+                            &format_args!(
+                                "from {:?}, not an external behaviour's on its own channel",
+                                msg.behaviour
+                            ),
+                        ),
                     },
-                    _ => refused += 1,
+                    _ => undecodable += 1,
                 };
             }
             if ticker.due(now) {
-                status.dropped = refused + queue_full;
+                status.dropped = bad.total() + undecodable + queue_full;
                 status.log();
             }
         },
     );
     let transport = lcm.stats();
+    let refused = bad.total() + undecodable;
     status.dropped = refused + queue_full;
     let depth = [&routes.perception_poses, &routes.map_poses]
         .into_iter()
@@ -310,4 +330,21 @@ pub(crate) fn io_loop(
     status.set("malformed_datagrams", transport.reassembly.malformed);
     auth_status(lcm, &mut status);
     result.map(|()| status)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_flood_of_refusals_is_counted_whole_and_warned_of_ten_times_in_a_thousand() {
+        let mut refused = Refused::default();
+        for _ in 0..1000 {
+            refused.refuse("pose", "POSE", &"not finite");
+        }
+        assert_eq!(refused.warned, 10, "1, 2, 4, … 512");
+        refused.refuse("votes", "ARC_VOTES_X", &"12 arcs");
+        assert_eq!(refused.warned, 11, "each kind's first");
+        assert_eq!(refused.total(), 1001);
+    }
 }

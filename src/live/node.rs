@@ -22,7 +22,7 @@ use arcnav_bus::transport::Lcm;
 use arcnav_pipeline::{ArbiterNode, BehaviourSet};
 
 use super::handoff;
-use super::io::{IoRoutes, Ticker, auth_status, decode, io_loop, publish_command, pump};
+use super::io::{IoRoutes, Refused, Ticker, auth_status, decode, io_loop, publish_command, pump};
 use super::threaded::{LiveError, LiveOptions};
 use super::workers::{MapStage, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
@@ -118,6 +118,7 @@ fn perception(
 fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
     let mut stage = MapStage::new(config);
     let mut status = NodeStatus::new("localmap");
+    let mut bad = Refused::default();
     let mut busy = Samples::default();
     let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
     let period_ms = 1e3 / config.pipeline.command_rate_hz;
@@ -135,17 +136,11 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
                 match decode(&message) {
                     Some(AnyMessage::Pose(msg)) => match arcnav_vehicle::Pose::try_from(&msg) {
                         Ok(pose) => stage.on_pose(pose),
-                        Err(e) => {
-                            tracing::warn!(%e, "pose refused");
-                            status.dropped += 1;
-                        }
+                        Err(e) => bad.refuse("pose", &message.channel, &e),
                     },
                     Some(AnyMessage::ObstacleCells(msg)) => match wire::obstacles_from_wire(msg) {
                         Ok(r) => stage.on_report(r, now),
-                        Err(e) => {
-                            tracing::warn!(%e, "obstacle cells refused");
-                            status.dropped += 1;
-                        }
+                        Err(e) => bad.refuse("obstacle cells", &message.channel, &e),
                     },
                     _ => status.dropped += 1,
                 }
@@ -166,6 +161,9 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
     )?;
     stage.fill(&mut status);
     status.busy_ms = busy.summary();
+    // Dropped: undecodable (counted as they came) and refused.
+    status.dropped += bad.total();
+    status.set("refused", bad.total());
     auth_status(&lcm, &mut status);
     Ok(report(vec![status]))
 }
@@ -197,6 +195,7 @@ fn behaviour(
     }
     let mut node = BehaviourSet::new(vec![built], arcs.clone());
     let mut status = NodeStatus::new(&format!("behaviour {name}"));
+    let mut bad = Refused::default();
     let mut busy = Samples::default();
     let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
     let period_ms = 1e3 / config.pipeline.command_rate_hz;
@@ -233,17 +232,11 @@ fn behaviour(
                                 period_ms,
                             );
                         }
-                        Err(e) => {
-                            tracing::warn!(%e, "local map refused");
-                            status.dropped += 1;
-                        }
+                        Err(e) => bad.refuse("local map", &message.channel, &e),
                     },
                     Some(AnyMessage::Waypoints(msg)) => match wire::mission_from_wire(&msg) {
                         Ok(mission) => node.on_waypoints(mission),
-                        Err(e) => {
-                            tracing::warn!(%e, "waypoints refused");
-                            status.dropped += 1;
-                        }
+                        Err(e) => bad.refuse("waypoints", &message.channel, &e),
                     },
                     Some(AnyMessage::SteeringCommand(msg)) => {
                         node.on_command(&arcnav_vehicle::SteeringCommand::from(&msg));
@@ -258,6 +251,9 @@ fn behaviour(
         },
     )?;
     status.busy_ms = busy.summary();
+    // Dropped: undecodable (counted as they came) and refused.
+    status.dropped += bad.total();
+    status.set("refused", bad.total());
     auth_status(&lcm, &mut status);
     Ok(report(vec![status]))
 }
@@ -279,6 +275,7 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
     let mut out = Vec::new();
     stage.measure_latency_from_cells();
     let mut status = NodeStatus::new("arbiter");
+    let mut bad = Refused::default();
     let mut busy = Samples::default();
     let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
     lcm.subscribe_regex(&format!("{}.*", channels::ARC_VOTES_PREFIX))?;
@@ -303,13 +300,10 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
                                     busy.add(started.elapsed().as_secs_f64() * 1e3);
                                 }
                                 Ok(()) => {}
-                                Err(e) => tracing::warn!(%e, "votes refused"),
+                                Err(e) => bad.refuse("votes", &message.channel, &e),
                             }
                         }
-                        Err(e) => {
-                            tracing::warn!(%e, channel = %message.channel, "votes refused");
-                            status.dropped += 1;
-                        }
+                        Err(e) => bad.refuse("votes", &message.channel, &e),
                     },
                     Some(AnyMessage::Pose(msg)) => stage.on_pose(msg.utime, now),
                     Some(AnyMessage::ObstacleCells(msg)) => {
@@ -335,6 +329,9 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
     result?;
     arbiter_status(&stage, &mut status);
     status.busy_ms = busy.summary();
+    // Dropped: undecodable (counted as they came) and refused.
+    status.dropped += bad.total();
+    status.set("refused", bad.total());
     auth_status(&lcm, &mut status);
     Ok(LiveReport {
         commands: stage.counts().commands,
