@@ -20,6 +20,7 @@ pub mod output;
 mod recorder;
 pub mod render;
 pub mod replay;
+pub mod speed_bound;
 pub mod sweep;
 pub mod wire;
 

@@ -28,6 +28,8 @@ use arcnav_vehicle::{MotionLimits, MotionModel, PlanarState, Pose, SteeringComma
 use nalgebra::Vector3;
 use serde::Serialize;
 
+use crate::speed_bound::{SpeedBound, speed_bound};
+
 use crate::config::Config;
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
@@ -117,6 +119,11 @@ pub struct MissionReport {
     pub render_ms_mean: f64,
     pub wall_time_s: f64,
     pub realtime_factor: f64,
+    /// The speed this configuration allows (002 §7: sensor rate and
+    /// resolution, latency, braking, turning radius; see
+    /// [`crate::speed_bound`]), and the average speed as a fraction of it.
+    pub speed_bound: SpeedBound,
+    pub speed_fraction_of_bound: f64,
 }
 
 /// Stop commands during the mission.
@@ -512,6 +519,12 @@ pub fn run_mission(
     let reached = pipeline.behaviours.progress().map_or(0, |p| p.current);
     let drops = pipeline.perception.drops;
     let wall_time = wall.elapsed().as_secs_f64();
+    let average_speed = if duration > 0.0 {
+        distance / duration
+    } else {
+        0.0
+    };
+    let bound = speed_bound(config)?;
     let report = MissionReport {
         world: world.spec.name.clone(),
         sensor: sensor.id.clone(),
@@ -521,11 +534,7 @@ pub fn run_mission(
         waypoints: world.waypoints.len(),
         distance_m: distance,
         duration_s: duration,
-        average_speed_mps: if duration > 0.0 {
-            distance / duration
-        } else {
-            0.0
-        },
+        average_speed_mps: average_speed,
         max_speed_mps: max_speed,
         cruise_speed_mps: config.arbiter.cruise_speed_mps,
         images,
@@ -557,6 +566,8 @@ pub fn run_mission(
         } else {
             0.0
         },
+        speed_fraction_of_bound: average_speed / bound.bound_mps.max(1e-9),
+        speed_bound: bound,
     };
     sink.log.finish()?;
     Ok(MissionRun {

@@ -160,6 +160,16 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         "distance      {:.0} m in {:.0} s: average {:.2} m/s, max {:.2} m/s (cruise {:.2} m/s)",
         r.distance_m, r.duration_s, r.average_speed_mps, r.max_speed_mps, r.cruise_speed_mps
     );
+    let b = &r.speed_bound;
+    println!(
+        "speed bound   {:.2} m/s (002 §7): a {:.1} m reach set by the {}, {:.2} s from image to \
+         effect; the average is {:.0} % of it",
+        b.bound_mps,
+        b.detection_range_m,
+        b.range_limited_by,
+        b.reaction_s,
+        100.0 * r.speed_fraction_of_bound
+    );
     println!(
         "images        {} processed, {} dropped",
         r.images, r.images_dropped

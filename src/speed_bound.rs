@@ -1,0 +1,145 @@
+//! The speed a configuration allows, by the reasoning of 002 §7: "Sensor
+//! acquisition rate and resolution are the two numbers that set hard limits
+//! on the speed." The vehicle tolerates discontinuities of
+//! `vehicle.tolerated_step_m` (20 cm); a larger one must be seen early
+//! enough to stop before it, or to turn away from it on the tightest arc.
+//!
+//! - **Detection range.** Adjacent beams `δθ` apart are `R·δθ` apart
+//!   vertically at range `R`, so a step of height `h` is certain to be hit
+//!   by a beam only within `R_res = h / δθ`. Nothing beyond the sensor's
+//!   reach or the local map's window ahead reaches the behaviours either:
+//!   `R = min(R_res, max_range_m, localmap.ahead_m)`. The free distance is
+//!   `D = R − (front bumper − sensor)`, the range being the sensor's.
+//! - **Reaction time.** A step may become resolvable just after an image
+//!   began: `T = 1/rate + pipeline.perception_latency_s +
+//!   1/pipeline.command_rate_hz + vehicle.command_latency_s`.
+//! - **Stopping:** `v·T + v²/(2a) ≤ D`, so `v_stop = a·(√(T² + 2D/a) − T)`
+//!   with `a = vehicle.max_deceleration_mps2`.
+//! - **Swerving:** moving the body sideways by half its width on the arc of
+//!   radius `r = vehicle.min_turning_radius_m` takes `d = √(w·(2r − w))` of
+//!   forward travel, after the steering has turned to that arc (`t_s =
+//!   (1/r)/vehicle.max_curvature_rate`): `v·(T + t_s) + d ≤ D`, and the turn
+//!   itself keeps `v²/r ≤ arbiter.max_lateral_accel_mps2`.
+//! - The bound is the faster of the two manoeuvres, at most
+//!   `vehicle.max_speed_mps`.
+
+use serde::Serialize;
+
+use crate::config::Config;
+
+/// What a configuration allows, and why.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SpeedBound {
+    /// The highest speed at which a step taller than the vehicle tolerates
+    /// can still be avoided, m/s.
+    pub bound_mps: f64,
+    /// The stopping and swerving bounds it is the larger of, m/s.
+    pub stop_mps: f64,
+    pub swerve_mps: f64,
+    /// Range at which such a step is certain to be seen, m, and what sets it
+    /// (`"resolution"`, `"sensor range"` or `"map window"`).
+    pub detection_range_m: f64,
+    pub range_limited_by: &'static str,
+    /// Image to command effect, s.
+    pub reaction_s: f64,
+    /// The sensor's vertical angle between adjacent beams, degrees.
+    pub beam_spacing_deg: f64,
+}
+
+/// The bound of `config` (its sensor, vehicle, map window and timing).
+pub fn speed_bound(config: &Config) -> Result<SpeedBound, arcnav_vehicle::ConfigError> {
+    let sensor = config.sensor.model().map_err(|e| e.within("sensor"))?;
+    let v = &config.vehicle;
+    let elevations = &sensor.beams.elevation;
+    let span = elevations
+        .iter()
+        .fold(f64::NEG_INFINITY, |m, &e| m.max(f64::from(e)))
+        - elevations
+            .iter()
+            .fold(f64::INFINITY, |m, &e| m.min(f64::from(e)));
+    let spacing = span / (elevations.len().max(2) - 1) as f64;
+    let resolved = if spacing > 0.0 {
+        v.tolerated_step_m / spacing
+    } else {
+        f64::INFINITY
+    };
+    let (range, limited_by) = [
+        (resolved, "resolution"),
+        (sensor.max_range_m, "sensor range"),
+        (config.localmap.ahead_m, "map window"),
+    ]
+    .into_iter()
+    .fold(
+        (f64::INFINITY, ""),
+        |best, c| if c.0 < best.0 { c } else { best },
+    );
+    let front = v.length_m - v.rear_overhang_m;
+    let sensor_x = sensor.vehicle_from_sensor.translation.vector.x;
+    let free = (range - (front - sensor_x).max(0.0)).max(0.0);
+    let reaction = 1.0 / sensor.rate_hz
+        + config.pipeline.perception_latency_s
+        + 1.0 / config.pipeline.command_rate_hz
+        + v.command_latency_s;
+    let a = v.max_deceleration_mps2;
+    let stop = a * ((reaction * reaction + 2.0 * free / a).sqrt() - reaction);
+    let r = v.min_turning_radius_m;
+    let w = (v.width_m / 2.0).min(r);
+    let sideways = (w * (2.0 * r - w)).sqrt();
+    let steer = (1.0 / r) / v.max_curvature_rate;
+    let swerve = ((free - sideways) / (reaction + steer))
+        .max(0.0)
+        .min((config.arbiter.max_lateral_accel_mps2 * r).sqrt());
+    Ok(SpeedBound {
+        bound_mps: stop.max(swerve).min(v.max_speed_mps),
+        stop_mps: stop,
+        swerve_mps: swerve,
+        detection_range_m: range,
+        range_limited_by: limited_by,
+        reaction_s: reaction,
+        beam_spacing_deg: spacing.to_degrees(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_perception::SensorPreset;
+
+    #[test]
+    fn the_papers_erim_allows_its_2_to_3_m_s_and_the_map_window_caps_it() {
+        let config = Config::default();
+        let b = speed_bound(&config).unwrap();
+        // 0.5° beams resolve 20 cm out to 22.9 m; the 20 m window is shorter.
+        assert!((b.beam_spacing_deg - 0.508).abs() < 0.01, "{b:?}");
+        assert_eq!(b.range_limited_by, "map window");
+        assert_eq!(b.detection_range_m, 20.0);
+        assert!((b.reaction_s - 1.15).abs() < 1e-9, "{b:?}");
+        // 002 drove 2-3 m/s with room to spare; far less than 10 m/s.
+        assert!((4.0..9.0).contains(&b.bound_mps), "{b:?}");
+        assert!(b.stop_mps > b.swerve_mps, "braking is the better way out");
+        // A window that reaches the resolution limit raises the bound; the
+        // resolution then limits it.
+        let mut wider = config.clone();
+        wider.localmap.ahead_m = 40.0;
+        let w = speed_bound(&wider).unwrap();
+        assert_eq!(w.range_limited_by, "resolution");
+        assert!(w.bound_mps > b.bound_mps, "{w:?} vs {b:?}");
+    }
+
+    #[test]
+    fn a_faster_sensor_and_a_tolerant_vehicle_allow_more_a_slow_one_less() {
+        let base = speed_bound(&Config::default()).unwrap().bound_mps;
+        let mut lidar = Config::default();
+        lidar.sensor.preset = SensorPreset::Lidar64;
+        let lidar = speed_bound(&lidar).unwrap();
+        // 0.1 s a frame instead of 0.5 s.
+        assert!((lidar.reaction_s - 0.75).abs() < 1e-9, "10 Hz: {lidar:?}");
+        assert!(lidar.bound_mps > base, "{} vs {base}", lidar.bound_mps);
+        let mut slow = Config::default();
+        slow.pipeline.perception_latency_s = 2.0;
+        assert!(speed_bound(&slow).unwrap().bound_mps < base);
+        let mut brakes = Config::default();
+        brakes.vehicle.max_deceleration_mps2 = 6.0;
+        assert!(speed_bound(&brakes).unwrap().bound_mps > base);
+    }
+}
