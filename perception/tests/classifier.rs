@@ -635,3 +635,76 @@ fn the_result_does_not_depend_on_how_the_parts_ran() {
     assert_eq!(evaluator.evaluate(&image, &pose, &mut again).unwrap(), a);
     assert_eq!(again, in_order);
 }
+
+/// An image whose returns land on two flat patches side by side: the cell
+/// [10.0, 10.2) × [0, 0.2) at height 0 and the cell [10.2, 10.4) beside it
+/// at `step`, five returns in each (two columns), none on a face between
+/// them; seen from 2 m up.
+fn two_level_image(step: f64) -> RangeImage {
+    let sensor_height = 2.0;
+    let targets: Vec<(f64, f64)> = [10.23, 10.27, 10.31, 10.35, 10.39]
+        .iter()
+        .map(|&x| (x, step))
+        .chain(
+            [10.03, 10.07, 10.11, 10.15, 10.19]
+                .iter()
+                .map(|&x| (x, 0.0)),
+        )
+        .collect();
+    let elevation = targets
+        .iter()
+        .map(|(x, z)| ((z - sensor_height) / x).atan() as f32)
+        .collect();
+    let azimuth = vec![0.004, 0.008];
+    let range = targets
+        .iter()
+        .flat_map(|(x, z)| {
+            let r = (x * x + (z - sensor_height).powi(2)).sqrt() as f32;
+            [r, r]
+        })
+        .collect();
+    RangeImage {
+        utime: 0,
+        sensor: "two levels".into(),
+        vehicle_from_sensor: isometry_from_xyz_rpy([0.0, 0.0, sensor_height], 0.0, 0.0, 0.0),
+        beams: BeamTable { elevation, azimuth },
+        range,
+    }
+}
+
+/// 002 §4 (c): a jump in height between neighbouring cells taller than the
+/// vehicle tolerates is untraversable even where each cell is flat (no face
+/// was seen between them); a jump it tolerates is not.
+#[test]
+fn a_jump_between_flat_neighbouring_cells_is_a_discontinuity() {
+    let mut evaluator = classifier();
+    let mut report = ObstacleReport::default();
+    evaluator
+        .evaluate(&two_level_image(0.35), &Isometry::identity(), &mut report)
+        .unwrap();
+    assert_eq!(report.cells.len(), 2, "{:?}", report.cells);
+    for cell in &report.cells {
+        assert_eq!(
+            cell.reasons,
+            Reasons::DISCONTINUITY,
+            "cell at ({:.2}, {:.2}): {}",
+            cell.x,
+            cell.y,
+            cell.reasons.names()
+        );
+    }
+    let xs: Vec<f64> = report
+        .cells
+        .iter()
+        .map(|c| (c.x * 10.0).round() / 10.0)
+        .collect();
+    assert!(
+        xs.contains(&10.1) && xs.contains(&10.3),
+        "both sides: {xs:?}"
+    );
+    // 15 cm: below the 20 cm the vehicle drives over.
+    evaluator
+        .evaluate(&two_level_image(0.15), &Isometry::identity(), &mut report)
+        .unwrap();
+    assert!(report.cells.is_empty(), "{:?}", report.cells);
+}
