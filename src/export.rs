@@ -176,24 +176,25 @@ impl Topics {
             );
     }
 
-    fn json(&mut self, topic: &str, schema_name: &str, schema: &'static str) -> Arc<RawChannel> {
-        let ctx = &self.ctx;
+    /// The JSON channel of `topic` (`None` only if the SDK refused it).
+    fn json(
+        &mut self,
+        topic: &str,
+        schema_name: &str,
+        schema: &'static str,
+    ) -> Option<Arc<RawChannel>> {
         if let Some(channel) = self.json.get(topic) {
-            return Arc::clone(channel);
+            return Some(Arc::clone(channel));
         }
-        let channel = ctx
+        let channel = self
+            .ctx
             .channel_builder(topic)
             .message_encoding("json")
             .schema(Schema::new(schema_name, "jsonschema", schema.as_bytes()))
-            .build_raw();
-        match channel {
-            Ok(channel) => {
-                self.json.insert(topic.to_owned(), Arc::clone(&channel));
-                channel
-            }
-            // Topics are unique here; the SDK refuses only a duplicate.
-            Err(e) => unreachable!("a new JSON topic {topic}: {e}"),
-        }
+            .build_raw()
+            .ok()?;
+        self.json.insert(topic.to_owned(), Arc::clone(&channel));
+        Some(channel)
     }
 }
 
@@ -227,6 +228,8 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
         json: BTreeMap::new(),
     };
     let mut summary = ExportSummary::default();
+    // Messages the MCAP writer would not take a channel for.
+    let mut refused_topics = 0u64;
     loop {
         let event = match reader.next_event() {
             Ok(Some(event)) => event,
@@ -398,10 +401,13 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                     "vetoed": msg.vetoed,
                     "speed_vote": msg.has_speed_vote.then_some(msg.speed_vote),
                 });
-                topics
-                    .json(&topic, "arcnav.ArcVotes", VOTES_SCHEMA)
-                    .log_with_meta(json.to_string().as_bytes(), time);
-                wrote(&topic);
+                match topics.json(&topic, "arcnav.ArcVotes", VOTES_SCHEMA) {
+                    Some(channel) => {
+                        channel.log_with_meta(json.to_string().as_bytes(), time);
+                        wrote(&topic);
+                    }
+                    None => refused_topics += 1,
+                }
             }
             AnyMessage::SteeringCommand(msg) => {
                 let json = serde_json::json!({
@@ -411,14 +417,17 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                     "arc_index": msg.arc_index,
                     "vote": msg.vote,
                 });
-                topics
-                    .json(
-                        "/steering_command",
-                        "arcnav.SteeringCommand",
-                        COMMAND_SCHEMA,
-                    )
-                    .log_with_meta(json.to_string().as_bytes(), time);
-                wrote("/steering_command");
+                match topics.json(
+                    "/steering_command",
+                    "arcnav.SteeringCommand",
+                    COMMAND_SCHEMA,
+                ) {
+                    Some(channel) => {
+                        channel.log_with_meta(json.to_string().as_bytes(), time);
+                        wrote("/steering_command");
+                    }
+                    None => refused_topics += 1,
+                }
                 arbiter.decide(msg.utime);
                 let fused = arbiter
                     .decision()
@@ -434,6 +443,12 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                 wrote("/arcs");
             }
         }
+    }
+    if refused_topics > 0 {
+        summary.skipped.insert(
+            "(any)".into(),
+            (refused_topics, "the MCAP writer refused their topic".into()),
+        );
     }
     let stats = reader.stats();
     summary.damaged_bytes = stats.skipped_bytes + stats.truncated_tail_bytes;
