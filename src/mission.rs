@@ -104,6 +104,9 @@ pub struct MissionReport {
     pub collisions: Vec<Collision>,
     /// Smallest gap between the footprint and a true hazard, m.
     pub closest_approach_m: Option<f64>,
+    /// When (s from the start), where and to what that gap was: `arcnav
+    /// render mission.lcm --at S` draws the decision of that moment.
+    pub closest_approach: Option<NearMissReport>,
     pub stops: StopStats,
     /// Backing up when blocked.
     pub recovery: RecoveryStats,
@@ -124,6 +127,16 @@ pub struct MissionReport {
     /// [`crate::speed_bound`]), and the average speed as a fraction of it.
     pub speed_bound: SpeedBound,
     pub speed_fraction_of_bound: f64,
+}
+
+/// The moment of the closest approach.
+#[derive(Debug, Clone, Serialize)]
+pub struct NearMissReport {
+    /// Seconds from the mission's start.
+    pub at_s: f64,
+    /// Vehicle origin, world frame, m.
+    pub position: [f64; 2],
+    pub hazard: String,
 }
 
 /// Stop commands during the mission.
@@ -549,6 +562,11 @@ pub fn run_mission(
             .closest_approach_m
             .is_finite()
             .then_some(truth.closest_approach_m),
+        closest_approach: truth.closest_at.as_ref().map(|m| NearMissReport {
+            at_s: micros_to_seconds(m.utime - t0),
+            position: m.position,
+            hazard: m.hazard.clone(),
+        }),
         stops,
         recovery,
         behaviour_counters,

@@ -61,6 +61,22 @@ fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
     );
     let duration = report["duration_s"].as_f64().unwrap();
     assert!(report["average_speed_mps"].as_f64().unwrap() > 2.0);
+    // The closest approach says when, where and to what, within the run.
+    let near = &report["closest_approach"];
+    let at = near["at_s"].as_f64().unwrap();
+    assert!((0.0..=duration).contains(&at), "{near}");
+    assert!(
+        near["hazard"].as_str().is_some_and(|h| !h.is_empty()),
+        "{near}"
+    );
+    assert!(report["closest_approach_m"].as_f64().unwrap() >= 0.0);
+    // And the speed the configuration allows, with the share achieved.
+    let bound = report["speed_bound"]["bound_mps"].as_f64().unwrap();
+    let fraction = report["speed_fraction_of_bound"].as_f64().unwrap();
+    assert!(
+        (fraction * bound - report["average_speed_mps"].as_f64().unwrap()).abs() < 1e-9,
+        "{fraction} of {bound}"
+    );
     assert!(
         report["stage_times"]["perception"]["count"]
             .as_u64()

@@ -24,5 +24,5 @@ pub mod world;
 
 pub use config::{CollisionPolicy, SimConfig};
 pub use generate::{Difficulty, generate};
-pub use truth::{Collision, Truth};
+pub use truth::{Collision, NearMiss, Truth};
 pub use world::{Feature, FeatureKind, World, WorldError, WorldSpec};

@@ -41,8 +41,19 @@ pub struct Truth {
     pub collisions: Vec<Collision>,
     /// Smallest gap seen between the footprint and a hazard, m.
     pub closest_approach_m: f64,
-    /// Where it was.
-    pub closest_at: Option<[f64; 2]>,
+    /// When and where it was, and to what.
+    pub closest_at: Option<NearMiss>,
+}
+
+/// The moment of the smallest gap to a hazard.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct NearMiss {
+    pub utime: Utime,
+    /// Vehicle origin then, world frame, m.
+    pub position: [f64; 2],
+    /// The hazard, e.g. "boulder 0.82 m tall".
+    pub hazard: String,
+    pub feature: usize,
 }
 
 impl Truth {
@@ -92,7 +103,12 @@ impl Truth {
                 segment_box_distance(to_vehicle(f.a), to_vehicle(f.b), &self.footprint) - f.radius;
             if gap < self.closest_approach_m {
                 self.closest_approach_m = gap.max(0.0);
-                self.closest_at = Some([x, y]);
+                self.closest_at = Some(NearMiss {
+                    utime,
+                    position: [x, y],
+                    hazard: why.clone(),
+                    feature: i,
+                });
             }
             if gap <= 0.0 {
                 touching.insert(i);

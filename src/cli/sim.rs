@@ -191,7 +191,19 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         );
     }
     if let Some(gap) = r.closest_approach_m {
-        println!("closest       {gap:.2} m between the vehicle and a hazard");
+        match &r.closest_approach {
+            Some(m) => println!(
+                "closest       {gap:.2} m between the vehicle and a hazard ({}) at {:.1} s, at ({:.1}, {:.1}): \
+                 `arcnav render {}/mission.lcm --at {:.1}` draws that decision",
+                m.hazard,
+                m.at_s,
+                m.position[0],
+                m.position[1],
+                out.display(),
+                (m.at_s - 0.5).max(0.0)
+            ),
+            None => println!("closest       {gap:.2} m between the vehicle and a hazard"),
+        }
     }
     let s = &r.stops;
     println!(
