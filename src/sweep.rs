@@ -380,6 +380,13 @@ pub struct Row {
     pub duration_s: f64,
     pub average_speed_mps: f64,
     pub closest_approach_m: Option<f64>,
+    /// When it was, s from the start (`arcnav render` draws that moment of
+    /// the run's log).
+    #[serde(default)]
+    pub closest_approach_at_s: Option<f64>,
+    /// The speed the configuration allows (002 §7), m/s.
+    #[serde(default)]
+    pub speed_bound_mps: f64,
     /// Runs of consecutive stop commands, and the time stood.
     pub stops: u64,
     pub stopped_s: f64,
@@ -411,6 +418,8 @@ impl Row {
             duration_s: 0.0,
             average_speed_mps: 0.0,
             closest_approach_m: None,
+            closest_approach_at_s: None,
+            speed_bound_mps: 0.0,
             stops: 0,
             stopped_s: 0.0,
             recoveries: 0,
@@ -450,6 +459,8 @@ impl Row {
             duration_s: r.duration_s,
             average_speed_mps: r.average_speed_mps,
             closest_approach_m: r.closest_approach_m,
+            closest_approach_at_s: r.closest_approach.as_ref().map(|m| m.at_s),
+            speed_bound_mps: r.speed_bound.bound_mps,
             stops: r.stops.episodes,
             stopped_s: r.stops.stopped_s.values().sum(),
             recoveries: r.recovery.recoveries,
@@ -538,8 +549,8 @@ pub fn table_csv(plan: &Plan, rows: &[Row]) -> String {
     }
     out.push_str(
         ",outcome,success,collisions,collision_cause,waypoints_reached,waypoints,distance_m,\
-         duration_s,average_speed_mps,closest_approach_m,stops,stopped_s,recoveries,backed_m,\
-         replans,wall_time_s,error\n",
+         duration_s,average_speed_mps,closest_approach_m,closest_approach_at_s,speed_bound_mps,\
+         stops,stopped_s,recoveries,backed_m,replans,wall_time_s,error\n",
     );
     for r in rows {
         let mut line = vec![r.run.to_string(), field(&r.world)];
@@ -555,6 +566,8 @@ pub fn table_csv(plan: &Plan, rows: &[Row]) -> String {
             number(r.duration_s),
             number(r.average_speed_mps),
             optional(r.closest_approach_m),
+            optional(r.closest_approach_at_s),
+            number(r.speed_bound_mps),
             r.stops.to_string(),
             number(r.stopped_s),
             r.recoveries.to_string(),
@@ -778,6 +791,8 @@ mod tests {
             duration_s: 40.0,
             average_speed_mps: 2.5,
             closest_approach_m: Some(1.5),
+            closest_approach_at_s: Some(12.0),
+            speed_bound_mps: 7.4,
             stops: 0,
             stopped_s: 0.0,
             recoveries: 0,
