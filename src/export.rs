@@ -8,6 +8,7 @@
 //! | RANGE_IMAGE* | `/range_image*`: x, y, z, range per return, vehicle frame | `foxglove.PointCloud` |
 //! | OBSTACLE_CELLS | `/obstacle_cells`: a cube per cell, world frame | `foxglove.SceneUpdate` |
 //! | LOCAL_MAP | `/local_map`: a cube per patch, world frame | `foxglove.SceneUpdate` |
+//! | (no LOCAL_MAP) | `/local_map`, rebuilt each decision cycle from the log's POSE and OBSTACLE_CELLS by the pipeline's own local map, as `arcnav replay --recorded-cells` does | `foxglove.SceneUpdate` |
 //! | WAYPOINTS | `/waypoints`: a sphere per waypoint, arrival radius | `foxglove.SceneUpdate` |
 //! | ARC_VOTES_NAME | `/arc_votes_name`: votes, vetoes, speed vote | JSON (`arcnav.ArcVotes`) |
 //! | STEERING_COMMAND | `/steering_command`: curvature, speed, arc, vote | JSON (`arcnav.SteeringCommand`) |
@@ -22,8 +23,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use arcnav_arbiter::Arbiter;
+use arcnav_bus::lcmtypes::local_map_t;
 use arcnav_bus::log::LogReader;
-use arcnav_bus::messages::AnyMessage;
+use arcnav_bus::messages::{AnyMessage, channels};
+use arcnav_pipeline::Delivery;
 use arcnav_vehicle::{ArcSet, Isometry};
 use foxglove::schemas::{
     Color, CubePrimitive, FrameTransform, FrameTransforms, LinePrimitive, PackedElementField,
@@ -227,6 +230,15 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
         scenes: BTreeMap::new(),
         json: BTreeMap::new(),
     };
+    // Logs of `arcnav sim` and `arcnav run` hold no LOCAL_MAP: rebuild it.
+    let mut rebuilt = if has_channel(log, channels::LOCAL_MAP)? {
+        None
+    } else {
+        Some((
+            config.decision_cycle::<()>(Delivery::held(&config.pipeline)),
+            Vec::new(),
+        ))
+    };
     let mut summary = ExportSummary::default();
     // Messages the MCAP writer would not take a channel for.
     let mut refused_topics = 0u64;
@@ -264,6 +276,12 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
         let mut wrote = |topic: &str| *summary.topics.entry(topic.to_owned()).or_default() += 1;
         match message {
             AnyMessage::Pose(msg) => {
+                if let (Some((cycle, out)), Ok(pose)) =
+                    (&mut rebuilt, arcnav_vehicle::Pose::try_from(&msg))
+                {
+                    cycle.on_pose(pose, out);
+                    cycle.advance(pose.utime, true, out);
+                }
                 let [w, x, y, z] = msg.orientation;
                 let [px, py, pz] = msg.position;
                 let rotation = Some(Quaternion { x, y, z, w });
@@ -321,6 +339,11 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                 }
             }
             AnyMessage::ObstacleCells(msg) => {
+                if let Some((cycle, out)) = &mut rebuilt
+                    && let Ok(report) = wire::obstacles_from_wire(msg.clone())
+                {
+                    cycle.on_report(report, (), out);
+                }
                 let cubes = msg
                     .cells
                     .iter()
@@ -343,26 +366,7 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                 wrote("/obstacle_cells");
             }
             AnyMessage::LocalMap(msg) => {
-                let cubes = msg
-                    .patches
-                    .iter()
-                    .map(|p| {
-                        let z = [p.z_min, p.z_max];
-                        cell_cube(
-                            p.world_x,
-                            p.world_y,
-                            msg.patch_size,
-                            z,
-                            [0.55, 0.2, 0.65, 0.6],
-                        )
-                    })
-                    .collect();
-                let entity = SceneEntity {
-                    id: "local_map".into(),
-                    cubes,
-                    ..SceneEntity::default()
-                };
-                topics.scene("/local_map", msg.utime, "world", entity, time);
+                local_map_scene(&mut topics, &msg, time);
                 wrote("/local_map");
             }
             AnyMessage::Waypoints(msg) => {
@@ -443,6 +447,14 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                 wrote("/arcs");
             }
         }
+        if let Some((_, out)) = &mut rebuilt {
+            for cycle in out.drain(..) {
+                let msg = wire::map_to_wire(cycle.utime, &cycle.pose, &cycle.map, cycle.resets);
+                let time = PartialMetadata::with_log_time(nanos(cycle.utime));
+                local_map_scene(&mut topics, &msg, time);
+                *summary.topics.entry("/local_map".into()).or_default() += 1;
+            }
+        }
     }
     if refused_topics > 0 {
         summary.skipped.insert(
@@ -454,6 +466,45 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
     summary.damaged_bytes = stats.skipped_bytes + stats.truncated_tail_bytes;
     writer.close().map_err(|e| write_error(e.to_string()))?;
     Ok(summary)
+}
+
+/// Logs `map` on `/local_map`: a cube per patch, world frame.
+fn local_map_scene(topics: &mut Topics, map: &local_map_t, time: PartialMetadata) {
+    let cubes = map
+        .patches
+        .iter()
+        .map(|p| {
+            let z = [p.z_min, p.z_max];
+            cell_cube(
+                p.world_x,
+                p.world_y,
+                map.patch_size,
+                z,
+                [0.55, 0.2, 0.65, 0.6],
+            )
+        })
+        .collect();
+    let entity = SceneEntity {
+        id: "local_map".into(),
+        cubes,
+        ..SceneEntity::default()
+    };
+    topics.scene("/local_map", map.utime, "world", entity, time);
+}
+
+/// Whether `log` holds any message on `channel`.
+fn has_channel(log: &Path, channel: &str) -> Result<bool, ExportError> {
+    let read_error = |source| ExportError::Read {
+        path: log.display().to_string(),
+        source,
+    };
+    let mut reader = LogReader::open(log).map_err(read_error)?;
+    while let Some(event) = reader.next_event().map_err(read_error)? {
+        if event.channel == channel {
+            return Ok(true);
+        }
+    }
+    Ok(false)
 }
 
 /// Each arc as a 12 m polyline from the vehicle origin, coloured by its

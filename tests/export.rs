@@ -123,6 +123,18 @@ fn an_exported_sim_run_reads_back_in_the_reference_mcap_reader() {
         }
     }
     assert!(channels.contains_key("RANGE_IMAGE_ERIM") && channels.contains_key("ARC_VOTES_ROUTE"));
+    // A sim log holds no LOCAL_MAP: the map is rebuilt, one per decision
+    // cycle (a command each), and it holds the cells seen.
+    assert!(!channels.contains_key("LOCAL_MAP"));
+    expect(
+        "/local_map",
+        channels["STEERING_COMMAND"],
+        "foxglove.SceneUpdate",
+    );
+    assert!(
+        got["most_local_map_patches"].as_u64().unwrap() > 10,
+        "{got}"
+    );
 
     // The first point cloud: every return of the first image, vehicle frame.
     let cloud = &got["cloud"];

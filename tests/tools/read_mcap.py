@@ -2,7 +2,8 @@
 and Foxglove's protobuf schemas) and prints what the export test checks, as JSON:
 per topic the message count, schema and encoding, whether log times never
 decrease; the points of the first point cloud and its frame; the arcs of the
-first /arcs scene; the fields of the first steering command."""
+first /arcs scene; the most patches a /local_map scene holds; the fields of
+the first steering command."""
 
 import json
 import sys
@@ -14,6 +15,7 @@ from mcap_protobuf.decoder import DecoderFactory
 
 topics = {}
 first = {}
+most_patches = 0
 with open(sys.argv[1], "rb") as f:
     reader = make_reader(f, decoder_factories=[DecoderFactory()])
     for schema, channel, message in reader.iter_messages():
@@ -30,6 +32,10 @@ with open(sys.argv[1], "rb") as f:
         t["last"] = message.log_time
         if channel.topic not in first:
             first[channel.topic] = message.data
+        if channel.topic == "/local_map":
+            scene = SceneUpdate()
+            scene.ParseFromString(message.data)
+            most_patches = max(most_patches, len(scene.entities[0].cubes))
 
 result = {"topics": {k: {x: v[x] for x in ("count", "schema", "encoding", "increasing")} for k, v in topics.items()}}
 clouds = [t for t in first if t.startswith("/range_image")]
@@ -46,6 +52,7 @@ if "/arcs" in first:
     scene = SceneUpdate()
     scene.ParseFromString(first["/arcs"])
     result["arcs"] = {"frame": scene.entities[0].frame_id, "lines": len(scene.entities[0].lines)}
+result["most_local_map_patches"] = most_patches
 if "/steering_command" in first:
     result["command"] = json.loads(first["/steering_command"])
 print(json.dumps(result))
