@@ -15,9 +15,7 @@ use arcnav_bus::transport::Lcm;
 pub fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> {
     use arcnav::live::threaded::LiveOptions;
     let registry = Registry::builtin();
-    let Started {
-        config, lcm, stop, ..
-    } = start(&args, &registry)?;
+    let Started { config, lcm, stop } = start(&args, &registry)?;
     let options = LiveOptions {
         stop,
         ..LiveOptions::default()
@@ -61,7 +59,6 @@ struct Started {
     /// Authenticating when `[bus.auth]` names a key.
     lcm: Lcm,
     stop: StopWhen,
-    authenticated: bool,
 }
 
 /// Loads the configuration, installs the signal handlers, reads the key
@@ -113,7 +110,6 @@ fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
     }
     let mut lcm = arcnav_bus::transport::Lcm::new(&args.lcm)
         .with_context(|| format!("cannot open LCM at {}", args.lcm))?;
-    let authenticated = policy.is_some();
     if let Some(policy) = policy {
         tracing::info!(key = %auth.key_path(base).display(), channels = ?auth.channels, "authentication on");
         lcm = lcm.authenticate(policy);
@@ -122,7 +118,6 @@ fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
         config,
         lcm,
         stop: StopWhen { flag, after },
-        authenticated,
     })
 }
 
@@ -139,25 +134,20 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
         anyhow::bail!("--rate {}: must be in (0, 1000] Hz", args.rate);
     }
     let registry = Registry::builtin();
-    let Started {
-        config,
-        lcm,
-        stop,
-        authenticated,
-    } = start(live, &registry)?;
+    let Started { config, lcm, stop } = start(live, &registry)?;
     let timeout_s = args
         .timeout
         .unwrap_or(3.0 / config.pipeline.command_rate_hz);
     if !(timeout_s > 0.0 && timeout_s.is_finite()) {
         anyhow::bail!("--timeout {timeout_s}: must be a positive number of seconds");
     }
-    if !authenticated {
+    if lcm.auth_stats().is_none() {
         tracing::warn!(
             lcm = %live.lcm,
             "authentication is off: this vehicle follows any STEERING_COMMAND published on the \
              bus; set [bus.auth] key_file to follow only commands signed with the group key"
         );
-    } else if !config.bus.auth.covers(channels::STEERING_COMMAND) {
+    } else if !lcm.authenticates(channels::STEERING_COMMAND) {
         anyhow::bail!(
             "[bus.auth] channels {:?} do not include STEERING_COMMAND: the vehicle would follow \
              unsigned commands; add \"STEERING_COMMAND\"",

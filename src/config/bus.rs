@@ -79,14 +79,6 @@ impl BusAuthConfig {
         Ok(())
     }
 
-    /// Whether `channel` is one of the authenticated channels.
-    pub fn covers(&self, channel: &str) -> bool {
-        self.channels.iter().any(|pattern| {
-            arcnav_bus::transport::ChannelFilter::pattern(pattern)
-                .is_ok_and(|filter| filter.matches(channel))
-        })
-    }
-
     /// True when a key file is named.
     pub fn enabled(&self) -> bool {
         !self.key_file.as_os_str().is_empty()

@@ -140,6 +140,13 @@ impl Refused {
     pub(crate) fn total(&self) -> u64 {
         self.counts.values().sum()
     }
+
+    /// Into `status` at exit: the `refused` counter, and added to `dropped`
+    /// (which counts what did not decode as it came).
+    pub(crate) fn report(&self, status: &mut NodeStatus) {
+        status.dropped += self.total();
+        status.set("refused", self.total());
+    }
 }
 
 /// Decodes a received message; `None` (logged at debug, to be counted as

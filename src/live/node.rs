@@ -161,9 +161,7 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
     )?;
     stage.fill(&mut status);
     status.busy_ms = busy.summary();
-    // Dropped: undecodable (counted as they came) and refused.
-    status.dropped += bad.total();
-    status.set("refused", bad.total());
+    bad.report(&mut status);
     auth_status(&lcm, &mut status);
     Ok(report(vec![status]))
 }
@@ -251,9 +249,7 @@ fn behaviour(
         },
     )?;
     status.busy_ms = busy.summary();
-    // Dropped: undecodable (counted as they came) and refused.
-    status.dropped += bad.total();
-    status.set("refused", bad.total());
+    bad.report(&mut status);
     auth_status(&lcm, &mut status);
     Ok(report(vec![status]))
 }
@@ -329,9 +325,7 @@ fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
     result?;
     arbiter_status(&stage, &mut status);
     status.busy_ms = busy.summary();
-    // Dropped: undecodable (counted as they came) and refused.
-    status.dropped += bad.total();
-    status.set("refused", bad.total());
+    bad.report(&mut status);
     auth_status(&lcm, &mut status);
     Ok(LiveReport {
         commands: stage.counts().commands,

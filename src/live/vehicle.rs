@@ -19,7 +19,7 @@ use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{CommandWatchdog, SteeringCommand};
 use serde::Serialize;
 
-use super::io::{Ticker, auth_status, pump};
+use super::io::{Refused, Ticker, auth_status, pump};
 use super::threaded::{LiveError, LiveOptions};
 use super::{LiveReport, NodeStatus};
 
@@ -101,7 +101,8 @@ pub fn run_bridge(
     let clock = options.clock();
     let mut watchdog = CommandWatchdog::new(seconds_to_micros(bridge.timeout_s));
     let mut status = NodeStatus::new("vehicle");
-    let (mut malformed, mut following, mut stopped) = (0u64, 0u64, 0u64);
+    let mut bad = Refused::default();
+    let (mut following, mut stopped) = (0u64, 0u64);
     let mut tick = Ticker::new(1.0 / bridge.rate_hz, clock.now_us());
     let mut report = Ticker::new(bridge.status_period_s, clock.now_us());
     lcm.subscribe(channels::STEERING_COMMAND);
@@ -118,10 +119,7 @@ pub fn run_bridge(
                         status.handled += 1;
                         watchdog.on_command(now, SteeringCommand::from(&msg));
                     }
-                    Err(e) => {
-                        malformed += 1;
-                        tracing::warn!(%e, "a STEERING_COMMAND that is not a steering_command_t was dropped");
-                    }
+                    Err(e) => bad.refuse("steering command", &message.channel, &e),
                 }
             }
             if tick.due(now) {
@@ -140,7 +138,7 @@ pub fn run_bridge(
                 execute(&Executed::new(now, state, &command));
             }
             if report.due(now) {
-                status.dropped = malformed;
+                status.dropped = bad.total();
                 status.set("watchdog_trips", watchdog.trips);
                 status.log();
             }
@@ -152,7 +150,7 @@ pub fn run_bridge(
         Execution::ShuttingDown,
         &SteeringCommand::stop(now),
     ));
-    status.dropped = malformed;
+    bad.report(&mut status);
     status.set("ticks_following", following);
     status.set("ticks_stopped", stopped + 1);
     status.set("watchdog_trips", watchdog.trips);

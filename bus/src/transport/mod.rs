@@ -249,6 +249,14 @@ impl Lcm {
         self.verifier.as_ref().map(|(_, v)| v.stats())
     }
 
+    /// Whether messages on `channel` are signed and verified (false when
+    /// authentication is off).
+    pub fn authenticates(&self, channel: &str) -> bool {
+        self.verifier
+            .as_ref()
+            .is_some_and(|(policy, _)| policy.covers(channel))
+    }
+
     pub fn url(&self) -> &LcmUrl {
         &self.url
     }
