@@ -37,6 +37,7 @@ use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use serde::Serialize;
 
 use crate::config::Config;
+use crate::output::Staged;
 use crate::wire;
 
 /// An export that could not be made.
@@ -209,18 +210,17 @@ const COMMAND_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"
 pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSummary, ExportError> {
     let arcs = config.arc_set()?;
     let mut arbiter: Arbiter = config.arbiter()?;
-    let mut reader = LogReader::open(log).map_err(|source| ExportError::Read {
-        path: log.display().to_string(),
-        source,
-    })?;
+    let mut reader = LogReader::open(log).map_err(read_error(log))?;
     let write_error = |reason: String| ExportError::Write {
         path: out.display().to_string(),
         reason,
     };
+    // Written whole or not at all: beside `out`, renamed onto it at the end.
+    let (staged, file) = Staged::create(out).map_err(|e| write_error(e.to_string()))?;
     let ctx = Context::new();
     let writer = ctx
         .mcap_writer()
-        .create_new_buffered_file(out)
+        .create(std::io::BufWriter::new(file))
         .map_err(|e| write_error(e.to_string()))?;
     let mut topics = Topics {
         ctx: Arc::clone(&ctx),
@@ -246,12 +246,7 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
         let event = match reader.next_event() {
             Ok(Some(event)) => event,
             Ok(None) => break,
-            Err(source) => {
-                return Err(ExportError::Read {
-                    path: log.display().to_string(),
-                    source,
-                });
-            }
+            Err(source) => return Err(read_error(log)(source)),
         };
         summary.events += 1;
         let time = PartialMetadata::with_log_time(nanos(event.timestamp));
@@ -464,8 +459,23 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
     }
     let stats = reader.stats();
     summary.damaged_bytes = stats.skipped_bytes + stats.truncated_tail_bytes;
-    writer.close().map_err(|e| write_error(e.to_string()))?;
+    let file = writer
+        .close()
+        .map_err(|e| write_error(e.to_string()))?
+        .into_inner()
+        .map_err(|e| write_error(e.error().to_string()))?;
+    file.sync_all()
+        .and_then(|()| staged.commit())
+        .map_err(|e| write_error(e.to_string()))?;
     Ok(summary)
+}
+
+/// The error of reading `log`.
+fn read_error(log: &Path) -> impl Fn(std::io::Error) -> ExportError + '_ {
+    move |source| ExportError::Read {
+        path: log.display().to_string(),
+        source,
+    }
 }
 
 /// Logs `map` on `/local_map`: a cube per patch, world frame.
@@ -494,12 +504,8 @@ fn local_map_scene(topics: &mut Topics, map: &local_map_t, time: PartialMetadata
 
 /// Whether `log` holds any message on `channel`.
 fn has_channel(log: &Path, channel: &str) -> Result<bool, ExportError> {
-    let read_error = |source| ExportError::Read {
-        path: log.display().to_string(),
-        source,
-    };
-    let mut reader = LogReader::open(log).map_err(read_error)?;
-    while let Some(event) = reader.next_event().map_err(read_error)? {
+    let mut reader = LogReader::open(log).map_err(read_error(log))?;
+    while let Some(event) = reader.next_event().map_err(read_error(log))? {
         if event.channel == channel {
             return Ok(true);
         }
