@@ -174,6 +174,34 @@ fn lookup<'t>(table: &'t toml::Table, key: &str) -> Option<&'t toml::Value> {
     table.get(last)
 }
 
+/// The axis of `key` over `given` values, each typed against the value the
+/// key holds in `table` by `value` (and shown as `shown` when it cannot be).
+fn axis<T>(
+    table: &toml::Table,
+    key: &str,
+    given: &[T],
+    shown: impl Fn(&T) -> String,
+    value: impl Fn(&toml::Value, &T) -> Result<toml::Value, String>,
+) -> Result<Axis, SweepError> {
+    let current = lookup(table, key).ok_or_else(|| SweepError::NoKey {
+        key: key.to_owned(),
+    })?;
+    let values = given
+        .iter()
+        .map(|g| {
+            value(current, g).map_err(|reason| SweepError::BadValue {
+                key: key.to_owned(),
+                value: shown(g),
+                reason,
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(Axis {
+        key: key.to_owned(),
+        values,
+    })
+}
+
 /// The axes of `--set` arguments and grid entries, values typed by the
 /// keys of `base`.
 pub fn axes(
@@ -182,41 +210,15 @@ pub fn axes(
     grid: &[(String, Vec<toml::Value>)],
 ) -> Result<Vec<Axis>, SweepError> {
     let table: toml::Table = toml::from_str(&base.to_toml()).unwrap_or_default();
-    let mut axes: Vec<Axis> = Vec::new();
-    let typed_values = |key: &str, values: Vec<Result<toml::Value, (String, String)>>| {
-        values
-            .into_iter()
-            .map(|v| {
-                v.map_err(|(value, reason)| SweepError::BadValue {
-                    key: key.to_owned(),
-                    value,
-                    reason,
-                })
+    let axes = sets
+        .iter()
+        .map(|(key, texts)| axis(&table, key, texts, String::clone, |c, t| typed(c, t)))
+        .chain(grid.iter().map(|(key, values)| {
+            axis(&table, key, values, toml::Value::to_string, |c, v| {
+                coerce(c, v.clone())
             })
-            .collect::<Result<Vec<_>, _>>()
-    };
-    for (key, texts) in sets {
-        let current = lookup(&table, key).ok_or_else(|| SweepError::NoKey { key: key.clone() })?;
-        let values = texts
-            .iter()
-            .map(|t| typed(current, t).map_err(|reason| (t.clone(), reason)))
-            .collect();
-        axes.push(Axis {
-            key: key.clone(),
-            values: typed_values(key, values)?,
-        });
-    }
-    for (key, values) in grid {
-        let current = lookup(&table, key).ok_or_else(|| SweepError::NoKey { key: key.clone() })?;
-        let values = values
-            .iter()
-            .map(|v| coerce(current, v.clone()).map_err(|reason| (v.to_string(), reason)))
-            .collect();
-        axes.push(Axis {
-            key: key.clone(),
-            values: typed_values(key, values)?,
-        });
-    }
+        }))
+        .collect::<Result<Vec<_>, _>>()?;
     for (i, axis) in axes.iter().enumerate() {
         if axes[..i].iter().any(|a| a.key == axis.key) {
             return Err(SweepError::Twice {
@@ -245,15 +247,20 @@ pub struct Setting {
 impl Setting {
     /// `key=value, key=value` (`defaults` with no axes).
     pub fn label(&self, axes: &[Axis]) -> String {
-        if axes.is_empty() {
-            return "defaults".into();
-        }
-        axes.iter()
-            .zip(&self.values)
-            .map(|(a, v)| format!("{}={v}", a.key))
-            .collect::<Vec<_>>()
-            .join(", ")
+        label(axes, &self.values)
     }
+}
+
+/// The label of the setting with `values` on `axes`.
+fn label(axes: &[Axis], values: &[String]) -> String {
+    if axes.is_empty() {
+        return "defaults".into();
+    }
+    axes.iter()
+        .zip(values)
+        .map(|(a, v)| format!("{}={v}", a.key))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Every combination of the axes' values (the last axis varying fastest),
@@ -285,26 +292,12 @@ pub fn settings(
                 assign(&mut config, &axis.key, (*value).clone())?;
             }
             let values: Vec<String> = values.iter().map(|v| v.to_string()).collect();
-            let setting = Setting {
-                values,
-                config: Config::default(),
-            };
-            let label = setting.label(axes);
+            let label = label(axes, &values);
+            // Loading validates the whole configuration.
             let text = toml::to_string(&config).unwrap_or_default();
             let config = Config::from_toml_with(&text, &label, registry)
-                .and_then(|c| {
-                    c.validate_with(registry).map(|()| c).map_err(|source| {
-                        ConfigLoadError::Invalid {
-                            origin: label.clone(),
-                            source,
-                        }
-                    })
-                })
-                .map_err(|source| SweepError::Invalid {
-                    label: label.clone(),
-                    source,
-                })?;
-            Ok(Setting { config, ..setting })
+                .map_err(|source| SweepError::Invalid { label, source })?;
+            Ok(Setting { values, config })
         })
         .collect()
 }
