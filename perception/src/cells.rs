@@ -1133,6 +1133,22 @@ impl CellClassifier {
     }
 }
 
+impl crate::registry::EvaluatorPlugin for CellClassifier {
+    const NAME: &'static str = "cells";
+    const ABOUT: &'static str =
+        "per-cell height variation, slope and discontinuity (002, Langer, Rosenblatt & Hebert)";
+    type Config = crate::config::CellsConfig;
+
+    /// `[perception.cells]`, checked with the rest of `[perception]`.
+    fn config(perception: &PerceptionConfig) -> Result<Self::Config, arcnav_vehicle::ConfigError> {
+        Ok(perception.cells.clone())
+    }
+
+    fn build(_: Self::Config, perception: &PerceptionConfig) -> Self {
+        Self::new(perception)
+    }
+}
+
 impl TerrainEvaluator for CellClassifier {
     fn name(&self) -> &'static str {
         "cells"

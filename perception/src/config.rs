@@ -4,17 +4,19 @@ use arcnav_vehicle::VehicleConfig;
 use arcnav_vehicle::config::{self, ConfigError};
 use serde::{Deserialize, Serialize};
 
-use crate::cells::CellClassifier;
-use crate::evaluator::TerrainEvaluator;
+use std::collections::BTreeMap;
 
-/// Evaluators arcnav can build by name.
-pub const EVALUATORS: [&str; 1] = ["cells"];
+use crate::evaluator::TerrainEvaluator;
+use crate::height_diff::HeightDiffConfig;
+use crate::pca::PcaConfig;
+use crate::registry::EvaluatorRegistry;
 
 /// Lives in `[perception]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PerceptionConfig {
-    /// Which terrain evaluator classifies images (see [`EVALUATORS`]).
+    /// Which terrain evaluator classifies images, by its name in the
+    /// [`EvaluatorRegistry`] (built in: `cells`, `height_diff`, `pca`).
     pub evaluator: String,
     /// Returns closer than this are ignored (the vehicle's own body), m.
     pub min_range_m: f64,
@@ -26,8 +28,16 @@ pub struct PerceptionConfig {
     pub region: RegionConfig,
     /// The per-cell classifier of 002 §4.
     pub cells: CellsConfig,
-    /// The near edges of unseen ground (holes, trenches, ledges).
+    /// The near edges of unseen ground (holes, trenches, ledges), found
+    /// the same way whichever evaluator judges the ground that was seen.
     pub drop_off: DropOffConfig,
+    /// Multi-scale height differences (000 §4–5.1), `evaluator = "height_diff"`.
+    pub height_diff: HeightDiffConfig,
+    /// Hierarchical PCA and scan-line roughness (001 §3), `evaluator = "pca"`.
+    pub pca: PcaConfig,
+    /// Tables of evaluators added to the registry by a program,
+    /// `[perception.plugins.NAME]`.
+    pub plugins: BTreeMap<String, toml::Table>,
 }
 
 impl Default for PerceptionConfig {
@@ -40,6 +50,9 @@ impl Default for PerceptionConfig {
             region: RegionConfig::default(),
             cells: CellsConfig::default(),
             drop_off: DropOffConfig::default(),
+            height_diff: HeightDiffConfig::default(),
+            pca: PcaConfig::default(),
+            plugins: BTreeMap::new(),
         }
     }
 }
@@ -167,35 +180,25 @@ impl PerceptionConfig {
     /// (cell edges lie on multiples of the cell size from the vehicle
     /// origin) and by the margin the slope window needs.
     pub(crate) fn grid(&self) -> GridShape {
-        let cell = self.cells.cell_size_m;
         let margin = (self.cells.slope_window_cells / 2).max(1) as usize;
-        let cells = |metres: f64| (metres / cell).ceil().max(0.0) as usize;
-        let (behind, right) = (
-            cells(self.region.behind_m) + margin,
-            cells(self.region.half_width_m) + margin,
-        );
-        GridShape {
-            cols: behind + cells(self.region.ahead_m) + margin,
-            rows: 2 * right,
-            corner: [behind as f32, right as f32],
-            margin,
-        }
+        GridShape::over(&self.region, self.cells.cell_size_m, margin)
     }
 
     /// Checks the values and that no threshold lets pass terrain the vehicle
     /// cannot drive. Keys are relative to `[perception]`, except those of
     /// the vehicle named in messages.
     pub fn validate_for(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
-        if !EVALUATORS.contains(&self.evaluator.as_str()) {
-            return Err(ConfigError::new(
-                "evaluator",
-                format!(
-                    "{:?} is not a known evaluator (known: {})",
-                    self.evaluator,
-                    EVALUATORS.join(", ")
-                ),
-            ));
-        }
+        self.validate_with(&EvaluatorRegistry::builtin(), vehicle)
+    }
+
+    /// [`PerceptionConfig::validate_for`], with the evaluators of `registry`
+    /// (for programs that add their own).
+    pub fn validate_with(
+        &self,
+        registry: &EvaluatorRegistry,
+        vehicle: &VehicleConfig,
+    ) -> Result<(), ConfigError> {
+        registry.check_known(&self.evaluator)?;
         config::non_negative("min_range_m", self.min_range_m)?;
         config::positive("max_range_m", self.max_range_m)?;
         if self.min_range_m >= self.max_range_m {
@@ -311,21 +314,13 @@ impl PerceptionConfig {
                 vehicle.tolerated_step_m,
             ),
         ];
-        checks.into_iter().flatten().next().map_or(Ok(()), Err)
+        checks.into_iter().flatten().next().map_or(Ok(()), Err)?;
+        registry.validate(self, vehicle)
     }
 
     /// Builds the configured evaluator (call `validate_for` first).
     pub fn build_evaluator(&self) -> Result<Box<dyn TerrainEvaluator>, ConfigError> {
-        match self.evaluator.as_str() {
-            "cells" => Ok(Box::new(CellClassifier::new(self))),
-            other => Err(ConfigError::new(
-                "evaluator",
-                format!(
-                    "{other:?} is not a known evaluator (known: {})",
-                    EVALUATORS.join(", ")
-                ),
-            )),
-        }
+        EvaluatorRegistry::builtin().build(self)
     }
 }
 
@@ -398,7 +393,7 @@ mod tests {
         let err = p.validate_for(&VehicleConfig::default()).unwrap_err();
         assert_eq!(
             err.to_string(),
-            "`evaluator`: \"magic\" is not a known evaluator (known: cells)"
+            "`evaluator`: \"magic\" is not a known evaluator (known: cells, height_diff, pca)"
         );
     }
 }

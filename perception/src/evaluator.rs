@@ -30,12 +30,20 @@ impl Reasons {
     /// vehicle bridges, beyond which the ground drops away (a hole, a
     /// trench, a ledge).
     pub const DROP_OFF: Self = Self(8);
+    /// The multi-scale height differences of 000 §5.1 add up to an
+    /// absolute obstacle (`height_diff`).
+    pub const HEIGHT_DIFFERENCE: Self = Self(16);
+    /// Not flat even at the smallest region of 001's hierarchical PCA
+    /// (`pca`).
+    pub const NOT_FLAT: Self = Self(32);
     /// Every reason, with its name, in bit order.
-    pub const ALL: [(Self, &'static str); 4] = [
+    pub const ALL: [(Self, &'static str); 6] = [
         (Self::HEIGHT_VARIATION, "height variation"),
         (Self::SLOPE, "slope"),
         (Self::DISCONTINUITY, "discontinuity"),
         (Self::DROP_OFF, "drop-off"),
+        (Self::HEIGHT_DIFFERENCE, "height difference"),
+        (Self::NOT_FLAT, "not flat"),
     ];
 
     pub const fn bits(self) -> u8 {
@@ -147,8 +155,11 @@ pub struct ImageStats {
     pub untraversable: u32,
     /// Untraversable cells per reason, in [`Reasons::ALL`] order (a cell
     /// with two reasons counts in both).
-    pub by_reason: [u32; 4],
+    pub by_reason: [u32; Reasons::ALL.len()],
     pub regions: u32,
+    /// Returns removed as outliers before evaluation (by evaluators that
+    /// filter the image, e.g. 000's median filter).
+    pub outliers: u32,
 }
 
 impl ImageStats {
@@ -167,6 +178,7 @@ impl ImageStats {
             add(a, b);
         }
         add(&mut self.regions, other.regions);
+        add(&mut self.outliers, other.outliers);
     }
 }
 

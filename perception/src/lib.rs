@@ -10,6 +10,10 @@
 //!   rendering of any [`raycast::RayCast`] scene;
 //! - [`evaluator`]: the [`TerrainEvaluator`] trait and its output;
 //! - [`cells`]: the paper's per-cell classifier;
+//! - [`height_diff`]: 000's multi-scale height differences, with
+//!   [`median`] outlier filtering;
+//! - [`pca`]: 001's hierarchical PCA and roughness;
+//! - [`registry`]: evaluators by name, and the plug-in trait;
 //! - [`fov`]: the observed footprint polygon;
 //! - [`shadow`]: the ground in it the image did not see;
 //! - [`scene`]: analytic scenes for tests and benchmarks;
@@ -19,8 +23,13 @@ pub mod cells;
 pub mod config;
 pub mod evaluator;
 pub mod fov;
+mod grid;
+pub mod height_diff;
 pub mod image;
+pub mod median;
+pub mod pca;
 pub mod raycast;
+pub mod registry;
 pub mod scene;
 pub mod sensor;
 pub mod shadow;
@@ -32,7 +41,10 @@ pub use evaluator::{
     TerrainEvaluator,
 };
 pub use fov::FovPolygon;
+pub use height_diff::{HeightDiff, HeightDiffConfig, HeightDiffMaps};
 pub use image::{BeamTable, ImageError, RangeImage};
+pub use pca::{HierarchicalPca, PcaConfig, PcaMaps};
 pub use raycast::RayCast;
+pub use registry::{EvaluatorPlugin, EvaluatorRegistry};
 pub use sensor::{SensorConfig, SensorModel, SensorPreset};
 pub use shadow::{Shadow, ShadowIndex, Shadows};

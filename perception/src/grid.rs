@@ -1,0 +1,333 @@
+//! What the grid evaluators (`height_diff`, `pca`) share: the image's points
+//! in the gravity-aligned frame of the capture pose, the level-frame grid
+//! over `[perception.region]` they are binned into, and the step from
+//! "these grid cells are untraversable" to an [`ObstacleReport`]
+//! (8-connected regions, world-frame cells).
+//!
+//! The grid is aligned as the cell classifier's is: cell edges lie on
+//! whole multiples of the cell size from the vehicle origin, so a cell of
+//! one evaluator and the cell classifier's cell of the same size are the
+//! same square of ground.
+
+use arcnav_vehicle::Isometry;
+
+use crate::config::{GridShape, RegionConfig};
+use crate::evaluator::{ImageStats, ObstacleCell, ObstacleReport, Reasons, Region};
+use crate::image::RangeImage;
+
+impl GridShape {
+    /// The grid over `region` with `cell`-sized cells and `margin` empty
+    /// cells along each edge.
+    pub(crate) fn over(region: &RegionConfig, cell: f64, margin: usize) -> Self {
+        let cells = |metres: f64| (metres / cell).ceil().max(0.0) as usize;
+        let (behind, right) = (
+            cells(region.behind_m) + margin,
+            cells(region.half_width_m) + margin,
+        );
+        GridShape {
+            cols: behind + cells(region.ahead_m) + margin,
+            rows: 2 * right,
+            corner: [behind as f32, right as f32],
+            margin,
+        }
+    }
+
+    /// The cell holding level-frame (x, y), when it lies at least `margin`
+    /// cells inside the grid.
+    #[inline]
+    pub(crate) fn index(&self, cell: f32, x: f32, y: f32) -> Option<usize> {
+        let (fx, fy) = (
+            (x / cell).floor() + self.corner[0],
+            (y / cell).floor() + self.corner[1],
+        );
+        let m = self.margin as f32;
+        if !(fx >= m && fy >= m && fx < (self.cols - self.margin) as f32)
+            || fy >= (self.rows - self.margin) as f32
+        {
+            return None;
+        }
+        Some(fy as usize * self.cols + fx as usize)
+    }
+
+    /// Level-frame centre of cell `index`.
+    #[inline]
+    pub(crate) fn centre(&self, cell: f32, index: usize) -> [f32; 2] {
+        let (ix, iy) = (index % self.cols, index / self.cols);
+        [
+            (ix as f32 + 0.5 - self.corner[0]) * cell,
+            (iy as f32 + 0.5 - self.corner[1]) * cell,
+        ]
+    }
+}
+
+/// One valid return, in the level frame of the capture pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Point {
+    pub xyz: [f32; 3],
+    /// Horizontal distance from the sensor, m.
+    pub distance: f32,
+    pub row: u32,
+    pub col: u32,
+}
+
+/// Per-image beam trigonometry and the projection of valid returns.
+#[derive(Debug, Default)]
+pub(crate) struct Projector {
+    cos_el: Vec<f32>,
+    sin_el: Vec<f32>,
+    cos_az: Vec<f32>,
+    sin_az: Vec<f32>,
+}
+
+/// The level frame of `world_from_vehicle` and where `image`'s sensor
+/// stands in it.
+pub(crate) fn level_frames(
+    image: &RangeImage,
+    world_from_vehicle: &Isometry,
+) -> (Isometry, Isometry) {
+    let world_from_level = arcnav_vehicle::frames::level_frame(world_from_vehicle);
+    let level_from_sensor =
+        world_from_level.inverse() * world_from_vehicle * image.vehicle_from_sensor;
+    (world_from_level, level_from_sensor)
+}
+
+impl Projector {
+    /// Projects every return of `ranges` (an image of `image`'s beam
+    /// table, possibly filtered) with a range in `[min_range, max_range]`
+    /// into the level frame, appending to `out`, and counts what it skips.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn project(
+        &mut self,
+        image: &RangeImage,
+        ranges: &[f32],
+        level_from_sensor: &Isometry,
+        min_range: f32,
+        max_range: f32,
+        out: &mut Vec<Point>,
+        stats: &mut ImageStats,
+    ) {
+        let beams = &image.beams;
+        self.cos_el.clear();
+        self.sin_el.clear();
+        for &el in &beams.elevation {
+            let (s, c) = el.sin_cos();
+            self.sin_el.push(s);
+            self.cos_el.push(c);
+        }
+        self.cos_az.clear();
+        self.sin_az.clear();
+        for &az in &beams.azimuth {
+            let (s, c) = az.sin_cos();
+            self.sin_az.push(s);
+            self.cos_az.push(c);
+        }
+        let m = level_from_sensor.rotation.to_rotation_matrix();
+        let m = m.matrix();
+        let r = |i: usize, j: usize| m[(i, j)] as f32;
+        let t = level_from_sensor.translation.vector;
+        let (tx, ty, tz) = (t.x as f32, t.y as f32, t.z as f32);
+        let cols = image.cols();
+        for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
+            let line = &ranges[row * cols..(row + 1) * cols];
+            for (col, &range) in line.iter().enumerate() {
+                if !(range.is_finite() && range > 0.0) {
+                    stats.no_return += 1;
+                    continue;
+                }
+                if range < min_range || range > max_range {
+                    stats.out_of_range += 1;
+                    continue;
+                }
+                let d = [ce * self.cos_az[col], ce * self.sin_az[col], se];
+                let p = [
+                    (r(0, 0) * d[0] + r(0, 1) * d[1] + r(0, 2) * d[2]) * range + tx,
+                    (r(1, 0) * d[0] + r(1, 1) * d[1] + r(1, 2) * d[2]) * range + ty,
+                    (r(2, 0) * d[0] + r(2, 1) * d[1] + r(2, 2) * d[2]) * range + tz,
+                ];
+                out.push(Point {
+                    xyz: p,
+                    distance: (p[0] - tx).hypot(p[1] - ty),
+                    row: row as u32,
+                    col: col as u32,
+                });
+            }
+        }
+    }
+}
+
+/// An untraversable grid cell, before it becomes an [`ObstacleCell`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Marked {
+    pub index: u32,
+    pub reasons: Reasons,
+    /// Level-frame heights of the cell, m.
+    pub z_min: f32,
+    pub z_max: f32,
+}
+
+/// Groups marked cells into 8-connected regions and writes them to
+/// `report` in the world frame. `labels` is scratch of the grid's size
+/// (every entry `u32::MAX`), left that way.
+pub(crate) fn emit(
+    marked: &mut [Marked],
+    grid: &GridShape,
+    cell: f32,
+    labels: &mut Vec<u32>,
+    world_from_level: &Isometry,
+    report: &mut ObstacleReport,
+    stats: &mut ImageStats,
+) {
+    const UNLABELLED: u32 = u32::MAX;
+    const MARKED: u32 = u32::MAX - 1;
+    labels.resize(grid.cols * grid.rows, UNLABELLED);
+    // The same cell may be marked twice (two reasons): merge.
+    marked.sort_unstable_by_key(|m| m.index);
+    let mut merged = 0;
+    for k in 0..marked.len() {
+        if merged > 0 && marked[merged - 1].index == marked[k].index {
+            let m = marked[k];
+            let last = &mut marked[merged - 1];
+            last.reasons.insert(m.reasons);
+            last.z_min = last.z_min.min(m.z_min);
+            last.z_max = last.z_max.max(m.z_max);
+        } else {
+            marked[merged] = marked[k];
+            merged += 1;
+        }
+    }
+    let marked = &marked[..merged];
+    for m in marked {
+        labels[m.index as usize] = MARKED;
+    }
+    let s = grid.cols as isize;
+    let neighbours = [-s - 1, -s, -s + 1, -1, 1, s - 1, s, s + 1];
+    let mut queue = Vec::new();
+    let mut regions: Vec<Region> = Vec::new();
+    for m in marked {
+        if labels[m.index as usize] != MARKED {
+            continue;
+        }
+        let region = regions.len() as u32;
+        regions.push(Region {
+            cells: 0,
+            reasons: Reasons::NONE,
+        });
+        labels[m.index as usize] = region;
+        queue.push(m.index as usize);
+        while let Some(i) = queue.pop() {
+            regions[region as usize].cells += 1;
+            for offset in neighbours {
+                let n = i as isize + offset;
+                if let Some(label) = usize::try_from(n).ok().and_then(|n| labels.get_mut(n))
+                    && *label == MARKED
+                {
+                    *label = region;
+                    queue.push(n as usize);
+                }
+            }
+        }
+    }
+    let (sin, cos) = arcnav_vehicle::frames::yaw_of(world_from_level).sin_cos();
+    let origin = world_from_level.translation.vector;
+    for m in marked {
+        let region = labels[m.index as usize];
+        labels[m.index as usize] = UNLABELLED;
+        regions[region as usize].reasons.insert(m.reasons);
+        let [cx, cy] = grid.centre(cell, m.index as usize).map(f64::from);
+        report.cells.push(ObstacleCell {
+            x: origin.x + cos * cx - sin * cy,
+            y: origin.y + sin * cx + cos * cy,
+            z_min: m.z_min + origin.z as f32,
+            z_max: m.z_max + origin.z as f32,
+            reasons: m.reasons,
+            region,
+        });
+        stats.untraversable += 1;
+        for (count, (reason, _)) in stats.by_reason.iter_mut().zip(Reasons::ALL) {
+            *count += u32::from(m.reasons.contains(reason));
+        }
+    }
+    stats.regions = regions.len() as u32;
+    report.regions = regions;
+}
+
+/// What every grid evaluator reports besides its own judgement, found by
+/// the cell classifier with its criteria (a)-(c) switched off: the
+/// observed footprint, its shadows and the drop-offs (the near edges of
+/// ground the image did not see, which no judgement of the ground that
+/// was seen can find).
+pub(crate) struct SeenGround {
+    classifier: crate::CellClassifier,
+    report: ObstacleReport,
+}
+
+impl SeenGround {
+    /// Over `config`'s region and drop-off rule, with `cell`-sized cells.
+    pub(crate) fn new(config: &crate::PerceptionConfig, cell: f64) -> Self {
+        let mut config = config.clone();
+        let c = &mut config.cells;
+        c.cell_size_m = cell;
+        c.max_height_variation_m = f64::INFINITY;
+        c.max_discontinuity_m = f64::INFINITY;
+        c.max_slope_deg = 90.0;
+        c.slope_window_cells = 1;
+        Self {
+            classifier: crate::CellClassifier::new(&config),
+            report: ObstacleReport::default(),
+        }
+    }
+
+    /// Evaluates `image` into `report` (cleared first): footprint, shadows,
+    /// the pixel counts in `stats`, and the drop-off cells left for
+    /// [`SeenGround::drop_offs`].
+    pub(crate) fn evaluate(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        runner: &dyn crate::Runner,
+        report: &mut ObstacleReport,
+    ) -> Result<ImageStats, crate::PerceptionError> {
+        use crate::TerrainEvaluator;
+        let stats =
+            self.classifier
+                .evaluate_with(image, world_from_vehicle, &mut self.report, runner)?;
+        report.clear();
+        report.utime = self.report.utime;
+        report.sensor.push_str(&self.report.sensor);
+        report.cell_size_m = self.report.cell_size_m;
+        std::mem::swap(&mut report.fov, &mut self.report.fov);
+        std::mem::swap(&mut report.shadows, &mut self.report.shadows);
+        Ok(ImageStats {
+            cells_evaluated: 0,
+            untraversable: 0,
+            by_reason: [0; Reasons::ALL.len()],
+            regions: 0,
+            ..stats
+        })
+    }
+
+    /// The drop-off cells of the last image, marked on `grid` (the same
+    /// cell size, so the same squares of ground); `world_from_level` is the
+    /// level frame of its capture pose.
+    pub(crate) fn drop_offs(
+        &self,
+        grid: &GridShape,
+        cell: f32,
+        world_from_level: &Isometry,
+        marked: &mut Vec<Marked>,
+    ) {
+        let level_from_world = world_from_level.inverse();
+        let z0 = world_from_level.translation.vector.z as f32;
+        for c in &self.report.cells {
+            let p = level_from_world * nalgebra::Point3::new(c.x, c.y, 0.0);
+            if let Some(index) = grid.index(cell, p.x as f32, p.y as f32) {
+                marked.push(Marked {
+                    index: index as u32,
+                    reasons: Reasons::DROP_OFF,
+                    z_min: c.z_min - z0,
+                    z_max: c.z_max - z0,
+                });
+            }
+        }
+    }
+}

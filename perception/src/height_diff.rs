@@ -1,0 +1,795 @@
+//! Multi-scale height differences: the drivability maps of Schwarz & Behnke
+//! (paper 000, §4–§5.1), `perception.evaluator = "height_diff"`.
+//!
+//! 1. **Median outlier filter** of each range image (§4.1; [`crate::median`]).
+//!    The paper's 10 × 10 pixel window of its 0.09°/pixel cameras is 0.9°;
+//!    here the window is the largest odd number of the sensor's own pixels
+//!    within that angle along each axis: 5 × 5 on a 0.14°/pixel depth
+//!    camera, 1 row × 5 columns on a 64-beam lidar (whose rows, 0.42°
+//!    apart, hit the ground metres apart), none on the 0.5°/pixel ERIM.
+//! 2. **Height map** (§4.1): a gravity-aligned grid around the vehicle;
+//!    each cell keeps the *maximum* height of the points falling in it
+//!    ("small positive obstacles pose more danger than small negative
+//!    ones"), NaN where none fell, and which sensor gave it. Several images
+//!    taken at once (a ring of cameras) go into one map:
+//!    [`HeightDiff::build_maps`].
+//! 3. **Gap filling** (§4.2): a NaN cell whose nearest defined cells in at
+//!    least two of the four axis directions lie closer than
+//!    `δ = δ0 + Δ·r` (r: its distance from the vehicle) takes their
+//!    inverse-distance weighted mean. The paper's δ0 = 4 cells and
+//!    Δ = 0.054 of its 5 cm grid are δ0 = 0.2 m and Δ = 0.054 m/m.
+//! 4. **Height differences** (§4.3) at scales l ∈ {1, 3, 6}:
+//!    `D_l(x, y) = max |H(x, y) − H(u, v)|` over `|u−x| ≤ l, |v−y| ≤ l`,
+//!    NaN when H(x, y) is NaN or no other cell of the window is defined.
+//!    (The paper writes `< l`, under which D_1 would compare a cell with
+//!    itself alone; its l are the neighbours' distances.)
+//!    Differences are never taken across sensor boundaries: a cell is
+//!    compared only with cells whose height came from the same sensor.
+//! 5. **Cost** (§5.1): `D̃ = Σ_{l ∈ {1,3,6}} min{0.5, λ_l·D_l}` with
+//!    λ = (5.0, 2.5, 3.5); an *absolute obstacle* has `λ_l·D_l ≥ 1` in some
+//!    map. Absolute obstacles are inflated by the robot radius and costs
+//!    averaged locally: `D_D = max{D̃, Σ_{P(x,y)} D̃ / |P|}` (the disc P of
+//!    the robot radius is taken as the square of the same area).
+//!
+//! What the report carries: the cells with `D̃ ≥ 1` (`obstacle_cost`) or
+//! an absolute obstacle, reason `height difference`, and the drop-offs, footprint and
+//! shadows every evaluator reports ([`crate::grid::SeenGround`]). The
+//! inflation and averaging of `D_D` are for planners that treat the
+//! vehicle as a point (the paper's navfn); arcnav's behaviours sweep the
+//! vehicle's footprint along each arc, so `D_D` is kept, graded, in
+//! [`HeightDiffMaps::drivability`] rather than reported as obstacles
+//! (that would close every gap narrower than two vehicle widths).
+//!
+//! The cell size sets what the scales mean on the ground. With 10 cm
+//! cells D_6 spans ±0.6 m: an even incline is an absolute obstacle
+//! (λ_6·D_6 ≥ 1) from 25.5° along a grid axis (18.6° along a diagonal,
+//! where the window reaches 0.85 m), about the vehicle's 25°, and D̃
+//! reaches 1 near 22° along an axis. A step of `1/λ_1` = 0.2 m is an
+//! absolute obstacle at any cell size: the vehicle's tolerated step. A
+//! step reaches D̃ = 1 from about 9 cm (0.5 + 0.25 + 0.35 at 10 cm): 000's
+//! small robot avoided what this vehicle could climb; raise
+//! `obstacle_cost` (at most 1.5, the three caps) to let it.
+
+use arcnav_vehicle::config::{self, ConfigError};
+use arcnav_vehicle::{Isometry, VehicleConfig};
+use serde::{Deserialize, Serialize};
+
+use crate::config::{GridShape, PerceptionConfig};
+use crate::evaluator::{
+    ImageStats, InOrder, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
+};
+use crate::grid::{self, Marked, Point, Projector, SeenGround};
+use crate::image::RangeImage;
+use crate::median::{MedianOutliers, MedianParams};
+use crate::registry::EvaluatorPlugin;
+
+/// Lives in `[perception.height_diff]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HeightDiffConfig {
+    /// Height-map cell, m (000: 5 cm for its 8 m map).
+    pub cell_size_m: f64,
+    /// Median window, degrees of beam angle (000: 10 × 10 pixels of 0.09°).
+    pub median_window_deg: f64,
+    /// A return farther than `outlier_m + outlier_fraction · median` from
+    /// its window's median is removed, m.
+    pub outlier_m: f64,
+    pub outlier_fraction: f64,
+    /// δ0 of the gap-filling distance δ = δ0 + Δ·r, m (000 §4.2: 4 cells of 5 cm).
+    pub gap_base_m: f64,
+    /// Δ of δ = δ0 + Δ·r, m per m (000 §4.2: 0.054).
+    pub gap_per_m: f64,
+    /// The scales l, in cells (000 §4.3: 1, 3, 6).
+    pub scales: [u32; 3],
+    /// λ_l (000 Table 1: 5.0, 2.5, 3.5), per m.
+    pub weights: [f64; 3],
+    /// Each scale's summand is capped at this (000 §5.1: 0.5).
+    pub cap: f64,
+    /// A cell whose D̃ reaches this is untraversable (000 §5.1: 1, which the
+    /// caps let no single scale reach alone), besides absolute obstacles.
+    pub obstacle_cost: f64,
+    /// Absolute obstacles are inflated by this radius in the drivability
+    /// map D_D, m (default: half the vehicle's width).
+    pub robot_radius_m: f64,
+}
+
+impl Default for HeightDiffConfig {
+    fn default() -> Self {
+        Self {
+            cell_size_m: 0.1,
+            median_window_deg: 0.9,
+            outlier_m: 0.3,
+            outlier_fraction: 0.05,
+            gap_base_m: 0.2,
+            gap_per_m: 0.054,
+            scales: [1, 3, 6],
+            weights: [5.0, 2.5, 3.5],
+            cap: 0.5,
+            obstacle_cost: 1.0,
+            robot_radius_m: VehicleConfig::default().width_m / 2.0,
+        }
+    }
+}
+
+impl HeightDiffConfig {
+    /// Keys relative to `[perception]`.
+    fn validate(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
+        let key = |k: &str| format!("height_diff.{k}");
+        config::in_range(&key("cell_size_m"), self.cell_size_m, 0.02, 1.0)?;
+        config::in_range(&key("median_window_deg"), self.median_window_deg, 0.0, 10.0)?;
+        config::non_negative(&key("outlier_m"), self.outlier_m)?;
+        config::in_range(&key("outlier_fraction"), self.outlier_fraction, 0.0, 1.0)?;
+        config::non_negative(&key("gap_base_m"), self.gap_base_m)?;
+        config::in_range(&key("gap_per_m"), self.gap_per_m, 0.0, 1.0)?;
+        if self.scales[0] == 0 || !self.scales.is_sorted() || self.scales[2] > 50 {
+            return Err(ConfigError::new(
+                key("scales"),
+                format!(
+                    "is {:?}, must be increasing, from 1 to 50 cells",
+                    self.scales
+                ),
+            ));
+        }
+        for (i, w) in self.weights.iter().enumerate() {
+            config::positive(&format!("{}[{i}]", key("weights")), *w)?;
+        }
+        config::in_range(&key("cap"), self.cap, 0.01, 1.0)?;
+        config::positive(&key("obstacle_cost"), self.obstacle_cost)?;
+        config::non_negative(&key("robot_radius_m"), self.robot_radius_m)?;
+        // An absolute obstacle at the finest scale is a step of 1/λ_1.
+        let step = 1.0 / self.weights[0];
+        if step > vehicle.tolerated_step_m + 1e-9 {
+            return Err(ConfigError::new(
+                format!("{}[0]", key("weights")),
+                format!(
+                    "is {}: a step is an obstacle only from 1/λ_1 = {step:.3} m, more than \
+                     vehicle.tolerated_step_m ({}): perception would pass terrain the vehicle \
+                     cannot drive",
+                    self.weights[0], vehicle.tolerated_step_m
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The maps of the last image (or set of images), row-major over the grid
+/// (`cols` cells along x ahead, `rows` along y left); NaN = unknown.
+#[derive(Debug, Clone, Default)]
+pub struct HeightDiffMaps {
+    pub cols: usize,
+    pub rows: usize,
+    /// Cell size, m.
+    pub cell: f32,
+    /// Level-frame (x, y) of the first cell's corner, m.
+    pub origin: [f32; 2],
+    /// H: the highest point per cell, level-frame z, m.
+    pub height: Vec<f32>,
+    /// H after gap filling.
+    pub filled: Vec<f32>,
+    /// The image (index in the set) each cell's height came from.
+    pub sensor: Vec<u8>,
+    /// D_l per scale, m.
+    pub differences: [Vec<f32>; 3],
+    /// D̃.
+    pub cost: Vec<f32>,
+    /// Cells that are absolute obstacles (λ_l·D_l ≥ 1 in some map).
+    pub absolute: Vec<bool>,
+    /// D_D: D̃ with absolute obstacles inflated and local averages.
+    pub drivability: Vec<f32>,
+}
+
+impl HeightDiffMaps {
+    /// The cell holding level-frame (x, y).
+    pub fn index(&self, x: f32, y: f32) -> Option<usize> {
+        let (i, j) = (
+            ((x - self.origin[0]) / self.cell).floor(),
+            ((y - self.origin[1]) / self.cell).floor(),
+        );
+        (i >= 0.0 && j >= 0.0 && (i as usize) < self.cols && (j as usize) < self.rows)
+            .then(|| j as usize * self.cols + i as usize)
+    }
+}
+
+/// The 000 evaluator. Build it with [`PerceptionConfig::build_evaluator`].
+pub struct HeightDiff {
+    config: HeightDiffConfig,
+    cell: f32,
+    grid: GridShape,
+    min_range: f32,
+    max_range: f32,
+    seen: SeenGround,
+    median: MedianOutliers,
+    filtered: Vec<f32>,
+    projector: Projector,
+    points: Vec<Point>,
+    lowest: Vec<f32>,
+    maps: HeightDiffMaps,
+    scratch: Scratch,
+    marked: Vec<Marked>,
+    labels: Vec<u32>,
+}
+
+/// Buffers of the separable window passes.
+#[derive(Debug, Default)]
+struct Scratch {
+    layer: Vec<f32>,
+    max: Vec<f32>,
+    min: Vec<f32>,
+    count: Vec<u16>,
+    line: Vec<f32>,
+    line_max: Vec<f32>,
+    line_min: Vec<f32>,
+    line_count: Vec<u16>,
+    prefix: Vec<f32>,
+    suffix: Vec<f32>,
+    sums: Vec<f64>,
+    counts: Vec<u32>,
+    gaps: [Vec<Nearest>; 2],
+}
+
+/// The nearest defined cell on one side of an undefined one.
+#[derive(Debug, Clone, Copy)]
+struct Nearest {
+    distance: u16,
+    value: f32,
+    sensor: u8,
+}
+
+impl Nearest {
+    const NONE: Self = Self {
+        distance: u16::MAX,
+        value: f32::NAN,
+        sensor: u8::MAX,
+    };
+}
+
+impl EvaluatorPlugin for HeightDiff {
+    const NAME: &'static str = "height_diff";
+    const ABOUT: &'static str = "multi-scale height differences of a max-height map with gap filling (000, Schwarz & Behnke)";
+    type Config = HeightDiffConfig;
+
+    fn config(perception: &PerceptionConfig) -> Result<Self::Config, ConfigError> {
+        Ok(perception.height_diff.clone())
+    }
+
+    fn validate(
+        config: &Self::Config,
+        _: &PerceptionConfig,
+        vehicle: &VehicleConfig,
+    ) -> Result<(), ConfigError> {
+        config.validate(vehicle)
+    }
+
+    fn build(config: Self::Config, perception: &PerceptionConfig) -> Self {
+        Self::new(config, perception)
+    }
+}
+
+impl HeightDiff {
+    /// An evaluator over `perception`'s region.
+    pub fn new(config: HeightDiffConfig, perception: &PerceptionConfig) -> Self {
+        let grid = GridShape::over(&perception.region, config.cell_size_m, 1);
+        let cell = config.cell_size_m as f32;
+        Self {
+            cell,
+            grid,
+            min_range: perception.min_range_m as f32,
+            max_range: perception.max_range_m as f32,
+            seen: SeenGround::new(perception, config.cell_size_m),
+            median: MedianOutliers::default(),
+            filtered: Vec::new(),
+            projector: Projector::default(),
+            points: Vec::new(),
+            lowest: Vec::new(),
+            maps: HeightDiffMaps {
+                cols: grid.cols,
+                rows: grid.rows,
+                cell,
+                origin: [-grid.corner[0] * cell, -grid.corner[1] * cell],
+                ..HeightDiffMaps::default()
+            },
+            scratch: Scratch::default(),
+            marked: Vec::new(),
+            labels: Vec::new(),
+            config,
+        }
+    }
+
+    /// The maps of the last evaluation.
+    pub fn maps(&self) -> &HeightDiffMaps {
+        &self.maps
+    }
+
+    /// The median window for `image`'s beam spacing: half sizes in rows
+    /// and columns.
+    fn median_params(&self, image: &RangeImage) -> MedianParams {
+        let half = |angles: &[f32]| {
+            let n = angles.len();
+            if n < 2 {
+                return 0;
+            }
+            let spacing = ((angles[n - 1] - angles[0]) / (n - 1) as f32)
+                .abs()
+                .to_degrees();
+            // The largest odd number of pixels within the window's angle.
+            let pixels = self.config.median_window_deg as f32 / spacing.max(1e-6);
+            (((pixels - 1.0) / 2.0).floor().max(0.0) as usize).min(16)
+        };
+        MedianParams {
+            half_rows: half(&image.beams.elevation),
+            half_cols: half(&image.beams.azimuth),
+            max_range: self.max_range,
+            abs: self.config.outlier_m as f32,
+            rel: self.config.outlier_fraction as f32,
+        }
+    }
+
+    /// Builds every map from `images`, taken at once with the vehicle at
+    /// `world_from_vehicle` (one image, or a ring of sensors). Their
+    /// filtered returns go into one height map; differences are taken only
+    /// between cells of the same image. Counts go into `stats`.
+    pub fn build_maps(
+        &mut self,
+        images: &[&RangeImage],
+        world_from_vehicle: &Isometry,
+        stats: &mut ImageStats,
+    ) -> Result<&HeightDiffMaps, PerceptionError> {
+        let n = self.grid.cols * self.grid.rows;
+        let params: Vec<MedianParams> = images.iter().map(|i| self.median_params(i)).collect();
+        let maps = &mut self.maps;
+        maps.height.clear();
+        maps.height.resize(n, f32::NAN);
+        maps.sensor.clear();
+        maps.sensor.resize(n, u8::MAX);
+        self.lowest.clear();
+        self.lowest.resize(n, f32::INFINITY);
+        for (k, image) in images.iter().enumerate().take(usize::from(u8::MAX)) {
+            image.validate()?;
+            let cols = image.cols();
+            stats.outliers +=
+                self.median
+                    .filter(&image.range, cols, &params[k], &mut self.filtered);
+            let (_, level_from_sensor) = grid::level_frames(image, world_from_vehicle);
+            self.points.clear();
+            let mut counts = ImageStats::default();
+            self.projector.project(
+                image,
+                &self.filtered,
+                &level_from_sensor,
+                self.min_range,
+                self.max_range,
+                &mut self.points,
+                &mut counts,
+            );
+            for p in &self.points {
+                let Some(i) = self.grid.index(self.cell, p.xyz[0], p.xyz[1]) else {
+                    continue;
+                };
+                let z = p.xyz[2];
+                if maps.height[i].is_nan() || maps.height[i] < z {
+                    maps.height[i] = z;
+                    maps.sensor[i] = k as u8;
+                }
+                self.lowest[i] = self.lowest[i].min(z);
+            }
+        }
+        self.fill_gaps();
+        self.differences();
+        self.costs();
+        Ok(&self.maps)
+    }
+
+    /// §4.2: fills NaN cells with at least two axis neighbours within δ.
+    fn fill_gaps(&mut self) {
+        let (cols, rows, cell) = (self.grid.cols, self.grid.rows, self.cell);
+        let maps = &mut self.maps;
+        maps.filled.clone_from(&maps.height);
+        let h = &maps.height;
+        // Per cell, the nearest defined cell on each side along x (then
+        // y): its distance in cells (u16::MAX = none), value and sensor.
+        let sensor = &maps.sensor;
+        let [along_x, along_y] = &mut self.scratch.gaps;
+        let nearest = |out: &mut Vec<Nearest>,
+                       len: usize,
+                       lines: usize,
+                       at: &dyn Fn(usize, usize) -> usize| {
+            out.clear();
+            out.resize(2 * len * lines, Nearest::NONE);
+            for line in 0..lines {
+                for backwards in [false, true] {
+                    let mut last: Option<(usize, usize)> = None;
+                    for step in 0..len {
+                        let k = if backwards { len - 1 - step } else { step };
+                        let i = at(line, k);
+                        if !h[i].is_nan() {
+                            last = Some((k, i));
+                        } else if let Some((j, source)) = last {
+                            out[2 * i + usize::from(backwards)] = Nearest {
+                                distance: k.abs_diff(j).min(usize::from(u16::MAX - 1)) as u16,
+                                value: h[source],
+                                sensor: sensor[source],
+                            };
+                        }
+                    }
+                }
+            }
+        };
+        nearest(along_x, cols, rows, &|row, k| row * cols + k);
+        nearest(along_y, rows, cols, &|col, k| k * cols + col);
+        let [ox, oy] = maps.origin;
+        for i in 0..cols * rows {
+            if !h[i].is_nan() {
+                continue;
+            }
+            let (x, y) = (
+                ox + ((i % cols) as f32 + 0.5) * cell,
+                oy + ((i / cols) as f32 + 0.5) * cell,
+            );
+            let delta =
+                (self.config.gap_base_m as f32 + self.config.gap_per_m as f32 * x.hypot(y)) / cell;
+            let sides = [
+                along_x[2 * i],
+                along_x[2 * i + 1],
+                along_y[2 * i],
+                along_y[2 * i + 1],
+            ];
+            let within = |n: &Nearest| n.distance != u16::MAX && f32::from(n.distance) < delta;
+            // Filled from one sensor only, the nearest neighbour's: a value
+            // between two sensors' heights would put a step inside each.
+            let Some(owner) = sides
+                .iter()
+                .filter(|n| within(n))
+                .min_by_key(|n| n.distance)
+                .map(|n| n.sensor)
+            else {
+                continue;
+            };
+            let (mut weight, mut sum, mut found) = (0.0f32, 0.0f32, 0);
+            for n in sides.iter().filter(|n| within(n) && n.sensor == owner) {
+                let w = 1.0 / f32::from(n.distance);
+                weight += w;
+                sum += w * n.value;
+                found += 1;
+            }
+            if found >= 2 {
+                maps.filled[i] = sum / weight;
+                maps.sensor[i] = owner;
+            }
+        }
+    }
+
+    /// §4.3: D_l for each scale, within each sensor's cells.
+    fn differences(&mut self) {
+        let (cols, rows) = (self.grid.cols, self.grid.rows);
+        let n = cols * rows;
+        let maps = &mut self.maps;
+        let s = &mut self.scratch;
+        let sensors: Vec<u8> = {
+            let mut seen = [false; 256];
+            for (&k, v) in maps.sensor.iter().zip(&maps.filled) {
+                if !v.is_nan() {
+                    seen[usize::from(k)] = true;
+                }
+            }
+            (0..=255u8).filter(|&k| seen[usize::from(k)]).collect()
+        };
+        for (scale, d) in self.config.scales.iter().zip(&mut maps.differences) {
+            d.clear();
+            d.resize(n, f32::NAN);
+            let half = *scale as usize;
+            for &k in &sensors {
+                s.layer.clear();
+                s.layer.extend(
+                    maps.filled
+                        .iter()
+                        .zip(&maps.sensor)
+                        .map(|(&v, &owner)| if owner == k { v } else { f32::NAN }),
+                );
+                window_extremes(s, cols, rows, half);
+                for (i, d) in d.iter_mut().enumerate() {
+                    let h = s.layer[i];
+                    if h.is_nan() || s.count[i] < 2 {
+                        continue;
+                    }
+                    *d = (s.max[i] - h).max(h - s.min[i]);
+                }
+            }
+        }
+    }
+
+    /// §5.1: D̃, absolute obstacles and D_D.
+    fn costs(&mut self) {
+        let (cols, rows, cell) = (self.grid.cols, self.grid.rows, self.cell);
+        let n = cols * rows;
+        let c = &self.config;
+        let maps = &mut self.maps;
+        maps.cost.clear();
+        maps.cost.resize(n, f32::NAN);
+        maps.absolute.clear();
+        maps.absolute.resize(n, false);
+        for i in 0..n {
+            let mut total = f32::NAN;
+            for (d, &lambda) in maps.differences.iter().zip(&c.weights) {
+                let weighted = lambda as f32 * d[i];
+                if weighted.is_nan() {
+                    continue;
+                }
+                maps.absolute[i] |= weighted >= 1.0;
+                total = total.max(0.0) + weighted.min(c.cap as f32);
+            }
+            maps.cost[i] = total;
+        }
+        // D_D: absolute obstacles inflated by the robot radius, then the
+        // larger of D̃ and its local mean over a square of the disc's area.
+        maps.drivability.clone_from(&maps.cost);
+        let radius = (c.robot_radius_m as f32 / cell).round() as isize;
+        let r2 = radius * radius;
+        for i in (0..n).filter(|&i| maps.absolute[i]) {
+            let (x, y) = ((i % cols) as isize, (i / cols) as isize);
+            for dy in -radius..=radius {
+                for dx in -radius..=radius {
+                    let (u, v) = (x + dx, y + dy);
+                    if dx * dx + dy * dy <= r2
+                        && (0..cols as isize).contains(&u)
+                        && (0..rows as isize).contains(&v)
+                    {
+                        let j = v as usize * cols + u as usize;
+                        maps.drivability[j] = maps.drivability[j].max(1.0).max(maps.cost[j]);
+                    }
+                }
+            }
+        }
+        let half =
+            ((c.robot_radius_m as f32 / cell) * std::f32::consts::PI.sqrt() / 2.0).round() as usize;
+        let s = &mut self.scratch;
+        // Summed-area table of D̃ and of its defined cells.
+        let w = cols + 1;
+        s.sums.clear();
+        s.sums.resize(w * (rows + 1), 0.0);
+        s.counts.clear();
+        s.counts.resize(w * (rows + 1), 0);
+        for y in 0..rows {
+            for x in 0..cols {
+                let v = maps.cost[y * cols + x];
+                let (add, one) = if v.is_nan() {
+                    (0.0, 0)
+                } else {
+                    (f64::from(v), 1)
+                };
+                let at = (y + 1) * w + x + 1;
+                s.sums[at] = add + s.sums[at - 1] + s.sums[at - w] - s.sums[at - w - 1];
+                s.counts[at] = one + s.counts[at - 1] + s.counts[at - w] - s.counts[at - w - 1];
+            }
+        }
+        for y in 0..rows {
+            let (y0, y1) = (y.saturating_sub(half), (y + half + 1).min(rows));
+            for x in 0..cols {
+                let i = y * cols + x;
+                if maps.cost[i].is_nan() {
+                    continue;
+                }
+                let (x0, x1) = (x.saturating_sub(half), (x + half + 1).min(cols));
+                let box_of =
+                    |t: &[f64]| t[y1 * w + x1] - t[y0 * w + x1] - t[y1 * w + x0] + t[y0 * w + x0];
+                let count = s.counts[y1 * w + x1] + s.counts[y0 * w + x0]
+                    - s.counts[y0 * w + x1]
+                    - s.counts[y1 * w + x0];
+                let mean = box_of(&s.sums) / f64::from(count.max(1));
+                maps.drivability[i] = maps.drivability[i].max(mean as f32);
+            }
+        }
+    }
+}
+
+/// Max, min and count of the defined values of `s.layer` over the
+/// `(2·half+1)²` window around each cell, into `s.max`, `s.min`,
+/// `s.count`: a pass along rows then one along columns, each in O(1) per
+/// cell (van Herk / Gil-Werman for the extremes, a running sum for the
+/// count).
+fn window_extremes(s: &mut Scratch, cols: usize, rows: usize, half: usize) {
+    let n = cols * rows;
+    s.max.clear();
+    s.max.resize(n, f32::NEG_INFINITY);
+    s.min.clear();
+    s.min.resize(n, f32::INFINITY);
+    s.count.clear();
+    s.count.resize(n, 0);
+    // Rows: the layer's values (NaN = none) into max/min/count.
+    for y in 0..rows {
+        s.line.clear();
+        s.line.extend_from_slice(&s.layer[y * cols..(y + 1) * cols]);
+        let counts: Vec<u16> = s.line.iter().map(|v| u16::from(!v.is_nan())).collect();
+        let highs: Vec<f32> = s
+            .line
+            .iter()
+            .map(|v| if v.is_nan() { f32::NEG_INFINITY } else { *v })
+            .collect();
+        let lows: Vec<f32> = s
+            .line
+            .iter()
+            .map(|v| if v.is_nan() { f32::INFINITY } else { *v })
+            .collect();
+        slide(
+            &highs,
+            half,
+            f32::max,
+            &mut s.prefix,
+            &mut s.suffix,
+            &mut s.line_max,
+        );
+        slide(
+            &lows,
+            half,
+            f32::min,
+            &mut s.prefix,
+            &mut s.suffix,
+            &mut s.line_min,
+        );
+        running_sum(&counts, half, &mut s.line_count);
+        s.max[y * cols..(y + 1) * cols].copy_from_slice(&s.line_max);
+        s.min[y * cols..(y + 1) * cols].copy_from_slice(&s.line_min);
+        s.count[y * cols..(y + 1) * cols].copy_from_slice(&s.line_count);
+    }
+    // Columns: over the row results.
+    let mut highs = Vec::with_capacity(rows);
+    let mut lows = Vec::with_capacity(rows);
+    let mut counts = Vec::with_capacity(rows);
+    for x in 0..cols {
+        highs.clear();
+        lows.clear();
+        counts.clear();
+        for y in 0..rows {
+            highs.push(s.max[y * cols + x]);
+            lows.push(s.min[y * cols + x]);
+            counts.push(s.count[y * cols + x]);
+        }
+        slide(
+            &highs,
+            half,
+            f32::max,
+            &mut s.prefix,
+            &mut s.suffix,
+            &mut s.line_max,
+        );
+        slide(
+            &lows,
+            half,
+            f32::min,
+            &mut s.prefix,
+            &mut s.suffix,
+            &mut s.line_min,
+        );
+        running_sum(&counts, half, &mut s.line_count);
+        for y in 0..rows {
+            s.max[y * cols + x] = s.line_max[y];
+            s.min[y * cols + x] = s.line_min[y];
+            s.count[y * cols + x] = s.line_count[y];
+        }
+    }
+}
+
+/// `out[i] = op` over `values[i-half ..= i+half]` (clipped), by van Herk /
+/// Gil-Werman: prefix and suffix extremes within blocks of the window's
+/// length, so each output takes one `op` whatever the window.
+fn slide(
+    values: &[f32],
+    half: usize,
+    op: fn(f32, f32) -> f32,
+    prefix: &mut Vec<f32>,
+    suffix: &mut Vec<f32>,
+    out: &mut Vec<f32>,
+) {
+    let n = values.len();
+    out.clear();
+    if half == 0 {
+        out.extend_from_slice(values);
+        return;
+    }
+    let w = 2 * half + 1;
+    prefix.clear();
+    prefix.extend_from_slice(values);
+    suffix.clear();
+    suffix.extend_from_slice(values);
+    for i in 1..n {
+        if i % w != 0 {
+            prefix[i] = op(prefix[i - 1], values[i]);
+        }
+    }
+    for i in (0..n.saturating_sub(1)).rev() {
+        if (i + 1) % w != 0 {
+            suffix[i] = op(suffix[i + 1], values[i]);
+        }
+    }
+    for i in 0..n {
+        let lo = i.saturating_sub(half);
+        let hi = (i + half).min(n - 1);
+        // [lo, hi] spans at most two blocks: the suffix of lo's block and
+        // the prefix of hi's.
+        out.push(if lo / w == hi / w {
+            // Clipped at an edge inside one block: fold directly (rare).
+            values[lo..=hi].iter().copied().fold(values[lo], op)
+        } else {
+            op(suffix[lo], prefix[hi])
+        });
+    }
+}
+
+/// `out[i]` = the sum of `values[i-half ..= i+half]` (clipped).
+fn running_sum(values: &[u16], half: usize, out: &mut Vec<u16>) {
+    let n = values.len();
+    out.clear();
+    let mut sum: u32 = values[..half.min(n)].iter().map(|&v| u32::from(v)).sum();
+    for i in 0..n {
+        if i + half < n {
+            sum += u32::from(values[i + half]);
+        }
+        if i > half {
+            sum -= u32::from(values[i - half - 1]);
+        }
+        out.push(sum.min(u32::from(u16::MAX)) as u16);
+    }
+}
+
+impl TerrainEvaluator for HeightDiff {
+    fn name(&self) -> &'static str {
+        "height_diff"
+    }
+
+    fn evaluate(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+    ) -> Result<ImageStats, PerceptionError> {
+        self.evaluate_with(image, world_from_vehicle, report, &InOrder)
+    }
+
+    fn evaluate_with(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+        runner: &dyn Runner,
+    ) -> Result<ImageStats, PerceptionError> {
+        let mut stats = self
+            .seen
+            .evaluate(image, world_from_vehicle, runner, report)?;
+        report.cell_size_m = self.config.cell_size_m;
+        if image.range.is_empty() {
+            return Ok(stats);
+        }
+        self.build_maps(&[image], world_from_vehicle, &mut stats)?;
+        let (world_from_level, _) = grid::level_frames(image, world_from_vehicle);
+        self.marked.clear();
+        let maps = &self.maps;
+        for i in 0..maps.filled.len() {
+            let h = maps.filled[i];
+            if h.is_nan() {
+                continue;
+            }
+            stats.cells_evaluated += 1;
+            if maps.absolute[i] || maps.cost[i] >= self.config.obstacle_cost as f32 {
+                let low = self.lowest[i];
+                self.marked.push(Marked {
+                    index: i as u32,
+                    reasons: Reasons::HEIGHT_DIFFERENCE,
+                    z_min: if low.is_finite() { low } else { h },
+                    z_max: h,
+                });
+            }
+        }
+        self.seen
+            .drop_offs(&self.grid, self.cell, &world_from_level, &mut self.marked);
+        grid::emit(
+            &mut self.marked,
+            &self.grid,
+            self.cell,
+            &mut self.labels,
+            &world_from_level,
+            report,
+            &mut stats,
+        );
+        Ok(stats)
+    }
+}

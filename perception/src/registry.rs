@@ -1,0 +1,187 @@
+//! Terrain evaluators by name, as behaviours are (`perception.evaluator`).
+//!
+//! ```toml
+//! [perception]
+//! evaluator = "height_diff"     # cells | height_diff | pca, or a plug-in's name
+//!
+//! [perception.height_diff]      # the built-ins' tables: every key has a default
+//! cell_size_m = 0.1
+//!
+//! [perception.plugins.my_eval]  # a plug-in's table, parsed into its own Config
+//! threshold_m = 0.3
+//! ```
+//!
+//! Every evaluator fills the same [`crate::ObstacleReport`] (untraversable
+//! cells with their reasons, the observed footprint and its shadows), so
+//! the local map, the behaviours and the arbiter work with any of them
+//! unchanged. Adding one: implement [`TerrainEvaluator`] and
+//! [`EvaluatorPlugin`], then `registry.add::<MyEvaluator>()`.
+
+use std::collections::BTreeMap;
+
+use arcnav_vehicle::{ConfigError, VehicleConfig};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::config::PerceptionConfig;
+use crate::evaluator::TerrainEvaluator;
+
+/// A terrain evaluator the registry can build from configuration.
+pub trait EvaluatorPlugin: TerrainEvaluator + Sized + 'static {
+    /// Its name in `perception.evaluator`.
+    const NAME: &'static str;
+    /// One line for `--help` and error messages: what it does, whose it is.
+    const ABOUT: &'static str;
+    /// Its configuration, with the documented defaults in `Default`.
+    type Config: Serialize + DeserializeOwned + Default + Clone;
+
+    /// Its table, typed: `[perception.plugins.NAME]` (the built-ins read
+    /// their own `[perception.NAME]`). Errors name keys relative to
+    /// `[perception]`.
+    fn config(perception: &PerceptionConfig) -> Result<Self::Config, ConfigError> {
+        let key = format!("plugins.{}", Self::NAME);
+        match perception.plugins.get(Self::NAME) {
+            None => Ok(Self::Config::default()),
+            Some(table) => toml::Value::Table(table.clone())
+                .try_into()
+                .map_err(|e: toml::de::Error| ConfigError::new(key, e.message().to_owned())),
+        }
+    }
+
+    /// Checks the configuration against the vehicle (keys relative to
+    /// `[perception]`).
+    fn validate(
+        _config: &Self::Config,
+        _perception: &PerceptionConfig,
+        _vehicle: &VehicleConfig,
+    ) -> Result<(), ConfigError> {
+        Ok(())
+    }
+
+    /// Builds the evaluator from its (validated) configuration.
+    fn build(config: Self::Config, perception: &PerceptionConfig) -> Self;
+}
+
+type Validator =
+    Box<dyn Fn(&PerceptionConfig, &VehicleConfig) -> Result<(), ConfigError> + Send + Sync>;
+type Builder =
+    Box<dyn Fn(&PerceptionConfig) -> Result<Box<dyn TerrainEvaluator>, ConfigError> + Send + Sync>;
+
+struct Entry {
+    about: &'static str,
+    validate: Validator,
+    build: Builder,
+}
+
+/// Terrain evaluators by name.
+#[derive(Default)]
+pub struct EvaluatorRegistry {
+    entries: BTreeMap<&'static str, Entry>,
+}
+
+impl std::fmt::Debug for EvaluatorRegistry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EvaluatorRegistry")
+            .field("evaluators", &self.names())
+            .finish()
+    }
+}
+
+impl EvaluatorRegistry {
+    /// An empty registry.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The evaluators arcnav ships: 002's cell classifier, 000's multi-scale
+    /// height differences and 001's hierarchical PCA.
+    pub fn builtin() -> Self {
+        let mut registry = Self::new();
+        registry
+            .add::<crate::CellClassifier>()
+            .add::<crate::HeightDiff>()
+            .add::<crate::HierarchicalPca>();
+        registry
+    }
+
+    /// Registers `P` under `P::NAME` (replacing an evaluator of that name).
+    pub fn add<P: EvaluatorPlugin>(&mut self) -> &mut Self {
+        self.entries.insert(
+            P::NAME,
+            Entry {
+                about: P::ABOUT,
+                validate: Box::new(|perception, vehicle| {
+                    let config = P::config(perception)?;
+                    P::validate(&config, perception, vehicle)
+                }),
+                build: Box::new(|perception| {
+                    let config = P::config(perception)?;
+                    Ok(Box::new(P::build(config, perception)) as Box<dyn TerrainEvaluator>)
+                }),
+            },
+        );
+        self
+    }
+
+    /// Registered names, sorted.
+    pub fn names(&self) -> Vec<&'static str> {
+        self.entries.keys().copied().collect()
+    }
+
+    /// What evaluator `name` does, if it is registered.
+    pub fn about(&self, name: &str) -> Option<&'static str> {
+        self.entries.get(name).map(|e| e.about)
+    }
+
+    fn entry(&self, name: &str) -> Result<&Entry, ConfigError> {
+        self.entries.get(name).ok_or_else(|| {
+            ConfigError::new(
+                "evaluator",
+                format!(
+                    "{name:?} is not a known evaluator (known: {})",
+                    self.names().join(", ")
+                ),
+            )
+        })
+    }
+
+    /// Refuses a name that is not registered, listing the known ones.
+    pub fn check_known(&self, name: &str) -> Result<(), ConfigError> {
+        self.entry(name).map(|_| ())
+    }
+
+    /// Checks that `perception.evaluator` is registered, that every
+    /// `[perception.plugins.NAME]` table belongs to a registered evaluator,
+    /// and the selected evaluator's table. (The others' tables are only
+    /// parsed: their checks against the vehicle apply when selected, so a
+    /// changed vehicle need not retune evaluators it does not use.)
+    pub fn validate(
+        &self,
+        perception: &PerceptionConfig,
+        vehicle: &VehicleConfig,
+    ) -> Result<(), ConfigError> {
+        self.entry(&perception.evaluator)?;
+        if let Some(name) = perception
+            .plugins
+            .keys()
+            .find(|name| !self.entries.contains_key(name.as_str()))
+        {
+            return Err(ConfigError::new(
+                format!("plugins.{name}"),
+                format!(
+                    "is the table of no known evaluator (known: {})",
+                    self.names().join(", ")
+                ),
+            ));
+        }
+        (self.entry(&perception.evaluator)?.validate)(perception, vehicle)
+    }
+
+    /// Builds the evaluator `perception.evaluator` names (validate first).
+    pub fn build(
+        &self,
+        perception: &PerceptionConfig,
+    ) -> Result<Box<dyn TerrainEvaluator>, ConfigError> {
+        (self.entry(&perception.evaluator)?.build)(perception)
+    }
+}

@@ -1,0 +1,592 @@
+//! The evaluators of papers 000 (`height_diff`) and 001 (`pca`) on analytic
+//! scenes rendered through the sensor model, and the registry that builds
+//! every evaluator by name.
+
+use arcnav_perception::scene::HeightFunction;
+use arcnav_perception::{
+    EvaluatorPlugin, EvaluatorRegistry, HeightDiff, HierarchicalPca, ImageStats, ObstacleReport,
+    PerceptionConfig, PerceptionError, RangeImage, Reasons, SensorModel, TerrainEvaluator,
+};
+use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+use arcnav_vehicle::{Isometry, VehicleConfig};
+
+/// `image` with deterministic range noise of about `sigma` (uniform, the
+/// same standard deviation).
+fn noisy(mut image: RangeImage, sigma: f32) -> RangeImage {
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    for r in image.range.iter_mut().filter(|r| r.is_finite()) {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let u = (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5;
+        *r += u * sigma * 12f32.sqrt();
+    }
+    image
+}
+
+fn render(sensor: &SensorModel, height: impl Fn(f64, f64) -> f64 + Sync) -> RangeImage {
+    sensor.render(
+        1_000_000,
+        &Isometry::identity(),
+        &HeightFunction::new(height),
+    )
+}
+
+fn height_diff() -> HeightDiff {
+    let p = PerceptionConfig::default();
+    HeightDiff::new(p.height_diff.clone(), &p)
+}
+
+fn pca() -> HierarchicalPca {
+    let p = PerceptionConfig::default();
+    HierarchicalPca::new(p.pca.clone(), &p)
+}
+
+/// The values of `layer` at cells whose level-frame centre satisfies `inside`.
+fn values_where(
+    index: impl Fn(f32, f32) -> Option<usize>,
+    layer: &[f32],
+    inside: impl Fn(f32, f32) -> bool,
+) -> Vec<f32> {
+    let mut out = Vec::new();
+    let mut x = -22.0f32;
+    while x < 22.0 {
+        let mut y = -12.0f32;
+        while y < 12.0 {
+            if inside(x, y)
+                && let Some(i) = index(x, y)
+                && layer[i].is_finite()
+            {
+                out.push(layer[i]);
+            }
+            y += 0.1;
+        }
+        x += 0.1;
+    }
+    out
+}
+
+fn mean(values: &[f32]) -> f32 {
+    values.iter().sum::<f32>() / values.len().max(1) as f32
+}
+
+fn evaluate(
+    evaluator: &mut dyn TerrainEvaluator,
+    image: &RangeImage,
+) -> (ObstacleReport, ImageStats) {
+    let mut report = ObstacleReport::default();
+    let stats = evaluator
+        .evaluate(image, &Isometry::identity(), &mut report)
+        .unwrap();
+    (report, stats)
+}
+
+// ---- 000: height differences ----
+
+#[test]
+fn a_step_shows_in_d1_and_the_cost_follows_000() {
+    // D̃ of a step s: min(.5, 5s) + min(.5, 2.5s) + min(.5, 3.5s); 1 from 9 cm.
+    for (step, obstacle, absolute) in [(0.06, false, false), (0.1, true, false), (0.25, true, true)]
+    {
+        let image = noisy(
+            render(
+                &SensorModel::lidar64(),
+                move |x, _| {
+                    if x > 8.05 { step } else { 0.0 }
+                },
+            ),
+            0.01,
+        );
+        let mut hd = height_diff();
+        let (report, _) = evaluate(&mut hd, &image);
+        let maps = hd.maps();
+        let index = |x, y| maps.index(x, y);
+        let at_edge = values_where(index, &maps.differences[0], |x, y| {
+            (7.9..8.2).contains(&x) && y.abs() < 3.0
+        });
+        let away = values_where(index, &maps.differences[0], |x, y| {
+            (4.0..7.0).contains(&x) && y.abs() < 3.0
+        });
+        let edge_max = at_edge.iter().copied().fold(0.0, f32::max);
+        assert!(
+            (edge_max - step as f32).abs() < 0.04,
+            "D_1 at a {step} m step peaks at {edge_max}"
+        );
+        assert!(mean(&away) < 0.03, "D_1 on flat ground is {}", mean(&away));
+        let on_step = report
+            .cells
+            .iter()
+            .filter(|c| c.reasons.contains(Reasons::HEIGHT_DIFFERENCE))
+            .filter(|c| (7.7..8.4).contains(&c.x) && c.y.abs() < 3.0)
+            .count();
+        assert_eq!(
+            on_step > 20,
+            obstacle,
+            "{step} m step: {on_step} height-difference cells on its edge"
+        );
+        let absolutes = values_where(
+            index,
+            &maps
+                .absolute
+                .iter()
+                .map(|&a| f32::from(u8::from(a)))
+                .collect::<Vec<_>>(),
+            |x, y| (7.7..8.4).contains(&x) && y.abs() < 3.0,
+        );
+        assert_eq!(
+            absolutes.iter().sum::<f32>() > 20.0,
+            absolute,
+            "{step} m step"
+        );
+        let elsewhere = report
+            .cells
+            .iter()
+            .filter(|c| c.reasons.contains(Reasons::HEIGHT_DIFFERENCE))
+            .filter(|c| c.x < 7.5 && c.x > 3.0)
+            .count();
+        assert_eq!(
+            elsewhere, 0,
+            "{step} m step: obstacles on the flat before it"
+        );
+    }
+}
+
+#[test]
+fn a_long_10_degree_incline_shows_in_d6_but_not_in_d1() {
+    let slope = 10f64.to_radians().tan();
+    let image = noisy(
+        render(&SensorModel::lidar64(), move |x, _| {
+            slope * (x - 4.0).max(0.0)
+        }),
+        0.01,
+    );
+    let mut hd = height_diff();
+    let (report, _) = evaluate(&mut hd, &image);
+    let maps = hd.maps();
+    let on_incline = |x: f32, y: f32| (6.0..12.0).contains(&x) && y.abs() < 4.0;
+    let d1 = mean(&values_where(
+        |x, y| maps.index(x, y),
+        &maps.differences[0],
+        on_incline,
+    ));
+    let d6 = mean(&values_where(
+        |x, y| maps.index(x, y),
+        &maps.differences[2],
+        on_incline,
+    ));
+    assert!(d1 < 0.05, "D_1 on a 10° incline is {d1}");
+    assert!(d6 > 0.08 && d6 > 3.0 * d1, "D_6 {d6} vs D_1 {d1}");
+    assert!(
+        !report
+            .cells
+            .iter()
+            .any(|c| c.reasons.contains(Reasons::HEIGHT_DIFFERENCE) && c.x < 12.0),
+        "a 10° incline is drivable"
+    );
+}
+
+#[test]
+fn two_sensors_overlap_without_an_artificial_obstacle() {
+    // Two ERIMs on the roof looking 30° left and right; the right one's
+    // mount is off by 12 cm in height from what its images claim.
+    let mount = |yaw: f64, z: f64| {
+        isometry_from_xyz_rpy([1.5, 0.0, z], 0.0, 18f64.to_radians(), yaw.to_radians())
+    };
+    let flat = HeightFunction::new(|_, _| 0.0);
+    let mut left = SensorModel::erim();
+    left.vehicle_from_sensor = mount(30.0, 2.2);
+    let mut right = SensorModel::erim();
+    right.id = "right".into();
+    right.vehicle_from_sensor = mount(-30.0, 2.32);
+    let left_image = noisy(left.render(0, &Isometry::identity(), &flat), 0.01);
+    let mut right_image = noisy(right.render(0, &Isometry::identity(), &flat), 0.01);
+    right_image.vehicle_from_sensor = mount(-30.0, 2.2);
+    let mut hd = height_diff();
+    let mut stats = ImageStats::default();
+    let maps = hd
+        .build_maps(
+            &[&left_image, &right_image],
+            &Isometry::identity(),
+            &mut stats,
+        )
+        .unwrap();
+    // The two sensors' heights do disagree where their cells meet...
+    let mut disagreements = 0;
+    for i in 0..maps.filled.len() - 1 {
+        let (a, b) = (maps.filled[i], maps.filled[i + 1]);
+        if a.is_finite()
+            && b.is_finite()
+            && maps.sensor[i] != maps.sensor[i + 1]
+            && (a - b).abs() > 0.1
+        {
+            disagreements += 1;
+        }
+    }
+    assert!(
+        disagreements > 50,
+        "only {disagreements} cross-sensor steps: the test shows nothing"
+    );
+    // ...but no difference is taken across them.
+    let absolute = maps.absolute.iter().filter(|&&a| a).count();
+    let worst = maps
+        .cost
+        .iter()
+        .copied()
+        .filter(|c| c.is_finite())
+        .fold(0.0, f32::max);
+    assert_eq!(
+        absolute, 0,
+        "absolute obstacles on flat ground (worst D̃ {worst})"
+    );
+    assert!(worst < 1.0);
+}
+
+#[test]
+fn a_small_gap_is_filled_and_a_large_one_is_not() {
+    let sensor = SensorModel::lidar64();
+    let image = render(&sensor, |_, _| 0.0);
+    let cols = image.cols();
+    // Blank 2° of columns straight ahead (0.28 m wide at 8 m) and 24° to
+    // the left (3.4 m).
+    let az = &image.beams.azimuth;
+    let mut gapped = image.clone();
+    for col in 0..cols {
+        let a = az[col].to_degrees();
+        if a.abs() < 1.0 || (40.0..64.0).contains(&a) {
+            for row in 0..image.rows() {
+                gapped.range[row * cols + col] = f32::NAN;
+            }
+        }
+    }
+    let mut hd = height_diff();
+    let whole = hd
+        .build_maps(&[&image], &Isometry::identity(), &mut ImageStats::default())
+        .unwrap()
+        .height
+        .clone();
+    let maps = hd
+        .build_maps(
+            &[&gapped],
+            &Isometry::identity(),
+            &mut ImageStats::default(),
+        )
+        .unwrap();
+    // Cells the whole image saw and the gapped one did not, in a sector.
+    let count = |r0: f32, r1: f32, a0: f32, a1: f32| {
+        let (mut unseen, mut filled) = (0, 0);
+        for i in 0..whole.len() {
+            let x = maps.origin[0] + ((i % maps.cols) as f32 + 0.5) * maps.cell;
+            let y = maps.origin[1] + ((i / maps.cols) as f32 + 0.5) * maps.cell;
+            let (r, a) = (x.hypot(y), y.atan2(x).to_degrees());
+            if (r0..r1).contains(&r)
+                && (a0..a1).contains(&a)
+                && whole[i].is_finite()
+                && maps.height[i].is_nan()
+            {
+                unseen += 1;
+                filled += usize::from(maps.filled[i].is_finite());
+            }
+        }
+        (unseen, filled)
+    };
+    let (small_unseen, small_filled) = count(5.0, 12.0, -0.5, 0.5);
+    assert!(
+        small_unseen > 20,
+        "the small gap hid only {small_unseen} cells"
+    );
+    assert!(
+        small_filled as f64 >= 0.95 * small_unseen as f64,
+        "small gap: {small_filled} of {small_unseen} filled"
+    );
+    let (large_unseen, large_filled) = count(8.0, 15.0, 49.0, 55.0);
+    assert!(
+        large_unseen > 100,
+        "the large gap hid only {large_unseen} cells"
+    );
+    assert!(
+        (large_filled as f64) < 0.05 * large_unseen as f64,
+        "large gap: {large_filled} of {large_unseen} filled"
+    );
+}
+
+#[test]
+fn outliers_are_removed_before_the_height_map() {
+    let mut image = render(&SensorModel::lidar64(), |_, _| 0.0);
+    let cols = image.cols();
+    // Ten isolated returns far short of the ground (a bird, a splash):
+    // each would be a 1 m tall spike in the height map.
+    let mut spiked = 0;
+    for k in 0..10 {
+        let i = 50 * cols + 100 + 150 * k;
+        if image.range[i].is_finite() {
+            image.range[i] *= 0.5;
+            spiked += 1;
+        }
+    }
+    let mut hd = height_diff();
+    let (report, stats) = evaluate(&mut hd, &image);
+    assert_eq!(stats.outliers, spiked);
+    assert!(
+        report.cells.is_empty(),
+        "{} cells from outliers",
+        report.cells.len()
+    );
+}
+
+// ---- 001: hierarchical PCA and roughness ----
+
+#[test]
+fn a_flat_tilted_plane_is_never_split_to_10_cm() {
+    let slope = 15f64.to_radians().tan();
+    let image = noisy(
+        render(&SensorModel::lidar64(), move |x, y| {
+            slope * (0.6 * x + 0.8 * y)
+        }),
+        0.01,
+    );
+    let mut pca = pca();
+    let (report, _) = evaluate(&mut pca, &image);
+    let maps = pca.maps();
+    assert!(maps.regions_judged > 100);
+    assert_eq!(
+        maps.single_cells_judged, 0,
+        "a flat plane was split to single cells"
+    );
+    assert!(
+        report.cells.iter().all(|c| c.reasons == Reasons::DROP_OFF),
+        "obstacles on a flat plane"
+    );
+}
+
+#[test]
+fn a_15_cm_box_is_found_at_10_cm_resolution() {
+    let image = noisy(
+        render(&SensorModel::lidar64(), |x, y| {
+            if (6.0..6.5).contains(&x) && (-0.25..0.25).contains(&y) {
+                0.15
+            } else {
+                0.0
+            }
+        }),
+        0.01,
+    );
+    let mut pca = pca();
+    let (report, _) = evaluate(&mut pca, &image);
+    let on_box: Vec<_> = report
+        .cells
+        .iter()
+        .filter(|c| c.reasons.contains(Reasons::NOT_FLAT))
+        .collect();
+    assert!(!on_box.is_empty(), "the box was not found");
+    for c in &on_box {
+        assert!(
+            (5.85..6.65).contains(&c.x) && c.y.abs() < 0.4,
+            "a not-flat cell at ({:.2}, {:.2}) away from the box",
+            c.x,
+            c.y
+        );
+    }
+    assert_eq!(report.cell_size_m, 0.1, "cells of the smallest region");
+}
+
+#[test]
+fn a_flat_ramp_steeper_than_the_vehicle_climbs_is_an_obstacle() {
+    let slope = 35f64.to_radians().tan();
+    let image = render(&SensorModel::lidar64(), move |x, _| {
+        slope * (x - 8.0).max(0.0)
+    });
+    let mut pca = pca();
+    let (report, _) = evaluate(&mut pca, &image);
+    let on_ramp = report
+        .cells
+        .iter()
+        .filter(|c| c.reasons.contains(Reasons::SLOPE) && (8.5..11.0).contains(&c.x))
+        .count();
+    assert!(on_ramp > 50, "{on_ramp} slope cells on a 35° ramp");
+}
+
+#[test]
+fn rubble_scores_rougher_than_a_plane_at_the_same_distance() {
+    // Rubble: 8 cm bumps every 40 cm, left of the vehicle; flat to the right.
+    let image = noisy(
+        render(&SensorModel::lidar64(), |x, y| {
+            if y > 1.0 {
+                0.04 * ((x * 15.7).sin() * (y * 15.7).sin() + 1.0)
+            } else {
+                0.0
+            }
+        }),
+        0.01,
+    );
+    let mut pca = pca();
+    evaluate(&mut pca, &image);
+    let maps = pca.maps();
+    let rubble = mean(&values_where(
+        |x, y| maps.index(x, y),
+        &maps.roughness,
+        |x, y| (6.0..10.0).contains(&x) && (2.0..5.0).contains(&y),
+    ));
+    let plane = mean(&values_where(
+        |x, y| maps.index(x, y),
+        &maps.roughness,
+        |x, y| (6.0..10.0).contains(&x) && (-5.0..-2.0).contains(&y),
+    ));
+    assert!(
+        rubble > 5.0 * plane && rubble > 0.0,
+        "rubble {rubble} vs plane {plane}"
+    );
+}
+
+// ---- the registry ----
+
+#[test]
+fn every_built_in_evaluator_is_built_by_name_and_reports_the_same_kind_of_report() {
+    let registry = EvaluatorRegistry::builtin();
+    assert_eq!(registry.names(), ["cells", "height_diff", "pca"]);
+    let image = render(&SensorModel::erim(), |x, y| {
+        if (10.0..11.0).contains(&x) && y.abs() < 0.5 {
+            0.6
+        } else {
+            0.0
+        }
+    });
+    for name in registry.names() {
+        let config = PerceptionConfig {
+            evaluator: name.into(),
+            ..Default::default()
+        };
+        config.validate_for(&VehicleConfig::default()).unwrap();
+        let mut evaluator = config.build_evaluator().unwrap();
+        assert_eq!(evaluator.name(), name);
+        let (report, stats) = evaluate(evaluator.as_mut(), &image);
+        assert!(!report.fov.is_empty(), "{name}: no footprint");
+        let on_rock = report
+            .cells
+            .iter()
+            .filter(|c| (9.6..11.4).contains(&c.x) && c.y.abs() < 0.9)
+            .count();
+        assert!(on_rock > 3, "{name}: {on_rock} cells on a 60 cm rock");
+        assert_eq!(stats.untraversable as usize, report.cells.len(), "{name}");
+        assert!(
+            report
+                .cells
+                .iter()
+                .all(|c| (c.region as usize) < report.regions.len())
+        );
+    }
+}
+
+/// A plug-in: every return higher than `max_height_m` above the vehicle's
+/// ground is an obstacle.
+struct TooHigh {
+    max_height_m: f64,
+}
+
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TooHighConfig {
+    max_height_m: f64,
+}
+
+impl TerrainEvaluator for TooHigh {
+    fn name(&self) -> &'static str {
+        "too_high"
+    }
+
+    fn evaluate(
+        &mut self,
+        image: &RangeImage,
+        _: &Isometry,
+        report: &mut ObstacleReport,
+    ) -> Result<ImageStats, PerceptionError> {
+        report.clear();
+        report.cell_size_m = self.max_height_m;
+        Ok(ImageStats {
+            pixels: image.range.len() as u32,
+            ..Default::default()
+        })
+    }
+}
+
+impl EvaluatorPlugin for TooHigh {
+    const NAME: &'static str = "too_high";
+    const ABOUT: &'static str = "a test plug-in";
+    type Config = TooHighConfig;
+
+    fn validate(
+        config: &TooHighConfig,
+        _: &PerceptionConfig,
+        _: &VehicleConfig,
+    ) -> Result<(), arcnav_vehicle::ConfigError> {
+        if config.max_height_m <= 0.0 {
+            return Err(arcnav_vehicle::ConfigError::new(
+                "plugins.too_high.max_height_m",
+                "must be positive",
+            ));
+        }
+        Ok(())
+    }
+
+    fn build(config: TooHighConfig, _: &PerceptionConfig) -> Self {
+        Self {
+            max_height_m: config.max_height_m,
+        }
+    }
+}
+
+fn perception(toml_text: &str) -> PerceptionConfig {
+    toml::from_str(toml_text).unwrap()
+}
+
+#[test]
+fn a_plug_in_is_configured_by_its_own_table_and_unknown_names_are_refused() {
+    let vehicle = VehicleConfig::default();
+    let mut registry = EvaluatorRegistry::builtin();
+    registry.add::<TooHigh>();
+    let config = perception("evaluator = \"too_high\"\n[plugins.too_high]\nmax_height_m = 0.7\n");
+    config.validate_with(&registry, &vehicle).unwrap();
+    let mut evaluator = registry.build(&config).unwrap();
+    assert_eq!(evaluator.name(), "too_high");
+    let (report, _) = evaluate(
+        evaluator.as_mut(),
+        &render(&SensorModel::erim(), |_, _| 0.0),
+    );
+    assert_eq!(report.cell_size_m, 0.7, "the plug-in did not get its table");
+
+    let bad = perception("evaluator = \"too_high\"\n[plugins.too_high]\nmax_height_m = -1.0\n");
+    let err = bad.validate_with(&registry, &vehicle).unwrap_err();
+    assert_eq!(err.key, "plugins.too_high.max_height_m");
+
+    let typo = perception("evaluator = \"too_high\"\n[plugins.too_high]\nmax_hieght_m = 1.0\n");
+    let err = typo.validate_with(&registry, &vehicle).unwrap_err();
+    assert!(err.to_string().contains("max_hieght_m"), "{err}");
+
+    // Without the plug-in registered, its name and its table are refused.
+    let err = config.validate_for(&vehicle).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "`evaluator`: \"too_high\" is not a known evaluator (known: cells, height_diff, pca)"
+    );
+    let stray = perception("[plugins.too_high]\nmax_height_m = 0.7\n");
+    let err = stray.validate_for(&vehicle).unwrap_err();
+    assert_eq!(err.key, "plugins.too_high");
+}
+
+#[test]
+fn an_evaluator_laxer_than_the_vehicle_is_refused_when_selected() {
+    let vehicle = VehicleConfig::default();
+    let lax = "[height_diff]\nweights = [4.0, 2.5, 3.5]\n[pca]\nmax_disturbance_m = 0.2\n";
+    // Not selected: only parsed (a changed vehicle need not retune them).
+    perception(lax).validate_for(&vehicle).unwrap();
+    let err = perception(&format!("evaluator = \"height_diff\"\n{lax}"))
+        .validate_for(&vehicle)
+        .unwrap_err();
+    assert_eq!(err.key, "height_diff.weights[0]");
+    assert!(err.reason.contains("0.250 m"), "{err}");
+    let err = perception(&format!("evaluator = \"pca\"\n{lax}"))
+        .validate_for(&vehicle)
+        .unwrap_err();
+    assert_eq!(err.key, "pca.max_disturbance_m");
+    // A key no evaluator has is refused whichever is selected.
+    assert!(toml::from_str::<PerceptionConfig>("[pca]\nmax_disturbanse_m = 0.01\n").is_err());
+}
