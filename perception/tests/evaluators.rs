@@ -250,8 +250,8 @@ fn a_small_gap_is_filled_and_a_large_one_is_not() {
     // the left (3.4 m).
     let az = &image.beams.azimuth;
     let mut gapped = image.clone();
-    for col in 0..cols {
-        let a = az[col].to_degrees();
+    for (col, a) in az.iter().enumerate() {
+        let a = a.to_degrees();
         if a.abs() < 1.0 || (40.0..64.0).contains(&a) {
             for row in 0..image.rows() {
                 gapped.range[row * cols + col] = f32::NAN;
@@ -274,13 +274,13 @@ fn a_small_gap_is_filled_and_a_large_one_is_not() {
     // Cells the whole image saw and the gapped one did not, in a sector.
     let count = |r0: f32, r1: f32, a0: f32, a1: f32| {
         let (mut unseen, mut filled) = (0, 0);
-        for i in 0..whole.len() {
+        for (i, seen) in whole.iter().enumerate() {
             let x = maps.origin[0] + ((i % maps.cols) as f32 + 0.5) * maps.cell;
             let y = maps.origin[1] + ((i / maps.cols) as f32 + 0.5) * maps.cell;
             let (r, a) = (x.hypot(y), y.atan2(x).to_degrees());
             if (r0..r1).contains(&r)
                 && (a0..a1).contains(&a)
-                && whole[i].is_finite()
+                && seen.is_finite()
                 && maps.height[i].is_nan()
             {
                 unseen += 1;
