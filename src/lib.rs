@@ -11,6 +11,7 @@
 //! `arcnav` binary.
 
 pub mod config;
+pub mod detection;
 #[doc(hidden)]
 pub mod export;
 pub mod fuzzing;

@@ -78,6 +78,16 @@ enum Command {
     /// arcs coloured by fused vote, each behaviour's votes and the command as
     /// plottable series. Every message keeps its log time.
     Export(ExportArgs),
+    /// The detection experiment of paper 000 (§6, Fig. 5) at this vehicle's
+    /// scale: blocks of several heights and a glass block that returns
+    /// nothing, straight ahead on flat ground at several distances, many
+    /// noisy frames each; per evaluator and sensor, the share of frames
+    /// that report the block untraversable and the share with a false
+    /// alarm. Writes detection.txt, detection.json and detection.png to --out
+    Detect(DetectArgs),
+    /// List the terrain evaluators `perception.evaluator` can name (the
+    /// papers they come from; configure each in [perception.NAME])
+    Evaluators,
     /// Print the effective configuration (defaults merged with FILE) as TOML,
     /// or validate FILE with --check.
     Config {
@@ -117,6 +127,11 @@ struct SimArgs {
     /// Sensor preset (sets sensor.preset).
     #[arg(long, value_enum)]
     sensor: Option<SensorArg>,
+    /// Terrain evaluator (sets perception.evaluator): cells (002, the
+    /// default), height_diff (000) or pca (001); `arcnav evaluators`
+    /// describes them.
+    #[arg(long, value_name = "NAME")]
+    evaluator: Option<String>,
     /// Write a local-map picture every S simulated seconds.
     #[arg(long, value_name = "S")]
     snapshot_every: Option<f64>,
@@ -176,6 +191,34 @@ struct SweepArgs {
     /// Runs at a time (default: one per core).
     #[arg(long, value_name = "N")]
     jobs: Option<usize>,
+}
+
+#[derive(Debug, clap::Args)]
+struct DetectArgs {
+    /// Terrain evaluator to test; repeatable (default: every built-in one).
+    #[arg(long = "evaluator", value_name = "NAME")]
+    evaluators: Vec<String>,
+    /// Sensor preset; repeatable (default: erim).
+    #[arg(long = "sensor", value_enum)]
+    sensors: Vec<SensorArg>,
+    /// Heights of the solid blocks, m, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "0.05,0.1,0.15,0.2,0.3")]
+    heights: Vec<f64>,
+    /// Leave out the glass block.
+    #[arg(long)]
+    no_glass: bool,
+    /// Distances of the blocks' near face from the vehicle, m, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "4,6,8,10,12,15,20,25,30")]
+    distances: Vec<f64>,
+    /// Noisy frames per block and distance (000: 120).
+    #[arg(long, default_value_t = 120)]
+    frames: u32,
+    /// Configuration file (its [perception] and [sim] noise are used).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Output directory.
+    #[arg(long, default_value = "out/detect")]
+    out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -315,6 +358,19 @@ enum SensorArg {
     Erim,
     Lidar64,
     Lidar128,
+    #[value(name = "depth_camera")]
+    DepthCamera,
+}
+
+impl From<SensorArg> for arcnav_perception::SensorPreset {
+    fn from(s: SensorArg) -> Self {
+        match s {
+            SensorArg::Erim => Self::Erim,
+            SensorArg::Lidar64 => Self::Lidar64,
+            SensorArg::Lidar128 => Self::Lidar128,
+            SensorArg::DepthCamera => Self::DepthCamera,
+        }
+    }
 }
 
 fn main() -> ExitCode {
@@ -375,6 +431,14 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
         Command::Sim(args) => cli::sim(args),
         Command::Sweep(args) => cli::sweep(args),
+        Command::Detect(args) => cli::detect(args).map(|()| ExitCode::SUCCESS),
+        Command::Evaluators => {
+            let registry = arcnav_perception::EvaluatorRegistry::builtin();
+            for name in registry.names() {
+                println!("{name:<12} {}", registry.about(name).unwrap_or_default());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Replay(args) => cli::replay(args),
         Command::Render(args) => cli::render(args),
         Command::Export(args) => cli::export(args),

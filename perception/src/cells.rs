@@ -232,10 +232,20 @@ struct Walk {
     z: Vec<f32>,
     beyond_d: Vec<f32>,
     beyond_z: Vec<f32>,
+    /// Beams of each column that returned nothing since its last return.
+    missed: Vec<u8>,
     /// Per pixel of the row: its gap to the column's previous return is
-    /// longer than the vehicle bridges and the ground beyond lower.
+    /// longer than the vehicle bridges and the ground beyond lower, or
+    /// beams between them returned nothing.
     long_gap: Vec<bool>,
 }
+
+/// This many beams in a row that return nothing between two returns are
+/// not dropouts (1 % of pixels each, so three in a row one in a million)
+/// but something the sensor does not see, such as glass or water: the
+/// ground between is unseen, a shadow, even when the ground beyond is
+/// level (000 §6: "this creates a sizable gap through occlusion").
+const MISSED_BEAMS: u8 = 3;
 
 impl Walk {
     fn start(&mut self, columns: usize) {
@@ -248,13 +258,16 @@ impl Walk {
             values.clear();
             values.resize(columns, start);
         }
+        self.missed.clear();
+        self.missed.resize(columns, 0);
     }
 
     /// One row's step: finds the returns whose gap to the column's previous
     /// return is long, has `rule` judge them (rarely any: flat ground's
     /// returns lie closer together than a wheel bridges out to 13 m for
     /// the ERIM), then moves every column that has a return on. A long gap
-    /// with a return beyond is a shadow, drop-off or not.
+    /// with a return beyond is a shadow, drop-off or not; so is one across
+    /// [`MISSED_BEAMS`] beams that returned nothing, whatever lies beyond.
     #[inline(always)]
     fn step(&mut self, row: &Row, points: &ProjectedRow, found: &mut Found) {
         let n = points.index.len();
@@ -269,17 +282,27 @@ impl Walk {
             &mut self.beyond_z[..n],
         );
         let long_gap = &mut self.long_gap[..n];
+        let missed = &mut self.missed[..n];
         let (mut any, mut walking) = (false, false);
         for k in 0..n {
             walking |= index[k] <= OUTSIDE_GRID;
             // Only a near edge in the region can be flagged. Far returns lie
             // farther apart than a wheel bridges: only those with ground
-            // lower beyond (or none) go to the rule.
+            // lower beyond (or none), or with beams lost between, go on.
             let long = (index[k] < OUTSIDE_GRID)
                 & (wd[k] - d[k] > max_gap)
-                & ((wd[k] == f32::INFINITY) | (z[k] - wz[k] > min_depth + depth_per_m * d[k]));
+                & ((wd[k] == f32::INFINITY)
+                    | (z[k] - wz[k] > min_depth + depth_per_m * d[k])
+                    | (missed[k] >= MISSED_BEAMS));
             long_gap[k] = long;
             any |= long;
+            // Counted between returns; any return (in the region or not,
+            // in range or not) ends the count.
+            missed[k] = if index[k] == NO_RETURN {
+                missed[k].saturating_add(1)
+            } else {
+                0
+            };
         }
         if any {
             for k in (0..n).filter(|&k| long_gap[k]) {

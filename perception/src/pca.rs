@@ -72,6 +72,9 @@ pub struct PcaConfig {
     pub min_points: u32,
     /// A flat region steeper than this is an obstacle, degrees.
     pub max_slope_deg: f64,
+    /// ... judged only when its points spread this much (standard
+    /// deviation) along x and along y, m.
+    pub min_plane_spread_m: f64,
     /// σ_L: the sensor's range noise, removed from the roughness, m.
     pub range_noise_m: f64,
     /// The mean filter along each scan line, returns (001 §3.3: 9).
@@ -87,6 +90,7 @@ impl Default for PcaConfig {
             max_disturbance_m: 0.03,
             min_points: 4,
             max_slope_deg: vehicle.max_slope_deg,
+            min_plane_spread_m: 0.03,
             range_noise_m: 0.02,
             roughness_window: 9,
         }
@@ -132,6 +136,7 @@ impl PcaConfig {
                 ),
             ));
         }
+        config::non_negative(&key("min_plane_spread_m"), self.min_plane_spread_m)?;
         config::non_negative(&key("range_noise_m"), self.range_noise_m)?;
         if !(1..=101).contains(&self.roughness_window) {
             return Err(ConfigError::new(
@@ -177,6 +182,13 @@ impl Moments {
         for (a, b) in self.ss.iter_mut().zip(other.ss) {
             *a += b;
         }
+    }
+
+    /// The smaller of the points' variances along x and along y, m².
+    fn horizontal_spread(&self) -> f64 {
+        let n = f64::from(self.n);
+        let var = |k: usize, a: usize| self.ss[k] / n - (self.s[a] / n).powi(2);
+        var(0, 0).min(var(3, 1))
     }
 
     /// `(h, tilt)`: the variance along the most vertical eigenvector (001
@@ -405,7 +417,10 @@ impl HierarchicalPca {
         let (h, tilt) = total.disturbance();
         let t = self.config.max_disturbance_m * self.config.max_disturbance_m;
         let reasons = if h <= t {
-            if tilt <= self.max_tilt {
+            // A plane is tilted only as far as the points show it: a few
+            // returns along one scan line give any tilt across it.
+            let spread = self.config.min_plane_spread_m * self.config.min_plane_spread_m;
+            if tilt <= self.max_tilt || total.horizontal_spread() < spread {
                 let side = (x1 - x0).max(y1 - y0).min(usize::from(u16::MAX)) as u16;
                 let cols = self.grid.cols;
                 for y in y0..y1 {

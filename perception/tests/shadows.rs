@@ -117,9 +117,11 @@ fn level_ground_and_dropouts_cast_no_shadow_and_a_rock_casts_its_own() {
         );
         let mut image = sensor.render(0, &pose(), &HeightFunction::new(|x: f64, _: f64| 0.0 * x));
         let cols = image.cols();
+        // Single lost beams and pairs of them down a column (never three
+        // in a row: that is something unseen, below).
         for (i, range) in image.range.iter_mut().enumerate() {
             let (row, col) = (i / cols, i % cols);
-            if i % 7 == 0 || (col % 5 == 0 && row % 6 < 2) {
+            if (i % 7 == 0 && row % 3 != 2) || (col % 5 == 0 && row % 6 < 2) {
                 *range = 0.0;
             }
         }
@@ -137,5 +139,62 @@ fn level_ground_and_dropouts_cast_no_shadow_and_a_rock_casts_its_own() {
             .into_iter()
             .chain(area((5.0, 9.0), (-2.0, 2.0)));
         assert_eq!(shadowed(&index, beside), 0.0, "{id}: beside the rock");
+    }
+}
+
+#[test]
+fn glass_that_returns_nothing_casts_a_shadow_but_is_no_drop_off() {
+    for sensor in sensors() {
+        let id = sensor.to_custom().id;
+        // A pane 60 cm tall and 2 m wide, 10 m ahead: every beam meeting
+        // it is lost, and it hides the level ground behind it.
+        let mut image = sensor.render(0, &pose(), &HeightFunction::new(|_: f64, _: f64| 0.0));
+        let origin = (pose() * image.vehicle_from_sensor).translation.vector;
+        let towards = pose() * nalgebra::Point3::new(10.0, 0.0, 0.0);
+        let cols = image.cols();
+        let mut lost = 0;
+        for (i, range) in image.range.iter_mut().enumerate() {
+            let (row, col) = (i / cols, i % cols);
+            let Some([dx, dy, dz]) = image.beams.direction(row, col) else {
+                continue;
+            };
+            // The beam in the world, and where it crosses the pane's plane
+            // (10 m ahead of the vehicle, facing it).
+            let world =
+                (pose() * image.vehicle_from_sensor).rotation * nalgebra::Vector3::new(dx, dy, dz);
+            let ahead = nalgebra::Vector3::new(
+                towards.x - pose().translation.vector.x,
+                towards.y - pose().translation.vector.y,
+                0.0,
+            )
+            .normalize();
+            let along = world.dot(&ahead);
+            if along <= 0.0 {
+                continue;
+            }
+            let to_plane = (towards.coords - origin).dot(&ahead);
+            let t = to_plane / along;
+            let hit = origin + world * t;
+            let side = (hit - towards.coords).dot(&nalgebra::Vector3::new(-ahead.y, ahead.x, 0.0));
+            if t > 0.0 && f64::from(*range) > t && hit.z < 0.6 && side.abs() < 1.0 {
+                *range = f32::NAN;
+                lost += 1;
+            }
+        }
+        assert!(lost > 10, "{id}: the pane took only {lost} beams");
+        let report = evaluate(&image);
+        let index = index(&report);
+        let behind = shadowed(&index, area((10.2, 11.0), (-0.5, 0.5)));
+        assert!(
+            behind > 0.9,
+            "{id}: only {:.0} % behind the pane unseen",
+            behind * 100.0
+        );
+        let beside = area((9.0, 13.0), (2.0, 3.0));
+        assert_eq!(shadowed(&index, beside), 0.0, "{id}: beside the pane");
+        assert!(
+            report.cells.is_empty(),
+            "{id}: level ground beyond a pane is no drop-off"
+        );
     }
 }

@@ -1,12 +1,14 @@
 //! The commands of the `arcnav` tool, one file each; `main.rs` holds the
 //! command line they are called from.
 
+mod detect;
 mod live;
 mod render;
 mod replay;
 mod sim;
 mod sweep;
 
+pub use detect::detect;
 pub use live::{live, vehicle};
 pub use render::{export, render};
 pub use replay::replay;

@@ -4,12 +4,11 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use crate::{SensorArg, SimArgs};
+use crate::SimArgs;
 use anyhow::Context as _;
 use arcnav::Config;
 use arcnav::mission::{LogMode, MissionOptions, MissionProgress, run_mission};
 use arcnav_behaviours::Registry;
-use arcnav_perception::SensorPreset;
 use arcnav_sim::world::EMBEDDED;
 use arcnav_sim::{Difficulty, World};
 
@@ -36,11 +35,10 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         config.vehicle.max_speed_mps = config.vehicle.max_speed_mps.max(speed);
     }
     if let Some(sensor) = args.sensor {
-        config.sensor.preset = match sensor {
-            SensorArg::Erim => SensorPreset::Erim,
-            SensorArg::Lidar64 => SensorPreset::Lidar64,
-            SensorArg::Lidar128 => SensorPreset::Lidar128,
-        };
+        config.sensor.preset = sensor.into();
+    }
+    if let Some(evaluator) = &args.evaluator {
+        config.perception.evaluator.clone_from(evaluator);
     }
     if let Some(every) = args.snapshot_every {
         anyhow::ensure!(

@@ -14,6 +14,7 @@ use crate::config::Config;
 use crate::mission::{MissionRun, TrackPoint};
 
 mod canvas;
+pub mod detection;
 mod sweep;
 
 pub use canvas::{BLACK, BLUE, Canvas, RED, RenderError, Rgba, WHITE, speed_color, vote_color};
