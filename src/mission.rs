@@ -317,12 +317,18 @@ pub fn run_mission(
 ) -> Result<MissionRun, MissionError> {
     let wall = Instant::now();
     world.validate_for(&config.vehicle, &world.spec.name)?;
-    let sensor: SensorModel = config.sensor.model().map_err(|e| e.within("sensor"))?;
+    let sensors: Vec<SensorModel> = config.sensor_models()?;
     // Returns beyond what perception evaluates are never used: not rendered.
-    let mut rendered = sensor.clone();
-    rendered.max_range_m = sensor
-        .max_range_m
-        .min(config.perception.max_range_m + config.sim.render_margin_m);
+    let rendered: Vec<SensorModel> = sensors
+        .iter()
+        .map(|sensor| {
+            let mut rendered = sensor.clone();
+            rendered.max_range_m = sensor
+                .max_range_m
+                .min(config.perception.max_range_m + config.sim.render_margin_m);
+            rendered
+        })
+        .collect();
     let sim = &config.sim;
     let mut pipeline = config.lockstep(registry)?;
     pipeline.time_stages(Instant::now);
@@ -370,10 +376,11 @@ pub fn run_mission(
         .message(t0, channels::WAYPOINTS, &wire::mission_to_wire(&mission));
     pipeline.input(Input::Waypoints(mission), &mut sink);
 
-    let image_period = sensor.period_us();
+    // Each sensor images at its own rate, the first image of each at t0.
+    let mut next_images: Vec<Utime> = vec![t0; sensors.len()];
     let time_limit = t0 + seconds_to_micros(sim.time_limit_s);
     let stuck_after = seconds_to_micros(sim.stuck_after_s);
-    let (mut next_image, mut images, mut image_positions) = (t0, 0u64, Vec::new());
+    let (mut images, mut image_positions) = (0u64, Vec::new());
     let (mut distance, mut max_speed, mut drift) = (0.0f64, 0.0f64, [0.0f64; 2]);
     let (mut render_ms, mut next_progress) = (0.0f64, t0);
     let mut best_gap = (usize::MAX, f64::INFINITY, t0);
@@ -439,7 +446,11 @@ pub fn run_mission(
         sink.log
             .message(t, channels::POSE, &pose_t::from(&measured));
         pipeline.input(Input::Pose(measured), &mut sink);
-        if t >= next_image {
+        for ((sensor, rendered), next_image) in sensors.iter().zip(&rendered).zip(&mut next_images)
+        {
+            if t < *next_image {
+                continue;
+            }
             let started = Instant::now();
             let sensor_position = (stance.world_from_vehicle * sensor.vehicle_from_sensor)
                 .translation
@@ -450,7 +461,7 @@ pub fn run_mission(
                 sensor.max_range_m + 1.0,
             );
             let image = arcnav_sim::sensor::render(
-                &rendered,
+                rendered,
                 &view,
                 &stance.world_from_vehicle,
                 t,
@@ -469,7 +480,7 @@ pub fn run_mission(
             pipeline.input(Input::Image(image), &mut sink);
             images += 1;
             image_positions.push([state.x, state.y]);
-            next_image += image_period;
+            *next_image += sensor.period_us();
         }
         pipeline.run_until(t, &mut sink);
         for command in sink.commands.drain(..) {
@@ -540,7 +551,11 @@ pub fn run_mission(
     let bound = speed_bound(config)?;
     let report = MissionReport {
         world: world.spec.name.clone(),
-        sensor: sensor.id.clone(),
+        sensor: sensors
+            .iter()
+            .map(|s| s.id.as_str())
+            .collect::<Vec<_>>()
+            .join("+"),
         success: outcome == Outcome::Completed && truth.collisions.is_empty(),
         outcome,
         waypoints_reached: reached,

@@ -46,9 +46,33 @@ pub struct SpeedBound {
     pub beam_spacing_deg: f64,
 }
 
-/// The bound of `config` (its sensor, vehicle, map window and timing).
+/// The bound of `config` (its sensors, vehicle, map window and timing):
+/// with several sensors, the best of those that look straight ahead (a
+/// rear camera does not see what the vehicle drives into).
 pub fn speed_bound(config: &Config) -> Result<SpeedBound, arcnav_vehicle::ConfigError> {
-    let sensor = config.sensor.model().map_err(|e| e.within("sensor"))?;
+    let sensors = config.sensor_models()?;
+    let ahead = |s: &&arcnav_perception::SensorModel| {
+        let yaw = arcnav_vehicle::frames::yaw_of(&s.vehicle_from_sensor);
+        s.beams
+            .azimuth
+            .iter()
+            .any(|&az| arcnav_vehicle::frames::wrap_angle(f64::from(az) + yaw).abs() < 0.1)
+    };
+    let forward: Vec<&arcnav_perception::SensorModel> = sensors.iter().filter(ahead).collect();
+    let candidates = if forward.is_empty() {
+        sensors.iter().collect()
+    } else {
+        forward
+    };
+    candidates
+        .into_iter()
+        .map(|sensor| bound_with(config, sensor))
+        .max_by(|a, b| a.bound_mps.total_cmp(&b.bound_mps))
+        .ok_or_else(|| arcnav_vehicle::ConfigError::new("sensors", "the vehicle has no sensor"))
+}
+
+/// The bound of `config` with `sensor` alone.
+fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> SpeedBound {
     let v = &config.vehicle;
     let elevations = &sensor.beams.elevation;
     let span = elevations
@@ -89,7 +113,7 @@ pub fn speed_bound(config: &Config) -> Result<SpeedBound, arcnav_vehicle::Config
     let swerve = ((free - sideways) / (reaction + steer))
         .max(0.0)
         .min((config.arbiter.max_lateral_accel_mps2 * r).sqrt());
-    Ok(SpeedBound {
+    SpeedBound {
         bound_mps: stop.max(swerve).min(v.max_speed_mps),
         stop_mps: stop,
         swerve_mps: swerve,
@@ -97,7 +121,7 @@ pub fn speed_bound(config: &Config) -> Result<SpeedBound, arcnav_vehicle::Config
         range_limited_by: limited_by,
         reaction_s: reaction,
         beam_spacing_deg: spacing.to_degrees(),
-    })
+    }
 }
 
 #[cfg(test)]

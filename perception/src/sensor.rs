@@ -71,13 +71,26 @@ impl Default for CustomSensorConfig {
     }
 }
 
-/// The sensor arcnav sees with. Lives in `[sensor]`.
+/// A sensor arcnav sees with: `[sensor]`, or each of `[[sensors]]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SensorConfig {
     pub preset: SensorPreset,
     /// Used when `preset = "custom"`.
     pub custom: CustomSensorConfig,
+    /// The sensor's id (names its channel, `RANGE_IMAGE_<ID>`), instead of
+    /// the preset's: two sensors of one preset need two ids.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    /// Where it is mounted, instead of the preset's: origin in the vehicle
+    /// frame, m, and roll, pitch (+ down), yaw, degrees.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mount_position_m: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mount_rpy_deg: Option<[f64; 3]>,
+    /// Images per second, instead of the preset's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rate_hz: Option<f64>,
 }
 
 impl Default for SensorConfig {
@@ -85,8 +98,32 @@ impl Default for SensorConfig {
         Self {
             preset: SensorPreset::Erim,
             custom: CustomSensorConfig::default(),
+            id: None,
+            mount_position_m: None,
+            mount_rpy_deg: None,
+            rate_hz: None,
         }
     }
+}
+
+/// Checks a sensor id: letters, digits or _, at most [`MAX_SENSOR_ID_LEN`].
+fn check_id(key: &str, id: &str) -> Result<(), ConfigError> {
+    if id.is_empty() || !id.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_') {
+        return Err(ConfigError::new(
+            key,
+            format!("{id:?} must be letters, digits or _"),
+        ));
+    }
+    if id.len() > MAX_SENSOR_ID_LEN {
+        return Err(ConfigError::new(
+            key,
+            format!(
+                "is {} characters long, must be at most {MAX_SENSOR_ID_LEN} (it names the channel RANGE_IMAGE_<ID>)",
+                id.len()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 impl SensorConfig {
@@ -105,25 +142,20 @@ impl SensorConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let c = &self.custom;
         let key = |k: &str| format!("custom.{k}");
-        if c.id.is_empty()
-            || !c
-                .id
-                .chars()
-                .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
-        {
-            return Err(ConfigError::new(
-                key("id"),
-                format!("{:?} must be letters, digits or _", c.id),
-            ));
+        check_id(&key("id"), &c.id)?;
+        if let Some(id) = &self.id {
+            check_id("id", id)?;
         }
-        if c.id.len() > MAX_SENSOR_ID_LEN {
-            return Err(ConfigError::new(
-                key("id"),
-                format!(
-                    "is {} characters long, must be at most {MAX_SENSOR_ID_LEN} (it names the channel RANGE_IMAGE_<ID>)",
-                    c.id.len()
-                ),
-            ));
+        if let Some(rate) = self.rate_hz {
+            config::positive("rate_hz", rate)?;
+        }
+        for (k, values) in [
+            ("mount_position_m", self.mount_position_m),
+            ("mount_rpy_deg", self.mount_rpy_deg),
+        ] {
+            if values.is_some_and(|v| v.iter().any(|x| !x.is_finite())) {
+                return Err(ConfigError::new(k, "holds a value that is not finite"));
+            }
         }
         if !(1..=4096).contains(&c.rows) {
             return Err(ConfigError::new(
@@ -200,16 +232,47 @@ impl SensorConfig {
         Ok(())
     }
 
-    /// The sensor this configuration describes.
+    /// The sensor this configuration describes: the preset (or `custom`)
+    /// with the id, mount and rate given here instead of its own.
     pub fn model(&self) -> Result<SensorModel, ConfigError> {
         self.validate()?;
-        Ok(match self.preset {
+        let preset = match self.preset {
             SensorPreset::Erim => SensorModel::erim(),
             SensorPreset::Lidar64 => SensorModel::lidar64(),
             SensorPreset::Lidar128 => SensorModel::lidar128(),
             SensorPreset::DepthCamera => SensorModel::depth_camera(),
-            SensorPreset::Custom => SensorModel::from_custom(&self.custom),
-        })
+            SensorPreset::Custom => {
+                return Ok(SensorModel::from_custom(
+                    &self.with_overrides(self.custom.clone()),
+                ));
+            }
+        };
+        if self.id.is_none()
+            && self.mount_position_m.is_none()
+            && self.mount_rpy_deg.is_none()
+            && self.rate_hz.is_none()
+        {
+            return Ok(preset);
+        }
+        Ok(SensorModel::from_custom(
+            &self.with_overrides(preset.to_custom()),
+        ))
+    }
+
+    fn with_overrides(&self, mut c: CustomSensorConfig) -> CustomSensorConfig {
+        if let Some(id) = &self.id {
+            c.id.clone_from(id);
+        }
+        if let Some(m) = self.mount_position_m {
+            c.mount_position_m = m;
+        }
+        if let Some(m) = self.mount_rpy_deg {
+            c.mount_rpy_deg = m;
+        }
+        if let Some(r) = self.rate_hz {
+            c.rate_hz = r;
+        }
+        c
     }
 }
 

@@ -35,6 +35,10 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         config.vehicle.max_speed_mps = config.vehicle.max_speed_mps.max(speed);
     }
     if let Some(sensor) = args.sensor {
+        anyhow::ensure!(
+            config.sensors.is_empty(),
+            "--sensor: the configuration lists its sensors in [[sensors]]; change them there"
+        );
         config.sensor.preset = sensor.into();
     }
     if let Some(evaluator) = &args.evaluator {
@@ -95,11 +99,13 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         snapshot_every_s: args.snapshot_every,
         snapshot_dir: Some(snapshot_dir),
     };
-    let sensor = config.sensor.model().map_err(|e| e.within("sensor"))?;
+    let sensors: Vec<String> = config.sensor_models()?.into_iter().map(|s| s.id).collect();
     eprintln!(
-        "arcnav sim: {name} ({} waypoints) with the {} sensor at {:.1} m/s cruise",
+        "arcnav sim: {name} ({} waypoints) with the {} sensor{} and the {} evaluator at {:.1} m/s cruise",
         world.waypoints.len(),
-        sensor.id,
+        sensors.join(" + "),
+        if sensors.len() > 1 { "s" } else { "" },
+        config.perception.evaluator,
         config.arbiter.cruise_speed_mps
     );
     let bar = indicatif::ProgressBar::new(world.waypoints.len() as u64);

@@ -37,7 +37,13 @@ pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
 pub struct Config {
     pub vehicle: VehicleConfig,
     pub arcs: ArcSetConfig,
+    /// The sensor, when the vehicle has one.
     pub sensor: SensorConfig,
+    /// The sensors, when it has several (`[[sensors]]`; then `[sensor]`
+    /// keeps its defaults). Each is rendered by the simulator, logged on
+    /// its own channel `RANGE_IMAGE_<ID>` and evaluated image by image.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<SensorConfig>,
     pub perception: PerceptionConfig,
     pub localmap: LocalMapConfig,
     pub arbiter: ArbiterConfig,
@@ -74,6 +80,7 @@ impl Default for Config {
             vehicle: VehicleConfig::default(),
             arcs: ArcSetConfig::default(),
             sensor: SensorConfig::default(),
+            sensors: Vec::new(),
             perception: PerceptionConfig::default(),
             localmap: LocalMapConfig::default(),
             arbiter: ArbiterConfig::default(),
@@ -317,12 +324,46 @@ impl Config {
         self.prepare_behaviours(registry).map(|_| ())
     }
 
+    /// The vehicle's sensors: each of `[[sensors]]`, or `[sensor]`. Keys
+    /// in errors are absolute (`sensors[1].id`).
+    pub fn sensor_models(&self) -> Result<Vec<arcnav_perception::SensorModel>, ConfigError> {
+        if self.sensors.is_empty() {
+            return Ok(vec![self.sensor.model().map_err(|e| e.within("sensor"))?]);
+        }
+        if self.sensor != SensorConfig::default() {
+            return Err(ConfigError::new(
+                "sensor",
+                "is set as well as [[sensors]]: give the vehicle's sensors in one place \
+                 (move [sensor] into [[sensors]])",
+            ));
+        }
+        let mut models: Vec<arcnav_perception::SensorModel> = Vec::new();
+        for (i, sensor) in self.sensors.iter().enumerate() {
+            let model = sensor
+                .model()
+                .map_err(|e| e.within(&format!("sensors[{i}]")))?;
+            if let Some(j) = models.iter().position(|m| m.id == model.id) {
+                return Err(ConfigError::new(
+                    format!("sensors[{i}].id"),
+                    format!(
+                        "{:?} is also the id of sensors[{j}]: each sensor needs its own (it names \
+                         its channel RANGE_IMAGE_<ID> and its cells in the local map)",
+                        model.id
+                    ),
+                ));
+            }
+            models.push(model);
+        }
+        Ok(models)
+    }
+
     fn validate_sections(&self) -> Result<(), ConfigError> {
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
         self.arcs
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("arcs"))?;
         self.sensor.validate().map_err(|e| e.within("sensor"))?;
+        self.sensor_models()?;
         self.perception
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("perception"))?;

@@ -313,3 +313,44 @@ fn weights_that_leave_no_behaviour_voting_are_refused() {
         "{msg}"
     );
 }
+
+#[test]
+fn several_sensors_each_with_its_own_id_mount_and_rate() {
+    let config = Config::from_toml(
+        "[[sensors]]\npreset = \"lidar64\"\n[[sensors]]\npreset = \"depth_camera\"\nid = \"rear\"\n\
+         mount_position_m = [-0.6, 0.0, 2.0]\nmount_rpy_deg = [0.0, 25.0, 180.0]\nrate_hz = 10.0\n",
+        "test.toml",
+    )
+    .unwrap();
+    let models = config.sensor_models().unwrap();
+    assert_eq!(models.len(), 2);
+    assert_eq!(models[0], arcnav_perception::SensorModel::lidar64());
+    assert_eq!(models[1].id, "rear");
+    assert_eq!(models[1].rate_hz, 10.0);
+    let yaw = arcnav_vehicle::frames::yaw_of(&models[1].vehicle_from_sensor);
+    assert!((yaw.abs() - std::f64::consts::PI).abs() < 1e-9, "{yaw}");
+    assert_eq!(
+        models[1].beams,
+        arcnav_perception::SensorModel::depth_camera().beams
+    );
+    // Without [[sensors]], [sensor] is the one sensor.
+    assert_eq!(Config::default().sensor_models().unwrap().len(), 1);
+}
+
+#[test]
+fn two_sensors_with_one_id_or_sensor_and_sensors_together_are_refused() {
+    let msg = parse_error("[[sensors]]\npreset = \"lidar64\"\n[[sensors]]\npreset = \"lidar64\"\n");
+    assert!(
+        msg.contains("`sensors[1].id`: \"lidar64\" is also the id of sensors[0]"),
+        "{msg}"
+    );
+    let msg = parse_error("[sensor]\npreset = \"lidar64\"\n[[sensors]]\npreset = \"erim\"\n");
+    assert!(
+        msg.contains("`sensor`: is set as well as [[sensors]]"),
+        "{msg}"
+    );
+    let msg = parse_error("[[sensors]]\npreset = \"erim\"\nid = \"front camera\"\n");
+    assert!(msg.contains("`sensors[0].id`"), "{msg}");
+    let msg = parse_error("[[sensors]]\npreset = \"erim\"\nrate_hz = 0.0\n");
+    assert!(msg.contains("`sensors[0].rate_hz`"), "{msg}");
+}
