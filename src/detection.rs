@@ -381,17 +381,21 @@ mod tests {
         let rows = run(&PerceptionConfig::default(), &options(), &|_, _| {}).unwrap();
         assert_eq!(rows.len(), 2 * 3 * 2);
         for r in &rows {
-            let expected = match (r.glass, r.height_m, r.distance_m) {
-                // Beyond the ERIM's reach and the evaluated region.
-                (_, _, d) if d > 30.0 => 0.0,
-                (false, h, _) if h < 0.1 => 0.0,
-                _ => 1.0,
+            let near = r.distance_m < 30.0;
+            // Beyond the ERIM's reach and the evaluated region nothing
+            // shows; a glass is never an obstacle cell but its ground is
+            // left unseen; a 5 cm block is driven over.
+            let (detected, unseen) = match (r.glass, r.height_m) {
+                (true, _) => (0.0, f64::from(u8::from(near))),
+                (false, h) if h < 0.1 => (0.0, 0.0),
+                _ => (f64::from(u8::from(near)), 0.0),
             };
-            assert_eq!(
-                r.detection_probability, expected,
+            let what = format!(
                 "{} {} {} at {} m",
                 r.evaluator, r.sensor, r.object, r.distance_m
             );
+            assert_eq!(r.detection_probability, detected, "{what}");
+            assert_eq!(r.unseen_probability, unseen, "{what}");
             assert_eq!(r.false_alarms, 0, "{r:?}");
         }
         let text = table(&rows);

@@ -17,6 +17,7 @@ pub mod export;
 pub mod fuzzing;
 pub mod live;
 pub mod mission;
+pub mod occupancy;
 pub mod output;
 mod recorder;
 pub mod render;

@@ -130,3 +130,82 @@ fn a_vehicle_with_a_front_lidar_and_a_rear_depth_camera_completes_the_short_cour
     let _ = std::fs::remove_dir_all(&run);
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn a_wall_known_only_from_a_static_occupancy_map_is_driven_around() {
+    use arcnav_bus::messages::{AnyMessage, TypedEvents};
+    // open_field runs straight from (0, 0) to its first waypoint (40, 0);
+    // a map_server map puts a 12 m wall across it at x = 20 that the
+    // terrain does not have (a fence the sensor cannot see, say).
+    let out = out_dir("occupancy-config");
+    std::fs::create_dir_all(&out).unwrap();
+    // 5 cm pixels, 0.4 m × 12 m: 8 columns, 240 rows; black = occupied.
+    let (cols, rows) = (8, 240);
+    let mut pgm = format!("P5\n{cols} {rows}\n255\n").into_bytes();
+    pgm.extend(std::iter::repeat_n(0u8, cols * rows));
+    std::fs::write(out.join("fence.pgm"), pgm).unwrap();
+    std::fs::write(
+        out.join("fence.yaml"),
+        "image: fence.pgm\nresolution: 0.05\norigin: [20.0, -6.0, 0.0]\nnegate: 0\n\
+         occupied_thresh: 0.65\nfree_thresh: 0.196\n",
+    )
+    .unwrap();
+    // Relative to the configuration file.
+    std::fs::write(
+        out.join("with_map.toml"),
+        "[localmap.occupancy]\nfile = \"fence.yaml\"\n",
+    )
+    .unwrap();
+    let config = out.join("with_map.toml");
+    let (report, run, printed) = sim(
+        "occupancy",
+        &[
+            "--world",
+            "open_field",
+            "--no-images",
+            "--config",
+            config.to_str().unwrap(),
+        ],
+    );
+    assert_completed("static map", &report, &printed);
+    assert!(
+        report["untraversable_cells"]["static map"] == 0,
+        "perception reports no static-map cells"
+    );
+    let mut poses = Vec::new();
+    for event in TypedEvents::new(LogReader::open(run.join("mission.lcm")).unwrap()) {
+        if let AnyMessage::Pose(p) = event.unwrap().message {
+            poses.push((p.position[0], p.position[1]));
+        }
+    }
+    // The vehicle (2.2 m wide) never crossed x = 20 within the wall's span.
+    let crossing = poses
+        .windows(2)
+        .find(|w| w[0].0 < 20.2 && w[1].0 >= 20.2)
+        .map(|w| w[1])
+        .expect("the vehicle reached x = 20");
+    assert!(
+        crossing.1.abs() > 6.0 + 1.1,
+        "crossed x = 20 at y = {:.2}, through the wall:\n{printed}",
+        crossing.1
+    );
+    // Without the map it drives straight through (the wall is only there).
+    let (plain, plain_run, printed) =
+        sim("no-occupancy", &["--world", "open_field", "--no-images"]);
+    assert_completed("no static map", &plain, &printed);
+    let mut straight = Vec::new();
+    for event in TypedEvents::new(LogReader::open(plain_run.join("mission.lcm")).unwrap()) {
+        if let AnyMessage::Pose(p) = event.unwrap().message {
+            straight.push((p.position[0], p.position[1]));
+        }
+    }
+    let through = straight
+        .windows(2)
+        .find(|w| w[0].0 < 20.2 && w[1].0 >= 20.2)
+        .map(|w| w[1])
+        .unwrap();
+    assert!(through.1.abs() < 6.0, "{through:?}");
+    for dir in [run, plain_run, out] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

@@ -45,6 +45,41 @@ pub struct LocalMapConfig {
     /// pose after a reset) counts as seen: the vehicle stands there, and no
     /// sensor sees the ground right in front of the bumper, m.
     pub assume_seen_m: f64,
+    /// A static occupancy map of the area, merged with perception's cells.
+    pub occupancy: OccupancyConfig,
+}
+
+/// Lives in `[localmap.occupancy]`: a static 2-D occupancy map (001 §3.4)
+/// whose occupied cells are obstacles wherever the window reaches them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OccupancyConfig {
+    /// A ROS `map_server` YAML (its PGM beside it, `origin`, `resolution`,
+    /// `negate` and `occupied_thresh` as map_server reads them) or a
+    /// `.npy` 2-D array; empty: none. A relative path is taken from the
+    /// configuration file's directory.
+    pub file: String,
+    /// `.npy` only: cell size, m.
+    pub resolution_m: f64,
+    /// `.npy` only: world x, y of the corner of cell [0, 0] and the grid's
+    /// yaw (degrees); rows run along +y, columns along +x, as in a ROS
+    /// `OccupancyGrid`.
+    pub origin: [f64; 3],
+    /// `.npy` only: a cell at or above this is occupied (values are
+    /// occupancy probabilities 0-1, or percentages 0-100 with -1 unknown
+    /// as in a ROS `OccupancyGrid`, told apart by their largest value).
+    pub occupied_thresh: f64,
+}
+
+impl Default for OccupancyConfig {
+    fn default() -> Self {
+        Self {
+            file: String::new(),
+            resolution_m: 0.05,
+            origin: [0.0, 0.0, 0.0],
+            occupied_thresh: 0.65,
+        }
+    }
 }
 
 impl Default for LocalMapConfig {
@@ -59,6 +94,7 @@ impl Default for LocalMapConfig {
             max_pose_jump_m: 2.0,
             on_pose_jump: JumpPolicy::Reset,
             assume_seen_m: 8.0,
+            occupancy: OccupancyConfig::default(),
         }
     }
 }
@@ -72,6 +108,15 @@ impl LocalMapConfig {
         config::non_negative("behind_m", self.behind_m)?;
         config::positive("max_pose_jump_m", self.max_pose_jump_m)?;
         config::in_range("assume_seen_m", self.assume_seen_m, 0.0, 100.0)?;
+        let o = &self.occupancy;
+        config::in_range("occupancy.resolution_m", o.resolution_m, 0.001, 100.0)?;
+        config::in_range("occupancy.occupied_thresh", o.occupied_thresh, 0.0, 1.0)?;
+        if o.origin.iter().any(|v| !v.is_finite()) {
+            return Err(ConfigError::new(
+                "occupancy.origin",
+                "holds a value that is not finite",
+            ));
+        }
         if self.misses_to_drop == 0 {
             return Err(ConfigError::new(
                 "misses_to_drop",

@@ -10,9 +10,11 @@
 pub mod config;
 pub mod map;
 pub mod raster;
+pub mod static_map;
 
-pub use config::{JumpPolicy, LocalMapConfig};
+pub use config::{JumpPolicy, LocalMapConfig, OccupancyConfig};
 pub use map::{
     InsertError, InsertOutcome, JumpReason, LocalMap, MapSnapshot, MapStats, Patch, PoseUpdate,
     SeenGround,
 };
+pub use static_map::{OccupancyGrid, StaticMap};

@@ -174,6 +174,11 @@ pub struct MapStats {
     pub rejected_poses: u64,
     /// Patches removed because the vehicle's body stands on them.
     pub cleared_under_vehicle: u64,
+    /// Perception cells on patches the static map already holds (not
+    /// stored twice, 001 eq. 6).
+    pub already_in_static_map: u64,
+    /// Static-map patches that entered the window.
+    pub static_patches_added: u64,
 }
 
 /// Which patches of a square of the world some image observed: patch
@@ -312,6 +317,8 @@ pub struct LocalMap {
     seen: Vec<(i64, i64)>,
     /// Ground around the next accepted pose is to be marked seen.
     assume_seen_pending: bool,
+    /// The static occupancy map, if one was given.
+    statics: Option<std::sync::Arc<crate::StaticMap>>,
     stats: MapStats,
 }
 
@@ -343,7 +350,71 @@ impl LocalMap {
             shadows: ShadowIndex::default(),
             seen: vec![UNSEEN; side * side],
             assume_seen_pending: true,
+            statics: None,
             stats: MapStats::default(),
+        }
+    }
+
+    /// Merges a static occupancy map (001 §3.4): its patches are in the map
+    /// whenever the window reaches them, never pruned by an image, and
+    /// perception cells on them are not stored again.
+    pub fn set_static_map(&mut self, statics: std::sync::Arc<crate::StaticMap>) {
+        self.statics = (!statics.is_empty()).then_some(statics);
+        self.add_static_patches();
+    }
+
+    fn is_static(&self, i: i64, j: i64) -> bool {
+        self.statics.as_ref().is_some_and(|s| s.contains(i, j))
+    }
+
+    /// Adds the static map's patches that lie in the window and are not in
+    /// the map yet (nor under the vehicle).
+    fn add_static_patches(&mut self) {
+        let (Some(statics), Some(pose), Some((i0, j0, side))) =
+            (self.statics.clone(), self.pose, self.window_square())
+        else {
+            return;
+        };
+        let utime = pose.utime;
+        for j in j0..j0 + i64::from(side) {
+            for i in i0..i0 + i64::from(side) {
+                if !statics.contains(i, j) {
+                    continue;
+                }
+                let slot = self.slot_index(i, j);
+                let existing = self.slots[slot];
+                if existing != EMPTY {
+                    let patch = &mut self.patches[existing as usize];
+                    if (patch.i, patch.j) == (i, j) {
+                        patch.reasons.insert(Reasons::STATIC_MAP);
+                        continue;
+                    }
+                    self.remove(existing as usize);
+                    self.stats.dropped_outside_window += 1;
+                }
+                let (cx, cy) = self.patch_centre(i, j);
+                let Some((vx, vy)) = self.to_vehicle(cx, cy) else {
+                    return;
+                };
+                if !self.config.in_window(vx, vy) {
+                    continue;
+                }
+                let patch = Patch {
+                    x: vx as f32,
+                    y: vy as f32,
+                    first_seen: utime,
+                    last_seen: utime,
+                    confirmations: 1,
+                    reasons: Reasons::STATIC_MAP,
+                    ..Patch::at(i, j)
+                };
+                if self.body.contains(Point2::new(vx, vy)) {
+                    continue;
+                }
+                self.slots[slot] = self.patches.len() as u32;
+                self.patches.push(patch);
+                self.stats.static_patches_added += 1;
+            }
         }
     }
 
@@ -466,6 +537,10 @@ impl LocalMap {
         let s = self.config.patch_size_m;
         for cell in &report.cells {
             let (i, j) = ((cell.x / s).floor() as i64, (cell.y / s).floor() as i64);
+            if self.is_static(i, j) {
+                self.stats.already_in_static_map += 1;
+                continue;
+            }
             let slot = self.slot_index(i, j);
             let existing = self.slots[slot];
             if existing != EMPTY {
@@ -622,6 +697,7 @@ impl LocalMap {
         while index < self.patches.len() {
             let patch = &mut self.patches[index];
             let judged = patch.stamp != stamp
+                && !patch.reasons.contains(Reasons::STATIC_MAP)
                 && patch.last_seen < report.utime
                 && (self.config.cross_sensor_pruning || patch.sensors & sensor_bit != 0)
                 && self.coverage.covers(patch.i, patch.j);
@@ -669,6 +745,7 @@ impl LocalMap {
                         self.pose = Some(*pose);
                         self.assume_seen_pending = false;
                         self.assume_seen_around_pose();
+                        self.add_static_patches();
                         return PoseUpdate::Reset(reason);
                     }
                     JumpPolicy::Reject => {
@@ -710,6 +787,7 @@ impl LocalMap {
             index += 1;
         }
         self.forget_seen_outside_window();
+        self.add_static_patches();
         PoseUpdate::Accepted
     }
 

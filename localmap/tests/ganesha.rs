@@ -640,3 +640,68 @@ fn cells_under_the_vehicle_are_cleared_and_counted() {
     assert_eq!(map.len(), 1, "{:?}", positions(&map));
     assert_eq!(map.stats().cleared_under_vehicle, 3);
 }
+
+/// A wall 0.4 m thick from (10, -2) to (10.4, 2), as a 10 cm occupancy grid.
+fn wall() -> std::sync::Arc<arcnav_localmap::StaticMap> {
+    let grid = arcnav_localmap::OccupancyGrid {
+        resolution_m: 0.1,
+        origin: planar_isometry(10.0, -2.0, 0.0),
+        cols: 4,
+        rows: 40,
+        occupied: vec![true; 160],
+    };
+    std::sync::Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, 0.4))
+}
+
+#[test]
+fn a_static_map_joins_the_window_is_never_pruned_and_is_not_stored_twice() {
+    let mut map = map();
+    map.set_static_map(wall());
+    assert!(map.is_empty(), "no pose yet: nothing is placed");
+    // 15 m back, facing +x: the wall is beyond the 20 m window... at 25 m.
+    map.update(&pose_at(0, -15.0, 0.0, 0.0));
+    assert!(map.is_empty(), "the wall 25 m ahead is outside the window");
+    map.update(&pose_at(SECOND, 0.0, 0.0, 0.0));
+    let statics = map
+        .snapshot()
+        .patches
+        .iter()
+        .filter(|p| p.reasons.contains(Reasons::STATIC_MAP))
+        .count();
+    assert_eq!(statics, 10, "a 4 m wall is ten 0.4 m patches");
+    assert_eq!(map.stats().static_patches_added, 10);
+    // An image that sees the wall's ground and reports nothing there does
+    // not prune it; its cells on the wall are not stored again, those
+    // elsewhere are.
+    let outcome = map
+        .insert(&report(
+            SECOND,
+            "erim",
+            &[(10.1, 0.1), (10.3, -1.5), (6.0, 3.0)],
+            rectangle(2.0, 18.0, -8.0, 8.0),
+        ))
+        .unwrap();
+    assert_eq!(outcome.new_patches, 1);
+    assert_eq!(map.stats().already_in_static_map, 2);
+    map.insert(&report(
+        SECOND + 1,
+        "erim",
+        &[],
+        rectangle(2.0, 18.0, -8.0, 8.0),
+    ))
+    .unwrap();
+    let patches = map.snapshot().patches.clone();
+    assert_eq!(
+        patches.len(),
+        10,
+        "the perception cell was pruned, the wall not"
+    );
+    assert!(patches.iter().all(|p| p.reasons == Reasons::STATIC_MAP));
+    // Driving past, the wall leaves the window and comes back with it.
+    map.update(&pose_at(2 * SECOND, 12.0, 30.0, 0.0));
+    assert!(map.is_empty());
+    map.update(&pose_at(3 * SECOND, 12.0, 12.0, 0.0));
+    assert!(map.is_empty(), "behind and beside beyond the window");
+    map.update(&pose_at(4 * SECOND, 0.0, 5.0, 0.0));
+    assert_eq!(map.len(), 10);
+}

@@ -36,14 +36,18 @@ impl Reasons {
     /// Not flat even at the smallest region of 001's hierarchical PCA
     /// (`pca`).
     pub const NOT_FLAT: Self = Self(32);
+    /// Occupied in the static occupancy map a user gave (001 §3.4); never
+    /// set by perception.
+    pub const STATIC_MAP: Self = Self(64);
     /// Every reason, with its name, in bit order.
-    pub const ALL: [(Self, &'static str); 6] = [
+    pub const ALL: [(Self, &'static str); 7] = [
         (Self::HEIGHT_VARIATION, "height variation"),
         (Self::SLOPE, "slope"),
         (Self::DISCONTINUITY, "discontinuity"),
         (Self::DROP_OFF, "drop-off"),
         (Self::HEIGHT_DIFFERENCE, "height difference"),
         (Self::NOT_FLAT, "not flat"),
+        (Self::STATIC_MAP, "static map"),
     ];
 
     pub const fn bits(self) -> u8 {

@@ -60,6 +60,26 @@ pub struct Config {
     /// checked, once, when the configuration was loaded.
     #[serde(skip)]
     prepared: PreparedBehaviours,
+    /// The static occupancy map `[localmap.occupancy]` names, read once.
+    #[serde(skip)]
+    statics: StaticMapCache,
+}
+
+/// The static map read for one `[localmap.occupancy]` and patch size.
+type StaticEntry = (
+    arcnav_localmap::OccupancyConfig,
+    f64,
+    Option<Arc<arcnav_localmap::StaticMap>>,
+);
+
+#[derive(Debug, Clone, Default)]
+struct StaticMapCache(Arc<std::sync::Mutex<Option<StaticEntry>>>);
+
+impl PartialEq for StaticMapCache {
+    /// A cache of what a file holds: configurations compare by its name.
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// Behaviour tables parsed and checked by the registry, by name. Building
@@ -90,6 +110,7 @@ impl Default for Config {
             sim: SimConfig::default(),
             behaviours: default_behaviours(),
             prepared: PreparedBehaviours::default(),
+            statics: StaticMapCache::default(),
         };
         // The built-in defaults always prepare.
         if let Ok(prepared) = config.prepare_behaviours(&Registry::builtin()) {
@@ -165,7 +186,12 @@ impl Config {
                 path: path.to_owned(),
                 source,
             })?;
-        Self::from_toml(&text, &path.display().to_string())
+        Self::from_toml_in(
+            &text,
+            &path.display().to_string(),
+            &Registry::builtin(),
+            path.parent(),
+        )
     }
 
     /// Loads `path` if given, else the defaults.
@@ -185,6 +211,17 @@ impl Config {
         origin: &str,
         registry: &Registry,
     ) -> Result<Self, ConfigLoadError> {
+        Self::from_toml_in(text, origin, registry, None)
+    }
+
+    /// Parses and validates; relative file names in the text are taken
+    /// from `base` (the configuration file's directory), if given.
+    fn from_toml_in(
+        text: &str,
+        origin: &str,
+        registry: &Registry,
+        base: Option<&Path>,
+    ) -> Result<Self, ConfigLoadError> {
         let mut config: Self = toml::from_str(text).map_err(|err| {
             let (line, key) = err
                 .span()
@@ -199,6 +236,13 @@ impl Config {
                 message: err.message().to_owned(),
             }
         })?;
+        let file = &mut config.localmap.occupancy.file;
+        if let Some(base) = base
+            && !file.is_empty()
+            && Path::new(file.as_str()).is_relative()
+        {
+            *file = base.join(&*file).display().to_string();
+        }
         config
             .validate_sections()
             .and_then(|()| config.prepare_behaviours(registry))
@@ -222,7 +266,7 @@ impl Config {
                 path: path.to_owned(),
                 source,
             })?;
-        Self::from_toml_with(&text, &path.display().to_string(), registry)
+        Self::from_toml_in(&text, &path.display().to_string(), registry, path.parent())
     }
 
     /// The arc set this configuration describes.
@@ -397,7 +441,38 @@ impl Config {
         }
         self.bus.validate().map_err(|e| e.within("bus"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
+        self.static_map()?;
         Ok(())
+    }
+
+    /// The static occupancy map `[localmap.occupancy]` names, gathered onto
+    /// the local map's patches (read once per file and patch size).
+    pub fn static_map(&self) -> Result<Option<Arc<arcnav_localmap::StaticMap>>, ConfigError> {
+        let occupancy = &self.localmap.occupancy;
+        let patch = self.localmap.patch_size_m;
+        let mut cache = self
+            .statics
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((c, p, map)) = cache.as_ref()
+            && c == occupancy
+            && *p == patch
+        {
+            return Ok(map.clone());
+        }
+        let map = crate::occupancy::load(occupancy)
+            .map_err(|e| ConfigError::new("localmap.occupancy.file", e.to_string()))?
+            .map(|grid| Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, patch)));
+        if let Some(m) = &map {
+            tracing::info!(
+                file = %occupancy.file,
+                patches = m.len(),
+                "static occupancy map merged into the local map"
+            );
+        }
+        *cache = Some((occupancy.clone(), patch, map.clone()));
+        Ok(map)
     }
 
     /// Perception must evaluate all the ground the local map keeps.

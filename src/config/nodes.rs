@@ -59,7 +59,13 @@ impl Config {
     /// The local map and its cycle clock, from `[localmap]`, the vehicle's
     /// top speed and `[pipeline]`, with reports delivered as `delivery` says.
     pub fn decision_cycle<T>(&self, delivery: Delivery) -> DecisionCycle<T> {
-        let map = LocalMapNode::new(&self.localmap, &self.vehicle);
+        let mut map = LocalMapNode::new(&self.localmap, &self.vehicle);
+        // Read (and its errors reported) when the configuration was checked.
+        match self.static_map() {
+            Ok(Some(statics)) => map.map.set_static_map(statics),
+            Ok(None) => {}
+            Err(e) => tracing::error!(%e, "no static occupancy map"),
+        }
         DecisionCycle::new(map, &self.pipeline, delivery)
     }
 

@@ -1,0 +1,362 @@
+//! Reading a static occupancy map (`[localmap.occupancy]`, 001 §3.4): a
+//! ROS `map_server` YAML with its PGM image, or a `.npy` 2-D array.
+//!
+//! map_server's rules: the YAML names the `image` (relative to the YAML),
+//! its `resolution` (m per pixel) and `origin` (x, y, yaw of the lower-left
+//! pixel's corner); a pixel's occupancy is `p = (255 − v) / 255`, or
+//! `v / 255` with `negate: 1`, and the pixel is occupied when
+//! `p > occupied_thresh`; `mode: raw` takes `v` as a percentage instead.
+//! The image's top row is the map's far (+y) edge. A `.npy` array's row 0
+//! is at the origin, as in a ROS `OccupancyGrid`; its resolution, origin
+//! and threshold come from the configuration.
+//!
+//! Nothing is allocated from a size a file states before it is checked: at
+//! most [`MAX_CELLS`] cells.
+
+use std::path::{Path, PathBuf};
+
+use arcnav_localmap::{OccupancyConfig, OccupancyGrid};
+use arcnav_vehicle::frames::planar_isometry;
+
+/// The largest map read: 20 000 × 20 000 cells (1 km square at 5 cm).
+pub const MAX_CELLS: u64 = 400_000_000;
+
+/// A map that could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum OccupancyError {
+    #[error("cannot read the occupancy map {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("occupancy map {path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+fn invalid(path: &Path, message: impl Into<String>) -> OccupancyError {
+    OccupancyError::Invalid {
+        path: path.to_owned(),
+        message: message.into(),
+    }
+}
+
+/// The map `config` names (`None` when it names none).
+pub fn load(config: &OccupancyConfig) -> Result<Option<OccupancyGrid>, OccupancyError> {
+    if config.file.is_empty() {
+        return Ok(None);
+    }
+    let path = Path::new(&config.file);
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match extension.as_deref() {
+        Some("yaml" | "yml") => load_yaml(path).map(Some),
+        Some("npy") => load_npy(path, config).map(Some),
+        _ => Err(invalid(
+            path,
+            "is neither a map_server .yaml nor a .npy array (named by its extension)",
+        )),
+    }
+}
+
+fn read(path: &Path) -> Result<Vec<u8>, OccupancyError> {
+    std::fs::read(path).map_err(|source| OccupancyError::Read {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+fn load_yaml(path: &Path) -> Result<OccupancyGrid, OccupancyError> {
+    use yaml_rust2::{Yaml, YamlLoader};
+    let text = String::from_utf8(read(path)?).map_err(|_| invalid(path, "is not UTF-8 text"))?;
+    let docs = YamlLoader::load_from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
+    let doc = docs
+        .first()
+        .ok_or_else(|| invalid(path, "holds no YAML document"))?;
+    let number = |key: &str| -> Result<Option<f64>, OccupancyError> {
+        match &doc[key] {
+            Yaml::BadValue => Ok(None),
+            Yaml::Real(_) => doc[key]
+                .as_f64()
+                .map(Some)
+                .ok_or_else(|| invalid(path, format!("`{key}` is not a number"))),
+            Yaml::Integer(i) => Ok(Some(*i as f64)),
+            _ => Err(invalid(path, format!("`{key}` is not a number"))),
+        }
+    };
+    let image = doc["image"]
+        .as_str()
+        .ok_or_else(|| invalid(path, "has no `image` (the PGM file)"))?;
+    let resolution =
+        number("resolution")?.ok_or_else(|| invalid(path, "has no `resolution` (m per pixel)"))?;
+    if !(resolution.is_finite() && resolution > 0.0) {
+        return Err(invalid(
+            path,
+            format!("`resolution` {resolution} must be positive"),
+        ));
+    }
+    let origin: Vec<f64> = doc["origin"]
+        .as_vec()
+        .ok_or_else(|| invalid(path, "has no `origin` [x, y, yaw]"))?
+        .iter()
+        .map(|v| v.as_f64().or_else(|| v.as_i64().map(|i| i as f64)))
+        .collect::<Option<Vec<f64>>>()
+        .filter(|o| o.len() == 3 && o.iter().all(|v| v.is_finite()))
+        .ok_or_else(|| invalid(path, "`origin` must be three numbers [x, y, yaw]"))?;
+    let negate = number("negate")?.unwrap_or(0.0) != 0.0;
+    let occupied_thresh = number("occupied_thresh")?.unwrap_or(0.65);
+    if !(0.0..=1.0).contains(&occupied_thresh) {
+        return Err(invalid(path, "`occupied_thresh` must be 0 to 1"));
+    }
+    let raw = doc["mode"].as_str() == Some("raw");
+    let image_path = path.parent().unwrap_or(Path::new(".")).join(image);
+    let pixels = read_pgm(&image_path)?;
+    let (cols, rows) = (pixels.width() as usize, pixels.height() as usize);
+    let mut occupied = vec![false; cols * rows];
+    for (x, y, v) in pixels.enumerate_pixels() {
+        let v = f64::from(v.0[0]);
+        let is = if raw {
+            (100.0 * occupied_thresh..=100.0).contains(&v)
+        } else {
+            let p = if negate {
+                v / 255.0
+            } else {
+                (255.0 - v) / 255.0
+            };
+            p > occupied_thresh
+        };
+        // The image's top row is the map's far edge.
+        let row = rows - 1 - y as usize;
+        occupied[row * cols + x as usize] = is;
+    }
+    Ok(OccupancyGrid {
+        resolution_m: resolution,
+        origin: planar_isometry(origin[0], origin[1], origin[2]),
+        cols,
+        rows,
+        occupied,
+    })
+}
+
+fn read_pgm(path: &Path) -> Result<image::GrayImage, OccupancyError> {
+    let bytes = read(path)?;
+    let mut reader =
+        image::ImageReader::with_format(std::io::Cursor::new(bytes), image::ImageFormat::Pnm);
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(2 * MAX_CELLS);
+    reader.limits(limits);
+    let decoded = reader
+        .decode()
+        .map_err(|e| invalid(path, format!("is not a readable PGM image: {e}")))?;
+    if u64::from(decoded.width()) * u64::from(decoded.height()) > MAX_CELLS {
+        return Err(invalid(path, "holds more than 400 million pixels"));
+    }
+    Ok(decoded.to_luma8())
+}
+
+fn load_npy(path: &Path, config: &OccupancyConfig) -> Result<OccupancyGrid, OccupancyError> {
+    use npyz::{DType, TypeChar};
+    let bytes = read(path)?;
+    let npy = npyz::NpyFile::new(&bytes[..])
+        .map_err(|e| invalid(path, format!("is not a .npy array: {e}")))?;
+    let shape = npy.shape().to_vec();
+    let [rows, cols] = shape[..] else {
+        return Err(invalid(
+            path,
+            format!(
+                "is a {}-D array; an occupancy map is 2-D (rows, columns)",
+                shape.len()
+            ),
+        ));
+    };
+    if rows.saturating_mul(cols) > MAX_CELLS || rows == 0 || cols == 0 {
+        return Err(invalid(
+            path,
+            format!("is {rows} × {cols}: at least one cell, at most 400 million"),
+        ));
+    }
+    let fortran = npy.order() == npyz::Order::Fortran;
+    let DType::Plain(ty) = npy.dtype() else {
+        return Err(invalid(path, "holds records, not numbers"));
+    };
+    let values: Vec<f64> = match (ty.type_char(), ty.size_field()) {
+        (TypeChar::Bool, 1) => to_f64(npy.into_vec::<bool>(), path, |v| f64::from(u8::from(v)))?,
+        (TypeChar::Uint, 1) => to_f64(npy.into_vec::<u8>(), path, f64::from)?,
+        (TypeChar::Int, 1) => to_f64(npy.into_vec::<i8>(), path, f64::from)?,
+        (TypeChar::Int, 2) => to_f64(npy.into_vec::<i16>(), path, f64::from)?,
+        (TypeChar::Int, 4) => to_f64(npy.into_vec::<i32>(), path, f64::from)?,
+        (TypeChar::Int, 8) => to_f64(npy.into_vec::<i64>(), path, |v| v as f64)?,
+        (TypeChar::Float, 4) => to_f64(npy.into_vec::<f32>(), path, f64::from)?,
+        (TypeChar::Float, 8) => to_f64(npy.into_vec::<f64>(), path, |v| v)?,
+        (c, size) => {
+            return Err(invalid(
+                path,
+                format!("holds {c:?} of {size} bytes; use bool, integers or floats"),
+            ));
+        }
+    };
+    let (rows, cols) = (rows as usize, cols as usize);
+    if values.len() != rows * cols {
+        return Err(invalid(path, "holds fewer values than its shape says"));
+    }
+    let largest = values
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    let threshold = if largest > 1.0 {
+        100.0 * config.occupied_thresh
+    } else {
+        config.occupied_thresh
+    };
+    let occupied = (0..rows * cols)
+        .map(|k| {
+            let (row, col) = (k / cols, k % cols);
+            let v = if fortran {
+                values[col * rows + row]
+            } else {
+                values[k]
+            };
+            v >= threshold
+        })
+        .collect();
+    let [x, y, yaw] = config.origin;
+    Ok(OccupancyGrid {
+        resolution_m: config.resolution_m,
+        origin: planar_isometry(x, y, yaw.to_radians()),
+        cols,
+        rows,
+        occupied,
+    })
+}
+
+fn to_f64<T>(
+    values: std::io::Result<Vec<T>>,
+    path: &Path,
+    convert: impl Fn(T) -> f64,
+) -> Result<Vec<f64>, OccupancyError> {
+    values
+        .map(|v| v.into_iter().map(convert).collect())
+        .map_err(|e| invalid(path, format!("cannot be read: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use npyz::WriterBuilder as _;
+
+    fn dir(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("arcnav-occ-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn config(file: &Path) -> OccupancyConfig {
+        OccupancyConfig {
+            file: file.to_str().unwrap().into(),
+            ..OccupancyConfig::default()
+        }
+    }
+
+    #[test]
+    fn a_map_server_yaml_and_pgm_are_read_with_its_rules() {
+        let d = dir("yaml");
+        // 3 wide, 2 tall; top row: black (occupied), grey (0.5), white.
+        let mut pgm = b"P5\n3 2\n255\n".to_vec();
+        pgm.extend_from_slice(&[0, 128, 255, 255, 255, 0]);
+        std::fs::write(d.join("map.pgm"), &pgm).unwrap();
+        std::fs::write(
+            d.join("map.yaml"),
+            "image: map.pgm\nresolution: 0.5\norigin: [-1.0, 2.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n",
+        )
+        .unwrap();
+        let grid = load(&config(&d.join("map.yaml"))).unwrap().unwrap();
+        assert_eq!((grid.cols, grid.rows, grid.resolution_m), (3, 2, 0.5));
+        // Row 0 is the image's bottom row: white, white, black.
+        assert_eq!(grid.occupied, [false, false, true, true, false, false]);
+        assert_eq!(grid.origin.translation.vector.x, -1.0);
+        // negate: 1 turns it over.
+        std::fs::write(
+            d.join("neg.yaml"),
+            "image: map.pgm\nresolution: 0.5\norigin: [0, 0, 0]\nnegate: 1\n",
+        )
+        .unwrap();
+        let grid = load(&config(&d.join("neg.yaml"))).unwrap().unwrap();
+        assert_eq!(grid.occupied, [true, true, false, false, false, true]);
+        let _ = std::fs::remove_dir_all(d);
+    }
+
+    #[test]
+    fn a_npy_array_is_read_with_the_configured_origin() {
+        let d = dir("npy");
+        let path = d.join("map.npy");
+        // 2 rows × 3 columns of percentages, -1 unknown.
+        let mut out = Vec::new();
+        {
+            let mut writer = npyz::WriteOptions::new()
+                .default_dtype()
+                .shape(&[2, 3])
+                .writer(&mut out)
+                .begin_nd()
+                .unwrap();
+            writer.extend([0i8, 100, -1, 70, 50, 0]).unwrap();
+            writer.finish().unwrap();
+        }
+        std::fs::write(&path, &out).unwrap();
+        let c = OccupancyConfig {
+            resolution_m: 0.2,
+            origin: [5.0, 0.0, 90.0],
+            ..config(&path)
+        };
+        let grid = load(&c).unwrap().unwrap();
+        assert_eq!((grid.cols, grid.rows), (3, 2));
+        assert_eq!(grid.occupied, [false, true, false, true, false, false]);
+        let yaw = arcnav_vehicle::frames::yaw_of(&grid.origin);
+        assert!((yaw - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        let _ = std::fs::remove_dir_all(d);
+    }
+
+    #[test]
+    fn bad_maps_are_refused_naming_the_file_and_the_problem() {
+        let d = dir("bad");
+        let case = |name: &str, bytes: &[u8]| {
+            let p = d.join(name);
+            std::fs::write(&p, bytes).unwrap();
+            load(&config(&p)).unwrap_err().to_string()
+        };
+        assert!(case("a.txt", b"").contains("neither a map_server .yaml nor a .npy"));
+        let e = case("noimage.yaml", b"resolution: 0.1\norigin: [0, 0, 0]\n");
+        assert!(e.contains("has no `image`"), "{e}");
+        let e = case(
+            "missing.yaml",
+            b"image: nowhere.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n",
+        );
+        assert!(
+            e.contains("cannot read the occupancy map") && e.contains("nowhere.pgm"),
+            "{e}"
+        );
+        std::fs::write(d.join("huge.pgm"), b"P5\n100000 100000\n255\n\0").unwrap();
+        let e = case(
+            "huge.yaml",
+            b"image: huge.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n",
+        );
+        assert!(e.contains("huge.pgm"), "{e}");
+        let e = case(
+            "origin.yaml",
+            b"image: huge.pgm\nresolution: 0.1\norigin: [0, 0]\n",
+        );
+        assert!(e.contains("`origin` must be three numbers"), "{e}");
+        let e = case("bad.npy", b"\x93NUMPY garbage");
+        assert!(
+            e.contains("bad.npy") && e.contains("not a .npy array"),
+            "{e}"
+        );
+        let e = load(&config(&d.join("absent.npy")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot read the occupancy map"), "{e}");
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
