@@ -36,10 +36,10 @@ impl GridShape {
     /// cells inside the grid.
     #[inline]
     pub(crate) fn index(&self, cell: f32, x: f32, y: f32) -> Option<usize> {
-        let (fx, fy) = (
-            (x / cell).floor() + self.corner[0],
-            (y / cell).floor() + self.corner[1],
-        );
+        // Cell coordinates from the grid's corner; only those at least
+        // `margin` cells in are taken, so they are positive and truncating
+        // is flooring (no libm call per point).
+        let (fx, fy) = (x / cell + self.corner[0], y / cell + self.corner[1]);
         let m = self.margin as f32;
         if !(fx >= m && fy >= m && fx < (self.cols - self.margin) as f32)
             || fy >= (self.rows - self.margin) as f32
@@ -64,8 +64,6 @@ impl GridShape {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Point {
     pub xyz: [f32; 3],
-    /// Horizontal distance from the sensor, m.
-    pub distance: f32,
     pub row: u32,
     pub col: u32,
 }
@@ -75,8 +73,10 @@ pub(crate) struct Point {
 pub(crate) struct Projector {
     cos_el: Vec<f32>,
     sin_el: Vec<f32>,
+    /// Per column: the rotated horizontal beam direction, x, y and z.
     cos_az: Vec<f32>,
     sin_az: Vec<f32>,
+    up: Vec<f32>,
 }
 
 /// The level frame of `world_from_vehicle` and where `image`'s sensor
@@ -106,7 +106,42 @@ impl Projector {
         out: &mut Vec<Point>,
         stats: &mut ImageStats,
     ) {
+        self.for_each(
+            image,
+            ranges,
+            level_from_sensor,
+            (min_range, max_range),
+            stats,
+            |xyz, row, col| {
+                out.push(Point {
+                    xyz,
+                    row: row as u32,
+                    col: col as u32,
+                })
+            },
+        );
+    }
+
+    /// [`Projector::project`], handing each point (level-frame xyz, row,
+    /// column) to `each` instead of storing it. Beam directions are
+    /// separable, so per image one rotated 3-vector per column and the
+    /// elevation's cosine and sine per row are computed: a point costs six
+    /// multiplications.
+    pub(crate) fn for_each(
+        &mut self,
+        image: &RangeImage,
+        ranges: &[f32],
+        level_from_sensor: &Isometry,
+        (min_range, max_range): (f32, f32),
+        stats: &mut ImageStats,
+        mut each: impl FnMut([f32; 3], usize, usize),
+    ) {
         let beams = &image.beams;
+        let m = level_from_sensor.rotation.to_rotation_matrix();
+        let m = m.matrix();
+        let r = |i: usize, j: usize| m[(i, j)] as f32;
+        // Per row: cos and sin of the elevation. Per column: the rotated
+        // horizontal direction R·(cos az, sin az, 0), one array per axis.
         self.cos_el.clear();
         self.sin_el.clear();
         for &el in &beams.elevation {
@@ -116,19 +151,20 @@ impl Projector {
         }
         self.cos_az.clear();
         self.sin_az.clear();
+        self.up.clear();
         for &az in &beams.azimuth {
-            let (s, c) = az.sin_cos();
-            self.sin_az.push(s);
-            self.cos_az.push(c);
+            let (sa, ca) = az.sin_cos();
+            self.cos_az.push(r(0, 0) * ca + r(0, 1) * sa);
+            self.sin_az.push(r(1, 0) * ca + r(1, 1) * sa);
+            self.up.push(r(2, 0) * ca + r(2, 1) * sa);
         }
-        let m = level_from_sensor.rotation.to_rotation_matrix();
-        let m = m.matrix();
-        let r = |i: usize, j: usize| m[(i, j)] as f32;
+        let vertical = [r(0, 2), r(1, 2), r(2, 2)];
         let t = level_from_sensor.translation.vector;
         let (tx, ty, tz) = (t.x as f32, t.y as f32, t.z as f32);
         let cols = image.cols();
         for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
             let line = &ranges[row * cols..(row + 1) * cols];
+            let (vx, vy, vz) = (se * vertical[0], se * vertical[1], se * vertical[2]);
             for (col, &range) in line.iter().enumerate() {
                 if !(range.is_finite() && range > 0.0) {
                     stats.no_return += 1;
@@ -138,18 +174,12 @@ impl Projector {
                     stats.out_of_range += 1;
                     continue;
                 }
-                let d = [ce * self.cos_az[col], ce * self.sin_az[col], se];
-                let p = [
-                    (r(0, 0) * d[0] + r(0, 1) * d[1] + r(0, 2) * d[2]) * range + tx,
-                    (r(1, 0) * d[0] + r(1, 1) * d[1] + r(1, 2) * d[2]) * range + ty,
-                    (r(2, 0) * d[0] + r(2, 1) * d[1] + r(2, 2) * d[2]) * range + tz,
+                let xyz = [
+                    (ce * self.cos_az[col] + vx) * range + tx,
+                    (ce * self.sin_az[col] + vy) * range + ty,
+                    (ce * self.up[col] + vz) * range + tz,
                 ];
-                out.push(Point {
-                    xyz: p,
-                    distance: (p[0] - tx).hypot(p[1] - ty),
-                    row: row as u32,
-                    col: col as u32,
-                });
+                each(xyz, row, col);
             }
         }
     }
@@ -168,11 +198,13 @@ pub(crate) struct Marked {
 /// Groups marked cells into 8-connected regions and writes them to
 /// `report` in the world frame. `labels` is scratch of the grid's size
 /// (every entry `u32::MAX`), left that way.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn emit(
     marked: &mut [Marked],
     grid: &GridShape,
     cell: f32,
     labels: &mut Vec<u32>,
+    queue: &mut Vec<usize>,
     world_from_level: &Isometry,
     report: &mut ObstacleReport,
     stats: &mut ImageStats,
@@ -201,8 +233,9 @@ pub(crate) fn emit(
     }
     let s = grid.cols as isize;
     let neighbours = [-s - 1, -s, -s + 1, -1, 1, s - 1, s, s + 1];
-    let mut queue = Vec::new();
-    let mut regions: Vec<Region> = Vec::new();
+    queue.clear();
+    let regions = &mut report.regions;
+    regions.clear();
     for m in marked {
         if labels[m.index as usize] != MARKED {
             continue;
@@ -247,8 +280,7 @@ pub(crate) fn emit(
             *count += u32::from(m.reasons.contains(reason));
         }
     }
-    stats.regions = regions.len() as u32;
-    report.regions = regions;
+    stats.regions = report.regions.len() as u32;
 }
 
 /// What every grid evaluator reports besides its own judgement, found by
@@ -295,8 +327,13 @@ impl SeenGround {
         report.utime = self.report.utime;
         report.sensor.push_str(&self.report.sensor);
         report.cell_size_m = self.report.cell_size_m;
-        std::mem::swap(&mut report.fov, &mut self.report.fov);
-        std::mem::swap(&mut report.shadows, &mut self.report.shadows);
+        // Field by field: a derived `clone_from` would allocate anew.
+        report.fov.vertices.clone_from(&self.report.fov.vertices);
+        report.shadows.origin = self.report.shadows.origin;
+        report
+            .shadows
+            .sectors
+            .clone_from(&self.report.shadows.sectors);
         Ok(ImageStats {
             cells_evaluated: 0,
             untraversable: 0,

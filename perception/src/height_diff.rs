@@ -58,7 +58,7 @@ use crate::config::{GridShape, PerceptionConfig};
 use crate::evaluator::{
     ImageStats, InOrder, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
 };
-use crate::grid::{self, Marked, Point, Projector, SeenGround};
+use crate::grid::{self, Marked, Projector, SeenGround};
 use crate::image::RangeImage;
 use crate::median::{MedianOutliers, MedianParams};
 use crate::registry::EvaluatorPlugin;
@@ -202,12 +202,12 @@ pub struct HeightDiff {
     median: MedianOutliers,
     filtered: Vec<f32>,
     projector: Projector,
-    points: Vec<Point>,
     lowest: Vec<f32>,
     maps: HeightDiffMaps,
     scratch: Scratch,
     marked: Vec<Marked>,
     labels: Vec<u32>,
+    queue: Vec<usize>,
 }
 
 /// Buffers of the separable window passes.
@@ -217,12 +217,9 @@ struct Scratch {
     max: Vec<f32>,
     min: Vec<f32>,
     count: Vec<u16>,
-    line: Vec<f32>,
-    line_max: Vec<f32>,
-    line_min: Vec<f32>,
-    line_count: Vec<u16>,
-    prefix: Vec<f32>,
-    suffix: Vec<f32>,
+    vertical: [Vec<f32>; 3],
+    count_scratch: [Vec<u16>; 3],
+    edges: Vec<usize>,
     sums: Vec<f64>,
     counts: Vec<u32>,
     gaps: [Vec<Nearest>; 2],
@@ -280,7 +277,6 @@ impl HeightDiff {
             median: MedianOutliers::default(),
             filtered: Vec::new(),
             projector: Projector::default(),
-            points: Vec::new(),
             lowest: Vec::new(),
             maps: HeightDiffMaps {
                 cols: grid.cols,
@@ -292,6 +288,7 @@ impl HeightDiff {
             scratch: Scratch::default(),
             marked: Vec::new(),
             labels: Vec::new(),
+            queue: Vec::new(),
             config,
         }
     }
@@ -299,30 +296,6 @@ impl HeightDiff {
     /// The maps of the last evaluation.
     pub fn maps(&self) -> &HeightDiffMaps {
         &self.maps
-    }
-
-    /// The median window for `image`'s beam spacing: half sizes in rows
-    /// and columns.
-    fn median_params(&self, image: &RangeImage) -> MedianParams {
-        let half = |angles: &[f32]| {
-            let n = angles.len();
-            if n < 2 {
-                return 0;
-            }
-            let spacing = ((angles[n - 1] - angles[0]) / (n - 1) as f32)
-                .abs()
-                .to_degrees();
-            // The largest odd number of pixels within the window's angle.
-            let pixels = self.config.median_window_deg as f32 / spacing.max(1e-6);
-            (((pixels - 1.0) / 2.0).floor().max(0.0) as usize).min(16)
-        };
-        MedianParams {
-            half_rows: half(&image.beams.elevation),
-            half_cols: half(&image.beams.azimuth),
-            max_range: self.max_range,
-            abs: self.config.outlier_m as f32,
-            rel: self.config.outlier_fraction as f32,
-        }
     }
 
     /// Builds every map from `images`, taken at once with the vehicle at
@@ -336,7 +309,6 @@ impl HeightDiff {
         stats: &mut ImageStats,
     ) -> Result<&HeightDiffMaps, PerceptionError> {
         let n = self.grid.cols * self.grid.rows;
-        let params: Vec<MedianParams> = images.iter().map(|i| self.median_params(i)).collect();
         let maps = &mut self.maps;
         maps.height.clear();
         maps.height.resize(n, f32::NAN);
@@ -347,32 +319,30 @@ impl HeightDiff {
         for (k, image) in images.iter().enumerate().take(usize::from(u8::MAX)) {
             image.validate()?;
             let cols = image.cols();
-            stats.outliers +=
-                self.median
-                    .filter(&image.range, cols, &params[k], &mut self.filtered);
+            let params = median_params(&self.config, self.max_range, image);
+            stats.outliers += self
+                .median
+                .filter(&image.range, cols, &params, &mut self.filtered);
             let (_, level_from_sensor) = grid::level_frames(image, world_from_vehicle);
-            self.points.clear();
-            let mut counts = ImageStats::default();
-            self.projector.project(
+            let (grid, cell) = (&self.grid, self.cell);
+            let (height, sensor, lowest) = (&mut maps.height, &mut maps.sensor, &mut self.lowest);
+            self.projector.for_each(
                 image,
                 &self.filtered,
                 &level_from_sensor,
-                self.min_range,
-                self.max_range,
-                &mut self.points,
-                &mut counts,
+                (self.min_range, self.max_range),
+                &mut ImageStats::default(),
+                |[x, y, z], _, _| {
+                    let Some(i) = grid.index(cell, x, y) else {
+                        return;
+                    };
+                    if height[i].is_nan() || height[i] < z {
+                        height[i] = z;
+                        sensor[i] = k as u8;
+                    }
+                    lowest[i] = lowest[i].min(z);
+                },
             );
-            for p in &self.points {
-                let Some(i) = self.grid.index(self.cell, p.xyz[0], p.xyz[1]) else {
-                    continue;
-                };
-                let z = p.xyz[2];
-                if maps.height[i].is_nan() || maps.height[i] < z {
-                    maps.height[i] = z;
-                    maps.sensor[i] = k as u8;
-                }
-                self.lowest[i] = self.lowest[i].min(z);
-            }
         }
         self.fill_gaps();
         self.differences();
@@ -459,40 +429,58 @@ impl HeightDiff {
         }
     }
 
-    /// §4.3: D_l for each scale, within each sensor's cells.
+    /// §4.3: D_l for each scale, within each sensor's cells: per sensor,
+    /// only over the box its cells span (a camera of a ring sees a wedge).
     fn differences(&mut self) {
         let (cols, rows) = (self.grid.cols, self.grid.rows);
         let n = cols * rows;
         let maps = &mut self.maps;
         let s = &mut self.scratch;
-        let sensors: Vec<u8> = {
-            let mut seen = [false; 256];
-            for (&k, v) in maps.sensor.iter().zip(&maps.filled) {
-                if !v.is_nan() {
-                    seen[usize::from(k)] = true;
-                }
+        // Per sensor: the box of its cells, (x0, x1, y0, y1) inclusive.
+        let mut boxes = [(usize::MAX, 0usize, usize::MAX, 0usize); 256];
+        for (i, (&k, v)) in maps.sensor.iter().zip(&maps.filled).enumerate() {
+            if !v.is_nan() {
+                let (x, y) = (i % cols, i / cols);
+                let b = &mut boxes[usize::from(k)];
+                *b = (b.0.min(x), b.1.max(x), b.2.min(y), b.3.max(y));
             }
-            (0..=255u8).filter(|&k| seen[usize::from(k)]).collect()
-        };
-        for (scale, d) in self.config.scales.iter().zip(&mut maps.differences) {
+        }
+        for d in &mut maps.differences {
             d.clear();
             d.resize(n, f32::NAN);
-            let half = *scale as usize;
-            for &k in &sensors {
-                s.layer.clear();
-                s.layer.extend(
-                    maps.filled
-                        .iter()
-                        .zip(&maps.sensor)
-                        .map(|(&v, &owner)| if owner == k { v } else { f32::NAN }),
-                );
-                window_extremes(s, cols, rows, half);
-                for (i, d) in d.iter_mut().enumerate() {
-                    let h = s.layer[i];
-                    if h.is_nan() || s.count[i] < 2 {
-                        continue;
+        }
+        for (k, &(x0, x1, y0, y1)) in boxes.iter().enumerate() {
+            if x0 > x1 {
+                continue;
+            }
+            let k = k as u8;
+            let rect = Rect {
+                x0,
+                y0,
+                w: x1 - x0 + 1,
+                h: y1 - y0 + 1,
+            };
+            s.layer.clear();
+            for y in y0..=y1 {
+                let row = y * cols;
+                s.layer.extend((x0..=x1).map(|x| {
+                    if maps.sensor[row + x] == k {
+                        maps.filled[row + x]
+                    } else {
+                        f32::NAN
                     }
-                    *d = (s.max[i] - h).max(h - s.min[i]);
+                }));
+            }
+            for (scale, d) in self.config.scales.iter().zip(&mut maps.differences) {
+                window_extremes(s, rect.w, rect.h, *scale as usize);
+                for (r, line) in s.layer.chunks_exact(rect.w).enumerate() {
+                    for (c, &h) in line.iter().enumerate() {
+                        let j = r * rect.w + c;
+                        if h.is_nan() || s.count[j] < 2 {
+                            continue;
+                        }
+                        d[(rect.y0 + r) * cols + rect.x0 + c] = (s.max[j] - h).max(h - s.min[j]);
+                    }
                 }
             }
         }
@@ -525,7 +513,23 @@ impl HeightDiff {
         maps.drivability.clone_from(&maps.cost);
         let radius = (c.robot_radius_m as f32 / cell).round() as isize;
         let r2 = radius * radius;
-        for i in (0..n).filter(|&i| maps.absolute[i]) {
+        // A point within the radius of an absolute cell is within it of
+        // one on its region's edge (or is absolute itself): only edges stamp.
+        let edge = |i: usize| {
+            let (x, y) = (i % cols, i / cols);
+            x == 0
+                || y == 0
+                || x + 1 == cols
+                || y + 1 == rows
+                || !(maps.absolute[i - 1]
+                    && maps.absolute[i + 1]
+                    && maps.absolute[i - cols]
+                    && maps.absolute[i + cols])
+        };
+        let mut edges = std::mem::take(&mut self.scratch.edges);
+        edges.clear();
+        edges.extend((0..n).filter(|&i| maps.absolute[i] && edge(i)));
+        for &i in &edges {
             let (x, y) = ((i % cols) as isize, (i / cols) as isize);
             for dy in -radius..=radius {
                 for dx in -radius..=radius {
@@ -540,6 +544,7 @@ impl HeightDiff {
                 }
             }
         }
+        self.scratch.edges = edges;
         let half =
             ((c.robot_radius_m as f32 / cell) * std::f32::consts::PI.sqrt() / 2.0).round() as usize;
         let s = &mut self.scratch;
@@ -582,153 +587,195 @@ impl HeightDiff {
     }
 }
 
-/// Max, min and count of the defined values of `s.layer` over the
-/// `(2·half+1)²` window around each cell, into `s.max`, `s.min`,
-/// `s.count`: a pass along rows then one along columns, each in O(1) per
-/// cell (van Herk / Gil-Werman for the extremes, a running sum for the
-/// count).
+/// The median window for `image`'s beam spacing: half sizes in rows
+/// and columns.
+fn median_params(config: &HeightDiffConfig, max_range: f32, image: &RangeImage) -> MedianParams {
+    let half = |angles: &[f32]| {
+        let n = angles.len();
+        if n < 2 {
+            return 0;
+        }
+        let spacing = ((angles[n - 1] - angles[0]) / (n - 1) as f32)
+            .abs()
+            .to_degrees();
+        // The largest odd number of pixels within the window's angle.
+        let pixels = config.median_window_deg as f32 / spacing.max(1e-6);
+        (((pixels - 1.0) / 2.0).floor().max(0.0) as usize).min(16)
+    };
+    MedianParams {
+        half_rows: half(&image.beams.elevation),
+        half_cols: half(&image.beams.azimuth),
+        max_range,
+        abs: config.outlier_m as f32,
+        rel: config.outlier_fraction as f32,
+    }
+}
+
+/// Max, min and count of the defined values of `s.layer` (`cols × rows`)
+/// over the `(2·half+1)²` window around each cell, into `s.max`, `s.min`,
+/// `s.count`. Separable: a pass down the columns, then one along the rows
+/// done as a pass down the columns of the transpose; each pass takes whole
+/// rows at a time (so it vectorises) and O(1) per cell whatever the window
+/// (van Herk / Gil-Werman for the extremes, a running sum for the count).
 fn window_extremes(s: &mut Scratch, cols: usize, rows: usize, half: usize) {
     let n = cols * rows;
     s.max.clear();
-    s.max.resize(n, f32::NEG_INFINITY);
     s.min.clear();
-    s.min.resize(n, f32::INFINITY);
     s.count.clear();
-    s.count.resize(n, 0);
-    // Rows: the layer's values (NaN = none) into max/min/count.
-    for y in 0..rows {
-        s.line.clear();
-        s.line.extend_from_slice(&s.layer[y * cols..(y + 1) * cols]);
-        let counts: Vec<u16> = s.line.iter().map(|v| u16::from(!v.is_nan())).collect();
-        let highs: Vec<f32> = s
-            .line
-            .iter()
-            .map(|v| if v.is_nan() { f32::NEG_INFINITY } else { *v })
-            .collect();
-        let lows: Vec<f32> = s
-            .line
-            .iter()
-            .map(|v| if v.is_nan() { f32::INFINITY } else { *v })
-            .collect();
-        slide(
-            &highs,
-            half,
-            f32::max,
-            &mut s.prefix,
-            &mut s.suffix,
-            &mut s.line_max,
-        );
-        slide(
-            &lows,
-            half,
-            f32::min,
-            &mut s.prefix,
-            &mut s.suffix,
-            &mut s.line_min,
-        );
-        running_sum(&counts, half, &mut s.line_count);
-        s.max[y * cols..(y + 1) * cols].copy_from_slice(&s.line_max);
-        s.min[y * cols..(y + 1) * cols].copy_from_slice(&s.line_min);
-        s.count[y * cols..(y + 1) * cols].copy_from_slice(&s.line_count);
+    for &v in &s.layer {
+        let defined = !v.is_nan();
+        s.max.push(if defined { v } else { f32::NEG_INFINITY });
+        s.min.push(if defined { v } else { f32::INFINITY });
+        s.count.push(u16::from(defined));
     }
-    // Columns: over the row results.
-    let mut highs = Vec::with_capacity(rows);
-    let mut lows = Vec::with_capacity(rows);
-    let mut counts = Vec::with_capacity(rows);
-    for x in 0..cols {
-        highs.clear();
-        lows.clear();
-        counts.clear();
-        for y in 0..rows {
-            highs.push(s.max[y * cols + x]);
-            lows.push(s.min[y * cols + x]);
-            counts.push(s.count[y * cols + x]);
-        }
-        slide(
-            &highs,
-            half,
-            f32::max,
-            &mut s.prefix,
-            &mut s.suffix,
-            &mut s.line_max,
-        );
-        slide(
-            &lows,
-            half,
-            f32::min,
-            &mut s.prefix,
-            &mut s.suffix,
-            &mut s.line_min,
-        );
-        running_sum(&counts, half, &mut s.line_count);
-        for y in 0..rows {
-            s.max[y * cols + x] = s.line_max[y];
-            s.min[y * cols + x] = s.line_min[y];
-            s.count[y * cols + x] = s.line_count[y];
+    let [source, prefix, suffix] = &mut s.vertical;
+    for (values, op) in [(&mut s.max, max as fn(f32, f32) -> f32), (&mut s.min, min)] {
+        slide_rows(values, cols, rows, half, op, [source, prefix, suffix]);
+        transpose(values, cols, rows, source);
+        slide_rows(source, rows, cols, half, op, [values, prefix, suffix]);
+        transpose(source, rows, cols, values);
+    }
+    let [scratch, sum, t] = &mut s.count_scratch;
+    sum_rows(&mut s.count, cols, rows, half, [scratch, sum]);
+    transpose(&s.count, cols, rows, t);
+    sum_rows(t, rows, cols, half, [scratch, sum]);
+    transpose(t, rows, cols, &mut s.count);
+    debug_assert_eq!(s.max.len(), n);
+}
+
+/// `a.max(b)` for values that are never NaN, as a plain comparison (so it
+/// vectorises).
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// `out` = the `rows × cols` transpose of `values` (`cols × rows`).
+fn transpose<T: Copy + Default>(values: &[T], cols: usize, rows: usize, out: &mut Vec<T>) {
+    out.clear();
+    out.resize(values.len(), T::default());
+    // In tiles, so both sides stay in cache.
+    const TILE: usize = 32;
+    for y0 in (0..rows).step_by(TILE) {
+        for x0 in (0..cols).step_by(TILE) {
+            for y in y0..(y0 + TILE).min(rows) {
+                for x in x0..(x0 + TILE).min(cols) {
+                    out[x * rows + y] = values[y * cols + x];
+                }
+            }
         }
     }
 }
 
-/// `out[i] = op` over `values[i-half ..= i+half]` (clipped), by van Herk /
-/// Gil-Werman: prefix and suffix extremes within blocks of the window's
-/// length, so each output takes one `op` whatever the window.
-fn slide(
-    values: &[f32],
+/// Each cell of `values` (`cols × rows`) becomes the sum of its column's
+/// cells within `half` rows (clipped), a running sum of whole rows
+/// (`scratch`: a copy).
+fn sum_rows(
+    values: &mut [u16],
+    cols: usize,
+    rows: usize,
+    half: usize,
+    [scratch, sum]: [&mut Vec<u16>; 2],
+) {
+    scratch.clear();
+    scratch.extend_from_slice(values);
+    sum.clear();
+    sum.resize(cols, 0);
+    for r in 0..half.min(rows) {
+        for (a, &c) in sum.iter_mut().zip(&scratch[r * cols..(r + 1) * cols]) {
+            *a = a.saturating_add(c);
+        }
+    }
+    for y in 0..rows {
+        if y + half < rows {
+            let r = y + half;
+            for (a, &c) in sum.iter_mut().zip(&scratch[r * cols..(r + 1) * cols]) {
+                *a = a.saturating_add(c);
+            }
+        }
+        if y > half {
+            let r = y - half - 1;
+            for (a, &c) in sum.iter_mut().zip(&scratch[r * cols..(r + 1) * cols]) {
+                *a = a.saturating_sub(c);
+            }
+        }
+        values[y * cols..(y + 1) * cols].copy_from_slice(sum);
+    }
+}
+
+/// [`slide`] down the columns of `values` (`cols × rows`, row-major),
+/// whole rows at a time, in place (`source`, `prefix`, `suffix`: scratch
+/// of its size).
+#[allow(clippy::too_many_arguments)]
+fn slide_rows(
+    values: &mut [f32],
+    cols: usize,
+    rows: usize,
     half: usize,
     op: fn(f32, f32) -> f32,
-    prefix: &mut Vec<f32>,
-    suffix: &mut Vec<f32>,
-    out: &mut Vec<f32>,
+    [source, prefix, suffix]: [&mut Vec<f32>; 3],
 ) {
-    let n = values.len();
-    out.clear();
-    if half == 0 {
-        out.extend_from_slice(values);
+    if half == 0 || rows == 0 {
         return;
     }
     let w = 2 * half + 1;
-    prefix.clear();
-    prefix.extend_from_slice(values);
-    suffix.clear();
-    suffix.extend_from_slice(values);
-    for i in 1..n {
-        if i % w != 0 {
-            prefix[i] = op(prefix[i - 1], values[i]);
+    source.clear();
+    source.extend_from_slice(values);
+    prefix.clone_from(source);
+    suffix.clone_from(source);
+    for y in 1..rows {
+        if y % w != 0 {
+            let (before, here) = prefix.split_at_mut(y * cols);
+            for (p, &q) in here[..cols].iter_mut().zip(&before[(y - 1) * cols..]) {
+                *p = op(*p, q);
+            }
         }
     }
-    for i in (0..n.saturating_sub(1)).rev() {
-        if (i + 1) % w != 0 {
-            suffix[i] = op(suffix[i + 1], values[i]);
+    for y in (0..rows - 1).rev() {
+        if (y + 1) % w != 0 {
+            let (here, after) = suffix.split_at_mut((y + 1) * cols);
+            for (p, &q) in here[y * cols..].iter_mut().zip(&after[..cols]) {
+                *p = op(*p, q);
+            }
         }
     }
-    for i in 0..n {
-        let lo = i.saturating_sub(half);
-        let hi = (i + half).min(n - 1);
-        // [lo, hi] spans at most two blocks: the suffix of lo's block and
-        // the prefix of hi's.
-        out.push(if lo / w == hi / w {
-            // Clipped at an edge inside one block: fold directly (rare).
-            values[lo..=hi].iter().copied().fold(values[lo], op)
+    for y in 0..rows {
+        let (lo, hi) = (y.saturating_sub(half), (y + half).min(rows - 1));
+        let out = &mut values[y * cols..(y + 1) * cols];
+        if hi - lo + 1 == w {
+            // A full window spans the suffix of lo's block and the prefix
+            // of hi's (one block when aligned: both are the whole block).
+            let (s, p) = (
+                &suffix[lo * cols..(lo + 1) * cols],
+                &prefix[hi * cols..(hi + 1) * cols],
+            );
+            for ((o, &a), &b) in out.iter_mut().zip(s).zip(p) {
+                *o = op(a, b);
+            }
         } else {
-            op(suffix[lo], prefix[hi])
-        });
+            // Clipped at the top or bottom: fold the rows directly.
+            out.copy_from_slice(&source[lo * cols..(lo + 1) * cols]);
+            for r in lo + 1..=hi {
+                for (o, &v) in out.iter_mut().zip(&source[r * cols..(r + 1) * cols]) {
+                    *o = op(*o, v);
+                }
+            }
+        }
     }
 }
 
-/// `out[i]` = the sum of `values[i-half ..= i+half]` (clipped).
-fn running_sum(values: &[u16], half: usize, out: &mut Vec<u16>) {
-    let n = values.len();
-    out.clear();
-    let mut sum: u32 = values[..half.min(n)].iter().map(|&v| u32::from(v)).sum();
-    for i in 0..n {
-        if i + half < n {
-            sum += u32::from(values[i + half]);
-        }
-        if i > half {
-            sum -= u32::from(values[i - half - 1]);
-        }
-        out.push(sum.min(u32::from(u16::MAX)) as u16);
-    }
+/// A box of grid cells.
+#[derive(Debug, Clone, Copy)]
+struct Rect {
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
 }
 
 impl TerrainEvaluator for HeightDiff {
@@ -786,6 +833,7 @@ impl TerrainEvaluator for HeightDiff {
             &self.grid,
             self.cell,
             &mut self.labels,
+            &mut self.queue,
             &world_from_level,
             report,
             &mut stats,

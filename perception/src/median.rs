@@ -21,12 +21,18 @@ const BINS: usize = 8192;
 #[derive(Debug, Clone)]
 pub struct MedianOutliers {
     hist: Vec<u32>,
+    /// Each pixel's bin ([`NONE`]: takes no part), computed once per image.
+    bins: Vec<u16>,
 }
+
+/// The bin of a pixel that takes no part.
+const NONE: u16 = u16::MAX;
 
 impl Default for MedianOutliers {
     fn default() -> Self {
         Self {
             hist: vec![0; BINS],
+            bins: Vec::new(),
         }
     }
 }
@@ -51,7 +57,6 @@ pub struct MedianParams {
 struct Window<'a> {
     hist: &'a mut [u32],
     scale: f32,
-    max_range: f32,
     count: u32,
     /// The median bin, and how many values lie in bins below it.
     median: usize,
@@ -60,14 +65,9 @@ struct Window<'a> {
 
 impl Window<'_> {
     #[inline]
-    fn bin(&self, range: f32) -> Option<usize> {
-        (range.is_finite() && range > 0.0 && range <= self.max_range)
-            .then(|| ((range * self.scale) as usize).min(BINS - 1))
-    }
-
-    #[inline]
-    fn add(&mut self, range: f32) {
-        if let Some(b) = self.bin(range) {
+    fn add(&mut self, bin: u16) {
+        if bin != NONE {
+            let b = usize::from(bin);
             self.hist[b] += 1;
             self.count += 1;
             self.below += u32::from(b < self.median);
@@ -75,8 +75,9 @@ impl Window<'_> {
     }
 
     #[inline]
-    fn remove(&mut self, range: f32) {
-        if let Some(b) = self.bin(range) {
+    fn remove(&mut self, bin: u16) {
+        if bin != NONE {
+            let b = usize::from(bin);
             self.hist[b] -= 1;
             self.count -= 1;
             self.below -= u32::from(b < self.median);
@@ -114,16 +115,29 @@ impl MedianOutliers {
         if cols == 0 || ranges.is_empty() || params.max_range.is_nan() || params.max_range <= 0.0 {
             return 0;
         }
+        let (hr, hc) = (params.half_rows, params.half_cols);
+        if hr == 0 && hc == 0 {
+            // A window of one pixel is its own median.
+            return 0;
+        }
         let rows = ranges.len() / cols;
+        let scale = BINS as f32 / params.max_range;
+        self.bins.clear();
+        self.bins.extend(ranges.iter().map(|&r| {
+            if r.is_finite() && r > 0.0 && r <= params.max_range {
+                ((r * scale) as usize).min(BINS - 1) as u16
+            } else {
+                NONE
+            }
+        }));
+        let bins = &self.bins;
         let mut window = Window {
             hist: &mut self.hist,
-            scale: BINS as f32 / params.max_range,
-            max_range: params.max_range,
+            scale,
             count: 0,
             median: 0,
             below: 0,
         };
-        let (hr, hc) = (params.half_rows, params.half_cols);
         let mut removed = 0;
         for row in 0..rows {
             // Symmetric about the row (fewer rows at the top and bottom): a
@@ -132,11 +146,11 @@ impl MedianOutliers {
             let lines = row - hr..row + hr + 1;
             let column = |window: &mut Window, col: usize, add: bool| {
                 for line in lines.clone() {
-                    let range = ranges[line * cols + col];
+                    let bin = bins[line * cols + col];
                     if add {
-                        window.add(range);
+                        window.add(bin);
                     } else {
-                        window.remove(range);
+                        window.remove(bin);
                     }
                 }
             };
@@ -155,7 +169,11 @@ impl MedianOutliers {
                 let range = ranges[row * cols + col];
                 // A median of fewer than three returns shows nothing; nor
                 // does one of a window clipped at the left or right edge.
-                if window.bin(range).is_none() || window.count < 3 || col < hc || col + hc >= cols {
+                if bins[row * cols + col] == NONE
+                    || window.count < 3
+                    || col < hc
+                    || col + hc >= cols
+                {
                     continue;
                 }
                 let median = window.median();

@@ -284,6 +284,7 @@ pub struct HierarchicalPca {
     maps: PcaMaps,
     marked: Vec<Marked>,
     labels: Vec<u32>,
+    queue: Vec<usize>,
 }
 
 impl EvaluatorPlugin for HierarchicalPca {
@@ -337,6 +338,7 @@ impl HierarchicalPca {
             },
             marked: Vec::new(),
             labels: Vec::new(),
+            queue: Vec::new(),
             config,
         }
     }
@@ -586,6 +588,7 @@ impl TerrainEvaluator for HierarchicalPca {
             &self.grid,
             self.cell,
             &mut self.labels,
+            &mut self.queue,
             &world_from_level,
             report,
             &mut stats,

@@ -513,17 +513,28 @@ fn no_allocation_per_image_after_warm_up() {
         }
     });
     let image = sensor.render(0, &Isometry::identity(), &scene);
-    let mut evaluator = classifier();
-    let mut report = ObstacleReport::default();
-    evaluator
-        .evaluate(&image, &Isometry::identity(), &mut report)
-        .unwrap();
-    ALLOCATIONS.with(|a| a.set(0));
-    COUNTING.with(|c| c.set(true));
-    let result = evaluator.evaluate(&image, &Isometry::identity(), &mut report);
-    COUNTING.with(|c| c.set(false));
-    assert!(result.is_ok() && !report.cells.is_empty());
-    assert_eq!(ALLOCATIONS.with(Cell::get), 0, "the second image allocated");
+    // Every evaluator, the other papers' too.
+    for name in ["cells", "height_diff", "pca"] {
+        let config = PerceptionConfig {
+            evaluator: name.into(),
+            ..Default::default()
+        };
+        let mut evaluator = config.build_evaluator().unwrap();
+        let mut report = ObstacleReport::default();
+        evaluator
+            .evaluate(&image, &Isometry::identity(), &mut report)
+            .unwrap();
+        ALLOCATIONS.with(|a| a.set(0));
+        COUNTING.with(|c| c.set(true));
+        let result = evaluator.evaluate(&image, &Isometry::identity(), &mut report);
+        COUNTING.with(|c| c.set(false));
+        assert!(result.is_ok() && !report.cells.is_empty(), "{name}");
+        assert_eq!(
+            ALLOCATIONS.with(Cell::get),
+            0,
+            "{name}: the second image allocated"
+        );
+    }
 }
 
 #[test]

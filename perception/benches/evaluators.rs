@@ -1,0 +1,113 @@
+//! Time per image of each terrain evaluator, on one core, printed:
+//!
+//! - every evaluator on one 128×2048 lidar image of a rough scene;
+//! - `height_diff` on eight 240×320 depth images at once (paper 000's ring
+//!   of cameras at QVGA: ~50 ms on an i7-4770K there; target ≤ 5 ms here),
+//!   the maps alone (`build_maps`) and with the footprint, shadows and
+//!   drop-offs of each image (`evaluate` per image).
+//!
+//! Run with `cargo bench -p arcnav-perception --bench evaluators`.
+
+use std::time::Instant;
+
+use arcnav_perception::scene::HeightFunction;
+use arcnav_perception::{
+    HeightDiff, ImageStats, ObstacleReport, PerceptionConfig, RangeImage, SensorModel,
+};
+use arcnav_vehicle::Isometry;
+use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+
+/// Rolling ground with ridges and scattered 40-80 cm rocks (as the
+/// classifier's bench).
+fn rough(x: f64, y: f64) -> f64 {
+    let ground = 0.35 * (0.21 * x).sin() * (0.17 * y).cos() + 0.06 * (1.3 * x + 0.7 * y).sin();
+    let (cx, cy) = ((x / 6.0).round() * 6.0, (y / 6.0).round() * 6.0);
+    let hash = ((cx * 12.9898 + cy * 78.233).sin() * 43_758.545)
+        .fract()
+        .abs();
+    let rock = if hash > 0.6 && (x - cx).hypot(y - cy) < 0.8 {
+        0.4 + 0.4 * hash
+    } else {
+        0.0
+    };
+    ground + rock
+}
+
+/// Median wall time of `f` over rounds of at least `min_s`, ms.
+fn time_ms(mut f: impl FnMut()) -> f64 {
+    f();
+    let mut times = Vec::new();
+    let started = Instant::now();
+    while times.len() < 15 || (started.elapsed().as_secs_f64() < 2.0 && times.len() < 200) {
+        let t = Instant::now();
+        f();
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+fn main() {
+    let scene = HeightFunction::with_step(rough, 0.1);
+    let lidar = SensorModel::lidar128().render(0, &Isometry::identity(), &scene);
+    println!(
+        "one 128×2048 lidar image ({} pixels), one core, median:",
+        lidar.range.len()
+    );
+    for evaluator in ["cells", "height_diff", "pca"] {
+        let config = PerceptionConfig {
+            evaluator: evaluator.into(),
+            ..Default::default()
+        };
+        let mut e = config.build_evaluator().unwrap_or_else(|e| panic!("{e}"));
+        let mut report = ObstacleReport::default();
+        let ms = time_ms(|| {
+            let _ = std::hint::black_box(e.evaluate(&lidar, &Isometry::identity(), &mut report));
+        });
+        println!(
+            "  {evaluator:<12} {ms:7.2} ms  ({} untraversable cells)",
+            report.cells.len()
+        );
+    }
+
+    // Paper 000's ring: eight cameras, 45° apart, on the roof.
+    let ring: Vec<RangeImage> = (0..8)
+        .map(|k| {
+            let mut camera = SensorModel::depth_camera();
+            camera.id = format!("camera{k}");
+            camera.vehicle_from_sensor = isometry_from_xyz_rpy(
+                [0.0, 0.0, 2.2],
+                0.0,
+                25f64.to_radians(),
+                (45.0 * k as f64).to_radians(),
+            );
+            let mut image = camera.render(0, &Isometry::identity(), &scene);
+            image.sensor = camera.id;
+            image
+        })
+        .collect();
+    let pixels: usize = ring.iter().map(|i| i.range.len()).sum();
+    println!("\neight 240×320 depth images ({pixels} pixels), height_diff, one core, median:");
+    let config = PerceptionConfig::default();
+    let mut hd = HeightDiff::new(config.height_diff.clone(), &config);
+    let images: Vec<&RangeImage> = ring.iter().collect();
+    let maps_ms = time_ms(|| {
+        let mut stats = ImageStats::default();
+        let _ = std::hint::black_box(hd.build_maps(&images, &Isometry::identity(), &mut stats));
+    });
+    println!(
+        "  one height map of all eight (build_maps):   {maps_ms:7.2} ms (target <= 5 ms; 000: ~50 ms)"
+    );
+    let mut report = ObstacleReport::default();
+    let each_ms = time_ms(|| {
+        for image in &ring {
+            let _ = std::hint::black_box(arcnav_perception::TerrainEvaluator::evaluate(
+                &mut hd,
+                image,
+                &Isometry::identity(),
+                &mut report,
+            ));
+        }
+    });
+    println!("  each image on its own, with footprint, shadows, drop-offs: {each_ms:7.2} ms");
+}
