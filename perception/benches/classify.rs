@@ -66,31 +66,11 @@ fn drop_off_cost() {
     }
 }
 
-/// Rolling ground with ridges, scattered 40-80 cm rocks and a ditch.
-fn rough(x: f64, y: f64) -> f64 {
-    let ground = 0.35 * (0.21 * x).sin() * (0.17 * y).cos() + 0.06 * (1.3 * x + 0.7 * y).sin();
-    let (cx, cy) = ((x / 6.0).round() * 6.0, (y / 6.0).round() * 6.0);
-    let hash = ((cx * 12.9898 + cy * 78.233).sin() * 43_758.545)
-        .fract()
-        .abs();
-    let rock = if hash > 0.6 && (x - cx).hypot(y - cy) < 0.8 {
-        0.4 + 0.4 * hash
-    } else {
-        0.0
-    };
-    let ditch = if (25.0..26.2).contains(&x.abs()) {
-        -0.8
-    } else {
-        0.0
-    };
-    ground + rock + ditch
-}
-
 fn scene_image(sensor: &SensorModel) -> RangeImage {
     sensor.render(
         0,
         &Isometry::identity(),
-        &HeightFunction::with_step(rough, 0.1),
+        &HeightFunction::with_step(arcnav_perception::scene::rough_ground, 0.1),
     )
 }
 

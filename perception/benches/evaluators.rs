@@ -17,22 +17,6 @@ use arcnav_perception::{
 use arcnav_vehicle::Isometry;
 use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 
-/// Rolling ground with ridges and scattered 40-80 cm rocks (as the
-/// classifier's bench).
-fn rough(x: f64, y: f64) -> f64 {
-    let ground = 0.35 * (0.21 * x).sin() * (0.17 * y).cos() + 0.06 * (1.3 * x + 0.7 * y).sin();
-    let (cx, cy) = ((x / 6.0).round() * 6.0, (y / 6.0).round() * 6.0);
-    let hash = ((cx * 12.9898 + cy * 78.233).sin() * 43_758.545)
-        .fract()
-        .abs();
-    let rock = if hash > 0.6 && (x - cx).hypot(y - cy) < 0.8 {
-        0.4 + 0.4 * hash
-    } else {
-        0.0
-    };
-    ground + rock
-}
-
 /// Median wall time of `f` over rounds of at least `min_s`, ms.
 fn time_ms(mut f: impl FnMut()) -> f64 {
     f();
@@ -48,7 +32,7 @@ fn time_ms(mut f: impl FnMut()) -> f64 {
 }
 
 fn main() {
-    let scene = HeightFunction::with_step(rough, 0.1);
+    let scene = HeightFunction::with_step(arcnav_perception::scene::rough_ground, 0.1);
     let lidar = SensorModel::lidar128().render(0, &Isometry::identity(), &scene);
     println!(
         "one 128×2048 lidar image ({} pixels), one core, median:",

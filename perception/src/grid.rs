@@ -368,3 +368,72 @@ impl SeenGround {
         }
     }
 }
+
+/// The report of a grid evaluator: what [`SeenGround`] finds (footprint,
+/// shadows, drop-offs) and the cells the evaluator marks on its grid,
+/// grouped into regions and written in the world frame.
+pub(crate) struct GridReport {
+    seen: SeenGround,
+    grid: GridShape,
+    cell: f32,
+    cell_size_m: f64,
+    /// The evaluator's untraversable cells of this image.
+    pub marked: Vec<Marked>,
+    labels: Vec<u32>,
+    queue: Vec<usize>,
+}
+
+impl GridReport {
+    /// Over `perception`'s region, with `cell_size_m` cells.
+    pub(crate) fn new(perception: &crate::PerceptionConfig, cell_size_m: f64) -> Self {
+        Self {
+            seen: SeenGround::new(perception, cell_size_m),
+            grid: GridShape::over(&perception.region, cell_size_m, 1),
+            cell: cell_size_m as f32,
+            cell_size_m,
+            marked: Vec::new(),
+            labels: Vec::new(),
+            queue: Vec::new(),
+        }
+    }
+
+    /// Starts `image`'s report (cleared): footprint, shadows, pixel counts.
+    pub(crate) fn start(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        runner: &dyn crate::Runner,
+        report: &mut ObstacleReport,
+    ) -> Result<ImageStats, crate::PerceptionError> {
+        let stats = self
+            .seen
+            .evaluate(image, world_from_vehicle, runner, report)?;
+        report.cell_size_m = self.cell_size_m;
+        self.marked.clear();
+        Ok(stats)
+    }
+
+    /// Adds the drop-offs to the marked cells and writes them all, in
+    /// regions, to `report`.
+    pub(crate) fn finish(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+        stats: &mut ImageStats,
+    ) {
+        let (world_from_level, _) = level_frames(image, world_from_vehicle);
+        self.seen
+            .drop_offs(&self.grid, self.cell, &world_from_level, &mut self.marked);
+        emit(
+            &mut self.marked,
+            &self.grid,
+            self.cell,
+            &mut self.labels,
+            &mut self.queue,
+            &world_from_level,
+            report,
+            stats,
+        );
+    }
+}

@@ -58,7 +58,7 @@ use crate::config::{GridShape, PerceptionConfig};
 use crate::evaluator::{
     ImageStats, InOrder, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
 };
-use crate::grid::{self, Marked, Projector, SeenGround};
+use crate::grid::{self, GridReport, Marked, Projector};
 use crate::image::RangeImage;
 use crate::median::{MedianOutliers, MedianParams};
 use crate::registry::EvaluatorPlugin;
@@ -198,16 +198,13 @@ pub struct HeightDiff {
     grid: GridShape,
     min_range: f32,
     max_range: f32,
-    seen: SeenGround,
+    out: GridReport,
     median: MedianOutliers,
     filtered: Vec<f32>,
     projector: Projector,
     lowest: Vec<f32>,
     maps: HeightDiffMaps,
     scratch: Scratch,
-    marked: Vec<Marked>,
-    labels: Vec<u32>,
-    queue: Vec<usize>,
 }
 
 /// Buffers of the separable window passes.
@@ -273,7 +270,7 @@ impl HeightDiff {
             grid,
             min_range: perception.min_range_m as f32,
             max_range: perception.max_range_m as f32,
-            seen: SeenGround::new(perception, config.cell_size_m),
+            out: GridReport::new(perception, config.cell_size_m),
             median: MedianOutliers::default(),
             filtered: Vec::new(),
             projector: Projector::default(),
@@ -286,9 +283,6 @@ impl HeightDiff {
                 ..HeightDiffMaps::default()
             },
             scratch: Scratch::default(),
-            marked: Vec::new(),
-            labels: Vec::new(),
-            queue: Vec::new(),
             config,
         }
     }
@@ -799,16 +793,11 @@ impl TerrainEvaluator for HeightDiff {
         report: &mut ObstacleReport,
         runner: &dyn Runner,
     ) -> Result<ImageStats, PerceptionError> {
-        let mut stats = self
-            .seen
-            .evaluate(image, world_from_vehicle, runner, report)?;
-        report.cell_size_m = self.config.cell_size_m;
+        let mut stats = self.out.start(image, world_from_vehicle, runner, report)?;
         if image.range.is_empty() {
             return Ok(stats);
         }
         self.build_maps(&[image], world_from_vehicle, &mut stats)?;
-        let (world_from_level, _) = grid::level_frames(image, world_from_vehicle);
-        self.marked.clear();
         let maps = &self.maps;
         for i in 0..maps.filled.len() {
             let h = maps.filled[i];
@@ -818,7 +807,7 @@ impl TerrainEvaluator for HeightDiff {
             stats.cells_evaluated += 1;
             if maps.absolute[i] || maps.cost[i] >= self.config.obstacle_cost as f32 {
                 let low = self.lowest[i];
-                self.marked.push(Marked {
+                self.out.marked.push(Marked {
                     index: i as u32,
                     reasons: Reasons::HEIGHT_DIFFERENCE,
                     z_min: if low.is_finite() { low } else { h },
@@ -826,18 +815,8 @@ impl TerrainEvaluator for HeightDiff {
                 });
             }
         }
-        self.seen
-            .drop_offs(&self.grid, self.cell, &world_from_level, &mut self.marked);
-        grid::emit(
-            &mut self.marked,
-            &self.grid,
-            self.cell,
-            &mut self.labels,
-            &mut self.queue,
-            &world_from_level,
-            report,
-            &mut stats,
-        );
+        self.out
+            .finish(image, world_from_vehicle, report, &mut stats);
         Ok(stats)
     }
 }

@@ -51,7 +51,7 @@ use crate::config::{GridShape, PerceptionConfig};
 use crate::evaluator::{
     ImageStats, InOrder, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
 };
-use crate::grid::{self, Marked, Point, Projector, SeenGround};
+use crate::grid::{self, GridReport, Marked, Point, Projector};
 use crate::image::RangeImage;
 use crate::registry::EvaluatorPlugin;
 
@@ -274,7 +274,7 @@ pub struct HierarchicalPca {
     min_range: f32,
     max_range: f32,
     max_tilt: f64,
-    seen: SeenGround,
+    out: GridReport,
     projector: Projector,
     points: Vec<Point>,
     deviation: Vec<f32>,
@@ -282,9 +282,6 @@ pub struct HierarchicalPca {
     cells: Vec<CellSums>,
     touched: Vec<u32>,
     maps: PcaMaps,
-    marked: Vec<Marked>,
-    labels: Vec<u32>,
-    queue: Vec<usize>,
 }
 
 impl EvaluatorPlugin for HierarchicalPca {
@@ -322,7 +319,7 @@ impl HierarchicalPca {
             min_range: perception.min_range_m as f32,
             max_range: perception.max_range_m as f32,
             max_tilt: config.max_slope_deg.to_radians(),
-            seen: SeenGround::new(perception, config.cell_size_m),
+            out: GridReport::new(perception, config.cell_size_m),
             projector: Projector::default(),
             points: Vec::new(),
             deviation: Vec::new(),
@@ -336,9 +333,6 @@ impl HierarchicalPca {
                 origin: [-grid.corner[0] * cell, -grid.corner[1] * cell],
                 ..PcaMaps::default()
             },
-            marked: Vec::new(),
-            labels: Vec::new(),
-            queue: Vec::new(),
             config,
         }
     }
@@ -457,7 +451,7 @@ impl HierarchicalPca {
             for x in x0..x1 {
                 let c = &self.cells[y * cols + x];
                 if c.moments.n > 0 {
-                    self.marked.push(Marked {
+                    self.out.marked.push(Marked {
                         index: (y * cols + x) as u32,
                         reasons,
                         z_min: c.z_min,
@@ -490,14 +484,11 @@ impl TerrainEvaluator for HierarchicalPca {
         report: &mut ObstacleReport,
         runner: &dyn Runner,
     ) -> Result<ImageStats, PerceptionError> {
-        let mut stats = self
-            .seen
-            .evaluate(image, world_from_vehicle, runner, report)?;
-        report.cell_size_m = self.config.cell_size_m;
+        let mut stats = self.out.start(image, world_from_vehicle, runner, report)?;
         if image.range.is_empty() {
             return Ok(stats);
         }
-        let (world_from_level, level_from_sensor) = grid::level_frames(image, world_from_vehicle);
+        let (_, level_from_sensor) = grid::level_frames(image, world_from_vehicle);
         self.deviations(image);
         self.points.clear();
         self.projector.project(
@@ -564,7 +555,6 @@ impl TerrainEvaluator for HierarchicalPca {
                 self.maps.roughness[i as usize] = ((variance - noise).max(0.0) / (d * d)) as f32;
             }
         }
-        self.marked.clear();
         let (gcols, grows) = (self.grid.cols, self.grid.rows);
         for ty in (0..grows).step_by(tile) {
             for tx in (0..gcols).step_by(tile) {
@@ -581,18 +571,8 @@ impl TerrainEvaluator for HierarchicalPca {
             self.cells[i as usize] = CellSums::default();
         }
         self.touched.clear();
-        self.seen
-            .drop_offs(&self.grid, self.cell, &world_from_level, &mut self.marked);
-        grid::emit(
-            &mut self.marked,
-            &self.grid,
-            self.cell,
-            &mut self.labels,
-            &mut self.queue,
-            &world_from_level,
-            report,
-            &mut stats,
-        );
+        self.out
+            .finish(image, world_from_vehicle, report, &mut stats);
         Ok(stats)
     }
 }

@@ -61,6 +61,28 @@ impl<F: Fn(f64, f64) -> f64 + Sync> RayCast for HeightFunction<F> {
     }
 }
 
+/// Rolling ground with ridges, scattered 40-80 cm rocks every 6 m or so
+/// and a 1.2 m wide, 0.8 m deep ditch 25 m away on either side: the scene
+/// the benchmarks time evaluators on.
+pub fn rough_ground(x: f64, y: f64) -> f64 {
+    let ground = 0.35 * (0.21 * x).sin() * (0.17 * y).cos() + 0.06 * (1.3 * x + 0.7 * y).sin();
+    let (cx, cy) = ((x / 6.0).round() * 6.0, (y / 6.0).round() * 6.0);
+    let hash = ((cx * 12.9898 + cy * 78.233).sin() * 43_758.545)
+        .fract()
+        .abs();
+    let rock = if hash > 0.6 && (x - cx).hypot(y - cy) < 0.8 {
+        0.4 + 0.4 * hash
+    } else {
+        0.0
+    };
+    let ditch = if (25.0..26.2).contains(&x.abs()) {
+        -0.8
+    } else {
+        0.0
+    };
+    ground + rock + ditch
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
