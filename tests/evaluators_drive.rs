@@ -127,6 +127,21 @@ fn a_vehicle_with_a_front_lidar_and_a_rear_depth_camera_completes_the_short_cour
         report["speed_bound"]["range_limited_by"], "map window",
         "{printed}"
     );
+    // Replay re-runs perception on both sensors' images and decides as the
+    // mission did, cycle for cycle.
+    let json = run.join("replay.json");
+    let replay = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args(["replay", run.join("mission.lcm").to_str().unwrap()])
+        .args(["--config", config.to_str().unwrap()])
+        .args(["--json", json.to_str().unwrap()])
+        .output()
+        .expect("arcnav replay runs");
+    let replayed = String::from_utf8_lossy(&replay.stdout);
+    assert_eq!(replay.status.code(), Some(0), "{replayed}");
+    let replay: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let comparison = &replay["comparisons"][0];
+    assert_eq!(comparison["agreement_percent"], 100.0, "{replayed}");
+    assert!(comparison["compared"].as_u64().unwrap() > 500, "{replayed}");
     let _ = std::fs::remove_dir_all(&run);
     let _ = std::fs::remove_dir_all(&out);
 }
