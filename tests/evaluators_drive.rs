@@ -224,3 +224,65 @@ fn a_wall_known_only_from_a_static_occupancy_map_is_driven_around() {
         let _ = std::fs::remove_dir_all(dir);
     }
 }
+
+#[test]
+fn detect_writes_its_table_json_and_picture_and_evaluators_lists_them() {
+    let out = out_dir("detect");
+    let run = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args(["detect", "--evaluator", "height_diff", "--sensor", "erim"])
+        .args(["--heights", "0.4", "--distances", "8,35", "--frames", "3"])
+        .args(["--out", out.to_str().unwrap()])
+        .output()
+        .expect("arcnav detect runs");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert_eq!(run.status.code(), Some(0), "{stdout}");
+    assert!(
+        stdout.contains("evaluator height_diff, sensor erim"),
+        "{stdout}"
+    );
+    let rows: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("detection.json")).unwrap())
+            .unwrap();
+    let rows = rows.as_array().unwrap();
+    // A 40 cm block and the glass, at 8 and 35 m.
+    assert_eq!(rows.len(), 4);
+    let at = |object: &str, d: f64| {
+        rows.iter()
+            .find(|r| r["object"].as_str().unwrap().starts_with(object) && r["distance_m"] == d)
+            .unwrap()
+            .clone()
+    };
+    assert_eq!(at("block", 8.0)["detection_probability"], 1.0);
+    assert_eq!(at("block", 35.0)["detection_probability"], 0.0);
+    assert_eq!(at("glass", 8.0)["unseen_probability"], 1.0);
+    assert_eq!(
+        std::fs::read_to_string(out.join("detection.txt")).unwrap(),
+        stdout
+    );
+    let png = std::fs::read(out.join("detection.png")).unwrap();
+    assert!(png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000);
+    // Bad input is refused before any work.
+    let bad = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args([
+            "detect",
+            "--distances",
+            "8,-1",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_ne!(bad.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--distances -1"));
+    let list = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .arg("evaluators")
+        .output()
+        .unwrap();
+    let listed = String::from_utf8_lossy(&list.stdout);
+    let names: Vec<&str> = listed
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert_eq!(names, ["cells", "height_diff", "pca"], "{listed}");
+    let _ = std::fs::remove_dir_all(out);
+}
