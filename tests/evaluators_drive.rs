@@ -142,6 +142,26 @@ fn a_vehicle_with_a_front_lidar_and_a_rear_depth_camera_completes_the_short_cour
     let comparison = &replay["comparisons"][0];
     assert_eq!(comparison["agreement_percent"], 100.0, "{replayed}");
     assert!(comparison["compared"].as_u64().unwrap() > 500, "{replayed}");
+    // A decision is redrawn with the run's own configuration (its two
+    // sensors), found beside the log.
+    let picture = run.join("at10.png");
+    let render = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args([
+            "render",
+            run.join("mission.lcm").to_str().unwrap(),
+            "--at",
+            "10",
+        ])
+        .args(["--out", picture.to_str().unwrap()])
+        .output()
+        .expect("arcnav render runs");
+    let said = String::from_utf8_lossy(&render.stderr);
+    assert_eq!(render.status.code(), Some(0), "{said}");
+    assert!(
+        said.contains("config.toml, the configuration the run was made with"),
+        "{said}"
+    );
+    assert!(picture.is_file());
     let _ = std::fs::remove_dir_all(&run);
     let _ = std::fs::remove_dir_all(&out);
 }

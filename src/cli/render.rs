@@ -1,19 +1,43 @@
 //! `arcnav render`: the picture of one decision of a log.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
 use std::process::ExitCode;
 
 use crate::{ExportArgs, RenderArgs};
 use arcnav::Config;
 use arcnav_behaviours::Registry;
 
+/// The configuration to redo a run's decisions with: `--config` if given,
+/// else the `config.toml` `arcnav sim` wrote beside the log (said so on
+/// stderr), else the defaults. A run made with another evaluator or other
+/// sensors is redrawn as it was driven.
+fn run_config(
+    log: &Path,
+    given: Option<&Path>,
+    registry: &Registry,
+) -> anyhow::Result<(Config, Option<PathBuf>)> {
+    if let Some(path) = given {
+        return Ok((Config::load_with(path, registry)?, Some(path.to_owned())));
+    }
+    let beside = log.parent().unwrap_or(Path::new(".")).join("config.toml");
+    if beside.is_file() {
+        let config = Config::load_with(&beside, registry)
+            .with_context(|| format!("the run's configuration {}", beside.display()))?;
+        eprintln!(
+            "using {}, the configuration the run was made with (--config to give another)",
+            beside.display()
+        );
+        return Ok((config, Some(beside)));
+    }
+    Ok((Config::default(), None))
+}
+
 pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
     use arcnav::replay::{ReplayOptions, replay as run_replay};
     let registry = Registry::builtin();
-    let config = match &args.config {
-        Some(p) => Config::load_with(p, &registry)?,
-        None => Config::default(),
-    };
+    let (config, config_path) = run_config(&args.log, args.config.as_deref(), &registry)?;
     anyhow::ensure!(
         args.at.is_finite() && (0.0..=1e9).contains(&args.at),
         "--at {}: must be a number of seconds from the log's start, 0 or more",
@@ -24,7 +48,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("decision-{:.1}s.png", args.at)));
     let mut inputs = vec![("the log", args.log.as_path())];
-    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
+    inputs.extend(config_path.as_deref().map(|c| ("the configuration", c)));
     arcnav::output::check_outputs(&[&out], &inputs)?;
     let options = ReplayOptions {
         recorded_cells: args.recorded_cells,
@@ -68,12 +92,9 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
 /// `arcnav export LOG --mcap OUT`.
 pub fn export(args: ExportArgs) -> anyhow::Result<ExitCode> {
     let registry = Registry::builtin();
-    let config = match &args.config {
-        Some(p) => Config::load_with(p, &registry)?,
-        None => Config::default(),
-    };
+    let (config, config_path) = run_config(&args.log, args.config.as_deref(), &registry)?;
     let mut inputs = vec![("the log", args.log.as_path())];
-    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
+    inputs.extend(config_path.as_deref().map(|c| ("the configuration", c)));
     arcnav::output::check_outputs(&[&args.mcap], &inputs)?;
     write_mcap(&args.log, &args.mcap, &config)?;
     Ok(ExitCode::SUCCESS)
