@@ -86,7 +86,19 @@ impl Canvas {
     }
 
     pub fn fill_rect(&mut self, x: f32, y: f32, w: f32, h: f32, c: Rgba) {
-        if let Some(rect) = Rect::from_xywh(x, y, w.max(0.5), h.max(0.5)) {
+        // A side under two pixels is snapped to whole pixels, at least one:
+        // tiny-skia's anti-aliased fill trips a debug assertion on a rect
+        // whose two edges fall in one pixel at fractional positions.
+        let snap = |start: f32, size: f32| {
+            if size < 2.0 {
+                let a = start.round();
+                (a, ((start + size).round() - a).max(1.0))
+            } else {
+                (start, size)
+            }
+        };
+        let ((x, w), (y, h)) = (snap(x, w), snap(y, h));
+        if let Some(rect) = Rect::from_xywh(x, y, w, h) {
             self.pixmap
                 .fill_rect(rect, &paint(c), Transform::identity(), None);
         }
