@@ -71,6 +71,7 @@ fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
         arcs: &arcs,
         vehicle: &config.vehicle,
         localmap: &LOCALMAP,
+        statics: None,
     };
     let behaviour = registry
         .build("prefer_current", &toml::Table::new(), &setup)

@@ -46,6 +46,7 @@ fn main() {
         arcs: &arcs,
         vehicle: &vehicle,
         localmap: &localmap,
+        statics: None,
     };
     let mut route = Route::new(RouteConfig::default(), &setup);
     let mut map = LocalMap::new(&localmap, &vehicle);

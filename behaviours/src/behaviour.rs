@@ -66,6 +66,9 @@ pub struct Setup<'a> {
     /// The local map: its window, and its patches' side (a patch is a
     /// square, its position its centre).
     pub localmap: &'a LocalMapConfig,
+    /// The static occupancy map of the area, if one was given
+    /// (`[localmap.occupancy]`): known before any image shows it.
+    pub statics: Option<&'a std::sync::Arc<arcnav_localmap::StaticMap>>,
 }
 
 /// How far a mission has come.

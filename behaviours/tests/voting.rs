@@ -29,6 +29,7 @@ fn setup<'a>(arcs: &'a ArcSet, vehicle: &'a VehicleConfig) -> Setup<'a> {
         arcs,
         vehicle,
         localmap: &LOCALMAP,
+        statics: None,
     }
 }
 
@@ -558,4 +559,65 @@ fn a_wall_across_every_arc_stops_the_vehicle() {
 fn the_same_inputs_give_the_same_decision() {
     let rock = [(FRONT + 6.0, 0.4), (FRONT + 6.4, 0.8), (FRONT + 9.0, -2.0)];
     assert_eq!(decide(&rock, (50.0, 20.0)), decide(&rock, (50.0, 20.0)));
+}
+
+/// The route's votes at the origin heading east, for a waypoint at
+/// (`goal`, 0), with `statics` known, on an empty map.
+fn route_votes(goal: f64, statics: Option<&std::sync::Arc<arcnav_localmap::StaticMap>>) -> Votes {
+    let arcs = arcs();
+    let vehicle = VehicleConfig::default();
+    let setup = Setup {
+        statics,
+        ..setup(&arcs, &vehicle)
+    };
+    let mut behaviour = Registry::builtin()
+        .build("route", &Default::default(), &setup)
+        .unwrap();
+    let map = snapshot_seeing(&[], 20.0);
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = Mission {
+        version: 1,
+        waypoints: vec![Waypoint {
+            x: goal,
+            y: 0.0,
+            radius_m: None,
+        }],
+    };
+    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    votes
+}
+
+/// The arc with the highest vote (0 hardest right, 19 straight, 38 hardest left).
+fn best_arc(votes: &Votes) -> usize {
+    let vote = |i: usize| votes.vote(i).unwrap_or(f32::NEG_INFINITY);
+    (0..votes.len())
+        .max_by(|&a, &b| vote(a).total_cmp(&vote(b)))
+        .unwrap()
+}
+
+#[test]
+fn the_route_plans_around_a_wall_the_static_map_knows_before_any_image_shows_it() {
+    // A wall 100 m long across the way 25 m ahead, beyond the 20 m window,
+    // open to the left only (y from -60 to +40): every way round starts
+    // more than 45° to the left.
+    let grid = arcnav_localmap::OccupancyGrid {
+        resolution_m: 0.5,
+        origin: planar_isometry(25.0, -60.0, 0.0),
+        cols: 2,
+        rows: 200,
+        occupied: vec![true; 400],
+    };
+    let statics = std::sync::Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, 0.4));
+    let without = best_arc(&route_votes(80.0, None));
+    let with = best_arc(&route_votes(80.0, Some(&statics)));
+    assert!(
+        without.abs_diff(19) <= 2,
+        "no map: about straight, not {without}"
+    );
+    assert!(
+        with >= 30,
+        "the way round is well to the left: best arc {with}"
+    );
 }

@@ -68,6 +68,7 @@ fn bench_cycle(bencher: Bencher, arc_count: usize) {
         arcs: &arcs,
         vehicle: &vehicle,
         localmap: &LOCALMAP,
+        statics: None,
     };
     let registry = Registry::builtin();
     let built = std::time::Instant::now();

@@ -274,11 +274,16 @@ impl Config {
         ArcSet::new(&self.arcs).map_err(|e| e.within("arcs"))
     }
 
-    fn setup<'a>(&'a self, arcs: &'a ArcSet) -> Setup<'a> {
+    fn setup<'a>(
+        &'a self,
+        arcs: &'a ArcSet,
+        statics: Option<&'a Arc<arcnav_localmap::StaticMap>>,
+    ) -> Setup<'a> {
         Setup {
             arcs,
             vehicle: &self.vehicle,
             localmap: &self.localmap,
+            statics,
         }
     }
 
@@ -286,7 +291,8 @@ impl Config {
     /// `[arbiter.weights]` and `arbiter.required` name configured behaviours.
     fn prepare_behaviours(&self, registry: &Registry) -> Result<PreparedBehaviours, ConfigError> {
         let arcs = self.arc_set()?;
-        let setup = self.setup(&arcs);
+        let statics = self.static_map()?;
+        let setup = self.setup(&arcs, statics.as_ref());
         let prepared = self
             .behaviours
             .iter()

@@ -20,7 +20,9 @@ impl Config {
         name: &str,
     ) -> Option<Result<Box<dyn Behaviour>, ConfigError>> {
         let table = self.behaviours.get(name)?;
-        let setup = self.setup(arcs);
+        // Read (and its errors reported) when the configuration was checked.
+        let statics = self.static_map().ok().flatten();
+        let setup = self.setup(arcs, statics.as_ref());
         Some(match self.prepared.0.get(name) {
             Some(p) if p.table() == table => Ok(p.build(&setup)),
             _ => registry

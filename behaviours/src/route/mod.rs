@@ -108,6 +108,9 @@ pub struct Route {
     changed: Vec<usize>,
     path: Vec<usize>,
     has_path: bool,
+    /// The static occupancy map: its patches are obstacles in the memory
+    /// wherever the memory reaches, seen or not.
+    statics: Option<std::sync::Arc<arcnav_localmap::StaticMap>>,
     stats: RouteStats,
 }
 
@@ -129,6 +132,7 @@ impl Route {
             changed: Vec::new(),
             path: Vec::new(),
             has_path: false,
+            statics: setup.statics.cloned(),
             stats: RouteStats::default(),
             config,
         }
@@ -203,10 +207,36 @@ impl Route {
             self.stats.recentres += 1;
         }
         self.origin = Some(wanted);
+        self.mark_statics();
         for c in 0..self.costs.len() {
             self.costs[c] = self.cost_of(c);
         }
         true
+    }
+
+    /// Marks every memory cell a static-map patch touches an obstacle (the
+    /// map's patches are smaller than the memory's cells).
+    fn mark_statics(&mut self) {
+        let Some(statics) = self.statics.clone() else {
+            return;
+        };
+        let patch = self.window.patch_size_m;
+        let cell = self.config.cell_m;
+        for c in 0..self.state.len() {
+            let [x, y] = self.centre(c);
+            let (lo_i, hi_i) = (
+                ((x - cell / 2.0) / patch).floor() as i64,
+                ((x + cell / 2.0) / patch).ceil() as i64 - 1,
+            );
+            let (lo_j, hi_j) = (
+                ((y - cell / 2.0) / patch).floor() as i64,
+                ((y + cell / 2.0) / patch).ceil() as i64 - 1,
+            );
+            let occupied = (lo_j..=hi_j).any(|j| (lo_i..=hi_i).any(|i| statics.contains(i, j)));
+            if occupied {
+                self.state[c] = OBSTACLE;
+            }
+        }
     }
 
     /// The cost of crossing cell `c` (see the module docs).
