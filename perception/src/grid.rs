@@ -60,6 +60,24 @@ impl GridShape {
     }
 }
 
+/// The cell of a grid layer (`cols × rows` cells of `cell` from its corner
+/// at level-frame `origin`) holding level-frame (x, y): how the evaluators'
+/// published maps are looked up.
+pub(crate) fn layer_index(
+    origin: [f32; 2],
+    cell: f32,
+    (cols, rows): (usize, usize),
+    x: f32,
+    y: f32,
+) -> Option<usize> {
+    let (i, j) = (
+        ((x - origin[0]) / cell).floor(),
+        ((y - origin[1]) / cell).floor(),
+    );
+    (i >= 0.0 && j >= 0.0 && (i as usize) < cols && (j as usize) < rows)
+        .then(|| j as usize * cols + i as usize)
+}
+
 /// One valid return, in the level frame of the capture pose.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Point {
@@ -395,6 +413,11 @@ impl GridReport {
             labels: Vec::new(),
             queue: Vec::new(),
         }
+    }
+
+    /// The grid the evaluator marks cells of.
+    pub(crate) fn grid(&self) -> GridShape {
+        self.grid
     }
 
     /// Starts `image`'s report (cleared): footprint, shadows, pixel counts.

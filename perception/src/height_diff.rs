@@ -182,12 +182,7 @@ pub struct HeightDiffMaps {
 impl HeightDiffMaps {
     /// The cell holding level-frame (x, y).
     pub fn index(&self, x: f32, y: f32) -> Option<usize> {
-        let (i, j) = (
-            ((x - self.origin[0]) / self.cell).floor(),
-            ((y - self.origin[1]) / self.cell).floor(),
-        );
-        (i >= 0.0 && j >= 0.0 && (i as usize) < self.cols && (j as usize) < self.rows)
-            .then(|| j as usize * self.cols + i as usize)
+        grid::layer_index(self.origin, self.cell, (self.cols, self.rows), x, y)
     }
 }
 
@@ -263,14 +258,15 @@ impl EvaluatorPlugin for HeightDiff {
 impl HeightDiff {
     /// An evaluator over `perception`'s region.
     pub fn new(config: HeightDiffConfig, perception: &PerceptionConfig) -> Self {
-        let grid = GridShape::over(&perception.region, config.cell_size_m, 1);
+        let out = GridReport::new(perception, config.cell_size_m);
+        let grid = out.grid();
         let cell = config.cell_size_m as f32;
         Self {
             cell,
             grid,
             min_range: perception.min_range_m as f32,
             max_range: perception.max_range_m as f32,
-            out: GridReport::new(perception, config.cell_size_m),
+            out,
             median: MedianOutliers::default(),
             filtered: Vec::new(),
             projector: Projector::default(),
@@ -354,10 +350,11 @@ impl HeightDiff {
         // y): its distance in cells (u16::MAX = none), value and sensor.
         let sensor = &maps.sensor;
         let [along_x, along_y] = &mut self.scratch.gaps;
+        // Cell `k` of line `line` is `line * line_stride + k * k_stride`.
         let nearest = |out: &mut Vec<Nearest>,
                        len: usize,
                        lines: usize,
-                       at: &dyn Fn(usize, usize) -> usize| {
+                       (line_stride, k_stride): (usize, usize)| {
             out.clear();
             out.resize(2 * len * lines, Nearest::NONE);
             for line in 0..lines {
@@ -365,7 +362,7 @@ impl HeightDiff {
                     let mut last: Option<(usize, usize)> = None;
                     for step in 0..len {
                         let k = if backwards { len - 1 - step } else { step };
-                        let i = at(line, k);
+                        let i = line * line_stride + k * k_stride;
                         if !h[i].is_nan() {
                             last = Some((k, i));
                         } else if let Some((j, source)) = last {
@@ -379,8 +376,8 @@ impl HeightDiff {
                 }
             }
         };
-        nearest(along_x, cols, rows, &|row, k| row * cols + k);
-        nearest(along_y, rows, cols, &|col, k| k * cols + col);
+        nearest(along_x, cols, rows, (cols, 1));
+        nearest(along_y, rows, cols, (1, cols));
         let [ox, oy] = maps.origin;
         for i in 0..cols * rows {
             if !h[i].is_nan() {

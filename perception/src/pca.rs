@@ -245,12 +245,7 @@ pub struct PcaMaps {
 impl PcaMaps {
     /// The cell holding level-frame (x, y).
     pub fn index(&self, x: f32, y: f32) -> Option<usize> {
-        let (i, j) = (
-            ((x - self.origin[0]) / self.cell).floor(),
-            ((y - self.origin[1]) / self.cell).floor(),
-        );
-        (i >= 0.0 && j >= 0.0 && (i as usize) < self.cols && (j as usize) < self.rows)
-            .then(|| j as usize * self.cols + i as usize)
+        grid::layer_index(self.origin, self.cell, (self.cols, self.rows), x, y)
     }
 }
 
@@ -310,7 +305,8 @@ impl EvaluatorPlugin for HierarchicalPca {
 impl HierarchicalPca {
     /// An evaluator over `perception`'s region.
     pub fn new(config: PcaConfig, perception: &PerceptionConfig) -> Self {
-        let grid = GridShape::over(&perception.region, config.cell_size_m, 1);
+        let out = GridReport::new(perception, config.cell_size_m);
+        let grid = out.grid();
         let cell = config.cell_size_m as f32;
         Self {
             cell,
@@ -319,7 +315,7 @@ impl HierarchicalPca {
             min_range: perception.min_range_m as f32,
             max_range: perception.max_range_m as f32,
             max_tilt: config.max_slope_deg.to_radians(),
-            out: GridReport::new(perception, config.cell_size_m),
+            out,
             projector: Projector::default(),
             points: Vec::new(),
             deviation: Vec::new(),

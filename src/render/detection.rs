@@ -96,22 +96,26 @@ pub fn detection_picture(path: &Path, rows: &[DetectionRow]) -> Result<(), Rende
                 }
             }
             c.text(x0 + pw - 60.0, y0 + ph + 28.0, 10.0, GREY, "distance, m");
-            for (o, object) in objects.iter().enumerate() {
-                let mut points: Vec<(f32, f32, f64)> = rows
+            // A series: the panel's rows `keep` picks, `value` against
+            // distance, in order of distance.
+            let series = |keep: &dyn Fn(&DetectionRow) -> bool, value: fn(&DetectionRow) -> f64| {
+                let mut points: Vec<&DetectionRow> = rows
                     .iter()
-                    .filter(|r| {
-                        r.evaluator == *evaluator && r.sensor == *sensor && r.object == *object
-                    })
+                    .filter(|r| r.evaluator == *evaluator && r.sensor == *sensor && keep(r))
+                    .collect();
+                points.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
+                points
+                    .iter()
                     .map(|r| {
                         (
                             x0 + pw * (r.distance_m / max_distance) as f32,
-                            y0 + ph * (1.0 - r.detection_probability as f32),
-                            r.distance_m,
+                            y0 + ph * (1.0 - value(r) as f32),
                         )
                     })
-                    .collect();
-                points.sort_by(|a, b| a.2.total_cmp(&b.2));
-                let line: Vec<(f32, f32)> = points.iter().map(|p| (p.0, p.1)).collect();
+                    .collect::<Vec<(f32, f32)>>()
+            };
+            for (o, object) in objects.iter().enumerate() {
+                let line = series(&|r| r.object == *object, |r| r.detection_probability);
                 let colour = LINES[o % LINES.len()];
                 c.polyline(&line, colour, 2.0, object.starts_with("glass"));
                 for &(x, y) in &line {
@@ -119,19 +123,7 @@ pub fn detection_picture(path: &Path, rows: &[DetectionRow]) -> Result<(), Rende
                 }
             }
             // The glass left unseen (in the image's shadows), dotted.
-            let mut unseen: Vec<(f32, f32, f64)> = rows
-                .iter()
-                .filter(|r| r.evaluator == *evaluator && r.sensor == *sensor && r.glass)
-                .map(|r| {
-                    (
-                        x0 + pw * (r.distance_m / max_distance) as f32,
-                        y0 + ph * (1.0 - r.unseen_probability as f32),
-                        r.distance_m,
-                    )
-                })
-                .collect();
-            unseen.sort_by(|a, b| a.2.total_cmp(&b.2));
-            let line: Vec<(f32, f32)> = unseen.iter().map(|p| (p.0, p.1)).collect();
+            let line = series(&|r| r.glass, |r| r.unseen_probability);
             c.polyline(&line, UNSEEN, 1.5, true);
             c.fill_rect(x0, y0 + ph, pw, 1.5, BLACK);
             c.fill_rect(x0, y0, 1.5, ph, BLACK);
