@@ -8,10 +8,10 @@ use arcnav_bus::lcmtypes::{
     arc_votes_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t, range_image_t,
     waypoints_t,
 };
-use arcnav_localmap::{MapSnapshot, Patch, SeenGround};
+use arcnav_localmap::{ElevationGrid, MapSnapshot, Patch, SeenGround};
 use arcnav_perception::{
-    BeamTable, FovPolygon, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region, Shadow,
-    Shadows,
+    BeamTable, FovPolygon, HeightSample, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region,
+    Shadow, Shadows,
 };
 use arcnav_vehicle::frames::{FrameError, isometry_from_parts, rotation_to_wxyz};
 use arcnav_vehicle::{ArcSet, Isometry, Pose, Utime};
@@ -103,7 +103,21 @@ pub fn obstacles_to_wire(report: &ObstacleReport) -> obstacle_cells_t {
             .iter()
             .map(|s| [s.azimuth, s.half_width, s.near, s.far])
             .collect(),
+        heights_cell: report.heights_cell_m as f32,
+        num_heights: report.heights.len() as i32,
+        // Cells of at least 5 cm within the 1e8 m the local map accepts fit
+        // an i32; one that does not saturates and lands outside the map.
+        height_cells: report
+            .heights
+            .iter()
+            .map(|h| [saturate(h.i), saturate(h.j)])
+            .collect(),
+        heights: report.heights.iter().map(|h| [h.z, h.variance]).collect(),
     }
+}
+
+fn saturate(i: i64) -> i32 {
+    i32::try_from(i).unwrap_or(if i < 0 { i32::MIN } else { i32::MAX })
 }
 
 /// An obstacle report from the wire; regions are rebuilt from the cells.
@@ -171,6 +185,27 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
         }
         sectors.push(shadow);
     }
+    let heights_cell_m = f64::from(msg.heights_cell);
+    let cell_ok = heights_cell_m.is_finite() && heights_cell_m >= 0.01;
+    if !(msg.heights.is_empty() || cell_ok) {
+        return Err(invalid(format!(
+            "height measurements in cells of {heights_cell_m} m: at least 0.01 m is needed"
+        )));
+    }
+    let mut heights = Vec::with_capacity(msg.heights.len());
+    for (&[i, j], &[z, variance]) in msg.height_cells.iter().zip(&msg.heights) {
+        if !(z.is_finite() && variance.is_finite() && variance > 0.0) {
+            return Err(invalid(format!(
+                "height measurement {z} m with variance {variance} m² in cell ({i}, {j}): both must be finite, the variance > 0"
+            )));
+        }
+        heights.push(HeightSample {
+            i: i64::from(i),
+            j: i64::from(j),
+            z,
+            variance,
+        });
+    }
     Ok(ObstacleReport {
         utime: msg.utime,
         sensor: msg.sensor,
@@ -182,6 +217,8 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
             origin: Point2::new(msg.shadow_origin[0], msg.shadow_origin[1]),
             sectors,
         },
+        heights,
+        heights_cell_m,
     })
 }
 
@@ -351,6 +388,11 @@ pub fn map_to_wire(cycle_utime: Utime, pose: &Pose, map: &MapSnapshot, resets: u
         seen_side: map.seen.side as i32,
         num_seen_words: map.seen.words.len() as i32,
         seen: map.seen.words.iter().map(|&w| w as i64).collect(),
+        elevation_cell: map.elevation.cell_size_m as f32,
+        elevation_origin: [map.elevation.origin.0, map.elevation.origin.1],
+        elevation_side: map.elevation.side as i32,
+        num_elevation: map.elevation.cells.len() as i32,
+        elevation: map.elevation.cells.clone(),
     }
 }
 
@@ -419,6 +461,7 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
         side,
         words: msg.seen.iter().map(|&w| w as u64).collect(),
     };
+    let elevation = elevation_from_wire(msg).map_err(invalid)?;
     Ok(MapMessage {
         cycle_utime: msg.cycle_utime,
         pose: Pose {
@@ -433,8 +476,41 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
             patch_size_m: size,
             patches,
             seen,
+            elevation,
         },
         resets: u64::try_from(msg.resets).unwrap_or(0),
+    })
+}
+
+/// The elevation square of a local-map message.
+fn elevation_from_wire(msg: &local_map_t) -> Result<ElevationGrid, String> {
+    let side = u32::try_from(msg.elevation_side)
+        .ok()
+        .filter(|&side| side as usize * side as usize == msg.elevation.len())
+        .ok_or_else(|| {
+            format!(
+                "elevation square of side {} needs its square of cells, the message holds {}",
+                msg.elevation_side,
+                msg.elevation.len()
+            )
+        })?;
+    let cell = f64::from(msg.elevation_cell);
+    if side > 0 && !(cell.is_finite() && cell >= 0.01) {
+        return Err(format!(
+            "elevation cells of {cell} m: at least 0.01 m is needed"
+        ));
+    }
+    if msg.elevation_origin.iter().any(|o| o.abs() > 1 << 40) {
+        return Err(format!(
+            "elevation origin {:?} is not a place on Earth",
+            msg.elevation_origin
+        ));
+    }
+    Ok(ElevationGrid {
+        cell_size_m: cell,
+        origin: (msg.elevation_origin[0], msg.elevation_origin[1]),
+        side,
+        cells: msg.elevation.clone(),
     })
 }
 
@@ -518,9 +594,22 @@ mod tests {
                     far: 9.0,
                 }],
             },
+            heights: vec![HeightSample {
+                i: -12,
+                j: 400,
+                z: 1.5,
+                variance: 0.0009,
+            }],
+            heights_cell_m: 0.25,
         };
         let back = obstacles_from_wire(obstacles_to_wire(&report)).unwrap();
         assert_eq!(back.cells, report.cells);
+        assert_eq!(back.heights, report.heights);
+        assert_eq!(back.heights_cell_m, 0.25);
+        let mut bad = obstacles_to_wire(&report);
+        bad.heights[0][1] = -1.0;
+        let error = obstacles_from_wire(bad).unwrap_err().to_string();
+        assert!(error.contains("variance"), "{error}");
         assert_eq!(back.regions, report.regions);
         assert_eq!(back.fov, report.fov);
         assert_eq!(back.shadows, report.shadows);
@@ -638,6 +727,12 @@ mod tests {
                 seen.insert(0, 77);
                 seen
             },
+            elevation: ElevationGrid {
+                cell_size_m: 0.25,
+                origin: (-5, 9),
+                side: 2,
+                cells: vec![[1.0, 0.01], [f32::NAN; 2], [2.5, 0.5], [-1.0, 0.25]],
+            },
         };
         let back = map_from_wire(&map_to_wire(1_020, &pose, &map, 2)).unwrap();
         assert_eq!(back.cycle_utime, 1_020);
@@ -652,6 +747,12 @@ mod tests {
         );
         assert_eq!(back.map.patches, map.patches);
         assert_eq!(back.map.seen, map.seen);
+        assert_eq!(back.map.elevation.at(-1.1, 2.3), Some([1.0, 0.01]));
+        assert_eq!(back.map.elevation.at(-0.9, 2.3), None);
+        assert_eq!(back.map.elevation.at(-0.9, 2.6), Some([-1.0, 0.25]));
+        let mut bad = map_to_wire(1_020, &pose, &map, 2);
+        bad.elevation_side = 3;
+        assert!(map_from_wire(&bad).is_err());
         assert!(back.map.seen.contains(26, 96) && !back.map.seen.contains(26, 95));
         let mut bad = map_to_wire(1_020, &pose, &map, 2);
         bad.seen_side = 58;

@@ -118,6 +118,7 @@ fn main() {
                     regions: vec![],
                     fov,
                     shadows: Default::default(),
+                    ..ObstacleReport::default()
                 };
                 map.insert(&report).expect("a valid report");
             }

@@ -79,6 +79,7 @@ fn snapshot_seeing_from(cells: &[(f64, f64)], near: f64, reach: f64) -> MapSnaps
             Point2::new(near, reach),
         ]),
         shadows: Default::default(),
+        ..ObstacleReport::default()
     };
     map.insert(&report).unwrap();
     (*map.snapshot()).clone()

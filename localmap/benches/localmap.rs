@@ -80,6 +80,7 @@ fn insert_loop_snapshot(bencher: Bencher, n: usize) {
         regions: vec![],
         fov: FovPolygon::default(),
         shadows: Default::default(),
+        ..ObstacleReport::default()
     };
     map.insert(&fill).expect("the fill is valid");
     assert_eq!(map.len(), n, "every cell has its own patch");

@@ -47,6 +47,8 @@ pub struct LocalMapConfig {
     pub assume_seen_m: f64,
     /// A static occupancy map of the area, merged with perception's cells.
     pub occupancy: OccupancyConfig,
+    /// The elevation layer (004 §III).
+    pub elevation: crate::elevation::ElevationConfig,
 }
 
 /// Lives in `[localmap.occupancy]`: a static 2-D occupancy map (001 §3.4)
@@ -95,6 +97,7 @@ impl Default for LocalMapConfig {
             on_pose_jump: JumpPolicy::Reset,
             assume_seen_m: 8.0,
             occupancy: OccupancyConfig::default(),
+            elevation: crate::elevation::ElevationConfig::default(),
         }
     }
 }
@@ -103,6 +106,9 @@ impl LocalMapConfig {
     /// Keys relative to `[localmap]`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         config::in_range("patch_size_m", self.patch_size_m, 0.05, 5.0)?;
+        self.elevation
+            .validate()
+            .map_err(|e| e.within("elevation"))?;
         config::positive("ahead_m", self.ahead_m)?;
         config::positive("half_width_m", self.half_width_m)?;
         config::non_negative("behind_m", self.behind_m)?;

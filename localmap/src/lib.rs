@@ -8,11 +8,13 @@
 //! immutable vehicle-frame [`MapSnapshot`]s.
 
 pub mod config;
+pub mod elevation;
 pub mod map;
 pub mod raster;
 pub mod static_map;
 
 pub use config::{JumpPolicy, LocalMapConfig, OccupancyConfig};
+pub use elevation::{ElevationConfig, ElevationGrid, ElevationLayer, ElevationStats};
 pub use map::{
     InsertError, InsertOutcome, JumpReason, LocalMap, MapSnapshot, MapStats, Patch, PoseUpdate,
     SeenGround,

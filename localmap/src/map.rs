@@ -43,6 +43,7 @@ use arcnav_vehicle::time::micros_to_seconds;
 use arcnav_vehicle::{Footprint, Isometry, Pose, Utime, VehicleConfig};
 
 use crate::config::{JumpPolicy, LocalMapConfig};
+use crate::elevation::{ElevationGrid, ElevationLayer};
 use crate::raster::Coverage;
 
 const EMPTY: u32 = u32::MAX;
@@ -262,6 +263,8 @@ pub struct MapSnapshot {
     pub patches: Vec<Patch>,
     /// The ground observed around the vehicle (the window's square).
     pub seen: SeenGround,
+    /// The elevation layer around the vehicle (004 §III), world-aligned.
+    pub elevation: ElevationGrid,
 }
 
 impl MapSnapshot {
@@ -319,6 +322,7 @@ pub struct LocalMap {
     assume_seen_pending: bool,
     /// The static occupancy map, if one was given.
     statics: Option<std::sync::Arc<crate::StaticMap>>,
+    elevation: ElevationLayer,
     stats: MapStats,
 }
 
@@ -351,6 +355,7 @@ impl LocalMap {
             seen: vec![UNSEEN; side * side],
             assume_seen_pending: true,
             statics: None,
+            elevation: ElevationLayer::new(&config.elevation, radius),
             stats: MapStats::default(),
         }
     }
@@ -422,6 +427,11 @@ impl LocalMap {
         &self.config
     }
 
+    /// The elevation layer (004 §III).
+    pub fn elevation(&self) -> &ElevationLayer {
+        &self.elevation
+    }
+
     pub fn stats(&self) -> &MapStats {
         &self.stats
     }
@@ -454,6 +464,7 @@ impl LocalMap {
         self.patches.clear();
         self.slots.fill(EMPTY);
         self.seen.fill(UNSEEN);
+        self.elevation.clear();
         self.assume_seen_pending = true;
         self.epoch_start = utime;
         self.stats.resets += 1;
@@ -531,6 +542,8 @@ impl LocalMap {
             self.stats.reports_refused += 1;
         })?;
         let sensor_bit = 1u32 << sensor;
+        self.elevation
+            .insert(&report.heights, report.heights_cell_m);
         self.stamp += 1;
         let stamp = self.stamp;
         let mut outcome = InsertOutcome::default();
@@ -743,6 +756,8 @@ impl LocalMap {
                         tracing::warn!(%reason, patches = self.patches.len(), "local map reset");
                         self.reset(pose.utime);
                         self.pose = Some(*pose);
+                        let t = pose.world_from_vehicle.translation.vector;
+                        self.elevation.recentre(t.x, t.y);
                         self.assume_seen_pending = false;
                         self.assume_seen_around_pose();
                         self.add_static_patches();
@@ -757,6 +772,8 @@ impl LocalMap {
             }
         }
         self.pose = Some(*pose);
+        let t = pose.world_from_vehicle.translation.vector;
+        self.elevation.recentre(t.x, t.y);
         if self.assume_seen_pending {
             self.assume_seen_pending = false;
             self.assume_seen_around_pose();
@@ -862,6 +879,7 @@ impl LocalMap {
             patch_size_m: self.config.patch_size_m,
             patches: self.patches.clone(),
             seen: self.seen_ground(),
+            elevation: self.elevation.snapshot(),
         })
     }
 

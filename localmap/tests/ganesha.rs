@@ -55,6 +55,7 @@ fn report(utime: Utime, sensor: &str, cells: &[(f64, f64)], fov: FovPolygon) -> 
         regions: vec![],
         fov,
         shadows: Default::default(),
+        ..ObstacleReport::default()
     }
 }
 

@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 
 use crate::evaluator::TerrainEvaluator;
 use crate::height_diff::HeightDiffConfig;
+use crate::heights::HeightsConfig;
 use crate::pca::PcaConfig;
 use crate::registry::EvaluatorRegistry;
 
@@ -35,6 +36,9 @@ pub struct PerceptionConfig {
     pub height_diff: HeightDiffConfig,
     /// Hierarchical PCA and scan-line roughness (001 §3), `evaluator = "pca"`.
     pub pca: PcaConfig,
+    /// The height measurements of the local map's elevation layer (004
+    /// §III), taken from every image whichever evaluator judges it.
+    pub heights: HeightsConfig,
     /// Tables of evaluators added to the registry by a program,
     /// `[perception.plugins.NAME]`.
     pub plugins: BTreeMap<String, toml::Table>,
@@ -52,6 +56,7 @@ impl Default for PerceptionConfig {
             drop_off: DropOffConfig::default(),
             height_diff: HeightDiffConfig::default(),
             pca: PcaConfig::default(),
+            heights: HeightsConfig::default(),
             plugins: BTreeMap::new(),
         }
     }
@@ -232,6 +237,23 @@ impl PerceptionConfig {
                     format!("is {value} m; at most 500 m is evaluated"),
                 ));
             }
+        }
+        self.heights.validate().map_err(|e| e.within("heights"))?;
+        // The sampler's world-aligned grid covers the region at any heading:
+        // up to twice the region's area (a square region at 45°).
+        let diagonal = (r.ahead_m + r.behind_m).hypot(2.0 * r.half_width_m);
+        let side = diagonal / self.heights.cell_size_m + 2.0;
+        if side * side > 2.0 * MAX_GRID_CELLS as f64 {
+            return Err(ConfigError::new(
+                "heights.cell_size_m",
+                format!(
+                    "{} m cells over the region need up to {:.0} cells; at most \
+                     {}: use larger cells or a smaller region",
+                    self.heights.cell_size_m,
+                    side * side,
+                    2 * MAX_GRID_CELLS
+                ),
+            ));
         }
         let c = &self.cells;
         config::in_range("cells.cell_size_m", c.cell_size_m, 0.02, 2.0)?;

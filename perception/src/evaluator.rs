@@ -127,6 +127,12 @@ pub struct ObstacleReport {
     /// The parts of `fov` the image did not see: beyond edges, out of
     /// sight (empty when the evaluator does not tell).
     pub shadows: Shadows,
+    /// Height measurements for the local map's elevation layer (004 §III),
+    /// one per world-aligned cell the image hit; filled after the
+    /// evaluator by the perception node (see [`crate::HeightSampler`]).
+    pub heights: Vec<crate::heights::HeightSample>,
+    /// The side of the world-aligned cells `heights` index, m.
+    pub heights_cell_m: f64,
 }
 
 impl ObstacleReport {
@@ -138,6 +144,7 @@ impl ObstacleReport {
         self.regions.clear();
         self.fov.vertices.clear();
         self.shadows.clear();
+        self.heights.clear();
     }
 }
 

@@ -25,6 +25,7 @@ pub mod evaluator;
 pub mod fov;
 mod grid;
 pub mod height_diff;
+pub mod heights;
 pub mod image;
 pub mod median;
 pub mod pca;
@@ -42,6 +43,7 @@ pub use evaluator::{
 };
 pub use fov::FovPolygon;
 pub use height_diff::{HeightDiff, HeightDiffConfig, HeightDiffMaps};
+pub use heights::{HeightSample, HeightSampler, HeightsConfig};
 pub use image::{BeamTable, ImageError, RangeImage};
 pub use pca::{HierarchicalPca, PcaConfig, PcaMaps};
 pub use raycast::RayCast;

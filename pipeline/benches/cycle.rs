@@ -51,6 +51,7 @@ fn map() -> MapSnapshot {
             regions: vec![],
             fov: FovPolygon::default(),
             shadows: Default::default(),
+            ..ObstacleReport::default()
         };
         local.insert(&report).expect("valid cells");
     }

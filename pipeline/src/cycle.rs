@@ -322,7 +322,7 @@ mod tests {
             cells: Vec::new(),
             regions: Vec::new(),
             fov: FovPolygon::new(Vec::new()),
-            shadows: Default::default(),
+            ..ObstacleReport::default()
         }
     }
 

@@ -5,7 +5,8 @@
 use std::collections::VecDeque;
 
 use arcnav_perception::{
-    ImageStats, InOrder, ObstacleReport, PerceptionConfig, RangeImage, Runner, TerrainEvaluator,
+    HeightSampler, ImageStats, InOrder, ObstacleReport, PerceptionConfig, RangeImage, Runner,
+    TerrainEvaluator,
 };
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::time::seconds_to_micros;
@@ -36,6 +37,7 @@ pub struct PerceptionDrops {
 /// Perception: range images + poses → obstacle reports.
 pub struct PerceptionNode {
     evaluator: Box<dyn TerrainEvaluator>,
+    heights: HeightSampler,
     runner: Box<dyn Runner + Send>,
     poses: PoseHistory,
     waiting: VecDeque<RangeImage>,
@@ -67,6 +69,12 @@ impl PerceptionNode {
     ) -> Result<Self, ConfigError> {
         Ok(Self {
             evaluator: perception.build_evaluator()?,
+            heights: HeightSampler::new(
+                &perception.heights,
+                &perception.region,
+                perception.min_range_m,
+                perception.max_range_m,
+            ),
             runner: Box::new(InOrder),
             poses: PoseHistory::spanning(seconds_to_micros(timing.pose_history_s), MAX_POSES),
             waiting: VecDeque::new(),
@@ -185,6 +193,8 @@ impl PerceptionNode {
             &*self.runner,
         ) {
             Ok(stats) => {
+                self.heights
+                    .sample(&image, &pose.world_from_vehicle, &mut report);
                 self.totals.accumulate(&stats);
                 self.reports += 1;
                 out(report);

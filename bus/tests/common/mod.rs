@@ -56,6 +56,10 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         shadow_origin: [-1.5, 2.25],
         num_shadows: 2,
         shadows: vec![[0.25, 0.0625, 6.5, 9.0], [-3.0, 0.001953125, 12.0, 12.5]],
+        heights_cell: 0.2,
+        num_heights: 2,
+        height_cells: vec![[500, -253], [-1, 7]],
+        heights: vec![[1.25, 0.0004], [-0.5, 0.015625]],
     };
     let waypoints = waypoints_t {
         utime: 1_700_000_000_900_000,
@@ -93,6 +97,16 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         seen_side: 9,
         num_seen_words: 2,
         seen: vec![0x0123_4567_89ab_cdef, -5],
+        elevation_cell: 0.2,
+        elevation_origin: [-120, 40],
+        elevation_side: 2,
+        num_elevation: 4,
+        elevation: vec![
+            [1.5, 0.0025],
+            [f32::NAN, f32::NAN],
+            [-0.25, 0.5],
+            [2.0, 0.125],
+        ],
     };
     vec![
         ("pose_t", AnyMessage::Pose(pose)),
@@ -268,7 +282,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
             )
         }
         4 => {
-            let (n, f, s) = (rng.len(), rng.len(), rng.len());
+            let (n, f, s, h) = (rng.len(), rng.len(), rng.len(), rng.len());
             (
                 "obstacle_cells_t",
                 AnyMessage::ObstacleCells(obstacle_cells_t {
@@ -291,6 +305,12 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     shadow_origin: [rng.f64(), rng.f64()],
                     num_shadows: s as i32,
                     shadows: (0..s).map(|_| std::array::from_fn(|_| rng.f32())).collect(),
+                    heights_cell: rng.f32(),
+                    num_heights: h as i32,
+                    height_cells: (0..h)
+                        .map(|_| [rng.next_u64() as i32, rng.next_u64() as i32])
+                        .collect(),
+                    heights: (0..h).map(|_| [rng.f32(), rng.f32()]).collect(),
                 }),
             )
         }
@@ -340,6 +360,11 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     seen_side: rng.next_u64() as i32,
                     num_seen_words: n as i32,
                     seen: (0..n).map(|_| rng.next_u64() as i64).collect(),
+                    elevation_cell: rng.f32(),
+                    elevation_origin: [rng.next_u64() as i64, rng.next_u64() as i64],
+                    elevation_side: rng.next_u64() as i32,
+                    num_elevation: n as i32,
+                    elevation: (0..n).map(|_| [rng.f32(), rng.f32()]).collect(),
                 }),
             )
         }

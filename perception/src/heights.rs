@@ -1,0 +1,276 @@
+//! Height measurements for the local map's elevation layer (004 §III).
+//!
+//! Whatever evaluator judges an image, the local map also keeps a
+//! robot-centric elevation map with a Kalman mean and variance per cell
+//! (004 eqs. 1–4). Its measurements come from here: every return of the
+//! image inside `[perception.region]` is placed in a world-aligned grid of
+//! `[perception.heights] cell_size_m`, and each cell the image hit yields
+//! one measurement h_t with a variance σ_t²:
+//!
+//! - h_t is the highest return in the cell: the surface a wheel or the
+//!   chassis meets (a 30 cm rock that fills a quarter of the cell is 30 cm
+//!   high to a tyre, not 7 cm as a mean would make it). Noise makes the
+//!   maximum of n returns read a little high; the bias is the same on all
+//!   ground, so slopes and heights above the ground under the wheels are
+//!   unaffected.
+//! - σ_t² = σ_r² + (r·σ_θ)², with σ_r the sensor's range noise and σ_θ the
+//!   error of the pose's attitude (a tilt error of σ_θ moves a return at
+//!   range r by r·σ_θ vertically): far returns count less, as in the
+//!   elevation mapping 004 builds on (Fankhauser et al., 2014).
+//!
+//! A cell is world-aligned, so the same square of ground gets the same
+//! index from every image and every sensor: the local map fuses the
+//! measurements without resampling.
+
+use arcnav_vehicle::Isometry;
+use serde::{Deserialize, Serialize};
+
+use crate::config::RegionConfig;
+use crate::evaluator::{ImageStats, ObstacleReport};
+use crate::grid::{Projector, level_frames};
+use crate::image::RangeImage;
+use arcnav_vehicle::config::{ConfigError, positive};
+
+/// Lives in `[perception.heights]`: the measurements of the elevation layer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HeightsConfig {
+    /// Measure heights at all (false: the elevation layer stays empty and
+    /// the `terrain` behaviour judges nothing).
+    pub enabled: bool,
+    /// World-aligned cell, m (the elevation layer's, see
+    /// `[localmap.elevation]`).
+    pub cell_size_m: f64,
+    /// σ_r: the sensor's range noise, standard deviation, m.
+    pub range_noise_m: f64,
+    /// σ_θ: the error of the pose's roll and pitch, standard deviation,
+    /// degrees.
+    pub attitude_noise_deg: f64,
+}
+
+impl Default for HeightsConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            cell_size_m: 0.2,
+            range_noise_m: 0.02,
+            attitude_noise_deg: 0.1,
+        }
+    }
+}
+
+impl HeightsConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("cell_size_m", self.cell_size_m)?;
+        if self.cell_size_m < 0.05 {
+            return Err(ConfigError::new(
+                "cell_size_m",
+                format!("is {}, must be at least 0.05 m", self.cell_size_m),
+            ));
+        }
+        positive("range_noise_m", self.range_noise_m)?;
+        arcnav_vehicle::config::non_negative("attitude_noise_deg", self.attitude_noise_deg)
+    }
+
+    /// σ_t² of a return at `range_m`.
+    pub fn variance(&self, range_m: f32) -> f32 {
+        let sigma_theta = self.attitude_noise_deg.to_radians() as f32;
+        let r = self.range_noise_m as f32;
+        r * r + (range_m * sigma_theta).powi(2)
+    }
+}
+
+/// One height measurement: the highest return of one image in one
+/// world-aligned cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeightSample {
+    /// World cell index: the cell spans [i·s, (i+1)·s) × [j·s, (j+1)·s).
+    pub i: i64,
+    pub j: i64,
+    /// h_t, world z, m.
+    pub z: f32,
+    /// σ_t², m².
+    pub variance: f32,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Bin {
+    z: f32,
+    range: f32,
+}
+
+const EMPTY: Bin = Bin {
+    z: f32::NEG_INFINITY,
+    range: 0.0,
+};
+
+/// Turns images into [`HeightSample`]s. Allocates nothing once warmed up to
+/// the image and region size.
+#[derive(Debug, Default)]
+pub struct HeightSampler {
+    config: HeightsConfig,
+    region: RegionConfig,
+    min_range: f32,
+    max_range: f32,
+    projector: Projector,
+    bins: Vec<Bin>,
+    touched: Vec<u32>,
+}
+
+impl HeightSampler {
+    pub fn new(
+        config: &HeightsConfig,
+        region: &RegionConfig,
+        min_range: f64,
+        max_range: f64,
+    ) -> Self {
+        Self {
+            config: config.clone(),
+            region: region.clone(),
+            min_range: min_range as f32,
+            max_range: max_range as f32,
+            ..Self::default()
+        }
+    }
+
+    pub fn config(&self) -> &HeightsConfig {
+        &self.config
+    }
+
+    /// Appends the measurements of `image`, taken at `world_from_vehicle`,
+    /// to `report.heights` (in row-major world cell order).
+    pub fn sample(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
+    ) {
+        report.heights_cell_m = self.config.cell_size_m;
+        if !self.config.enabled {
+            return;
+        }
+        let out = &mut report.heights;
+        let cell = self.config.cell_size_m;
+        let (world_from_level, level_from_sensor) = level_frames(image, world_from_vehicle);
+        let t = world_from_level.translation.vector;
+        let yaw = arcnav_vehicle::frames::yaw_of(&world_from_level);
+        let (sin, cos) = yaw.sin_cos();
+        // The region's corners in the world give the grid's bounds.
+        let r = &self.region;
+        let corners = [
+            (r.ahead_m, r.half_width_m),
+            (r.ahead_m, -r.half_width_m),
+            (-r.behind_m, r.half_width_m),
+            (-r.behind_m, -r.half_width_m),
+        ];
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (x, y) in corners {
+            let w = [t.x + cos * x - sin * y, t.y + sin * x + cos * y];
+            for a in 0..2 {
+                lo[a] = lo[a].min(w[a]);
+                hi[a] = hi[a].max(w[a]);
+            }
+        }
+        let i0 = (lo[0] / cell).floor() as i64;
+        let j0 = (lo[1] / cell).floor() as i64;
+        let cols = ((hi[0] / cell).floor() as i64 - i0 + 1).max(1) as usize;
+        let rows = ((hi[1] / cell).floor() as i64 - j0 + 1).max(1) as usize;
+        if self.bins.len() < cols * rows {
+            self.bins.resize(cols * rows, EMPTY);
+        }
+        // Points are binned relative to the grid's corner in f32.
+        let (ox, oy) = (
+            (t.x - i0 as f64 * cell) as f32,
+            (t.y - j0 as f64 * cell) as f32,
+        );
+        let (sin, cos, inverse) = (sin as f32, cos as f32, (1.0 / cell) as f32);
+        let (ahead, behind, half) = (r.ahead_m as f32, r.behind_m as f32, r.half_width_m as f32);
+        let tz = t.z as f32;
+        let ranges = &image.range;
+        let image_cols = image.cols();
+        let (bins, touched) = (&mut self.bins, &mut self.touched);
+        let mut stats = ImageStats::default();
+        self.projector.for_each(
+            image,
+            ranges,
+            &level_from_sensor,
+            (self.min_range, self.max_range),
+            &mut stats,
+            |[x, y, z], row, col| {
+                if !(x <= ahead && x >= -behind && y.abs() <= half) {
+                    return;
+                }
+                let (gx, gy) = (
+                    (ox + cos * x - sin * y) * inverse,
+                    (oy + sin * x + cos * y) * inverse,
+                );
+                if !(gx >= 0.0 && gy >= 0.0) {
+                    return;
+                }
+                let (ci, cj) = (gx as usize, gy as usize);
+                if ci >= cols || cj >= rows {
+                    return;
+                }
+                let index = cj * cols + ci;
+                let bin = &mut bins[index];
+                if bin.z == f32::NEG_INFINITY {
+                    touched.push(index as u32);
+                }
+                let z = z + tz;
+                if z > bin.z {
+                    *bin = Bin {
+                        z,
+                        range: ranges[row * image_cols + col],
+                    };
+                }
+            },
+        );
+        touched.sort_unstable();
+        out.reserve(touched.len());
+        for &index in touched.iter() {
+            let index = index as usize;
+            let bin = std::mem::replace(&mut bins[index], EMPTY);
+            out.push(HeightSample {
+                i: i0 + (index % cols) as i64,
+                j: j0 + (index / cols) as i64,
+                z: bin.z,
+                variance: self.config.variance(bin.range),
+            });
+        }
+        touched.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::HeightFunction;
+
+    #[test]
+    fn a_flat_plane_gives_one_sample_per_cell_at_its_height() {
+        let model = crate::SensorModel::erim();
+        let pose = Isometry::identity();
+        let image = model.render(0, &pose, &HeightFunction::new(|_, _| 0.0));
+        let mut sampler = HeightSampler::new(
+            &HeightsConfig::default(),
+            &RegionConfig::default(),
+            0.5,
+            40.0,
+        );
+        let mut report = ObstacleReport::default();
+        sampler.sample(&image, &pose, &mut report);
+        let out = report.heights;
+        assert!(out.len() > 500, "{} samples", out.len());
+        for s in &out {
+            assert!(s.z.abs() < 1e-3, "{s:?}");
+            assert!(s.variance > 0.0);
+        }
+        let mut cells: Vec<_> = out.iter().map(|s| (s.i, s.j)).collect();
+        cells.dedup();
+        assert_eq!(cells.len(), out.len(), "one sample per cell");
+        // Again: nothing is left over from the first image.
+        let mut again = ObstacleReport::default();
+        sampler.sample(&image, &pose, &mut again);
+        assert_eq!(again.heights, out);
+    }
+}
