@@ -108,6 +108,9 @@ pub struct MissionReport {
     /// render mission.lcm --at S` draws the decision of that moment.
     pub closest_approach: Option<NearMissReport>,
     pub stops: StopStats,
+    /// What the ground did to the vehicle (ground truth): peak roll and
+    /// pitch, vertical acceleration of the body.
+    pub ride: arcnav_sim::RideReport,
     /// Backing up when blocked.
     pub recovery: RecoveryStats,
     /// Counters behaviours keep (the route planner's plans and re-plans),
@@ -385,6 +388,7 @@ pub fn run_mission(
     let (mut render_ms, mut next_progress) = (0.0f64, t0);
     let mut best_gap = (usize::MAX, f64::INFINITY, t0);
     let mut previous = *motion.state();
+    let mut ride = arcnav_sim::Ride::new(t0, config.vehicle.max_slope_deg);
     let outcome;
     let mut t = t0;
     let mut tick: u64 = 0;
@@ -395,6 +399,7 @@ pub fn run_mission(
         previous = state;
         max_speed = max_speed.max(state.speed_mps);
         let stance = drape(&world, &config.vehicle, &state);
+        ride.observe(t, &stance);
         if tick.is_multiple_of(5) {
             sink.track.push(TrackPoint {
                 utime: t,
@@ -583,6 +588,7 @@ pub fn run_mission(
             hazard: m.hazard.clone(),
         }),
         stops,
+        ride: ride.report(),
         recovery,
         behaviour_counters,
         steering_activity: sink.curvature_change.0 / sink.curvature_change.1.max(1) as f64,

@@ -72,6 +72,7 @@ fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
         vehicle: &config.vehicle,
         localmap: &LOCALMAP,
         statics: None,
+        cruise_mps: 2.5,
     };
     let behaviour = registry
         .build("prefer_current", &toml::Table::new(), &setup)

@@ -47,6 +47,7 @@ fn main() {
         vehicle: &vehicle,
         localmap: &localmap,
         statics: None,
+        cruise_mps: 2.5,
     };
     let mut route = Route::new(RouteConfig::default(), &setup);
     let mut map = LocalMap::new(&localmap, &vehicle);

@@ -69,6 +69,10 @@ pub struct Setup<'a> {
     /// The static occupancy map of the area, if one was given
     /// (`[localmap.occupancy]`): known before any image shows it.
     pub statics: Option<&'a std::sync::Arc<arcnav_localmap::StaticMap>>,
+    /// The speed the arbiter drives at when nothing asks for less, m/s
+    /// (`arbiter.cruise_speed_mps`): speed limits given as a fraction of it
+    /// (terrain speed) use it.
+    pub cruise_mps: f64,
 }
 
 /// How far a mission has come.

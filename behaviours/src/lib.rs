@@ -15,9 +15,11 @@ pub mod goal_seeking;
 pub mod obstacle_avoidance;
 pub mod registry;
 pub mod route;
+pub mod terrain;
 
 pub use behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
 pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
 pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig, UnseenGround};
 pub use registry::{Plugin, Prepared, Registry, RegistryError};
 pub use route::{Route, RouteConfig, RouteStats};
+pub use terrain::{ArcTerrain, Judgement, Stance, TerrainCheck, TerrainConfig};

@@ -51,6 +51,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::behaviour::{Behaviour, Setup, VoteContext};
 use crate::registry::Plugin;
+use crate::terrain::{ArcTerrain, TerrainCheck, TerrainConfig};
 
 /// Lives in `[behaviours.obstacle_avoidance]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -81,6 +82,9 @@ pub struct ObstacleAvoidanceConfig {
     pub reverse_reach_m: f64,
     /// Clearance kept to each side of the body when backing up, m.
     pub reverse_margin_m: f64,
+    /// Attitude, chassis clearance and roughness along the arcs, from the
+    /// map's elevation layer (004 §IV).
+    pub terrain: TerrainConfig,
 }
 
 /// What obstacle avoidance makes of ground no image has seen.
@@ -110,6 +114,7 @@ impl Default for ObstacleAvoidanceConfig {
             unseen_ground: UnseenGround::Slow,
             reverse_reach_m: 5.0,
             reverse_margin_m: 0.3,
+            terrain: TerrainConfig::default(),
         }
     }
 }
@@ -317,6 +322,10 @@ pub struct ObstacleAvoidance {
     reverse: Option<Reverse>,
     /// Per arc: first collision distance (∞ if none within max), for speed.
     free: Vec<f64>,
+    terrain: TerrainCheck,
+    /// Per arc: this cycle's verdict on the ground.
+    verdicts: Vec<ArcTerrain>,
+    cruise_mps: f64,
 }
 
 impl ObstacleAvoidance {
@@ -399,7 +408,16 @@ impl ObstacleAvoidance {
                 bands,
             }
         });
+        let terrain = TerrainCheck::new(
+            &config.terrain,
+            setup.vehicle,
+            setup.arcs.curvatures(),
+            config.max_distance_m,
+        );
         Self {
+            terrain,
+            verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
+            cruise_mps: setup.cruise_mps,
             deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
             max_deceleration: setup.vehicle.max_deceleration_mps2,
             free: vec![f64::INFINITY; setup.arcs.len()],
@@ -547,32 +565,58 @@ impl Behaviour for ObstacleAvoidance {
         let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
         let reach = max as f32;
         let widest = self.margins.len() - 1;
+        // The ground ahead at the vehicle's scale: the speed horizon is
+        // where the vehicle gets to while it reacts and brakes from cruise.
+        let cruise = self.cruise_mps;
+        let horizon = cruise * self.config.reaction_s
+            + cruise * cruise / (2.0 * self.deceleration)
+            + self.terrain.config().step_m;
+        self.terrain.judge_arcs(
+            &ctx.map.elevation,
+            &ctx.map.world_from_vehicle,
+            horizon,
+            &mut self.verdicts,
+        );
+        let terrain_penalty = self.config.terrain.penalty;
         for arc in 0..self.templates.len().min(votes.len()) {
             let template = &self.templates[arc];
+            let verdict = self.verdicts[arc];
             self.free[arc] = f64::INFINITY;
-            if self.first_hit(&template.bands[widest], reach).is_none() {
-                votes.set(arc, 1.0);
-                continue;
-            }
-            if let Some(hit) = self.first_hit(&template.bands[0], reach) {
-                let distance = f64::from(hit.s);
+            // The first collision with a cell, or with ground the vehicle
+            // cannot stand on (its attitude or chassis), whichever is nearer.
+            let cell = self
+                .first_hit(&template.bands[0], reach)
+                .map(|hit| (f64::from(hit.s), hit));
+            let ground = verdict.forbidden;
+            let collision = match (cell, ground) {
+                (Some((d, hit)), Some((g, _))) if d <= g => Some((d, self.ahead.cause(hit, ctx))),
+                (_, Some((g, at))) => Some((g, Some(at))),
+                (Some((d, hit)), None) => Some((d, self.ahead.cause(hit, ctx))),
+                (None, None) => None,
+            };
+            if let Some((distance, cause)) = collision {
                 self.free[arc] = distance;
                 if distance < min {
-                    let cause = self.ahead.cause(hit, ctx);
                     votes.veto(arc, cause);
                 } else {
                     votes.set(arc, -(1.0 - (distance - min) / (max - min)) as f32);
                 }
                 continue;
             }
-            // Clear of collisions: the narrowest band that grazes a cell.
-            let band = (1..=widest)
-                .find(|&b| self.first_hit(&template.bands[b], reach).is_some())
-                .unwrap_or(widest);
-            let clearance = self.margins[band - 1];
+            // Clear of collisions: the narrowest band that grazes a cell,
+            // and how hard the ground along the arc is.
             let penalty =
-                self.config.near_miss_penalty * (1.0 - clearance / self.config.near_miss_m);
-            votes.set(arc, (1.0 - penalty) as f32);
+                match (1..=widest).find(|&b| self.first_hit(&template.bands[b], reach).is_some()) {
+                    Some(band) => {
+                        let clearance = self.margins[band - 1];
+                        self.config.near_miss_penalty * (1.0 - clearance / self.config.near_miss_m)
+                    }
+                    None => 0.0,
+                };
+            votes.set(
+                arc,
+                (1.0 - penalty - terrain_penalty * verdict.severity) as f32,
+            );
         }
         if !self.config.speed_vote {
             return;
@@ -610,7 +654,18 @@ impl Behaviour for ObstacleAvoidance {
                 }
                 room = room.min(distance - self.config.stop_margin_m);
             }
-            votes.limit_arc_speed(arc, stopping_speed(room));
+            // Terrain speed: from cruise at severity 0 down to
+            // min_speed_fraction of it at severity 1 over the ground reached
+            // before the vehicle could slow down.
+            // (No limit on easy ground: cruise is the arbiter's to set.)
+            let floor = self.config.terrain.min_speed_fraction;
+            let severity = self.verdicts[arc].near_severity;
+            let terrain = if severity > 0.0 {
+                cruise * (1.0 - (1.0 - floor) * severity)
+            } else {
+                f64::INFINITY
+            };
+            votes.limit_arc_speed(arc, stopping_speed(room).min(terrain));
         }
     }
 }
@@ -619,7 +674,7 @@ impl Plugin for ObstacleAvoidance {
     const NAME: &'static str = "obstacle_avoidance";
     type Config = ObstacleAvoidanceConfig;
 
-    fn validate(c: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
+    fn validate(c: &Self::Config, setup: &Setup<'_>) -> Result<(), ConfigError> {
         config::positive("min_distance_m", c.min_distance_m)?;
         config::positive("max_distance_m", c.max_distance_m)?;
         if c.max_distance_m <= c.min_distance_m {
@@ -650,7 +705,9 @@ impl Plugin for ObstacleAvoidance {
         config::non_negative("reaction_s", c.reaction_s)?;
         config::in_range("reverse_reach_m", c.reverse_reach_m, 0.0, 20.0)?;
         config::in_range("reverse_margin_m", c.reverse_margin_m, 0.0, 2.0)?;
-        Ok(())
+        c.terrain
+            .validate(setup.vehicle)
+            .map_err(|e| e.within("terrain"))
     }
 
     fn build(config: Self::Config, setup: &Setup<'_>) -> Self {

@@ -30,6 +30,7 @@ fn setup<'a>(arcs: &'a ArcSet, vehicle: &'a VehicleConfig) -> Setup<'a> {
         vehicle,
         localmap: &LOCALMAP,
         statics: None,
+        cruise_mps: 2.5,
     }
 }
 

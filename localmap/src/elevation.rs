@@ -129,6 +129,16 @@ impl ElevationLayer {
         &self.config
     }
 
+    /// Slots along each side of the ring.
+    pub fn side(&self) -> usize {
+        self.side
+    }
+
+    /// Memory the ring holds, bytes.
+    pub fn memory_bytes(&self) -> usize {
+        self.slots.len() * std::mem::size_of::<Slot>()
+    }
+
     pub fn stats(&self) -> &ElevationStats {
         &self.stats
     }

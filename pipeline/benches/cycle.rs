@@ -70,6 +70,7 @@ fn bench_cycle(bencher: Bencher, arc_count: usize) {
         vehicle: &vehicle,
         localmap: &LOCALMAP,
         statics: None,
+        cruise_mps: 2.5,
     };
     let registry = Registry::builtin();
     let built = std::time::Instant::now();

@@ -13,12 +13,15 @@ pub struct Stance {
     pub world_from_vehicle: Isometry,
     pub roll: f64,
     pub pitch: f64,
+    /// Mean height of the four wheel contacts: where the body's middle
+    /// rides, world z, m.
+    pub centre_z: f64,
 }
 
 /// Where `state` puts the vehicle on `world`.
 pub fn drape(world: &World, vehicle: &VehicleConfig, state: &PlanarState) -> Stance {
     let (sin, cos) = state.yaw.sin_cos();
-    let track = (vehicle.width_m - 0.3).max(0.5);
+    let track = vehicle.track_m;
     let wheel = |along: f64, left: f64| {
         let (x, y) = (
             state.x + cos * along - sin * left,
@@ -39,5 +42,6 @@ pub fn drape(world: &World, vehicle: &VehicleConfig, state: &PlanarState) -> Sta
         world_from_vehicle: isometry_from_xyz_rpy([state.x, state.y, z], roll, pitch, state.yaw),
         roll,
         pitch,
+        centre_z: (rl + rr + fl + fr) / 4.0,
     }
 }

@@ -16,6 +16,7 @@ pub mod drape;
 pub mod generate;
 pub mod heightmap;
 pub mod noise;
+pub mod ride;
 pub mod rng;
 pub mod sensor;
 pub mod tiles;
@@ -24,5 +25,6 @@ pub mod world;
 
 pub use config::{CollisionPolicy, SimConfig};
 pub use generate::{Difficulty, generate};
+pub use ride::{Ride, RideReport};
 pub use truth::{Collision, NearMiss, Truth};
 pub use world::{Feature, FeatureKind, World, WorldError, WorldSpec};

@@ -209,6 +209,18 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
             None => println!("closest       {gap:.2} m between the vehicle and a hazard"),
         }
     }
+    let ride = &r.ride;
+    println!(
+        "ride          peak roll {:.1}° at {:.1} s, peak pitch {:.1}° at {:.1} s (limit {:.0}°); vertical acceleration {:.1} m/s² peak at {:.1} s, {:.2} m/s² rms",
+        ride.peak_roll_deg,
+        ride.peak_roll_at_s,
+        ride.peak_pitch_deg,
+        ride.peak_pitch_at_s,
+        ride.slope_limit_deg,
+        ride.peak_vertical_accel_mps2,
+        ride.peak_vertical_accel_at_s,
+        ride.rms_vertical_accel_mps2
+    );
     let s = &r.stops;
     println!(
         "stops         {} stop commands in {} episodes (all arcs forbidden {}, no acceptable arc {}, required behaviour stale {}, stuck {})",

@@ -284,6 +284,7 @@ impl Config {
             vehicle: &self.vehicle,
             localmap: &self.localmap,
             statics,
+            cruise_mps: self.arbiter.cruise_speed_mps,
         }
     }
 

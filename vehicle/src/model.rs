@@ -41,6 +41,8 @@ pub struct VehicleConfig {
     /// tolerated step it sets the widest gap the vehicle rolls across
     /// ([`VehicleConfig::bridgeable_gap_m`]).
     pub wheel_radius_m: f64,
+    /// Wheel centre to wheel centre across an axle, m (M998: 1.82 m).
+    pub track_m: f64,
 }
 
 impl Default for VehicleConfig {
@@ -61,6 +63,7 @@ impl Default for VehicleConfig {
             tolerated_step_m: 0.2,
             max_slope_deg: 25.0,
             wheel_radius_m: 0.47,
+            track_m: 1.82,
         }
     }
 }
@@ -82,6 +85,16 @@ impl VehicleConfig {
         config::positive("tolerated_step_m", self.tolerated_step_m)?;
         config::in_range("max_slope_deg", self.max_slope_deg, 0.1, 89.0)?;
         config::positive("wheel_radius_m", self.wheel_radius_m)?;
+        config::positive("track_m", self.track_m)?;
+        if self.track_m > self.width_m {
+            return Err(ConfigError::new(
+                "track_m",
+                format!(
+                    "is {} m, wider than the body (width_m {} m)",
+                    self.track_m, self.width_m
+                ),
+            ));
+        }
         if self.rear_overhang_m >= self.length_m {
             return Err(ConfigError::new(
                 "rear_overhang_m",
