@@ -25,11 +25,11 @@ fn temp_file(name: &str, text: &str) -> PathBuf {
 
 #[test]
 fn config_prints_defaults_merged_with_the_file() {
-    let file = temp_file("narrow.toml", "[vehicle]\nwidth_m = 1.8\n");
+    let file = temp_file("narrow.toml", "[vehicle]\nwidth_m = 2.0\n");
     let (code, stdout, _) = arcnav(&["config", file.to_str().unwrap()]);
     assert_eq!(code, 0);
     let printed: arcnav::Config = toml::from_str(&stdout).expect("output is TOML");
-    assert_eq!(printed.vehicle.width_m, 1.8);
+    assert_eq!(printed.vehicle.width_m, 2.0);
     assert_eq!(
         printed.vehicle.length_m, 4.6,
         "other keys keep their defaults"

@@ -28,14 +28,18 @@
 //! - **Twist**: the fourth contact's distance below the plane of the other
 //!   three, |z_FL + z_RR − z_FR − z_RL|: how far the suspension articulates,
 //!   the roughness the vehicle feels at its scale.
+//! - **Bumps**: under each tyre, the range of its cells' heights less what
+//!   the contacts' slope explains over them: stones and ruts smaller than
+//!   the vehicle, which its wheels ride over one by one.
 //!
 //! A pose is **forbidden** when its roll or pitch exceeds the configured
 //! limit or the chassis strikes; obstacle avoidance treats the first
 //! forbidden pose as a collision at that distance. Otherwise its
 //! **severity** in [0, 1] is the largest of: attitude within `caution_deg`
 //! of the limit (0 at limit − caution, 1 at the limit), the chassis's
-//! height h under it rising from `smooth_m` to V_min, and the twist rising
-//! from `smooth_m` to `max_twist_m` (below `smooth_m` ground is ordinary:
+//! height h under it rising from `smooth_m` to V_min, the twist rising
+//! from `smooth_m` to `max_twist_m` and the bumps from `smooth_m` to
+//! `max_bump_m` (below `smooth_m` ground is ordinary:
 //! the noise of the measurements, grass, pebbles; without that floor the
 //! vehicle slowed on open fields). A pose where fewer than three
 //! wheels stand on measured ground ends the arc's judgement: unmeasured
@@ -66,8 +70,11 @@ pub struct TerrainConfig {
     pub tyre_patch_m: f64,
     /// Twist at which roughness severity reaches 1, m.
     pub max_twist_m: f64,
-    /// Twist, and heights under the chassis above the wheels' plane, up to
-    /// this are ordinary ground (noise, grass, small stones): no severity, m.
+    /// Bumps under a tyre at which roughness severity reaches 1, m.
+    pub max_bump_m: f64,
+    /// Twist, bumps, and heights under the chassis above the wheels'
+    /// plane up to this are ordinary ground (noise, grass, small stones):
+    /// no severity, m.
     pub smooth_m: f64,
     /// Vote a clear arc loses at severity 1.
     pub penalty: f64,
@@ -86,7 +93,8 @@ impl Default for TerrainConfig {
             caution_deg: 8.0,
             tyre_patch_m: 0.3,
             max_twist_m: 0.4,
-            smooth_m: 0.1,
+            max_bump_m: 0.2,
+            smooth_m: 0.05,
             penalty: 0.5,
             min_speed_fraction: 0.4,
         }
@@ -116,11 +124,17 @@ impl TerrainConfig {
         config::in_range("tyre_patch_m", self.tyre_patch_m, 0.0, 2.0)?;
         config::positive("max_twist_m", self.max_twist_m)?;
         config::non_negative("smooth_m", self.smooth_m)?;
-        if self.smooth_m >= self.max_twist_m.min(vehicle.ground_clearance_m) {
+        config::positive("max_bump_m", self.max_bump_m)?;
+        if self.smooth_m
+            >= self
+                .max_twist_m
+                .min(self.max_bump_m)
+                .min(vehicle.ground_clearance_m)
+        {
             return Err(ConfigError::new(
                 "smooth_m",
                 format!(
-                    "is {} m, must be below max_twist_m and vehicle.ground_clearance_m",
+                    "is {} m, must be below max_twist_m, max_bump_m and vehicle.ground_clearance_m",
                     self.smooth_m
                 ),
             ));
@@ -138,6 +152,9 @@ pub struct Stance {
     pub pitch: f64,
     /// |z_FL + z_RR − z_FR − z_RL|, m.
     pub twist: f64,
+    /// The largest height range under a tyre beyond what the ground's
+    /// slope explains: stones, ruts, m.
+    pub bumps: f64,
     /// Highest 1 − V_trav under the body (004 eq. 6); ≥ 1: the chassis strikes.
     pub belly: f64,
     /// Highest h − smooth_m over V_min − smooth_m under the body: the
@@ -286,9 +303,11 @@ impl TerrainCheck {
         };
         // Each tyre: the k × k cells around the cell corner (k even) or
         // the cell (k odd) nearest its contact point, read as one block.
-        let k = ((self.config.tyre_patch_m / grid.cell_size_m).round() as usize).max(1);
+        // (0.3 / 0.2 is 1.4999… in binary: nudged, it rounds as written.)
+        let k = ((self.config.tyre_patch_m / grid.cell_size_m + 1e-9).round() as usize).max(1);
         let (half, o) = (if k.is_multiple_of(2) { 0.5 } else { 0.0 }, (k / 2) as f64);
         let mut z = [f64::NAN; 4];
+        let mut low = [f64::NAN; 4];
         for (wheel, p) in self.probes.wheels.iter().enumerate() {
             let (u, v) = (
                 u0 + cu * p[0] - su * p[1] + half - o,
@@ -300,8 +319,9 @@ impl TerrainCheck {
             let (u, v) = (u as usize, v as usize);
             for row in grid.cells[v * side..].chunks(side).take(k) {
                 for cell in &row[u..u + k] {
-                    // NaN (unknown) never wins a max.
+                    // NaN (unknown) never wins a max or a min.
                     z[wheel] = z[wheel].max(f64::from(cell[0]));
+                    low[wheel] = low[wheel].min(f64::from(cell[0]));
                 }
             }
         }
@@ -330,6 +350,16 @@ impl TerrainCheck {
         let mean = (fl + fr + rl + rr) / 4.0;
         let slope_x = ((fl + fr) - (rl + rr)) / (2.0 * l);
         let slope_y = ((fl + rl) - (fr + rr)) / (2.0 * t);
+        // Bumps under the tyres: each block's height range less what the
+        // contacts' plane explains over it ((k - 1) cells along each world
+        // axis of its gradient).
+        let gradient =
+            (cos * slope_x - sin * slope_y).abs() + (sin * slope_x + cos * slope_y).abs();
+        let plane_range = (k - 1) as f64 * grid.cell_size_m * gradient;
+        let bumps = (0..4)
+            .filter(|&w| low[w].is_finite())
+            .map(|w| z[w] - low[w] - plane_range)
+            .fold(0.0f64, f64::max);
         let mut belly: f64 = 0.0;
         let mut belly_severity: f64 = 0.0;
         let smooth = self.config.smooth_m;
@@ -353,6 +383,7 @@ impl TerrainCheck {
             roll,
             pitch,
             twist,
+            bumps,
             belly,
             belly_severity,
         })
@@ -372,7 +403,8 @@ impl TerrainCheck {
             severity: near(roll, c.max_roll_deg)
                 .max(near(pitch, c.max_pitch_deg))
                 .max(stance.belly_severity)
-                .max(((stance.twist - c.smooth_m) / (c.max_twist_m - c.smooth_m)).clamp(0.0, 1.0)),
+                .max(((stance.twist - c.smooth_m) / (c.max_twist_m - c.smooth_m)).clamp(0.0, 1.0))
+                .max(((stance.bumps - c.smooth_m) / (c.max_bump_m - c.smooth_m)).clamp(0.0, 1.0)),
         }
     }
 

@@ -817,7 +817,11 @@ impl CellClassifier {
             cell_size,
             min_points: c.min_points,
             max_height_variation: c.max_height_variation_m as f32,
-            max_slope_tan2: c.max_slope_deg.to_radians().tan().powi(2),
+            max_slope_tan2: if c.slope {
+                c.max_slope_deg.to_radians().tan().powi(2)
+            } else {
+                f64::INFINITY
+            },
             max_discontinuity: c.max_discontinuity_m as f32,
             min_plane_variance: c.min_plane_spread_m * c.min_plane_spread_m,
             min_range: config.min_range_m as f32,

@@ -151,6 +151,13 @@ pub struct CellsConfig {
     pub min_points: u32,
     /// (a) A cell whose points span more height than this is untraversable, m.
     pub max_height_variation_m: f64,
+    /// (b) per cell at all. Off by default: what tilts the vehicle is the
+    /// ground under its four wheels, predicted along every arc from the
+    /// local map's elevation layer (`behaviours.obstacle_avoidance.terrain`,
+    /// 004 §IV); judged per 0.6 m window, noise and small bumps on a 15-25°
+    /// hillside push single cells past the limit and they become walls.
+    /// Drop-offs still use `max_slope_deg` for ground falling away.
+    pub slope: bool,
     /// (b) A cell whose fitted plane is steeper than this is untraversable, degrees.
     pub max_slope_deg: f64,
     /// (c) A height gap larger than this to a neighbouring cell is a discontinuity, m.
@@ -172,6 +179,7 @@ impl Default for CellsConfig {
             cell_size_m: 0.2,
             min_points: 5,
             max_height_variation_m: vehicle.tolerated_step_m,
+            slope: false,
             max_slope_deg: vehicle.max_slope_deg,
             max_discontinuity_m: vehicle.tolerated_step_m,
             min_plane_spread_m: 0.03,

@@ -201,6 +201,7 @@ pub fn generate(seed: u64, difficulty: Difficulty) -> WorldSpec {
         holes: vec![],
         ditches,
         banks,
+        rubble: vec![],
         scatter: vec![
             scatter(
                 ScatterKind::Boulder,

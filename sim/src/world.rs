@@ -164,6 +164,19 @@ pub struct BankSpec {
     pub slope_deg: f64,
 }
 
+/// Rubble: a strip of loose stones along a segment, each below a height:
+/// rough ground the vehicle may drive over (when the stones stay under
+/// `vehicle.tolerated_step_m`) but feels.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RubbleSpec {
+    pub from_m: [f64; 2],
+    pub to_m: [f64; 2],
+    pub width_m: f64,
+    /// The tallest stone, m (stones are 50-100 % of it).
+    pub height_m: f64,
+}
+
 /// Kinds of scattered features.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -224,6 +237,8 @@ pub struct WorldSpec {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub banks: Vec<BankSpec>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rubble: Vec<RubbleSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub scatter: Vec<ScatterSpec>,
 }
 
@@ -255,6 +270,7 @@ pub enum FeatureKind {
     Hole,
     Ditch,
     Bank,
+    Rubble,
 }
 
 impl FeatureKind {
@@ -266,6 +282,7 @@ impl FeatureKind {
             FeatureKind::Hole => "hole",
             FeatureKind::Ditch => "ditch",
             FeatureKind::Bank => "bank",
+            FeatureKind::Rubble => "rubble",
         }
     }
 }
@@ -317,6 +334,7 @@ impl Feature {
                         .max(0.0)
                 }
             }
+            FeatureKind::Rubble => self.height * stone(p),
         }
     }
 
@@ -336,6 +354,9 @@ impl Feature {
             FeatureKind::Bank if self.slope_deg > vehicle.max_slope_deg && self.height > step => {
                 Some(format!("bank sides of {:.0}°", self.slope_deg))
             }
+            FeatureKind::Rubble if self.height > step => {
+                Some(format!("rubble of stones up to {:.2} m", self.height))
+            }
             _ => None,
         }
     }
@@ -349,6 +370,41 @@ impl Feature {
             self.a[1].max(self.b[1]) + self.radius,
         ]
     }
+}
+
+/// Rubble's stones at p, as a fraction of the tallest: domes 0.4 m across
+/// on a jittered 0.5 m lattice, each 50-100 % tall (a hash of its lattice
+/// cell, so the same everywhere it is asked).
+fn stone(p: [f64; 2]) -> f64 {
+    const SPACING: f64 = 0.5;
+    const RADIUS: f64 = 0.2;
+    let hash = |i: i64, j: i64, salt: u64| {
+        let mut h = (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            ^ (j as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
+            ^ salt;
+        h ^= h >> 31;
+        h = h.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        h ^= h >> 29;
+        (h >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (ci, cj) = (
+        (p[0] / SPACING).floor() as i64,
+        (p[1] / SPACING).floor() as i64,
+    );
+    let mut best: f64 = 0.0;
+    for i in ci - 1..=ci + 1 {
+        for j in cj - 1..=cj + 1 {
+            let centre = [
+                (i as f64 + 0.25 + 0.5 * hash(i, j, 1)) * SPACING,
+                (j as f64 + 0.25 + 0.5 * hash(i, j, 2)) * SPACING,
+            ];
+            let d = (p[0] - centre[0]).hypot(p[1] - centre[1]) / RADIUS;
+            if d < 1.0 {
+                best = best.max((0.5 + 0.5 * hash(i, j, 3)) * (1.0 - d * d).sqrt());
+            }
+        }
+    }
+    best
 }
 
 /// Distance from p to the segment a–b.
@@ -678,6 +734,23 @@ impl World {
                 b: d.to_m,
                 radius: d.width_m / 2.0,
                 height: -d.depth_m,
+                top_half_width: 0.0,
+                slope_deg: 90.0,
+            });
+        }
+        for r in &spec.rubble {
+            if !(r.width_m > 0.0 && r.height_m > 0.0) {
+                return Err(invalid(format!(
+                    "rubble from {:?}: width_m and height_m must be positive",
+                    r.from_m
+                )));
+            }
+            features.push(Feature {
+                kind: FeatureKind::Rubble,
+                a: r.from_m,
+                b: r.to_m,
+                radius: r.width_m / 2.0,
+                height: r.height_m,
                 top_half_width: 0.0,
                 slope_deg: 90.0,
             });

@@ -103,6 +103,7 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
             (FeatureKind::Bush, _) => [60, 140, 50, 255],
             (FeatureKind::Hole | FeatureKind::Ditch, true) => [40, 60, 120, 255],
             (FeatureKind::Bank, _) => [140, 100, 60, 255],
+            (FeatureKind::Rubble, _) => [150, 130, 110, 255],
             _ => [170, 170, 160, 255],
         };
         let (ax, ay) = to_px(f.a[0], f.a[1]);

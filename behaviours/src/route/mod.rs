@@ -12,7 +12,10 @@
 //!   impassable; ground next to an obstacle (within one cell) costs
 //!   `1 + clearance_cost` times more, within two cells `1 + clearance_cost/4`
 //!   times (the vehicle is wider than a cell: obstacle avoidance decides
-//!   the last metre, the route keeps away from narrow gaps).
+//!   the last metre, the route keeps away from narrow gaps); seen ground
+//!   as rough as stones or ruts costs up to `1 + rough_cost` (four levels
+//!   from the elevation layer's second differences: see
+//!   [`Route::roughness_level`]), so a smooth track beside rubble wins.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
@@ -49,6 +52,13 @@ pub struct RouteConfig {
     pub unseen_cost: f64,
     /// Extra cost of ground next to an obstacle (half a vehicle width away).
     pub clearance_cost: f64,
+    /// Extra cost of the roughest seen ground, relative to smooth ground:
+    /// the planner takes a smooth track beside rubble when both lead there.
+    pub rough_cost: f64,
+    /// Mean |second difference| of the elevation layer's heights in a cell
+    /// at which ground starts to count as rough, and at which it is the
+    /// roughest, m.
+    pub rough_m: [f64; 2],
     /// A waypoint is reached within this distance (unless it has its own), m.
     pub arrival_radius_m: f64,
     /// A waypoint behind the vehicle and within this many arrival radii is passed.
@@ -65,6 +75,8 @@ impl Default for RouteConfig {
             lookahead_m: 8.0,
             unseen_cost: 2.0,
             clearance_cost: 4.0,
+            rough_cost: 4.0,
+            rough_m: [0.04, 0.15],
             arrival_radius_m: 5.0,
             pass_radius_factor: 2.0,
             max_expansions: 200_000,
@@ -75,6 +87,9 @@ impl Default for RouteConfig {
 const UNKNOWN: u8 = 0;
 const FREE: u8 = 1;
 const OBSTACLE: u8 = 2;
+/// Seen free ground of roughness level 1 to [`ROUGH_LEVELS`]: `ROUGH + level - 1`.
+const ROUGH: u8 = 3;
+const ROUGH_LEVELS: u8 = 4;
 
 /// What the route behaviour did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -244,7 +259,11 @@ impl Route {
         let base = match self.state[c] {
             OBSTACLE => return f32::INFINITY,
             FREE => 1.0,
-            _ => self.config.unseen_cost as f32,
+            UNKNOWN => self.config.unseen_cost as f32,
+            rough => {
+                let level = f64::from(rough - ROUGH + 1) / f64::from(ROUGH_LEVELS);
+                (1.0 + self.config.rough_cost * level) as f32
+            }
         };
         let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
         let side = self.side as i64;
@@ -342,13 +361,62 @@ impl Route {
                     if hit {
                         self.set_state(c, OBSTACLE);
                     } else if seen {
-                        self.set_state(c, FREE);
+                        let level = self.roughness_level(map, x, y);
+                        self.set_state(c, if level == 0 { FREE } else { ROUGH + level - 1 });
                     }
                 } else if hit {
                     self.set_state(c, OBSTACLE);
                 }
             }
         }
+    }
+
+    /// How rough the memory cell centred on world (x, y) is, from the map's
+    /// elevation layer: 0 (smooth or unmeasured) to [`ROUGH_LEVELS`]. The
+    /// measure is the mean |second difference| of the layer's heights
+    /// along x and y over the cell (`2·z(i) − z(i−1) − z(i+1)`): a plane
+    /// of any slope has none, stones and ruts smaller than the cell have
+    /// about twice their height. It rises from `rough_m[0]` (level 0) to
+    /// `rough_m[1]` (the top level).
+    fn roughness_level(&self, map: &MapSnapshot, x: f64, y: f64) -> u8 {
+        let grid = &map.elevation;
+        if grid.side < 3 {
+            return 0;
+        }
+        let s = grid.cell_size_m;
+        let half = self.config.cell_m / 2.0;
+        let side = i64::from(grid.side);
+        let (lo_i, hi_i) = (
+            ((x - half) / s).floor() as i64 - grid.origin.0,
+            ((x + half) / s).ceil() as i64 - 1 - grid.origin.0,
+        );
+        let (lo_j, hi_j) = (
+            ((y - half) / s).floor() as i64 - grid.origin.1,
+            ((y + half) / s).ceil() as i64 - 1 - grid.origin.1,
+        );
+        let z = |i: i64, j: i64| grid.cells[(j * side + i) as usize][0];
+        let (mut sum, mut count) = (0.0f32, 0u32);
+        for j in lo_j.max(1)..=hi_j.min(side - 2) {
+            for i in lo_i.max(1)..=hi_i.min(side - 2) {
+                let centre = 2.0 * z(i, j);
+                for d in [
+                    centre - z(i - 1, j) - z(i + 1, j),
+                    centre - z(i, j - 1) - z(i, j + 1),
+                ] {
+                    if d.is_finite() {
+                        sum += d.abs();
+                        count += 1;
+                    }
+                }
+            }
+        }
+        if count < 4 {
+            return 0;
+        }
+        let [smooth, rough] = self.config.rough_m;
+        let severity =
+            ((f64::from(sum / count as f32) - smooth) / (rough - smooth)).clamp(0.0, 1.0);
+        (severity * f64::from(ROUGH_LEVELS)).round() as u8
     }
 
     /// The memory cell to plan to for waypoint (x, y): its own, or where
@@ -490,6 +558,15 @@ impl Plugin for Route {
         config::positive("lookahead_m", c.lookahead_m)?;
         config::in_range("unseen_cost", c.unseen_cost, 1.0, 100.0)?;
         config::in_range("clearance_cost", c.clearance_cost, 0.0, 100.0)?;
+        config::in_range("rough_cost", c.rough_cost, 0.0, 100.0)?;
+        let [smooth, rough] = c.rough_m;
+        config::non_negative("rough_m", smooth)?;
+        if !(rough > smooth && rough.is_finite()) {
+            return Err(ConfigError::new(
+                "rough_m",
+                format!("is [{smooth}, {rough}], the second value must exceed the first"),
+            ));
+        }
         config::positive("arrival_radius_m", c.arrival_radius_m)?;
         config::non_negative("pass_radius_factor", c.pass_radius_factor)?;
         if c.max_expansions == 0 {
