@@ -101,6 +101,8 @@ pub struct MissionReport {
     /// Untraversable cells perception reported, summed over the images,
     /// per reason (a cell with two reasons counts in both).
     pub untraversable_cells: BTreeMap<&'static str, u64>,
+    /// Graded cells (cost below 1) perception reported, summed over the images.
+    pub graded_cells: u64,
     pub collisions: Vec<Collision>,
     /// Smallest gap between the footprint and a true hazard, m.
     pub closest_approach_m: Option<f64>,
@@ -176,7 +178,8 @@ pub struct MissionRun {
     pub image_positions: Vec<[f64; 2]>,
     /// World patches that were ever in the local map (i, j), with the
     /// union of their reasons, and the patch size.
-    pub obstacle_patches: BTreeMap<(i64, i64), Reasons>,
+    /// ... and the highest cost they had (below 1: graded ground).
+    pub obstacle_patches: BTreeMap<(i64, i64), (Reasons, f32)>,
     /// World patches whose ground some image observed during the mission.
     pub seen_patches: BTreeSet<(i64, i64)>,
     pub patch_size_m: f64,
@@ -220,7 +223,7 @@ struct MissionSink<'a> {
     curvature_change: (f64, u64),
     stops: StopStats,
     stopped: bool,
-    patches: BTreeMap<(i64, i64), Reasons>,
+    patches: BTreeMap<(i64, i64), (Reasons, f32)>,
     seen: BTreeSet<(i64, i64)>,
     snapshot: Option<(f64, &'a Path, Utime)>,
     snapshots: Vec<PathBuf>,
@@ -259,10 +262,12 @@ impl Sink for MissionSink<'_> {
         }
         self.stopped = command.is_stop();
         for p in &map.patches {
-            self.patches
+            let (reasons, cost) = self
+                .patches
                 .entry((p.i, p.j))
-                .or_default()
-                .insert(p.reasons);
+                .or_insert((Reasons::NONE, 0.0));
+            reasons.insert(p.reasons);
+            *cost = cost.max(p.cost);
         }
         // The seen ground, for the picture: every 10th decision is enough
         // (the vehicle moves less than the window meanwhile).
@@ -577,6 +582,7 @@ pub fn run_mission(
             .zip(pipeline.perception.totals.by_reason)
             .map(|(&(_, name), count)| (name, u64::from(count)))
             .collect(),
+        graded_cells: u64::from(pipeline.perception.totals.graded),
         collisions: truth.collisions.clone(),
         closest_approach_m: truth
             .closest_approach_m

@@ -91,6 +91,7 @@ pub fn obstacles_to_wire(report: &ObstacleReport) -> obstacle_cells_t {
                 z_max: c.z_max,
                 reasons: c.reasons.bits() as i8,
                 region: c.region as i32,
+                cost: c.cost,
             })
             .collect(),
         num_fov: report.fov.vertices.len() as i32,
@@ -140,6 +141,12 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
         if region as usize >= 1 << 20 {
             return Err(invalid(format!("region {region} is implausibly large")));
         }
+        if !(c.cost.is_finite() && c.cost > 0.0 && c.cost <= 1.0) {
+            return Err(invalid(format!(
+                "cell at ({}, {}) has cost {}: a cell's cost lies in (0, 1]",
+                c.x, c.y, c.cost
+            )));
+        }
         let reasons = Reasons::from_bits(c.reasons as u8);
         if regions.len() <= region as usize {
             regions.resize(
@@ -159,6 +166,7 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
             z_max: c.z_max,
             reasons,
             region,
+            cost: c.cost,
         });
     }
     if msg.fov.iter().flatten().any(|v| !v.is_finite()) {
@@ -378,6 +386,7 @@ pub fn map_to_wire(cycle_utime: Utime, pose: &Pose, map: &MapSnapshot, resets: u
                 z_max: p.z_max,
                 misses: p.misses as i32,
                 sensors: p.sensors as i32,
+                cost: p.cost,
             })
             .collect(),
         cycle_utime,
@@ -442,6 +451,13 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
         patch.reasons = Reasons::from_bits(p.reasons as u8);
         patch.z_min = p.z_min;
         patch.z_max = p.z_max;
+        if !(p.cost.is_finite() && p.cost > 0.0 && p.cost <= 1.0) {
+            return Err(invalid(format!(
+                "patch at ({}, {}) has cost {}: a patch's cost lies in (0, 1]",
+                p.world_x, p.world_y, p.cost
+            )));
+        }
+        patch.cost = p.cost;
         patches.push(patch);
     }
     let side = u32::try_from(msg.seen_side)
@@ -552,6 +568,7 @@ mod tests {
                     z_max: 0.5,
                     reasons: Reasons::SLOPE,
                     region: 0,
+                    cost: 1.0,
                 },
                 ObstacleCell {
                     x: 1.2,
@@ -560,6 +577,7 @@ mod tests {
                     z_max: 0.6,
                     reasons: Reasons::HEIGHT_VARIATION,
                     region: 0,
+                    cost: 1.0,
                 },
                 ObstacleCell {
                     x: 9.0,
@@ -568,6 +586,7 @@ mod tests {
                     z_max: 0.6,
                     reasons: Reasons::DISCONTINUITY,
                     region: 1,
+                    cost: 1.0,
                 },
             ],
             regions: vec![
@@ -602,8 +621,14 @@ mod tests {
             }],
             heights_cell_m: 0.25,
         };
+        let mut report = report;
+        report.cells[2].cost = 0.8;
         let back = obstacles_from_wire(obstacles_to_wire(&report)).unwrap();
         assert_eq!(back.cells, report.cells);
+        let mut bad = obstacles_to_wire(&report);
+        bad.cells[1].cost = 1.5;
+        let error = obstacles_from_wire(bad).unwrap_err().to_string();
+        assert!(error.contains("cost"), "{error}");
         assert_eq!(back.heights, report.heights);
         assert_eq!(back.heights_cell_m, 0.25);
         let mut bad = obstacles_to_wire(&report);
@@ -715,6 +740,7 @@ mod tests {
         far.reasons = Reasons::SLOPE;
         far.z_min = -0.25;
         far.z_max = 0.75;
+        far.cost = 0.625;
         let map = MapSnapshot {
             utime: pose.utime,
             world_from_vehicle: pose.world_from_vehicle,

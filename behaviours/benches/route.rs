@@ -97,6 +97,7 @@ fn main() {
                             z_max: 0.8,
                             reasons: Reasons::HEIGHT_VARIATION,
                             region: 0,
+                            cost: 1.0,
                         })
                     })
                     .collect();

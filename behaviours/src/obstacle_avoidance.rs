@@ -17,6 +17,11 @@
 //! distance order: most arcs are decided by one pass over the widest band.
 //! Map patches are squares, so the footprint is grown by half a patch.
 //!
+//! Graded ground (map patches of cost below 1: perception's graded cells,
+//! e.g. 000's D̃ short of an obstacle) is no collision: a clear arc loses
+//! `terrain.penalty` times the highest cost its footprint crosses, and its
+//! speed falls as for the terrain's severity (see [`crate::terrain`]).
+//!
 //! Ground no image has seen is not free ground (000 §4.2 treats unknown
 //! height as an obstacle). `unseen_ground` sets what it is:
 //! - `slow` (default): each arc's speed is limited so that the vehicle can
@@ -189,6 +194,11 @@ struct Raster {
     /// Map patch index per grid cell that holds one (u32::MAX otherwise).
     causes: Vec<u32>,
     set_cells: Vec<u32>,
+    /// Cells holding graded ground (patches of cost below 1), same layout
+    /// as `bitmap`, and the highest cost per grid cell.
+    graded: Vec<u64>,
+    graded_cost: Vec<f32>,
+    graded_cells: Vec<u32>,
 }
 
 impl Raster {
@@ -211,6 +221,9 @@ impl Raster {
             standing: mask,
             causes: vec![u32::MAX; grid.rows * grid.columns],
             set_cells: Vec::new(),
+            graded: vec![0; words],
+            graded_cost: vec![0.0; grid.rows * grid.columns],
+            graded_cells: Vec::new(),
             mirror,
             grid,
         }
@@ -227,13 +240,31 @@ impl Raster {
             self.causes[cell as usize] = u32::MAX;
         }
         self.set_cells.clear();
+        for &cell in &self.graded_cells {
+            let (row, column) = (
+                cell as usize / self.grid.columns,
+                cell as usize % self.grid.columns,
+            );
+            self.graded[row * self.grid.words_per_row + column / 64] = 0;
+            self.graded_cost[cell as usize] = 0.0;
+        }
+        self.graded_cells.clear();
         for (index, patch) in ctx.map.patches.iter().enumerate() {
             let (x, y) = (self.mirror * f64::from(patch.x), f64::from(patch.y));
             let Some((row, column)) = self.grid.cell(x, y) else {
                 continue;
             };
-            self.bitmap[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
             let cell = row * self.grid.columns + column;
+            if !patch.is_obstacle() {
+                // Graded ground: no collision, a price (highest per cell).
+                self.graded[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
+                if self.graded_cost[cell] == 0.0 {
+                    self.graded_cells.push(cell as u32);
+                }
+                self.graded_cost[cell] = self.graded_cost[cell].max(patch.cost);
+                continue;
+            }
+            self.bitmap[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
             if self.causes[cell] == u32::MAX {
                 self.causes[cell] = index as u32;
                 self.set_cells.push(cell as u32);
@@ -267,6 +298,29 @@ impl Raster {
         let patch = self.causes.get(row * self.grid.columns + column)?;
         let patch = ctx.map.patches.get(*patch as usize)?;
         Some([patch.x, patch.y])
+    }
+}
+
+impl Raster {
+    /// The highest graded cost the band crosses within `reach`, and within
+    /// `near` (the speed horizon).
+    fn graded_crossed(&self, band: &[Entry], reach: f32, near: f32) -> (f32, f32) {
+        let (mut all, mut close) = (0.0f32, 0.0f32);
+        for entry in band.iter().take_while(|e| e.s <= reach) {
+            let mut hits = self.graded[entry.word as usize] & entry.mask;
+            let row = entry.word as usize / self.grid.words_per_row;
+            let base = (entry.word as usize % self.grid.words_per_row) * 64;
+            while hits != 0 {
+                let column = base + hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                let cost = self.graded_cost[row * self.grid.columns + column];
+                all = all.max(cost);
+                if entry.s <= near {
+                    close = close.max(cost);
+                }
+            }
+        }
+        (all, close)
     }
 }
 
@@ -613,10 +667,15 @@ impl Behaviour for ObstacleAvoidance {
                     }
                     None => 0.0,
                 };
-            votes.set(
-                arc,
-                (1.0 - penalty - terrain_penalty * verdict.severity) as f32,
-            );
+            // Graded ground the footprint crosses (perception's graded
+            // cells, e.g. 000's D̃) counts like the terrain's severity.
+            let (crossed, near) =
+                self.ahead
+                    .graded_crossed(&template.bands[0], reach, horizon as f32);
+            self.verdicts[arc].near_severity =
+                self.verdicts[arc].near_severity.max(f64::from(near));
+            let severity = verdict.severity.max(f64::from(crossed));
+            votes.set(arc, (1.0 - penalty - terrain_penalty * severity) as f32);
         }
         if !self.config.speed_vote {
             return;

@@ -306,23 +306,29 @@ impl TerrainCheck {
         // (0.3 / 0.2 is 1.4999… in binary: nudged, it rounds as written.)
         let k = ((self.config.tyre_patch_m / grid.cell_size_m + 1e-9).round() as usize).max(1);
         let (half, o) = (if k.is_multiple_of(2) { 0.5 } else { 0.0 }, (k / 2) as f64);
+        // First pass: each tyre's block, its first cell's grid position and
+        // the mean of its known cells.
+        let mut blocks: [Option<(usize, usize, [f64; 2])>; 4] = [None; 4];
         let mut z = [f64::NAN; 4];
-        let mut low = [f64::NAN; 4];
         for (wheel, p) in self.probes.wheels.iter().enumerate() {
-            let (u, v) = (
-                u0 + cu * p[0] - su * p[1] + half - o,
-                v0 + su * p[0] + cu * p[1] + half - o,
-            );
+            let (fu, fv) = (u0 + cu * p[0] - su * p[1], v0 + su * p[0] + cu * p[1]);
+            let (u, v) = (fu + half - o, fv + half - o);
             if !(u >= 0.0 && v >= 0.0 && u + (k as f64) < limit && v + (k as f64) < limit) {
                 continue;
             }
             let (u, v) = (u as usize, v as usize);
+            let (mut sum, mut count) = (0.0, 0u32);
             for row in grid.cells[v * side..].chunks(side).take(k) {
-                for cell in &row[u..u + k] {
-                    // NaN (unknown) never wins a max or a min.
-                    z[wheel] = z[wheel].max(f64::from(cell[0]));
-                    low[wheel] = low[wheel].min(f64::from(cell[0]));
+                for cell in row[u..u + k].iter().filter(|c| c[0].is_finite()) {
+                    sum += f64::from(cell[0]);
+                    count += 1;
                 }
+            }
+            if count > 0 {
+                z[wheel] = sum / f64::from(count);
+                // The contact point's offset from the block's first cell
+                // centre, in cells.
+                blocks[wheel] = Some((u, v, [fu - u as f64 - 0.5, fv - v as f64 - 0.5]));
             }
         }
         // One wheel on unmeasured ground stands where the plane of the
@@ -341,8 +347,42 @@ impl TerrainCheck {
             }
             (Some(_), Some(_)) => return None,
         }
-        let [fl, fr, rl, rr] = z;
+        // Second pass: the ground's gradient from the block means; each
+        // tyre stands on the highest cell of its block once the gradient
+        // is taken out (on a plane exactly the plane's height at the
+        // contact, with a rock the rock's top), and its bumps are the
+        // range of those detrended heights.
         let (l, t) = (self.probes.wheelbase, self.probes.track);
+        let [fl, fr, rl, rr] = z;
+        let (along, across) = (
+            ((fl + fr) - (rl + rr)) / (2.0 * l),
+            ((fl + rl) - (fr + rr)) / (2.0 * t),
+        );
+        let cell_m = grid.cell_size_m;
+        let (gu, gv) = (
+            (cos * along - sin * across) * cell_m,
+            (sin * along + cos * across) * cell_m,
+        );
+        let mut bumps: f64 = 0.0;
+        for (wheel, block) in blocks.iter().enumerate() {
+            let Some((u, v, [du, dv])) = *block else {
+                continue;
+            };
+            let (mut top, mut low) = (f64::NAN, f64::NAN);
+            for (r, row) in grid.cells[v * side..].chunks(side).take(k).enumerate() {
+                for (c, cell) in row[u..u + k].iter().enumerate() {
+                    // Height at the contact point if the ground were the
+                    // plane through this cell.
+                    let h = f64::from(cell[0]) - gu * (c as f64 - du) - gv * (r as f64 - dv);
+                    // NaN (unknown) never wins a max or a min.
+                    top = top.max(h);
+                    low = low.min(h);
+                }
+            }
+            z[wheel] = top;
+            bumps = bumps.max(top - low);
+        }
+        let [fl, fr, rl, rr] = z;
         let roll = ((fl - fr).abs().max((rl - rr).abs()) / t).atan();
         let pitch = ((fl - rl).abs().max((fr - rr).abs()) / l).atan();
         let twist = (fl + rr - fr - rl).abs();
@@ -350,16 +390,6 @@ impl TerrainCheck {
         let mean = (fl + fr + rl + rr) / 4.0;
         let slope_x = ((fl + fr) - (rl + rr)) / (2.0 * l);
         let slope_y = ((fl + rl) - (fr + rr)) / (2.0 * t);
-        // Bumps under the tyres: each block's height range less what the
-        // contacts' plane explains over it ((k - 1) cells along each world
-        // axis of its gradient).
-        let gradient =
-            (cos * slope_x - sin * slope_y).abs() + (sin * slope_x + cos * slope_y).abs();
-        let plane_range = (k - 1) as f64 * grid.cell_size_m * gradient;
-        let bumps = (0..4)
-            .filter(|&w| low[w].is_finite())
-            .map(|w| z[w] - low[w] - plane_range)
-            .fold(0.0f64, f64::max);
         let mut belly: f64 = 0.0;
         let mut belly_severity: f64 = 0.0;
         let smooth = self.config.smooth_m;

@@ -205,3 +205,58 @@ fn a_thirty_degree_side_slope_forbids_the_arcs_that_cross_it() {
     assert_eq!(votes.vote(straight), Some(1.0));
     assert!(votes.arc_speed(straight).unwrap() >= 2.5 - 1e-9);
 }
+
+/// Graded ground (a patch of cost below 1, e.g. 000's D̃ short of an
+/// obstacle) is no collision: the arc crossing it loses penalty × cost of
+/// its vote and slows; the same patch at cost 1 is an obstacle.
+#[test]
+fn graded_ground_lowers_an_arc_and_its_speed_but_does_not_block_it() {
+    let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
+    let vehicle = VehicleConfig::default();
+    let localmap = LocalMapConfig::default();
+    let setup = Setup {
+        arcs: &arcs,
+        vehicle: &vehicle,
+        localmap: &localmap,
+        statics: None,
+        cruise_mps: 2.5,
+    };
+    let straight = arcs.straight_index();
+    let votes_with = |cost: f32| {
+        let mut oa = ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup);
+        let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+        let mut seen = SeenGround::new(-100, -100, 200);
+        for j in -100..100 {
+            for i in -100..100 {
+                seen.insert(i, j);
+            }
+        }
+        // A patch 2 m ahead of the front bumper (x = 4 m), on the straight arc.
+        let mut patch = arcnav_localmap::Patch::at(15, 0);
+        (patch.x, patch.y, patch.cost) = (6.2, 0.2, cost);
+        let map = MapSnapshot {
+            utime: 0,
+            world_from_vehicle: pose.world_from_vehicle,
+            patch_size_m: 0.4,
+            patches: vec![patch],
+            seen,
+            elevation: ElevationGrid::default(),
+        };
+        let mission = Default::default();
+        let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
+        let mut votes = Votes::new(arcs.len());
+        oa.vote(&ctx, &mut votes);
+        votes
+    };
+    let graded = votes_with(0.8);
+    assert!(!graded.is_vetoed(straight));
+    let vote = graded.vote(straight).unwrap();
+    assert!((vote - (1.0 - 0.5 * 0.8)).abs() < 1e-5, "{vote}");
+    let speed = graded.arc_speed(straight).unwrap();
+    assert!(
+        (speed - 2.5 * (1.0 - 0.6 * 0.8)).abs() < 0.05,
+        "{speed} m/s over graded ground 2 m ahead"
+    );
+    // The same patch as an obstacle forbids the straight arc outright.
+    assert!(votes_with(1.0).is_vetoed(straight));
+}

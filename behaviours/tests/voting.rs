@@ -70,6 +70,7 @@ fn snapshot_seeing_from(cells: &[(f64, f64)], near: f64, reach: f64) -> MapSnaps
                 z_max: 0.6,
                 reasons: Reasons::HEIGHT_VARIATION,
                 region: 0,
+                cost: 1.0,
             })
             .collect(),
         regions: vec![],

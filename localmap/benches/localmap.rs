@@ -45,6 +45,7 @@ fn cells(n: usize) -> Vec<ObstacleCell> {
                 z_max: 0.4,
                 reasons: Reasons::HEIGHT_VARIATION,
                 region: 0,
+                cost: 1.0,
             }
         })
         .collect()

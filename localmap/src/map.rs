@@ -72,11 +72,20 @@ pub struct Patch {
     /// Lowest and highest point of its cells, world z, m.
     pub z_min: f32,
     pub z_max: f32,
+    /// Highest cost of its cells: 1 untraversable, below 1 graded ground
+    /// (see `arcnav_perception::ObstacleCell::cost`).
+    pub cost: f32,
     /// Last report that touched it.
     stamp: u64,
 }
 
 impl Patch {
+    /// Whether the vehicle cannot drive here (cost 1); graded ground
+    /// otherwise.
+    pub fn is_obstacle(&self) -> bool {
+        self.cost >= 1.0
+    }
+
     /// An empty patch at world index (`i`, `j`), to fill in field by field
     /// (a map snapshot rebuilt from a message, a test).
     pub fn at(i: i64, j: i64) -> Self {
@@ -93,6 +102,7 @@ impl Patch {
             sensors: 0,
             z_min: 0.0,
             z_max: 0.0,
+            cost: 1.0,
             stamp: 0,
         }
     }
@@ -392,6 +402,7 @@ impl LocalMap {
                     let patch = &mut self.patches[existing as usize];
                     if (patch.i, patch.j) == (i, j) {
                         patch.reasons.insert(Reasons::STATIC_MAP);
+                        patch.cost = 1.0;
                         continue;
                     }
                     self.remove(existing as usize);
@@ -571,6 +582,7 @@ impl LocalMap {
                     patch.sensors |= sensor_bit;
                     patch.z_min = patch.z_min.min(cell.z_min);
                     patch.z_max = patch.z_max.max(cell.z_max);
+                    patch.cost = patch.cost.max(cell.cost);
                     continue;
                 }
                 // The ring wrapped onto a patch far outside the window.
@@ -600,6 +612,7 @@ impl LocalMap {
                 sensors: sensor_bit,
                 z_min: cell.z_min,
                 z_max: cell.z_max,
+                cost: cell.cost,
                 stamp,
             };
             self.slots[slot] = self.patches.len() as u32;

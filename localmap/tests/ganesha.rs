@@ -34,6 +34,7 @@ fn cell(x: f64, y: f64) -> ObstacleCell {
         z_max: 0.5,
         reasons: Reasons::HEIGHT_VARIATION,
         region: 0,
+        cost: 1.0,
     }
 }
 
@@ -191,6 +192,33 @@ fn a_cell_reported_again_is_kept_and_confirmed() {
         (patches[0].first_seen, patches[0].last_seen),
         (100, 600_000)
     );
+}
+
+/// Graded ground (cells of cost below 1) makes patches that carry their
+/// cost and are no obstacles; an untraversable cell in the same patch makes
+/// it one, and it stays one.
+#[test]
+fn a_patch_carries_the_highest_cost_of_its_cells() {
+    let mut map = map();
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    let fov = rectangle(4.0, 25.0, -8.0, 8.0);
+    let graded = |utime, cost: f32| {
+        let mut r = report(utime, "erim", &[(10.0, 0.0)], fov.clone());
+        r.cells[0].cost = cost;
+        r.cells[0].reasons = Reasons::NONE;
+        r
+    };
+    map.insert(&graded(100, 0.8)).unwrap();
+    let patch = map.snapshot().patches[0];
+    assert_eq!(patch.cost, 0.8);
+    assert!(!patch.is_obstacle());
+    map.insert(&graded(200, 0.9)).unwrap();
+    assert_eq!(map.snapshot().patches[0].cost, 0.9);
+    map.insert(&report(300, "erim", &[(10.0, 0.0)], fov.clone()))
+        .unwrap();
+    map.insert(&graded(400, 0.8)).unwrap();
+    let patch = map.snapshot().patches[0];
+    assert!(patch.is_obstacle() && patch.reasons.contains(Reasons::HEIGHT_VARIATION));
 }
 
 #[test]

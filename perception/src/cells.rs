@@ -1108,6 +1108,7 @@ impl CellClassifier {
                 z_max: cell.z_max + origin.z as f32,
                 reasons,
                 region,
+                cost: 1.0,
             });
         }
     }

@@ -90,7 +90,10 @@ impl Reasons {
     }
 }
 
-/// One untraversable cell, world frame.
+/// One cell perception has an opinion on, world frame: untraversable
+/// (`cost` 1, with its reasons) or graded ground (`cost` below 1, no
+/// reasons: passable at a price, from evaluators that grade, e.g.
+/// `height_diff`'s D̃).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObstacleCell {
     /// Cell centre, world frame, m.
@@ -102,6 +105,15 @@ pub struct ObstacleCell {
     pub reasons: Reasons,
     /// Index into [`ObstacleReport::regions`].
     pub region: u32,
+    /// In [0, 1]: 1 untraversable, below it how hard the ground is.
+    pub cost: f32,
+}
+
+impl ObstacleCell {
+    /// Whether the vehicle cannot drive here (cost 1).
+    pub fn is_obstacle(&self) -> bool {
+        self.cost >= 1.0
+    }
 }
 
 /// A connected group of untraversable cells of one image.
@@ -162,6 +174,8 @@ pub struct ImageStats {
     pub outside_grid: u32,
     /// Cells holding at least one point.
     pub cells_evaluated: u32,
+    /// Cells reported as graded ground (cost below 1).
+    pub graded: u32,
     /// Cells classified untraversable.
     pub untraversable: u32,
     /// Untraversable cells per reason, in [`Reasons::ALL`] order (a cell
@@ -185,6 +199,7 @@ impl ImageStats {
         add(&mut self.outside_grid, other.outside_grid);
         add(&mut self.cells_evaluated, other.cells_evaluated);
         add(&mut self.untraversable, other.untraversable);
+        add(&mut self.graded, other.graded);
         for (a, b) in self.by_reason.iter_mut().zip(other.by_reason) {
             add(a, b);
         }

@@ -208,6 +208,9 @@ impl Projector {
 pub(crate) struct Marked {
     pub index: u32,
     pub reasons: Reasons,
+    /// 1: untraversable; below: graded ground (no reasons), see
+    /// [`ObstacleCell::cost`].
+    pub cost: f32,
     /// Level-frame heights of the cell, m.
     pub z_min: f32,
     pub z_max: f32,
@@ -238,6 +241,7 @@ pub(crate) fn emit(
             let m = marked[k];
             let last = &mut marked[merged - 1];
             last.reasons.insert(m.reasons);
+            last.cost = last.cost.max(m.cost);
             last.z_min = last.z_min.min(m.z_min);
             last.z_max = last.z_max.max(m.z_max);
         } else {
@@ -246,7 +250,7 @@ pub(crate) fn emit(
         }
     }
     let marked = &marked[..merged];
-    for m in marked {
+    for m in marked.iter().filter(|m| m.cost >= 1.0) {
         labels[m.index as usize] = MARKED;
     }
     let s = grid.cols as isize;
@@ -254,7 +258,7 @@ pub(crate) fn emit(
     queue.clear();
     let regions = &mut report.regions;
     regions.clear();
-    for m in marked {
+    for m in marked.iter().filter(|m| m.cost >= 1.0) {
         if labels[m.index as usize] != MARKED {
             continue;
         }
@@ -278,11 +282,26 @@ pub(crate) fn emit(
             }
         }
     }
+    // Graded ground (cost below 1) is no obstacle: one region of its own,
+    // after the untraversable ones, with no reasons.
+    let graded_region = regions.len() as u32;
+    if marked.iter().any(|m| m.cost < 1.0) {
+        regions.push(Region {
+            cells: 0,
+            reasons: Reasons::NONE,
+        });
+    }
     let (sin, cos) = arcnav_vehicle::frames::yaw_of(world_from_level).sin_cos();
     let origin = world_from_level.translation.vector;
     for m in marked {
-        let region = labels[m.index as usize];
-        labels[m.index as usize] = UNLABELLED;
+        let region = if m.cost >= 1.0 {
+            let region = labels[m.index as usize];
+            labels[m.index as usize] = UNLABELLED;
+            region
+        } else {
+            regions[graded_region as usize].cells += 1;
+            graded_region
+        };
         regions[region as usize].reasons.insert(m.reasons);
         let [cx, cy] = grid.centre(cell, m.index as usize).map(f64::from);
         report.cells.push(ObstacleCell {
@@ -292,7 +311,12 @@ pub(crate) fn emit(
             z_max: m.z_max + origin.z as f32,
             reasons: m.reasons,
             region,
+            cost: m.cost.min(1.0),
         });
+        if m.cost < 1.0 {
+            stats.graded += 1;
+            continue;
+        }
         stats.untraversable += 1;
         for (count, (reason, _)) in stats.by_reason.iter_mut().zip(Reasons::ALL) {
             *count += u32::from(m.reasons.contains(reason));
@@ -379,6 +403,7 @@ impl SeenGround {
                 marked.push(Marked {
                     index: index as u32,
                     reasons: Reasons::DROP_OFF,
+                    cost: 1.0,
                     z_min: c.z_min - z0,
                     z_max: c.z_max - z0,
                 });

@@ -31,7 +31,9 @@
 //!    averaged locally: `D_D = max{D̃, Σ_{P(x,y)} D̃ / |P|}` (the disc P of
 //!    the robot radius is taken as the square of the same area).
 //!
-//! What the report carries: the cells with `D̃ ≥ 1` (`obstacle_cost`) or
+//! What the report carries: graded ground, the cells with
+//! `graded_from ≤ D̃ / obstacle_cost < 1`, with that cost; and, untraversable,
+//! the cells with `D̃ ≥ 1` (`obstacle_cost`) or
 //! an absolute obstacle, reason `height difference`, and the drop-offs, footprint and
 //! shadows every evaluator reports ([`crate::grid::SeenGround`]). The
 //! inflation and averaging of `D_D` are for planners that treat the
@@ -88,6 +90,9 @@ pub struct HeightDiffConfig {
     /// A cell whose D̃ reaches this is untraversable (000 §5.1: 1, which the
     /// caps let no single scale reach alone), besides absolute obstacles.
     pub obstacle_cost: f64,
+    /// Cells with D̃ of at least this fraction of `obstacle_cost` are
+    /// reported as graded ground with cost D̃ / obstacle_cost (0: none).
+    pub graded_from: f64,
     /// Absolute obstacles are inflated by this radius in the drivability
     /// map D_D, m (default: half the vehicle's width).
     pub robot_radius_m: f64,
@@ -106,6 +111,7 @@ impl Default for HeightDiffConfig {
             weights: [5.0, 2.5, 3.5],
             cap: 0.5,
             obstacle_cost: 1.0,
+            graded_from: 0.75,
             robot_radius_m: VehicleConfig::default().width_m / 2.0,
         }
     }
@@ -135,6 +141,7 @@ impl HeightDiffConfig {
         }
         config::in_range(&key("cap"), self.cap, 0.01, 1.0)?;
         config::positive(&key("obstacle_cost"), self.obstacle_cost)?;
+        config::in_range(&key("graded_from"), self.graded_from, 0.0, 1.0)?;
         config::non_negative(&key("robot_radius_m"), self.robot_radius_m)?;
         // An absolute obstacle at the finest scale is a step of 1/λ_1.
         let step = 1.0 / self.weights[0];
@@ -802,11 +809,20 @@ impl TerrainEvaluator for HeightDiff {
                 continue;
             }
             stats.cells_evaluated += 1;
-            if maps.absolute[i] || maps.cost[i] >= self.config.obstacle_cost as f32 {
+            let obstacle = self.config.obstacle_cost as f32;
+            let graded = self.config.graded_from as f32 * obstacle;
+            let cost = maps.cost[i];
+            if maps.absolute[i] || cost >= obstacle || (graded > 0.0 && cost >= graded) {
                 let low = self.lowest[i];
+                let untraversable = maps.absolute[i] || cost >= obstacle;
                 self.out.marked.push(Marked {
                     index: i as u32,
-                    reasons: Reasons::HEIGHT_DIFFERENCE,
+                    reasons: if untraversable {
+                        Reasons::HEIGHT_DIFFERENCE
+                    } else {
+                        Reasons::NONE
+                    },
+                    cost: if untraversable { 1.0 } else { cost / obstacle },
                     z_min: if low.is_finite() { low } else { h },
                     z_max: h,
                 });

@@ -450,6 +450,7 @@ impl HierarchicalPca {
                     self.out.marked.push(Marked {
                         index: (y * cols + x) as u32,
                         reasons,
+                        cost: 1.0,
                         z_min: c.z_min,
                         z_max: c.z_max,
                     });

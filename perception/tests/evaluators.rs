@@ -152,6 +152,62 @@ fn a_step_shows_in_d1_and_the_cost_follows_000() {
 }
 
 #[test]
+fn a_step_short_of_an_obstacle_is_reported_as_graded_ground_with_its_cost() {
+    // 7 cm: D̃ = 0.35 + 0.175 + 0.245 = 0.77, below 1 and above
+    // graded_from (0.75): graded ground of cost D̃, no reasons. 12 cm: cost 1.
+    for (step, graded) in [(0.07, true), (0.12, false)] {
+        let image = noisy(
+            render(
+                &SensorModel::lidar64(),
+                move |x, _| {
+                    if x > 8.05 { step } else { 0.0 }
+                },
+            ),
+            0.005,
+        );
+        let (report, stats) = evaluate(&mut height_diff(), &image);
+        let edge: Vec<_> = report
+            .cells
+            .iter()
+            .filter(|c| (7.7..8.4).contains(&c.x) && c.y.abs() < 3.0)
+            .collect();
+        assert!(
+            edge.len() > 20,
+            "{step} m: {} cells on the edge",
+            edge.len()
+        );
+        if graded {
+            let costs: Vec<f32> = edge.iter().map(|c| c.cost).collect();
+            assert!(
+                edge.iter()
+                    .all(|c| !c.is_obstacle() && c.reasons.is_empty()),
+                "{step} m: {edge:?}"
+            );
+            let top = costs.iter().copied().fold(0.0, f32::max);
+            assert!((0.75..0.95).contains(&top), "{step} m: costs {costs:?}");
+            assert!(
+                stats.graded as usize >= edge.len() && stats.untraversable == 0,
+                "{stats:?}"
+            );
+            // Their region carries no reason: graded ground is no obstacle.
+            let region = report.regions[edge[0].region as usize];
+            assert!(region.reasons.is_empty(), "{region:?}");
+        } else {
+            assert!(
+                edge.iter().any(|c| c.is_obstacle() && c.cost == 1.0),
+                "{step} m"
+            );
+        }
+        let flat = report
+            .cells
+            .iter()
+            .filter(|c| c.x < 7.0 && c.x > 3.0)
+            .count();
+        assert_eq!(flat, 0, "{step} m: cells on the flat before it");
+    }
+}
+
+#[test]
 fn a_long_10_degree_incline_shows_in_d6_but_not_in_d1() {
     let slope = 10f64.to_radians().tan();
     let image = noisy(

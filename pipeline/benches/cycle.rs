@@ -41,6 +41,7 @@ fn map() -> MapSnapshot {
                 z_max: 0.5,
                 reasons: Reasons::HEIGHT_VARIATION,
                 region: 0,
+                cost: 1.0,
             });
         }
         let report = ObstacleReport {

@@ -183,7 +183,11 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         .iter()
         .map(|(reason, n)| format!("{reason} {n}"))
         .collect();
-    println!("cells         untraversable: {}", cells.join(", "));
+    println!(
+        "cells         untraversable: {}; graded {}",
+        cells.join(", "),
+        r.graded_cells
+    );
     println!("collisions    {}", r.collisions.len());
     for c in &r.collisions {
         println!(

@@ -124,9 +124,9 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
     }
     // What the local map held: the paper's "obstacle regions shown as black
     // dots", drop-offs in their own colour.
-    for (&(i, j), &reasons) in &run.obstacle_patches {
+    for (&(i, j), &(reasons, cost)) in &run.obstacle_patches {
         let (x, y) = to_px(i as f64 * s, (j + 1) as f64 * s);
-        canvas.fill_rect(x, y, side, side, patch_color(reasons, 200));
+        canvas.fill_rect(x, y, side, side, patch_color(reasons, cost, 200));
     }
     // The path, coloured by speed.
     let top = run.track.iter().map(|p| p.speed_mps).fold(0.5, f64::max);
@@ -197,7 +197,7 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         50.0,
         14.0,
         BLACK,
-        &format!("black: cells in the local map · orange: drop-offs · light: ground seen · white: images · circles: waypoints ({} reached) · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
+        &format!("black: cells in the local map · orange: drop-offs · purple: graded ground · light: ground seen · white: images · circles: waypoints ({} reached) · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
     );
     canvas.save(path)
 }
@@ -208,8 +208,17 @@ const SEEN: [u8; 4] = [255, 255, 255, 90];
 const UNSEEN: [u8; 4] = [200, 200, 205, 255];
 
 /// A map patch's colour: orange when a drop-off, black otherwise.
-fn patch_color(reasons: Reasons, alpha: u8) -> [u8; 4] {
-    if reasons.contains(Reasons::DROP_OFF) {
+/// A map patch's colour: drop-offs orange, other obstacles black, graded
+/// ground (cost below 1) purple, the more opaque the costlier.
+fn patch_color(reasons: Reasons, cost: f32, alpha: u8) -> [u8; 4] {
+    if cost < 1.0 {
+        [
+            130,
+            40,
+            150,
+            (f32::from(alpha) * cost.clamp(0.2, 1.0)) as u8,
+        ]
+    } else if reasons.contains(Reasons::DROP_OFF) {
         [235, 120, 20, alpha]
     } else {
         [20, 20, 20, alpha]
@@ -266,14 +275,14 @@ pub fn snapshot_picture(
     // Map patches, drop-offs in their own colour.
     for p in &map.patches {
         let (x, y) = to_px(p.x + s / 2.0, p.y + s / 2.0);
-        canvas.fill_rect(x, y, s * ppm, s * ppm, patch_color(p.reasons, 255));
+        canvas.fill_rect(x, y, s * ppm, s * ppm, patch_color(p.reasons, p.cost, 255));
     }
     canvas.text(
         6.0,
         map_h as f32 - 8.0,
         12.0,
         [60, 60, 60, 255],
-        "grey: ground not seen · black: cells · orange: drop-offs",
+        "grey: ground not seen · black: cells · orange: drop-offs · purple: graded ground (by cost)",
     );
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);

@@ -119,6 +119,9 @@ pub struct Route {
     /// The waypoint being planned to and its memory cell.
     goal: Option<(usize, usize)>,
     hits: Vec<u32>,
+    /// Per cell: the stamp of the cycle a graded patch lay in it, and the
+    /// highest roughness level of those patches.
+    graded: Vec<(u32, u8)>,
     stamp: u32,
     changed: Vec<usize>,
     path: Vec<usize>,
@@ -143,6 +146,7 @@ impl Route {
             planner: DStarLite::new(side, 1.0),
             goal: None,
             hits: vec![0; n],
+            graded: vec![(0, 0); n],
             stamp: 0,
             changed: Vec::new(),
             path: Vec::new(),
@@ -168,8 +172,10 @@ impl Route {
     /// Bytes the memory and the planner hold.
     pub fn memory_bytes(&self) -> usize {
         let n = self.side * self.side;
-        // state, costs, hits; the planner's g, rhs, queued key, marks.
-        n * (1 + 4 + 4) + n * (4 + 4 + 12 + 4) + self.path.capacity() * 8
+        // state, costs, hits, graded; the planner's g, rhs, queued key, marks.
+        n * (1 + 4 + 4 + std::mem::size_of::<(u32, u8)>())
+            + n * (4 + 4 + 12 + 4)
+            + self.path.capacity() * 8
     }
 
     /// Memory cell of world point (x, y), if inside.
@@ -316,13 +322,25 @@ impl Route {
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
             self.hits.fill(0);
+            self.graded.fill((0, 0));
             self.stamp = 1;
         }
         let s = map.patch_size_m;
         for patch in &map.patches {
             let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
             if let Some(c) = self.cell_at(x, y) {
-                self.hits[c] = self.stamp;
+                if patch.is_obstacle() {
+                    self.hits[c] = self.stamp;
+                } else {
+                    // Graded ground: rough, as costly as its cost says.
+                    let level = (f64::from(patch.cost) * f64::from(ROUGH_LEVELS)).round() as u8;
+                    let graded = &mut self.graded[c];
+                    *graded = if graded.0 == self.stamp {
+                        (self.stamp, graded.1.max(level))
+                    } else {
+                        (self.stamp, level)
+                    };
+                }
             }
         }
         let t = map.world_from_vehicle.translation.vector;
@@ -361,7 +379,9 @@ impl Route {
                     if hit {
                         self.set_state(c, OBSTACLE);
                     } else if seen {
-                        let level = self.roughness_level(map, x, y);
+                        let graded = self.graded[c];
+                        let graded = if graded.0 == self.stamp { graded.1 } else { 0 };
+                        let level = self.roughness_level(map, x, y).max(graded);
                         self.set_state(c, if level == 0 { FREE } else { ROUGH + level - 1 });
                     }
                 } else if hit {

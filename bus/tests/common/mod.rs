@@ -49,6 +49,7 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
                 z_max: (1.0 + i as f64) as f32,
                 reasons: [1, 2, 4][i],
                 region: (i / 2) as i32,
+                cost: 1.0,
             })
             .collect(),
         num_fov: 4,
@@ -87,6 +88,7 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
                 z_max: 1.25 + i as f32,
                 misses: i as i32,
                 sensors: 1,
+                cost: 1.0,
             })
             .collect(),
         cycle_utime: 1_700_000_001_020_000,
@@ -298,6 +300,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                             z_max: rng.f32(),
                             reasons: rng.next_u64() as i8,
                             region: rng.next_u64() as i32,
+                            cost: 1.0,
                         })
                         .collect(),
                     num_fov: f as i32,
@@ -350,6 +353,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                             z_max: rng.f32(),
                             misses: rng.next_u64() as i32,
                             sensors: rng.next_u64() as i32,
+                            cost: 1.0,
                         })
                         .collect(),
                     cycle_utime: rng.next_u64() as i64,
