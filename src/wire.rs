@@ -405,6 +405,14 @@ pub fn map_to_wire(cycle_utime: Utime, pose: &Pose, map: &MapSnapshot, resets: u
     }
 }
 
+/// Empties a map message's elevation square (for receivers that do not
+/// use it: the rest of the message is a tenth of its size).
+pub fn drop_elevation(msg: &mut local_map_t) {
+    msg.elevation_side = 0;
+    msg.num_elevation = 0;
+    msg.elevation.clear();
+}
+
 /// A cycle's map from the wire. Patch indices come back from the world
 /// centres (exact doubles), not from the `float` patch size.
 pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {

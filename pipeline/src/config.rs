@@ -96,6 +96,12 @@ pub struct LiveConfig {
     /// them with their weight in `[arbiter.weights]` (and waits for them
     /// like any other), and `arcnav run` publishes LOCAL_MAP for them.
     pub external_behaviours: Vec<String>,
+    /// The LOCAL_MAP `arcnav run` publishes for external behaviours
+    /// carries the elevation layer (004 §III) too: some 0.4 MB a cycle
+    /// with the default layer, more than a script decodes ten times a
+    /// second. Off: its elevation square is empty. (`arcnav node localmap`
+    /// always sends it: the built-in behaviours judge attitude on it.)
+    pub external_elevation: bool,
 }
 
 impl Default for LiveConfig {
@@ -110,6 +116,7 @@ impl Default for LiveConfig {
             queue_capacity: 1024,
             perception_busy_poll: false,
             external_behaviours: Vec::new(),
+            external_elevation: false,
         }
     }
 }

@@ -213,6 +213,7 @@ pub fn run(
                 .then(|| Duration::from_secs_f64(config.arbiter.vote_timeout_s)),
             awaiting: None,
             map_out: (!live.external_behaviours.is_empty()).then(|| lcm.publisher()),
+            map_elevation: live.external_elevation,
         };
         let arbiter_tx = arbiter_tx.clone();
         let period = live.status_period_s;
@@ -283,6 +284,8 @@ struct Voter {
     awaiting: Option<Utime>,
     /// Publishes each cycle's LOCAL_MAP for behaviours in other processes.
     map_out: Option<Publisher>,
+    /// ... with the elevation layer (`live.external_elevation`).
+    map_elevation: bool,
 }
 
 impl Voter {
@@ -314,7 +317,10 @@ impl Voter {
                     }
                     let _ = arbiter.send(ToArbiter::Votes { votes, images: cycle.images });
                     if let Some(out) = &self.map_out {
-                        let msg = wire::map_to_wire(cycle.utime, &cycle.pose, &cycle.map, cycle.resets);
+                        let mut msg = wire::map_to_wire(cycle.utime, &cycle.pose, &cycle.map, cycle.resets);
+                        if !self.map_elevation {
+                            wire::drop_elevation(&mut msg);
+                        }
                         if let Err(e) = out.publish_message(channels::LOCAL_MAP, &msg) {
                             tracing::error!(%e, "cannot publish the local map");
                         }
