@@ -126,6 +126,12 @@ fn a_thirty_centimetre_rock_under_one_wheel_rolls_the_vehicle_by_the_track() {
 }
 
 fn votes_on(elevation: ElevationGrid) -> Votes {
+    oa_votes(elevation, Vec::new())
+}
+
+/// Obstacle avoidance's votes from the origin heading +x, at rest, on a
+/// map that saw everything and holds `patches` and `elevation`.
+fn oa_votes(elevation: ElevationGrid, patches: Vec<arcnav_localmap::Patch>) -> Votes {
     let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
     let vehicle = VehicleConfig::default();
     let localmap = LocalMapConfig::default();
@@ -148,7 +154,7 @@ fn votes_on(elevation: ElevationGrid) -> Votes {
         utime: 0,
         world_from_vehicle: pose.world_from_vehicle,
         patch_size_m: 0.4,
-        patches: Vec::new(),
+        patches,
         seen,
         elevation,
     };
@@ -211,42 +217,14 @@ fn a_thirty_degree_side_slope_forbids_the_arcs_that_cross_it() {
 /// its vote and slows; the same patch at cost 1 is an obstacle.
 #[test]
 fn graded_ground_lowers_an_arc_and_its_speed_but_does_not_block_it() {
-    let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
-    let vehicle = VehicleConfig::default();
-    let localmap = LocalMapConfig::default();
-    let setup = Setup {
-        arcs: &arcs,
-        vehicle: &vehicle,
-        localmap: &localmap,
-        statics: None,
-        cruise_mps: 2.5,
-    };
-    let straight = arcs.straight_index();
+    let straight = ArcSet::new(&ArcSetConfig::default())
+        .unwrap()
+        .straight_index();
+    // A patch 2 m ahead of the front bumper (x = 4 m), on the straight arc.
     let votes_with = |cost: f32| {
-        let mut oa = ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup);
-        let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
-        let mut seen = SeenGround::new(-100, -100, 200);
-        for j in -100..100 {
-            for i in -100..100 {
-                seen.insert(i, j);
-            }
-        }
-        // A patch 2 m ahead of the front bumper (x = 4 m), on the straight arc.
         let mut patch = arcnav_localmap::Patch::at(15, 0);
         (patch.x, patch.y, patch.cost) = (6.2, 0.2, cost);
-        let map = MapSnapshot {
-            utime: 0,
-            world_from_vehicle: pose.world_from_vehicle,
-            patch_size_m: 0.4,
-            patches: vec![patch],
-            seen,
-            elevation: ElevationGrid::default(),
-        };
-        let mission = Default::default();
-        let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
-        let mut votes = Votes::new(arcs.len());
-        oa.vote(&ctx, &mut votes);
-        votes
+        oa_votes(ElevationGrid::default(), vec![patch])
     };
     let graded = votes_with(0.8);
     assert!(!graded.is_vetoed(straight));
