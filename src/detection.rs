@@ -255,7 +255,12 @@ pub fn run(
             for k in 0..options.frames {
                 noisy_frame(&clean, options, u64::from(k), &mut frame);
                 evaluator.evaluate(&frame, &Isometry::identity(), &mut report)?;
-                let distances = report.cells.iter().map(|c| outside(&scene, c.x, c.y));
+                // Obstacles only: graded ground is driven over.
+                let distances = report
+                    .cells
+                    .iter()
+                    .filter(|c| c.is_obstacle())
+                    .map(|c| outside(&scene, c.x, c.y));
                 let (mut near, mut away) = (false, false);
                 for d in distances {
                     near |= d <= options.margin_m;

@@ -348,7 +348,12 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                             c.y,
                             msg.cell_size,
                             [c.z_min, c.z_max],
-                            [0.85, 0.15, 0.1, 0.8],
+                            // Obstacles red, graded ground purple by cost.
+                            if c.cost >= 1.0 {
+                                [0.85, 0.15, 0.1, 0.8]
+                            } else {
+                                [0.5, 0.15, 0.6, 0.2 + 0.6 * f64::from(c.cost)]
+                            },
                         )
                     })
                     .collect();

@@ -274,7 +274,11 @@ pub fn snapshot_picture(
     }
     // Map patches, drop-offs in their own colour.
     // (Only those on the map panel: the window reaches further behind.)
-    for p in map.patches.iter().filter(|p| p.x > -x_behind && p.y.abs() < half) {
+    for p in map
+        .patches
+        .iter()
+        .filter(|p| p.x > -x_behind && p.y.abs() < half)
+    {
         let (x, y) = to_px(p.x + s / 2.0, p.y + s / 2.0);
         canvas.fill_rect(x, y, s * ppm, s * ppm, patch_color(p.reasons, p.cost, 255));
     }
