@@ -500,7 +500,7 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
             patch_size_m: size,
             patches,
             seen,
-            elevation,
+            elevation: std::sync::Arc::new(elevation),
         },
         resets: u64::try_from(msg.resets).unwrap_or(0),
     })
@@ -761,12 +761,12 @@ mod tests {
                 seen.insert(0, 77);
                 seen
             },
-            elevation: ElevationGrid {
+            elevation: std::sync::Arc::new(ElevationGrid {
                 cell_size_m: 0.25,
                 origin: (-5, 9),
                 side: 2,
                 cells: vec![[1.0, 0.01], [f32::NAN; 2], [2.5, 0.5], [-1.0, 0.25]],
-            },
+            }),
         };
         let back = map_from_wire(&map_to_wire(1_020, &pose, &map, 2)).unwrap();
         assert_eq!(back.cycle_utime, 1_020);

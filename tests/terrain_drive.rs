@@ -96,3 +96,43 @@ fn rubble_is_crossed_slower_and_a_smooth_track_beside_it_is_taken() {
         run.report.ride
     );
 }
+
+/// 018's "as before": the 20 generated moderate worlds (seeds 0-19) are all
+/// completed without a collision with the terrain checks on (and per-cell
+/// slope off), two at a time.
+#[test]
+fn twenty_generated_moderate_worlds_are_completed() {
+    let next = std::sync::atomic::AtomicU64::new(0);
+    let failures = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..2 {
+            scope.spawn(|| {
+                loop {
+                    let seed = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if seed >= 20 {
+                        break;
+                    }
+                    let spec = arcnav_sim::generate(seed, arcnav_sim::Difficulty::Moderate);
+                    let world = Arc::new(World::build(spec, "generated world", None).unwrap());
+                    let run = run_mission(
+                        &Config::default(),
+                        &Registry::builtin(),
+                        world,
+                        &MissionOptions::default(),
+                        &mut |_| {},
+                    )
+                    .unwrap();
+                    let r = &run.report;
+                    if r.outcome != Outcome::Completed || !r.collisions.is_empty() {
+                        failures.lock().unwrap().push(format!(
+                            "seed {seed}: {:?}, collisions {:?}",
+                            r.outcome, r.collisions
+                        ));
+                    }
+                }
+            });
+        }
+    });
+    let failures = failures.into_inner().unwrap();
+    assert!(failures.is_empty(), "{failures:#?}");
+}

@@ -156,7 +156,7 @@ fn oa_votes(elevation: ElevationGrid, patches: Vec<arcnav_localmap::Patch>) -> V
         patch_size_m: 0.4,
         patches,
         seen,
-        elevation,
+        elevation: std::sync::Arc::new(elevation),
     };
     let mission = Default::default();
     let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);

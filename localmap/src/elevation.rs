@@ -95,7 +95,7 @@ const NOBODY: Slot = Slot {
 };
 
 /// The elevation layer.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct ElevationLayer {
     config: ElevationConfig,
     /// Cells reached to each side of the centre.
@@ -106,6 +106,26 @@ pub struct ElevationLayer {
     /// World cell of the vehicle.
     centre: (i64, i64),
     stats: ElevationStats,
+    /// Bumped by every change; the last snapshot and the version it shows
+    /// (a cycle without a new image or a new centre cell shares it).
+    version: u64,
+    cache: std::sync::Mutex<(u64, std::sync::Arc<ElevationGrid>)>,
+}
+
+impl Clone for ElevationLayer {
+    fn clone(&self) -> Self {
+        Self {
+            config: self.config.clone(),
+            reach: self.reach,
+            mask: self.mask,
+            side: self.side,
+            slots: self.slots.clone(),
+            centre: self.centre,
+            stats: self.stats,
+            version: self.version + 1,
+            cache: std::sync::Mutex::default(),
+        }
+    }
 }
 
 impl ElevationLayer {
@@ -122,6 +142,8 @@ impl ElevationLayer {
             slots: vec![NOBODY; side * side],
             centre: (0, 0),
             stats: ElevationStats::default(),
+            version: 1,
+            cache: std::sync::Mutex::default(),
         }
     }
 
@@ -151,12 +173,17 @@ impl ElevationLayer {
 
     /// Moves the square's centre to the vehicle at world (x, y).
     pub fn recentre(&mut self, x: f64, y: f64) {
-        self.centre = self.cell_of(x, y);
+        let centre = self.cell_of(x, y);
+        if centre != self.centre {
+            self.centre = centre;
+            self.version += 1;
+        }
     }
 
     /// Forgets every cell.
     pub fn clear(&mut self) {
         self.slots.fill(NOBODY);
+        self.version += 1;
     }
 
     fn in_square(&self, (i, j): (i64, i64)) -> bool {
@@ -171,6 +198,9 @@ impl ElevationLayer {
     /// `sample_cell_m`.
     pub fn insert(&mut self, samples: &[HeightSample], sample_cell_m: f64) {
         let same = (sample_cell_m - self.config.cell_size_m).abs() < 1e-6;
+        if !samples.is_empty() {
+            self.version += 1;
+        }
         let q = (self.config.process_noise_m * self.config.process_noise_m) as f32;
         let gate = (self.config.mahalanobis * self.config.mahalanobis) as f32;
         for s in samples {
@@ -229,8 +259,18 @@ impl ElevationLayer {
         ((slot.i, slot.j) == cell).then_some((slot.mean, slot.variance))
     }
 
-    /// The known cells of the square around the vehicle, as a dense grid.
-    pub fn snapshot(&self) -> ElevationGrid {
+    /// The known cells of the square around the vehicle, as a dense grid,
+    /// shared until the layer changes (a new image, a new centre cell).
+    pub fn snapshot(&self) -> std::sync::Arc<ElevationGrid> {
+        let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        if cache.0 != self.version {
+            *cache = (self.version, std::sync::Arc::new(self.grid()));
+        }
+        cache.1.clone()
+    }
+
+    /// [`ElevationLayer::snapshot`], built afresh.
+    fn grid(&self) -> ElevationGrid {
         let side = (2 * self.reach + 1) as usize;
         let (i0, j0) = (self.centre.0 - self.reach, self.centre.1 - self.reach);
         let mut cells = Vec::with_capacity(side * side);

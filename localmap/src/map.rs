@@ -273,8 +273,9 @@ pub struct MapSnapshot {
     pub patches: Vec<Patch>,
     /// The ground observed around the vehicle (the window's square).
     pub seen: SeenGround,
-    /// The elevation layer around the vehicle (004 §III), world-aligned.
-    pub elevation: ElevationGrid,
+    /// The elevation layer around the vehicle (004 §III), world-aligned
+    /// (shared between snapshots while the layer does not change).
+    pub elevation: Arc<ElevationGrid>,
 }
 
 impl MapSnapshot {
