@@ -166,18 +166,35 @@ fn assert_threaded_gives_lockstep(perception_busy_poll: bool) {
     let _serial = serial();
     let mut config = config(SensorPreset::Erim, true);
     config.live.perception_busy_poll = perception_busy_poll;
+    // The feed's end is the test's, not the vehicle's: its last poses stay
+    // fresh while the run decides the cycles still in its queues.
+    config.live.pose_timeout_s = 3.0;
     let log = sim_log(SensorPreset::Erim);
     let expected = lockstep(&log, &config);
     let (tap, taken) = crossbeam_channel::unbounded::<Decided>();
     let run = InProcess::start(&config, Registry::builtin(), Some(tap)).unwrap();
-    // Four times real time: perception still delivers long before the
-    // modelled 0.3 s latency.
-    feed(&log, 4.0, |channel, data| {
+    // Twice real time: perception still delivers long before the modelled
+    // 0.3 s latency. (At four times, since 018's heavier cycles, the
+    // behaviours thread's wait for each cycle's command now and then stalls
+    // a wall second near the feed's end, and the last cycles were decided
+    // after it: stops on a stale pose, or none before the run was stopped.)
+    feed(&log, 2.0, |channel, data| {
         run.publisher().publish(channel, data).unwrap()
     });
-    std::thread::sleep(Duration::from_millis(300));
+    // Stopped once the last cycle is decided on its votes (watchdog stops
+    // carry the newest pose's time), or after 3 s.
+    let last_cycle = SIM_EPOCH_US + ((LOG_S - 0.1) * 1e6) as Utime;
+    let deadline = Instant::now() + Duration::from_secs(3);
+    let mut decided: Vec<Decided> = Vec::new();
+    while let Ok(d) = taken.recv_deadline(deadline) {
+        let done = matches!(d.why, Why::Complete) && d.command.utime >= last_cycle;
+        decided.push(d);
+        if done {
+            break;
+        }
+    }
     let report = run.stop().unwrap();
-    let decided: Vec<Decided> = taken.try_iter().collect();
+    decided.extend(taken.try_iter());
     let live: BTreeMap<Utime, SteeringCommand> = decided
         .iter()
         .filter(|d| matches!(d.why, Why::Complete))

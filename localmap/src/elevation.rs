@@ -173,11 +173,11 @@ impl ElevationLayer {
 
     /// Moves the square's centre to the vehicle at world (x, y).
     pub fn recentre(&mut self, x: f64, y: f64) {
-        let centre = self.cell_of(x, y);
-        if centre != self.centre {
-            self.centre = centre;
-            self.version += 1;
-        }
+        // The snapshot is not rebuilt for a new centre alone: its cells are
+        // world-aligned, so it stays right, and its square (a cell wider
+        // than the window each way) lags by at most what the vehicle
+        // drives between two images.
+        self.centre = self.cell_of(x, y);
     }
 
     /// Forgets every cell.
