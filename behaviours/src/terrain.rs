@@ -461,9 +461,10 @@ impl TerrainCheck {
                     cos * c - sin * si,
                     sin * c + cos * si,
                 ];
-                // The chassis spans the wheelbase, so ground under it is
-                // checked at every other pose (at least twice as it passes).
-                let belly = index.is_multiple_of(2) || index + 1 == poses.len();
+                // The chassis spans 2.1 m between the axles, so ground under
+                // it is checked every third pose (1.5 m): each point passes
+                // under one of its rows (0.42 m apart) at least once.
+                let belly = index.is_multiple_of(3) || index + 1 == poses.len();
                 let Some(stance) = self.stance_with(grid, pose, belly) else {
                     break;
                 };
