@@ -12,15 +12,7 @@ use arcnav_testkit::workspace_root;
 
 fn drive(world: &str) -> MissionRun {
     let path = workspace_root().join("tests/worlds").join(world);
-    let world = Arc::new(World::load(&path).unwrap());
-    let run = run_mission(
-        &Config::default(),
-        &Registry::builtin(),
-        world,
-        &MissionOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let run = run(World::load(&path).unwrap());
     let r = &run.report;
     assert_eq!(
         r.outcome,
@@ -30,6 +22,18 @@ fn drive(world: &str) -> MissionRun {
     );
     assert!(r.collisions.is_empty(), "{:#?}", r.collisions);
     run
+}
+
+/// The mission on `world` with the default configuration.
+fn run(world: World) -> MissionRun {
+    run_mission(
+        &Config::default(),
+        &Registry::builtin(),
+        Arc::new(world),
+        &MissionOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap()
 }
 
 /// Mean speed of the track points whose position satisfies `within`.
@@ -113,15 +117,7 @@ fn twenty_generated_moderate_worlds_are_completed() {
                         break;
                     }
                     let spec = arcnav_sim::generate(seed, arcnav_sim::Difficulty::Moderate);
-                    let world = Arc::new(World::build(spec, "generated world", None).unwrap());
-                    let run = run_mission(
-                        &Config::default(),
-                        &Registry::builtin(),
-                        world,
-                        &MissionOptions::default(),
-                        &mut |_| {},
-                    )
-                    .unwrap();
+                    let run = run(World::build(spec, "generated world", None).unwrap());
                     let r = &run.report;
                     if r.outcome != Outcome::Completed || !r.collisions.is_empty() {
                         failures.lock().unwrap().push(format!(

@@ -306,6 +306,9 @@ impl Raster {
     /// `near` (the speed horizon).
     fn graded_crossed(&self, band: &[Entry], reach: f32, near: f32) -> (f32, f32) {
         let (mut all, mut close) = (0.0f32, 0.0f32);
+        if self.graded_cells.is_empty() {
+            return (all, close);
+        }
         for entry in band.iter().take_while(|e| e.s <= reach) {
             let mut hits = self.graded[entry.word as usize] & entry.mask;
             let row = entry.word as usize / self.grid.words_per_row;

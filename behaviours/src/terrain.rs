@@ -194,6 +194,15 @@ struct Probes {
     clearance: f64,
 }
 
+/// The slopes along and across the vehicle of the mean plane of its four
+/// contact heights (FL, FR, RL, RR) on a `wheelbase` × `track` rectangle.
+fn contact_slopes([fl, fr, rl, rr]: [f64; 4], wheelbase: f64, track: f64) -> (f64, f64) {
+    (
+        ((fl + fr) - (rl + rr)) / (2.0 * wheelbase),
+        ((fl + rl) - (fr + rr)) / (2.0 * track),
+    )
+}
+
 /// Predicts stances along arcs.
 #[derive(Debug, Clone)]
 pub struct TerrainCheck {
@@ -277,9 +286,8 @@ impl TerrainCheck {
         &self,
         grid: &ElevationGrid,
         world_from_pose: [f64; 4],
-        belly: bool,
+        check_belly: bool,
     ) -> Option<Stance> {
-        let check_belly = belly;
         let [tx, ty, cos, sin] = world_from_pose;
         // The pose in the grid's cell coordinates: a point (px, py) of the
         // pose's frame lies in cell (u, v) = (u0 + cu·px - su·py,
@@ -353,11 +361,7 @@ impl TerrainCheck {
         // contact, with a rock the rock's top), and its bumps are the
         // range of those detrended heights.
         let (l, t) = (self.probes.wheelbase, self.probes.track);
-        let [fl, fr, rl, rr] = z;
-        let (along, across) = (
-            ((fl + fr) - (rl + rr)) / (2.0 * l),
-            ((fl + rl) - (fr + rr)) / (2.0 * t),
-        );
+        let (along, across) = contact_slopes(z, l, t);
         let cell_m = grid.cell_size_m;
         let (gu, gv) = (
             (cos * along - sin * across) * cell_m,
@@ -388,8 +392,7 @@ impl TerrainCheck {
         let twist = (fl + rr - fr - rl).abs();
         // The mean plane of the four contacts, in the pose's frame.
         let mean = (fl + fr + rl + rr) / 4.0;
-        let slope_x = ((fl + fr) - (rl + rr)) / (2.0 * l);
-        let slope_y = ((fl + rl) - (fr + rr)) / (2.0 * t);
+        let (slope_x, slope_y) = contact_slopes(z, l, t);
         let mut belly: f64 = 0.0;
         let mut belly_severity: f64 = 0.0;
         let smooth = self.config.smooth_m;

@@ -803,14 +803,14 @@ impl TerrainEvaluator for HeightDiff {
         }
         self.build_maps(&[image], world_from_vehicle, &mut stats)?;
         let maps = &self.maps;
+        let obstacle = self.config.obstacle_cost as f32;
+        let graded = self.config.graded_from as f32 * obstacle;
         for i in 0..maps.filled.len() {
             let h = maps.filled[i];
             if h.is_nan() {
                 continue;
             }
             stats.cells_evaluated += 1;
-            let obstacle = self.config.obstacle_cost as f32;
-            let graded = self.config.graded_from as f32 * obstacle;
             let cost = maps.cost[i];
             if maps.absolute[i] || cost >= obstacle || (graded > 0.0 && cost >= graded) {
                 let low = self.lowest[i];
