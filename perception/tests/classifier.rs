@@ -47,8 +47,12 @@ unsafe impl GlobalAlloc for CountingAllocator {
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
+/// 002's classifier as the paper has it: criterion (b), per-cell slope,
+/// on (off by default since attitude is predicted along the arcs, 018).
 fn classifier() -> Box<dyn TerrainEvaluator> {
-    PerceptionConfig::default().build_evaluator().unwrap()
+    let mut config = PerceptionConfig::default();
+    config.cells.slope = true;
+    config.build_evaluator().unwrap()
 }
 
 /// Renders `height` with `sensor` from `pose` and classifies the image.
@@ -254,6 +258,7 @@ fn a_cell_with_4_points_is_never_classified_by_slope_or_height_variation() {
 fn flat_ground_seen_from_a_pitched_and_rolled_vehicle_is_still_flat() {
     // A strict classifier: 5° of apparent slope would be flagged.
     let mut config = PerceptionConfig::default();
+    config.cells.slope = true;
     config.cells.max_slope_deg = 5.0;
     let mut evaluator = config.build_evaluator().unwrap();
     let pose = isometry_from_xyz_rpy([0.0, 0.0, 0.0], 5f64.to_radians(), 10f64.to_radians(), 0.0);

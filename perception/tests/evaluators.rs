@@ -522,7 +522,14 @@ fn every_built_in_evaluator_is_built_by_name_and_reports_the_same_kind_of_report
             .filter(|c| (9.6..11.4).contains(&c.x) && c.y.abs() < 0.9)
             .count();
         assert!(on_rock > 3, "{name}: {on_rock} cells on a 60 cm rock");
-        assert_eq!(stats.untraversable as usize, report.cells.len(), "{name}");
+        // Every cell is counted: obstacles as untraversable, the rest graded.
+        let obstacles = report.cells.iter().filter(|c| c.is_obstacle()).count();
+        assert_eq!(stats.untraversable as usize, obstacles, "{name}");
+        assert_eq!(
+            stats.graded as usize,
+            report.cells.len() - obstacles,
+            "{name}"
+        );
         assert!(
             report
                 .cells
