@@ -75,12 +75,17 @@ def samples(arcnav):
         c.z_max = 1.0 + i
         c.reasons = [1, 2, 4][i]
         c.region = i // 2
+        c.cost = 1.0
         m.cells.append(c)
     m.num_fov = 4
     m.fov = [[0.0, 0.0], [10.0, -5.0], [20.0, 0.0], [10.0, 5.0]]
     m.shadow_origin = [-1.5, 2.25]
     m.num_shadows = 2
     m.shadows = [[0.25, 0.0625, 6.5, 9.0], [-3.0, 0.001953125, 12.0, 12.5]]
+    m.heights_cell = 0.2
+    m.num_heights = 2
+    m.height_cells = [[500, -253], [-1, 7]]
+    m.heights = [[1.25, 0.0004], [-0.5, 0.015625]]
     out["obstacle_cells_t"] = m
 
     m = arcnav.waypoints_t()
@@ -111,6 +116,7 @@ def samples(arcnav):
         p.z_max = 1.25 + i
         p.misses = i
         p.sensors = 1
+        p.cost = 1.0
         m.patches.append(p)
     m.cycle_utime = 1_700_000_001_020_000
     m.velocity = [2.5, -0.5, 0.0]
@@ -120,6 +126,12 @@ def samples(arcnav):
     m.seen_side = 9
     m.num_seen_words = 2
     m.seen = [0x0123_4567_89AB_CDEF, -5]
+    m.elevation_cell = 0.2
+    m.elevation_origin = [-120, 40]
+    m.elevation_side = 2
+    m.num_elevation = 4
+    nan = float("nan")
+    m.elevation = [[1.5, 0.0025], [nan, nan], [-0.25, 0.5], [2.0, 0.125]]
     out["local_map_t"] = m
     return out
 
