@@ -15,17 +15,20 @@ fn arcnav(args: &[&str]) -> (i32, String, String) {
     )
 }
 
-fn temp_file(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("arcnav-cli-config-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
+/// `text` written to `name` in a directory removed when the guard drops.
+fn temp_file(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::Builder::new()
+        .prefix("arcnav-cli-config-")
+        .tempdir()
+        .unwrap();
+    let path = dir.path().join(name);
     std::fs::write(&path, text).unwrap();
-    path
+    (dir, path)
 }
 
 #[test]
 fn config_prints_defaults_merged_with_the_file() {
-    let file = temp_file("narrow.toml", "[vehicle]\nwidth_m = 2.0\n");
+    let (_dir, file) = temp_file("narrow.toml", "[vehicle]\nwidth_m = 2.0\n");
     let (code, stdout, _) = arcnav(&["config", file.to_str().unwrap()]);
     assert_eq!(code, 0);
     let printed: arcnav::Config = toml::from_str(&stdout).expect("output is TOML");
@@ -46,7 +49,7 @@ fn config_check_accepts_the_shipped_defaults() {
 
 #[test]
 fn config_check_names_the_bad_key_and_fails() {
-    let file = temp_file("bad.toml", "[arcs]\ncount = 40\n");
+    let (_dir, file) = temp_file("bad.toml", "[arcs]\ncount = 40\n");
     let (code, stdout, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
     assert_eq!(code, 1);
     assert!(stdout.is_empty());
@@ -63,24 +66,30 @@ fn config_check_without_a_file_is_a_usage_error() {
     assert!(stderr.contains("<FILE>"), "{stderr}");
 }
 
-/// A configuration naming `key` as its group key, in its own directory.
-fn keyed_config(tag: &str, key: Option<(&str, u32)>, extra: &str) -> (PathBuf, PathBuf) {
+/// A configuration naming `key` as its group key, in its own directory
+/// (removed when the guard drops).
+fn keyed_config(
+    tag: &str,
+    key: Option<(&str, u32)>,
+    extra: &str,
+) -> (tempfile::TempDir, PathBuf, PathBuf) {
     use std::os::unix::fs::PermissionsExt;
-    let dir = std::env::temp_dir().join(format!("arcnav-cli-key-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let key_path = dir.join("group.key");
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("arcnav-cli-key-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let key_path = dir.path().join("group.key");
     if let Some((text, mode)) = key {
         std::fs::write(&key_path, text).unwrap();
         std::fs::set_permissions(&key_path, std::fs::Permissions::from_mode(mode)).unwrap();
     }
-    let config = dir.join("vehicle.toml");
+    let config = dir.path().join("vehicle.toml");
     std::fs::write(
         &config,
         format!("[bus.auth]\nkey_file = \"group.key\"\n{extra}"),
     )
     .unwrap();
-    (config, key_path)
+    (dir, config, key_path)
 }
 
 const GOOD_KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff\n";
@@ -97,7 +106,7 @@ fn live_commands_refuse_a_key_they_cannot_use_and_name_the_file() {
         ("not-hex", Some(("arcnav\n", 0o600)), "not a hex digit"),
     ];
     for (tag, key, expect) in cases {
-        let (config, key_path) = keyed_config(tag, key, "");
+        let (_dir, config, key_path) = keyed_config(tag, key, "");
         let config = config.to_str().unwrap();
         for command in [
             &["run"][..],
@@ -124,7 +133,7 @@ fn live_commands_refuse_a_key_they_cannot_use_and_name_the_file() {
 /// through, and says how to fix them.
 #[test]
 fn the_vehicle_bridge_refuses_to_follow_unsigned_commands_or_itself() {
-    let (config, _) = keyed_config(
+    let (_dir, config, _) = keyed_config(
         "uncovered",
         Some((GOOD_KEY, 0o600)),
         "channels = [\"ARC_VOTES_.*\"]\n",
