@@ -155,11 +155,101 @@ pub struct Stance {
     /// The largest height range under a tyre beyond what the ground's
     /// slope explains: stones, ruts, m.
     pub bumps: f64,
-    /// Highest 1 − V_trav under the body (004 eq. 6); ≥ 1: the chassis strikes.
+    /// Highest 1 − V_trav under the body (004 eq. 6) of the heights above
+    /// `smooth_m` (lower ones are ordinary ground: 0); ≥ 1: the chassis
+    /// strikes.
     pub belly: f64,
     /// Highest h − smooth_m over V_min − smooth_m under the body: the
     /// chassis's share of the severity.
     pub belly_severity: f64,
+}
+
+/// A stance as the hot path computes it: roll and pitch as tangents, so
+/// that no pose below the caution band pays for an arctangent.
+#[derive(Debug, Clone, Copy)]
+struct RawStance {
+    roll_tan: f64,
+    pitch_tan: f64,
+    twist: f64,
+    bumps: f64,
+    belly: f64,
+    belly_severity: f64,
+}
+
+impl RawStance {
+    fn stance(&self) -> Stance {
+        Stance {
+            roll: self.roll_tan.atan(),
+            pitch: self.pitch_tan.atan(),
+            twist: self.twist,
+            bumps: self.bumps,
+            belly: self.belly,
+            belly_severity: self.belly_severity,
+        }
+    }
+}
+
+impl From<&Stance> for RawStance {
+    fn from(s: &Stance) -> Self {
+        Self {
+            roll_tan: s.roll.tan(),
+            pitch_tan: s.pitch.tan(),
+            twist: s.twist,
+            bumps: s.bumps,
+            belly: s.belly,
+            belly_severity: s.belly_severity,
+        }
+    }
+}
+
+/// Roll and pitch limits as tangents: where the caution band starts and
+/// where a pose is forbidden.
+#[derive(Debug, Clone, Copy)]
+struct TanLimits {
+    roll_caution: f64,
+    roll_max: f64,
+    pitch_caution: f64,
+    pitch_max: f64,
+}
+
+impl TanLimits {
+    fn new(c: &TerrainConfig) -> Self {
+        // Below zero degrees the band starts at once (any tangent exceeds it).
+        let tan = |deg: f64| {
+            if deg <= 0.0 {
+                f64::NEG_INFINITY
+            } else {
+                deg.to_radians().tan()
+            }
+        };
+        Self {
+            roll_caution: tan(c.max_roll_deg - c.caution_deg),
+            roll_max: tan(c.max_roll_deg),
+            pitch_caution: tan(c.max_pitch_deg - c.caution_deg),
+            pitch_max: tan(c.max_pitch_deg),
+        }
+    }
+}
+
+/// Each tyre's block of cells on a layer of one cell size: k × k cells,
+/// centred on the nearest cell corner (k even) or cell (k odd).
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    k: usize,
+    /// Added to a contact's cell coordinate to reach the block's first cell.
+    shift: f64,
+}
+
+impl Block {
+    fn new(tyre_patch_m: f64, cell_size_m: f64) -> Self {
+        // (0.3 / 0.2 is 1.4999… in binary: nudged, it rounds as written.)
+        let k = ((tyre_patch_m / cell_size_m + 1e-9).round() as usize).max(1);
+        let half = if k.is_multiple_of(2) { 0.5 } else { 0.0 };
+        Self {
+            k,
+            shift: half - (k / 2) as f64,
+        }
+    }
 }
 
 /// What a stance means for driving there.
@@ -211,6 +301,7 @@ pub struct TerrainCheck {
     /// Per arc: the poses judged (x, y, cos, sin in the vehicle frame) and
     /// their distances.
     poses: Vec<Vec<(f64, [f64; 4])>>,
+    limits: TanLimits,
 }
 
 impl TerrainCheck {
@@ -266,6 +357,7 @@ impl TerrainCheck {
                 clearance: vehicle.ground_clearance_m,
             },
             poses,
+            limits: TanLimits::new(config),
         }
     }
 
@@ -277,17 +369,20 @@ impl TerrainCheck {
     /// of its yaw in the world), if at least three wheels stand on
     /// measured ground.
     pub fn stance(&self, grid: &ElevationGrid, world_from_pose: [f64; 4]) -> Option<Stance> {
-        self.stance_with(grid, world_from_pose, true)
+        let block = Block::new(self.config.tyre_patch_m, grid.cell_size_m);
+        self.stance_with(grid, block, world_from_pose, true)
+            .map(|raw| raw.stance())
     }
 
-    /// [`TerrainCheck::stance`]; the ground under the chassis only when
-    /// `belly` (0 otherwise).
+    /// [`TerrainCheck::stance`] with tangents; the ground under the
+    /// chassis only when `check_belly` (0 otherwise).
     fn stance_with(
         &self,
         grid: &ElevationGrid,
+        block: Block,
         world_from_pose: [f64; 4],
         check_belly: bool,
-    ) -> Option<Stance> {
+    ) -> Option<RawStance> {
         let [tx, ty, cos, sin] = world_from_pose;
         // The pose in the grid's cell coordinates: a point (px, py) of the
         // pose's frame lies in cell (u, v) = (u0 + cu·px - su·py,
@@ -311,29 +406,28 @@ impl TerrainCheck {
         };
         // Each tyre: the k × k cells around the cell corner (k even) or
         // the cell (k odd) nearest its contact point, read as one block.
-        // (0.3 / 0.2 is 1.4999… in binary: nudged, it rounds as written.)
-        let k = ((self.config.tyre_patch_m / grid.cell_size_m + 1e-9).round() as usize).max(1);
-        let (half, o) = (if k.is_multiple_of(2) { 0.5 } else { 0.0 }, (k / 2) as f64);
+        let k = block.k;
         // First pass: each tyre's block, its first cell's grid position and
         // the mean of its known cells.
         let mut blocks: [Option<(usize, usize, [f64; 2])>; 4] = [None; 4];
         let mut z = [f64::NAN; 4];
         for (wheel, p) in self.probes.wheels.iter().enumerate() {
             let (fu, fv) = (u0 + cu * p[0] - su * p[1], v0 + su * p[0] + cu * p[1]);
-            let (u, v) = (fu + half - o, fv + half - o);
+            let (u, v) = (fu + block.shift, fv + block.shift);
             if !(u >= 0.0 && v >= 0.0 && u + (k as f64) < limit && v + (k as f64) < limit) {
                 continue;
             }
             let (u, v) = (u as usize, v as usize);
-            let (mut sum, mut count) = (0.0, 0u32);
-            for row in grid.cells[v * side..].chunks(side).take(k) {
-                for cell in row[u..u + k].iter().filter(|c| c[0].is_finite()) {
-                    sum += f64::from(cell[0]);
+            let (mut sum, mut count) = (0.0f32, 0u32);
+            for r in 0..k {
+                let row = &grid.cells[(v + r) * side + u..][..k];
+                for cell in row.iter().filter(|c| c[0].is_finite()) {
+                    sum += cell[0];
                     count += 1;
                 }
             }
             if count > 0 {
-                z[wheel] = sum / f64::from(count);
+                z[wheel] = f64::from(sum) / f64::from(count);
                 // The contact point's offset from the block's first cell
                 // centre, in cells.
                 blocks[wheel] = Some((u, v, [fu - u as f64 - 0.5, fv - v as f64 - 0.5]));
@@ -373,22 +467,27 @@ impl TerrainCheck {
                 continue;
             };
             let (mut top, mut low) = (f64::NAN, f64::NAN);
-            for (r, row) in grid.cells[v * side..].chunks(side).take(k).enumerate() {
-                for (c, cell) in row[u..u + k].iter().enumerate() {
-                    // Height at the contact point if the ground were the
-                    // plane through this cell.
-                    let h = f64::from(cell[0]) - gu * (c as f64 - du) - gv * (r as f64 - dv);
+            // Height at the contact point if the ground were the plane
+            // through a cell: its height + gu·du + gv·dv − gu·c − gv·r.
+            let mut row_offset = gu * du + gv * dv;
+            for r in 0..k {
+                let row = &grid.cells[(v + r) * side + u..][..k];
+                let mut offset = row_offset;
+                for cell in row {
+                    let h = f64::from(cell[0]) + offset;
                     // NaN (unknown) never wins a max or a min.
                     top = top.max(h);
                     low = low.min(h);
+                    offset -= gu;
                 }
+                row_offset -= gv;
             }
             z[wheel] = top;
             bumps = bumps.max(top - low);
         }
         let [fl, fr, rl, rr] = z;
-        let roll = ((fl - fr).abs().max((rl - rr).abs()) / t).atan();
-        let pitch = ((fl - rl).abs().max((fr - rr).abs()) / l).atan();
+        let roll_tan = (fl - fr).abs().max((rl - rr).abs()) / t;
+        let pitch_tan = (fl - rl).abs().max((fr - rr).abs()) / l;
         let twist = (fl + rr - fr - rl).abs();
         // The mean plane of the four contacts, in the pose's frame.
         let mean = (fl + fr + rl + rr) / 4.0;
@@ -403,6 +502,10 @@ impl TerrainCheck {
             };
             let ground = mean + slope_x * (p[0] - l / 2.0) + slope_y * p[1];
             let h = f64::from(height) - ground;
+            if h <= smooth {
+                // Ordinary ground: no cost, and nothing to compute.
+                continue;
+            }
             // 004 eqs. 5 and 6.
             let v_min = self.probes.clearance + f64::from(variance).sqrt();
             belly = belly.max(if h >= v_min {
@@ -412,9 +515,9 @@ impl TerrainCheck {
             });
             belly_severity = belly_severity.max(((h - smooth) / (v_min - smooth)).clamp(0.0, 1.0));
         }
-        Some(Stance {
-            roll,
-            pitch,
+        Some(RawStance {
+            roll_tan,
+            pitch_tan,
             twist,
             bumps,
             belly,
@@ -424,17 +527,33 @@ impl TerrainCheck {
 
     /// Whether `stance` is forbidden, and its severity otherwise.
     pub fn judge(&self, stance: &Stance) -> Judgement {
-        let c = &self.config;
-        let (roll, pitch) = (stance.roll.to_degrees(), stance.pitch.to_degrees());
-        if roll > c.max_roll_deg || pitch > c.max_pitch_deg || stance.belly >= 1.0 {
+        self.judge_raw(&RawStance::from(stance))
+    }
+
+    /// [`TerrainCheck::judge`] on tangents: an arctangent only within the
+    /// caution band.
+    fn judge_raw(&self, stance: &RawStance) -> Judgement {
+        let (c, limits) = (&self.config, &self.limits);
+        if stance.roll_tan > limits.roll_max
+            || stance.pitch_tan > limits.pitch_max
+            || stance.belly >= 1.0
+        {
             return Judgement::Forbidden;
         }
-        let near = |value: f64, limit: f64| {
-            ((value - (limit - c.caution_deg)) / c.caution_deg).clamp(0.0, 1.0)
+        // 0 at limit − caution, 1 at the limit, in degrees.
+        let near = |tan: f64, caution_tan: f64, limit: f64| {
+            if tan <= caution_tan {
+                return 0.0;
+            }
+            ((tan.atan().to_degrees() - (limit - c.caution_deg)) / c.caution_deg).clamp(0.0, 1.0)
         };
         Judgement::Passable {
-            severity: near(roll, c.max_roll_deg)
-                .max(near(pitch, c.max_pitch_deg))
+            severity: near(stance.roll_tan, limits.roll_caution, c.max_roll_deg)
+                .max(near(
+                    stance.pitch_tan,
+                    limits.pitch_caution,
+                    c.max_pitch_deg,
+                ))
                 .max(stance.belly_severity)
                 .max(((stance.twist - c.smooth_m) / (c.max_twist_m - c.smooth_m)).clamp(0.0, 1.0))
                 .max(((stance.bumps - c.smooth_m) / (c.max_bump_m - c.smooth_m)).clamp(0.0, 1.0)),
@@ -456,6 +575,10 @@ impl TerrainCheck {
         }
         let t = world_from_vehicle.translation.vector;
         let (sin, cos) = yaw_of(world_from_vehicle).sin_cos();
+        let block = Block::new(self.config.tyre_patch_m, grid.cell_size_m);
+        // Every arc's first pose is the vehicle's own (`Arc::sample` starts
+        // at 0): judged once for all of them.
+        let here = self.stance_with(grid, block, [t.x, t.y, cos, sin], true);
         for (verdict, poses) in out.iter_mut().zip(&self.poses) {
             for (index, &(s, [x, y, c, si])) in poses.iter().enumerate() {
                 let pose = [
@@ -468,10 +591,15 @@ impl TerrainCheck {
                 // it is checked every third pose (1.5 m): each point passes
                 // under one of its rows (0.42 m apart) at least once.
                 let belly = index.is_multiple_of(3) || index + 1 == poses.len();
-                let Some(stance) = self.stance_with(grid, pose, belly) else {
+                let stance = if index == 0 {
+                    here
+                } else {
+                    self.stance_with(grid, block, pose, belly)
+                };
+                let Some(stance) = stance else {
                     break;
                 };
-                match self.judge(&stance) {
+                match self.judge_raw(&stance) {
                     Judgement::Forbidden => {
                         let centre = [
                             (x + c * self.probes.wheelbase / 2.0) as f32,
