@@ -465,7 +465,15 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     ),
                     None => println!("# effective configuration: the defaults"),
                 }
-                print!("{}", config.to_toml());
+                let look = config.lookahead();
+                if look.moved_m > 0.0 {
+                    println!(
+                        "# [lookahead]: at {} m/s a clear arc allows cruise {:.1} m along, so the \
+                         distances that look ahead are {:.1} m farther than configured",
+                        config.arbiter.cruise_speed_mps, look.needed_m, look.moved_m
+                    );
+                }
+                print!("{}", config.effective().to_toml());
             }
             Ok(ExitCode::SUCCESS)
         }

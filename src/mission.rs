@@ -132,6 +132,9 @@ pub struct MissionReport {
     /// [`crate::speed_bound`]), and the average speed as a fraction of it.
     pub speed_bound: SpeedBound,
     pub speed_fraction_of_bound: f64,
+    /// Seconds driving, by the limit that set the speed (cruise, vehicle,
+    /// speed vote, lateral, weak vote, reverse): what held the average down.
+    pub speed_limited_by_s: BTreeMap<&'static str, f64>,
 }
 
 /// The moment of the closest approach.
@@ -333,7 +336,7 @@ pub fn run_mission(
             let mut rendered = sensor.clone();
             rendered.max_range_m = sensor
                 .max_range_m
-                .min(config.perception.max_range_m + config.sim.render_margin_m);
+                .min(config.lookahead().max_range_m + config.sim.render_margin_m);
             rendered
         })
         .collect();
@@ -613,6 +616,7 @@ pub fn run_mission(
         },
         speed_fraction_of_bound: average_speed / bound.bound_mps.max(1e-9),
         speed_bound: bound,
+        speed_limited_by_s: arbiter.moving.seconds().into_iter().collect(),
     };
     sink.log.finish()?;
     Ok(MissionRun {

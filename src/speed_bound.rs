@@ -8,7 +8,8 @@
 //!   vertically at range `R`, so a step of height `h` is certain to be hit
 //!   by a beam only within `R_res = h / δθ`. Nothing beyond the sensor's
 //!   reach or the local map's window ahead reaches the behaviours either:
-//!   `R = min(R_res, max_range_m, localmap.ahead_m)`. The free distance is
+//!   `R = min(R_res, max_range_m, localmap.ahead_m)` (the window as
+//!   `[lookahead]` sets it for the cruise speed). The free distance is
 //!   `D = R − (front bumper − sensor)`, the range being the sensor's.
 //! - **Reaction time.** A step may become resolvable just after an image
 //!   began: `T = 1/rate + pipeline.perception_latency_s +
@@ -90,7 +91,7 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
     let (range, limited_by) = [
         (resolved, "resolution"),
         (sensor.max_range_m, "sensor range"),
-        (config.localmap.ahead_m, "map window"),
+        (config.lookahead().map_ahead_m, "map window"),
     ]
     .into_iter()
     .fold(

@@ -157,8 +157,65 @@ impl StopTime {
     }
 }
 
-/// Picks the [`StopTime`] counter a stop feeds.
-type StopCounter = fn(&mut StopTime) -> &mut u64;
+/// Time spent driving, by the limit that set the speed, µs: from each
+/// command to the next decision. Tells what holds a mission's average
+/// down (002 §7's question: what limits the speed).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SpeedTime {
+    /// `arbiter.cruise_speed_mps`.
+    pub cruise_us: u64,
+    /// `vehicle.max_speed_mps`.
+    pub vehicle_us: u64,
+    /// A behaviour's speed vote (stopping distance, unseen ground, terrain).
+    pub speed_vote_us: u64,
+    /// Lateral acceleration on the arc driven.
+    pub lateral_us: u64,
+    /// The best vote was weak (below `slow_below_vote`).
+    pub weak_vote_us: u64,
+    /// Backing up.
+    pub reverse_us: u64,
+}
+
+impl SpeedTime {
+    /// (limit, seconds) for the non-zero ones.
+    pub fn seconds(&self) -> Vec<(&'static str, f64)> {
+        [
+            ("cruise", self.cruise_us),
+            ("vehicle", self.vehicle_us),
+            ("speed vote", self.speed_vote_us),
+            ("lateral", self.lateral_us),
+            ("weak vote", self.weak_vote_us),
+            ("reverse", self.reverse_us),
+        ]
+        .into_iter()
+        .filter(|(_, us)| *us > 0)
+        .map(|(why, us)| (why, us as f64 * 1e-6))
+        .collect()
+    }
+
+    /// The counter of the limit that set `limits`' speed (the arbiter's
+    /// list: cruise, vehicle, a speed vote, lateral, weak vote last).
+    fn binding(limits: &[(String, f64)]) -> TimeCounter {
+        let weak = limits.iter().any(|(name, _)| name == "weak vote");
+        let lowest = limits
+            .iter()
+            .filter(|(name, _)| name != "weak vote")
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(name, _)| name.as_str());
+        match (weak, lowest) {
+            (true, _) => |t| &mut t.moving.weak_vote_us,
+            (_, Some("recovery")) => |t| &mut t.moving.reverse_us,
+            (_, Some("cruise")) => |t| &mut t.moving.cruise_us,
+            (_, Some("vehicle")) => |t| &mut t.moving.vehicle_us,
+            (_, Some("lateral")) => |t| &mut t.moving.lateral_us,
+            _ => |t| &mut t.moving.speed_vote_us,
+        }
+    }
+}
+
+/// Picks the [`ArbiterStats`] time counter a command feeds until the next
+/// decision.
+type TimeCounter = fn(&mut ArbiterStats) -> &mut u64;
 
 /// Counts of decisions.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -174,6 +231,7 @@ pub struct ArbiterStats {
     pub reverse_commands: u64,
     pub rejected_votes: u64,
     pub stopped: StopTime,
+    pub moving: SpeedTime,
 }
 
 #[derive(Debug, Clone)]
@@ -206,7 +264,8 @@ pub struct Arbiter {
     /// Per arc: the least backing-up clearance of the fresh votes.
     clearance: Vec<Option<f64>>,
     /// The last stop: when, and the stop-time counter it feeds.
-    last_stop: Option<(Utime, StopCounter)>,
+    /// The last command's time and the counter it feeds.
+    last_command: Option<(Utime, TimeCounter)>,
 }
 
 impl Arbiter {
@@ -238,7 +297,7 @@ impl Arbiter {
             recovery: Recovery::new(&config.recovery, vehicle),
             preference: vec![0.0; n],
             clearance: vec![None; n],
-            last_stop: None,
+            last_command: None,
         };
         for name in &config.required {
             arbiter.input_index(name);
@@ -340,8 +399,8 @@ impl Arbiter {
         self.stats.decisions += 1;
         let mut outcome = self.fuse(now);
         let creep = self.config.recovery.creep_mps;
-        if let Some((since, counter)) = self.last_stop.take() {
-            *counter(&mut self.stats.stopped) += u64::try_from(now - since).unwrap_or(0);
+        if let Some((since, counter)) = self.last_command.take() {
+            *counter(&mut self.stats) += u64::try_from(now - since).unwrap_or(0);
         }
         let stop_asked = self
             .used(now)
@@ -389,18 +448,17 @@ impl Arbiter {
                 SteeringCommand::stop(now)
             }
         };
-        if command.is_stop() {
-            let counter: StopCounter = match &outcome {
-                Err(StopReason::NoVotes) => |t| &mut t.no_votes_us,
-                Err(StopReason::RequiredStale { .. }) => |t| &mut t.required_stale_us,
-                Err(StopReason::AllArcsForbidden { .. }) => |t| &mut t.all_arcs_forbidden_us,
-                Err(StopReason::NoAcceptableArc { .. }) => |t| &mut t.no_acceptable_arc_us,
-                Err(StopReason::Stuck { .. }) => |t| &mut t.stuck_us,
-                Ok(_) if stop_asked => |t| &mut t.asked_us,
-                Ok(_) => |t| &mut t.speed_limited_us,
-            };
-            self.last_stop = Some((now, counter));
-        }
+        let counter: TimeCounter = match &outcome {
+            Err(StopReason::NoVotes) => |t| &mut t.stopped.no_votes_us,
+            Err(StopReason::RequiredStale { .. }) => |t| &mut t.stopped.required_stale_us,
+            Err(StopReason::AllArcsForbidden { .. }) => |t| &mut t.stopped.all_arcs_forbidden_us,
+            Err(StopReason::NoAcceptableArc { .. }) => |t| &mut t.stopped.no_acceptable_arc_us,
+            Err(StopReason::Stuck { .. }) => |t| &mut t.stopped.stuck_us,
+            Ok(_) if command.is_stop() && stop_asked => |t| &mut t.stopped.asked_us,
+            Ok(_) if command.is_stop() => |t| &mut t.stopped.speed_limited_us,
+            Ok((_, limits)) => SpeedTime::binding(limits),
+        };
+        self.last_command = Some((now, counter));
         self.recovery.sent(now, &command);
         if self.explain {
             let (stop, limits) = match outcome {

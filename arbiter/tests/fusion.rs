@@ -294,6 +294,50 @@ fn speed_is_the_minimum_of_the_limits_and_drops_with_a_weak_vote() {
     );
 }
 
+/// Each command's time, to the next decision, goes to the limit that set
+/// its speed: what a mission report says held the average down.
+#[test]
+fn time_driving_is_counted_by_the_limit_that_set_the_speed() {
+    let mut config = plain();
+    config.cruise_speed_mps = 8.0;
+    let mut a = arbiter(config);
+    let tenth = SECOND / 10;
+    // Straight and clear: cruise, for 0.3 s.
+    for n in 0..3 {
+        a.on_votes(&votes("obstacle_avoidance", n * tenth, |i| {
+            if i == 19 { 1.0 } else { 0.0 }
+        }))
+        .unwrap();
+        assert_eq!(a.decide(n * tenth).speed_mps, 8.0);
+    }
+    // A hard turn: sqrt(1.5 · 8) = 3.46 m/s, for 0.2 s.
+    for n in 3..5 {
+        a.on_votes(&votes("obstacle_avoidance", n * tenth, |i| {
+            if i == 0 { 1.0 } else { 0.0 }
+        }))
+        .unwrap();
+        assert!((a.decide(n * tenth).speed_mps - 12f64.sqrt()).abs() < 1e-9);
+    }
+    // Straight, but the behaviour asks for 2 m/s: a speed vote, for 0.1 s.
+    let mut slow = votes("obstacle_avoidance", 5 * tenth, |i| {
+        if i == 19 { 1.0 } else { 0.0 }
+    });
+    slow.votes.vote_speed(2.0);
+    a.on_votes(&slow).unwrap();
+    a.decide(5 * tenth);
+    a.decide(6 * tenth);
+    let moving = a.stats().moving;
+    assert_eq!(moving.cruise_us, 3 * tenth as u64);
+    assert_eq!(moving.lateral_us, 2 * tenth as u64);
+    assert_eq!(moving.speed_vote_us, tenth as u64);
+    let names: Vec<&str> = moving.seconds().iter().map(|(name, _)| *name).collect();
+    assert_eq!(
+        names,
+        ["cruise", "speed vote", "lateral"],
+        "only those that held"
+    );
+}
+
 #[test]
 fn votes_for_another_arc_set_are_refused() {
     let mut a = arbiter(plain());

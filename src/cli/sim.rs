@@ -174,6 +174,14 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         b.reaction_s,
         100.0 * r.speed_fraction_of_bound
     );
+    if !r.speed_limited_by_s.is_empty() {
+        let why: Vec<String> = r
+            .speed_limited_by_s
+            .iter()
+            .map(|(why, seconds)| format!("{why} {seconds:.1} s"))
+            .collect();
+        println!("speed set by  {}", why.join(", "));
+    }
     println!(
         "images        {} processed, {} dropped",
         r.images, r.images_dropped

@@ -7,9 +7,11 @@
 //! pipeline's nodes from it is in [`nodes`].
 
 mod bus;
+mod lookahead;
 mod nodes;
 
 pub use bus::{BusAuthConfig, BusConfig};
+pub use lookahead::{Lookahead, LookaheadConfig};
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -47,6 +49,8 @@ pub struct Config {
     pub perception: PerceptionConfig,
     pub localmap: LocalMapConfig,
     pub arbiter: ArbiterConfig,
+    /// How far ahead the vehicle looks, from its cruise speed.
+    pub lookahead: LookaheadConfig,
     pub pipeline: PipelineConfig,
     pub live: LiveConfig,
     pub bus: BusConfig,
@@ -104,6 +108,7 @@ impl Default for Config {
             perception: PerceptionConfig::default(),
             localmap: LocalMapConfig::default(),
             arbiter: ArbiterConfig::default(),
+            lookahead: LookaheadConfig::default(),
             pipeline: PipelineConfig::default(),
             live: LiveConfig::default(),
             bus: BusConfig::default(),
@@ -430,6 +435,9 @@ impl Config {
                 ),
             ));
         }
+        self.lookahead
+            .validate()
+            .map_err(|e| e.within("lookahead"))?;
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
         self.live.validate().map_err(|e| e.within("live"))?;
         if let Some(name) = self

@@ -19,11 +19,12 @@ impl Config {
         arcs: &ArcSet,
         name: &str,
     ) -> Option<Result<Box<dyn Behaviour>, ConfigError>> {
-        let table = self.behaviours.get(name)?;
+        let this = self.effective();
+        let table = this.behaviours.get(name)?;
         // Read (and its errors reported) when the configuration was checked.
-        let statics = self.static_map().ok().flatten();
-        let setup = self.setup(arcs, statics.as_ref());
-        Some(match self.prepared.0.get(name) {
+        let statics = this.static_map().ok().flatten();
+        let setup = this.setup(arcs, statics.as_ref());
+        Some(match this.prepared.0.get(name) {
             Some(p) if p.table() == table => Ok(p.build(&setup)),
             _ => registry
                 .prepare(name, table, &setup)
@@ -53,15 +54,18 @@ impl Config {
         ))
     }
 
-    /// The perception node, from `[perception]` and `[pipeline]`.
+    /// The perception node, from `[perception]` (looking as far as
+    /// [`Config::lookahead`] says) and `[pipeline]`.
     pub fn perception_node(&self) -> Result<PerceptionNode, ConfigError> {
-        PerceptionNode::new(&self.perception, &self.pipeline).map_err(|e| e.within("perception"))
+        let this = self.effective();
+        PerceptionNode::new(&this.perception, &this.pipeline).map_err(|e| e.within("perception"))
     }
 
     /// The local map and its cycle clock, from `[localmap]`, the vehicle's
     /// top speed and `[pipeline]`, with reports delivered as `delivery` says.
     pub fn decision_cycle<T>(&self, delivery: Delivery) -> DecisionCycle<T> {
-        let mut map = LocalMapNode::new(&self.localmap, &self.vehicle);
+        let this = self.effective();
+        let mut map = LocalMapNode::new(&this.localmap, &this.vehicle);
         // Read (and its errors reported) when the configuration was checked.
         match self.static_map() {
             Ok(Some(statics)) => map.map.set_static_map(statics),

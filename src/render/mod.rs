@@ -238,7 +238,15 @@ pub fn snapshot_picture(
     _track: &[TrackPoint],
 ) -> Result<(), RenderError> {
     let ppm = 20.0f32;
-    let (x_behind, x_ahead, half) = (8.0f32, 22.0f32, 13.0f32);
+    // The picture reaches 2 m past the map window (farther at speed, see
+    // `Config::lookahead`).
+    let effective = config.effective();
+    let lm = &effective.localmap;
+    let (x_behind, x_ahead, half) = (
+        8.0f32,
+        (lm.ahead_m as f32 + 2.0).max(22.0),
+        (lm.half_width_m as f32 + 3.0).max(13.0),
+    );
     let map_h = ((x_behind + x_ahead) * ppm) as u32;
     let map_w = (2.0 * half * ppm) as u32;
     let panel = 520u32;
@@ -246,7 +254,6 @@ pub fn snapshot_picture(
     // Vehicle frame (x forward up, y left to the left) to pixels.
     let to_px = |x: f32, y: f32| ((half - y) * ppm, (x_ahead - x) * ppm);
     canvas.fill_rect(0.0, 0.0, map_w as f32, map_h as f32, WHITE);
-    let lm = &config.localmap;
     let window = [
         to_px(lm.ahead_m as f32, lm.half_width_m as f32),
         to_px(lm.ahead_m as f32, -lm.half_width_m as f32),

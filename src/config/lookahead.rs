@@ -1,0 +1,253 @@
+//! How far ahead the vehicle looks, from how fast it drives (020 item 1).
+//!
+//! Obstacle avoidance votes each arc a speed at which the vehicle stops
+//! within the arc's free distance D (less `stop_margin_m` m), reacting
+//! after t = `reaction_s` and braking at a = half of
+//! `vehicle.max_deceleration_mps2`: `v·t + v²/(2a) = D − margin`. An arc
+//! clear for `max_distance_m` therefore allows at most the v of
+//! D = `max_distance_m`; with the window of 002 §5 (20 m ahead, 18 m of
+//! arc) that is 5.9 m/s whatever the sensor sees. So that a clear arc
+//! allows the cruise speed v_c, the arcs must be judged
+//!
+//! ```text
+//! D(v_c) = v_c·t + v_c²/(2a) + margin
+//! ```
+//!
+//! along, and the map window and perception's region must hold what lies
+//! there. When `D(v_c)` exceeds the configured `max_distance_m`, every
+//! distance that looks ahead moves out by the same δ = D(v_c) −
+//! `max_distance_m`: `behaviours.obstacle_avoidance.max_distance_m`,
+//! `localmap.ahead_m`, `perception.region.ahead_m` and
+//! `perception.max_range_m`. δ is bounded so that the window reaches
+//! neither beyond `lookahead.max_ahead_m` nor beyond the farthest sensor's
+//! range (ground no sensor returns cannot fill it). The configured values
+//! are floors: at the default 2.5 m/s nothing changes (D = 5.96 m).
+//!
+//! The window must also be wide enough for the arcs: on an arc of
+//! curvature k the arbiter drives at most v_k = min(v_c, √(a_lat/|k|))
+//! (`arbiter.max_lateral_accel_mps2`), so that arc is judged D(v_k) along,
+//! where it has moved sideways by (1 − cos(k·D))/|k| (2/|k| past a half
+//! turn). `localmap.half_width_m` and `perception.region.half_width_m`
+//! move out by what the widest of these, plus half the vehicle's width
+//! and 1 m, exceeds the configured half width. (Ground outside the window
+//! is ground no image has seen: an arc that leaves it sideways is slowed
+//! as if it ran into fog.)
+
+use serde::{Deserialize, Serialize};
+
+use arcnav_behaviours::ObstacleAvoidanceConfig;
+use arcnav_vehicle::ConfigError;
+use arcnav_vehicle::config;
+
+use super::Config;
+
+/// Lives in `[lookahead]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LookaheadConfig {
+    /// Move the distances that look ahead out with the cruise speed.
+    pub from_speed: bool,
+    /// The map window never reaches farther ahead than this, m.
+    pub max_ahead_m: f64,
+}
+
+impl Default for LookaheadConfig {
+    fn default() -> Self {
+        Self {
+            from_speed: true,
+            max_ahead_m: 60.0,
+        }
+    }
+}
+
+impl LookaheadConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        config::in_range("max_ahead_m", self.max_ahead_m, 5.0, 200.0)
+    }
+}
+
+/// The distances a configuration looks ahead with, m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lookahead {
+    /// Arc length at which a clear arc allows the cruise speed: D(v_c).
+    pub needed_m: f64,
+    /// How far every distance that looks ahead moved out (0: as configured).
+    pub moved_m: f64,
+    pub max_distance_m: f64,
+    pub map_ahead_m: f64,
+    pub region_ahead_m: f64,
+    pub max_range_m: f64,
+    /// How far the window moved out to each side (0: as configured).
+    pub widened_m: f64,
+    pub map_half_width_m: f64,
+    pub region_half_width_m: f64,
+}
+
+impl Config {
+    /// Obstacle avoidance's table, typed (its defaults if it is not
+    /// configured or does not parse: then nothing votes on distances, or
+    /// loading reported it).
+    fn obstacle_avoidance(&self) -> ObstacleAvoidanceConfig {
+        self.behaviours
+            .get("obstacle_avoidance")
+            .and_then(|table| table.clone().try_into().ok())
+            .unwrap_or_default()
+    }
+
+    /// How far this configuration looks ahead (see the module
+    /// documentation).
+    pub fn lookahead(&self) -> Lookahead {
+        let oa = self.obstacle_avoidance();
+        let cruise = self.arbiter.cruise_speed_mps;
+        let a = 0.5 * self.vehicle.max_deceleration_mps2;
+        let judged = |v: f64| v * oa.reaction_s + v * v / (2.0 * a) + oa.stop_margin_m;
+        let needed = judged(cruise);
+        let (map, region) = (self.localmap.ahead_m, self.perception.region.ahead_m);
+        let reach = self
+            .sensor_models()
+            .map(|models| models.iter().map(|m| m.max_range_m).fold(0.0, f64::max))
+            .unwrap_or(map);
+        let room = (self.lookahead.max_ahead_m.min(reach) - map).max(0.0);
+        let moved = if self.lookahead.from_speed {
+            (needed - oa.max_distance_m).clamp(0.0, room)
+        } else {
+            0.0
+        };
+        // The widest sideways reach of an arc within the length it is
+        // judged at the speed it can be driven.
+        let max_distance = oa.max_distance_m + moved;
+        let sideways = self.arc_set().map_or(0.0, |arcs| {
+            arcs.curvatures()
+                .iter()
+                .map(|&k| {
+                    let k = k.abs();
+                    if k < 1e-9 {
+                        return 0.0;
+                    }
+                    let v = cruise.min((self.arbiter.max_lateral_accel_mps2 / k).sqrt());
+                    let along = judged(v).min(max_distance);
+                    if k * along >= std::f64::consts::PI {
+                        2.0 / k
+                    } else {
+                        (1.0 - (k * along).cos()) / k
+                    }
+                })
+                .fold(0.0, f64::max)
+        });
+        let half = self.localmap.half_width_m;
+        let widened = if moved > 0.0 {
+            (sideways + 0.5 * self.vehicle.width_m + 1.0 - half).max(0.0)
+        } else {
+            0.0
+        };
+        Lookahead {
+            needed_m: needed,
+            moved_m: moved,
+            max_distance_m: max_distance,
+            map_ahead_m: map + moved,
+            region_ahead_m: region + moved,
+            max_range_m: self.perception.max_range_m + moved,
+            widened_m: widened,
+            map_half_width_m: half + widened,
+            region_half_width_m: self.perception.region.half_width_m + widened,
+        }
+    }
+
+    /// This configuration with the distances that look ahead as
+    /// [`Config::lookahead`] sets them: what the nodes are built from.
+    /// Applying it again changes nothing.
+    pub fn effective(&self) -> Config {
+        let look = self.lookahead();
+        let mut config = self.clone();
+        if look.moved_m > 0.0 {
+            config.localmap.ahead_m = look.map_ahead_m;
+            config.perception.region.ahead_m = look.region_ahead_m;
+            config.perception.max_range_m = look.max_range_m;
+            config.localmap.half_width_m = look.map_half_width_m;
+            config.perception.region.half_width_m = look.region_half_width_m;
+            if let Some(table) = config.behaviours.get_mut("obstacle_avoidance") {
+                table.insert(
+                    "max_distance_m".to_owned(),
+                    toml::Value::Float(look.max_distance_m),
+                );
+            }
+        }
+        config
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    use arcnav_perception::SensorPreset;
+
+    fn at(speed: f64, sensor: SensorPreset) -> Config {
+        let mut config = Config::default();
+        config.arbiter.cruise_speed_mps = speed;
+        config.vehicle.max_speed_mps = config.vehicle.max_speed_mps.max(speed);
+        config.sensor.preset = sensor;
+        config
+    }
+
+    #[test]
+    fn the_default_speed_looks_as_far_as_configured() {
+        let config = Config::default();
+        let look = config.lookahead();
+        // 2.5·0.75 + 2.5²/(2·1.5) + 2 = 5.96 m: well inside 18 m.
+        assert!((look.needed_m - 5.958).abs() < 1e-3, "{look:?}");
+        assert_eq!(look.moved_m, 0.0);
+        assert_eq!(config.effective(), config);
+    }
+
+    #[test]
+    fn a_faster_vehicle_looks_farther_so_that_a_clear_arc_allows_cruise() {
+        let config = at(10.0, SensorPreset::Lidar64);
+        let look = config.lookahead();
+        // 10·0.75 + 100/3 + 2 = 42.83 m of arc; everything moves out by 24.83 m.
+        assert!((look.needed_m - 42.833).abs() < 1e-3, "{look:?}");
+        assert!((look.max_distance_m - look.needed_m).abs() < 1e-9);
+        assert!((look.map_ahead_m - 44.833).abs() < 1e-3);
+        assert!((look.region_ahead_m - 46.833).abs() < 1e-3);
+        assert!((look.max_range_m - 64.833).abs() < 1e-3);
+        // Arcs of |k| ~ 1/50 run at 8.7 m/s, judged 33.5 m along, where
+        // they are 10.8 m to the side: the window widens to ~12.9 m.
+        assert!((12.0..14.0).contains(&look.map_half_width_m), "{look:?}");
+        assert_eq!(look.region_half_width_m, look.map_half_width_m + 2.0);
+        let effective = config.effective();
+        assert_eq!(effective.localmap.ahead_m, look.map_ahead_m);
+        assert_eq!(
+            effective.obstacle_avoidance().max_distance_m,
+            look.max_distance_m
+        );
+        // A clear arc's stopping-distance speed is the cruise speed.
+        let (t, a) = (0.75f64, 1.5f64);
+        let room = look.max_distance_m - 2.0;
+        let v = -a * t + ((a * t).powi(2) + 2.0 * a * room).sqrt();
+        assert!((v - 10.0).abs() < 1e-9, "{v}");
+        effective
+            .validate()
+            .expect("the effective configuration is valid");
+        assert_eq!(
+            effective.effective(),
+            effective,
+            "applying it twice changes nothing"
+        );
+        // 6 m/s needs 4.5 + 12 + 2 = 18.5 m: a little farther than configured.
+        let look = at(6.0, SensorPreset::Lidar64).lookahead();
+        assert!((look.moved_m - 0.5).abs() < 1e-9, "{look:?}");
+    }
+
+    #[test]
+    fn the_window_stops_at_the_sensor_and_the_bound_or_when_switched_off() {
+        // The ERIM returns nothing beyond 40 m: the window stops there.
+        let look = at(10.0, SensorPreset::Erim).lookahead();
+        assert_eq!(look.map_ahead_m, 40.0, "{look:?}");
+        let mut config = at(10.0, SensorPreset::Lidar64);
+        config.lookahead.max_ahead_m = 30.0;
+        assert_eq!(config.lookahead().map_ahead_m, 30.0);
+        config.lookahead.from_speed = false;
+        assert_eq!(config.lookahead().moved_m, 0.0);
+        assert_eq!(config.effective(), config);
+    }
+}
