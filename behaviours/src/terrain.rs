@@ -302,6 +302,8 @@ pub struct TerrainCheck {
     /// their distances.
     poses: Vec<Vec<(f64, [f64; 4])>>,
     limits: TanLimits,
+    /// The chassis is checked every this many poses.
+    belly_stride: usize,
 }
 
 impl TerrainCheck {
@@ -358,6 +360,10 @@ impl TerrainCheck {
             },
             poses,
             limits: TanLimits::new(config),
+            // The rows under the chassis span l − 1.2 m (2.1 m for the
+            // M998): poses at most that far apart let every ground point
+            // pass under the span, so within half a row spacing of a row.
+            belly_stride: ((l - 1.2) / config.step_m).floor().max(1.0) as usize,
         }
     }
 
@@ -587,10 +593,9 @@ impl TerrainCheck {
                     cos * c - sin * si,
                     sin * c + cos * si,
                 ];
-                // The chassis spans 2.1 m between the axles, so ground under
-                // it is checked every third pose (1.5 m): each point passes
-                // under one of its rows (0.42 m apart) at least once.
-                let belly = index.is_multiple_of(3) || index + 1 == poses.len();
+                // Ground under the chassis every `belly_stride` poses: each
+                // point still passes under one of its rows once.
+                let belly = index.is_multiple_of(self.belly_stride) || index + 1 == poses.len();
                 let stance = if index == 0 {
                     here
                 } else {
