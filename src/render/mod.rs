@@ -298,7 +298,18 @@ pub fn snapshot_picture(
     );
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);
-    let reach = 18.0;
+    // As far as obstacle avoidance judges them.
+    let reach = config.lookahead().max_distance_m;
+    // An arc is drawn until it leaves the map (at speed, tight arcs judged
+    // 40 m along circle the vehicle and would run over the panel).
+    let arc_pixels = |arc: &arcnav_vehicle::Arc| -> Vec<(f32, f32)> {
+        arc.sample(reach, 0.5)
+            .map(|p| to_px(p.position.x as f32, p.position.y as f32))
+            .take_while(|&(u, v)| {
+                (0.0..=map_w as f32).contains(&u) && (0.0..=map_h as f32).contains(&v)
+            })
+            .collect()
+    };
     for (i, arc) in arcs.iter().enumerate() {
         let (vote, vetoed) = decision
             .map(|d| {
@@ -308,10 +319,7 @@ pub fn snapshot_picture(
                 )
             })
             .unwrap_or((0.0, false));
-        let points: Vec<(f32, f32)> = arc
-            .sample(reach, 0.5)
-            .map(|p| to_px(p.position.x as f32, p.position.y as f32))
-            .collect();
+        let points = arc_pixels(&arc);
         if Some(i) == chosen {
             continue;
         }
@@ -320,10 +328,7 @@ pub fn snapshot_picture(
     if let Some(i) = chosen
         && let Some(arc) = arcs.arc(i)
     {
-        let points: Vec<(f32, f32)> = arc
-            .sample(reach, 0.5)
-            .map(|p| to_px(p.position.x as f32, p.position.y as f32))
-            .collect();
+        let points = arc_pixels(&arc);
         canvas.polyline(&points, BLUE, 4.0, false);
     }
     let f = config.vehicle.footprint();
