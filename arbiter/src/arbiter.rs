@@ -141,7 +141,7 @@ pub struct StopTime {
 impl StopTime {
     /// (why, seconds) for the non-zero ones.
     pub fn seconds(&self) -> Vec<(&'static str, f64)> {
-        [
+        nonzero_seconds([
             ("no votes", self.no_votes_us),
             ("required behaviour stale", self.required_stale_us),
             ("all arcs forbidden", self.all_arcs_forbidden_us),
@@ -149,12 +149,17 @@ impl StopTime {
             ("speed limited to 0", self.speed_limited_us),
             ("asked to stop", self.asked_us),
             ("stuck", self.stuck_us),
-        ]
+        ])
+    }
+}
+
+/// The named durations (µs) that are not zero, in seconds.
+fn nonzero_seconds<const N: usize>(named: [(&'static str, u64); N]) -> Vec<(&'static str, f64)> {
+    named
         .into_iter()
         .filter(|(_, us)| *us > 0)
         .map(|(why, us)| (why, us as f64 * 1e-6))
         .collect()
-    }
 }
 
 /// Time spent driving, by the limit that set the speed, µs: from each
@@ -179,18 +184,14 @@ pub struct SpeedTime {
 impl SpeedTime {
     /// (limit, seconds) for the non-zero ones.
     pub fn seconds(&self) -> Vec<(&'static str, f64)> {
-        [
+        nonzero_seconds([
             ("cruise", self.cruise_us),
             ("vehicle", self.vehicle_us),
             ("speed vote", self.speed_vote_us),
             ("lateral", self.lateral_us),
             ("weak vote", self.weak_vote_us),
             ("reverse", self.reverse_us),
-        ]
-        .into_iter()
-        .filter(|(_, us)| *us > 0)
-        .map(|(why, us)| (why, us as f64 * 1e-6))
-        .collect()
+        ])
     }
 
     /// The counter of the limit that set `limits`' speed (the arbiter's

@@ -175,12 +175,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         100.0 * r.speed_fraction_of_bound
     );
     if !r.speed_limited_by_s.is_empty() {
-        let why: Vec<String> = r
-            .speed_limited_by_s
-            .iter()
-            .map(|(why, seconds)| format!("{why} {seconds:.1} s"))
-            .collect();
-        println!("speed set by  {}", why.join(", "));
+        println!("speed set by  {}", seconds_list(&r.speed_limited_by_s));
     }
     println!(
         "images        {} processed, {} dropped",
@@ -244,12 +239,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         s.stuck
     );
     if !s.stopped_s.is_empty() {
-        let why: Vec<String> = s
-            .stopped_s
-            .iter()
-            .map(|(why, seconds)| format!("{why} {seconds:.1} s"))
-            .collect();
-        println!("stopped       {}", why.join(", "));
+        println!("stopped       {}", seconds_list(&s.stopped_s));
     }
     let rec = &r.recovery;
     println!(
@@ -299,4 +289,13 @@ pub(crate) fn named_world(name: &str) -> anyhow::Result<World> {
                 .join(", ")
         ),
     }
+}
+
+/// "why 1.2 s, other 3.4 s".
+fn seconds_list(seconds: &std::collections::BTreeMap<&'static str, f64>) -> String {
+    seconds
+        .iter()
+        .map(|(why, s)| format!("{why} {s:.1} s"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
