@@ -330,13 +330,12 @@ pub fn run_mission(
     world.validate_for(&config.vehicle, &world.spec.name)?;
     let sensors: Vec<SensorModel> = config.sensor_models()?;
     // Returns beyond what perception evaluates are never used: not rendered.
+    let evaluated = config.lookahead().max_range_m + config.sim.render_margin_m;
     let rendered: Vec<SensorModel> = sensors
         .iter()
         .map(|sensor| {
             let mut rendered = sensor.clone();
-            rendered.max_range_m = sensor
-                .max_range_m
-                .min(config.lookahead().max_range_m + config.sim.render_margin_m);
+            rendered.max_range_m = sensor.max_range_m.min(evaluated);
             rendered
         })
         .collect();

@@ -264,7 +264,6 @@ pub struct Arbiter {
     preference: Vec<f32>,
     /// Per arc: the least backing-up clearance of the fresh votes.
     clearance: Vec<Option<f64>>,
-    /// The last stop: when, and the stop-time counter it feeds.
     /// The last command's time and the counter it feeds.
     last_command: Option<(Utime, TimeCounter)>,
 }

@@ -639,10 +639,14 @@ impl Behaviour for ObstacleAvoidance {
             let template = &self.templates[arc];
             let verdict = self.verdicts[arc];
             self.free[arc] = f64::INFINITY;
+            // The bands are nested: when the widest touches no cell, no
+            // band does (most arcs are decided by this one pass).
+            let grazed = self.first_hit(&template.bands[widest], reach).is_some();
             // The first collision with a cell, or with ground the vehicle
             // cannot stand on (its attitude or chassis), whichever is nearer.
-            let cell = self
-                .first_hit(&template.bands[0], reach)
+            let cell = grazed
+                .then(|| self.first_hit(&template.bands[0], reach))
+                .flatten()
                 .map(|hit| (f64::from(hit.s), hit));
             let ground = verdict.forbidden;
             let collision = match (cell, ground) {
@@ -662,14 +666,18 @@ impl Behaviour for ObstacleAvoidance {
             }
             // Clear of collisions: the narrowest band that grazes a cell,
             // and how hard the ground along the arc is.
-            let penalty =
-                match (1..=widest).find(|&b| self.first_hit(&template.bands[b], reach).is_some()) {
-                    Some(band) => {
-                        let clearance = self.margins[band - 1];
-                        self.config.near_miss_penalty * (1.0 - clearance / self.config.near_miss_m)
-                    }
-                    None => 0.0,
-                };
+            let narrowest = grazed
+                .then(|| {
+                    (1..=widest).find(|&b| self.first_hit(&template.bands[b], reach).is_some())
+                })
+                .flatten();
+            let penalty = match narrowest {
+                Some(band) => {
+                    let clearance = self.margins[band - 1];
+                    self.config.near_miss_penalty * (1.0 - clearance / self.config.near_miss_m)
+                }
+                None => 0.0,
+            };
             // Graded ground the footprint crosses (perception's graded
             // cells, e.g. 000's D̃) counts like the terrain's severity.
             let (crossed, near) =

@@ -216,6 +216,13 @@ pub(crate) struct Marked {
     pub z_max: f32,
 }
 
+impl Marked {
+    /// Whether the cell is untraversable (cost 1) rather than graded.
+    fn is_obstacle(&self) -> bool {
+        self.cost >= 1.0
+    }
+}
+
 /// Groups marked cells into 8-connected regions and writes them to
 /// `report` in the world frame. `labels` is scratch of the grid's size
 /// (every entry `u32::MAX`), left that way.
@@ -250,7 +257,7 @@ pub(crate) fn emit(
         }
     }
     let marked = &marked[..merged];
-    for m in marked.iter().filter(|m| m.cost >= 1.0) {
+    for m in marked.iter().filter(|m| m.is_obstacle()) {
         labels[m.index as usize] = MARKED;
     }
     let s = grid.cols as isize;
@@ -258,7 +265,7 @@ pub(crate) fn emit(
     queue.clear();
     let regions = &mut report.regions;
     regions.clear();
-    for m in marked.iter().filter(|m| m.cost >= 1.0) {
+    for m in marked.iter().filter(|m| m.is_obstacle()) {
         if labels[m.index as usize] != MARKED {
             continue;
         }
@@ -285,7 +292,7 @@ pub(crate) fn emit(
     // Graded ground (cost below 1) is no obstacle: one region of its own,
     // after the untraversable ones, with no reasons.
     let graded_region = regions.len() as u32;
-    if marked.iter().any(|m| m.cost < 1.0) {
+    if marked.iter().any(|m| !m.is_obstacle()) {
         regions.push(Region {
             cells: 0,
             reasons: Reasons::NONE,
@@ -294,7 +301,7 @@ pub(crate) fn emit(
     let (sin, cos) = arcnav_vehicle::frames::yaw_of(world_from_level).sin_cos();
     let origin = world_from_level.translation.vector;
     for m in marked {
-        let region = if m.cost >= 1.0 {
+        let region = if m.is_obstacle() {
             let region = labels[m.index as usize];
             labels[m.index as usize] = UNLABELLED;
             region
@@ -313,7 +320,7 @@ pub(crate) fn emit(
             region,
             cost: m.cost.min(1.0),
         });
-        if m.cost < 1.0 {
+        if !m.is_obstacle() {
             stats.graded += 1;
             continue;
         }

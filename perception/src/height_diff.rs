@@ -812,9 +812,9 @@ impl TerrainEvaluator for HeightDiff {
             }
             stats.cells_evaluated += 1;
             let cost = maps.cost[i];
-            if maps.absolute[i] || cost >= obstacle || (graded > 0.0 && cost >= graded) {
+            let untraversable = maps.absolute[i] || cost >= obstacle;
+            if untraversable || (graded > 0.0 && cost >= graded) {
                 let low = self.lowest[i];
-                let untraversable = maps.absolute[i] || cost >= obstacle;
                 self.out.marked.push(Marked {
                     index: i as u32,
                     reasons: if untraversable {

@@ -207,7 +207,6 @@ const SEEN: [u8; 4] = [255, 255, 255, 90];
 /// Ground no image observed (snapshot picture).
 const UNSEEN: [u8; 4] = [200, 200, 205, 255];
 
-/// A map patch's colour: orange when a drop-off, black otherwise.
 /// A map patch's colour: drop-offs orange, other obstacles black, graded
 /// ground (cost below 1) purple, the more opaque the costlier.
 fn patch_color(reasons: Reasons, cost: f32, alpha: u8) -> [u8; 4] {
