@@ -439,15 +439,20 @@ fn forest_hillside_cul_de_sac_and_boxed_in_worlds_complete() {
 
 /// 020 item 1: a faster vehicle looks farther. With the 18 m of arc and
 /// the 20 m window of 002 §5, obstacle avoidance's stopping-distance vote
-/// caps every sensor at 5.9 m/s; with the lookahead from speed (the
-/// default) the 64-beam lidar at 10 m/s cruise drives faster than that,
-/// still without a collision, and the report says what set the speed.
+/// caps every sensor at 5.9 m/s; with the lookahead from speed
+/// (`lookahead.from_speed`, off by default) the 64-beam lidar at 10 m/s
+/// cruise drives faster than that, still without a collision, and the
+/// report says what set the speed.
 #[test]
 fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows() {
-    let run = |tag: &str, config: Option<&str>| -> Value {
+    let run = |tag: &str, config: &str| -> Value {
         let out = out_dir(tag);
-        let mut args = vec![
+        let file = out.with_extension("toml");
+        std::fs::write(&file, config).unwrap();
+        let args = [
             "sim",
+            "--config",
+            file.to_str().unwrap(),
             "--world",
             "short_course",
             "--sensor",
@@ -458,11 +463,6 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
             "--out",
             out.to_str().unwrap(),
         ];
-        let file = out.with_extension("toml");
-        if let Some(text) = config {
-            std::fs::write(&file, text).unwrap();
-            args.extend(["--config", file.to_str().unwrap()]);
-        }
         let (code, stdout, stderr) = arcnav(&args);
         assert_eq!(
             code, 0,
@@ -475,14 +475,14 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
         let _ = std::fs::remove_file(&file);
         report
     };
-    let fixed = run("window-fixed", Some("[lookahead]\nfrom_speed = false\n"));
+    let fixed = run("window-fixed", "[lookahead]\nfrom_speed = false\n");
     let max = |r: &Value| r["max_speed_mps"].as_f64().unwrap();
     assert!(
         max(&fixed) <= 5.95,
         "the 18 m arcs cap the speed vote at 5.9 m/s: {}",
         max(&fixed)
     );
-    let looking = run("window-from-speed", None);
+    let looking = run("window-from-speed", "[lookahead]\nfrom_speed = true\n");
     assert!(
         max(&looking) > 6.5,
         "looking 42.8 m along the arcs lets it go faster: {}",
