@@ -1,0 +1,110 @@
+//! Simulated range images (020 item 4): the time to render one frame of each
+//! sensor preset over the embedded `paper_loop` (hills, rocks, trees,
+//! bushes, ditches, banks), from 40 poses along its route, level and tilted
+//! (roll 12°, pitch −6°, as on a side slope), on one thread and on two.
+//! Prints the median and the 90th percentile per frame and what a lidar
+//! mission's rendering alone allows: 10 Hz frames × real time.
+//! Target (020 item 4, not met): a 64×2048 frame ≥ 10× faster than the
+//! ~31 ms measured in missions (≤ 3.2 ms), so lidar missions run ≥ 20× real
+//! time. See docs/simulator.md for what has been measured and tried.
+//! Run with `cargo bench -p arcnav-sim --bench render`.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use arcnav_perception::SensorModel;
+use arcnav_sim::World;
+use arcnav_sim::tiles::TileCache;
+use arcnav_vehicle::Isometry;
+use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+
+fn poses(world: &World, tilted: bool) -> Vec<Isometry> {
+    let mut route = vec![world.start.0];
+    route.extend(world.waypoints.iter().map(|w| [w.x, w.y]));
+    let (roll, pitch) = if tilted {
+        (12f64.to_radians(), -6f64.to_radians())
+    } else {
+        (0.0, 0.0)
+    };
+    let mut out = Vec::new();
+    for leg in route.windows(2) {
+        let ([x0, y0], [x1, y1]) = (leg[0], leg[1]);
+        let yaw = (y1 - y0).atan2(x1 - x0);
+        for k in 0..4 {
+            let f = f64::from(k) / 4.0;
+            let (x, y) = (x0 + f * (x1 - x0), y0 + f * (y1 - y0));
+            out.push(isometry_from_xyz_rpy(
+                [x, y, world.height(x, y)],
+                roll,
+                pitch,
+                yaw,
+            ));
+        }
+    }
+    out.truncate(40);
+    out
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+fn main() {
+    let world = Arc::new(
+        World::embedded("paper_loop")
+            .expect("paper_loop is embedded")
+            .expect("paper_loop builds"),
+    );
+    let mut tiles = TileCache::new(Arc::clone(&world), 256, 2);
+    println!(
+        "{:<10} {:>9} {:>7} {:>11} {:>11} {:>14}",
+        "sensor", "poses", "threads", "median ms", "p90 ms", "10 Hz × real"
+    );
+    for sensor in [
+        SensorModel::lidar64(),
+        SensorModel::lidar128(),
+        SensorModel::erim(),
+    ] {
+        for tilted in [false, true] {
+            let poses = poses(&world, tilted);
+            let views: Vec<_> = poses
+                .iter()
+                .map(|pose| {
+                    let p = (pose * sensor.vehicle_from_sensor).translation.vector;
+                    tiles.view(p.x, p.y, sensor.max_range_m + 1.0)
+                })
+                .collect();
+            for threads in [1, 2] {
+                let mut times = Vec::new();
+                let mut returns = 0usize;
+                for (pose, view) in poses.iter().zip(&views) {
+                    let start = Instant::now();
+                    let image = arcnav_sim::sensor::render(
+                        &sensor,
+                        view,
+                        pose,
+                        0,
+                        (0.0, 0.0),
+                        (1, 1),
+                        threads,
+                    );
+                    times.push(start.elapsed().as_secs_f64() * 1e3);
+                    returns += image.range.iter().filter(|r| r.is_finite()).count();
+                }
+                times.sort_by(f64::total_cmp);
+                let median = percentile(&times, 0.5);
+                println!(
+                    "{:<10} {:>9} {:>7} {:>11.2} {:>11.2} {:>13.0}×   ({:.0} % of beams return)",
+                    sensor.id,
+                    if tilted { "tilted" } else { "level" },
+                    threads,
+                    median,
+                    percentile(&times, 0.9),
+                    1e3 / sensor.rate_hz / median,
+                    100.0 * returns as f64
+                        / (poses.len() * sensor.beams.rows() * sensor.beams.cols()) as f64,
+                );
+            }
+        }
+    }
+}
