@@ -1,21 +1,19 @@
 //! Missions with each terrain evaluator and with two sensors, as a user
 //! runs them (`arcnav sim --evaluator`, `[[sensors]]`).
 
-use std::path::PathBuf;
 use std::process::Command;
 
 use arcnav_bus::log::LogReader;
+use arcnav_testkit::ScratchDir;
 use serde_json::Value;
 
-fn out_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("arcnav-eval-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+fn out_dir(tag: &str) -> ScratchDir {
+    arcnav_testkit::scratch_dir(&format!("arcnav-eval-{tag}"))
 }
 
 /// Runs `arcnav sim` with `args` into a fresh directory; the report and
 /// the directory (for the log), and what it printed.
-fn sim(tag: &str, args: &[&str]) -> (Value, PathBuf, String) {
+fn sim(tag: &str, args: &[&str]) -> (Value, ScratchDir, String) {
     let out = out_dir(tag);
     let output = Command::new(env!("CARGO_BIN_EXE_arcnav"))
         .arg("sim")
@@ -56,11 +54,10 @@ fn each_evaluator_completes_the_papers_loop_and_the_short_course() {
             .map(|(world, evaluator, _)| {
                 scope.spawn(move || {
                     let tag = format!("{world}-{evaluator}");
-                    let (report, out, printed) = sim(
+                    let (report, _run, printed) = sim(
                         &tag,
                         &["--world", world, "--evaluator", evaluator, "--no-images"],
                     );
-                    let _ = std::fs::remove_dir_all(out);
                     (tag, report, printed)
                 })
             })
@@ -162,8 +159,6 @@ fn a_vehicle_with_a_front_lidar_and_a_rear_depth_camera_completes_the_short_cour
         "{said}"
     );
     assert!(picture.is_file());
-    let _ = std::fs::remove_dir_all(&run);
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
@@ -240,9 +235,6 @@ fn a_wall_known_only_from_a_static_occupancy_map_is_driven_around() {
         .map(|w| w[1])
         .unwrap();
     assert!(through.1.abs() < 6.0, "{through:?}");
-    for dir in [run, plain_run, out] {
-        let _ = std::fs::remove_dir_all(dir);
-    }
 }
 
 #[test]
@@ -304,5 +296,4 @@ fn detect_writes_its_table_json_and_picture_and_evaluators_lists_them() {
         .filter_map(|l| l.split_whitespace().next())
         .collect();
     assert_eq!(names, ["cells", "height_diff", "pca"], "{listed}");
-    let _ = std::fs::remove_dir_all(out);
 }

@@ -1,11 +1,12 @@
 //! `arcnav sim` end to end, as a user runs it.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::{AnyMessage, TypedEvents};
+use arcnav_testkit::ScratchDir;
 use serde_json::Value;
 
 fn arcnav(args: &[&str]) -> (i32, String, String) {
@@ -20,13 +21,11 @@ fn arcnav(args: &[&str]) -> (i32, String, String) {
     )
 }
 
-fn out_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("arcnav-sim-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+fn out_dir(tag: &str) -> ScratchDir {
+    arcnav_testkit::scratch_dir(&format!("arcnav-sim-{tag}"))
 }
 
-fn run_short_course(tag: &str) -> PathBuf {
+fn run_short_course(tag: &str) -> ScratchDir {
     let out = out_dir(tag);
     let (code, stdout, stderr) = arcnav(&[
         "sim",
@@ -193,7 +192,6 @@ fn bad_worlds_fail_with_a_message_naming_the_problem() {
     );
 
     let dir = out_dir("bad-world");
-    std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("w.toml");
     std::fs::write(
         &file,
@@ -221,7 +219,6 @@ fn bad_worlds_fail_with_a_message_naming_the_problem() {
 #[test]
 fn a_generated_world_can_be_saved_and_run_again() {
     let dir = out_dir("generated");
-    std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("seed7.toml");
     let (code, stdout, stderr) = arcnav(&[
         "sim",
@@ -297,12 +294,11 @@ fn the_drop_offs_world_completes_without_falling_into_anything() {
             "{tag}: the trench's and ditches' near edges are drop-offs: {}",
             report["untraversable_cells"]
         );
-        let _ = std::fs::remove_dir_all(&out);
     }
     // 002's system (no drop-off detection, unseen ground free, goal
     // seeking): the trench.
     let out = out_dir("drop-off-disabled");
-    let config = out.with_extension("toml");
+    let config = out.join("drop-off-disabled.toml");
     std::fs::write(
         &config,
         "[perception.drop_off]\nenabled = false\n[behaviours.obstacle_avoidance]\nunseen_ground = \"free\"\n\
@@ -320,7 +316,6 @@ fn the_drop_offs_world_completes_without_falling_into_anything() {
     ]);
     assert_ne!(code, 0, "{stdout}");
     assert!(stdout.contains("ditch 2.00 m deep"), "{stdout}");
-    let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_file(&config);
 }
 
@@ -372,7 +367,6 @@ fn trenches_too_wide_to_see_into_are_never_driven_into() {
         if completes {
             assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
         }
-        let _ = std::fs::remove_dir_all(&out);
     }
 }
 
@@ -402,7 +396,6 @@ fn forest_hillside_cul_de_sac_and_boxed_in_worlds_complete() {
                     let (_, stdout, stderr) = arcnav(&all);
                     let report = std::fs::read_to_string(out.join("report.json"))
                         .unwrap_or_else(|e| panic!("{tag}: no report ({e}):\n{stdout}\n{stderr}"));
-                    let _ = std::fs::remove_dir_all(&out);
                     (*tag, serde_json::from_str(&report).unwrap(), stdout)
                 })
             })
@@ -471,7 +464,6 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
         let report: Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
                 .unwrap();
-        let _ = std::fs::remove_dir_all(&out);
         let _ = std::fs::remove_file(&file);
         report
     };

@@ -144,6 +144,49 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// A fresh directory under the system's temporary directory for what one
+/// test writes (logs of a whole mission run to tens of MB). It is removed
+/// when the test passes; when the test fails it is kept, and its path
+/// printed, so what the run wrote can be looked at.
+#[derive(Debug)]
+pub struct ScratchDir(Option<tempfile::TempDir>);
+
+/// A [`ScratchDir`] whose name starts with `prefix`.
+pub fn scratch_dir(prefix: &str) -> ScratchDir {
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("{prefix}-"))
+        .tempdir()
+        .expect("create a test directory");
+    ScratchDir(Some(dir))
+}
+
+impl std::ops::Deref for ScratchDir {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        self.0.as_ref().map_or(Path::new(""), |dir| dir.path())
+    }
+}
+
+impl AsRef<Path> for ScratchDir {
+    fn as_ref(&self) -> &Path {
+        self
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        if std::thread::panicking()
+            && let Some(dir) = self.0.take()
+        {
+            eprintln!(
+                "kept {} for a look at what the failed test wrote",
+                dir.keep().display()
+            );
+        }
+    }
+}
+
 /// A network namespace owned by one test; deleted on drop.
 #[derive(Debug)]
 pub struct NetNs {
@@ -266,5 +309,31 @@ fn remove_stale_namespaces() {
         if !Path::new(&format!("/proc/{pid}")).exists() {
             let _ = ip(&["netns", "del", &name]);
         }
+    }
+}
+
+#[cfg(test)]
+mod scratch_tests {
+    use super::*;
+
+    #[test]
+    fn a_scratch_dir_goes_when_the_test_passes_and_stays_when_it_fails() {
+        let passed = scratch_dir("arcnav-testkit-pass");
+        std::fs::write(passed.join("log"), b"x").unwrap();
+        let path = passed.to_path_buf();
+        drop(passed);
+        assert!(!path.exists());
+
+        let (send, receive) = std::sync::mpsc::channel();
+        let failed = std::thread::spawn(move || {
+            let dir = scratch_dir("arcnav-testkit-fail");
+            std::fs::write(dir.join("log"), b"x").unwrap();
+            send.send(dir.to_path_buf()).unwrap();
+            panic!("a failing test");
+        });
+        assert!(failed.join().is_err());
+        let kept = receive.recv().unwrap();
+        assert!(kept.join("log").exists(), "{kept:?} kept");
+        std::fs::remove_dir_all(kept).unwrap();
     }
 }
