@@ -11,11 +11,12 @@ use arcnav::replay::{ReplayOptions, ReplayResult, compare, replay};
 use arcnav_behaviours::Registry;
 use arcnav_bus::log::{LogReader, LogWriter};
 use arcnav_sim::World;
-use arcnav_testkit::ScratchDir;
 use serde_json::Value;
 
-fn dir(tag: &str) -> ScratchDir {
-    arcnav_testkit::scratch_dir(&format!("arcnav-replay-{tag}"))
+fn dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("arcnav-replay-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
 }
 
 /// `path` replayed with the default configuration and behaviours.
