@@ -106,8 +106,8 @@ pub struct ElevationLayer {
     /// World cell of the vehicle.
     centre: (i64, i64),
     stats: ElevationStats,
-    /// Bumped by every change; the last snapshot and the version it shows
-    /// (a cycle without a new image or a new centre cell shares it).
+    /// Bumped by every change to the cells; the last snapshot and the
+    /// version it shows (a cycle without a new image shares it).
     version: u64,
     cache: std::sync::Mutex<(u64, std::sync::Arc<ElevationGrid>)>,
 }
@@ -260,7 +260,8 @@ impl ElevationLayer {
     }
 
     /// The known cells of the square around the vehicle, as a dense grid,
-    /// shared until the layer changes (a new image, a new centre cell).
+    /// shared until the cells change (a new image, a clear). A new centre
+    /// alone keeps it: see [`ElevationLayer::recentre`].
     pub fn snapshot(&self) -> std::sync::Arc<ElevationGrid> {
         let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
         if cache.0 != self.version {

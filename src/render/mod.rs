@@ -239,13 +239,14 @@ pub fn snapshot_picture(
     let ppm = 20.0f32;
     // The picture reaches 2 m past the map window (farther at speed, see
     // `Config::lookahead`).
-    let effective = config.effective();
-    let lm = &effective.localmap;
-    let (x_behind, x_ahead, half) = (
-        8.0f32,
-        (lm.ahead_m as f32 + 2.0).max(22.0),
-        (lm.half_width_m as f32 + 3.0).max(13.0),
+    let look = config.lookahead();
+    // The map window as the nodes use it.
+    let (ahead, side, behind) = (
+        look.map_ahead_m as f32,
+        look.map_half_width_m as f32,
+        config.localmap.behind_m as f32,
     );
+    let (x_behind, x_ahead, half) = (8.0f32, (ahead + 2.0).max(22.0), (side + 3.0).max(13.0));
     let map_h = ((x_behind + x_ahead) * ppm) as u32;
     let map_w = (2.0 * half * ppm) as u32;
     let panel = 520u32;
@@ -254,10 +255,10 @@ pub fn snapshot_picture(
     let to_px = |x: f32, y: f32| ((half - y) * ppm, (x_ahead - x) * ppm);
     canvas.fill_rect(0.0, 0.0, map_w as f32, map_h as f32, WHITE);
     let window = [
-        to_px(lm.ahead_m as f32, lm.half_width_m as f32),
-        to_px(lm.ahead_m as f32, -lm.half_width_m as f32),
-        to_px(-lm.behind_m as f32, -lm.half_width_m as f32),
-        to_px(-lm.behind_m as f32, lm.half_width_m as f32),
+        to_px(ahead, side),
+        to_px(ahead, -side),
+        to_px(-behind, -side),
+        to_px(-behind, side),
     ];
     canvas.polygon(&window, None, Some(([150, 150, 150, 255], 1.0)));
     for m in (-5..=20).step_by(5) {
@@ -298,7 +299,7 @@ pub fn snapshot_picture(
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);
     // As far as obstacle avoidance judges them.
-    let reach = config.lookahead().max_distance_m;
+    let reach = look.max_distance_m;
     // An arc is drawn until it leaves the map (at speed, tight arcs judged
     // 40 m along circle the vehicle and would run over the panel).
     let arc_pixels = |arc: &arcnav_vehicle::Arc| -> Vec<(f32, f32)> {
