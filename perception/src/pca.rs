@@ -35,12 +35,26 @@
 //! 9, and each return's deviation δ_i from the smoothed line is kept. Per
 //! cell, `σ̂_δ² = (1/n)Σδ_i² − ((1/n)Σδ_i)²` (eq. 3), the sensor's own
 //! noise removed, `σ_δ² = max{0, σ̂_δ² − σ_L²}`, and divided by the squared
-//! distance of the cell from the sensor, `r = σ_δ² / d²` (eq. 4): a graded
-//! measure of rough but passable ground, in [`PcaMaps::roughness`].
+//! distance of the cell from the sensor, `r = σ_δ² / d²` (eq. 4), in
+//! [`PcaMaps::roughness`]. Eq. 3 is taken over the returns of a pool of
+//! cells around the cell (`roughness_pool_m`, 0.5 m): a 10 cm cell holds
+//! 2-5 returns of a 64-beam lidar, and a variance of so few speckles
+//! (per cell, flat ground and 2 cm bumps overlapped; pooled, flat ground
+//! reads under 2 mm and 2 cm bumps 1-2 cm).
 //!
-//! The report carries the `not flat` and `slope` cells and the drop-offs,
-//! footprint and shadows every evaluator reports
-//! ([`crate::grid::SeenGround`]).
+//! r becomes a height through eq. 2, `e = d·h₂/(h₁ − h₂)`: with
+//! e/d = √r and h₁ the sensor's height above the cell, the bumps are
+//! `h₂ = h₁·√r/(1 + √r)` high ([`PcaMaps::bump_height`]). A cell judged
+//! flat with `h₂ ≥ rough_from_m` is graded ground (no reason) of cost
+//! `rough_max_cost · min(1, h₂ / rough_full_m)`, below 1: 001 uses r to
+//! prefer a track over a still passable rubble pile, so rough ground
+//! lowers an arc's vote and speed in obstacle avoidance and never blocks
+//! it. The filter sees bumps shorter than its 9 returns span (at 10 m,
+//! 0.3 m for lidar64, 0.5 m for the ERIM) and underestimates longer ones.
+//!
+//! The report carries the `not flat` and `slope` cells, the graded rough
+//! ground, and the drop-offs, footprint and shadows every evaluator
+//! reports ([`crate::grid::SeenGround`]).
 
 use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::{Isometry, VehicleConfig};
@@ -79,6 +93,24 @@ pub struct PcaConfig {
     pub range_noise_m: f64,
     /// The mean filter along each scan line, returns (001 §3.3: 9).
     pub roughness_window: u32,
+    /// A return whose filter window spans more than this fraction of its
+    /// range straddles an edge (an obstacle against the ground behind it)
+    /// and gives no deviation (5 cm bumps seen from 2.4 m span about 4 %).
+    pub roughness_max_jump: f64,
+    /// σ̂_δ² (eq. 3) of a cell is taken over the returns of the cells in a
+    /// square of this side around it, m (001: the cell alone; a 10 cm cell
+    /// holds 2-5 returns of a 64-beam lidar, too few for a variance).
+    pub roughness_pool_m: f64,
+    /// A cell judged flat whose bump height (eq. 2 solved for h₂) reaches
+    /// this is reported as graded ground, m (below it: the noise of open
+    /// ground).
+    pub rough_from_m: f64,
+    /// ... with cost `rough_max_cost · min(1, h₂ / rough_full_m)`: the
+    /// bump height at which the cost is highest, m.
+    pub rough_full_m: f64,
+    /// The cost of the roughest ground, below 1: rough ground is passable
+    /// (001 §3.3), only less preferred.
+    pub rough_max_cost: f64,
 }
 
 impl Default for PcaConfig {
@@ -93,6 +125,11 @@ impl Default for PcaConfig {
             min_plane_spread_m: 0.03,
             range_noise_m: 0.02,
             roughness_window: 9,
+            roughness_max_jump: 0.1,
+            roughness_pool_m: 0.5,
+            rough_from_m: 0.01,
+            rough_full_m: 0.05,
+            rough_max_cost: 0.9,
         }
     }
 }
@@ -144,6 +181,33 @@ impl PcaConfig {
                 format!("is {}, must be 1 to 101", self.roughness_window),
             ));
         }
+        config::in_range(
+            &key("roughness_max_jump"),
+            self.roughness_max_jump,
+            0.001,
+            10.0,
+        )?;
+        config::in_range(&key("roughness_pool_m"), self.roughness_pool_m, 0.0, 5.0)?;
+        config::positive(&key("rough_from_m"), self.rough_from_m)?;
+        if self.rough_full_m.is_nan() || self.rough_full_m <= self.rough_from_m {
+            return Err(ConfigError::new(
+                key("rough_full_m"),
+                format!(
+                    "is {}, must be more than rough_from_m ({})",
+                    self.rough_full_m, self.rough_from_m
+                ),
+            ));
+        }
+        if !(self.rough_max_cost > 0.0 && self.rough_max_cost < 1.0) {
+            return Err(ConfigError::new(
+                key("rough_max_cost"),
+                format!(
+                    "is {}, must be above 0 and below 1 (a cost of 1 is an obstacle; rough \
+                     ground is passable)",
+                    self.rough_max_cost
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -191,9 +255,10 @@ impl Moments {
         var(0, 0).min(var(3, 1))
     }
 
-    /// `(h, tilt)`: the variance along the most vertical eigenvector (001
-    /// eq. 1) and that eigenvector's angle from the vertical, radians.
-    fn disturbance(&self) -> (f64, f64) {
+    /// `(h, tilt, normal)`: the variance along the most vertical
+    /// eigenvector (001 eq. 1), that eigenvector's angle from the vertical,
+    /// radians, and the eigenvector itself, pointing up.
+    fn disturbance(&self) -> (f64, f64, [f64; 3]) {
         let n = f64::from(self.n);
         let m = self.s.map(|v| v / n);
         let c = |k: usize, a: usize, b: usize| self.ss[k] / n - m[a] * m[b];
@@ -218,7 +283,9 @@ impl Moments {
             .unwrap_or(2);
         let h = eigen.eigenvalues[k].max(0.0);
         let tilt = eigen.eigenvectors[(2, k)].abs().min(1.0).acos();
-        (h, tilt)
+        let e = eigen.eigenvectors.column(k);
+        let up = e[2].signum();
+        (h, tilt, [e[0] * up, e[1] * up, e[2] * up])
     }
 }
 
@@ -232,8 +299,12 @@ pub struct PcaMaps {
     pub cell: f32,
     /// Level-frame (x, y) of the first cell's corner, m.
     pub origin: [f32; 2],
-    /// r of 001 eq. 4 per cell (NaN: no return, or a single one).
+    /// r of 001 eq. 4 per cell, over the returns of its pool (NaN: fewer
+    /// than two returns with a deviation).
     pub roughness: Vec<f32>,
+    /// The bump height h₂ that r shows (eq. 2 solved for h₂; see
+    /// `rough_from_m`), m, in cells judged flat (NaN elsewhere).
+    pub bump_height: Vec<f32>,
     /// Side, in cells, of the largest region each cell was judged flat in
     /// (0: not judged flat).
     pub flat_region: Vec<u16>,
@@ -258,6 +329,9 @@ struct CellSums {
     /// Σδ, Σδ², Σ range of the points with a deviation.
     dev: [f64; 3],
     dev_n: u32,
+    /// The sensor's height above the plane of the cell's tile, m (cells
+    /// judged flat).
+    sensor_above: f32,
 }
 
 /// The 001 evaluator. Build it with [`PerceptionConfig::build_evaluator`].
@@ -274,8 +348,13 @@ pub struct HierarchicalPca {
     points: Vec<Point>,
     deviation: Vec<f32>,
     line: Vec<f32>,
+    prefix: Vec<f64>,
     cells: Vec<CellSums>,
     touched: Vec<u32>,
+    /// Half the side of the roughness pool, cells.
+    pool: usize,
+    /// The sensor's level-frame position for the image being judged.
+    sensor: [f64; 3],
     maps: PcaMaps,
 }
 
@@ -320,8 +399,13 @@ impl HierarchicalPca {
             points: Vec::new(),
             deviation: Vec::new(),
             line: Vec::new(),
+            prefix: Vec::new(),
             cells: vec![CellSums::default(); grid.cols * grid.rows],
             touched: Vec::new(),
+            sensor: [0.0; 3],
+            pool: ((config.roughness_pool_m / config.cell_size_m - 1.0) / 2.0)
+                .round()
+                .max(0.0) as usize,
             maps: PcaMaps {
                 cols: grid.cols,
                 rows: grid.rows,
@@ -343,6 +427,7 @@ impl HierarchicalPca {
     fn deviations(&mut self, image: &RangeImage) {
         let cols = image.cols();
         let half = (self.config.roughness_window / 2) as usize;
+        let max_jump = self.config.roughness_max_jump as f32;
         self.deviation.clear();
         self.deviation.resize(image.range.len(), f32::NAN);
         for (row, ranges) in image.range.chunks_exact(cols.max(1)).enumerate() {
@@ -360,24 +445,124 @@ impl HierarchicalPca {
                 }
                 self.line.push(last);
             }
-            let mut sum: f64 = self.line[..half.min(cols)]
-                .iter()
-                .map(|&v| f64::from(v))
-                .sum();
+            // Prefix sums: the window shrinks symmetrically at the ends of
+            // the line, so a steadily changing range (a level row across a
+            // tilted sensor's image) leaves no deviation there.
+            self.prefix.clear();
+            self.prefix.push(0.0);
+            let mut total = 0.0;
+            for &v in &self.line {
+                total += f64::from(v);
+                self.prefix.push(total);
+            }
             let deviations = &mut self.deviation[row * cols..(row + 1) * cols];
             for (col, (&range, deviation)) in ranges.iter().zip(deviations).enumerate() {
-                if col + half < cols {
-                    sum += f64::from(self.line[col + half]);
+                let h = half.min(col).min(cols - 1 - col);
+                if !valid(range) {
+                    continue;
                 }
-                if col > half {
-                    sum -= f64::from(self.line[col - half - 1]);
+                // A window across an edge (an obstacle's silhouette against
+                // the ground behind it) deviates by the jump, not by bumps:
+                // no deviation is taken there.
+                let window = &self.line[col - h..=col + h];
+                let (low, high) = window
+                    .iter()
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                        (lo.min(v), hi.max(v))
+                    });
+                if high - low > max_jump * range {
+                    continue;
                 }
-                let width = (col + half + 1).min(cols) - col.saturating_sub(half);
-                if valid(range) {
-                    *deviation = (sum / width as f64) as f32 - range;
-                }
+                let sum = self.prefix[col + h + 1] - self.prefix[col - h];
+                *deviation = (sum / (2 * h + 1) as f64) as f32 - range;
             }
         }
+    }
+
+    /// §3.3 eqs. 3-4 per touched cell, over the returns of its pool:
+    ///
+    /// ```text
+    /// σ̂_δ² = (1/n)Σδ_i² − ((1/n)Σδ_i)²     (001 eq. 3)
+    /// σ_δ² = max{0, σ̂_δ² − σ_L²}
+    /// r    = σ_δ² / d_Cell²                  (001 eq. 4)
+    /// ```
+    ///
+    fn roughness(&mut self) {
+        let (cols, rows) = (self.grid.cols, self.grid.rows);
+        let maps = &mut self.maps;
+        for layer in [&mut maps.roughness, &mut maps.bump_height] {
+            layer.clear();
+            layer.resize(cols * rows, f32::NAN);
+        }
+        let noise = self.config.range_noise_m * self.config.range_noise_m;
+        let pool = self.pool;
+        for &i in &self.touched {
+            let i = i as usize;
+            let (x, y) = (i % cols, i / cols);
+            let (mut sums, mut count) = ([0.0; 3], 0);
+            for v in y.saturating_sub(pool)..(y + pool + 1).min(rows) {
+                for c in &self.cells
+                    [v * cols + x.saturating_sub(pool)..v * cols + (x + pool + 1).min(cols)]
+                {
+                    for (s, d) in sums.iter_mut().zip(c.dev) {
+                        *s += d;
+                    }
+                    count += c.dev_n;
+                }
+            }
+            if count < 2 {
+                continue;
+            }
+            let k = f64::from(count);
+            let variance = sums[1] / k - (sums[0] / k).powi(2);
+            let d = sums[2] / k;
+            maps.roughness[i] = ((variance - noise).max(0.0) / (d * d)) as f32;
+        }
+    }
+
+    /// The bump height of each cell judged flat, from its roughness by
+    /// eq. 2, `e = d·h₂/(h₁ − h₂)`, solved for h₂ with e/d = √r:
+    /// `h₂ = h₁·√r / (1 + √r)`. h₁ is the sensor's height above the plane
+    /// fitted to the cell's tile, along its normal: eq. 2 is drawn over
+    /// level ground, and on a slope the ray's grazing angle is the one to
+    /// the slope (the level height overstates bumps on ground falling away
+    /// and understates them on ground rising). Cells whose bump height
+    /// reaches `rough_from_m` are marked as graded ground (cost below 1,
+    /// no reason).
+    fn grade_rough_ground(&mut self) {
+        let c = &self.config;
+        let (from, full, top) = (c.rough_from_m, c.rough_full_m, c.rough_max_cost);
+        debug_assert!(full > from);
+        for &i in &self.touched {
+            let i = i as usize;
+            let r = f64::from(self.maps.roughness[i]);
+            if self.maps.flat_region[i] == 0 || r.is_nan() {
+                continue;
+            }
+            let cell = &self.cells[i];
+            let bump = f64::from(cell.sensor_above) * r.sqrt() / (1.0 + r.sqrt());
+            self.maps.bump_height[i] = bump as f32;
+            if bump < from {
+                continue;
+            }
+            self.out.marked.push(Marked {
+                index: i as u32,
+                reasons: Reasons::NONE,
+                cost: (top * (bump / full).min(1.0)) as f32,
+                z_min: cell.z_min,
+                z_max: cell.z_max,
+            });
+        }
+    }
+
+    /// Level-frame (x, y) of the corner of the tile holding cell (x, y):
+    /// moments are taken relative to it, for precision.
+    fn tile_corner(&self, x: usize, y: usize) -> [f32; 2] {
+        let (tile, cell) = (self.tile, self.cell);
+        [
+            self.maps.origin[0] + (x / tile * tile) as f32 * cell,
+            self.maps.origin[1] + (y / tile * tile) as f32 * cell,
+        ]
     }
 
     /// The moments of the cells `[x0, x1) × [y0, y1)`.
@@ -392,13 +577,15 @@ impl HierarchicalPca {
         total
     }
 
-    /// Algorithm 1 on the cells `[x0, x1) × [y0, y1)`. A region too sparse
-    /// to judge is left alone, except as the half of a region found not
-    /// flat: no finer region can show it flat, so it stays an obstacle.
-    fn judge(&mut self, x0: usize, x1: usize, y0: usize, y1: usize, parent_not_flat: bool) {
+    /// Algorithm 1 on the cells `[x0, x1) × [y0, y1)`: a whole tile
+    /// (`tile_above` None), or the half of a region found not flat, with
+    /// the sensor's height above its tile's plane. A region too sparse to
+    /// judge is left alone, except as such a half: no finer region can
+    /// show it flat, so it stays an obstacle.
+    fn judge(&mut self, x0: usize, x1: usize, y0: usize, y1: usize, tile_above: Option<f32>) {
         let total = self.moments(x0, x1, y0, y1);
         if total.n < self.config.min_points {
-            if parent_not_flat && total.n > 0 {
+            if tile_above.is_some() && total.n > 0 {
                 self.mark(x0, x1, y0, y1, Reasons::NOT_FLAT);
             }
             return;
@@ -406,18 +593,38 @@ impl HierarchicalPca {
         self.maps.regions_judged += 1;
         let single = x1 - x0 == 1 && y1 - y0 == 1;
         self.maps.single_cells_judged += u32::from(single);
-        let (h, tilt) = total.disturbance();
+        let (h, tilt, normal) = total.disturbance();
+        // A plane is tilted only as far as the points show it: a few
+        // returns along one scan line give any tilt across it.
+        let spread = self.config.min_plane_spread_m * self.config.min_plane_spread_m;
+        let planar = total.horizontal_spread() >= spread;
+        // The sensor's height above the tile's plane (above the level
+        // plane through its centroid where its points show no plane), for
+        // the roughness's bump height: the tile's, not a small region's,
+        // whose plane may be a bump's flank.
+        let above = tile_above.unwrap_or_else(|| {
+            let n = if planar { normal } else { [0.0, 0.0, 1.0] };
+            let count = f64::from(total.n);
+            let corner = self.tile_corner(x0, y0);
+            let centroid = [
+                total.s[0] / count + f64::from(corner[0]),
+                total.s[1] / count + f64::from(corner[1]),
+                total.s[2] / count,
+            ];
+            (0..3)
+                .map(|a| (self.sensor[a] - centroid[a]) * n[a])
+                .sum::<f64>()
+                .max(0.0) as f32
+        });
         let t = self.config.max_disturbance_m * self.config.max_disturbance_m;
         let reasons = if h <= t {
-            // A plane is tilted only as far as the points show it: a few
-            // returns along one scan line give any tilt across it.
-            let spread = self.config.min_plane_spread_m * self.config.min_plane_spread_m;
-            if tilt <= self.max_tilt || total.horizontal_spread() < spread {
+            if tilt <= self.max_tilt || !planar {
                 let side = (x1 - x0).max(y1 - y0).min(usize::from(u16::MAX)) as u16;
                 let cols = self.grid.cols;
                 for y in y0..y1 {
                     for x in x0..x1 {
                         self.maps.flat_region[y * cols + x] = side;
+                        self.cells[y * cols + x].sensor_above = above;
                     }
                 }
                 return;
@@ -428,12 +635,12 @@ impl HierarchicalPca {
         } else {
             if x1 - x0 >= y1 - y0 {
                 let mid = x0 + (x1 - x0) / 2;
-                self.judge(x0, mid, y0, y1, true);
-                self.judge(mid, x1, y0, y1, true);
+                self.judge(x0, mid, y0, y1, Some(above));
+                self.judge(mid, x1, y0, y1, Some(above));
             } else {
                 let mid = y0 + (y1 - y0) / 2;
-                self.judge(x0, x1, y0, mid, true);
-                self.judge(x0, x1, mid, y1, true);
+                self.judge(x0, x1, y0, mid, Some(above));
+                self.judge(x0, x1, mid, y1, Some(above));
             }
             return;
         };
@@ -499,21 +706,19 @@ impl TerrainEvaluator for HierarchicalPca {
         );
         let (cols, cell, tile) = (self.grid.cols, self.cell, self.tile);
         let sensor = level_from_sensor.translation.vector;
+        self.sensor = [sensor.x, sensor.y, sensor.z];
         for p in &self.points {
             let Some(i) = self.grid.index(cell, p.xyz[0], p.xyz[1]) else {
                 continue;
             };
+            // Relative to the corner of the cell's tile, for precision.
+            let corner = self.tile_corner(i % cols, i / cols);
             let c = &mut self.cells[i];
             if c.moments.n == 0 {
                 self.touched.push(i as u32);
                 c.z_min = f32::INFINITY;
                 c.z_max = f32::NEG_INFINITY;
             }
-            // Relative to the corner of the cell's tile, for precision.
-            let corner = [
-                self.maps.origin[0] + ((i % cols) / tile * tile) as f32 * cell,
-                self.maps.origin[1] + ((i / cols) / tile * tile) as f32 * cell,
-            ];
             c.moments.add_point([
                 f64::from(p.xyz[0] - corner[0]),
                 f64::from(p.xyz[1] - corner[1]),
@@ -535,35 +740,19 @@ impl TerrainEvaluator for HierarchicalPca {
         // Moments are relative to tile corners: a region never spans two
         // tiles, so the sums of its cells share one origin.
         let n = cols * self.grid.rows;
-        self.maps.roughness.clear();
-        self.maps.roughness.resize(n, f32::NAN);
         self.maps.flat_region.clear();
         self.maps.flat_region.resize(n, 0);
         self.maps.regions_judged = 0;
         self.maps.single_cells_judged = 0;
-        let noise = self.config.range_noise_m * self.config.range_noise_m;
-        for &i in &self.touched {
-            let c = &self.cells[i as usize];
-            stats.cells_evaluated += 1;
-            if c.dev_n >= 2 {
-                let k = f64::from(c.dev_n);
-                let variance = c.dev[1] / k - (c.dev[0] / k).powi(2);
-                let d = c.dev[2] / k;
-                self.maps.roughness[i as usize] = ((variance - noise).max(0.0) / (d * d)) as f32;
-            }
-        }
+        stats.cells_evaluated += self.touched.len() as u32;
+        self.roughness();
         let (gcols, grows) = (self.grid.cols, self.grid.rows);
         for ty in (0..grows).step_by(tile) {
             for tx in (0..gcols).step_by(tile) {
-                self.judge(
-                    tx,
-                    (tx + tile).min(gcols),
-                    ty,
-                    (ty + tile).min(grows),
-                    false,
-                );
+                self.judge(tx, (tx + tile).min(gcols), ty, (ty + tile).min(grows), None);
             }
         }
+        self.grade_rough_ground();
         for &i in &self.touched {
             self.cells[i as usize] = CellSums::default();
         }

@@ -493,6 +493,81 @@ fn rubble_scores_rougher_than_a_plane_at_the_same_distance() {
     );
 }
 
+#[test]
+fn rubble_beside_a_track_is_graded_ground_and_the_track_is_not() {
+    // Rubble of bumps `amp` high (a 40 cm pattern) left of the vehicle
+    // beyond y = 1 m, a smooth track to the right; range noise of 2 cm, as
+    // the simulator's.
+    let rubble = |amp: f64| {
+        move |x: f64, y: f64| {
+            if y > 1.0 {
+                amp * ((x * 15.7).sin() * (y * 15.7).sin() + 1.0)
+            } else {
+                0.0
+            }
+        }
+    };
+    for sensor in [SensorModel::lidar64(), SensorModel::erim()] {
+        let azimuth = &sensor.beams.azimuth;
+        let column_spacing =
+            f64::from((azimuth[azimuth.len() - 1] - azimuth[0]).abs() / (azimuth.len() - 1) as f32);
+        let mut costs = Vec::new();
+        for amp in [0.04, 0.08] {
+            let image = noisy(render(&sensor, rubble(amp)), 0.02);
+            let mut pca = pca();
+            let (report, stats) = evaluate(&mut pca, &image);
+            let graded: Vec<_> = report.cells.iter().filter(|c| c.cost < 1.0).collect();
+            assert_eq!(stats.graded as usize, graded.len());
+            for c in &graded {
+                assert_eq!(c.reasons, Reasons::NONE, "graded ground has no reason");
+                assert!(c.cost > 0.0);
+                // A smooth cell is graded only within the scan line's mean
+                // filter (9 returns) and the pool of the rubble.
+                let spread = 4.5 * column_spacing * c.x.hypot(c.y) + 0.3;
+                assert!(
+                    c.y > 1.0 - spread,
+                    "{}: graded cell on the smooth track at ({:.1}, {:.1})",
+                    sensor.id,
+                    c.x,
+                    c.y
+                );
+            }
+            let on_rubble = |x: f64, y: f64| (6.0..12.0).contains(&x) && (2.0..5.0).contains(&y);
+            // The cells judged flat there: only those can be graded.
+            let maps = pca.maps();
+            let flat: Vec<f32> = maps.flat_region.iter().map(|&s| f32::from(s)).collect();
+            let seen = values_where(
+                |x, y| maps.index(x, y),
+                &flat,
+                |x, y| on_rubble(f64::from(x), f64::from(y)),
+            )
+            .into_iter()
+            .filter(|&side| side > 0.0)
+            .count();
+            assert!(seen > 100, "{}: {seen} rubble cells judged flat", sensor.id);
+            let found: Vec<f32> = graded
+                .iter()
+                .filter(|c| on_rubble(c.x, c.y))
+                .map(|c| c.cost)
+                .collect();
+            assert!(
+                found.len() * 100 >= seen * 35,
+                "{} with {amp} m bumps: {} of {seen} rubble cells graded",
+                sensor.id,
+                found.len()
+            );
+            costs.push(mean(&found));
+        }
+        assert!(
+            costs[1] > costs[0] + 0.1,
+            "{}: rougher rubble costs {:.2}, not more than {:.2}",
+            sensor.id,
+            costs[1],
+            costs[0]
+        );
+    }
+}
+
 // ---- the registry ----
 
 #[test]
@@ -652,4 +727,14 @@ fn an_evaluator_laxer_than_the_vehicle_is_refused_when_selected() {
     assert_eq!(err.key, "pca.max_disturbance_m");
     // A key no evaluator has is refused whichever is selected.
     assert!(toml::from_str::<PerceptionConfig>("[pca]\nmax_disturbanse_m = 0.01\n").is_err());
+    // Rough ground is passable: a cost of 1 would make it an obstacle.
+    for (table, key) in [
+        ("rough_max_cost = 1.0", "pca.rough_max_cost"),
+        ("rough_from_m = 0.06", "pca.rough_full_m"),
+    ] {
+        let err = perception(&format!("evaluator = \"pca\"\n[pca]\n{table}\n"))
+            .validate_for(&vehicle)
+            .unwrap_err();
+        assert_eq!(err.key, key, "{table}");
+    }
 }
