@@ -31,9 +31,27 @@ fn time_ms(mut f: impl FnMut()) -> f64 {
     times[times.len() / 2]
 }
 
+/// The rough scene every part renders.
+type Scene = HeightFunction<fn(f64, f64) -> f64>;
+
 fn main() {
-    let scene = HeightFunction::with_step(arcnav_perception::scene::rough_ground, 0.1);
-    let lidar = SensorModel::lidar128().render(0, &Isometry::identity(), &scene);
+    // `-- lidar` or `-- ring` runs one part (cargo passes `--bench` too).
+    let parts: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
+    let run = |part: &str| parts.is_empty() || parts.iter().any(|p| p == part);
+    let scene: Scene = HeightFunction::with_step(arcnav_perception::scene::rough_ground, 0.1);
+    if run("lidar") {
+        lidar_image(&scene);
+    }
+    if run("ring") {
+        depth_ring(&scene);
+    }
+}
+
+fn lidar_image(scene: &Scene) {
+    let lidar = SensorModel::lidar128().render(0, &Isometry::identity(), scene);
     println!(
         "one 128×2048 lidar image ({} pixels), one core, median:",
         lidar.range.len()
@@ -53,7 +71,9 @@ fn main() {
             report.cells.len()
         );
     }
+}
 
+fn depth_ring(scene: &Scene) {
     // Paper 000's ring: eight cameras, 45° apart, on the roof.
     let ring: Vec<RangeImage> = (0..8)
         .map(|k| {
@@ -65,7 +85,7 @@ fn main() {
                 25f64.to_radians(),
                 (45.0 * k as f64).to_radians(),
             );
-            let mut image = camera.render(0, &Isometry::identity(), &scene);
+            let mut image = camera.render(0, &Isometry::identity(), scene);
             image.sensor = camera.id;
             image
         })
