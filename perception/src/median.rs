@@ -81,6 +81,14 @@ pub struct MedianParams {
     pub rel: f32,
 }
 
+impl MedianParams {
+    /// Whether a range is a return that takes part in the median.
+    #[inline]
+    fn takes_part(&self, r: f32) -> bool {
+        r.is_finite() && r > 0.0 && r <= self.max_range
+    }
+}
+
 /// The histogram of one window and its median pointer.
 struct Window<'a> {
     hist: &'a mut [u32],
@@ -199,7 +207,7 @@ impl MedianOutliers {
         }
         self.values.clear();
         self.values.extend(ranges.iter().map(|&r| {
-            if r.is_finite() && r > 0.0 && r <= params.max_range {
+            if params.takes_part(r) {
                 r
             } else {
                 f32::NAN
@@ -277,7 +285,7 @@ impl MedianOutliers {
         let scale = BINS as f32 / params.max_range;
         self.bins.clear();
         self.bins.extend(ranges.iter().map(|&r| {
-            if r.is_finite() && r > 0.0 && r <= params.max_range {
+            if params.takes_part(r) {
                 ((r * scale) as usize).min(BINS - 1) as u16
             } else {
                 NONE
