@@ -11,7 +11,7 @@
 //! σ²_{0:t} = (σ²_{0:t-1} · σ_t²) / (σ²_{0:t-1} + σ_t²)                         (4)
 //! ```
 //!
-//! Two additions from the elevation mapping 004 builds on (its ref. [7],
+//! Two additions from the elevation mapping 004 builds on (its ref. \[7\],
 //! Fankhauser et al., 2014), without which a fused map goes wrong as the
 //! vehicle drives:
 //!

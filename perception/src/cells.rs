@@ -17,7 +17,7 @@
 //!
 //! - (d) **drop-off**: it holds the near edge of ground the image did not see,
 //!   wider than the vehicle bridges, beyond which the ground drops away (see
-//!   [`DropOffRule::judge`]). Each image column is walked from its highest
+//!   `DropOffRule::judge`). Each image column is walked from its highest
 //!   beam down, far returns to near ones, while the rows are binned.
 //!
 //! Untraversable cells are grouped into 8-connected regions. Only cells

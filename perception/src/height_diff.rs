@@ -35,7 +35,7 @@
 //! `graded_from ≤ D̃ / obstacle_cost < 1`, with that cost; and, untraversable,
 //! the cells with `D̃ ≥ 1` (`obstacle_cost`) or
 //! an absolute obstacle, reason `height difference`, and the drop-offs, footprint and
-//! shadows every evaluator reports ([`crate::grid::SeenGround`]). The
+//! shadows every evaluator reports (`grid::SeenGround`). The
 //! inflation and averaging of `D_D` are for planners that treat the
 //! vehicle as a point (the paper's navfn); arcnav's behaviours sweep the
 //! vehicle's footprint along each arc, so `D_D` is kept, graded, in

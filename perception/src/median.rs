@@ -206,13 +206,11 @@ impl MedianOutliers {
             return 0;
         }
         self.values.clear();
-        self.values.extend(ranges.iter().map(|&r| {
-            if params.takes_part(r) {
-                r
-            } else {
-                f32::NAN
-            }
-        }));
+        self.values.extend(
+            ranges
+                .iter()
+                .map(|&r| if params.takes_part(r) { r } else { f32::NAN }),
+        );
         // Pixels `hc..cols - hc` of a row: pixel `j` of them has the
         // window columns `j..=j + 2·hc`.
         let inner = cols - 2 * hc;

@@ -54,7 +54,7 @@
 //!
 //! The report carries the `not flat` and `slope` cells, the graded rough
 //! ground, and the drop-offs, footprint and shadows every evaluator
-//! reports ([`crate::grid::SeenGround`]).
+//! reports (`grid::SeenGround`, crate-private).
 
 use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::{Isometry, VehicleConfig};

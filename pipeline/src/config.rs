@@ -92,7 +92,7 @@ pub struct LiveConfig {
     pub perception_busy_poll: bool,
     /// Behaviours that run in processes of their own (a Python script, a
     /// program in another language): they take LOCAL_MAP and publish their
-    /// votes on ARC_VOTES_<NAME> with `behaviour` = NAME. The arbiter fuses
+    /// votes on `ARC_VOTES_<NAME>` with `behaviour` = NAME. The arbiter fuses
     /// them with their weight in `[arbiter.weights]` (and waits for them
     /// like any other), and `arcnav run` publishes LOCAL_MAP for them.
     pub external_behaviours: Vec<String>,

@@ -4,7 +4,7 @@
 //!
 //! - [`world`]: worlds in TOML (terrain from noise or a `.npy`/`.asc` file,
 //!   boulders, trees, bushes, ditches, holes, banks, waypoints, start), three
-//!   embedded ones and [`generate`]d ones;
+//!   embedded ones and [`generate`](mod@generate)d ones;
 //! - [`tiles`]: the world as 0.1 m height tiles and a ray caster implementing
 //!   perception's [`arcnav_perception::RayCast`] — the one rendering path;
 //! - [`sensor`]: range images with noise and dropouts;

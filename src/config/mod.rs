@@ -4,7 +4,7 @@
 //! `Default`, `validate()`); this module composes them, cross-checks values
 //! that span sections, and turns TOML and validation failures into messages
 //! that name the file, the line and the dotted key. Building the
-//! pipeline's nodes from it is in [`nodes`].
+//! pipeline's nodes from it is in `nodes`.
 
 mod bus;
 mod lookahead;

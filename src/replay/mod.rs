@@ -7,7 +7,7 @@
 //! replace perception). The same log and configuration give the same output
 //! byte for byte. Nothing in the input can panic the replay: damaged or
 //! foreign input is skipped and counted, and the [`InputProblems`] say what
-//! ([`problems`]); [`compare`] sets two runs' decisions side by side.
+//! (`problems`); [`compare`] sets two runs' decisions side by side.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -15,7 +15,7 @@
 //!   the last metre, the route keeps away from narrow gaps); seen ground
 //!   as rough as stones or ruts costs up to `1 + rough_cost` (four levels
 //!   from the elevation layer's second differences: see
-//!   [`Route::roughness_level`]), so a smooth track beside rubble wins.
+//!   `Route::roughness_level`), so a smooth track beside rubble wins.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
