@@ -43,7 +43,8 @@
 //! reads under 2 mm and 2 cm bumps 1-2 cm).
 //!
 //! r becomes a height through eq. 2, `e = d·h₂/(h₁ − h₂)`: with
-//! e/d = √r and h₁ the sensor's height above the cell, the bumps are
+//! e/d = √r and h₁ the sensor's height above the plane fitted to the
+//! cell's tile (along its normal, so a slope's grazing angle), the bumps are
 //! `h₂ = h₁·√r/(1 + √r)` high ([`PcaMaps::bump_height`]). A cell judged
 //! flat with `h₂ ≥ rough_from_m` is graded ground (no reason) of cost
 //! `rough_max_cost · min(1, h₂ / rough_full_m)`, below 1: 001 uses r to
