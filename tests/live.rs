@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, mpsc};
 use std::time::{Duration, Instant};
 
@@ -490,6 +490,33 @@ fn listening<T, R: Send>(
 
 /// Records STEERING_COMMAND inside `ns` while `body` runs.
 fn recording<T>(ns: &NetNs, body: impl FnOnce() -> T) -> (T, Received) {
+    recording_watched(ns, |_| body())
+}
+
+/// The cycle time of the latest steering command heard so far.
+struct Latest(AtomicI64);
+
+impl Latest {
+    /// Waits (at most `within`) until a command for the cycle at `utime`
+    /// or a later one has been heard. A fixed pause after the feed was too
+    /// short on a loaded 2-core machine: the last cycles were decided after
+    /// the executor had been told to stop.
+    fn wait_for_cycle(&self, utime: Utime, within: Duration) {
+        let deadline = Instant::now() + within;
+        while self.0.load(Ordering::Relaxed) < utime {
+            assert!(
+                Instant::now() < deadline,
+                "the cycle at {:.2} s was not decided within {within:?} of the feed's end",
+                (utime - SIM_EPOCH_US) as f64 * 1e-6
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+/// [`recording`], with what has been heard so far given to `body`.
+fn recording_watched<T>(ns: &NetNs, body: impl FnOnce(&Latest) -> T) -> (T, Received) {
+    let heard = Latest(AtomicI64::new(i64::MIN));
     let listen = |stop: &AtomicBool, ready: &mpsc::Sender<()>| {
         let mut lcm = Lcm::new("").unwrap();
         lcm.subscribe(channels::STEERING_COMMAND);
@@ -498,12 +525,18 @@ fn recording<T>(ns: &NetNs, body: impl FnOnce() -> T) -> (T, Received) {
         while !stop.load(Ordering::Relaxed) {
             if let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() {
                 let msg = steering_command_t::decode(&m.data).unwrap();
+                heard.0.fetch_max(msg.utime, Ordering::Relaxed);
                 got.push((Instant::now(), SteeringCommand::from(&msg)));
             }
         }
         got
     };
-    listening(ns, listen, body)
+    listening(ns, listen, || body(&heard))
+}
+
+/// The last cycle lock-step replay decides on `log`.
+fn last_cycle(log: &Path, config: &Config) -> Utime {
+    *lockstep(log, config).keys().next_back().unwrap()
 }
 
 /// The commands published at cycle times (heartbeat stops sit between them).
@@ -652,14 +685,15 @@ fn distributed_nodes_reproduce_the_lockstep_replay_over_udp_multicast() {
         ("route", &["node", "behaviour", "route", "--stats"]),
         ("arbiter", &["node", "arbiter", "--stats"]),
     ];
-    let (stats, received) = recording(&net.ns, || {
+    let last = last_cycle(&net.log, &net.config);
+    let (stats, received) = recording_watched(&net.ns, |heard| {
         let procs: Vec<Proc> = nodes
             .iter()
             .map(|(name, args)| net.arcnav(name, args))
             .collect();
         procs.iter().for_each(Proc::wait_ready);
         assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
-        std::thread::sleep(Duration::from_millis(300));
+        heard.wait_for_cycle(last, Duration::from_secs(10));
         procs.iter().for_each(|p| p.signal("TERM"));
         let mut stats = String::new();
         for p in procs {
@@ -687,11 +721,12 @@ fn arcnav_run_reproduces_the_lockstep_replay_over_udp_multicast() {
     let Some(net) = Net::erim("run", config(SensorPreset::Erim, true)) else {
         return;
     };
-    let (stats, received) = recording(&net.ns, || {
+    let last = last_cycle(&net.log, &net.config);
+    let (stats, received) = recording_watched(&net.ns, |heard| {
         let run = net.arcnav("run", &["run", "--stats"]);
         run.wait_ready();
         assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
-        std::thread::sleep(Duration::from_millis(300));
+        heard.wait_for_cycle(last, Duration::from_secs(10));
         run.signal("TERM");
         let (code, out) = run.finish();
         assert_eq!(code, Some(0));
@@ -1494,7 +1529,13 @@ fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
     );
     let heading = mean_heading(&net.log) + 60f64.to_radians();
     let json = temp_dir("python-run").join("run.json");
-    let (python_stderr, received) = recording(&net.ns, || {
+    let builtin_only = {
+        let mut c = net.config.clone();
+        c.live.external_behaviours.clear();
+        c
+    };
+    let last = last_cycle(&net.log, &builtin_only);
+    let (python_stderr, received) = recording_watched(&net.ns, |heard| {
         let mut python = KillOnDrop(
             net.ns
                 .command(net.reference.python_path())
@@ -1514,7 +1555,7 @@ fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
         let run = net.arcnav("run", &["run", "--json", json.to_str().unwrap()]);
         run.wait_ready();
         assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
-        std::thread::sleep(Duration::from_millis(300));
+        heard.wait_for_cycle(last, Duration::from_secs(10));
         run.signal("TERM");
         let (code, _) = run.finish();
         assert_eq!(code, Some(0));
@@ -1547,11 +1588,7 @@ fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
     assert!(voted >= 190, "{python_stderr}");
 
     // Against lock-step without it: decisions moved, and to the left.
-    let without = lockstep(&net.log, &{
-        let mut c = net.config.clone();
-        c.live.external_behaviours.clear();
-        c
-    });
+    let without = lockstep(&net.log, &builtin_only);
     let with = by_time(&received);
     let (mut compared, mut moved, mut shift) = (0, 0, 0.0);
     for (t, base) in &without {
