@@ -249,6 +249,7 @@ pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
             .map(|&s| if s.is_finite() { s } else { -1.0 })
             .collect(),
         reverse_clear: votes.votes.reverse_clearances().to_vec(),
+        forward_clear: votes.votes.forward_clearances().to_vec(),
     }
 }
 
@@ -294,10 +295,16 @@ pub fn votes_from_wire(msg: &arc_votes_t, arcs: &ArcSet) -> Result<BehaviourVote
             votes.limit_arc_speed(i, f64::from(speed));
         }
     }
+    // Negative: no opinion; NaN is no number of metres: 0.
+    let given = |metres: &f32| *metres >= 0.0 || metres.is_nan();
     for (i, &metres) in msg.reverse_clear.iter().enumerate() {
-        // Negative: no opinion; NaN is no number of metres: 0.
-        if metres >= 0.0 || metres.is_nan() {
+        if given(&metres) {
             votes.set_reverse_clearance(i, f64::from(metres));
+        }
+    }
+    for (i, &metres) in msg.forward_clear.iter().enumerate() {
+        if given(&metres) {
+            votes.set_forward_clearance(i, f64::from(metres));
         }
     }
     Ok(BehaviourVotes {
@@ -672,6 +679,7 @@ mod tests {
         votes.limit_arc_speed(5, 0.0);
         votes.set_reverse_clearance(6, 3.5);
         votes.set_reverse_clearance(7, 0.0);
+        votes.set_forward_clearance(9, 2.75);
         let bv = BehaviourVotes {
             behaviour: "obstacle_avoidance".into(),
             utime: 9,
@@ -691,6 +699,14 @@ mod tests {
             ),
             (Some(3.5), Some(0.0), None),
             "backing-up clearances: given, zero, no opinion"
+        );
+        assert_eq!(
+            (
+                back.votes.forward_clearance(9),
+                back.votes.forward_clearance(10)
+            ),
+            (Some(2.75), None),
+            "creeping clearances: given, no opinion"
         );
         let other = ArcSet::new(&ArcSetConfig {
             count: 39,

@@ -25,6 +25,28 @@ fn out_dir(tag: &str) -> ScratchDir {
     arcnav_testkit::scratch_dir(&format!("arcnav-sim-{tag}"))
 }
 
+/// Runs `arcnav sim --out DIR ARGS…` for every (tag, args) at once: each
+/// mission's report and standard output.
+fn missions<'a>(prefix: &str, runs: &'a [(&'a str, Vec<String>)]) -> Vec<(&'a str, Value, String)> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = runs
+            .iter()
+            .map(|(tag, args)| {
+                scope.spawn(move || {
+                    let out = out_dir(&format!("{prefix}-{tag}"));
+                    let mut all = vec!["sim", "--out", out.to_str().unwrap()];
+                    all.extend(args.iter().map(String::as_str));
+                    let (_, stdout, stderr) = arcnav(&all);
+                    let report = std::fs::read_to_string(out.join("report.json"))
+                        .unwrap_or_else(|e| panic!("{tag}: no report ({e}):\n{stdout}\n{stderr}"));
+                    (*tag, serde_json::from_str(&report).unwrap(), stdout)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    })
+}
+
 fn run_short_course(tag: &str) -> ScratchDir {
     let out = out_dir(tag);
     let (code, stdout, stderr) = arcnav(&[
@@ -385,23 +407,7 @@ fn forest_hillside_cul_de_sac_and_boxed_in_worlds_complete() {
         ("hillside", vec!["--world".into(), world("hillside")]),
         ("seed4", vec!["--seed".into(), "4".into()]),
     ];
-    let reports: Vec<(&str, Value, String)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = runs
-            .iter()
-            .map(|(tag, args)| {
-                scope.spawn(move || {
-                    let out = out_dir(&format!("stuck-{tag}"));
-                    let mut all = vec!["sim", "--out", out.to_str().unwrap()];
-                    all.extend(args.iter().map(String::as_str));
-                    let (_, stdout, stderr) = arcnav(&all);
-                    let report = std::fs::read_to_string(out.join("report.json"))
-                        .unwrap_or_else(|e| panic!("{tag}: no report ({e}):\n{stdout}\n{stderr}"));
-                    (*tag, serde_json::from_str(&report).unwrap(), stdout)
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap()).collect()
-    });
+    let reports = missions("stuck", &runs);
     for (tag, report, stdout) in &reports {
         assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
         assert_eq!(
@@ -428,6 +434,47 @@ fn forest_hillside_cul_de_sac_and_boxed_in_worlds_complete() {
             .unwrap()
             > 10
     );
+}
+
+/// 017, the class beyond the U: cul-de-sacs narrower than the
+/// vehicle's turning circle (7.7 m of floor against 16 m), and the 24 m one
+/// with the 64-beam lidar, whose route swings the vehicle to and fro when
+/// it only backs up once. Each is left by turning round in a K-point turn:
+/// completed, no collision, at least 90° turned in legs.
+#[test]
+fn narrow_cul_de_sacs_are_left_by_turning_round() {
+    let world = |name: &str| format!("{}/tests/worlds/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    let run = |tag, name, sensor: &str| {
+        let args = ["--world", &world(name), "--sensor", sensor, "--no-images"];
+        (tag, args.map(String::from).to_vec())
+    };
+    let runs = [
+        run("narrow-erim", "cul_de_sac_narrow", "erim"),
+        run("narrow-lidar64", "cul_de_sac_narrow", "lidar64"),
+        run("wide-lidar64", "cul_de_sac", "lidar64"),
+    ];
+    let reports = missions("turn", &runs);
+    for (tag, report, stdout) in &reports {
+        assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
+        assert_eq!(
+            report["collisions"].as_array().unwrap().len(),
+            0,
+            "{tag}:\n{stdout}"
+        );
+        let recovery = &report["recovery"];
+        assert!(
+            recovery["turns"].as_u64().unwrap() >= 1,
+            "{tag}: {recovery}"
+        );
+        assert!(
+            recovery["turn_legs"].as_u64().unwrap() >= 2,
+            "{tag}: {recovery}"
+        );
+        assert!(
+            recovery["turned_deg"].as_f64().unwrap() >= 90.0,
+            "{tag}: {recovery}"
+        );
+    }
 }
 
 /// 020 item 1: a faster vehicle looks farther. With the 18 m of arc and

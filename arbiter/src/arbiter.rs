@@ -136,6 +136,8 @@ pub struct StopTime {
     /// A behaviour asked to stop (a mission complete).
     pub asked_us: u64,
     pub stuck_us: u64,
+    /// Turning the wheels, standing, before a manoeuvre's leg.
+    pub steering_us: u64,
 }
 
 impl StopTime {
@@ -149,6 +151,7 @@ impl StopTime {
             ("speed limited to 0", self.speed_limited_us),
             ("asked to stop", self.asked_us),
             ("stuck", self.stuck_us),
+            ("steering for a manoeuvre", self.steering_us),
         ])
     }
 }
@@ -179,6 +182,8 @@ pub struct SpeedTime {
     pub weak_vote_us: u64,
     /// Backing up.
     pub reverse_us: u64,
+    /// A turning-round manoeuvre's forward legs.
+    pub turning_us: u64,
 }
 
 impl SpeedTime {
@@ -191,7 +196,13 @@ impl SpeedTime {
             ("lateral", self.lateral_us),
             ("weak vote", self.weak_vote_us),
             ("reverse", self.reverse_us),
+            ("turning", self.turning_us),
         ])
+    }
+
+    /// True when `limits` are a manoeuvre's (backing up, turning round).
+    fn manoeuvre(limits: &[(String, f64)]) -> bool {
+        matches!(limits, [(name, _)] if name == BACKING || name == TURNING)
     }
 
     /// The counter of the limit that set `limits`' speed (the arbiter's
@@ -205,7 +216,8 @@ impl SpeedTime {
             .map(|(name, _)| name.as_str());
         match (weak, lowest) {
             (true, _) => |t| &mut t.moving.weak_vote_us,
-            (_, Some("recovery")) => |t| &mut t.moving.reverse_us,
+            (_, Some(BACKING)) => |t| &mut t.moving.reverse_us,
+            (_, Some(TURNING)) => |t| &mut t.moving.turning_us,
             (_, Some("cruise")) => |t| &mut t.moving.cruise_us,
             (_, Some("vehicle")) => |t| &mut t.moving.vehicle_us,
             (_, Some("lateral")) => |t| &mut t.moving.lateral_us,
@@ -213,6 +225,11 @@ impl SpeedTime {
         }
     }
 }
+
+/// The speed limit a manoeuvre's command carries: backing up, and a
+/// turning-round's forward legs.
+const BACKING: &str = "recovery";
+const TURNING: &str = "turning";
 
 /// Picks the [`ArbiterStats`] time counter a command feeds until the next
 /// decision.
@@ -264,6 +281,11 @@ pub struct Arbiter {
     preference: Vec<f32>,
     /// Per arc: the least backing-up clearance of the fresh votes.
     clearance: Vec<Option<f64>>,
+    /// Per arc: the least forward (creeping) clearance of the fresh votes.
+    forward: Vec<Option<f64>>,
+    /// Per arc: the weighted mean vote of the fresh behaviours that give no
+    /// clearance (see [`crate::recovery`]).
+    wish: Vec<f32>,
     /// The last command's time and the counter it feeds.
     last_command: Option<(Utime, TimeCounter)>,
 }
@@ -297,6 +319,8 @@ impl Arbiter {
             recovery: Recovery::new(&config.recovery, vehicle),
             preference: vec![0.0; n],
             clearance: vec![None; n],
+            forward: vec![None; n],
+            wish: vec![0.0; n],
             last_command: None,
         };
         for name in &config.required {
@@ -415,17 +439,24 @@ impl Arbiter {
             }
             Err(_) => (false, false),
         };
-        self.gather_clearance(now);
+        let wished = self.gather_clearance(now);
         let behind = Behind {
             clearance: &self.clearance,
+            forward: &self.forward,
             preference: &self.preference,
+            wish: wished.then_some(self.wish.as_slice()),
             curvatures: self.arcs.curvatures(),
         };
         match self.recovery.step(now, blocked, safe, &behind) {
             recovery::Outcome::Keep => {}
-            recovery::Outcome::Back(command) => {
-                self.stats.reverse_commands += 1;
-                outcome = Ok((command, vec![("recovery".to_owned(), -command.speed_mps)]));
+            recovery::Outcome::Drive(command) => {
+                let label = if command.is_reverse() {
+                    self.stats.reverse_commands += 1;
+                    BACKING
+                } else {
+                    TURNING
+                };
+                outcome = Ok((command, vec![(label.to_owned(), command.speed_mps.abs())]));
             }
             recovery::Outcome::Exhausted { attempts } => {
                 let blocked = match &outcome {
@@ -454,6 +485,9 @@ impl Arbiter {
             Err(StopReason::AllArcsForbidden { .. }) => |t| &mut t.stopped.all_arcs_forbidden_us,
             Err(StopReason::NoAcceptableArc { .. }) => |t| &mut t.stopped.no_acceptable_arc_us,
             Err(StopReason::Stuck { .. }) => |t| &mut t.stopped.stuck_us,
+            Ok((_, limits)) if command.is_stop() && SpeedTime::manoeuvre(limits) => {
+                |t| &mut t.stopped.steering_us
+            }
             Ok(_) if command.is_stop() && stop_asked => |t| &mut t.stopped.asked_us,
             Ok(_) if command.is_stop() => |t| &mut t.stopped.speed_limited_us,
             Ok((_, limits)) => SpeedTime::binding(limits),
@@ -470,18 +504,44 @@ impl Arbiter {
         command
     }
 
-    /// Per arc, the least backing-up clearance the fresh votes give.
-    fn gather_clearance(&mut self, now: Utime) {
-        let mut clearance = std::mem::take(&mut self.clearance);
+    /// Per arc, the least clearance, backing up and creeping forwards, the
+    /// fresh votes give; and the weighted mean vote of the fresh behaviours
+    /// that give none (false when there are none).
+    fn gather_clearance(&mut self, now: Utime) -> bool {
+        let (mut clearance, mut forward, mut wish) = (
+            std::mem::take(&mut self.clearance),
+            std::mem::take(&mut self.forward),
+            std::mem::take(&mut self.wish),
+        );
         clearance.fill(None);
-        for (_, votes) in self.used(now) {
-            for (slot, arc) in clearance.iter_mut().zip(0..) {
-                if let Some(c) = votes.reverse_clearance(arc) {
-                    *slot = Some(slot.map_or(c, |s: f64| s.min(c)));
+        forward.fill(None);
+        wish.fill(0.0);
+        let least = |slot: &mut Option<f64>, c: Option<f64>| {
+            if let Some(c) = c {
+                *slot = Some(slot.map_or(c, |s| s.min(c)));
+            }
+        };
+        let mut weight = 0.0;
+        for (input, votes) in self.used(now) {
+            let mut judges_ground = false;
+            for arc in 0..clearance.len() {
+                let (back, ahead) = (votes.reverse_clearance(arc), votes.forward_clearance(arc));
+                judges_ground |= back.is_some() || ahead.is_some();
+                least(&mut clearance[arc], back);
+                least(&mut forward[arc], ahead);
+            }
+            if !judges_ground {
+                weight += input.weight;
+                for (w, &v) in wish.iter_mut().zip(votes.values()) {
+                    *w += input.weight as f32 * v;
                 }
             }
         }
-        self.clearance = clearance;
+        if weight > 0.0 {
+            wish.iter_mut().for_each(|w| *w /= weight as f32);
+        }
+        (self.clearance, self.forward, self.wish) = (clearance, forward, wish);
+        weight > 0.0
     }
 
     #[allow(clippy::type_complexity)]

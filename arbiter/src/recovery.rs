@@ -13,6 +13,27 @@
 //! most `max_attempts` recoveries follow each other without `progress_m` of
 //! forward driving in between; then the vehicle stops and says why.
 //!
+//! **Turning round.** When what the vehicle wants — the weighted mean vote
+//! of the behaviours that judge no ground (give no clearance), e.g. the
+//! route — is an extreme arc, or every arc's is below 0, its way lies
+//! beyond the arcs, to the side or behind, as at the end of a cul-de-sac. Backing up
+//! once and then driving on the fused vote swings the nose back and forth
+//! (the forward arcs that obstacle avoidance likes best lead back in).
+//! Instead the vehicle makes a K-point turn, as a driver would in a narrow
+//! lane: backing legs along arcs curving away from that side and forward
+//! legs along arcs curving towards it, both turning the heading the same
+//! way, each the leg that turns it most (|k|·length) among those clear for
+//! at least `min_distance_m` — forwards too, however close (obstacle
+//! avoidance's `min_distance_m` veto is for driving at speed, not for a
+//! leg at `speed_mps`). The wheels are turned standing before each leg. It
+//! ends when the wish's favourite arc curves less than `turn_exit_fraction`
+//! of the hardest towards that side and its vote is 0 or more (the way lies
+//! ahead again, for a second: a route's path can swing for a cycle as it
+//! re-plans; a wish for the other side's hardest arc, the way still
+//! behind, does not end it), after `turn_max_legs` legs, or when no leg is
+//! clear. One turn counts as one recovery; a turn left unfinished is taken
+//! up towards the same side by the next one (until `progress_m` of driving).
+//!
 //! The arbiter reads no pose: how far the vehicle has moved comes from its
 //! own commands and the vehicle's acceleration limits, so every executor
 //! fed the same votes decides the same. The behaviours re-check the ground
@@ -20,7 +41,7 @@
 //! clear enough to stop on.
 
 use arcnav_vehicle::config::{self, ConfigError};
-use arcnav_vehicle::motion::speed_ramp;
+use arcnav_vehicle::motion::{curvature_ramp, speed_ramp};
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
 use arcnav_vehicle::{MotionLimits, SteeringCommand, Utime, VehicleConfig};
 use serde::{Deserialize, Serialize};
@@ -50,6 +71,14 @@ pub struct RecoveryConfig {
     /// Commands slower than this count as standing (blocked when the arcs'
     /// limits force it), m/s.
     pub creep_mps: f64,
+    /// Turn round with a K-point turn when blocked with the way to the side
+    /// or behind (false: back up once, as for any block).
+    pub turn_round: bool,
+    /// Legs (backing and forward) in one turn at most.
+    pub turn_max_legs: u32,
+    /// The turn ends when the wished-for arc curves less than this fraction
+    /// of the hardest arc towards the turn's side.
+    pub turn_exit_fraction: f64,
 }
 
 impl Default for RecoveryConfig {
@@ -64,6 +93,9 @@ impl Default for RecoveryConfig {
             max_attempts: 8,
             progress_m: 8.0,
             creep_mps: 0.1,
+            turn_round: true,
+            turn_max_legs: 12,
+            turn_exit_fraction: 0.5,
         }
     }
 }
@@ -78,20 +110,31 @@ impl RecoveryConfig {
         config::non_negative("margin_m", self.margin_m)?;
         config::non_negative("progress_m", self.progress_m)?;
         config::in_range("creep_mps", self.creep_mps, 0.0, 1.0)?;
-        if self.max_attempts > 1000 {
-            return Err(ConfigError::new(
-                "max_attempts",
-                format!("is {}, at most 1000", self.max_attempts),
-            ));
+        config::in_range("turn_exit_fraction", self.turn_exit_fraction, 0.0, 1.0)?;
+        for (key, value) in [
+            ("max_attempts", self.max_attempts),
+            ("turn_max_legs", self.turn_max_legs),
+        ] {
+            if value > 1000 {
+                return Err(ConfigError::new(key, format!("is {value}, at most 1000")));
+            }
         }
         Ok(())
     }
 }
 
+/// A leg starts moving once the steering is this near its curvature, 1/m
+/// (0.13 s of the default steering rate).
+const STEERED_WITHIN: f64 = 0.02;
+
+/// A turn round ends once the way has lain ahead this long, s: a route's
+/// path can swing for a cycle as it re-plans.
+const WISH_HELD_S: f64 = 1.0;
+
 /// What recoveries did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct RecoveryStats {
-    /// Times the vehicle started backing up.
+    /// Times the vehicle started backing up or turning round.
     pub recoveries: u64,
     /// Metres backed (estimated from the commands), m.
     pub backed_m: f64,
@@ -99,27 +142,126 @@ pub struct RecoveryStats {
     pub no_way_back: u64,
     /// Decisions that stopped because recoveries were exhausted.
     pub exhausted: u64,
+    /// Of the recoveries, K-point turns.
+    pub turns: u64,
+    /// Legs driven in those turns, backing and forward.
+    pub turn_legs: u64,
+    /// Heading turned by them (estimated from the commands), degrees.
+    pub turned_deg: f64,
 }
 
-/// What the arbiter knows of the ground behind and the behaviours' wishes
-/// at one decision.
+/// What the arbiter knows of the ground and the behaviours' wishes at one
+/// decision.
 pub(crate) struct Behind<'a> {
     /// Per arc: the least backing-up clearance any fresh behaviour gave
     /// (`None`: nobody had an opinion).
     pub clearance: &'a [Option<f64>],
+    /// Per arc: the least forward (creeping) clearance any fresh behaviour
+    /// gave.
+    pub forward: &'a [Option<f64>],
     /// Per arc: the fused vote before vetoes.
     pub preference: &'a [f32],
+    /// Per arc: the weighted mean vote of the fresh behaviours that judge
+    /// no ground (give no clearance): where the vehicle wants to go (`None`:
+    /// no such behaviour voted).
+    pub wish: Option<&'a [f32]>,
     pub curvatures: &'a [f64],
+}
+
+impl Behind<'_> {
+    /// The clearance along `arc` driven forwards or backing up.
+    fn clear(&self, arc: usize, reverse: bool) -> Option<f64> {
+        let side = if reverse {
+            self.clearance
+        } else {
+            self.forward
+        };
+        side.get(arc).copied().flatten()
+    }
+
+    /// What the vehicle wants: the wished-for arc's curvature as a
+    /// fraction of the hardest arc's (-1 hard right .. 1 hard left; ties go
+    /// to the straighter arc), and its wish vote.
+    fn wished(&self) -> Option<Wish> {
+        let wish = self.wish?;
+        let n = wish.len().min(self.curvatures.len());
+        let straight = n / 2;
+        let best = (0..n).max_by(|&a, &b| {
+            wish[a]
+                .total_cmp(&wish[b])
+                .then(b.abs_diff(straight).cmp(&a.abs_diff(straight)))
+                .then(b.cmp(&a))
+        })?;
+        let hardest = self.curvatures.iter().fold(0.0f64, |m, k| m.max(k.abs()));
+        let left: f32 = wish[straight + 1..n].iter().sum();
+        let right: f32 = wish[..straight].iter().sum();
+        (hardest > 0.0).then(|| Wish {
+            turn: self.curvatures[best] / hardest,
+            vote: wish[best],
+            better_side: if left >= right { 1.0 } else { -1.0 },
+        })
+    }
+}
+
+/// Where the behaviours that judge no ground want the vehicle to go.
+#[derive(Debug, Clone, Copy)]
+struct Wish {
+    /// The wished-for arc's curvature over the hardest arc's.
+    turn: f64,
+    /// Its vote: below 0 every arc leads away (the way lies behind).
+    vote: f32,
+    /// +1 when the left arcs are liked better than the right ones, else -1.
+    better_side: f64,
+}
+
+impl Wish {
+    /// The side to turn round towards, when the way lies beyond the arcs:
+    /// the hardest arc is wished for, or every arc leads away.
+    fn beyond_the_arcs(&self) -> Option<f64> {
+        if self.turn.abs() >= 1.0 - 1e-9 {
+            Some(self.turn.signum())
+        } else if self.vote < 0.0 {
+            Some(self.better_side)
+        } else {
+            None
+        }
+    }
+}
+
+/// One leg of a manoeuvre along an arc at a crawl.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Leg {
+    arc: usize,
+    curvature: f64,
+    reverse: bool,
+    /// Distance to drive, m.
+    goal_m: f64,
+    done_m: f64,
+}
+
+impl Leg {
+    /// A leg of `goal_m` along `arc`, backing up when `reverse`.
+    fn along(arc: usize, behind: &Behind<'_>, reverse: bool, goal_m: f64) -> Self {
+        Self {
+            arc,
+            curvature: behind.curvatures[arc],
+            reverse,
+            goal_m,
+            done_m: 0.0,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Mode {
     Forward,
-    Backing {
-        arc: usize,
-        /// Distance to back up, m.
-        goal_m: f64,
-        backed_m: f64,
+    /// Backing up once, then forward again.
+    Backing(Leg),
+    /// A K-point turn towards `side` (+1 left, -1 right).
+    Turning {
+        side: f64,
+        leg: Leg,
+        legs: u32,
     },
 }
 
@@ -135,7 +277,15 @@ pub(crate) struct Recovery {
     forward_since_recovery_m: f64,
     /// The vehicle's speed as the commands so far make it, m/s.
     speed_estimate: f64,
-    last: Option<(Utime, f64)>,
+    /// Its curvature as the commands so far make it, 1/m.
+    curvature_estimate: f64,
+    /// Turning round: since when the way has lain ahead.
+    wish_ahead_since: Option<Utime>,
+    /// The side of a turn that ended with no leg clear, until the vehicle
+    /// has made progress or a turn has finished.
+    unfinished_turn: Option<f64>,
+    /// The last command: when, its speed and its curvature.
+    last: Option<(Utime, f64, f64)>,
     pub stats: RecoveryStats,
 }
 
@@ -143,8 +293,9 @@ pub(crate) struct Recovery {
 pub(crate) enum Outcome {
     /// Forward decision stands.
     Keep,
-    /// Back up with this command.
-    Back(SteeringCommand),
+    /// Drive a manoeuvre's leg with this command (backing up when its
+    /// speed is negative).
+    Drive(SteeringCommand),
     /// Blocked and recoveries are used up.
     Exhausted { attempts: u32 },
 }
@@ -159,36 +310,53 @@ impl Recovery {
             attempts: 0,
             forward_since_recovery_m: 0.0,
             speed_estimate: 0.0,
+            curvature_estimate: 0.0,
+            wish_ahead_since: None,
+            unfinished_turn: None,
             last: None,
             stats: RecoveryStats::default(),
         }
     }
 
-    /// True while backing up.
+    /// True while a manoeuvre (backing up, turning round) drives.
     pub fn is_backing(&self) -> bool {
-        matches!(self.mode, Mode::Backing { .. })
+        !matches!(self.mode, Mode::Forward)
     }
 
     /// Moves the speed estimate to `now` under the last command.
     fn advance(&mut self, now: Utime) {
-        let Some((since, target)) = self.last else {
+        let Some((since, target, curvature)) = self.last else {
             return;
         };
-        self.last = Some((now, target));
+        self.last = Some((now, target, curvature));
         let dt = micros_to_seconds(now - since).max(0.0);
+        (self.curvature_estimate, _) =
+            curvature_ramp(self.curvature_estimate, curvature, &self.limits, dt);
         let (v1, mean) = speed_ramp(self.speed_estimate, target, &self.limits, dt);
         let distance = mean * dt;
         self.speed_estimate = v1;
-        if distance > 0.0 {
-            self.forward_since_recovery_m += distance;
-            if self.forward_since_recovery_m >= self.config.progress_m {
-                self.attempts = 0;
-            }
-        } else {
+        if distance < 0.0 {
             self.stats.backed_m -= distance;
-            if let Mode::Backing { backed_m, .. } = &mut self.mode {
-                *backed_m -= distance;
+        }
+        let leg = match &mut self.mode {
+            Mode::Forward => {
+                if distance > 0.0 {
+                    self.forward_since_recovery_m += distance;
+                    if self.forward_since_recovery_m >= self.config.progress_m {
+                        self.attempts = 0;
+                        self.unfinished_turn = None;
+                    }
+                }
+                return;
             }
+            Mode::Backing(leg) => leg,
+            Mode::Turning { leg, .. } => {
+                self.stats.turned_deg += (leg.curvature * distance).to_degrees().abs();
+                leg
+            }
+        };
+        if (distance < 0.0) == leg.reverse {
+            leg.done_m += distance.abs();
         }
     }
 
@@ -199,52 +367,68 @@ impl Recovery {
         } else {
             command.speed_mps
         };
-        self.last = Some((now, speed));
+        self.last = Some((now, speed, command.curvature));
     }
 
     /// The decision at `now`: `blocked` says whether the forward decision
     /// leaves the vehicle standing for want of an arc; `safe` is false when
-    /// it stopped for a reason no backing up may override (votes missing).
+    /// it stopped for a reason no manoeuvre may override (votes missing).
     pub fn step(&mut self, now: Utime, blocked: bool, safe: bool, behind: &Behind<'_>) -> Outcome {
         self.advance(now);
         if !self.config.enabled {
             return Outcome::Keep;
         }
         if !safe {
-            self.end_backing();
+            self.mode = Mode::Forward;
             return Outcome::Keep;
         }
-        if let Mode::Backing {
-            arc,
-            goal_m,
-            backed_m,
-        } = self.mode
-        {
-            let remaining = goal_m - backed_m;
-            let clear = behind.clearance.get(arc).copied().flatten().unwrap_or(0.0);
-            // Room to stand before what is behind, at the speed it has.
-            let v = self.speed_estimate.abs();
-            let braking = v * v / (2.0 * self.limits.max_deceleration_mps2);
-            if remaining > 0.0 && clear - self.config.margin_m > braking {
-                let room = (clear - self.config.margin_m).min(remaining + braking);
-                let speed = self
-                    .config
-                    .speed_mps
-                    .min((2.0 * self.limits.max_deceleration_mps2 * room.max(0.0)).sqrt());
-                return Outcome::Back(SteeringCommand {
-                    utime: now,
-                    curvature: behind.curvatures[arc],
-                    speed_mps: -speed,
-                    arc_index: Some(arc),
-                    vote: behind.preference.get(arc).copied().unwrap_or(0.0),
-                });
+        match self.mode {
+            Mode::Forward => self.when_forward(now, blocked, behind),
+            Mode::Backing(leg) => {
+                if let Some(command) = self.drive(now, &leg, behind) {
+                    return Outcome::Drive(command);
+                }
+                tracing::info!(
+                    t_s = micros_to_seconds(now),
+                    backed_m = leg.done_m,
+                    "backing up ends"
+                );
+                self.end(now, blocked)
             }
-            tracing::info!(backed_m, remaining, clear, "backing up ends");
-            self.end_backing();
-            // Give the way forward a fresh look before backing again.
-            self.blocked_since = blocked.then_some(now);
-            return Outcome::Keep;
+            Mode::Turning { side, leg, legs } => {
+                let since = self
+                    .wish_ahead(side, behind)
+                    .then(|| self.wish_ahead_since.unwrap_or(now));
+                self.wish_ahead_since = since;
+                if since.is_some_and(|since| now - since >= seconds_to_micros(WISH_HELD_S)) {
+                    tracing::info!(t_s = micros_to_seconds(now), legs, "turned round");
+                    self.unfinished_turn = None;
+                    return self.end(now, blocked);
+                }
+                if let Some(command) = self.drive(now, &leg, behind) {
+                    return Outcome::Drive(command);
+                }
+                // The next leg goes the other way and turns the same way.
+                let next = (legs < self.config.turn_max_legs)
+                    .then(|| self.choose_leg(side, !leg.reverse, behind))
+                    .flatten();
+                let Some(next) = next else {
+                    tracing::info!(
+                        t_s = micros_to_seconds(now),
+                        legs,
+                        "turning round ends: no leg clear or legs used up"
+                    );
+                    self.unfinished_turn = Some(side);
+                    return self.end(now, blocked);
+                };
+                self.start_turn_leg(side, next, legs + 1);
+                self.step(now, blocked, safe, behind)
+            }
         }
+    }
+
+    /// Driving forwards: blocked long enough, standing, starts a manoeuvre.
+    fn when_forward(&mut self, now: Utime, blocked: bool, behind: &Behind<'_>) -> Outcome {
         if !blocked {
             self.blocked_since = None;
             return Outcome::Keep;
@@ -260,29 +444,148 @@ impl Recovery {
                 attempts: self.attempts,
             };
         }
-        let Some((arc, goal_m)) = self.choose(behind) else {
+        // A turn left unfinished (no leg clear) carries on towards the same
+        // side: starting the other way undoes it.
+        let side = behind
+            .wished()
+            .filter(|_| self.config.turn_round)
+            .and_then(|wish| wish.beyond_the_arcs())
+            .map(|side| self.unfinished_turn.unwrap_or(side));
+        // Turning round starts with the leg that has room: backing first.
+        let turn = side.and_then(|side| {
+            [true, false]
+                .into_iter()
+                .find_map(|reverse| self.choose_leg(side, reverse, behind))
+                .map(|leg| (side, leg))
+        });
+        if let Some((side, leg)) = turn {
+            self.begin();
+            self.stats.turns += 1;
+            tracing::info!(
+                t_s = micros_to_seconds(now),
+                attempt = self.attempts,
+                side,
+                "blocked, the way behind: turning round"
+            );
+            self.start_turn_leg(side, leg, 1);
+        } else if let Some((arc, goal_m)) = self.choose(behind) {
+            self.begin();
+            let leg = Leg::along(arc, behind, true, goal_m);
+            tracing::info!(
+                t_s = micros_to_seconds(now),
+                attempt = self.attempts,
+                ?leg,
+                "blocked: backing up"
+            );
+            self.mode = Mode::Backing(leg);
+        } else {
             self.stats.no_way_back += 1;
             return Outcome::Keep;
-        };
+        }
+        self.step(now, blocked, true, behind)
+    }
+
+    /// Counts a recovery starting.
+    fn begin(&mut self) {
         self.attempts += 1;
         self.stats.recoveries += 1;
         self.forward_since_recovery_m = 0.0;
-        tracing::info!(
-            attempt = self.attempts,
-            curvature = behind.curvatures[arc],
-            distance_m = goal_m,
-            "blocked: backing up"
-        );
-        self.mode = Mode::Backing {
-            arc,
-            goal_m,
-            backed_m: 0.0,
-        };
-        self.step(now, blocked, safe, behind)
     }
 
-    fn end_backing(&mut self) {
+    fn start_turn_leg(&mut self, side: f64, leg: Leg, legs: u32) {
+        self.stats.turn_legs += 1;
+        if legs == 1 {
+            self.wish_ahead_since = None;
+        }
+        tracing::info!(
+            leg = legs,
+            reverse = leg.reverse,
+            curvature = leg.curvature,
+            distance_m = leg.goal_m,
+            "turning round: next leg"
+        );
+        self.mode = Mode::Turning { side, leg, legs };
+    }
+
+    /// Back to driving on the fused vote; a block gets a fresh look first.
+    fn end(&mut self, now: Utime, blocked: bool) -> Outcome {
         self.mode = Mode::Forward;
+        self.blocked_since = blocked.then_some(now);
+        Outcome::Keep
+    }
+
+    /// True when the way lies ahead again for a turn towards `side`: the
+    /// wished-for arc curves less than `turn_exit_fraction` of the hardest
+    /// towards it and leads towards the way (a vote of 0 or more). A wish
+    /// for the other side's hardest arc does not end the turn: the way is
+    /// still behind, and turning on gets there as well (switching sides is
+    /// what swings the nose to and fro).
+    fn wish_ahead(&self, side: f64, behind: &Behind<'_>) -> bool {
+        behind.wished().is_none_or(|wish| {
+            let towards = wish.turn * side;
+            towards < self.config.turn_exit_fraction && towards > -1.0 + 1e-9 && wish.vote >= 0.0
+        })
+    }
+
+    /// The command that drives `leg` on, while it has distance to go and
+    /// room to stop before what its clearance shows; `None` when it ends.
+    /// The wheels are turned to the leg's curvature standing first: the
+    /// sweep that was checked is the arc's, not the steering's transition.
+    fn drive(&self, now: Utime, leg: &Leg, behind: &Behind<'_>) -> Option<SteeringCommand> {
+        let remaining = leg.goal_m - leg.done_m;
+        let clear = behind.clear(leg.arc, leg.reverse).unwrap_or(0.0);
+        // Room to stand before what is in the way, at the speed it has: the
+        // command's latency, then braking.
+        let (a, latency) = (
+            self.limits.max_deceleration_mps2,
+            micros_to_seconds(self.limits.latency_us),
+        );
+        let v = self.speed_estimate.abs();
+        let stopping = v * latency + v * v / (2.0 * a);
+        if remaining <= 0.0 || clear - self.config.margin_m <= stopping {
+            return None;
+        }
+        let steering = (self.curvature_estimate - leg.curvature).abs() > STEERED_WITHIN;
+        let room = (clear - self.config.margin_m).min(remaining + stopping);
+        // v·t + v²/2a = room, solved for v.
+        let stopping_speed = -a * latency + ((a * latency).powi(2) + 2.0 * a * room).sqrt();
+        let speed = if steering {
+            0.0
+        } else {
+            self.config.speed_mps.min(stopping_speed)
+        };
+        Some(SteeringCommand {
+            utime: now,
+            curvature: leg.curvature,
+            speed_mps: if leg.reverse { -speed } else { speed },
+            arc_index: Some(leg.arc),
+            vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
+        })
+    }
+
+    /// The least room a leg needs, m.
+    fn min_leg_m(&self) -> f64 {
+        self.config.min_distance_m.max(0.1)
+    }
+
+    /// A K-point turn's next leg towards `side`: driven backwards along an
+    /// arc curving away from it, or forwards along one curving towards it,
+    /// the one that turns the heading most (|k|·length) among those clear
+    /// for at least `min_distance_m`.
+    fn choose_leg(&self, side: f64, reverse: bool, behind: &Behind<'_>) -> Option<Leg> {
+        let turning = if reverse { -side } else { side };
+        let margin = self.config.margin_m;
+        (0..behind.curvatures.len())
+            .filter(|&arc| behind.curvatures[arc] * turning > 0.0)
+            .filter_map(|arc| {
+                let room = behind.clear(arc, reverse)? - margin;
+                (room >= self.min_leg_m()).then(|| (arc, room.min(self.config.distance_m)))
+            })
+            .max_by(|&(a, ra), &(b, rb)| {
+                let turn = |arc: usize, r: f64| behind.curvatures[arc].abs() * r;
+                turn(a, ra).total_cmp(&turn(b, rb)).then(ra.total_cmp(&rb))
+            })
+            .map(|(arc, goal_m)| Leg::along(arc, behind, reverse, goal_m))
     }
 
     /// The backward arc to take and how far: clear for the distance (or
@@ -299,7 +602,7 @@ impl Recovery {
             let ok = if any_full {
                 r >= full
             } else {
-                r >= self.config.min_distance_m.max(0.1)
+                r >= self.min_leg_m()
             };
             ok.then_some((arc, r.min(full)))
         });

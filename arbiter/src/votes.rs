@@ -7,14 +7,30 @@ fn zero_or_more(value: f64) -> f64 {
     if value.is_nan() { 0.0 } else { value.max(0.0) }
 }
 
-/// A backing-up clearance nobody gave.
+/// A clearance nobody gave.
 const NO_OPINION: f32 = -1.0;
+
+/// `metres` as a stored clearance (negative or NaN: 0).
+fn clearance_slot(slot: Option<&mut f32>, metres: f64) {
+    if let Some(clear) = slot {
+        *clear = zero_or_more(metres) as f32;
+    }
+}
+
+/// A stored clearance, if one was given.
+fn clearance_of(slots: &[f32], index: usize) -> Option<f64> {
+    slots
+        .get(index)
+        .filter(|&&m| m >= 0.0)
+        .map(|&m| f64::from(m))
+}
 
 /// What a behaviour thinks of every arc: a vote in [-1, 1] per arc (index
 /// order of the `ArcSet`), arcs it forbids outright (a veto: no weighted sum
 /// can make such an arc win), the map cell that caused each veto, an
-/// optional speed limit, and — for behaviours that check the ground behind
-/// the vehicle — how far it can back up along each arc. Buffers are sized
+/// optional speed limit, and — for behaviours that check the ground — how
+/// far the vehicle can drive along each arc, forwards and backing up, at a
+/// crawl (the manoeuvres of [`crate::recovery`]). Buffers are sized
 /// once for the arc set; behaviours fill them in place.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Votes {
@@ -26,6 +42,9 @@ pub struct Votes {
     arc_speeds: Vec<f32>,
     /// Per arc: metres the vehicle may back up along it (negative: no opinion).
     reverse_clear: Vec<f32>,
+    /// Per arc: metres the vehicle may creep forwards along it, however
+    /// close that is (negative: no opinion).
+    forward_clear: Vec<f32>,
 }
 
 impl Votes {
@@ -38,6 +57,7 @@ impl Votes {
             speed_mps: None,
             arc_speeds: vec![f32::INFINITY; arcs],
             reverse_clear: vec![NO_OPINION; arcs],
+            forward_clear: vec![NO_OPINION; arcs],
         }
     }
 
@@ -57,6 +77,7 @@ impl Votes {
         self.speed_mps = None;
         self.arc_speeds.fill(f32::INFINITY);
         self.reverse_clear.fill(NO_OPINION);
+        self.forward_clear.fill(NO_OPINION);
     }
 
     /// Sets the vote of arc `index`, clamped to [-1, 1] (NaN counts as -1).
@@ -105,18 +126,32 @@ impl Votes {
     /// driven backwards), m (negative or NaN: 0). Behaviours that never set
     /// it have no opinion on backing up.
     pub fn set_reverse_clearance(&mut self, index: usize, metres: f64) {
-        if let Some(clear) = self.reverse_clear.get_mut(index) {
-            *clear = zero_or_more(metres) as f32;
-        }
+        clearance_slot(self.reverse_clear.get_mut(index), metres);
     }
 
     /// How far the vehicle may back up along arc `index`, if this behaviour
     /// said.
     pub fn reverse_clearance(&self, index: usize) -> Option<f64> {
-        self.reverse_clear
-            .get(index)
-            .filter(|&&m| m >= 0.0)
-            .map(|&m| f64::from(m))
+        clearance_of(&self.reverse_clear, index)
+    }
+
+    /// How far the vehicle may creep forwards along arc `index` before it
+    /// meets what this behaviour forbids, m (negative or NaN: 0) — however
+    /// close that is: an arc vetoed for driving at speed may still take a
+    /// turning manoeuvre's short leg.
+    pub fn set_forward_clearance(&mut self, index: usize, metres: f64) {
+        clearance_slot(self.forward_clear.get_mut(index), metres);
+    }
+
+    /// How far the vehicle may creep forwards along arc `index`, if this
+    /// behaviour said.
+    pub fn forward_clearance(&self, index: usize) -> Option<f64> {
+        clearance_of(&self.forward_clear, index)
+    }
+
+    /// Per arc: the forward clearance, negative where none was given.
+    pub fn forward_clearances(&self) -> &[f32] {
+        &self.forward_clear
     }
 
     /// Per arc: the backing-up clearance, negative where none was given.
@@ -161,6 +196,7 @@ impl Votes {
         self.speed_mps = other.speed_mps;
         self.arc_speeds.clone_from(&other.arc_speeds);
         self.reverse_clear.clone_from(&other.reverse_clear);
+        self.forward_clear.clone_from(&other.forward_clear);
     }
 }
 
@@ -206,6 +242,16 @@ mod tests {
                 v.reverse_clearance(2)
             ),
             (Some(2.5), Some(0.0), None)
+        );
+        v.set_forward_clearance(3, 1.25);
+        v.set_forward_clearance(4, -3.0);
+        assert_eq!(
+            (
+                v.forward_clearance(3),
+                v.forward_clearance(4),
+                v.forward_clearance(0)
+            ),
+            (Some(1.25), Some(0.0), None)
         );
         v.clear();
         assert_eq!(v, Votes::new(5));

@@ -74,7 +74,13 @@ fn blocked_and_standing_it_backs_up_along_the_arc_that_swings_the_nose_towards_t
         .iter()
         .position(SteeringCommand::is_reverse)
         .unwrap();
-    assert_eq!(first, 15, "backs up after 1.5 s blocked");
+    // Then turns the wheels standing (0.15 1/m per second, to within
+    // 0.02 1/m of the arc's -0.072 1/m: 4 decisions), then backs up.
+    assert_eq!(first, 19, "backs up after 1.5 s blocked and 0.4 s steering");
+    for steer in &commands[15..first] {
+        assert!(steer.is_stop(), "{steer:?}");
+        assert_eq!(steer.arc_index, Some(38 - goal), "{steer:?}");
+    }
     let back = commands[first];
     assert_eq!(back.speed_mps, -1.0);
     // Backing along a right arc turns the heading left, towards the goal:
@@ -196,4 +202,136 @@ fn no_backing_up_when_a_behaviour_asks_to_stop_or_votes_are_missing() {
     assert!(commands[29].is_reverse());
     assert!(commands[30..].iter().all(SteeringCommand::is_stop));
     assert!(!a.is_backing_up());
+}
+
+/// Obstacle avoidance forbidding every forward arc for driving at speed
+/// (`vetoed`), with `ahead` metres of creeping room and 5 m behind on every
+/// arc; the route wishing for `wish(arc)`.
+fn cornered(
+    utime: i64,
+    vetoed: bool,
+    ahead: f64,
+    wish: impl Fn(usize) -> f32,
+) -> [BehaviourVotes; 2] {
+    let [mut avoid, mut route] = blocked(utime, |_| Some(5.0), 19);
+    for arc in 0..39 {
+        if !vetoed {
+            avoid.votes = {
+                let mut v = Votes::new(39);
+                (0..39).for_each(|a| {
+                    v.set(a, 1.0);
+                    v.set_reverse_clearance(a, 5.0);
+                });
+                v
+            };
+        }
+        avoid.votes.set_forward_clearance(arc, ahead);
+        route.votes.set(arc, wish(arc));
+    }
+    [avoid, route]
+}
+
+/// The way lies behind and to the left: every arc leads away, the hard
+/// left one least.
+fn behind_left(arc: usize) -> f32 {
+    -0.9 + 0.5 * arc as f32 / 38.0
+}
+
+#[test]
+fn with_the_way_behind_it_turns_round_in_legs_that_all_turn_the_same_way() {
+    let mut a = arbiter();
+    let commands = drive(&mut a, 0, 40.0, |t| cornered(t, true, 3.0, behind_left));
+    let moving: Vec<_> = commands.iter().filter(|c| !c.is_stop()).collect();
+    assert!(!moving.is_empty());
+    // Backing along right arcs and creeping forwards along left ones: the
+    // heading rate k·v is positive (left) on every leg.
+    for c in &moving {
+        assert!(c.curvature * c.speed_mps > 0.0, "{c:?}");
+        assert!(c.speed_mps.abs() <= 1.0, "{c:?}");
+    }
+    // Both kinds of leg, alternating, the hardest arcs (room is the same
+    // on all of them).
+    let legs: Vec<bool> = moving
+        .windows(2)
+        .filter(|w| w[0].is_reverse() != w[1].is_reverse())
+        .map(|w| w[1].is_reverse())
+        .collect();
+    assert!(legs.len() >= 6, "{} changes of direction", legs.len());
+    assert!(
+        moving
+            .iter()
+            .all(|c| c.arc_index == Some(0) || c.arc_index == Some(38))
+    );
+    let stats = *a.recovery_stats();
+    assert!(stats.turns >= 1, "{stats:?}");
+    assert!(stats.turn_legs >= 7, "{stats:?}");
+    // Forward legs stop 0.5 m (margin_m) short of the 3 m of room: 2.5 m;
+    // backing legs go the 4 m distance.
+    assert!(stats.turned_deg > 90.0, "{stats:?}");
+    // No turn has more than turn_max_legs legs.
+    let max = ArbiterConfig::default().recovery.turn_max_legs;
+    assert!(stats.turn_legs <= u64::from(max) * stats.turns, "{stats:?}");
+}
+
+#[test]
+fn the_turn_ends_once_the_way_has_lain_ahead_for_a_second() {
+    let ahead = |arc: usize| 1.0 - arc.abs_diff(19) as f32 / 20.0;
+    // The way swings ahead for 0.5 s at 8 s (a route re-planning), then
+    // for good at 12 s; from 12 s the ground ahead is clear too.
+    let votes = |t: i64| {
+        let swing = (8 * SECOND..8 * SECOND + SECOND / 2).contains(&t);
+        if t >= 12 * SECOND {
+            cornered(t, false, 18.0, ahead)
+        } else if swing {
+            cornered(t, true, 3.0, ahead)
+        } else {
+            cornered(t, true, 3.0, behind_left)
+        }
+    };
+    let mut a = arbiter();
+    let commands = drive(&mut a, 0, 16.0, votes);
+    // Still turning after the swing (legs with the hardest arcs)...
+    assert!(commands[85..120].iter().any(
+        |c| c.arc_index == Some(0) && c.is_reverse() || c.arc_index == Some(38) && !c.is_stop()
+    ));
+    // ... and driving on the fused vote a second after the way lies ahead.
+    let normal =
+        |c: &SteeringCommand| !c.is_reverse() && c.arc_index.is_some_and(|i| i.abs_diff(19) <= 2);
+    assert!(
+        !commands[120..129].iter().any(normal),
+        "not before a second"
+    );
+    assert!(
+        commands[131..].iter().all(normal),
+        "{:?}",
+        &commands[129..135]
+    );
+    assert_eq!(a.recovery_stats().turns, 1);
+    assert!(!a.is_backing_up());
+}
+
+#[test]
+fn forward_legs_need_creeping_room_and_turning_round_can_be_switched_off() {
+    // 1.2 m of room ahead is less than min_distance_m (1 m) + margin_m
+    // (0.5 m): the turn is backing legs only, each followed by a stop.
+    let mut a = arbiter();
+    let commands = drive(&mut a, 0, 30.0, |t| cornered(t, true, 1.2, behind_left));
+    assert!(commands.iter().any(SteeringCommand::is_reverse));
+    assert!(
+        commands.iter().all(|c| c.is_stop() || c.is_reverse()),
+        "no forward leg"
+    );
+    // turn_round = false: backing up once per recovery, as before.
+    let mut config = ArbiterConfig::default();
+    config.recovery.turn_round = false;
+    config.validate().unwrap();
+    let mut a = Arbiter::new(
+        &config,
+        ArcSet::new(&ArcSetConfig::default()).unwrap(),
+        &VehicleConfig::default(),
+    );
+    let commands = drive(&mut a, 0, 20.0, |t| cornered(t, true, 3.0, behind_left));
+    assert!(commands.iter().any(SteeringCommand::is_reverse));
+    assert!(commands.iter().all(|c| c.is_stop() || c.is_reverse()));
+    assert_eq!(a.recovery_stats().turns, 0);
 }

@@ -45,6 +45,12 @@
 //! before its body meets a cell or ground no image has seen — goes out with
 //! the votes ([`Votes::set_reverse_clearance`]); the arbiter backs up only
 //! along arcs clear for the distance it needs.
+//!
+//! **Creeping forwards**: each arc's distance to its first collision or
+//! unseen ground, however close, also goes out with the votes
+//! ([`Votes::set_forward_clearance`]). `min_distance_m` vetoes arcs for
+//! driving at speed; a turning manoeuvre's short legs at a crawl may still
+//! take them as far as they are clear.
 
 use std::collections::HashMap;
 
@@ -379,6 +385,9 @@ pub struct ObstacleAvoidance {
     reverse: Option<Reverse>,
     /// Per arc: first collision distance (∞ if none within max), for speed.
     free: Vec<f64>,
+    /// Per arc: where its footprint first meets unseen ground, when
+    /// `unseen_ground` is `slow` (as an obstacle it is a collision in `free`).
+    unseen_at: Vec<Option<Entry>>,
     terrain: TerrainCheck,
     /// Per arc: this cycle's verdict on the ground.
     verdicts: Vec<ArcTerrain>,
@@ -478,6 +487,7 @@ impl ObstacleAvoidance {
             deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
             max_deceleration: setup.vehicle.max_deceleration_mps2,
             free: vec![f64::INFINITY; setup.arcs.len()],
+            unseen_at: vec![None; setup.arcs.len()],
             config,
             ahead,
             templates,
@@ -688,6 +698,16 @@ impl Behaviour for ObstacleAvoidance {
             let severity = verdict.severity.max(f64::from(crossed));
             votes.set(arc, (1.0 - penalty - terrain_penalty * severity) as f32);
         }
+        // How far each arc is clear at a crawl: to the first collision or
+        // unseen ground, however close (a turning manoeuvre's leg).
+        for arc in 0..self.templates.len().min(votes.len()) {
+            self.unseen_at[arc] = (policy == UnseenGround::Slow)
+                .then(|| first_in(&self.ahead.unseen, &self.templates[arc].bands[0], reach))
+                .flatten()
+                .copied();
+            let unseen = self.unseen_at[arc].map_or(f64::INFINITY, |hit| f64::from(hit.s));
+            votes.set_forward_clearance(arc, self.free[arc].min(unseen).min(max));
+        }
         if !self.config.speed_vote {
             return;
         }
@@ -705,10 +725,7 @@ impl Behaviour for ObstacleAvoidance {
                 continue;
             }
             let mut room = self.free[arc].min(max) - self.config.stop_margin_m;
-            if policy == UnseenGround::Slow
-                && let Some(unseen) =
-                    first_in(&self.ahead.unseen, &self.templates[arc].bands[0], reach)
-            {
+            if let Some(unseen) = &self.unseen_at[arc] {
                 // Stop `stop_margin_m` before the first unseen ground the
                 // footprint meets (its patch may begin past the edge);
                 // an arc the vehicle can no longer stop on before it, at

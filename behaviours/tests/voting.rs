@@ -295,6 +295,35 @@ fn backing_up_is_checked_against_the_cells_and_the_unseen_ground_behind() {
 }
 
 #[test]
+fn creeping_forwards_is_clear_to_the_first_cell_or_unseen_ground_however_close() {
+    let max = ObstacleAvoidanceConfig::default().max_distance_m;
+    let clearance = |votes: &Votes, arc: usize| votes.forward_clearance(arc).unwrap();
+    // Open seen ground: as far as arcs are judged.
+    let open = avoidance_votes(&[]);
+    assert!((0..39).all(|arc| clearance(&open, arc) == max));
+    // A rock 2 m ahead of the bumper: straight is vetoed for driving (it is
+    // within min_distance_m) but still clear to creep about 2 m, less half
+    // a patch (no arc turns away from it in 2 m).
+    let rock = avoidance_votes(&[(FRONT + 2.0, 0.0)]);
+    assert!(rock.is_vetoed(19));
+    let straight = clearance(&rock, 19);
+    assert!((1.5..=2.1).contains(&straight), "{straight} m");
+    // A rock 3 m ahead and 2.5 m left: the hard left arc meets it within
+    // a few metres, the hard right one never does.
+    let left = avoidance_votes(&[(FRONT + 3.0, 2.5)]);
+    assert!(clearance(&left, 38) < 4.0, "{}", clearance(&left, 38));
+    assert_eq!(clearance(&left, 0), max);
+    // Ground seen only to 3 m ahead of the bumper: no further.
+    let blind = avoidance_votes_on(
+        &snapshot_seeing(&[], FRONT + 3.0),
+        ObstacleAvoidanceConfig::default(),
+    );
+    let all: Vec<f64> = (0..39).map(|arc| clearance(&blind, arc)).collect();
+    assert!(all.iter().all(|&c| c <= 3.1), "{all:?}");
+    assert!(all[19] > 2.0, "{all:?}");
+}
+
+#[test]
 fn being_boxed_in_slows_the_speed_vote() {
     // A wall 7 m ahead alone is avoided by turning: no reason to slow down.
     let ahead: Vec<(f64, f64)> = (-25..=25).map(|k| (FRONT + 7.0, k as f64 * 0.4)).collect();

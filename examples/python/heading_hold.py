@@ -138,6 +138,7 @@ def main():
         msg.speed_vote = 0.0
         msg.arc_speed = [-1.0] * len(curvatures)      # no speed limit of its own
         msg.reverse_clear = [-1.0] * len(curvatures)  # no opinion on backing up
+        msg.forward_clear = [-1.0] * len(curvatures)  # nor on creeping forwards
         payload = msg.encode()
         bus.publish(channel, signer.sign(channel, payload) if signer else payload)
         voted["cycles"] += 1

@@ -243,8 +243,14 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     }
     let rec = &r.recovery;
     println!(
-        "recoveries    {} (backed {:.1} m; blocked with no way back {} decisions, out of recoveries {})",
-        rec.recoveries, rec.backed_m, rec.no_way_back, rec.exhausted
+        "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned; blocked with no way back {} decisions, out of recoveries {})",
+        rec.recoveries,
+        rec.backed_m,
+        rec.turns,
+        rec.turn_legs,
+        rec.turned_deg,
+        rec.no_way_back,
+        rec.exhausted
     );
     for (behaviour, counters) in &r.behaviour_counters {
         let counts: Vec<String> = counters.iter().map(|(k, v)| format!("{k} {v}")).collect();

@@ -150,7 +150,7 @@ impl MotionModel {
         let k_target = clamp_abs(self.target_curvature, limits.max_curvature);
         let v_target = clamp_abs(self.target_speed_mps, limits.max_speed_mps);
         let k0 = self.state.curvature;
-        let (k1, k_mean) = ramp(k0, k_target, limits.max_curvature_rate, dt);
+        let (k1, k_mean) = curvature_ramp(k0, k_target, limits, dt);
         let (v1, v_mean) = speed_ramp(self.state.speed_mps, v_target, limits, dt);
         let distance = v_mean * dt;
         let k = k_mean;
@@ -188,6 +188,13 @@ pub fn speed_ramp(v0: f64, target: f64, limits: &MotionLimits, dt: f64) -> (f64,
         limits.max_deceleration_mps2
     };
     ramp(v0, target, rate, dt)
+}
+
+/// The curvature moving from `k0` towards `target` for `dt` seconds at the
+/// steering's rate (moving or standing): its final value and its mean over
+/// the interval.
+pub fn curvature_ramp(k0: f64, target: f64, limits: &MotionLimits, dt: f64) -> (f64, f64) {
+    ramp(k0, target, limits.max_curvature_rate, dt)
 }
 
 fn clamp_abs(value: f64, limit: f64) -> f64 {

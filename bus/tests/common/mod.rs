@@ -35,6 +35,7 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         speed_vote: 3.0,
         arc_speed: (0..39).map(|i| i as f32 * 0.25 - 1.0).collect(),
         reverse_clear: (0..39).map(|i| i as f32 * 0.125 - 0.5).collect(),
+        forward_clear: (0..39).map(|i| 4.0 - i as f32 * 0.25).collect(),
     };
     let cells = obstacle_cells_t {
         utime: 1_700_000_000_800_000,
@@ -280,6 +281,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     speed_vote: rng.f64(),
                     arc_speed: (0..n).map(|_| rng.f32()).collect(),
                     reverse_clear: (0..n).map(|_| rng.f32()).collect(),
+                    forward_clear: (0..n).map(|_| rng.f32()).collect(),
                 }),
             )
         }

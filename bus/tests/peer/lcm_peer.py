@@ -59,6 +59,7 @@ def samples(arcnav):
     m.speed_vote = 3.0
     m.arc_speed = [i * 0.25 - 1.0 for i in range(39)]
     m.reverse_clear = [i * 0.125 - 0.5 for i in range(39)]
+    m.forward_clear = [4.0 - i * 0.25 for i in range(39)]
     out["arc_votes_t"] = m
 
     m = arcnav.obstacle_cells_t()
