@@ -7,6 +7,7 @@
 pub mod arbiter;
 pub mod config;
 pub mod recovery;
+pub mod trail;
 pub mod votes;
 
 pub use arbiter::{

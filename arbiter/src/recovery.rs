@@ -25,7 +25,8 @@
 //! way, each the leg that turns it most (|k|·length) among those clear for
 //! at least `min_distance_m` — forwards too, however close (obstacle
 //! avoidance's `min_distance_m` veto is for driving at speed, not for a
-//! leg at `speed_mps`). The wheels are turned standing before each leg. It
+//! leg at `speed_mps`); when the other way has no such leg, the same way
+//! again. The wheels are turned standing before each leg. It
 //! ends when the wish's favourite arc curves less than `turn_exit_fraction`
 //! of the hardest towards that side and its vote is 0 or more (the way lies
 //! ahead again, for a second: a route's path can swing for a cycle as it
@@ -34,6 +35,19 @@
 //! clear. One turn counts as one recovery; a turn left unfinished is taken
 //! up towards the same side by the next one (until `progress_m` of driving).
 //!
+//! **Backing out the way it came.** When no manoeuvre can start (no
+//! backward arc is clear) or a turn round ends with no leg clear (a lane
+//! narrower than the turning circle and the vehicle's length allow to turn
+//! in), the vehicle retraces its own path: the arbiter remembers the last
+//! `retrace_max_m` of its motions (curvature and distance, from its
+//! commands) and undoes them newest first — backing along what it drove
+//! forwards, creeping forwards along what it backed — each checked against
+//! the behaviours' clearances like any leg (the local map counts the ground
+//! it drove over as seen: see `localmap.driven_memory_m`). Retracing
+//! towards a turn ends where an arc curving towards the way is clear for
+//! `retrace_room_m` ahead (room to turn); otherwise after `distance_m`, as a
+//! backing-up would. One retrace counts as one recovery.
+//!
 //! The arbiter reads no pose: how far the vehicle has moved comes from its
 //! own commands and the vehicle's acceleration limits, so every executor
 //! fed the same votes decides the same. The behaviours re-check the ground
@@ -41,9 +55,13 @@
 //! clear enough to stop on.
 
 use arcnav_vehicle::config::{self, ConfigError};
-use arcnav_vehicle::motion::{curvature_ramp, speed_ramp};
+use arcnav_vehicle::frames::wrap_angle;
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
-use arcnav_vehicle::{MotionLimits, SteeringCommand, Utime, VehicleConfig};
+use arcnav_vehicle::{
+    MotionLimits, MotionModel, PlanarState, SteeringCommand, Utime, VehicleConfig,
+};
+
+use crate::trail::Trail;
 use serde::{Deserialize, Serialize};
 
 /// Lives in `[arbiter.recovery]`.
@@ -79,6 +97,18 @@ pub struct RecoveryConfig {
     /// The turn ends when the wished-for arc curves less than this fraction
     /// of the hardest arc towards the turn's side.
     pub turn_exit_fraction: f64,
+    /// Back out the way the vehicle came when no manoeuvre can start or a
+    /// turn round found no leg clear.
+    pub retrace: bool,
+    /// The vehicle's own motions are remembered this far back, and one
+    /// retrace goes at most this far, m.
+    pub retrace_max_m: f64,
+    /// Retracing towards a turn ends where an arc curving towards the way
+    /// is clear this far ahead, m.
+    pub retrace_room_m: f64,
+    /// A turn round that found no leg clear before turning this far was in
+    /// a lane too narrow to turn in: the next recovery retraces, degrees.
+    pub retrace_below_deg: f64,
 }
 
 impl Default for RecoveryConfig {
@@ -96,6 +126,10 @@ impl Default for RecoveryConfig {
             turn_round: true,
             turn_max_legs: 12,
             turn_exit_fraction: 0.5,
+            retrace: true,
+            retrace_max_m: 50.0,
+            retrace_room_m: 8.0,
+            retrace_below_deg: 45.0,
         }
     }
 }
@@ -111,6 +145,9 @@ impl RecoveryConfig {
         config::non_negative("progress_m", self.progress_m)?;
         config::in_range("creep_mps", self.creep_mps, 0.0, 1.0)?;
         config::in_range("turn_exit_fraction", self.turn_exit_fraction, 0.0, 1.0)?;
+        config::in_range("retrace_max_m", self.retrace_max_m, 0.0, 1000.0)?;
+        config::in_range("retrace_room_m", self.retrace_room_m, 0.0, 100.0)?;
+        config::in_range("retrace_below_deg", self.retrace_below_deg, 0.0, 360.0)?;
         for (key, value) in [
             ("max_attempts", self.max_attempts),
             ("turn_max_legs", self.turn_max_legs),
@@ -148,6 +185,10 @@ pub struct RecoveryStats {
     pub turn_legs: u64,
     /// Heading turned by them (estimated from the commands), degrees.
     pub turned_deg: f64,
+    /// Of the recoveries, retraces of the vehicle's own path.
+    pub retraces: u64,
+    /// Metres retraced (estimated from the commands), m.
+    pub retraced_m: f64,
 }
 
 /// What the arbiter knows of the ground and the behaviours' wishes at one
@@ -263,6 +304,13 @@ enum Mode {
         leg: Leg,
         legs: u32,
     },
+    /// Undoing the vehicle's own motions, newest first, for at most
+    /// `budget_m`; towards a turn to `side`, until there is room to turn.
+    Retracing {
+        side: Option<f64>,
+        done_m: f64,
+        budget_m: f64,
+    },
 }
 
 /// The recovery state machine (owned by the arbiter).
@@ -275,17 +323,24 @@ pub(crate) struct Recovery {
     blocked_since: Option<Utime>,
     attempts: u32,
     forward_since_recovery_m: f64,
-    /// The vehicle's speed as the commands so far make it, m/s.
-    speed_estimate: f64,
-    /// Its curvature as the commands so far make it, 1/m.
-    curvature_estimate: f64,
+    /// The vehicle as its commands move it (dead reckoning in a frame of
+    /// its own, latency and limits included); begun at the first decision.
+    model: Option<MotionModel>,
     /// Turning round: since when the way has lain ahead.
     wish_ahead_since: Option<Utime>,
     /// The side of a turn that ended with no leg clear, until the vehicle
     /// has made progress or a turn has finished.
     unfinished_turn: Option<f64>,
-    /// The last command: when, its speed and its curvature.
-    last: Option<(Utime, f64, f64)>,
+    /// Heading turned by the turn under way (and those it takes up again
+    /// after they found no leg clear), degrees.
+    turn_deg: f64,
+    /// The last turn found no leg clear before `retrace_below_deg`: the
+    /// next recovery retraces.
+    cramped: bool,
+    /// Turning round: since when no leg has been clear.
+    stalled_since: Option<Utime>,
+    /// The way the vehicle came, at most `retrace_max_m`.
+    trail: Trail,
     pub stats: RecoveryStats,
 }
 
@@ -309,11 +364,13 @@ impl Recovery {
             blocked_since: None,
             attempts: 0,
             forward_since_recovery_m: 0.0,
-            speed_estimate: 0.0,
-            curvature_estimate: 0.0,
+            model: None,
             wish_ahead_since: None,
             unfinished_turn: None,
-            last: None,
+            turn_deg: 0.0,
+            cramped: false,
+            stalled_since: None,
+            trail: Trail::new(config.retrace_max_m),
             stats: RecoveryStats::default(),
         }
     }
@@ -323,21 +380,33 @@ impl Recovery {
         !matches!(self.mode, Mode::Forward)
     }
 
-    /// Moves the speed estimate to `now` under the last command.
+    /// The vehicle's speed and curvature as its commands make them.
+    fn speed_and_curvature(&self) -> (f64, f64) {
+        self.model
+            .as_ref()
+            .map_or((0.0, 0.0), |m| (m.state().speed_mps, m.state().curvature))
+    }
+
+    /// Moves the motion estimate to `now` under the commands sent.
     fn advance(&mut self, now: Utime) {
-        let Some((since, target, curvature)) = self.last else {
-            return;
-        };
-        self.last = Some((now, target, curvature));
-        let dt = micros_to_seconds(now - since).max(0.0);
-        (self.curvature_estimate, _) =
-            curvature_ramp(self.curvature_estimate, curvature, &self.limits, dt);
-        let (v1, mean) = speed_ramp(self.speed_estimate, target, &self.limits, dt);
-        let distance = mean * dt;
-        self.speed_estimate = v1;
+        let limits = self.limits;
+        let model = self
+            .model
+            .get_or_insert_with(|| MotionModel::new(limits, PlanarState::default(), now));
+        let (before, odometer_before) = (*model.state(), model.odometer_m());
+        let after = model.advance_to(now);
+        let odometer = model.odometer_m();
+        let distance = odometer - odometer_before;
         if distance < 0.0 {
             self.stats.backed_m -= distance;
         }
+        if let Mode::Retracing { done_m, .. } = &mut self.mode {
+            *done_m += distance.abs();
+            self.stats.retraced_m += distance.abs();
+            return;
+        }
+        self.trail
+            .record(&before, odometer_before, &after, odometer);
         let leg = match &mut self.mode {
             Mode::Forward => {
                 if distance > 0.0 {
@@ -345,29 +414,31 @@ impl Recovery {
                     if self.forward_since_recovery_m >= self.config.progress_m {
                         self.attempts = 0;
                         self.unfinished_turn = None;
+                        self.cramped = false;
                     }
                 }
                 return;
             }
             Mode::Backing(leg) => leg,
             Mode::Turning { leg, .. } => {
-                self.stats.turned_deg += (leg.curvature * distance).to_degrees().abs();
+                let turned = wrap_angle(after.yaw - before.yaw).to_degrees().abs();
+                self.stats.turned_deg += turned;
+                self.turn_deg += turned;
                 leg
             }
+            Mode::Retracing { .. } => return,
         };
         if (distance < 0.0) == leg.reverse {
             leg.done_m += distance.abs();
         }
     }
 
-    /// Records the command sent at `now`.
-    pub fn sent(&mut self, now: Utime, command: &SteeringCommand) {
-        let speed = if command.is_stop() {
-            0.0
-        } else {
-            command.speed_mps
-        };
-        self.last = Some((now, speed, command.curvature));
+    /// Records the command sent at `now` (it acts after the vehicle's
+    /// latency).
+    pub fn sent(&mut self, _now: Utime, command: &SteeringCommand) {
+        if let Some(model) = &mut self.model {
+            model.command(*command);
+        }
     }
 
     /// The decision at `now`: `blocked` says whether the forward decision
@@ -408,23 +479,160 @@ impl Recovery {
                 if let Some(command) = self.drive(now, &leg, behind) {
                     return Outcome::Drive(command);
                 }
-                // The next leg goes the other way and turns the same way.
+                // The next leg goes the other way and turns the same way;
+                // with no room that way, the same way again (on an arc with
+                // room: it turns the heading on, if less).
                 let next = (legs < self.config.turn_max_legs)
-                    .then(|| self.choose_leg(side, !leg.reverse, behind))
+                    .then(|| {
+                        self.choose_leg(side, !leg.reverse, behind)
+                            .or_else(|| self.choose_leg(side, leg.reverse, behind))
+                    })
                     .flatten();
                 let Some(next) = next else {
+                    // Standing still a moment may free a leg (the vehicle
+                    // rolls on as it stops; new images come in): the turn
+                    // waits `wait_s` for one before it ends.
+                    let stalled = *self.stalled_since.get_or_insert(now);
+                    if legs < self.config.turn_max_legs
+                        && now - stalled < seconds_to_micros(self.config.wait_s)
+                    {
+                        return Outcome::Drive(SteeringCommand {
+                            utime: now,
+                            curvature: leg.curvature,
+                            speed_mps: 0.0,
+                            arc_index: Some(leg.arc),
+                            vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
+                        });
+                    }
                     tracing::info!(
                         t_s = micros_to_seconds(now),
                         legs,
                         "turning round ends: no leg clear or legs used up"
                     );
                     self.unfinished_turn = Some(side);
+                    self.cramped = self.turn_deg < self.config.retrace_below_deg;
                     return self.end(now, blocked);
                 };
+                self.stalled_since = None;
                 self.start_turn_leg(side, next, legs + 1);
                 self.step(now, blocked, safe, behind)
             }
+            Mode::Retracing {
+                side,
+                done_m,
+                budget_m,
+            } => {
+                let roomy = side.is_some_and(|side| {
+                    done_m >= self.min_leg_m() && self.room_to_turn(side, behind)
+                });
+                let command = (!roomy && done_m < budget_m)
+                    .then(|| self.retrace_command(now, budget_m - done_m, behind))
+                    .flatten();
+                if let Some(command) = command {
+                    return Outcome::Drive(command);
+                }
+                tracing::info!(
+                    t_s = micros_to_seconds(now),
+                    retraced_m = done_m,
+                    room_to_turn = roomy,
+                    trail_m = self.trail.length_m(),
+                    "retracing ends"
+                );
+                if let Some(model) = &self.model {
+                    self.trail.resume_from(model.odometer_m());
+                }
+                // With room to turn, the turn starts at once, forwards (on
+                // the fused vote, the arcs leading back in win again).
+                let turn = side
+                    .filter(|_| roomy)
+                    .and_then(|side| Some((side, self.choose_leg(side, false, behind)?)));
+                if let Some((side, leg)) = turn {
+                    self.stats.turns += 1;
+                    self.turn_deg = 0.0;
+                    tracing::info!(
+                        t_s = micros_to_seconds(now),
+                        side,
+                        "room to turn: turning round"
+                    );
+                    self.start_turn_leg(side, leg, 1);
+                    return self.step(now, blocked, safe, behind);
+                }
+                self.end(now, blocked)
+            }
         }
+    }
+
+    /// The command that follows the trail back (see [`crate::trail`]), for
+    /// at most `budget_m` more, on the arc nearest the curvature pursued.
+    fn retrace_command(
+        &mut self,
+        now: Utime,
+        budget_m: f64,
+        behind: &Behind<'_>,
+    ) -> Option<SteeringCommand> {
+        let state = *self.model.as_ref()?.state();
+        let pursuit = self.trail.pursue(&state)?;
+        let arc = nearest_arc(behind.curvatures, pursuit.curvature);
+        self.drive(
+            now,
+            &Leg::along(arc, behind, pursuit.reverse, pursuit.run_m.min(budget_m)),
+            behind,
+        )
+    }
+
+    /// True when an arc curving towards `side`, at least half as hard as
+    /// the hardest, is clear `retrace_room_m` ahead.
+    fn room_to_turn(&self, side: f64, behind: &Behind<'_>) -> bool {
+        let hardest = behind.curvatures.iter().fold(0.0f64, |m, k| m.max(k.abs()));
+        (0..behind.curvatures.len()).any(|arc| {
+            behind.curvatures[arc] * side >= 0.5 * hardest
+                && behind
+                    .clear(arc, false)
+                    .is_some_and(|c| c - self.config.margin_m >= self.config.retrace_room_m)
+        })
+    }
+
+    /// Starts retracing (a recovery), towards a turn to `side` if given;
+    /// false when there is no trail to retrace.
+    fn start_retrace(&mut self, now: Utime, side: Option<f64>, behind: &Behind<'_>) -> bool {
+        if !self.config.retrace || self.trail.length_m() < self.min_leg_m() {
+            return false;
+        }
+        // Only when the way back is open now: a retrace that cannot move
+        // would spend a recovery on nothing.
+        let Some(state) = self.model.as_ref().map(|m| *m.state()) else {
+            return false;
+        };
+        let mut trail = self.trail.clone();
+        let open = trail.pursue(&state).is_some_and(|p| {
+            let arc = nearest_arc(behind.curvatures, p.curvature);
+            let leg = Leg::along(arc, behind, p.reverse, p.run_m);
+            self.drive(now, &leg, behind).is_some()
+        });
+        if !open {
+            return false;
+        }
+        self.begin();
+        self.cramped = false;
+        self.stats.retraces += 1;
+        let budget_m = if side.is_some() {
+            self.config.retrace_max_m
+        } else {
+            self.config.distance_m
+        };
+        tracing::info!(
+            t_s = micros_to_seconds(now),
+            attempt = self.attempts,
+            trail_m = self.trail.length_m(),
+            side,
+            "blocked: retracing the way the vehicle came"
+        );
+        self.mode = Mode::Retracing {
+            side,
+            done_m: 0.0,
+            budget_m,
+        };
+        true
     }
 
     /// Driving forwards: blocked long enough, standing, starts a manoeuvre.
@@ -434,7 +642,7 @@ impl Recovery {
             return Outcome::Keep;
         }
         let since = *self.blocked_since.get_or_insert(now);
-        let standing = self.speed_estimate.abs() < 0.05;
+        let standing = self.speed_and_curvature().0.abs() < 0.05;
         if now - since < seconds_to_micros(self.config.wait_s) || !standing {
             return Outcome::Keep;
         }
@@ -451,6 +659,11 @@ impl Recovery {
             .filter(|_| self.config.turn_round)
             .and_then(|wish| wish.beyond_the_arcs())
             .map(|side| self.unfinished_turn.unwrap_or(side));
+        // A turn that could not turn far here: back out the way the vehicle
+        // came first, to where there is room.
+        if self.cramped && self.start_retrace(now, side.or(self.unfinished_turn), behind) {
+            return self.step(now, blocked, true, behind);
+        }
         // Turning round starts with the leg that has room: backing first.
         let turn = side.and_then(|side| {
             [true, false]
@@ -461,6 +674,11 @@ impl Recovery {
         if let Some((side, leg)) = turn {
             self.begin();
             self.stats.turns += 1;
+            // A turn taken up again after finding no leg clear counts what
+            // the one before it turned.
+            if self.unfinished_turn.is_none() {
+                self.turn_deg = 0.0;
+            }
             tracing::info!(
                 t_s = micros_to_seconds(now),
                 attempt = self.attempts,
@@ -468,6 +686,10 @@ impl Recovery {
                 "blocked, the way behind: turning round"
             );
             self.start_turn_leg(side, leg, 1);
+        } else if side.is_some() && self.start_retrace(now, side, behind) {
+            // The way is behind and no turn can start here: backing out the
+            // way the vehicle came leads where it can (backing up once and
+            // driving on would lead back in).
         } else if let Some((arc, goal_m)) = self.choose(behind) {
             self.begin();
             let leg = Leg::along(arc, behind, true, goal_m);
@@ -478,7 +700,7 @@ impl Recovery {
                 "blocked: backing up"
             );
             self.mode = Mode::Backing(leg);
-        } else {
+        } else if !self.start_retrace(now, side, behind) {
             self.stats.no_way_back += 1;
             return Outcome::Keep;
         }
@@ -496,6 +718,7 @@ impl Recovery {
         self.stats.turn_legs += 1;
         if legs == 1 {
             self.wish_ahead_since = None;
+            self.stalled_since = None;
         }
         tracing::info!(
             leg = legs,
@@ -540,12 +763,13 @@ impl Recovery {
             self.limits.max_deceleration_mps2,
             micros_to_seconds(self.limits.latency_us),
         );
-        let v = self.speed_estimate.abs();
+        let (speed, curvature) = self.speed_and_curvature();
+        let v = speed.abs();
         let stopping = v * latency + v * v / (2.0 * a);
         if remaining <= 0.0 || clear - self.config.margin_m <= stopping {
             return None;
         }
-        let steering = (self.curvature_estimate - leg.curvature).abs() > STEERED_WITHIN;
+        let steering = (curvature - leg.curvature).abs() > STEERED_WITHIN;
         let room = (clear - self.config.margin_m).min(remaining + stopping);
         // v·t + v²/2a = room, solved for v.
         let stopping_speed = -a * latency + ((a * latency).powi(2) + 2.0 * a * room).sqrt();
@@ -617,4 +841,14 @@ impl Recovery {
                 .then(b.cmp(&a))
         })
     }
+}
+
+/// The arc whose curvature is nearest `curvature` (0 for an empty set).
+fn nearest_arc(curvatures: &[f64], curvature: f64) -> usize {
+    (0..curvatures.len())
+        .min_by(|&a, &b| {
+            let off = |arc: usize| (curvatures[arc] - curvature).abs();
+            off(a).total_cmp(&off(b))
+        })
+        .unwrap_or(0)
 }

@@ -2,7 +2,9 @@
 //! how far, how often, and when it must not.
 
 use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, StopReason, Votes};
-use arcnav_vehicle::{ArcSet, ArcSetConfig, SteeringCommand, VehicleConfig};
+use arcnav_vehicle::{
+    ArcSet, ArcSetConfig, MotionLimits, MotionModel, PlanarState, SteeringCommand, VehicleConfig,
+};
 
 const SECOND: i64 = 1_000_000;
 /// Decisions every 100 ms, as the live arbiter makes them.
@@ -74,9 +76,10 @@ fn blocked_and_standing_it_backs_up_along_the_arc_that_swings_the_nose_towards_t
         .iter()
         .position(SteeringCommand::is_reverse)
         .unwrap();
-    // Then turns the wheels standing (0.15 1/m per second, to within
-    // 0.02 1/m of the arc's -0.072 1/m: 4 decisions), then backs up.
-    assert_eq!(first, 19, "backs up after 1.5 s blocked and 0.4 s steering");
+    // Then turns the wheels standing: the command acts after the 0.25 s
+    // latency, the wheels turn at 0.15 1/m per second to within 0.02 1/m
+    // of the arc's -0.072 1/m (0.35 s): 6 decisions; then backs up.
+    assert_eq!(first, 21, "backs up after 1.5 s blocked and 0.6 s steering");
     for steer in &commands[15..first] {
         assert!(steer.is_stop(), "{steer:?}");
         assert_eq!(steer.arc_index, Some(38 - goal), "{steer:?}");
@@ -313,8 +316,15 @@ fn the_turn_ends_once_the_way_has_lain_ahead_for_a_second() {
 #[test]
 fn forward_legs_need_creeping_room_and_turning_round_can_be_switched_off() {
     // 1.2 m of room ahead is less than min_distance_m (1 m) + margin_m
-    // (0.5 m): the turn is backing legs only, each followed by a stop.
-    let mut a = arbiter();
+    // (0.5 m): the turn is backing legs only, each followed by a stop
+    // (not retracing them: that is the next tests').
+    let mut config = ArbiterConfig::default();
+    config.recovery.retrace = false;
+    let mut a = Arbiter::new(
+        &config,
+        ArcSet::new(&ArcSetConfig::default()).unwrap(),
+        &VehicleConfig::default(),
+    );
     let commands = drive(&mut a, 0, 30.0, |t| cornered(t, true, 1.2, behind_left));
     assert!(commands.iter().any(SteeringCommand::is_reverse));
     assert!(
@@ -334,4 +344,147 @@ fn forward_legs_need_creeping_room_and_turning_round_can_be_switched_off() {
     assert!(commands.iter().any(SteeringCommand::is_reverse));
     assert!(commands.iter().all(|c| c.is_stop() || c.is_reverse()));
     assert_eq!(a.recovery_stats().turns, 0);
+}
+
+// ---------------------------------------------------------------------------
+// Backing out the way the vehicle came.
+
+/// Obstacle avoidance with every arc open (18 m ahead, 5 m behind), and a
+/// route favouring arc `goal`.
+fn open(utime: i64, goal: usize) -> [BehaviourVotes; 2] {
+    let [mut avoid, mut route] = blocked(utime, |_| Some(5.0), goal);
+    avoid.votes = Votes::new(39);
+    for arc in 0..39 {
+        avoid.votes.set(arc, 1.0);
+        avoid.votes.set_reverse_clearance(arc, 5.0);
+        avoid.votes.set_forward_clearance(arc, 18.0);
+        route.votes.set(arc, 1.0 - arc.abs_diff(goal) as f32 / 20.0);
+    }
+    [avoid, route]
+}
+
+/// A lane too narrow to turn in, the way behind and to the left: every
+/// forward arc forbidden, 0.4 m of creeping room ahead (no forward leg),
+/// 1.2 m behind every arc (less than a backing leg needs, min_distance_m
+/// plus margin_m), except that from `room_from` on the left arcs are
+/// clear 12 m ahead (the lane's mouth).
+fn lane(utime: i64, room_from: i64) -> [BehaviourVotes; 2] {
+    let [mut avoid, route] = cornered(utime, true, 0.4, behind_left);
+    for arc in 0..39 {
+        avoid.votes.set_reverse_clearance(arc, 1.2);
+        if utime >= room_from && arc > 19 {
+            avoid.votes.set_forward_clearance(arc, 12.0);
+        }
+    }
+    [avoid, route]
+}
+
+/// Where `commands`, decided every 100 ms from 0, take the vehicle: its
+/// state after each decision's interval, as the simulator drives it.
+fn driven(commands: &[SteeringCommand]) -> Vec<PlanarState> {
+    let limits = MotionLimits::from_vehicle(&VehicleConfig::default());
+    let mut model = MotionModel::new(limits, PlanarState::default(), 0);
+    commands
+        .iter()
+        .enumerate()
+        .map(|(k, command)| {
+            model.command(*command);
+            model.advance_to((k as i64 + 1) * PERIOD)
+        })
+        .collect()
+}
+
+#[test]
+fn in_a_lane_too_narrow_to_turn_in_it_backs_out_the_way_it_came_and_turns_where_there_is_room() {
+    let mut a = arbiter();
+    let room_from = 20 * SECOND;
+    let commands = drive(&mut a, 0, 26.0, |t| {
+        if t < 8 * SECOND {
+            open(t, 19)
+        } else {
+            lane(t, room_from)
+        }
+    });
+    let states = driven(&commands);
+    let deepest = states[79].x;
+    assert!(deepest > 12.0, "drove {deepest} m into the lane");
+    // Blocked, no turn can start and no backing leg fits: it backs along
+    // the way it came (straight), at a crawl.
+    let backing: Vec<_> = commands[80..200].iter().filter(|c| !c.is_stop()).collect();
+    assert!(backing.len() > 50, "{} commands backing", backing.len());
+    for c in &backing {
+        assert!(c.is_reverse() && c.speed_mps >= -1.0, "{c:?}");
+        assert_eq!(c.arc_index, Some(19), "{c:?}");
+    }
+    let stats = *a.recovery_stats();
+    assert_eq!(stats.retraces, 1, "{stats:?}");
+    // On the line it came by, well back from where it stopped.
+    let at_room = states[199];
+    assert!(
+        at_room.y.abs() < 0.05 && at_room.yaw.abs() < 0.01,
+        "{at_room:?}"
+    );
+    assert!(deepest - at_room.x > 6.0, "{at_room:?}");
+    assert!(
+        (stats.retraced_m - (states[99].x - at_room.x)).abs() < 0.5,
+        "{stats:?} {:?} {at_room:?}",
+        states[99]
+    );
+    // Where the left arcs have room, the turn starts at once, forwards
+    // and to the left.
+    let next = commands[200..]
+        .iter()
+        .find(|c| !c.is_stop())
+        .expect("drives on");
+    assert!(!next.is_reverse() && next.curvature > 0.1, "{next:?}");
+    assert_eq!(a.recovery_stats().turns, 1);
+    assert_eq!(a.recovery_stats().recoveries, 1, "one recovery");
+}
+
+#[test]
+fn the_way_back_follows_the_curve_it_came_by_to_where_the_trail_begins() {
+    // 6 s straight, 6 s along arc 30 (curving left), then a lane with no
+    // room anywhere: the vehicle backs out along all it remembers.
+    let mut a = arbiter();
+    let commands = drive(&mut a, 0, 70.0, |t| match t {
+        t if t < 6 * SECOND => open(t, 19),
+        t if t < 12 * SECOND => open(t, 30),
+        t => lane(t, i64::MAX),
+    });
+    let states = driven(&commands);
+    let blocked_at = states[125];
+    assert!(
+        blocked_at.yaw > 0.5,
+        "turned left on the way in: {blocked_at:?}"
+    );
+    let first_back = commands[120..]
+        .iter()
+        .find(|c| c.is_reverse())
+        .expect("backs up");
+    // (The stop straightened the wheels as it slowed: the path's last
+    // metre curves less than the arc.)
+    assert!(
+        first_back.curvature > 0.03,
+        "backs along the curve first: {first_back:?}"
+    );
+    let last_back = commands
+        .iter()
+        .rposition(SteeringCommand::is_reverse)
+        .unwrap();
+    assert!(
+        commands[last_back].curvature.abs() < 0.01,
+        "ends along the straight: {:?}",
+        commands[last_back]
+    );
+    // Back where it started, facing the way it set off.
+    let end = states.last().unwrap();
+    assert!(end.x.hypot(end.y) < 0.6, "{end:?}");
+    assert!(end.yaw.abs() < 3f64.to_radians(), "{end:?}");
+    assert!(
+        commands[last_back + 10..]
+            .iter()
+            .all(SteeringCommand::is_stop)
+    );
+    let stats = *a.recovery_stats();
+    assert!(stats.retraces >= 1 && stats.retraced_m > 20.0, "{stats:?}");
 }

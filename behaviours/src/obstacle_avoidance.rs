@@ -341,6 +341,8 @@ struct Reverse {
     bands: Vec<[Vec<Entry>; 2]>,
     /// Scratch: cells and unseen ground together.
     blocked: Vec<u64>,
+    /// Per arc: the terrain's verdict backing up along it.
+    verdicts: Vec<ArcTerrain>,
 }
 
 /// The grid covering every outline of `footprint` swept `reach` along
@@ -471,15 +473,19 @@ impl ObstacleAvoidance {
             Reverse {
                 blocked: vec![0; raster.bitmap.len()],
                 raster,
+                verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
                 bands,
             }
         });
-        let terrain = TerrainCheck::new(
+        let mut terrain = TerrainCheck::new(
             &config.terrain,
             setup.vehicle,
             setup.arcs.curvatures(),
             config.max_distance_m,
         );
+        if reverse.is_some() {
+            terrain = terrain.with_reverse(setup.arcs.curvatures(), config.reverse_reach_m);
+        }
         Self {
             terrain,
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
@@ -501,12 +507,18 @@ impl ObstacleAvoidance {
         first_in(&self.ahead.bitmap, band, reach)
     }
 
-    /// Each arc's clearance backing up: cells and unseen ground stop it.
+    /// Each arc's clearance backing up: cells, unseen ground and ground the
+    /// vehicle cannot stand on (its attitude or chassis) stop it.
     fn vote_reverse(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
         let Some(reverse) = &mut self.reverse else {
             return;
         };
         let reach = self.config.reverse_reach_m;
+        self.terrain.judge_reverse_arcs(
+            &ctx.map.elevation,
+            &ctx.map.world_from_vehicle,
+            &mut reverse.verdicts,
+        );
         reverse.raster.rasterise(ctx);
         reverse.raster.rasterise_unseen(ctx);
         for ((blocked, cell), unseen) in reverse
@@ -526,10 +538,13 @@ impl ObstacleAvoidance {
             let moving = margin.partition_point(|e| e.s <= 0.0);
             let margin_hit =
                 first_in(&reverse.raster.bitmap, &margin[moving..], reach as f32).map(|hit| hit.s);
+            let ground = reverse.verdicts[arc].forbidden.map(|(s, _)| s);
             let clear = body_hit
                 .into_iter()
                 .chain(margin_hit)
-                .fold(reach, |clear, s| clear.min(f64::from(s)));
+                .map(f64::from)
+                .chain(ground)
+                .fold(reach, f64::min);
             votes.set_reverse_clearance(arc, clear);
         }
     }

@@ -301,6 +301,9 @@ pub struct TerrainCheck {
     /// Per arc: the poses judged (x, y, cos, sin in the vehicle frame) and
     /// their distances.
     poses: Vec<Vec<(f64, [f64; 4])>>,
+    /// Per arc: the poses backing up along it (see
+    /// [`TerrainCheck::with_reverse`]).
+    reverse_poses: Vec<Vec<(f64, [f64; 4])>>,
     limits: TanLimits,
     /// The chassis is checked every this many poses.
     belly_stride: usize,
@@ -359,12 +362,36 @@ impl TerrainCheck {
                 clearance: vehicle.ground_clearance_m,
             },
             poses,
+            reverse_poses: Vec::new(),
             limits: TanLimits::new(config),
             // The rows under the chassis span l − 1.2 m (2.1 m for the
             // M998): poses at most that far apart let every ground point
             // pass under the span, so within half a row spacing of a row.
             belly_stride: ((l - 1.2) / config.step_m).floor().max(1.0) as usize,
         }
+    }
+
+    /// Also judges backing up along every arc, `reach_m` back: backing
+    /// along curvature k for s metres puts the vehicle at (−sin ks/k,
+    /// (1 − cos ks)/k) heading −ks, the forward pose mirrored (x → −x) with
+    /// its heading negated; it still faces forwards.
+    #[must_use]
+    pub fn with_reverse(mut self, curvatures: &[f64], reach_m: f64) -> Self {
+        self.reverse_poses = curvatures
+            .iter()
+            .map(|&k| {
+                Arc::new(k)
+                    .sample(reach_m, self.config.step_m)
+                    .enumerate()
+                    .map(|(i, p)| {
+                        let s = (i as f64 * self.config.step_m).min(reach_m);
+                        let (sin, cos) = p.heading.sin_cos();
+                        (s, [-p.position.x, p.position.y, cos, -sin])
+                    })
+                    .collect()
+            })
+            .collect();
+        self
     }
 
     pub fn config(&self) -> &TerrainConfig {
@@ -575,6 +602,40 @@ impl TerrainCheck {
         horizon_m: f64,
         out: &mut [ArcTerrain],
     ) {
+        self.judge_poses(&self.poses, grid, world_from_vehicle, horizon_m, true, out);
+    }
+
+    /// [`TerrainCheck::judge_arcs`] backing up along every arc (none unless
+    /// built [`TerrainCheck::with_reverse`]). The stance the vehicle has
+    /// now forbids nothing: backing is how it gets off ground it should
+    /// not stand on.
+    pub fn judge_reverse_arcs(
+        &self,
+        grid: &ElevationGrid,
+        world_from_vehicle: &Isometry,
+        out: &mut [ArcTerrain],
+    ) {
+        self.judge_poses(
+            &self.reverse_poses,
+            grid,
+            world_from_vehicle,
+            0.0,
+            false,
+            out,
+        );
+    }
+
+    /// Judges the poses of every arc of `arcs` (the first is the
+    /// vehicle's own; it may forbid an arc only when `own_stance_forbids`).
+    fn judge_poses(
+        &self,
+        arcs: &[Vec<(f64, [f64; 4])>],
+        grid: &ElevationGrid,
+        world_from_vehicle: &Isometry,
+        horizon_m: f64,
+        own_stance_forbids: bool,
+        out: &mut [ArcTerrain],
+    ) {
         out.fill(ArcTerrain::default());
         if !self.config.enabled || grid.is_empty() {
             return;
@@ -585,7 +646,7 @@ impl TerrainCheck {
         // Every arc's first pose is the vehicle's own (`Arc::sample` starts
         // at 0): judged once for all of them.
         let here = self.stance_with(grid, block, [t.x, t.y, cos, sin], true);
-        for (verdict, poses) in out.iter_mut().zip(&self.poses) {
+        for (verdict, poses) in out.iter_mut().zip(arcs) {
             for (index, &(s, [x, y, c, si])) in poses.iter().enumerate() {
                 let pose = [
                     t.x + cos * x - sin * y,
@@ -605,6 +666,7 @@ impl TerrainCheck {
                     break;
                 };
                 match self.judge_raw(&stance) {
+                    Judgement::Forbidden if index == 0 && !own_stance_forbids => {}
                     Judgement::Forbidden => {
                         let centre = [
                             (x + c * self.probes.wheelbase / 2.0) as f32,

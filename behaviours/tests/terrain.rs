@@ -238,3 +238,38 @@ fn graded_ground_lowers_an_arc_and_its_speed_but_does_not_block_it() {
     // The same patch as an obstacle forbids the straight arc outright.
     assert!(votes_with(1.0).is_vetoed(straight));
 }
+
+/// Backing up is judged like driving forwards: the poses backing along each
+/// arc (the forward ones mirrored) must keep the vehicle within its
+/// attitude limits. A 30° bank rising behind the vehicle (from 1 m behind
+/// the rear axle) stops every backward arc on it; flat ground behind leaves
+/// each clear to `reverse_reach_m`; the stance the vehicle has now never
+/// forbids backing (backing is how it gets off such ground).
+#[test]
+fn backing_onto_a_bank_steeper_than_the_attitude_limits_is_not_clear() {
+    let reach = ObstacleAvoidanceConfig::default().reverse_reach_m;
+    let flat = votes_on(grid(|_, _| 0.0));
+    let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
+    for arc in 0..arcs.len() {
+        assert_eq!(flat.reverse_clearance(arc), Some(reach), "arc {arc}");
+    }
+    let tan = 30f64.to_radians().tan();
+    let bank = votes_on(grid(|x, _| if x < -1.0 { tan * (-1.0 - x) } else { 0.0 }));
+    let straight = arcs.straight_index();
+    let clear = bank.reverse_clearance(straight).unwrap();
+    // The rear wheels reach the bank's foot after 1 m; with the front
+    // wheels on the flat, the pitch tan 30° (s - 1)/3.3 passes 25° at
+    // s = 3.7 m: poses every 0.5 m find it at 4 m.
+    assert!((3.0..=4.0).contains(&clear), "{clear} m");
+    for arc in 0..arcs.len() {
+        assert!(bank.reverse_clearance(arc).unwrap() < reach, "arc {arc}");
+    }
+    // Standing on a 30° side slope (beyond the limits), backing along it
+    // is not refused for the stance it has now: only its ground's roll
+    // along the way, the same 30°, stops it one step on.
+    let side = votes_on(grid(|_, y| tan * y));
+    let clear = side.reverse_clearance(straight).unwrap();
+    assert!(clear > 0.0, "{clear} m");
+    // Forwards, the same stance forbids every arc outright.
+    assert!((0..arcs.len()).all(|arc| side.is_vetoed(arc)));
+}

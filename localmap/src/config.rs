@@ -31,6 +31,11 @@ pub struct LocalMapConfig {
     /// goes at most this far, less the rear overhang, behind the farthest
     /// point reached.
     pub behind_m: f64,
+    /// The ground between the vehicle's axles is remembered for this much
+    /// travel, beyond the window: it bore the vehicle, so it counts as seen
+    /// when it comes back into the window (backing out of a dead end the
+    /// way the vehicle came in), m; 0: not remembered.
+    pub driven_memory_m: f64,
     /// A cell is dropped after this many newer overlapping images of a
     /// sensor that reported it did not report it again (002 §5: 1).
     pub misses_to_drop: u32,
@@ -91,6 +96,7 @@ impl Default for LocalMapConfig {
             ahead_m: 20.0,
             half_width_m: 10.0,
             behind_m: 20.0,
+            driven_memory_m: 100.0,
             misses_to_drop: 1,
             cross_sensor_pruning: false,
             max_pose_jump_m: 2.0,
@@ -112,6 +118,7 @@ impl LocalMapConfig {
         config::positive("ahead_m", self.ahead_m)?;
         config::positive("half_width_m", self.half_width_m)?;
         config::non_negative("behind_m", self.behind_m)?;
+        config::in_range("driven_memory_m", self.driven_memory_m, 0.0, 10_000.0)?;
         config::positive("max_pose_jump_m", self.max_pose_jump_m)?;
         config::in_range("assume_seen_m", self.assume_seen_m, 0.0, 100.0)?;
         let o = &self.occupancy;

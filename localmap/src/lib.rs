@@ -8,6 +8,7 @@
 //! immutable vehicle-frame [`MapSnapshot`]s.
 
 pub mod config;
+mod driven;
 pub mod elevation;
 pub mod map;
 pub mod raster;

@@ -43,6 +43,7 @@ use arcnav_vehicle::time::micros_to_seconds;
 use arcnav_vehicle::{Footprint, Isometry, Pose, Utime, VehicleConfig};
 
 use crate::config::{JumpPolicy, LocalMapConfig};
+use crate::driven::DrivenGround;
 use crate::elevation::{ElevationGrid, ElevationLayer};
 use crate::raster::Coverage;
 
@@ -333,11 +334,26 @@ pub struct LocalMap {
     assume_seen_pending: bool,
     /// The static occupancy map, if one was given.
     statics: Option<std::sync::Arc<crate::StaticMap>>,
+    /// Ground the vehicle has driven over: seen again when it comes back
+    /// into the window.
+    driven: DrivenGround,
+    /// The steep ground of the last elevation snapshot (see
+    /// [`LocalMap::snapshot`]).
+    steep: std::sync::Mutex<SteepGround>,
     elevation: ElevationLayer,
     stats: MapStats,
 }
 
 const UNSEEN: (i64, i64) = (i64::MIN, i64::MIN);
+
+/// The steep ground of one elevation snapshot, and scratch to find it.
+#[derive(Debug, Default)]
+struct SteepGround {
+    of: Option<Arc<ElevationGrid>>,
+    patches: Arc<Vec<(i64, i64)>>,
+    scratch: Vec<bool>,
+    cells: Vec<(i64, i64)>,
+}
 
 impl LocalMap {
     /// An empty map for `vehicle`: its top speed bounds plausible motion
@@ -366,6 +382,8 @@ impl LocalMap {
             seen: vec![UNSEEN; side * side],
             assume_seen_pending: true,
             statics: None,
+            driven: DrivenGround::new(vehicle, config.patch_size_m, config.driven_memory_m),
+            steep: std::sync::Mutex::default(),
             elevation: ElevationLayer::new(&config.elevation, radius),
             stats: MapStats::default(),
         }
@@ -476,6 +494,7 @@ impl LocalMap {
         self.patches.clear();
         self.slots.fill(EMPTY);
         self.seen.fill(UNSEEN);
+        self.driven.clear();
         self.elevation.clear();
         self.assume_seen_pending = true;
         self.epoch_start = utime;
@@ -818,8 +837,31 @@ impl LocalMap {
             index += 1;
         }
         self.forget_seen_outside_window();
+        self.driven.drive(pose);
+        self.see_driven_ground();
         self.add_static_patches();
         PoseUpdate::Accepted
+    }
+
+    /// Marks the driven ground inside the window seen: it bore the vehicle
+    /// (see [`crate::driven`]), though the window may have forgotten it.
+    fn see_driven_ground(&mut self) {
+        let Some(pose) = self.pose else {
+            return;
+        };
+        let t = pose.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
+        let s = self.config.patch_size_m;
+        for (i, j) in self.driven.iter() {
+            let (dx, dy) = ((i as f64 + 0.5) * s - t.x, (j as f64 + 0.5) * s - t.y);
+            if self
+                .config
+                .in_window(cos * dx + sin * dy, -sin * dx + cos * dy)
+            {
+                let slot = self.slot_index(i, j);
+                self.seen[slot] = (i, j);
+            }
+        }
     }
 
     /// Forgets the seen ground that has left the window, as its patches
@@ -883,18 +925,98 @@ impl LocalMap {
         true
     }
 
-    /// The map as it stands, in the vehicle frame of the last update.
+    /// The map as it stands, in the vehicle frame of the last update: its
+    /// patches, and the ground its elevation layer finds steeper than
+    /// `elevation.steep_deg` as obstacle patches of their own (reason
+    /// `steep`; a patch already held gets the reason and becomes an
+    /// obstacle), within the window and not under the vehicle. Perception
+    /// judges each image alone and marks a bank's side only in places; the
+    /// fused layer sees all of it, for every behaviour (obstacle avoidance
+    /// driving and backing, the route's memory).
     pub fn snapshot(&self) -> Arc<MapSnapshot> {
+        let elevation = self.elevation.snapshot();
+        let mut patches = self.patches.clone();
+        if let Some(pose) = self.pose {
+            let steep = self.steep_patches(&elevation);
+            self.add_steep(&steep, &pose, &elevation, &mut patches);
+        }
         Arc::new(MapSnapshot {
             utime: self.pose.map_or(0, |p| p.utime),
             world_from_vehicle: self
                 .pose
                 .map_or_else(Isometry::identity, |p| p.world_from_vehicle),
             patch_size_m: self.config.patch_size_m,
-            patches: self.patches.clone(),
+            patches,
             seen: self.seen_ground(),
-            elevation: self.elevation.snapshot(),
+            elevation,
         })
+    }
+
+    /// The world patches holding steep cells of `elevation`, found once per
+    /// elevation snapshot.
+    fn steep_patches(&self, elevation: &Arc<ElevationGrid>) -> Arc<Vec<(i64, i64)>> {
+        let mut steep = self.steep.lock().unwrap_or_else(|e| e.into_inner());
+        if !steep
+            .of
+            .as_ref()
+            .is_some_and(|of| Arc::ptr_eq(of, elevation))
+        {
+            let SteepGround { scratch, cells, .. } = &mut *steep;
+            elevation.steep_cells(self.config.elevation.steep_deg, scratch, cells);
+            let (c, s) = (elevation.cell_size_m, self.config.patch_size_m);
+            let mut found: Vec<(i64, i64)> = cells
+                .iter()
+                .map(|&(i, j)| {
+                    let centre = |k: i64| ((k as f64 + 0.5) * c / s).floor() as i64;
+                    (centre(i), centre(j))
+                })
+                .collect();
+            found.sort_unstable();
+            found.dedup();
+            steep.patches = Arc::new(found);
+            steep.of = Some(Arc::clone(elevation));
+        }
+        Arc::clone(&steep.patches)
+    }
+
+    /// Adds the `steep` world patches to `patches` (vehicle frame at `pose`).
+    fn add_steep(
+        &self,
+        steep: &[(i64, i64)],
+        pose: &Pose,
+        elevation: &ElevationGrid,
+        patches: &mut Vec<Patch>,
+    ) {
+        let t = pose.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
+        for &(i, j) in steep {
+            let index = self.slots[self.slot_index(i, j)];
+            if let Some(held) = patches
+                .get_mut(index as usize)
+                .filter(|p| (p.i, p.j) == (i, j))
+            {
+                held.reasons.insert(Reasons::STEEP);
+                held.cost = 1.0;
+                continue;
+            }
+            let (cx, cy) = self.patch_centre(i, j);
+            let (dx, dy) = (cx - t.x, cy - t.y);
+            let (x, y) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+            if !self.config.in_window(x, y) || self.body.contains(Point2::new(x, y)) {
+                continue;
+            }
+            let z = elevation.at(cx, cy).map_or(0.0, |[mean, _]| mean);
+            patches.push(Patch {
+                x: x as f32,
+                y: y as f32,
+                first_seen: pose.utime,
+                last_seen: pose.utime,
+                reasons: Reasons::STEEP,
+                z_min: z,
+                z_max: z,
+                ..Patch::at(i, j)
+            });
+        }
     }
 
     /// The seen ground of the square around the window.

@@ -3,7 +3,9 @@
 
 use arcnav_localmap::{LocalMap, LocalMapConfig};
 use arcnav_perception::scene::HeightFunction;
-use arcnav_perception::{HeightSampler, ObstacleReport, PerceptionConfig, RangeImage, SensorModel};
+use arcnav_perception::{
+    HeightSampler, ObstacleReport, PerceptionConfig, RangeImage, Reasons, SensorModel,
+};
 use arcnav_vehicle::frames::planar_isometry;
 use arcnav_vehicle::{Pose, Utime, VehicleConfig};
 
@@ -37,6 +39,10 @@ struct Rig {
 
 impl Rig {
     fn new(sigma_m: f64) -> Self {
+        Self::with_sensor(sigma_m, SensorModel::erim())
+    }
+
+    fn with_sensor(sigma_m: f64, sensor: SensorModel) -> Self {
         let perception = PerceptionConfig::default();
         Self {
             map: LocalMap::new(&LocalMapConfig::default(), &VehicleConfig::default()),
@@ -46,7 +52,7 @@ impl Rig {
                 perception.min_range_m,
                 perception.max_range_m,
             ),
-            sensor: SensorModel::erim(),
+            sensor,
             noise: Noise(7),
             sigma_m,
         }
@@ -71,7 +77,7 @@ impl Rig {
         }
         let mut report = ObstacleReport {
             utime,
-            sensor: "erim".into(),
+            sensor: self.sensor.id.clone(),
             ..ObstacleReport::default()
         };
         self.sampler
@@ -197,4 +203,86 @@ fn the_layer_scrolls_with_the_vehicle_and_keeps_what_stays_in_the_window() {
         grid.origin.1 + i64::from(grid.side / 2),
     );
     assert_eq!(centre, (552, 0), "square centred on the vehicle at 110.5 m");
+}
+
+/// A bank's 35° side, as `cul_de_sac`'s banks have: rising from 3 m to the
+/// left of the vehicle's line to a 1.5 m top at 5.1 m.
+fn bank(_: f64, y: f64) -> f64 {
+    ((y - 3.0) * 35f64.to_radians().tan()).clamp(0.0, 1.5)
+}
+
+/// The steep patches of `rig`'s snapshot: vehicle-frame centres.
+fn steep(rig: &Rig) -> Vec<(f32, f32)> {
+    rig.map
+        .snapshot()
+        .patches
+        .iter()
+        .filter(|p| p.reasons.contains(Reasons::STEEP))
+        .inspect(|p| assert!(p.is_obstacle(), "{p:?}"))
+        .map(|p| (p.x, p.y))
+        .collect()
+}
+
+#[test]
+fn a_bank_side_steeper_than_the_vehicle_drives_is_an_obstacle_along_its_whole_run() {
+    // Perception's cells mark a 35° side only in places (within a 20 cm
+    // cell it rises 14 cm, below every threshold); the fused layer sees it
+    // all.
+    let mut rig = Rig::with_sensor(0.02, SensorModel::lidar64());
+    for n in 1..=4 {
+        rig.image(n, 0.0, bank);
+    }
+    let found = steep(&rig);
+    // On the side (3-5.1 m), give or take a patch and the central
+    // differences' reach.
+    assert!(
+        found.iter().all(|&(_, y)| (2.4..=5.7).contains(&y)),
+        "{found:?}"
+    );
+    // Along its run ahead of the vehicle, every metre from 5 to 15 m.
+    for x in 5..=15 {
+        let x = x as f32;
+        assert!(
+            found.iter().any(|&(px, _)| (px - x).abs() <= 0.6),
+            "no steep patch near x = {x} m: {found:?}"
+        );
+    }
+    // A 20° hillside, as driven on `hillside`: nothing, though noise
+    // lifts single cells past the limit.
+    let mut rig = Rig::with_sensor(0.02, SensorModel::lidar64());
+    let hillside = |_: f64, y: f64| y * 20f64.to_radians().tan();
+    for n in 1..=4 {
+        rig.image(n, 0.0, hillside);
+    }
+    assert_eq!(steep(&rig), vec![], "a 20° hillside is no obstacle");
+    // Off (steep_deg = 90), the bank is only what perception found.
+    let mut config = LocalMapConfig::default();
+    config.elevation.steep_deg = 90.0;
+    config.validate().unwrap();
+    let mut rig = Rig::with_sensor(0.02, SensorModel::lidar64());
+    rig.map = LocalMap::new(&config, &VehicleConfig::default());
+    for n in 1..=4 {
+        rig.image(n, 0.0, bank);
+    }
+    assert!(steep(&rig).is_empty());
+}
+
+#[test]
+fn steep_ground_under_the_vehicle_is_not_an_obstacle() {
+    // The vehicle stands across the foot of the side (its left flank at
+    // 1.1 m): the steep patches start beyond its body.
+    let mut rig = Rig::with_sensor(0.02, SensorModel::lidar64());
+    let near = |x: f64, y: f64| bank(x, y + 2.0);
+    for n in 1..=4 {
+        rig.image(n, 0.0, near);
+    }
+    let found = steep(&rig);
+    assert!(!found.is_empty());
+    let body = VehicleConfig::default().footprint().widened(0.2);
+    assert!(
+        found
+            .iter()
+            .all(|&(x, y)| !body.contains(nalgebra::Point2::new(f64::from(x), f64::from(y)))),
+        "{found:?}"
+    );
 }

@@ -495,8 +495,10 @@ fn a_footprint_reaching_around_the_earth_still_prunes_and_an_absurd_one_is_refus
 
 #[test]
 fn the_map_knows_which_ground_has_been_seen() {
+    // What images saw (the driven ground is the next test's).
     let mut map = map_with(LocalMapConfig {
         assume_seen_m: 3.0,
+        driven_memory_m: 0.0,
         ..LocalMapConfig::default()
     });
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
@@ -581,6 +583,62 @@ fn ground_that_left_the_window_is_forgotten_with_its_cells() {
     let snapshot = map.snapshot();
     assert!(!snapshot.is_seen(2.0, 3.0), "the dropped cell's ground");
     assert!(!snapshot.is_seen(-2.0, 0.0) && snapshot.is_seen(5.0, 0.0));
+}
+
+#[test]
+fn the_ground_the_vehicle_drove_over_is_seen_again_when_it_backs_onto_it() {
+    // A lane driven 30 m in, with a window 6 m behind: backing out the way
+    // it came, the swath between the axles it drove over bore it, so it
+    // counts as seen though the window forgot it; beside the swath, and
+    // with no memory of it, the forgotten ground stays unseen.
+    let drive_and_back = |memory_m: f64| {
+        let mut map = map_with(LocalMapConfig {
+            behind_m: 6.0,
+            assume_seen_m: 0.0,
+            driven_memory_m: memory_m,
+            ..LocalMapConfig::default()
+        });
+        let mut t = 0;
+        for step in (0..=300).chain((100..300).rev()) {
+            t += SECOND / 20;
+            map.update(&pose_at(t, f64::from(step) * 0.1, 0.0, 0.0));
+        }
+        // Back at x = 10 m, 20 m behind the farthest point reached.
+        map.snapshot()
+    };
+    let remembered = drive_and_back(100.0);
+    for x in [-5.5, -3.0, -0.5, 1.0, 3.0] {
+        for y in [-1.3, -1.0, 0.0, 1.0, 1.3] {
+            assert!(remembered.is_seen(x, y), "driven ({x}, {y})");
+        }
+    }
+    assert!(!remembered.is_seen(-3.0, 2.5) && !remembered.is_seen(-3.0, -2.5));
+    // The swath beyond the window behind is not in the map at all.
+    assert!(!remembered.is_seen(-8.0, 0.0));
+    let forgotten = drive_and_back(0.0);
+    assert!(!forgotten.is_seen(-3.0, 0.0) && !forgotten.is_seen(-5.5, 0.0));
+    // A short memory keeps the newest travel only: the lane behind was
+    // driven over 40 m of travel ago; where the vehicle stands, just now.
+    let short = drive_and_back(10.0);
+    assert!(short.is_seen(1.0, 0.0));
+    assert!(!short.is_seen(-3.0, 0.0) && !short.is_seen(-5.5, 0.0));
+}
+
+#[test]
+fn a_reset_forgets_the_driven_ground() {
+    let mut map = map_with(LocalMapConfig {
+        behind_m: 6.0,
+        assume_seen_m: 0.0,
+        ..LocalMapConfig::default()
+    });
+    let mut t = 0;
+    for step in 0..=200 {
+        t += SECOND / 20;
+        map.update(&pose_at(t, f64::from(step) * 0.1, 0.0, 0.0));
+    }
+    map.reset(t);
+    map.update(&pose_at(t + SECOND / 20, 5.0, 0.0, 0.0));
+    assert!(!map.snapshot().is_seen(-3.0, 0.0));
 }
 
 #[test]

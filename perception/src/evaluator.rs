@@ -39,8 +39,11 @@ impl Reasons {
     /// Occupied in the static occupancy map a user gave (001 §3.4); never
     /// set by perception.
     pub const STATIC_MAP: Self = Self(64);
+    /// Steeper than the vehicle's slope limit in the local map's fused
+    /// elevation layer (a bank's side); never set by perception.
+    pub const STEEP: Self = Self(128);
     /// Every reason, with its name, in bit order.
-    pub const ALL: [(Self, &'static str); 7] = [
+    pub const ALL: [(Self, &'static str); 8] = [
         (Self::HEIGHT_VARIATION, "height variation"),
         (Self::SLOPE, "slope"),
         (Self::DISCONTINUITY, "discontinuity"),
@@ -48,6 +51,7 @@ impl Reasons {
         (Self::HEIGHT_DIFFERENCE, "height difference"),
         (Self::NOT_FLAT, "not flat"),
         (Self::STATIC_MAP, "static map"),
+        (Self::STEEP, "steep"),
     ];
 
     pub const fn bits(self) -> u8 {

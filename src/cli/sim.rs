@@ -243,12 +243,14 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     }
     let rec = &r.recovery;
     println!(
-        "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned; blocked with no way back {} decisions, out of recoveries {})",
+        "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned; {} retraces over {:.1} m; blocked with no way back {} decisions, out of recoveries {})",
         rec.recoveries,
         rec.backed_m,
         rec.turns,
         rec.turn_legs,
         rec.turned_deg,
+        rec.retraces,
+        rec.retraced_m,
         rec.no_way_back,
         rec.exhausted
     );

@@ -79,6 +79,8 @@ pub struct MotionModel {
     target_speed_mps: f64,
     /// Commands not yet acting, with the time they take effect.
     pending: VecDeque<(Utime, SteeringCommand)>,
+    /// Signed distance driven (backing up counts down), m.
+    odometer_m: f64,
 }
 
 impl MotionModel {
@@ -92,6 +94,7 @@ impl MotionModel {
             target_curvature: state.curvature,
             target_speed_mps: state.speed_mps,
             pending: VecDeque::new(),
+            odometer_m: 0.0,
         }
     }
 
@@ -105,6 +108,12 @@ impl MotionModel {
 
     pub fn limits(&self) -> &MotionLimits {
         &self.limits
+    }
+
+    /// Signed distance driven since the model began: forwards counts up,
+    /// backing up counts down, m.
+    pub fn odometer_m(&self) -> f64 {
+        self.odometer_m
     }
 
     /// Hands a command to the vehicle; it takes effect `latency` after its
@@ -153,6 +162,7 @@ impl MotionModel {
         let (k1, k_mean) = curvature_ramp(k0, k_target, limits, dt);
         let (v1, v_mean) = speed_ramp(self.state.speed_mps, v_target, limits, dt);
         let distance = v_mean * dt;
+        self.odometer_m += distance;
         let k = k_mean;
         let (x, y, yaw) = (self.state.x, self.state.y, self.state.yaw);
         let dyaw = k * distance;
