@@ -164,6 +164,10 @@ impl RecoveryConfig {
 /// (0.13 s of the default steering rate).
 const STEERED_WITHIN: f64 = 0.02;
 
+/// Decisions further apart than this restart the motion estimate, µs: the
+/// commands before have acted in full (latency, steering and speed ramps).
+const SETTLED_US: Utime = 2_000_000;
+
 /// A turn round ends once the way has lain ahead this long, s: a route's
 /// path can swing for a cycle as it re-plans.
 const WISH_HELD_S: f64 = 1.0;
@@ -393,6 +397,23 @@ impl Recovery {
         let model = self
             .model
             .get_or_insert_with(|| MotionModel::new(limits, PlanarState::default(), now));
+        if now > model.utime().saturating_add(SETTLED_US) {
+            // A gap between decisions (cycles skipped, a clock that jumped
+            // ahead): the commands have long acted, but where the vehicle
+            // went is not known. The estimate starts afresh at `now`, with
+            // the speed and curvature they left, and no way back.
+            let settled = model.advance_to(model.utime() + SETTLED_US);
+            *model = MotionModel::new(
+                limits,
+                PlanarState {
+                    speed_mps: settled.speed_mps,
+                    curvature: settled.curvature,
+                    ..PlanarState::default()
+                },
+                now,
+            );
+            self.trail = Trail::new(self.config.retrace_max_m);
+        }
         let (before, odometer_before) = (*model.state(), model.odometer_m());
         let after = model.advance_to(now);
         let odometer = model.odometer_m();

@@ -488,3 +488,17 @@ fn the_way_back_follows_the_curve_it_came_by_to_where_the_trail_begins() {
     let stats = *a.recovery_stats();
     assert!(stats.retraces >= 1 && stats.retraced_m > 20.0, "{stats:?}");
 }
+
+#[test]
+fn a_decision_far_in_the_future_restarts_the_estimate_and_forgets_the_way_back() {
+    // Driving, then a decision stamped near the end of time (a corrupt
+    // log): no overflow, no integration over the gap; where the vehicle
+    // went meanwhile is unknown, so only what it drove since (braking from
+    // cruise: about 1.5 m) can be retraced, not the 16 m before.
+    let mut a = arbiter();
+    drive(&mut a, 0, 8.0, |t| open(t, 19));
+    let late = i64::MAX - 10 * SECOND;
+    drive(&mut a, late, 6.0, |t| lane(t, i64::MAX));
+    let stats = *a.recovery_stats();
+    assert!(stats.retraced_m < 2.0, "{stats:?}");
+}

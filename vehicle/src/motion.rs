@@ -119,7 +119,10 @@ impl MotionModel {
     /// Hands a command to the vehicle; it takes effect `latency` after its
     /// `utime` (or after the vehicle's current time, if that is later).
     pub fn command(&mut self, command: SteeringCommand) {
-        let effective = command.utime.max(self.utime) + self.limits.latency_us;
+        let effective = command
+            .utime
+            .max(self.utime)
+            .saturating_add(self.limits.latency_us);
         // Keep the queue ordered by effective time.
         let at = self.pending.partition_point(|(t, _)| *t <= effective);
         self.pending.insert(at, (effective, command));
@@ -142,7 +145,7 @@ impl MotionModel {
                     command.speed_mps
                 };
             }
-            let mut end = (self.utime + MAX_SUBSTEP_US).min(utime);
+            let mut end = self.utime.saturating_add(MAX_SUBSTEP_US).min(utime);
             if let Some(&(due, _)) = self.pending.front() {
                 end = end.min(due);
             }
