@@ -477,6 +477,41 @@ fn narrow_cul_de_sacs_are_left_by_turning_round() {
     }
 }
 
+/// 017, narrower still: a dead-end lane with 5.7 m of floor, where no
+/// K-point turn gets the vehicle round. It backs out the way it came (at
+/// least 20 m of the 30 m lane, both sensors), turns once out, and
+/// completes without a collision, keeping off the banks' sides.
+#[test]
+fn a_dead_end_lane_too_narrow_to_turn_in_is_left_backing_out_the_way_it_came() {
+    let world = format!(
+        "{}/tests/worlds/lane_dead_end.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let runs: Vec<(&str, Vec<String>)> = ["erim", "lidar64"]
+        .into_iter()
+        .map(|sensor| {
+            let args = ["--world", &world, "--sensor", sensor, "--no-images"];
+            (sensor, args.map(String::from).to_vec())
+        })
+        .collect();
+    for (tag, report, stdout) in &missions("lane", &runs) {
+        assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
+        assert_eq!(
+            report["collisions"].as_array().unwrap().len(),
+            0,
+            "{tag}:\n{stdout}"
+        );
+        let recovery = &report["recovery"];
+        assert!(
+            recovery["retraces"].as_u64().unwrap() >= 1
+                && recovery["retraced_m"].as_f64().unwrap() >= 20.0,
+            "{tag}: {recovery}"
+        );
+        let closest = report["closest_approach_m"].as_f64().unwrap();
+        assert!(closest >= 0.3, "{tag}: {closest} m from a bank's side");
+    }
+}
+
 /// 020 item 1: a faster vehicle looks farther. With the 18 m of arc and
 /// the 20 m window of 002 §5, obstacle avoidance's stopping-distance vote
 /// caps every sensor at 5.9 m/s; with the lookahead from speed
