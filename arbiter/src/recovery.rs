@@ -46,7 +46,19 @@
 //! it drove over as seen: see `localmap.driven_memory_m`). Retracing
 //! towards a turn ends where an arc curving towards the way is clear for
 //! `retrace_room_m` ahead (room to turn); otherwise after `distance_m`, as a
-//! backing-up would. One retrace counts as one recovery.
+//! backing-up would. One retrace counts as one recovery. The way back is
+//! driven on the arc nearest the curvature pursued that has room, within
+//! 0.05 1/m of it (a corner standing beside a bank refuses the arc that
+//! swings it in); a run that cannot be driven to its end (a turn's leg was
+//! driven as close as its clearance allowed, and pursuit ends a little
+//! off it) is given up within a metre of its end for the next.
+//!
+//! **Nothing behind.** Where nothing behind is known (the mission's start,
+//! or a trail followed back to where it began) and the arcs the vehicle
+//! wants are held to a stop by ground not seen close along them (a sensor
+//! looking ahead never saw beside the start), it turns towards them
+//! forwards, as far as the ground is seen: the legs of a turn round
+//! towards that side, which ends once the way lies ahead.
 //!
 //! The arbiter reads no pose: how far the vehicle has moved comes from its
 //! own commands and the vehicle's acceleration limits, so every executor
@@ -61,7 +73,7 @@ use arcnav_vehicle::{
     MotionLimits, MotionModel, PlanarState, SteeringCommand, Utime, VehicleConfig,
 };
 
-use crate::trail::Trail;
+use crate::trail::{Pursuit, Trail};
 use serde::{Deserialize, Serialize};
 
 /// Lives in `[arbiter.recovery]`.
@@ -167,6 +179,21 @@ const STEERED_WITHIN: f64 = 0.02;
 /// Decisions further apart than this restart the motion estimate, µs: the
 /// commands before have acted in full (latency, steering and speed ramps).
 const SETTLED_US: Utime = 2_000_000;
+
+/// Slower than this, the vehicle stands, m/s.
+const STANDING_MPS: f64 = 0.05;
+
+/// Retracing, a run that cannot be driven to its end is given up for the
+/// next one when this little of it is left, m.
+const RUN_SLACK_M: f64 = 1.0;
+
+/// Retracing steers at most this far from the curvature pursuit asks for
+/// to find an arc with room, 1/m (2.5 m of lateral offset over 10 m).
+const RETRACE_STEER_SLACK: f64 = 0.05;
+
+/// Retracing, an arc is taken for the way back when it has this much room
+/// past the margin (or the rest of the run), m.
+const RETRACE_ROOM_M: f64 = 0.5;
 
 /// A turn round ends once the way has lain ahead this long, s: a route's
 /// path can swing for a cycle as it re-plans.
@@ -517,13 +544,7 @@ impl Recovery {
                     if legs < self.config.turn_max_legs
                         && now - stalled < seconds_to_micros(self.config.wait_s)
                     {
-                        return Outcome::Drive(SteeringCommand {
-                            utime: now,
-                            curvature: leg.curvature,
-                            speed_mps: 0.0,
-                            arc_index: Some(leg.arc),
-                            vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
-                        });
+                        return Outcome::Drive(self.hold(now, &leg, behind));
                     }
                     tracing::info!(
                         t_s = micros_to_seconds(now),
@@ -592,13 +613,69 @@ impl Recovery {
         behind: &Behind<'_>,
     ) -> Option<SteeringCommand> {
         let state = *self.model.as_ref()?.state();
-        let pursuit = self.trail.pursue(&state)?;
-        let arc = nearest_arc(behind.curvatures, pursuit.curvature);
-        self.drive(
-            now,
-            &Leg::along(arc, behind, pursuit.reverse, pursuit.run_m.min(budget_m)),
-            behind,
-        )
+        loop {
+            let pursuit = self.trail.pursue(&state)?;
+            let arc = self.retrace_arc(&pursuit, behind);
+            let leg = Leg::along(arc, behind, pursuit.reverse, pursuit.run_m.min(budget_m));
+            if let Some(command) = self.drive(now, &leg, behind) {
+                return Some(command);
+            }
+            if state.speed_mps.abs() >= STANDING_MPS {
+                // Too fast to stop in the room left: stop, then creep on.
+                return Some(SteeringCommand {
+                    speed_mps: 0.0,
+                    ..self.hold(now, &leg, behind)
+                });
+            }
+            // A leg of a turn round was driven as close to what stood in
+            // the way as the clearance allowed: driving it back ends a
+            // little short of where it began. Near enough, the next run
+            // (the other way) starts from here.
+            if pursuit.run_m > RUN_SLACK_M || !self.trail.skip_run() {
+                tracing::debug!(
+                    run_m = pursuit.run_m,
+                    reverse = pursuit.reverse,
+                    curvature = pursuit.curvature,
+                    clear_m = behind.clear(arc, pursuit.reverse),
+                    "retracing: no room along the way back"
+                );
+                return None;
+            }
+        }
+    }
+
+    /// The arc to follow the trail back on: the one nearest the curvature
+    /// pursued that has room to go on (`RETRACE_ROOM_M` past the margin),
+    /// within `RETRACE_STEER_SLACK` of it; else the nearest. Standing with
+    /// a corner beside a bank, a curvature that swings it in is refused
+    /// and a straighter one taken: pursuit steers back onto the trail a
+    /// metre later.
+    fn retrace_arc(&self, pursuit: &Pursuit, behind: &Behind<'_>) -> usize {
+        let nearest = nearest_arc(behind.curvatures, pursuit.curvature);
+        let needed = self.config.margin_m + RETRACE_ROOM_M.min(pursuit.run_m);
+        (0..behind.curvatures.len())
+            .filter(|&arc| {
+                (behind.curvatures[arc] - pursuit.curvature).abs() <= RETRACE_STEER_SLACK
+                    && behind
+                        .clear(arc, pursuit.reverse)
+                        .is_some_and(|c| c >= needed)
+            })
+            .min_by(|&a, &b| {
+                let off = |arc: usize| (behind.curvatures[arc] - pursuit.curvature).abs();
+                off(a).total_cmp(&off(b))
+            })
+            .unwrap_or(nearest)
+    }
+
+    /// Standing with the wheels at `leg`'s curvature.
+    fn hold(&self, now: Utime, leg: &Leg, behind: &Behind<'_>) -> SteeringCommand {
+        SteeringCommand {
+            utime: now,
+            curvature: leg.curvature,
+            speed_mps: 0.0,
+            arc_index: Some(leg.arc),
+            vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
+        }
     }
 
     /// True when an arc curving towards `side`, at least half as hard as
@@ -626,7 +703,7 @@ impl Recovery {
         };
         let mut trail = self.trail.clone();
         let open = trail.pursue(&state).is_some_and(|p| {
-            let arc = nearest_arc(behind.curvatures, p.curvature);
+            let arc = self.retrace_arc(&p, behind);
             let leg = Leg::along(arc, behind, p.reverse, p.run_m);
             self.drive(now, &leg, behind).is_some()
         });
@@ -663,7 +740,7 @@ impl Recovery {
             return Outcome::Keep;
         }
         let since = *self.blocked_since.get_or_insert(now);
-        let standing = self.speed_and_curvature().0.abs() < 0.05;
+        let standing = self.speed_and_curvature().0.abs() < STANDING_MPS;
         if now - since < seconds_to_micros(self.config.wait_s) || !standing {
             return Outcome::Keep;
         }
@@ -722,8 +799,30 @@ impl Recovery {
             );
             self.mode = Mode::Backing(leg);
         } else if !self.start_retrace(now, side, behind) {
-            self.stats.no_way_back += 1;
-            return Outcome::Keep;
+            // Nothing behind is known (where the mission began, or a trail
+            // followed back to its start) and the arcs the vehicle wants
+            // lead into ground not seen yet: a turn towards them, forwards
+            // as far as the ground is seen, shows more of it.
+            let lean = behind
+                .wished()
+                .filter(|wish| self.config.turn_round && wish.turn != 0.0)
+                .map(|wish| wish.turn.signum());
+            let Some((side, leg)) =
+                lean.and_then(|side| Some((side, self.choose_leg(side, false, behind)?)))
+            else {
+                self.stats.no_way_back += 1;
+                return Outcome::Keep;
+            };
+            self.begin();
+            self.stats.turns += 1;
+            self.turn_deg = 0.0;
+            tracing::info!(
+                t_s = micros_to_seconds(now),
+                attempt = self.attempts,
+                side,
+                "blocked, no way back: turning towards the way, forwards"
+            );
+            self.start_turn_leg(side, leg, 1);
         }
         self.step(now, blocked, true, behind)
     }

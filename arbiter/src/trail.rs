@@ -202,6 +202,18 @@ impl Trail {
         })
     }
 
+    /// Gives up the rest of the newest run: the next run (the other way)
+    /// is followed from here. False when no run is left.
+    pub fn skip_run(&mut self) -> bool {
+        let Some(run) = self.newest_run() else {
+            return false;
+        };
+        for _ in 0..run.len {
+            self.pop_newest();
+        }
+        true
+    }
+
     fn pop_newest(&mut self) {
         if let Some(p) = self.points.pop_back() {
             self.length_m -= p.step_m;

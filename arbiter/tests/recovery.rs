@@ -502,3 +502,122 @@ fn a_decision_far_in_the_future_restarts_the_estimate_and_forgets_the_way_back()
     let stats = *a.recovery_stats();
     assert!(stats.retraced_m < 2.0, "{stats:?}");
 }
+
+/// Decides every 100 ms from 0 for `seconds`, with the votes made by
+/// `votes(t, state)` from where the commands so far have taken the vehicle
+/// (as the simulator drives it); the commands and the states they lead to.
+fn drive_seen(
+    arbiter: &mut Arbiter,
+    seconds: f64,
+    mut votes: impl FnMut(i64, &PlanarState) -> [BehaviourVotes; 2],
+) -> (Vec<SteeringCommand>, Vec<PlanarState>) {
+    let limits = MotionLimits::from_vehicle(&VehicleConfig::default());
+    let mut model = MotionModel::new(limits, PlanarState::default(), 0);
+    let steps = (seconds * 10.0).round() as i64;
+    (0..steps)
+        .map(|k| {
+            let t = k * PERIOD;
+            for v in votes(t, model.state()) {
+                arbiter.on_votes(&v).unwrap();
+            }
+            let command = arbiter.decide(t);
+            model.command(command);
+            (command, model.advance_to(t + PERIOD))
+        })
+        .unzip()
+}
+
+#[test]
+fn backing_out_passes_a_leg_it_cannot_undo_to_the_end_and_an_arc_it_cannot_take() {
+    // In 8 s straight, then blocked with the way ahead: one plain backing
+    // up of 4 m. From 16 s the way lies behind and to the left, no turn
+    // leg fits (1.2 m behind, 0.4 m ahead on the left arcs), and the only
+    // way out is back along the trail. Undoing the backing leg forwards
+    // meets a wall 0.3 m short of where it began (as a leg driven to the
+    // limit of its room does): it stops about 0.7 m short of the leg's
+    // start and carries on from there.
+    // Backing along the straight way in, the straight arc itself is
+    // blocked 0.4 m behind (a corner beside a bank); its neighbours are
+    // not.
+    let mut a = arbiter();
+    let mut deepest = f64::MIN;
+    let (commands, states) = drive_seen(&mut a, 60.0, |t, state| {
+        deepest = deepest.max(state.x);
+        if t < 8 * SECOND {
+            return open(t, 19);
+        }
+        if t < 16 * SECOND {
+            return blocked(t, |_| Some(5.0), 19);
+        }
+        let wall = (deepest - 0.3 - state.x).max(0.0);
+        let [mut avoid, route] = cornered(t, true, 0.4, behind_left);
+        for arc in 0..39 {
+            let forward = if arc <= 19 { wall } else { 0.4 };
+            avoid.votes.set_forward_clearance(arc, forward);
+            avoid
+                .votes
+                .set_reverse_clearance(arc, if arc == 19 { 0.4 } else { 1.2 });
+        }
+        [avoid, route]
+    });
+    let turned_back = states[159].x;
+    assert!(
+        deepest - turned_back > 3.5,
+        "backed up once by 16 s: {deepest} -> {turned_back}"
+    );
+    // Creeps forwards towards the leg's start, then backs out along the
+    // way in on the arcs beside the straight one.
+    let after: Vec<_> = commands[160..].iter().filter(|c| !c.is_stop()).collect();
+    let first_back = after
+        .iter()
+        .position(|c| c.is_reverse())
+        .unwrap_or_else(|| panic!("backs out: {:?}", a.recovery_stats()));
+    assert!(first_back > 10, "creeps forwards first");
+    assert!(after[..first_back].iter().all(|c| c.speed_mps > 0.0));
+    for c in &after[first_back..] {
+        assert!(c.is_reverse(), "{c:?}");
+        assert_ne!(c.arc_index, Some(19), "{c:?}");
+        assert!(c.curvature.abs() < 0.06, "{c:?}");
+    }
+    let end = states.last().unwrap();
+    assert!(
+        end.x < deepest - 12.0,
+        "backed out to {end:?} from {deepest}"
+    );
+    assert!(end.y.abs() < 0.5, "kept to the way in: {end:?}");
+    let stats = *a.recovery_stats();
+    assert_eq!(stats.retraces, 1, "{stats:?}");
+}
+
+#[test]
+fn where_nothing_behind_is_known_it_turns_towards_the_way_forwards_as_far_as_the_ground_is_seen() {
+    // The mission's start: nothing behind has been seen (no backing
+    // clearance, no trail), the way lies to the right (arc 8, not the
+    // hardest), and every arc is held to 0 m/s by ground not seen close
+    // along it; the right arcs up to straight have 6 m of creeping room.
+    let votes = |t: i64| {
+        let [mut avoid, mut route] = blocked(t, |_| None, 8);
+        avoid.votes = Votes::new(39);
+        for arc in 0..39 {
+            avoid.votes.set(arc, 1.0);
+            avoid.votes.limit_arc_speed(arc, 0.0);
+            avoid
+                .votes
+                .set_forward_clearance(arc, if (5..=19).contains(&arc) { 6.0 } else { 0.5 });
+            route.votes.set(arc, 1.0 - arc.abs_diff(8) as f32 / 20.0);
+        }
+        [avoid, route]
+    };
+    let mut a = arbiter();
+    let commands = drive(&mut a, 0, 12.0, votes);
+    // Stands for wait_s, then creeps forwards along a right arc with room.
+    assert!(commands[..15].iter().all(SteeringCommand::is_stop));
+    let first = commands
+        .iter()
+        .find(|c| !c.is_stop())
+        .unwrap_or_else(|| panic!("stays: {:?}", a.recovery_stats()));
+    assert!(first.speed_mps > 0.0 && first.speed_mps <= 1.0, "{first:?}");
+    assert!(first.curvature < 0.0, "towards the way, right: {first:?}");
+    assert!((5..=19).contains(&first.arc_index.unwrap()), "{first:?}");
+    assert_eq!(a.recovery_stats().turns, 1, "{:?}", a.recovery_stats());
+}
