@@ -95,6 +95,10 @@ pub(crate) struct Projector {
     cos_az: Vec<f32>,
     sin_az: Vec<f32>,
     up: Vec<f32>,
+    /// [`Projector::for_each_cell`]'s row: each return's cell (`u32::MAX`:
+    /// none) and level-frame z.
+    row_cells: Vec<u32>,
+    row_z: Vec<f32>,
 }
 
 /// The level frame of `world_from_vehicle` and where `image`'s sensor
@@ -154,6 +158,103 @@ impl Projector {
         stats: &mut ImageStats,
         mut each: impl FnMut([f32; 3], usize, usize),
     ) {
+        let ([tx, ty, tz], vertical) = self.prepare(image, level_from_sensor);
+        let cols = image.cols();
+        for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
+            let line = &ranges[row * cols..(row + 1) * cols];
+            let (vx, vy, vz) = (se * vertical[0], se * vertical[1], se * vertical[2]);
+            for (col, &range) in line.iter().enumerate() {
+                if !(range.is_finite() && range > 0.0) {
+                    stats.no_return += 1;
+                    continue;
+                }
+                if range < min_range || range > max_range {
+                    stats.out_of_range += 1;
+                    continue;
+                }
+                let xyz = [
+                    (ce * self.cos_az[col] + vx) * range + tx,
+                    (ce * self.sin_az[col] + vy) * range + ty,
+                    (ce * self.up[col] + vz) * range + tz,
+                ];
+                each(xyz, row, col);
+            }
+        }
+    }
+
+    /// [`Projector::for_each`] binned into `grid` of `cell`-sized cells:
+    /// `each` gets the cell (as [`GridShape::index`] finds it, the same
+    /// arithmetic) and the level-frame z of every return in range that
+    /// falls inside it. A row at a time, in two passes: every column's
+    /// point and cell first, with no branch (it vectorises: the divisions
+    /// by the cell size are most of a point's cost), then the hand-over.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn for_each_cell(
+        &mut self,
+        image: &RangeImage,
+        ranges: &[f32],
+        level_from_sensor: &Isometry,
+        (min_range, max_range): (f32, f32),
+        (grid, cell): (&GridShape, f32),
+        stats: &mut ImageStats,
+        mut each: impl FnMut(usize, f32),
+    ) {
+        let ([tx, ty, tz], vertical) = self.prepare(image, level_from_sensor);
+        let cols = image.cols();
+        let m = grid.margin as f32;
+        let (x_end, y_end) = (
+            (grid.cols - grid.margin) as f32,
+            (grid.rows - grid.margin) as f32,
+        );
+        let [cx, cy] = grid.corner;
+        let width = grid.cols as u32;
+        let (mut no_return, mut out_of_range) = (0u32, 0u32);
+        let (row_cells, row_z) = (&mut self.row_cells, &mut self.row_z);
+        row_cells.resize(cols, u32::MAX);
+        row_z.resize(cols, 0.0);
+        for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
+            let line = &ranges[row * cols..(row + 1) * cols];
+            let (vx, vy, vz) = (se * vertical[0], se * vertical[1], se * vertical[2]);
+            let beams = self.cos_az.iter().zip(&self.sin_az).zip(&self.up);
+            for (((&range, ((&ca, &sa), &up)), index), z) in line
+                .iter()
+                .zip(beams)
+                .zip(row_cells.iter_mut())
+                .zip(row_z.iter_mut())
+            {
+                let returned = range.is_finite() && range > 0.0;
+                let in_range = range >= min_range && range <= max_range;
+                no_return += u32::from(!returned);
+                out_of_range += u32::from(returned && !in_range);
+                let x = (ce * ca + vx) * range + tx;
+                let y = (ce * sa + vy) * range + ty;
+                *z = (ce * up + vz) * range + tz;
+                let (fx, fy) = (x / cell + cx, y / cell + cy);
+                let inside = fx >= m && fy >= m && fx < x_end && fy < y_end;
+                *index = if returned && in_range && inside {
+                    fy as u32 * width + fx as u32
+                } else {
+                    u32::MAX
+                };
+            }
+            for (&index, &z) in row_cells.iter().zip(row_z.iter()) {
+                if index != u32::MAX {
+                    each(index as usize, z);
+                }
+            }
+        }
+        stats.no_return += no_return;
+        stats.out_of_range += out_of_range;
+    }
+
+    /// Per row the elevation's cosine and sine, per column the rotated
+    /// horizontal direction; the sensor's position and the rotated
+    /// vertical.
+    fn prepare(
+        &mut self,
+        image: &RangeImage,
+        level_from_sensor: &Isometry,
+    ) -> ([f32; 3], [f32; 3]) {
         let beams = &image.beams;
         let m = level_from_sensor.rotation.to_rotation_matrix();
         let m = m.matrix();
@@ -178,28 +279,7 @@ impl Projector {
         }
         let vertical = [r(0, 2), r(1, 2), r(2, 2)];
         let t = level_from_sensor.translation.vector;
-        let (tx, ty, tz) = (t.x as f32, t.y as f32, t.z as f32);
-        let cols = image.cols();
-        for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
-            let line = &ranges[row * cols..(row + 1) * cols];
-            let (vx, vy, vz) = (se * vertical[0], se * vertical[1], se * vertical[2]);
-            for (col, &range) in line.iter().enumerate() {
-                if !(range.is_finite() && range > 0.0) {
-                    stats.no_return += 1;
-                    continue;
-                }
-                if range < min_range || range > max_range {
-                    stats.out_of_range += 1;
-                    continue;
-                }
-                let xyz = [
-                    (ce * self.cos_az[col] + vx) * range + tx,
-                    (ce * self.sin_az[col] + vy) * range + ty,
-                    (ce * self.up[col] + vz) * range + tz,
-                ];
-                each(xyz, row, col);
-            }
-        }
+        ([t.x as f32, t.y as f32, t.z as f32], vertical)
     }
 }
 

@@ -64,6 +64,7 @@ use crate::grid::{self, GridReport, Marked, Projector};
 use crate::image::RangeImage;
 use crate::median::{MedianOutliers, MedianParams};
 use crate::registry::EvaluatorPlugin;
+use crate::window::WindowStats;
 
 /// Lives in `[perception.height_diff]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -213,29 +214,27 @@ pub struct HeightDiff {
 #[derive(Debug, Default)]
 struct Scratch {
     layer: Vec<f32>,
-    max: Vec<f32>,
-    min: Vec<f32>,
-    count: Vec<u16>,
-    vertical: [Vec<f32>; 3],
-    count_scratch: [Vec<u16>; 3],
+    windows: WindowStats,
     edges: Vec<usize>,
     sums: Vec<f64>,
     counts: Vec<u32>,
-    gaps: [Vec<Nearest>; 2],
+    gaps: [Vec<u32>; 2],
+    bins: Vec<Bin>,
 }
 
-/// The nearest defined cell on one side of an undefined one.
+/// A cell's returns while they are binned: the highest (NaN: none yet),
+/// the image it came from, and the lowest.
 #[derive(Debug, Clone, Copy)]
-struct Nearest {
-    distance: u16,
-    value: f32,
+struct Bin {
+    highest: f32,
+    lowest: f32,
     sensor: u8,
 }
 
-impl Nearest {
-    const NONE: Self = Self {
-        distance: u16::MAX,
-        value: f32::NAN,
+impl Bin {
+    const EMPTY: Self = Self {
+        highest: f32::NAN,
+        lowest: f32::INFINITY,
         sensor: u8::MAX,
     };
 }
@@ -307,12 +306,11 @@ impl HeightDiff {
     ) -> Result<&HeightDiffMaps, PerceptionError> {
         let n = self.grid.cols * self.grid.rows;
         let maps = &mut self.maps;
-        maps.height.clear();
-        maps.height.resize(n, f32::NAN);
-        maps.sensor.clear();
-        maps.sensor.resize(n, u8::MAX);
-        self.lowest.clear();
-        self.lowest.resize(n, f32::INFINITY);
+        // Binned into one array of cells (one cache line per point, not
+        // three), spread into the maps after.
+        let bins = &mut self.scratch.bins;
+        bins.clear();
+        bins.resize(n, Bin::EMPTY);
         for (k, image) in images.iter().enumerate().take(usize::from(u8::MAX)) {
             image.validate()?;
             let cols = image.cols();
@@ -322,25 +320,29 @@ impl HeightDiff {
                 .filter(&image.range, cols, &params, &mut self.filtered);
             let (_, level_from_sensor) = grid::level_frames(image, world_from_vehicle);
             let (grid, cell) = (&self.grid, self.cell);
-            let (height, sensor, lowest) = (&mut maps.height, &mut maps.sensor, &mut self.lowest);
-            self.projector.for_each(
+            self.projector.for_each_cell(
                 image,
                 &self.filtered,
                 &level_from_sensor,
                 (self.min_range, self.max_range),
+                (grid, cell),
                 &mut ImageStats::default(),
-                |[x, y, z], _, _| {
-                    let Some(i) = grid.index(cell, x, y) else {
-                        return;
-                    };
-                    if height[i].is_nan() || height[i] < z {
-                        height[i] = z;
-                        sensor[i] = k as u8;
+                |i, z| {
+                    let bin = &mut bins[i];
+                    if bin.highest.is_nan() || bin.highest < z {
+                        bin.highest = z;
+                        bin.sensor = k as u8;
                     }
-                    lowest[i] = lowest[i].min(z);
+                    bin.lowest = bin.lowest.min(z);
                 },
             );
         }
+        maps.height.clear();
+        maps.height.extend(bins.iter().map(|b| b.highest));
+        maps.sensor.clear();
+        maps.sensor.extend(bins.iter().map(|b| b.sensor));
+        self.lowest.clear();
+        self.lowest.extend(bins.iter().map(|b| b.lowest));
         self.fill_gaps();
         self.differences();
         self.costs();
@@ -349,80 +351,100 @@ impl HeightDiff {
 
     /// §4.2: fills NaN cells with at least two axis neighbours within δ.
     fn fill_gaps(&mut self) {
-        let (cols, rows, cell) = (self.grid.cols, self.grid.rows, self.cell);
+        let (cols, cell) = (self.grid.cols, self.cell);
         let maps = &mut self.maps;
         maps.filled.clone_from(&maps.height);
         let h = &maps.height;
-        // Per cell, the nearest defined cell on each side along x (then
-        // y): its distance in cells (u16::MAX = none), value and sensor.
-        let sensor = &maps.sensor;
+        // Only the box the defined cells span can be filled: a cell beside
+        // it has a defined cell on one side along one axis at most.
+        let Some(bounds) = defined_box(h.iter().map(|v| !v.is_nan()), cols) else {
+            return;
+        };
+        let (x0, y0) = (bounds.x0, bounds.y0);
+        // Per cell of the box, the nearest defined cell (its grid index,
+        // NONE: none) before and after it along x, then along y.
+        const NONE: u32 = u32::MAX;
         let [along_x, along_y] = &mut self.scratch.gaps;
-        // Cell `k` of line `line` is `line * line_stride + k * k_stride`.
-        let nearest = |out: &mut Vec<Nearest>,
-                       len: usize,
-                       lines: usize,
-                       (line_stride, k_stride): (usize, usize)| {
+        let at = |bx: usize, by: usize| (y0 + by) * cols + x0 + bx;
+        for (out, along_rows) in [(&mut *along_x, true), (&mut *along_y, false)] {
             out.clear();
-            out.resize(2 * len * lines, Nearest::NONE);
+            out.resize(2 * bounds.w * bounds.h, NONE);
+            let (lines, len) = if along_rows {
+                (bounds.h, bounds.w)
+            } else {
+                (bounds.w, bounds.h)
+            };
             for line in 0..lines {
                 for backwards in [false, true] {
-                    let mut last: Option<(usize, usize)> = None;
+                    let mut last = NONE;
                     for step in 0..len {
                         let k = if backwards { len - 1 - step } else { step };
-                        let i = line * line_stride + k * k_stride;
+                        let (bx, by) = if along_rows { (k, line) } else { (line, k) };
+                        let i = at(bx, by);
                         if !h[i].is_nan() {
-                            last = Some((k, i));
-                        } else if let Some((j, source)) = last {
-                            out[2 * i + usize::from(backwards)] = Nearest {
-                                distance: k.abs_diff(j).min(usize::from(u16::MAX - 1)) as u16,
-                                value: h[source],
-                                sensor: sensor[source],
-                            };
+                            last = i as u32;
+                        } else {
+                            out[2 * (by * bounds.w + bx) + usize::from(backwards)] = last;
                         }
                     }
                 }
             }
-        };
-        nearest(along_x, cols, rows, (cols, 1));
-        nearest(along_y, rows, cols, (1, cols));
+        }
         let [ox, oy] = maps.origin;
-        for i in 0..cols * rows {
-            if !h[i].is_nan() {
-                continue;
-            }
-            let (x, y) = (
-                ox + ((i % cols) as f32 + 0.5) * cell,
-                oy + ((i / cols) as f32 + 0.5) * cell,
-            );
-            let delta =
-                (self.config.gap_base_m as f32 + self.config.gap_per_m as f32 * x.hypot(y)) / cell;
-            let sides = [
-                along_x[2 * i],
-                along_x[2 * i + 1],
-                along_y[2 * i],
-                along_y[2 * i + 1],
-            ];
-            let within = |n: &Nearest| n.distance != u16::MAX && f32::from(n.distance) < delta;
-            // Filled from one sensor only, the nearest neighbour's: a value
-            // between two sensors' heights would put a step inside each.
-            let Some(owner) = sides
-                .iter()
-                .filter(|n| within(n))
-                .min_by_key(|n| n.distance)
-                .map(|n| n.sensor)
-            else {
-                continue;
-            };
-            let (mut weight, mut sum, mut found) = (0.0f32, 0.0f32, 0);
-            for n in sides.iter().filter(|n| within(n) && n.sensor == owner) {
-                let w = 1.0 / f32::from(n.distance);
-                weight += w;
-                sum += w * n.value;
-                found += 1;
-            }
-            if found >= 2 {
-                maps.filled[i] = sum / weight;
-                maps.sensor[i] = owner;
+        let (base, per_m) = (self.config.gap_base_m as f32, self.config.gap_per_m as f32);
+        for by in 0..bounds.h {
+            for bx in 0..bounds.w {
+                let i = at(bx, by);
+                if !h[i].is_nan() {
+                    continue;
+                }
+                let j = 2 * (by * bounds.w + bx);
+                let sides = [along_x[j], along_x[j + 1], along_y[j], along_y[j + 1]];
+                if sides.iter().filter(|&&s| s != NONE).count() < 2 {
+                    continue;
+                }
+                let (x, y) = (
+                    ox + ((i % cols) as f32 + 0.5) * cell,
+                    oy + ((i / cols) as f32 + 0.5) * cell,
+                );
+                let delta = (base + per_m * x.hypot(y)) / cell;
+                // Distance in cells (u16::MAX: none).
+                let distance = |side: usize| {
+                    let s = sides[side];
+                    if s == NONE {
+                        return u16::MAX;
+                    }
+                    let apart = i.abs_diff(s as usize);
+                    let cells = if side < 2 { apart } else { apart / cols };
+                    cells.min(usize::from(u16::MAX - 1)) as u16
+                };
+                let within = |side: usize| {
+                    let d = distance(side);
+                    d != u16::MAX && f32::from(d) < delta
+                };
+                // Filled from one sensor only, the nearest neighbour's: a
+                // value between two sensors' heights would put a step
+                // inside each.
+                let Some(owner) = (0..4)
+                    .filter(|&side| within(side))
+                    .min_by_key(|&side| distance(side))
+                    .map(|side| maps.sensor[sides[side] as usize])
+                else {
+                    continue;
+                };
+                let (mut weight, mut sum, mut found) = (0.0f32, 0.0f32, 0);
+                for side in (0..4)
+                    .filter(|&side| within(side) && maps.sensor[sides[side] as usize] == owner)
+                {
+                    let w = 1.0 / f32::from(distance(side));
+                    weight += w;
+                    sum += w * h[sides[side] as usize];
+                    found += 1;
+                }
+                if found >= 2 {
+                    maps.filled[i] = sum / weight;
+                    maps.sensor[i] = owner;
+                }
             }
         }
     }
@@ -469,15 +491,17 @@ impl HeightDiff {
                     }
                 }));
             }
-            for (scale, d) in self.config.scales.iter().zip(&mut maps.differences) {
-                window_extremes(s, rect.w, rect.h, *scale as usize);
+            let halves = self.config.scales.map(|scale| scale as usize);
+            s.windows.compute(&s.layer, rect.w, rect.h, &halves);
+            for (k, d) in maps.differences.iter_mut().enumerate() {
+                let (max, min, count) = (s.windows.max(k), s.windows.min(k), s.windows.count(k));
                 for (r, line) in s.layer.chunks_exact(rect.w).enumerate() {
-                    for (c, &h) in line.iter().enumerate() {
-                        let j = r * rect.w + c;
-                        if h.is_nan() || s.count[j] < 2 {
-                            continue;
+                    let out = &mut d[(rect.y0 + r) * cols + rect.x0..][..rect.w];
+                    let j = r * rect.w;
+                    for (c, (o, &h)) in out.iter_mut().zip(line).enumerate() {
+                        if !h.is_nan() && count[j + c] >= 2 {
+                            *o = (max[j + c] - h).max(h - min[j + c]);
                         }
-                        d[(rect.y0 + r) * cols + rect.x0 + c] = (s.max[j] - h).max(h - s.min[j]);
                     }
                 }
             }
@@ -609,164 +633,6 @@ fn median_params(config: &HeightDiffConfig, max_range: f32, image: &RangeImage) 
     }
 }
 
-/// Max, min and count of the defined values of `s.layer` (`cols × rows`)
-/// over the `(2·half+1)²` window around each cell, into `s.max`, `s.min`,
-/// `s.count`. Separable: a pass down the columns, then one along the rows
-/// done as a pass down the columns of the transpose; each pass takes whole
-/// rows at a time (so it vectorises) and O(1) per cell whatever the window
-/// (van Herk / Gil-Werman for the extremes, a running sum for the count).
-fn window_extremes(s: &mut Scratch, cols: usize, rows: usize, half: usize) {
-    let n = cols * rows;
-    s.max.clear();
-    s.min.clear();
-    s.count.clear();
-    for &v in &s.layer {
-        let defined = !v.is_nan();
-        s.max.push(if defined { v } else { f32::NEG_INFINITY });
-        s.min.push(if defined { v } else { f32::INFINITY });
-        s.count.push(u16::from(defined));
-    }
-    let [source, prefix, suffix] = &mut s.vertical;
-    for (values, op) in [(&mut s.max, max as fn(f32, f32) -> f32), (&mut s.min, min)] {
-        slide_rows(values, cols, rows, half, op, [source, prefix, suffix]);
-        transpose(values, cols, rows, source);
-        slide_rows(source, rows, cols, half, op, [values, prefix, suffix]);
-        transpose(source, rows, cols, values);
-    }
-    let [scratch, sum, t] = &mut s.count_scratch;
-    sum_rows(&mut s.count, cols, rows, half, [scratch, sum]);
-    transpose(&s.count, cols, rows, t);
-    sum_rows(t, rows, cols, half, [scratch, sum]);
-    transpose(t, rows, cols, &mut s.count);
-    debug_assert_eq!(s.max.len(), n);
-}
-
-/// `a.max(b)` for values that are never NaN, as a plain comparison (so it
-/// vectorises).
-#[inline(always)]
-fn max(a: f32, b: f32) -> f32 {
-    if a > b { a } else { b }
-}
-
-#[inline(always)]
-fn min(a: f32, b: f32) -> f32 {
-    if a < b { a } else { b }
-}
-
-/// `out` = the `rows × cols` transpose of `values` (`cols × rows`).
-fn transpose<T: Copy + Default>(values: &[T], cols: usize, rows: usize, out: &mut Vec<T>) {
-    out.clear();
-    out.resize(values.len(), T::default());
-    // In tiles, so both sides stay in cache.
-    const TILE: usize = 32;
-    for y0 in (0..rows).step_by(TILE) {
-        for x0 in (0..cols).step_by(TILE) {
-            for y in y0..(y0 + TILE).min(rows) {
-                for x in x0..(x0 + TILE).min(cols) {
-                    out[x * rows + y] = values[y * cols + x];
-                }
-            }
-        }
-    }
-}
-
-/// Each cell of `values` (`cols × rows`) becomes the sum of its column's
-/// cells within `half` rows (clipped), a running sum of whole rows
-/// (`scratch`: a copy).
-fn sum_rows(
-    values: &mut [u16],
-    cols: usize,
-    rows: usize,
-    half: usize,
-    [scratch, sum]: [&mut Vec<u16>; 2],
-) {
-    scratch.clear();
-    scratch.extend_from_slice(values);
-    sum.clear();
-    sum.resize(cols, 0);
-    for r in 0..half.min(rows) {
-        for (a, &c) in sum.iter_mut().zip(&scratch[r * cols..(r + 1) * cols]) {
-            *a = a.saturating_add(c);
-        }
-    }
-    for y in 0..rows {
-        if y + half < rows {
-            let r = y + half;
-            for (a, &c) in sum.iter_mut().zip(&scratch[r * cols..(r + 1) * cols]) {
-                *a = a.saturating_add(c);
-            }
-        }
-        if y > half {
-            let r = y - half - 1;
-            for (a, &c) in sum.iter_mut().zip(&scratch[r * cols..(r + 1) * cols]) {
-                *a = a.saturating_sub(c);
-            }
-        }
-        values[y * cols..(y + 1) * cols].copy_from_slice(sum);
-    }
-}
-
-/// [`slide`] down the columns of `values` (`cols × rows`, row-major),
-/// whole rows at a time, in place (`source`, `prefix`, `suffix`: scratch
-/// of its size).
-#[allow(clippy::too_many_arguments)]
-fn slide_rows(
-    values: &mut [f32],
-    cols: usize,
-    rows: usize,
-    half: usize,
-    op: fn(f32, f32) -> f32,
-    [source, prefix, suffix]: [&mut Vec<f32>; 3],
-) {
-    if half == 0 || rows == 0 {
-        return;
-    }
-    let w = 2 * half + 1;
-    source.clear();
-    source.extend_from_slice(values);
-    prefix.clone_from(source);
-    suffix.clone_from(source);
-    for y in 1..rows {
-        if y % w != 0 {
-            let (before, here) = prefix.split_at_mut(y * cols);
-            for (p, &q) in here[..cols].iter_mut().zip(&before[(y - 1) * cols..]) {
-                *p = op(*p, q);
-            }
-        }
-    }
-    for y in (0..rows - 1).rev() {
-        if (y + 1) % w != 0 {
-            let (here, after) = suffix.split_at_mut((y + 1) * cols);
-            for (p, &q) in here[y * cols..].iter_mut().zip(&after[..cols]) {
-                *p = op(*p, q);
-            }
-        }
-    }
-    for y in 0..rows {
-        let (lo, hi) = (y.saturating_sub(half), (y + half).min(rows - 1));
-        let out = &mut values[y * cols..(y + 1) * cols];
-        if hi - lo + 1 == w {
-            // A full window spans the suffix of lo's block and the prefix
-            // of hi's (one block when aligned: both are the whole block).
-            let (s, p) = (
-                &suffix[lo * cols..(lo + 1) * cols],
-                &prefix[hi * cols..(hi + 1) * cols],
-            );
-            for ((o, &a), &b) in out.iter_mut().zip(s).zip(p) {
-                *o = op(a, b);
-            }
-        } else {
-            // Clipped at the top or bottom: fold the rows directly.
-            out.copy_from_slice(&source[lo * cols..(lo + 1) * cols]);
-            for r in lo + 1..=hi {
-                for (o, &v) in out.iter_mut().zip(&source[r * cols..(r + 1) * cols]) {
-                    *o = op(*o, v);
-                }
-            }
-        }
-    }
-}
-
 /// A box of grid cells.
 #[derive(Debug, Clone, Copy)]
 struct Rect {
@@ -774,6 +640,22 @@ struct Rect {
     y0: usize,
     w: usize,
     h: usize,
+}
+
+/// The box the set cells of a `cols`-wide grid (row-major) span; `None`
+/// when none is set.
+fn defined_box(set: impl Iterator<Item = bool>, cols: usize) -> Option<Rect> {
+    let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
+    for (i, _) in set.enumerate().filter(|&(_, set)| set) {
+        let (x, y) = (i % cols, i / cols);
+        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+    }
+    (x0 <= x1).then(|| Rect {
+        x0,
+        y0,
+        w: x1 - x0 + 1,
+        h: y1 - y0 + 1,
+    })
 }
 
 impl TerrainEvaluator for HeightDiff {

@@ -34,6 +34,7 @@ pub mod registry;
 pub mod scene;
 pub mod sensor;
 pub mod shadow;
+mod window;
 
 pub use cells::CellClassifier;
 pub use config::{CellsConfig, DropOffConfig, PerceptionConfig, RegionConfig};
