@@ -102,6 +102,22 @@ fn depth_ring(scene: &Scene) {
     println!(
         "  one height map of all eight (build_maps):   {maps_ms:7.2} ms (target <= 5 ms; 000: ~50 ms)"
     );
+    // Of which the median outlier filter (§4.1), the part that grows
+    // with the pixels' window.
+    let mut median = arcnav_perception::median::MedianOutliers::default();
+    let mut filtered = Vec::new();
+    let median_ms = time_ms(|| {
+        for image in &ring {
+            let params = hd.median_params(image);
+            std::hint::black_box(median.filter(&image.range, image.cols(), &params, &mut filtered));
+        }
+    });
+    let params = hd.median_params(&ring[0]);
+    println!(
+        "    of which the median outlier filter ({}×{} window): {median_ms:7.2} ms",
+        2 * params.half_rows + 1,
+        2 * params.half_cols + 1
+    );
     let mut report = ObstacleReport::default();
     let each_ms = time_ms(|| {
         for image in &ring {

@@ -294,6 +294,12 @@ impl HeightDiff {
         &self.maps
     }
 
+    /// The median outlier filter's window and bounds for `image` (its
+    /// beam spacing sets the window's pixels).
+    pub fn median_params(&self, image: &RangeImage) -> MedianParams {
+        median_params(&self.config, self.max_range, image)
+    }
+
     /// Builds every map from `images`, taken at once with the vehicle at
     /// `world_from_vehicle` (one image, or a ring of sensors). Their
     /// filtered returns go into one height map; differences are taken only
