@@ -503,15 +503,7 @@ impl Latest {
     /// short on a loaded 2-core machine: the last cycles were decided after
     /// the executor had been told to stop.
     fn wait_for_cycle(&self, utime: Utime, within: Duration) {
-        let deadline = Instant::now() + within;
-        while self.0.load(Ordering::Relaxed) < utime {
-            assert!(
-                Instant::now() < deadline,
-                "the cycle at {:.2} s was not decided within {within:?} of the feed's end",
-                (utime - SIM_EPOCH_US) as f64 * 1e-6
-            );
-            std::thread::sleep(Duration::from_millis(10));
-        }
+        wait_until_past(&self.0, utime, within, "decided");
     }
 
     /// Waits (at most `within`) until the external behaviour has voted on
@@ -519,15 +511,20 @@ impl Latest {
     /// arbiter (which decides without it at the deadline), and its last
     /// votes would reach an executor already told to stop.
     fn wait_for_votes(&self, utime: Utime, within: Duration) {
-        let deadline = Instant::now() + within;
-        while self.1.load(Ordering::Relaxed) < utime {
-            assert!(
-                Instant::now() < deadline,
-                "the external behaviour did not vote on the cycle at {:.2} s within {within:?}",
-                (utime - SIM_EPOCH_US) as f64 * 1e-6
-            );
-            std::thread::sleep(Duration::from_millis(10));
-        }
+        wait_until_past(&self.1, utime, within, "voted on by the external behaviour");
+    }
+}
+
+/// Waits (at most `within`) until `latest` reaches `utime`.
+fn wait_until_past(latest: &AtomicI64, utime: Utime, within: Duration, what: &str) {
+    let deadline = Instant::now() + within;
+    while latest.load(Ordering::Relaxed) < utime {
+        assert!(
+            Instant::now() < deadline,
+            "the cycle at {:.2} s was not {what} within {within:?} of the feed's end",
+            (utime - SIM_EPOCH_US) as f64 * 1e-6
+        );
+        std::thread::sleep(Duration::from_millis(10));
     }
 }
 

@@ -25,6 +25,17 @@ fn out_dir(tag: &str) -> ScratchDir {
     arcnav_testkit::scratch_dir(&format!("arcnav-sim-{tag}"))
 }
 
+/// The mission `tag` completed with no collision (its summary printed
+/// when not).
+fn assert_completed_without_collision(tag: &str, report: &Value, stdout: &str) {
+    assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
+    assert_eq!(
+        report["collisions"].as_array().unwrap().len(),
+        0,
+        "{tag}:\n{stdout}"
+    );
+}
+
 /// Runs `arcnav sim --out DIR ARGS…` for every (tag, args) at once: each
 /// mission's report and standard output.
 fn missions<'a>(prefix: &str, runs: &'a [(&'a str, Vec<String>)]) -> Vec<(&'a str, Value, String)> {
@@ -409,12 +420,7 @@ fn forest_hillside_cul_de_sac_and_boxed_in_worlds_complete() {
     ];
     let reports = missions("stuck", &runs);
     for (tag, report, stdout) in &reports {
-        assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
-        assert_eq!(
-            report["collisions"].as_array().unwrap().len(),
-            0,
-            "{tag}:\n{stdout}"
-        );
+        assert_completed_without_collision(tag, report, stdout);
         assert!(
             report["behaviour_counters"]["route"]["plans"]
                 .as_u64()
@@ -455,12 +461,7 @@ fn narrow_cul_de_sacs_are_left_by_turning_round() {
     ];
     let reports = missions("turn", &runs);
     for (tag, report, stdout) in &reports {
-        assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
-        assert_eq!(
-            report["collisions"].as_array().unwrap().len(),
-            0,
-            "{tag}:\n{stdout}"
-        );
+        assert_completed_without_collision(tag, report, stdout);
         let recovery = &report["recovery"];
         assert!(
             recovery["turns"].as_u64().unwrap() >= 1,
@@ -495,12 +496,7 @@ fn a_dead_end_lane_too_narrow_to_turn_in_is_left_backing_out_the_way_it_came() {
         })
         .collect();
     for (tag, report, stdout) in &missions("lane", &runs) {
-        assert_eq!(report["outcome"], "completed", "{tag}:\n{stdout}");
-        assert_eq!(
-            report["collisions"].as_array().unwrap().len(),
-            0,
-            "{tag}:\n{stdout}"
-        );
+        assert_completed_without_collision(tag, report, stdout);
         let recovery = &report["recovery"];
         assert!(
             recovery["retraces"].as_u64().unwrap() >= 1
