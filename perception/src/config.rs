@@ -361,7 +361,7 @@ fn bridgeable_gap_m(vehicle: &VehicleConfig) -> f64 {
 }
 
 /// The most cells the classifier's grid may have (256 MiB of slots).
-const MAX_GRID_CELLS: u64 = 1 << 25;
+pub(crate) const MAX_GRID_CELLS: u64 = 1 << 25;
 
 #[cfg(test)]
 mod tests {

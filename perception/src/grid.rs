@@ -10,10 +10,31 @@
 //! same square of ground.
 
 use arcnav_vehicle::Isometry;
+use arcnav_vehicle::config::ConfigError;
 
 use crate::config::{GridShape, RegionConfig};
 use crate::evaluator::{ImageStats, ObstacleCell, ObstacleReport, Reasons, Region};
 use crate::image::RangeImage;
+
+/// Refuses a `cell`-sized grid over `region` of more than
+/// [`crate::config::MAX_GRID_CELLS`] cells (`key`: the cell size's key):
+/// its layers are allocated per evaluator, and cell indices are 32-bit.
+pub(crate) fn check_size(key: &str, region: &RegionConfig, cell: f64) -> Result<(), ConfigError> {
+    let grid = GridShape::over(region, cell, 0);
+    let cells = grid.cols as f64 * grid.rows as f64;
+    let max = crate::config::MAX_GRID_CELLS;
+    if cells > max as f64 {
+        return Err(ConfigError::new(
+            key,
+            format!(
+                "{cell} m cells over the region need a {} x {} grid; at most {max} cells: \
+                 use larger cells or a smaller region",
+                grid.cols, grid.rows
+            ),
+        ));
+    }
+    Ok(())
+}
 
 impl GridShape {
     /// The grid over `region` with `cell`-sized cells and `margin` empty
@@ -207,7 +228,7 @@ impl Projector {
             (grid.rows - grid.margin) as f32,
         );
         let [cx, cy] = grid.corner;
-        let width = grid.cols as u32;
+        let width = grid.cols as i32;
         let (mut no_return, mut out_of_range) = (0u32, 0u32);
         let (row_cells, row_z) = (&mut self.row_cells, &mut self.row_z);
         row_cells.resize(cols, u32::MAX);
@@ -230,12 +251,18 @@ impl Projector {
                 let y = (ce * sa + vy) * range + ty;
                 *z = (ce * up + vz) * range + tz;
                 let (fx, fy) = (x / cell + cx, y / cell + cy);
-                let inside = fx >= m && fy >= m && fx < x_end && fy < y_end;
-                *index = if returned && in_range && inside {
-                    fy as u32 * width + fx as u32
-                } else {
-                    u32::MAX
-                };
+                let used = returned && in_range && fx >= m && fy >= m && fx < x_end && fy < y_end;
+                // Truncating the cell coordinates of a point outside is
+                // avoided by selecting 0 first; inside they are whole
+                // numbers of cells below 2^24, so the unchecked conversion
+                // is exact (and, unlike `as`, vectorises).
+                let (fx, fy) = if used { (fx, fy) } else { (0.0, 0.0) };
+                // SAFETY: fx and fy are 0 or within [margin, cols) and
+                // [margin, rows): finite and representable as i32.
+                let (ix, iy) =
+                    unsafe { (fx.to_int_unchecked::<i32>(), fy.to_int_unchecked::<i32>()) };
+                let cell_index = (iy * width + ix) as u32;
+                *index = if used { cell_index } else { u32::MAX };
             }
             for (&index, &z) in row_cells.iter().zip(row_z.iter()) {
                 if index != u32::MAX {

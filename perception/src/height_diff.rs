@@ -250,10 +250,15 @@ impl EvaluatorPlugin for HeightDiff {
 
     fn validate(
         config: &Self::Config,
-        _: &PerceptionConfig,
+        perception: &PerceptionConfig,
         vehicle: &VehicleConfig,
     ) -> Result<(), ConfigError> {
-        config.validate(vehicle)
+        config.validate(vehicle)?;
+        grid::check_size(
+            "height_diff.cell_size_m",
+            &perception.region,
+            config.cell_size_m,
+        )
     }
 
     fn build(config: Self::Config, perception: &PerceptionConfig) -> Self {

@@ -371,10 +371,11 @@ impl EvaluatorPlugin for HierarchicalPca {
 
     fn validate(
         config: &Self::Config,
-        _: &PerceptionConfig,
+        perception: &PerceptionConfig,
         vehicle: &VehicleConfig,
     ) -> Result<(), ConfigError> {
-        config.validate(vehicle)
+        config.validate(vehicle)?;
+        grid::check_size("pca.cell_size_m", &perception.region, config.cell_size_m)
     }
 
     fn build(config: Self::Config, perception: &PerceptionConfig) -> Self {

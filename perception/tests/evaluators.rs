@@ -738,3 +738,22 @@ fn an_evaluator_laxer_than_the_vehicle_is_refused_when_selected() {
         assert_eq!(err.key, key, "{table}");
     }
 }
+
+#[test]
+fn a_grid_too_fine_for_the_region_is_refused_before_anything_is_allocated() {
+    // 2 cm cells over 150 m × 200 m: 7.5·10⁷ cells, each layer 300 MB;
+    // refused with the key to change, whichever grid evaluator is selected
+    // (over the largest region allowed, 1000 m square, they would pass a
+    // 32-bit cell index).
+    let vehicle = VehicleConfig::default();
+    let region = "[region]\nahead_m = 100.0\nbehind_m = 50.0\nhalf_width_m = 100.0\n";
+    for name in ["height_diff", "pca"] {
+        let text = format!("evaluator = \"{name}\"\n[{name}]\ncell_size_m = 0.02\n{region}");
+        let err = perception(&text).validate_for(&vehicle).unwrap_err();
+        assert_eq!(err.key, format!("{name}.cell_size_m"), "{err}");
+        assert!(err.reason.contains("use larger cells"), "{err}");
+        // At their defaults over that region they are fine.
+        let text = format!("evaluator = \"{name}\"\n{region}");
+        perception(&text).validate_for(&vehicle).unwrap();
+    }
+}
