@@ -622,10 +622,7 @@ impl Recovery {
             }
             if state.speed_mps.abs() >= STANDING_MPS {
                 // Too fast to stop in the room left: stop, then creep on.
-                return Some(SteeringCommand {
-                    speed_mps: 0.0,
-                    ..self.hold(now, &leg, behind)
-                });
+                return Some(self.hold(now, &leg, behind));
             }
             // A leg of a turn round was driven as close to what stood in
             // the way as the clearance allowed: driving it back ends a
