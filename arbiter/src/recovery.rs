@@ -589,14 +589,7 @@ impl Recovery {
                     .filter(|_| roomy)
                     .and_then(|side| Some((side, self.choose_leg(side, false, behind)?)));
                 if let Some((side, leg)) = turn {
-                    self.stats.turns += 1;
-                    self.turn_deg = 0.0;
-                    tracing::info!(
-                        t_s = micros_to_seconds(now),
-                        side,
-                        "room to turn: turning round"
-                    );
-                    self.start_turn_leg(side, leg, 1);
+                    self.start_turn(now, side, leg, "room to turn");
                     return self.step(now, blocked, safe, behind);
                 }
                 self.end(now, blocked)
@@ -768,19 +761,11 @@ impl Recovery {
         });
         if let Some((side, leg)) = turn {
             self.begin();
-            self.stats.turns += 1;
             // A turn taken up again after finding no leg clear counts what
             // the one before it turned.
-            if self.unfinished_turn.is_none() {
-                self.turn_deg = 0.0;
-            }
-            tracing::info!(
-                t_s = micros_to_seconds(now),
-                attempt = self.attempts,
-                side,
-                "blocked, the way behind: turning round"
-            );
-            self.start_turn_leg(side, leg, 1);
+            let turned = self.unfinished_turn.map(|_| self.turn_deg);
+            self.start_turn(now, side, leg, "blocked, the way behind");
+            self.turn_deg = turned.unwrap_or(0.0);
         } else if side.is_some() && self.start_retrace(now, side, behind) {
             // The way is behind and no turn can start here: backing out the
             // way the vehicle came leads where it can (backing up once and
@@ -811,17 +796,29 @@ impl Recovery {
                 return Outcome::Keep;
             };
             self.begin();
-            self.stats.turns += 1;
-            self.turn_deg = 0.0;
-            tracing::info!(
-                t_s = micros_to_seconds(now),
-                attempt = self.attempts,
+            self.start_turn(
+                now,
                 side,
-                "blocked, no way back: turning towards the way, forwards"
+                leg,
+                "blocked, no way back: towards the way, forwards",
             );
-            self.start_turn_leg(side, leg, 1);
         }
         self.step(now, blocked, true, behind)
+    }
+
+    /// Starts a turn round towards `side` with `leg` (one more turn; the
+    /// heading turned counts from 0), saying `why` in the log.
+    fn start_turn(&mut self, now: Utime, side: f64, leg: Leg, why: &str) {
+        self.stats.turns += 1;
+        self.turn_deg = 0.0;
+        tracing::info!(
+            t_s = micros_to_seconds(now),
+            attempt = self.attempts,
+            side,
+            why,
+            "turning round"
+        );
+        self.start_turn_leg(side, leg, 1);
     }
 
     /// Counts a recovery starting.

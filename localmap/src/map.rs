@@ -346,6 +346,44 @@ pub struct LocalMap {
 
 const UNSEEN: (i64, i64) = (i64::MIN, i64::MIN);
 
+/// World patches seen from the vehicle frame of one pose, the pose's
+/// trigonometry done once for a loop over many patches.
+#[derive(Debug, Clone, Copy)]
+struct PatchFrame {
+    tx: f64,
+    ty: f64,
+    sin: f64,
+    cos: f64,
+    patch_size_m: f64,
+}
+
+impl PatchFrame {
+    fn new(pose: &Pose, patch_size_m: f64) -> Self {
+        let t = pose.world_from_vehicle.translation.vector;
+        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
+        Self {
+            tx: t.x,
+            ty: t.y,
+            sin,
+            cos,
+            patch_size_m,
+        }
+    }
+
+    /// The centre of world patch (i, j) in the vehicle frame.
+    fn centre(&self, i: i64, j: i64) -> (f64, f64) {
+        let s = self.patch_size_m;
+        let (dx, dy) = (
+            (i as f64 + 0.5) * s - self.tx,
+            (j as f64 + 0.5) * s - self.ty,
+        );
+        (
+            self.cos * dx + self.sin * dy,
+            -self.sin * dx + self.cos * dy,
+        )
+    }
+}
+
 /// The steep ground of one elevation snapshot, and scratch to find it.
 #[derive(Debug, Default)]
 struct SteepGround {
@@ -811,17 +849,11 @@ impl LocalMap {
             self.assume_seen_pending = false;
             self.assume_seen_around_pose();
         }
-        let t = pose.world_from_vehicle.translation.vector;
-        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
-        let s = self.config.patch_size_m;
+        let frame = PatchFrame::new(pose, self.config.patch_size_m);
         let mut index = 0;
         while index < self.patches.len() {
             let patch = &mut self.patches[index];
-            let (dx, dy) = (
-                (patch.i as f64 + 0.5) * s - t.x,
-                (patch.j as f64 + 0.5) * s - t.y,
-            );
-            let (vx, vy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+            let (vx, vy) = frame.centre(patch.i, patch.j);
             if !self.config.in_window(vx, vy) {
                 self.remove(index);
                 self.stats.dropped_outside_window += 1;
@@ -849,15 +881,10 @@ impl LocalMap {
         let Some(pose) = self.pose else {
             return;
         };
-        let t = pose.world_from_vehicle.translation.vector;
-        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
-        let s = self.config.patch_size_m;
+        let frame = PatchFrame::new(&pose, self.config.patch_size_m);
         for (i, j) in self.driven.iter() {
-            let (dx, dy) = ((i as f64 + 0.5) * s - t.x, (j as f64 + 0.5) * s - t.y);
-            if self
-                .config
-                .in_window(cos * dx + sin * dy, -sin * dx + cos * dy)
-            {
+            let (x, y) = frame.centre(i, j);
+            if self.config.in_window(x, y) {
                 let slot = self.slot_index(i, j);
                 self.seen[slot] = (i, j);
             }
@@ -870,21 +897,13 @@ impl LocalMap {
         let Some(pose) = self.pose else {
             return;
         };
-        let t = pose.world_from_vehicle.translation.vector;
-        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
-        let s = self.config.patch_size_m;
+        let frame = PatchFrame::new(&pose, self.config.patch_size_m);
         for slot in &mut self.seen {
             if *slot == UNSEEN {
                 continue;
             }
-            let (dx, dy) = (
-                (slot.0 as f64 + 0.5) * s - t.x,
-                (slot.1 as f64 + 0.5) * s - t.y,
-            );
-            if !self
-                .config
-                .in_window(cos * dx + sin * dy, -sin * dx + cos * dy)
-            {
+            let (x, y) = frame.centre(slot.0, slot.1);
+            if !self.config.in_window(x, y) {
                 *slot = UNSEEN;
             }
         }
@@ -987,8 +1006,7 @@ impl LocalMap {
         elevation: &ElevationGrid,
         patches: &mut Vec<Patch>,
     ) {
-        let t = pose.world_from_vehicle.translation.vector;
-        let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
+        let frame = PatchFrame::new(pose, self.config.patch_size_m);
         for &(i, j) in steep {
             let index = self.slots[self.slot_index(i, j)];
             if let Some(held) = patches
@@ -999,12 +1017,11 @@ impl LocalMap {
                 held.cost = 1.0;
                 continue;
             }
-            let (cx, cy) = self.patch_centre(i, j);
-            let (dx, dy) = (cx - t.x, cy - t.y);
-            let (x, y) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+            let (x, y) = frame.centre(i, j);
             if !self.config.in_window(x, y) || self.body.contains(Point2::new(x, y)) {
                 continue;
             }
+            let (cx, cy) = self.patch_centre(i, j);
             let z = elevation.at(cx, cy).map_or(0.0, |[mean, _]| mean);
             patches.push(Patch {
                 x: x as f32,
