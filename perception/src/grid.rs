@@ -107,6 +107,17 @@ pub(crate) struct Point {
     pub col: u32,
 }
 
+/// What [`Projector::for_each_cell`] projects: the image, its (filtered)
+/// ranges, the level frame's sensor pose, the ranges kept, and the grid
+/// with its cell size.
+type CellArgs<'a> = (
+    &'a RangeImage,
+    &'a [f32],
+    &'a Isometry,
+    (f32, f32),
+    (&'a GridShape, f32),
+);
+
 /// Per-image beam trigonometry and the projection of valid returns.
 #[derive(Debug, Default)]
 pub(crate) struct Projector {
@@ -203,22 +214,55 @@ impl Projector {
         }
     }
 
-    /// [`Projector::for_each`] binned into `grid` of `cell`-sized cells:
-    /// `each` gets the cell (as [`GridShape::index`] finds it, the same
-    /// arithmetic) and the level-frame z of every return in range that
-    /// falls inside it. A row at a time, in two passes: every column's
-    /// point and cell first, with no branch (it vectorises: the divisions
-    /// by the cell size are most of a point's cost), then the hand-over.
+    /// [`Projector::for_each`] binned into `grid` of `cell`-sized cells,
+    /// keeping each cell's highest and lowest level-frame z: `each` gets
+    /// the cell (as [`GridShape::index`] finds it, the same arithmetic)
+    /// with the highest and lowest z of a run of neighbouring returns in
+    /// range that fall inside it, every return in exactly one run. A row
+    /// at a time, in two passes: every column's point and cell first, with
+    /// no branch (it vectorises: the divisions by the cell size are most of
+    /// a point's cost), then the hand-over of each run of columns in one
+    /// cell (near the sensor a cell holds many returns of a row: one
+    /// scattered update per run instead of per return).
+    /// With AVX2 where the processor has it (as [`crate::cells`] bins):
+    /// the same arithmetic (no fused multiply-add), so the same cells.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn for_each_cell(
         &mut self,
         image: &RangeImage,
         ranges: &[f32],
         level_from_sensor: &Isometry,
-        (min_range, max_range): (f32, f32),
-        (grid, cell): (&GridShape, f32),
+        ranges_kept: (f32, f32),
+        grid: (&GridShape, f32),
         stats: &mut ImageStats,
-        mut each: impl FnMut(usize, f32),
+        each: impl FnMut(usize, f32, f32),
+    ) {
+        let args = (image, ranges, level_from_sensor, ranges_kept, grid);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            return unsafe { self.for_each_cell_avx2(args, stats, each) };
+        }
+        self.for_each_cell_portable(args, stats, each);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn for_each_cell_avx2(
+        &mut self,
+        args: CellArgs<'_>,
+        stats: &mut ImageStats,
+        each: impl FnMut(usize, f32, f32),
+    ) {
+        self.for_each_cell_portable(args, stats, each);
+    }
+
+    #[inline(always)]
+    fn for_each_cell_portable(
+        &mut self,
+        (image, ranges, level_from_sensor, (min_range, max_range), (grid, cell)): CellArgs<'_>,
+        stats: &mut ImageStats,
+        mut each: impl FnMut(usize, f32, f32),
     ) {
         let ([tx, ty, tz], vertical) = self.prepare(image, level_from_sensor);
         let cols = image.cols();
@@ -264,10 +308,21 @@ impl Projector {
                 let cell_index = (iy * width + ix) as u32;
                 *index = if used { cell_index } else { u32::MAX };
             }
+            let (mut run, mut highest, mut lowest) = (u32::MAX, f32::NAN, f32::NAN);
             for (&index, &z) in row_cells.iter().zip(row_z.iter()) {
-                if index != u32::MAX {
-                    each(index as usize, z);
+                if index == run {
+                    // z is finite: plain comparisons.
+                    highest = if z > highest { z } else { highest };
+                    lowest = if z < lowest { z } else { lowest };
+                    continue;
                 }
+                if run != u32::MAX {
+                    each(run as usize, highest, lowest);
+                }
+                (run, highest, lowest) = (index, z, z);
+            }
+            if run != u32::MAX {
+                each(run as usize, highest, lowest);
             }
         }
         stats.no_return += no_return;

@@ -216,6 +216,7 @@ struct Scratch {
     layer: Vec<f32>,
     windows: WindowStats,
     edges: Vec<usize>,
+    spans: Vec<usize>,
     sums: Vec<f64>,
     counts: Vec<u32>,
     gaps: [Vec<u32>; 2],
@@ -338,13 +339,13 @@ impl HeightDiff {
                 (self.min_range, self.max_range),
                 (grid, cell),
                 &mut ImageStats::default(),
-                |i, z| {
+                |i, highest, lowest| {
                     let bin = &mut bins[i];
-                    if bin.highest.is_nan() || bin.highest < z {
-                        bin.highest = z;
+                    if bin.highest.is_nan() || bin.highest < highest {
+                        bin.highest = highest;
                         bin.sensor = k as u8;
                     }
-                    bin.lowest = bin.lowest.min(z);
+                    bin.lowest = bin.lowest.min(lowest);
                 },
             );
         }
@@ -368,12 +369,13 @@ impl HeightDiff {
         let h = &maps.height;
         // Only the box the defined cells span can be filled: a cell beside
         // it has a defined cell on one side along one axis at most.
-        let Some(bounds) = defined_box(h.iter().map(|v| !v.is_nan()), cols) else {
+        let Some(bounds) = defined_box(h, cols) else {
             return;
         };
         let (x0, y0) = (bounds.x0, bounds.y0);
-        // Per cell of the box, the nearest defined cell (its grid index,
-        // NONE: none) before and after it along x, then along y.
+        // Per cell of the box, the box coordinate along its line of the
+        // nearest defined cell (NONE: none) before and after it along x,
+        // then along y.
         const NONE: u32 = u32::MAX;
         let [along_x, along_y] = &mut self.scratch.gaps;
         let at = |bx: usize, by: usize| (y0 + by) * cols + x0 + bx;
@@ -391,9 +393,8 @@ impl HeightDiff {
                     for step in 0..len {
                         let k = if backwards { len - 1 - step } else { step };
                         let (bx, by) = if along_rows { (k, line) } else { (line, k) };
-                        let i = at(bx, by);
-                        if !h[i].is_nan() {
-                            last = i as u32;
+                        if !h[at(bx, by)].is_nan() {
+                            last = k as u32;
                         } else {
                             out[2 * (by * bounds.w + bx) + usize::from(backwards)] = last;
                         }
@@ -414,23 +415,24 @@ impl HeightDiff {
                 if sides.iter().filter(|&&s| s != NONE).count() < 2 {
                     continue;
                 }
+                // Each side's cell and distance in cells (u16::MAX: none).
+                let (mut index, mut distance) = ([0usize; 4], [u16::MAX; 4]);
+                let cells = |apart: usize| apart.min(usize::from(u16::MAX - 1)) as u16;
+                for (side, &k) in sides.iter().enumerate().filter(|&(_, &k)| k != NONE) {
+                    let k = k as usize;
+                    (index[side], distance[side]) = if side < 2 {
+                        (at(k, by), cells(k.abs_diff(bx)))
+                    } else {
+                        (at(bx, k), cells(k.abs_diff(by)))
+                    };
+                }
                 let (x, y) = (
-                    ox + ((i % cols) as f32 + 0.5) * cell,
-                    oy + ((i / cols) as f32 + 0.5) * cell,
+                    ox + ((x0 + bx) as f32 + 0.5) * cell,
+                    oy + ((y0 + by) as f32 + 0.5) * cell,
                 );
                 let delta = (base + per_m * x.hypot(y)) / cell;
-                // Distance in cells (u16::MAX: none).
-                let distance = |side: usize| {
-                    let s = sides[side];
-                    if s == NONE {
-                        return u16::MAX;
-                    }
-                    let apart = i.abs_diff(s as usize);
-                    let cells = if side < 2 { apart } else { apart / cols };
-                    cells.min(usize::from(u16::MAX - 1)) as u16
-                };
                 let within = |side: usize| {
-                    let d = distance(side);
+                    let d = distance[side];
                     d != u16::MAX && f32::from(d) < delta
                 };
                 // Filled from one sensor only, the nearest neighbour's: a
@@ -438,18 +440,17 @@ impl HeightDiff {
                 // inside each.
                 let Some(owner) = (0..4)
                     .filter(|&side| within(side))
-                    .min_by_key(|&side| distance(side))
-                    .map(|side| maps.sensor[sides[side] as usize])
+                    .min_by_key(|&side| distance[side])
+                    .map(|side| maps.sensor[index[side]])
                 else {
                     continue;
                 };
                 let (mut weight, mut sum, mut found) = (0.0f32, 0.0f32, 0);
-                for side in (0..4)
-                    .filter(|&side| within(side) && maps.sensor[sides[side] as usize] == owner)
+                for side in (0..4).filter(|&side| within(side) && maps.sensor[index[side]] == owner)
                 {
-                    let w = 1.0 / f32::from(distance(side));
+                    let w = 1.0 / f32::from(distance[side]);
                     weight += w;
-                    sum += w * h[sides[side] as usize];
+                    sum += w * h[index[side]];
                     found += 1;
                 }
                 if found >= 2 {
@@ -529,23 +530,22 @@ impl HeightDiff {
         maps.cost.resize(n, f32::NAN);
         maps.absolute.clear();
         maps.absolute.resize(n, false);
-        for i in 0..n {
-            let mut total = f32::NAN;
-            for (d, &lambda) in maps.differences.iter().zip(&c.weights) {
-                let weighted = lambda as f32 * d[i];
-                if weighted.is_nan() {
-                    continue;
-                }
-                maps.absolute[i] |= weighted >= 1.0;
-                total = total.max(0.0) + weighted.min(c.cap as f32);
+        // A scale at a time over the whole map, with no branch (it
+        // vectorises); per cell the scales are added in order.
+        let cap = c.cap as f32;
+        for (d, &lambda) in maps.differences.iter().zip(&c.weights) {
+            let cells = maps.cost.iter_mut().zip(maps.absolute.iter_mut());
+            for ((total, absolute), &d) in cells.zip(d) {
+                let weighted = lambda as f32 * d;
+                *absolute |= weighted >= 1.0;
+                let sum = if total.is_nan() { 0.0 } else { *total } + weighted.min(cap);
+                *total = if weighted.is_nan() { *total } else { sum };
             }
-            maps.cost[i] = total;
         }
         // D_D: absolute obstacles inflated by the robot radius, then the
         // larger of D̃ and its local mean over a square of the disc's area.
         maps.drivability.clone_from(&maps.cost);
-        let radius = (c.robot_radius_m as f32 / cell).round() as isize;
-        let r2 = radius * radius;
+        let radius = (c.robot_radius_m as f32 / cell).round() as usize;
         // A point within the radius of an absolute cell is within it of
         // one on its region's edge (or is absolute itself): only edges stamp.
         let edge = |i: usize| {
@@ -562,52 +562,60 @@ impl HeightDiff {
         let mut edges = std::mem::take(&mut self.scratch.edges);
         edges.clear();
         edges.extend((0..n).filter(|&i| maps.absolute[i] && edge(i)));
+        // The disc's half width on each row of it.
+        let mut spans = std::mem::take(&mut self.scratch.spans);
+        spans.clear();
+        spans.extend((0..=radius).map(|dy| (radius * radius - dy * dy).isqrt()));
         for &i in &edges {
-            let (x, y) = ((i % cols) as isize, (i / cols) as isize);
-            for dy in -radius..=radius {
-                for dx in -radius..=radius {
-                    let (u, v) = (x + dx, y + dy);
-                    if dx * dx + dy * dy <= r2
-                        && (0..cols as isize).contains(&u)
-                        && (0..rows as isize).contains(&v)
-                    {
-                        let j = v as usize * cols + u as usize;
-                        maps.drivability[j] = maps.drivability[j].max(1.0).max(maps.cost[j]);
-                    }
+            let (x, y) = (i % cols, i / cols);
+            for v in y.saturating_sub(radius)..(y + radius + 1).min(rows) {
+                let half = spans[v.abs_diff(y)];
+                let row = v * cols;
+                let span = row + x.saturating_sub(half)..row + (x + half + 1).min(cols);
+                let costs = &maps.cost[span.clone()];
+                for (d, &cost) in maps.drivability[span].iter_mut().zip(costs) {
+                    *d = d.max(1.0).max(cost);
                 }
             }
         }
         self.scratch.edges = edges;
+        self.scratch.spans = spans;
         let half =
             ((c.robot_radius_m as f32 / cell) * std::f32::consts::PI.sqrt() / 2.0).round() as usize;
+        // Summed-area tables of D̃ and of its defined cells, over the box
+        // that holds defined cells (outside it every window adds nothing).
+        let Some(b) = defined_box(&maps.cost, cols) else {
+            return;
+        };
         let s = &mut self.scratch;
-        // Summed-area table of D̃ and of its defined cells.
-        let w = cols + 1;
+        let w = b.w + 1;
         s.sums.clear();
-        s.sums.resize(w * (rows + 1), 0.0);
+        s.sums.resize(w * (b.h + 1), 0.0);
         s.counts.clear();
-        s.counts.resize(w * (rows + 1), 0);
-        for y in 0..rows {
-            for x in 0..cols {
-                let v = maps.cost[y * cols + x];
-                let (add, one) = if v.is_nan() {
-                    (0.0, 0)
-                } else {
-                    (f64::from(v), 1)
-                };
-                let at = (y + 1) * w + x + 1;
-                s.sums[at] = add + s.sums[at - 1] + s.sums[at - w] - s.sums[at - w - 1];
-                s.counts[at] = one + s.counts[at - 1] + s.counts[at - w] - s.counts[at - w - 1];
+        s.counts.resize(w * (b.h + 1), 0);
+        for y in 0..b.h {
+            let line = &maps.cost[(b.y0 + y) * cols + b.x0..][..b.w];
+            let (above, here) = s.sums.split_at_mut((y + 1) * w);
+            let (counts_above, counts_here) = s.counts.split_at_mut((y + 1) * w);
+            let (mut sum, mut count) = (0.0, 0);
+            for x in 0..b.w {
+                let v = line[x];
+                if !v.is_nan() {
+                    sum += f64::from(v);
+                    count += 1;
+                }
+                here[x + 1] = sum + above[y * w + x + 1];
+                counts_here[x + 1] = count + counts_above[y * w + x + 1];
             }
         }
-        for y in 0..rows {
-            let (y0, y1) = (y.saturating_sub(half), (y + half + 1).min(rows));
-            for x in 0..cols {
-                let i = y * cols + x;
+        for y in 0..b.h {
+            let (y0, y1) = (y.saturating_sub(half), (y + half + 1).min(b.h));
+            for x in 0..b.w {
+                let i = (b.y0 + y) * cols + b.x0 + x;
                 if maps.cost[i].is_nan() {
                     continue;
                 }
-                let (x0, x1) = (x.saturating_sub(half), (x + half + 1).min(cols));
+                let (x0, x1) = (x.saturating_sub(half), (x + half + 1).min(b.w));
                 let box_of =
                     |t: &[f64]| t[y1 * w + x1] - t[y0 * w + x1] - t[y1 * w + x0] + t[y0 * w + x0];
                 let count = s.counts[y1 * w + x1] + s.counts[y0 * w + x0]
@@ -653,13 +661,16 @@ struct Rect {
     h: usize,
 }
 
-/// The box the set cells of a `cols`-wide grid (row-major) span; `None`
-/// when none is set.
-fn defined_box(set: impl Iterator<Item = bool>, cols: usize) -> Option<Rect> {
+/// The box the defined (not NaN) cells of a `cols`-wide grid (row-major)
+/// span; `None` when none is.
+fn defined_box(layer: &[f32], cols: usize) -> Option<Rect> {
     let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
-    for (i, _) in set.enumerate().filter(|&(_, set)| set) {
-        let (x, y) = (i % cols, i / cols);
-        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+    for (y, line) in layer.chunks_exact(cols).enumerate() {
+        let Some(first) = line.iter().position(|v| !v.is_nan()) else {
+            continue;
+        };
+        let last = line.iter().rposition(|v| !v.is_nan()).unwrap_or(first);
+        (x0, x1, y0, y1) = (x0.min(first), x1.max(last), y0.min(y), y1.max(y));
     }
     (x0 <= x1).then(|| Rect {
         x0,

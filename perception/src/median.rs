@@ -42,6 +42,8 @@ pub struct MedianOutliers {
     values: Vec<f32>,
     lo: Vec<f32>,
     hi: Vec<f32>,
+    /// Counting: which pixels of a row only counts can decide.
+    bounds: WindowBounds,
     below_lo: Vec<u32>,
     up_to_hi: Vec<u32>,
     valid: Vec<u32>,
@@ -58,6 +60,7 @@ impl Default for MedianOutliers {
             values: Vec::new(),
             lo: Vec::new(),
             hi: Vec::new(),
+            bounds: WindowBounds::default(),
             below_lo: Vec::new(),
             up_to_hi: Vec::new(),
             valid: Vec::new(),
@@ -231,46 +234,61 @@ impl MedianOutliers {
         // window columns `j..=j + 2·hc`.
         let inner = cols - 2 * hc;
         let (abs, rel) = (params.abs, params.rel);
+        // Written by `counts` for the undecided pixels of each row.
+        for counts in [&mut self.below_lo, &mut self.up_to_hi, &mut self.valid] {
+            counts.resize(inner, 0);
+        }
         let mut removed = 0;
         for row in 0..rows {
             let line = &self.values[row * cols..(row + 1) * cols];
-            self.lo.clear();
-            self.hi.clear();
-            for &c in &line[hc..cols - hc] {
-                // NaN bounds count nothing: a pixel without a return is
-                // skipped below anyway.
-                self.lo.push((c - abs) / (1.0 + rel));
-                self.hi.push(if rel < 1.0 {
-                    (c + abs) / (1.0 - rel)
-                } else {
-                    f32::INFINITY
-                });
+            // NaN bounds count nothing: a pixel without a return is
+            // skipped below anyway. (Sized first and written in place, so
+            // that the divisions vectorise.)
+            self.lo.resize(inner, 0.0);
+            self.hi.resize(inner, 0.0);
+            let centres = &line[hc..cols - hc];
+            for ((lo, hi), &c) in self.lo.iter_mut().zip(self.hi.iter_mut()).zip(centres) {
+                *lo = (c - abs) / (1.0 + rel);
+                *hi = (c + abs) / (1.0 - rel);
             }
-            for counts in [&mut self.below_lo, &mut self.up_to_hi, &mut self.valid] {
-                counts.clear();
-                counts.resize(inner, 0);
+            if rel >= 1.0 {
+                self.hi.fill(f32::INFINITY);
             }
             let hr = hr.min(row).min(rows - 1 - row);
+            let window_rows = &self.values[(row - hr) * cols..(row + hr + 1) * cols];
+            self.bounds
+                .compute(window_rows, cols, hc, &self.lo, &self.hi);
             counts(RowWindows {
-                values: &self.values[(row - hr) * cols..(row + hr + 1) * cols],
+                values: window_rows,
                 cols,
                 half_cols: hc,
                 first: 0,
                 lo: &self.lo,
                 hi: &self.hi,
+                undecided: &self.bounds.undecided,
                 below_lo: &mut self.below_lo,
                 up_to_hi: &mut self.up_to_hi,
                 valid: &mut self.valid,
             });
-            for j in 0..inner {
-                let n = self.valid[j];
-                if line[hc + j].is_nan() || n < 3 {
-                    continue;
-                }
-                let rank = (n - 1) / 2;
-                if self.up_to_hi[j] <= rank || self.below_lo[j] > rank {
-                    out[row * cols + hc + j] = f32::NAN;
-                    removed += 1;
+            // Eight pixels at a time past the decided ones.
+            let undecided = &self.bounds.undecided;
+            for j in (0..inner).step_by(8).filter(|&j| {
+                let block = &undecided[j..(j + 8).min(inner)];
+                block.len() < 8 || block.iter().any(|&u| u != 0)
+            }) {
+                for j in j..(j + 8).min(inner) {
+                    if undecided[j] == 0 || line[hc + j].is_nan() {
+                        continue;
+                    }
+                    let n = self.valid[j];
+                    if n < 3 {
+                        continue;
+                    }
+                    let rank = (n - 1) / 2;
+                    if self.up_to_hi[j] <= rank || self.below_lo[j] > rank {
+                        out[row * cols + hc + j] = f32::NAN;
+                        removed += 1;
+                    }
                 }
             }
         }
@@ -359,10 +377,76 @@ impl MedianOutliers {
     }
 }
 
+/// Which pixels of a row the counting method must count for.
+#[derive(Debug, Clone, Default)]
+struct WindowBounds {
+    /// Each column's lowest and highest return over the row's window rows
+    /// (±∞ where none), then each inner pixel's over its whole window.
+    column_low: Vec<f32>,
+    column_high: Vec<f32>,
+    window_low: Vec<f32>,
+    window_high: Vec<f32>,
+    /// Per inner pixel: 1 where its window holds a return outside its
+    /// bounds `[lo, hi]`, so that only counts can decide it.
+    undecided: Vec<u8>,
+}
+
+impl WindowBounds {
+    /// Which pixels of a row only counts can decide: those whose window
+    /// (`window_rows`, `cols` wide) holds a return outside their bounds.
+    /// Where every return of the window lies within `[lo, hi]`, so does the
+    /// median, and the pixel is kept without counting. On smooth ground
+    /// that is most pixels; it costs a lowest and a highest per column and
+    /// per window, with no division and no branch. Inlined, so that it is compiled for the
+    /// caller's instruction set.
+    #[inline(always)]
+    fn compute(&mut self, window_rows: &[f32], cols: usize, hc: usize, lo: &[f32], hi: &[f32]) {
+        let (low, high) = (&mut self.column_low, &mut self.column_high);
+        low.clear();
+        low.resize(cols, f32::INFINITY);
+        high.clear();
+        high.resize(cols, f32::NEG_INFINITY);
+        for line in window_rows.chunks_exact(cols) {
+            // `min` and `max` take the other operand where one is NaN.
+            for ((l, h), &v) in low.iter_mut().zip(high.iter_mut()).zip(line) {
+                *l = l.min(v);
+                *h = h.max(v);
+            }
+        }
+        let inner = cols - 2 * hc;
+        self.window_low.clear();
+        self.window_low.extend_from_slice(&low[..inner]);
+        self.window_high.clear();
+        self.window_high.extend_from_slice(&high[..inner]);
+        for dc in 1..=2 * hc {
+            let column = low[dc..][..inner].iter().zip(&high[dc..][..inner]);
+            for ((l, h), (&cl, &ch)) in self
+                .window_low
+                .iter_mut()
+                .zip(self.window_high.iter_mut())
+                .zip(column)
+            {
+                *l = l.min(cl);
+                *h = h.max(ch);
+            }
+        }
+        self.undecided.resize(inner, 0);
+        let windows = self.window_low.iter().zip(&self.window_high);
+        for ((u, (&low, &high)), (&lo, &hi)) in self
+            .undecided
+            .iter_mut()
+            .zip(windows)
+            .zip(lo.iter().zip(hi))
+        {
+            *u = u8::from(low < lo) | u8::from(high > hi);
+        }
+    }
+}
+
 /// One row's windows for the counting method: the window rows of
 /// `values` (`cols` wide), and per inner pixel `first + j` of the row
 /// (window columns `first + j ..= first + j + 2·half_cols`) its bounds and
-/// counts to add to: window values below `lo[j]`, up to `hi[j]`, and
+/// counts to write (the counting functions set them): window values below `lo[j]`, up to `hi[j]`, and
 /// defined.
 struct RowWindows<'a> {
     values: &'a [f32],
@@ -372,6 +456,9 @@ struct RowWindows<'a> {
     first: usize,
     lo: &'a [f32],
     hi: &'a [f32],
+    /// 0 where the pixel is decided without its counts (they may be
+    /// skipped), 1 where they decide it.
+    undecided: &'a [u8],
     below_lo: &'a mut [u32],
     up_to_hi: &'a mut [u32],
     valid: &'a mut [u32],
@@ -382,6 +469,9 @@ struct RowWindows<'a> {
 #[inline(always)]
 fn window_counts(w: RowWindows<'_>) {
     let inner = w.lo.len();
+    for counts in [&mut *w.below_lo, &mut *w.up_to_hi, &mut *w.valid] {
+        counts.fill(0);
+    }
     for line in w.values.chunks_exact(w.cols) {
         for dc in 0..=2 * w.half_cols {
             let counts = w
@@ -417,6 +507,9 @@ unsafe fn window_counts_avx2(w: RowWindows<'_>) {
     let blocks = inner / 8;
     for block in 0..blocks {
         let j = 8 * block;
+        if w.undecided[j..j + 8].iter().all(|&u| u == 0) {
+            continue;
+        }
         debug_assert_eq!(w.first, 0);
         debug_assert!(inner + 2 * w.half_cols <= w.cols && w.hi.len() == inner);
         // SAFETY: j + 8 <= inner = lo.len() = hi.len(); every window value
@@ -449,7 +542,7 @@ unsafe fn window_counts_avx2(w: RowWindows<'_>) {
                 (&mut *w.valid, valid),
             ] {
                 let at = counts.as_mut_ptr().add(j).cast::<__m256i>();
-                _mm256_storeu_si256(at, _mm256_add_epi32(_mm256_loadu_si256(at), add));
+                _mm256_storeu_si256(at, add);
             }
         }
     }
@@ -462,6 +555,7 @@ unsafe fn window_counts_avx2(w: RowWindows<'_>) {
         first: done,
         lo: &w.lo[done..],
         hi: &w.hi[done..],
+        undecided: &w.undecided[done..],
         below_lo: &mut w.below_lo[done..],
         up_to_hi: &mut w.up_to_hi[done..],
         valid: &mut w.valid[done..],

@@ -152,6 +152,45 @@ fn a_step_shows_in_d1_and_the_cost_follows_000() {
 }
 
 #[test]
+fn d_d_inflates_absolute_obstacles_by_the_robot_radius_and_never_lowers_the_cost() {
+    // 000 §5.1: D_D = max{D̃, local mean}, with absolute obstacles inflated
+    // by the robot radius. A 25 cm step at x = 8.05 m is absolute along its
+    // edge; the flat ground before it is not.
+    let image = noisy(
+        render(
+            &SensorModel::lidar64(),
+            |x, _| if x > 8.05 { 0.25 } else { 0.0 },
+        ),
+        0.01,
+    );
+    let mut hd = height_diff();
+    evaluate(&mut hd, &image);
+    let maps = hd.maps();
+    let radius = PerceptionConfig::default().height_diff.robot_radius_m as f32;
+    let index = |x, y| maps.index(x, y);
+    let band = |from: f32, to: f32| {
+        values_where(index, &maps.drivability, move |x, y| {
+            (from..to).contains(&x) && y.abs() < 2.0
+        })
+    };
+    // Flat cells within the radius of the edge (less a cell for where the
+    // edge's cells lie): inflated to at least 1.
+    let inflated = band(8.0 - radius + 0.2, 7.9);
+    assert!(inflated.len() > 100, "{} cells", inflated.len());
+    let low = inflated.iter().copied().fold(f32::INFINITY, f32::min);
+    assert!(low >= 1.0, "D_D within the robot radius of the step: {low}");
+    // Beyond the radius and the averaging square, flat ground stays low.
+    let beyond = band(8.0 - radius - 1.5, 8.0 - radius - 0.4);
+    assert!(beyond.len() > 100, "{} cells", beyond.len());
+    let high = beyond.iter().copied().fold(0.0, f32::max);
+    assert!(high < 0.5, "D_D on flat ground beyond the radius: {high}");
+    // D_D is never below D̃ (inflation also reaches unknown cells).
+    for (&d, &cost) in maps.drivability.iter().zip(&maps.cost) {
+        assert!(cost.is_nan() || d >= cost, "D_D {d} below D̃ {cost}");
+    }
+}
+
+#[test]
 fn a_step_short_of_an_obstacle_is_reported_as_graded_ground_with_its_cost() {
     // 7 cm: D̃ = 0.35 + 0.175 + 0.245 = 0.77, below 1 and above
     // graded_from (0.75): graded ground of cost D̃, no reasons. 12 cm: cost 1.
