@@ -223,7 +223,7 @@ struct Scratch {
     bins: Vec<Bin>,
 }
 
-/// A cell's returns while they are binned: the highest (NaN: none yet),
+/// A cell's returns while they are binned: the highest (-∞: none yet),
 /// the image it came from, and the lowest.
 #[derive(Debug, Clone, Copy)]
 struct Bin {
@@ -234,7 +234,7 @@ struct Bin {
 
 impl Bin {
     const EMPTY: Self = Self {
-        highest: f32::NAN,
+        highest: f32::NEG_INFINITY,
         lowest: f32::INFINITY,
         sensor: u8::MAX,
     };
@@ -340,17 +340,27 @@ impl HeightDiff {
                 (grid, cell),
                 &mut ImageStats::default(),
                 |i, highest, lowest| {
+                    // Heights are finite: plain comparisons, selects.
                     let bin = &mut bins[i];
-                    if bin.highest.is_nan() || bin.highest < highest {
-                        bin.highest = highest;
-                        bin.sensor = k as u8;
-                    }
-                    bin.lowest = bin.lowest.min(lowest);
+                    let higher = highest > bin.highest;
+                    bin.sensor = if higher { k as u8 } else { bin.sensor };
+                    bin.highest = if higher { highest } else { bin.highest };
+                    bin.lowest = if lowest < bin.lowest {
+                        lowest
+                    } else {
+                        bin.lowest
+                    };
                 },
             );
         }
         maps.height.clear();
-        maps.height.extend(bins.iter().map(|b| b.highest));
+        maps.height.extend(bins.iter().map(|b| {
+            if b.highest == f32::NEG_INFINITY {
+                f32::NAN
+            } else {
+                b.highest
+            }
+        }));
         maps.sensor.clear();
         maps.sensor.extend(bins.iter().map(|b| b.sensor));
         self.lowest.clear();
@@ -470,11 +480,16 @@ impl HeightDiff {
         let s = &mut self.scratch;
         // Per sensor: the box of its cells, (x0, x1, y0, y1) inclusive.
         let mut boxes = [(usize::MAX, 0usize, usize::MAX, 0usize); 256];
-        for (i, (&k, v)) in maps.sensor.iter().zip(&maps.filled).enumerate() {
-            if !v.is_nan() {
-                let (x, y) = (i % cols, i / cols);
-                let b = &mut boxes[usize::from(k)];
-                *b = (b.0.min(x), b.1.max(x), b.2.min(y), b.3.max(y));
+        let lines = maps
+            .sensor
+            .chunks_exact(cols)
+            .zip(maps.filled.chunks_exact(cols));
+        for (y, (sensors, heights)) in lines.enumerate() {
+            for (x, (&k, v)) in sensors.iter().zip(heights).enumerate() {
+                if !v.is_nan() {
+                    let b = &mut boxes[usize::from(k)];
+                    *b = (b.0.min(x), b.1.max(x), b.2.min(y), b.3.max(y));
+                }
             }
         }
         for d in &mut maps.differences {
@@ -510,10 +525,16 @@ impl HeightDiff {
                 for (r, line) in s.layer.chunks_exact(rect.w).enumerate() {
                     let out = &mut d[(rect.y0 + r) * cols + rect.x0..][..rect.w];
                     let j = r * rect.w;
-                    for (c, (o, &h)) in out.iter_mut().zip(line).enumerate() {
-                        if !h.is_nan() && count[j + c] >= 2 {
-                            *o = (max[j + c] - h).max(h - min[j + c]);
-                        }
+                    let windows = max[j..][..rect.w]
+                        .iter()
+                        .zip(&min[j..][..rect.w])
+                        .zip(&count[j..][..rect.w]);
+                    // Each cell is its own sensor's: written from one box
+                    // only (a select, so that it vectorises).
+                    for ((o, &h), ((&max, &min), &count)) in out.iter_mut().zip(line).zip(windows) {
+                        let (up, down) = (max - h, h - min);
+                        let d = if up > down { up } else { down };
+                        *o = if !h.is_nan() && count >= 2 { d } else { *o };
                     }
                 }
             }

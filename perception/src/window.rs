@@ -241,18 +241,32 @@ impl WindowStats {
             }
             let out = &mut self.count[k];
             let row_sums = &mut self.row_sums;
+            row_sums.resize(cols + 1, 0);
             for y in 0..rows {
                 let line = &vertical[y * cols..(y + 1) * cols];
-                row_sums.clear();
-                row_sums.push(0);
                 let mut total = 0;
-                for &v in line {
+                for (sum, &v) in row_sums[1..].iter_mut().zip(line) {
                     total += v;
-                    row_sums.push(total);
+                    *sum = total;
                 }
-                for (x, o) in out[y * cols..(y + 1) * cols].iter_mut().enumerate() {
+                let out = &mut out[y * cols..(y + 1) * cols];
+                // Windows wholly inside the row: two shifted slices.
+                let (inner_from, inner_to) = if 2 * half < cols {
+                    (half, cols - half)
+                } else {
+                    (0, 0)
+                };
+                let ends = row_sums.get(2 * half + 1..).unwrap_or_default();
+                for ((o, &end), &start) in out[inner_from..inner_to]
+                    .iter_mut()
+                    .zip(ends)
+                    .zip(&row_sums[..])
+                {
+                    *o = end - start;
+                }
+                for x in (0..inner_from).chain(inner_to.max(inner_from)..cols) {
                     let (lo, hi) = (x.saturating_sub(half), (x + half).min(cols - 1));
-                    *o = row_sums[hi + 1] - row_sums[lo];
+                    out[x] = row_sums[hi + 1] - row_sums[lo];
                 }
             }
         }
