@@ -219,7 +219,7 @@ struct Scratch {
     spans: Vec<usize>,
     sums: Vec<f64>,
     counts: Vec<u32>,
-    gaps: [Vec<u32>; 2],
+    gaps: [Vec<u32>; 4],
     bins: Vec<Bin>,
 }
 
@@ -365,13 +365,37 @@ impl HeightDiff {
         maps.sensor.extend(bins.iter().map(|b| b.sensor));
         self.lowest.clear();
         self.lowest.extend(bins.iter().map(|b| b.lowest));
-        self.fill_gaps();
-        self.differences();
-        self.costs();
+        self.judge_heights();
         Ok(&self.maps)
     }
 
+    /// Gap filling, height differences and costs of the height map, with
+    /// AVX2 where the processor has it (the same operations, no fused
+    /// multiply-add, so the same maps).
+    fn judge_heights(&mut self) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            return unsafe { self.judge_heights_avx2() };
+        }
+        self.judge_heights_portable();
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn judge_heights_avx2(&mut self) {
+        self.judge_heights_portable();
+    }
+
+    #[inline(always)]
+    fn judge_heights_portable(&mut self) {
+        self.fill_gaps();
+        self.differences();
+        self.costs();
+    }
+
     /// §4.2: fills NaN cells with at least two axis neighbours within δ.
+    #[inline(always)]
     fn fill_gaps(&mut self) {
         let (cols, cell) = (self.grid.cols, self.cell);
         let maps = &mut self.maps;
@@ -383,35 +407,37 @@ impl HeightDiff {
             return;
         };
         let (x0, y0) = (bounds.x0, bounds.y0);
-        // Per cell of the box, the box coordinate along its line of the
-        // nearest defined cell (NONE: none) before and after it along x,
-        // then along y.
+        // Per cell of the box (row-major over it), the box coordinate along
+        // its line of the nearest defined cell (NONE: none) before and
+        // after it along x, and along y. (A defined cell's own entries are
+        // never read.)
         const NONE: u32 = u32::MAX;
-        let [along_x, along_y] = &mut self.scratch.gaps;
+        let (w, bh) = (bounds.w, bounds.h);
+        let [x_before, x_after, y_before, y_after] = &mut self.scratch.gaps;
+        for side in [&mut *x_before, &mut *x_after, &mut *y_before, &mut *y_after] {
+            side.clear();
+            side.resize(w * bh, NONE);
+        }
         let at = |bx: usize, by: usize| (y0 + by) * cols + x0 + bx;
-        for (out, along_rows) in [(&mut *along_x, true), (&mut *along_y, false)] {
-            out.clear();
-            out.resize(2 * bounds.w * bounds.h, NONE);
-            let (lines, len) = if along_rows {
-                (bounds.h, bounds.w)
-            } else {
-                (bounds.w, bounds.h)
-            };
-            for line in 0..lines {
-                for backwards in [false, true] {
-                    let mut last = NONE;
-                    for step in 0..len {
-                        let k = if backwards { len - 1 - step } else { step };
-                        let (bx, by) = if along_rows { (k, line) } else { (line, k) };
-                        if !h[at(bx, by)].is_nan() {
-                            last = k as u32;
-                        } else {
-                            out[2 * (by * bounds.w + bx) + usize::from(backwards)] = last;
-                        }
-                    }
-                }
+        for by in 0..bh {
+            let line = &h[at(0, by)..][..w];
+            let (before, after) = (&mut x_before[by * w..][..w], &mut x_after[by * w..][..w]);
+            let mut last = NONE;
+            for (bx, (v, out)) in line.iter().zip(before).enumerate() {
+                last = if v.is_nan() { last } else { bx as u32 };
+                *out = last;
+            }
+            last = NONE;
+            for (bx, (v, out)) in line.iter().zip(after).enumerate().rev() {
+                last = if v.is_nan() { last } else { bx as u32 };
+                *out = last;
             }
         }
+        // Along y a whole row at a time, each column's last defined row
+        // carried in the row before's entries (so the rows vectorise).
+        let rows_of = |by: usize| &h[at(0, by)..][..w];
+        sweep_rows(0..bh, w, rows_of, y_before);
+        sweep_rows((0..bh).rev(), w, rows_of, y_after);
         let [ox, oy] = maps.origin;
         let (base, per_m) = (self.config.gap_base_m as f32, self.config.gap_per_m as f32);
         for by in 0..bounds.h {
@@ -420,8 +446,8 @@ impl HeightDiff {
                 if !h[i].is_nan() {
                     continue;
                 }
-                let j = 2 * (by * bounds.w + bx);
-                let sides = [along_x[j], along_x[j + 1], along_y[j], along_y[j + 1]];
+                let j = by * w + bx;
+                let sides = [x_before[j], x_after[j], y_before[j], y_after[j]];
                 if sides.iter().filter(|&&s| s != NONE).count() < 2 {
                     continue;
                 }
@@ -441,22 +467,23 @@ impl HeightDiff {
                     oy + ((y0 + by) as f32 + 0.5) * cell,
                 );
                 let delta = (base + per_m * x.hypot(y)) / cell;
-                let within = |side: usize| {
+                // Filled from one sensor only, the nearest neighbour's (the
+                // first of the nearest): a value between two sensors'
+                // heights would put a step inside each.
+                let mut within = [false; 4];
+                let mut nearest: Option<usize> = None;
+                for side in 0..4 {
                     let d = distance[side];
-                    d != u16::MAX && f32::from(d) < delta
-                };
-                // Filled from one sensor only, the nearest neighbour's: a
-                // value between two sensors' heights would put a step
-                // inside each.
-                let Some(owner) = (0..4)
-                    .filter(|&side| within(side))
-                    .min_by_key(|&side| distance[side])
-                    .map(|side| maps.sensor[index[side]])
-                else {
+                    within[side] = d != u16::MAX && f32::from(d) < delta;
+                    if within[side] && nearest.is_none_or(|n| d < distance[n]) {
+                        nearest = Some(side);
+                    }
+                }
+                let Some(owner) = nearest.map(|side| maps.sensor[index[side]]) else {
                     continue;
                 };
                 let (mut weight, mut sum, mut found) = (0.0f32, 0.0f32, 0);
-                for side in (0..4).filter(|&side| within(side) && maps.sensor[index[side]] == owner)
+                for side in (0..4).filter(|&side| within[side] && maps.sensor[index[side]] == owner)
                 {
                     let w = 1.0 / f32::from(distance[side]);
                     weight += w;
@@ -473,6 +500,7 @@ impl HeightDiff {
 
     /// §4.3: D_l for each scale, within each sensor's cells: per sensor,
     /// only over the box its cells span (a camera of a ring sees a wedge).
+    #[inline(always)]
     fn differences(&mut self) {
         let (cols, rows) = (self.grid.cols, self.grid.rows);
         let n = cols * rows;
@@ -542,6 +570,7 @@ impl HeightDiff {
     }
 
     /// §5.1: D̃, absolute obstacles and D_D.
+    #[inline(always)]
     fn costs(&mut self) {
         let (cols, rows, cell) = (self.grid.cols, self.grid.rows, self.cell);
         let n = cols * rows;
@@ -569,20 +598,27 @@ impl HeightDiff {
         let radius = (c.robot_radius_m as f32 / cell).round() as usize;
         // A point within the radius of an absolute cell is within it of
         // one on its region's edge (or is absolute itself): only edges stamp.
-        let edge = |i: usize| {
-            let (x, y) = (i % cols, i / cols);
+        let absolute = &maps.absolute;
+        let edge = |x: usize, y: usize, i: usize| {
             x == 0
                 || y == 0
                 || x + 1 == cols
                 || y + 1 == rows
-                || !(maps.absolute[i - 1]
-                    && maps.absolute[i + 1]
-                    && maps.absolute[i - cols]
-                    && maps.absolute[i + cols])
+                || !(absolute[i - 1] && absolute[i + 1] && absolute[i - cols] && absolute[i + cols])
         };
         let mut edges = std::mem::take(&mut self.scratch.edges);
         edges.clear();
-        edges.extend((0..n).filter(|&i| maps.absolute[i] && edge(i)));
+        for (y, line) in absolute.chunks_exact(cols).enumerate() {
+            if !line.contains(&true) {
+                continue;
+            }
+            for (x, _) in line.iter().enumerate().filter(|&(_, &a)| a) {
+                let i = y * cols + x;
+                if edge(x, y, i) {
+                    edges.push(i);
+                }
+            }
+        }
         // The disc's half width on each row of it.
         let mut spans = std::mem::take(&mut self.scratch.spans);
         spans.clear();
@@ -646,6 +682,41 @@ impl HeightDiff {
                 maps.drivability[i] = maps.drivability[i].max(mean as f32);
             }
         }
+    }
+}
+
+/// For each cell of a `w`-wide box whose rows are `line(by)`, taken in the
+/// order `rows`: the last row in that order, itself included, in which its
+/// column was defined (`u32::MAX`: none), into `out` (row-major, `w` wide).
+#[inline(always)]
+fn sweep_rows<'a>(
+    mut rows: impl Iterator<Item = usize>,
+    w: usize,
+    line: impl Fn(usize) -> &'a [f32],
+    out: &mut [u32],
+) {
+    let Some(mut previous) = rows.next() else {
+        return;
+    };
+    for (v, o) in line(previous).iter().zip(&mut out[previous * w..][..w]) {
+        *o = if v.is_nan() {
+            u32::MAX
+        } else {
+            previous as u32
+        };
+    }
+    for by in rows {
+        let (here, carried) = if previous < by {
+            let (a, b) = out.split_at_mut(by * w);
+            (&mut b[..w], &a[previous * w..][..w])
+        } else {
+            let (a, b) = out.split_at_mut(previous * w);
+            (&mut a[by * w..][..w], &b[..w])
+        };
+        for ((v, o), &c) in line(by).iter().zip(here).zip(carried) {
+            *o = if v.is_nan() { c } else { by as u32 };
+        }
+        previous = by;
     }
 }
 

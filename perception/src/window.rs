@@ -101,7 +101,26 @@ impl WindowStats {
     /// each half size `halves[k]` (window `2h + 1` square), the extremes
     /// and counts of its defined cells, read with [`Self::max`],
     /// [`Self::min`], [`Self::count`].
+    ///
+    /// With AVX2 where the processor has it (the same operations, so the
+    /// same results).
     pub fn compute(&mut self, layer: &[f32], cols: usize, rows: usize, halves: &[usize]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            return unsafe { self.compute_avx2(layer, cols, rows, halves) };
+        }
+        self.compute_portable(layer, cols, rows, halves);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn compute_avx2(&mut self, layer: &[f32], cols: usize, rows: usize, halves: &[usize]) {
+        self.compute_portable(layer, cols, rows, halves);
+    }
+
+    #[inline(always)]
+    fn compute_portable(&mut self, layer: &[f32], cols: usize, rows: usize, halves: &[usize]) {
         let n = cols * rows;
         debug_assert_eq!(layer.len(), n);
         for out in [&mut self.max, &mut self.min] {
@@ -155,6 +174,7 @@ impl WindowStats {
 
     /// Levels 0..=top down the columns: level p row y is the extreme of
     /// rows y .. y + 2^p (clamped at the last row).
+    #[inline(always)]
     fn vertical_levels(
         &mut self,
         layer: &[f32],
@@ -190,6 +210,7 @@ impl WindowStats {
     }
 
     /// `self.vertical` = each cell's extreme over rows y - half ..= y + half.
+    #[inline(always)]
     fn vertical_window(&mut self, cols: usize, rows: usize, half: usize, op: Extreme) {
         self.vertical.clear();
         self.vertical.resize(cols * rows, 0.0);
@@ -209,6 +230,7 @@ impl WindowStats {
 
     /// Counts of defined cells: prefix sums down the columns (once), then
     /// per window size the vertical window's and each row's prefix sums.
+    #[inline(always)]
     fn counts(&mut self, layer: &[f32], cols: usize, rows: usize, halves: &[usize]) {
         let sums = &mut self.column_sums;
         sums.clear();
@@ -275,6 +297,7 @@ impl WindowStats {
 
 /// `out` = each cell of `values` (`cols` wide) with its extreme over
 /// columns x - half ..= x + half, row by row.
+#[inline(always)]
 fn horizontal(
     values: &[f32],
     out: &mut [f32],
