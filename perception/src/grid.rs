@@ -243,7 +243,7 @@ impl Projector {
             // SAFETY: the processor has AVX2, checked just above.
             return unsafe { self.for_each_cell_avx2(args, stats, each) };
         }
-        self.for_each_cell_portable(args, stats, each);
+        self.for_each_cell_portable::<false>(args, stats, each);
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -254,11 +254,13 @@ impl Projector {
         stats: &mut ImageStats,
         each: impl FnMut(usize, f32, f32),
     ) {
-        self.for_each_cell_portable(args, stats, each);
+        self.for_each_cell_portable::<true>(args, stats, each);
     }
 
+    /// `AVX2`: whether the caller is compiled for AVX2 (and so may hand
+    /// runs over with [`hand_over_runs_avx2`]).
     #[inline(always)]
-    fn for_each_cell_portable(
+    fn for_each_cell_portable<const AVX2: bool>(
         &mut self,
         (image, ranges, level_from_sensor, (min_range, max_range), (grid, cell)): CellArgs<'_>,
         stats: &mut ImageStats,
@@ -308,22 +310,13 @@ impl Projector {
                 let cell_index = (iy * width + ix) as u32;
                 *index = if used { cell_index } else { u32::MAX };
             }
-            let (mut run, mut highest, mut lowest) = (u32::MAX, f32::NAN, f32::NAN);
-            for (&index, &z) in row_cells.iter().zip(row_z.iter()) {
-                if index == run {
-                    // z is finite: plain comparisons.
-                    highest = if z > highest { z } else { highest };
-                    lowest = if z < lowest { z } else { lowest };
-                    continue;
-                }
-                if run != u32::MAX {
-                    each(run as usize, highest, lowest);
-                }
-                (run, highest, lowest) = (index, z, z);
+            #[cfg(target_arch = "x86_64")]
+            if AVX2 {
+                // SAFETY: AVX2 is set only where the processor has AVX2.
+                unsafe { hand_over_runs_avx2(row_cells, row_z, &mut each) };
+                continue;
             }
-            if run != u32::MAX {
-                each(run as usize, highest, lowest);
-            }
+            hand_over_runs(row_cells, row_z, 0, None, &mut each);
         }
         stats.no_return += no_return;
         stats.out_of_range += out_of_range;
@@ -363,6 +356,137 @@ impl Projector {
         let t = level_from_sensor.translation.vector;
         ([t.x as f32, t.y as f32, t.z as f32], vertical)
     }
+}
+
+/// Hands `each` every run of neighbouring returns of a row in one cell:
+/// the cell, the run's highest and lowest z (finite). Starts at column
+/// `from`, continuing `open`: the run (cell, highest, lowest) that the
+/// columns before `from` left unfinished, if any. Cells `u32::MAX` (no
+/// return in the grid) form no run.
+#[inline(always)]
+fn hand_over_runs(
+    cells: &[u32],
+    z: &[f32],
+    from: usize,
+    open: Option<(u32, f32, f32)>,
+    each: &mut impl FnMut(usize, f32, f32),
+) {
+    let (mut run, mut highest, mut lowest) = open.unwrap_or((u32::MAX, f32::NAN, f32::NAN));
+    for (&index, &z) in cells[from..].iter().zip(&z[from..]) {
+        if index == run {
+            // z is finite: plain comparisons.
+            highest = if z > highest { z } else { highest };
+            lowest = if z < lowest { z } else { lowest };
+            continue;
+        }
+        if run != u32::MAX {
+            each(run as usize, highest, lowest);
+        }
+        (run, highest, lowest) = (index, z, z);
+    }
+    if run != u32::MAX {
+        each(run as usize, highest, lowest);
+    }
+}
+
+/// [`hand_over_runs`] eight returns at a time: within each eight, a
+/// segmented scan (three steps of 1, 2 and 4 lanes, each lane combining
+/// with the one that far back while both lie in one run) gives every lane
+/// the highest and lowest of its run so far; the leading lanes that
+/// continue the eight before take its last lane's too; the lanes that end
+/// a run are handed over. The same runs, values and order as
+/// [`hand_over_runs`] (max and min are exact), without its dependency from
+/// one return to the next.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn hand_over_runs_avx2(cells: &[u32], z: &[f32], each: &mut impl FnMut(usize, f32, f32)) {
+    use std::arch::x86_64::*;
+    let n = cells.len().min(z.len());
+    // Blocks of eight with a ninth column after them (whether the eighth
+    // ends its run); the rest goes to the scalar hand-over.
+    let blocks = n.saturating_sub(1) / 8;
+    if blocks == 0 {
+        return hand_over_runs(cells, z, 0, None, each);
+    }
+    let (mut carry_high, mut carry_low) = (f32::NEG_INFINITY, f32::INFINITY);
+    let mut ended_last = true;
+    let (mut highs, mut lows) = ([0f32; 8], [0f32; 8]);
+    // SAFETY (whole block): every load reads lanes c - 1 ..= c + 8 with
+    // 8 <= c + 8 < n for c >= 8, and lanes 0 ..= 8 < n for c = 0.
+    unsafe {
+        let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let from = |d: i32| _mm256_cmpgt_epi32(lane, _mm256_set1_epi32(d - 1));
+        let back = |d: i32| {
+            _mm256_max_epi32(
+                _mm256_sub_epi32(lane, _mm256_set1_epi32(d)),
+                _mm256_setzero_si256(),
+            )
+        };
+        let (from1, from2, from4) = (from(1), from(2), from(4));
+        let (back1, back2, back4) = (back(1), back(2), back(4));
+        for c in (0..blocks).map(|b| 8 * b) {
+            let here = _mm256_loadu_si256(cells.as_ptr().add(c).cast());
+            let next = _mm256_loadu_si256(cells.as_ptr().add(c + 1).cast());
+            // Lane i continues lane i - 1's run (lane 0: the block before's
+            // last, with a neutral carry at the row's start).
+            let before = if c == 0 {
+                _mm256_permutevar8x32_epi32(here, back1)
+            } else {
+                _mm256_loadu_si256(cells.as_ptr().add(c - 1).cast())
+            };
+            let same1 = _mm256_cmpeq_epi32(here, before);
+            let (mut high, mut low) = (
+                _mm256_loadu_ps(z.as_ptr().add(c)),
+                _mm256_loadu_ps(z.as_ptr().add(c)),
+            );
+            // Runs within the block: lane i combines with lane i - d where
+            // lanes i - d ..= i share a run.
+            let mut joined = same1;
+            for (back_d, from_d) in [(back1, from1), (back2, from2), (back4, from4)] {
+                let take = _mm256_castsi256_ps(_mm256_and_si256(joined, from_d));
+                let (h, l) = (
+                    _mm256_permutevar8x32_ps(high, back_d),
+                    _mm256_permutevar8x32_ps(low, back_d),
+                );
+                high = _mm256_blendv_ps(high, _mm256_max_ps(high, h), take);
+                low = _mm256_blendv_ps(low, _mm256_min_ps(low, l), take);
+                joined = _mm256_and_si256(joined, _mm256_permutevar8x32_epi32(joined, back_d));
+            }
+            // The leading lanes of the run the block before left open.
+            let continuing =
+                (!(_mm256_movemask_ps(_mm256_castsi256_ps(same1)) as u32)).trailing_zeros();
+            let lead = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+                _mm256_set1_epi32(continuing as i32),
+                lane,
+            ));
+            high = _mm256_blendv_ps(high, _mm256_max_ps(high, _mm256_set1_ps(carry_high)), lead);
+            low = _mm256_blendv_ps(low, _mm256_min_ps(low, _mm256_set1_ps(carry_low)), lead);
+            // Lanes that end a run in the grid.
+            let ends = _mm256_andnot_si256(
+                _mm256_or_si256(
+                    _mm256_cmpeq_epi32(here, next),
+                    _mm256_cmpeq_epi32(here, _mm256_set1_epi32(-1)),
+                ),
+                _mm256_set1_epi32(-1),
+            );
+            let mut bits = _mm256_movemask_ps(_mm256_castsi256_ps(ends)) as u32;
+            _mm256_storeu_ps(highs.as_mut_ptr(), high);
+            _mm256_storeu_ps(lows.as_mut_ptr(), low);
+            while bits != 0 {
+                let i = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                each(cells[c + i] as usize, highs[i], lows[i]);
+            }
+            (carry_high, carry_low) = (highs[7], lows[7]);
+            ended_last = cells[c + 7] != cells[c + 8];
+        }
+    }
+    let from = 8 * blocks;
+    let open = (!ended_last).then(|| (cells[from - 1], carry_high, carry_low));
+    hand_over_runs(cells, z, from, open, each);
 }
 
 /// An untraversable grid cell, before it becomes an [`ObstacleCell`].
@@ -652,5 +776,89 @@ impl GridReport {
             report,
             stats,
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every run [`hand_over_runs`] hands over for a row.
+    fn runs(cells: &[u32], z: &[f32], avx2: bool) -> Vec<(usize, u32, u32)> {
+        let mut out = Vec::new();
+        let mut each = |i: usize, high: f32, low: f32| out.push((i, high.to_bits(), low.to_bits()));
+        if avx2 {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: called only where the processor has AVX2.
+            unsafe {
+                hand_over_runs_avx2(cells, z, &mut each)
+            };
+        } else {
+            hand_over_runs(cells, z, 0, None, &mut each);
+        }
+        out
+    }
+
+    #[test]
+    fn runs_of_a_row_are_its_neighbouring_returns_in_one_cell() {
+        // Cells 5, 5, off the grid (NaN z), 7, 5: three runs, the off-grid
+        // return in none.
+        let cells = [5, 5, u32::MAX, 7, 5];
+        let z = [0.5, 0.25, f32::NAN, 1.0, 2.0];
+        assert_eq!(
+            runs(&cells, &z, false),
+            [
+                (5, 0.5f32.to_bits(), 0.25f32.to_bits()),
+                (7, 1.0f32.to_bits(), 1.0f32.to_bits()),
+                (5, 2.0f32.to_bits(), 2.0f32.to_bits()),
+            ]
+        );
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_and_scalar_hand_over_the_same_runs() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            assert!(
+                std::env::var("CI").as_deref() != Ok("true"),
+                "CI's machine has no AVX2: the AVX2 hand-over is untested"
+            );
+            eprintln!("no AVX2 on this processor: nothing to compare");
+            return;
+        }
+        // Rows of every length up to 70 with runs of 1 to 20 returns
+        // (across block boundaries), off-grid returns with NaN heights, and
+        // a cell met again after another.
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = |m: u64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state % m
+        };
+        let mut tested_long = false;
+        for round in 0..400 {
+            let n = round % 71;
+            let (mut cells, mut z) = (Vec::new(), Vec::new());
+            while cells.len() < n {
+                let length = 1 + next(if round % 2 == 0 { 4 } else { 20 }) as usize;
+                let cell = match next(5) {
+                    0 => u32::MAX,
+                    1 => 3,
+                    _ => next(1000) as u32,
+                };
+                for _ in 0..length.min(n - cells.len()) {
+                    cells.push(cell);
+                    z.push(if cell == u32::MAX {
+                        f32::NAN
+                    } else {
+                        next(2000) as f32 * 0.01 - 10.0
+                    });
+                }
+                tested_long |= length > 9;
+            }
+            assert_eq!(runs(&cells, &z, true), runs(&cells, &z, false), "{cells:?}");
+        }
+        assert!(tested_long);
     }
 }
