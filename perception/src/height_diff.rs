@@ -508,17 +508,33 @@ impl HeightDiff {
         let s = &mut self.scratch;
         // Per sensor: the box of its cells, (x0, x1, y0, y1) inclusive.
         let mut boxes = [(usize::MAX, 0usize, usize::MAX, 0usize); 256];
+        // A row's cells of one sensor come in long runs (NaN between them
+        // does not end one): a box is updated once per run.
+        let mut add = |run: Option<(u8, usize, usize)>, y: usize| {
+            if let Some((k, first, last)) = run {
+                let b = &mut boxes[usize::from(k)];
+                *b = (b.0.min(first), b.1.max(last), b.2.min(y), b.3.max(y));
+            }
+        };
         let lines = maps
             .sensor
             .chunks_exact(cols)
             .zip(maps.filled.chunks_exact(cols));
         for (y, (sensors, heights)) in lines.enumerate() {
+            let mut run: Option<(u8, usize, usize)> = None;
             for (x, (&k, v)) in sensors.iter().zip(heights).enumerate() {
-                if !v.is_nan() {
-                    let b = &mut boxes[usize::from(k)];
-                    *b = (b.0.min(x), b.1.max(x), b.2.min(y), b.3.max(y));
+                if v.is_nan() {
+                    continue;
+                }
+                match &mut run {
+                    Some((sensor, _, last)) if *sensor == k => *last = x,
+                    _ => {
+                        add(run, y);
+                        run = Some((k, x, x));
+                    }
                 }
             }
+            add(run, y);
         }
         for d in &mut maps.differences {
             d.clear();

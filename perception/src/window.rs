@@ -2,17 +2,19 @@
 //! windows of a grid layer, for several window sizes at once (000 §4.3's
 //! height differences at l ∈ {1, 3, 6}).
 //!
-//! Max and min are idempotent, so a window's extreme is that of two
-//! overlapping power-of-two runs that cover it: with `L_p[i]` the extreme
-//! of `v[i .. i + 2^p]` (a sparse table, each level from the one before in
-//! one pass: `L_p[i] = op(L_{p-1}[i], L_{p-1}[i + 2^(p-1)])`), the window
-//! `[lo, hi]` of length n has `op(L_p[lo], L_p[hi + 1 - 2^p])`, p = ⌊log₂ n⌋.
-//! Down the columns, every pass takes whole rows, so it vectorises across
-//! the row; the levels are built once for all window sizes. Along the
-//! rows, each row's levels are built in buffers that stay in L1, and the
-//! windows wholly inside the row are two shifted slices. Counts are
-//! differences of prefix sums, down the columns and then along the rows.
-//! Windows are clipped at the layer's edges.
+//! Max and min are idempotent, so a window's extreme is that of any
+//! windows that cover it, overlaps allowed: the window of half size `b` is
+//! covered by the windows of half size `a < b` centred at offsets from
+//! `-(b - a)` to `b - a`, at most `2a + 1` apart (1, 3, 6: the 3-window is
+//! the 1-window at -1, 0, 1; the 7-window the 3-window at -2, 1, 2; the
+//! 13-window the 7-window at -3, 3). Each scale is built from the one
+//! before, along the rows and then down the columns, one shifted slice per
+//! offset over the whole layer at once (so it vectorises). The layer is
+//! padded with the extreme's neutral value by the largest half size, so a
+//! window clipped at the layer's edge needs no case of its own, and every
+//! shift stays inside the padded rows for the cells that are kept. Counts
+//! are differences of prefix sums, down the columns and then along the
+//! rows.
 
 /// Scratch and results of [`WindowStats::compute`].
 #[derive(Debug, Default)]
@@ -23,12 +25,11 @@ pub(crate) struct WindowStats {
     min: Vec<Vec<f32>>,
     /// Per window size: defined cells in the window.
     count: Vec<Vec<u32>>,
-    /// Vertical sparse-table levels (level 0 is the layer itself).
-    levels: Vec<Vec<f32>>,
-    /// One scale's vertical extremes.
-    vertical: Vec<f32>,
-    /// A row's horizontal levels.
-    row_levels: Vec<Vec<f32>>,
+    /// The padded layer's extremes at the scale before and this one, and
+    /// the pass along the rows between them.
+    before: Vec<f32>,
+    along: Vec<f32>,
+    scale: Vec<f32>,
     /// Prefix sums of defined cells down the columns, `(rows + 1) × cols`.
     column_sums: Vec<u32>,
     /// One scale's vertical counts, and a row's prefix sums.
@@ -50,47 +51,21 @@ impl Extreme {
             Self::Min => f32::INFINITY,
         }
     }
-
-    /// The more extreme of two values that are never NaN (a plain
-    /// comparison, so it vectorises).
-    #[inline(always)]
-    fn pick(self, a: f32, b: f32) -> f32 {
-        match self {
-            Self::Max => {
-                if a > b {
-                    a
-                } else {
-                    b
-                }
-            }
-            Self::Min => {
-                if a < b {
-                    a
-                } else {
-                    b
-                }
-            }
-        }
-    }
 }
 
-/// ⌊log₂ n⌋ for n ≥ 1.
-fn log2(n: usize) -> usize {
-    (usize::BITS - 1 - n.leading_zeros()) as usize
-}
-
-/// `out[i] = op(a[i], b[i])`.
+/// `out[i] = op(out[i], a[i])` (never NaN here; `max` and `min` rather
+/// than a select, which the compiler turns into masked stores).
 #[inline(always)]
-fn combine(out: &mut [f32], a: &[f32], b: &[f32], op: Extreme) {
+fn combine(out: &mut [f32], a: &[f32], op: Extreme) {
     match op {
         Extreme::Max => {
-            for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
-                *o = if x > y { x } else { y };
+            for (o, &x) in out.iter_mut().zip(a) {
+                *o = o.max(x);
             }
         }
         Extreme::Min => {
-            for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
-                *o = if x < y { x } else { y };
+            for (o, &x) in out.iter_mut().zip(a) {
+                *o = o.min(x);
             }
         }
     }
@@ -138,21 +113,8 @@ impl WindowStats {
         if n == 0 {
             return;
         }
-        let top = halves
-            .iter()
-            .map(|&h| log2((2 * h + 1).min(rows.max(cols))))
-            .max()
-            .unwrap_or(0);
         for op in [Extreme::Max, Extreme::Min] {
-            self.vertical_levels(layer, cols, rows, top, op);
-            for (k, &half) in halves.iter().enumerate() {
-                self.vertical_window(cols, rows, half, op);
-                let out = match op {
-                    Extreme::Max => &mut self.max[k],
-                    Extreme::Min => &mut self.min[k],
-                };
-                horizontal(&self.vertical, out, cols, half, op, &mut self.row_levels);
-            }
+            self.extremes(layer, cols, rows, halves, op);
         }
         self.counts(layer, cols, rows, halves);
     }
@@ -172,59 +134,39 @@ impl WindowStats {
         &self.count[k]
     }
 
-    /// Levels 0..=top down the columns: level p row y is the extreme of
-    /// rows y .. y + 2^p (clamped at the last row).
+    /// Each window size's extreme of `op`, into `self.max` or `self.min`.
+    /// `halves` must not decrease.
     #[inline(always)]
-    fn vertical_levels(
-        &mut self,
-        layer: &[f32],
-        cols: usize,
-        rows: usize,
-        top: usize,
-        op: Extreme,
-    ) {
-        // Grown, never shrunk: the buffers are kept for the next image.
-        if self.levels.len() <= top {
-            self.levels.resize_with(top + 1, Vec::new);
-        }
+    fn extremes(&mut self, layer: &[f32], cols: usize, rows: usize, halves: &[usize], op: Extreme) {
+        let pad = halves.iter().copied().max().unwrap_or(0);
+        let (width, height) = (cols + 2 * pad, rows + 2 * pad);
         let neutral = op.neutral();
-        let first = &mut self.levels[0];
-        first.clear();
-        first.extend(layer.iter().map(|&v| if v.is_nan() { neutral } else { v }));
-        for p in 1..=top {
-            let (before, after) = self.levels.split_at_mut(p);
-            let (prev, next) = (&before[p - 1], &mut after[0]);
-            next.clear();
-            next.resize(cols * rows, 0.0);
-            let step = 1 << (p - 1);
-            for y in 0..rows {
-                let z = (y + step).min(rows - 1);
-                combine(
-                    &mut next[y * cols..(y + 1) * cols],
-                    &prev[y * cols..(y + 1) * cols],
-                    &prev[z * cols..(z + 1) * cols],
-                    op,
-                );
+        let before = &mut self.before;
+        before.clear();
+        before.resize(width * height, neutral);
+        for (y, line) in layer.chunks_exact(cols).enumerate() {
+            let padded = &mut before[(y + pad) * width + pad..][..cols];
+            for (p, &v) in padded.iter_mut().zip(line) {
+                *p = if v.is_nan() { neutral } else { v };
             }
         }
-    }
-
-    /// `self.vertical` = each cell's extreme over rows y - half ..= y + half.
-    #[inline(always)]
-    fn vertical_window(&mut self, cols: usize, rows: usize, half: usize, op: Extreme) {
-        self.vertical.clear();
-        self.vertical.resize(cols * rows, 0.0);
-        for y in 0..rows {
-            let (lo, hi) = (y.saturating_sub(half), (y + half).min(rows - 1));
-            let p = log2(hi - lo + 1);
-            let level = &self.levels[p];
-            let b = hi + 1 - (1 << p);
-            combine(
-                &mut self.vertical[y * cols..(y + 1) * cols],
-                &level[lo * cols..(lo + 1) * cols],
-                &level[b * cols..(b + 1) * cols],
-                op,
-            );
+        let mut half_before = 0;
+        for (k, &half) in halves.iter().enumerate() {
+            debug_assert!(half >= half_before, "window sizes decrease: {halves:?}");
+            let reach = half.saturating_sub(half_before);
+            let step = 2 * half_before + 1;
+            // Along the rows, then down the columns.
+            cover(&self.before, &mut self.along, reach, step, 1, op);
+            cover(&self.along, &mut self.scale, reach, step, width, op);
+            std::mem::swap(&mut self.before, &mut self.scale);
+            half_before = half;
+            let out = match op {
+                Extreme::Max => &mut self.max[k],
+                Extreme::Min => &mut self.min[k],
+            };
+            for (y, line) in out.chunks_exact_mut(cols).enumerate() {
+                line.copy_from_slice(&self.before[(y + pad) * width + pad..][..cols]);
+            }
         }
     }
 
@@ -295,60 +237,41 @@ impl WindowStats {
     }
 }
 
-/// `out` = each cell of `values` (`cols` wide) with its extreme over
-/// columns x - half ..= x + half, row by row.
+/// `target[i]` = the extreme of `source[i + d·stride]` over the offsets d
+/// from `-reach` to `reach` at most `step` apart (`source`'s windows of
+/// width `step` then cover the wider window). Where an offset leaves the
+/// array, the cell is neutral (it lies in the padding, never read).
 #[inline(always)]
-fn horizontal(
-    values: &[f32],
-    out: &mut [f32],
-    cols: usize,
-    half: usize,
+fn cover(
+    source: &[f32],
+    target: &mut Vec<f32>,
+    reach: usize,
+    step: usize,
+    stride: usize,
     op: Extreme,
-    levels: &mut Vec<Vec<f32>>,
 ) {
-    let top = log2((2 * half + 1).min(cols));
-    if levels.len() <= top {
-        levels.resize_with(top + 1, Vec::new);
+    let n = source.len();
+    target.clear();
+    target.resize(n, op.neutral());
+    let margin = reach * stride;
+    if n <= 2 * margin {
+        return;
     }
-    for (line, source) in out.chunks_exact_mut(cols).zip(values.chunks_exact(cols)) {
-        levels[0].clear();
-        levels[0].extend_from_slice(source);
-        for p in 1..=top {
-            let (before, after) = levels.split_at_mut(p);
-            let (prev, next) = (&before[p - 1], &mut after[0]);
-            let step = 1 << (p - 1);
-            next.clear();
-            next.resize(cols, 0.0);
-            let inner = cols.saturating_sub(step);
-            combine(&mut next[..inner], &prev[..inner], &prev[step..], op);
-            for x in inner..cols {
-                next[x] = op.pick(prev[x], prev[cols - 1]);
-            }
-        }
-        // Windows wholly inside the row: one level, two shifted slices.
-        let full = 2 * half + 1;
-        let (inner_from, inner_to) = if full <= cols {
-            (half, cols - half)
+    let inner = n - 2 * margin;
+    // The first offset, then every `step` up to the last, `reach`.
+    let mut offset = 0;
+    loop {
+        let from = &source[offset * stride..][..inner];
+        let out = &mut target[margin..][..inner];
+        if offset == 0 {
+            out.copy_from_slice(from);
         } else {
-            (0, 0)
-        };
-        if inner_to > inner_from {
-            let p = log2(full);
-            let level = &levels[p];
-            let width = inner_to - inner_from;
-            let shift = full - (1 << p);
-            combine(
-                &mut line[inner_from..inner_to],
-                &level[..width],
-                &level[shift..shift + width],
-                op,
-            );
+            combine(out, from, op);
         }
-        for x in (0..inner_from.min(cols)).chain(inner_to.max(inner_from)..cols) {
-            let (lo, hi) = (x.saturating_sub(half), (x + half).min(cols - 1));
-            let p = log2(hi - lo + 1);
-            line[x] = op.pick(levels[p][lo], levels[p][hi + 1 - (1 << p)]);
+        if offset == 2 * reach {
+            break;
         }
+        offset = (offset + step).min(2 * reach);
     }
 }
 
@@ -387,28 +310,31 @@ mod tests {
             seed
         };
         let mut stats = WindowStats::default();
-        let halves = [1, 3, 6];
-        // Shapes smaller than, equal to and larger than the windows.
-        for (cols, rows) in [(1, 1), (1, 9), (9, 1), (5, 4), (13, 13), (14, 27), (40, 33)] {
-            let layer: Vec<f32> = (0..cols * rows)
-                .map(|_| {
-                    let r = random();
-                    if r % 4 == 0 {
-                        f32::NAN
-                    } else {
-                        (r >> 16) as f32 % 1000.0 * 0.01 - 5.0
+        // 000's scales; equal ones; far apart (many covering windows); one
+        // wider than every shape.
+        for halves in [[1, 3, 6], [1, 1, 2], [2, 5, 11], [1, 2, 50]] {
+            // Shapes smaller than, equal to and larger than the windows.
+            for (cols, rows) in [(1, 1), (1, 9), (9, 1), (5, 4), (13, 13), (14, 27), (40, 33)] {
+                let layer: Vec<f32> = (0..cols * rows)
+                    .map(|_| {
+                        let r = random();
+                        if r % 4 == 0 {
+                            f32::NAN
+                        } else {
+                            (r >> 16) as f32 % 1000.0 * 0.01 - 5.0
+                        }
+                    })
+                    .collect();
+                stats.compute(&layer, cols, rows, &halves);
+                for (k, &half) in halves.iter().enumerate() {
+                    let expected = brute(&layer, cols, rows, half);
+                    for (i, &(hi, lo, n)) in expected.iter().enumerate() {
+                        assert_eq!(
+                            (stats.max(k)[i], stats.min(k)[i], stats.count(k)[i]),
+                            (hi, lo, n),
+                            "{cols}×{rows}, half {half} of {halves:?}, cell {i}"
+                        );
                     }
-                })
-                .collect();
-            stats.compute(&layer, cols, rows, &halves);
-            for (k, &half) in halves.iter().enumerate() {
-                let expected = brute(&layer, cols, rows, half);
-                for (i, &(hi, lo, n)) in expected.iter().enumerate() {
-                    assert_eq!(
-                        (stats.max(k)[i], stats.min(k)[i], stats.count(k)[i]),
-                        (hi, lo, n),
-                        "{cols}×{rows}, half {half}, cell {i}"
-                    );
                 }
             }
         }
