@@ -229,14 +229,12 @@ struct Scratch {
 struct Bin {
     highest: f32,
     lowest: f32,
-    sensor: u8,
 }
 
 impl Bin {
     const EMPTY: Self = Self {
         highest: f32::NEG_INFINITY,
         lowest: f32::INFINITY,
-        sensor: u8::MAX,
     };
 }
 
@@ -318,11 +316,16 @@ impl HeightDiff {
     ) -> Result<&HeightDiffMaps, PerceptionError> {
         let n = self.grid.cols * self.grid.rows;
         let maps = &mut self.maps;
-        // Binned into one array of cells (one cache line per point, not
-        // three), spread into the maps after.
+        // Heights binned into one array of cells (one cache line per run,
+        // not two), spread into the maps after; the sensor of each cell's
+        // highest straight into its map (a separate, small array: with it
+        // in the bins, noisy images binned 0.3 ms slower).
         let bins = &mut self.scratch.bins;
         bins.clear();
         bins.resize(n, Bin::EMPTY);
+        maps.sensor.clear();
+        maps.sensor.resize(n, u8::MAX);
+        let sensors = &mut maps.sensor;
         for (k, image) in images.iter().enumerate().take(usize::from(u8::MAX)) {
             image.validate()?;
             let cols = image.cols();
@@ -343,7 +346,7 @@ impl HeightDiff {
                     // Heights are finite: plain comparisons, selects.
                     let bin = &mut bins[i];
                     let higher = highest > bin.highest;
-                    bin.sensor = if higher { k as u8 } else { bin.sensor };
+                    sensors[i] = if higher { k as u8 } else { sensors[i] };
                     bin.highest = if higher { highest } else { bin.highest };
                     bin.lowest = if lowest < bin.lowest {
                         lowest
@@ -361,8 +364,6 @@ impl HeightDiff {
                 b.highest
             }
         }));
-        maps.sensor.clear();
-        maps.sensor.extend(bins.iter().map(|b| b.sensor));
         self.lowest.clear();
         self.lowest.extend(bins.iter().map(|b| b.lowest));
         self.judge_heights();
