@@ -53,6 +53,24 @@ impl Extreme {
     }
 }
 
+/// `out[i] = op(a[i], b[i])` (a select from two loads into a third
+/// array, so that it vectorises).
+#[inline(always)]
+fn combine_into(out: &mut [f32], a: &[f32], b: &[f32], op: Extreme) {
+    match op {
+        Extreme::Max => {
+            for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
+                *o = if x > y { x } else { y };
+            }
+        }
+        Extreme::Min => {
+            for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
+                *o = if x < y { x } else { y };
+            }
+        }
+    }
+}
+
 /// `out[i] = op(out[i], a[i])` (never NaN here; `max` and `min` rather
 /// than a select, which the compiler turns into masked stores).
 #[inline(always)]
@@ -251,27 +269,29 @@ fn cover(
     op: Extreme,
 ) {
     let n = source.len();
-    target.clear();
-    target.resize(n, op.neutral());
-    let margin = reach * stride;
+    let neutral = op.neutral();
+    // Only the margins need clearing: the rest is written below.
+    target.resize(n, neutral);
+    let margin = (reach * stride).min(n);
+    target[..margin].fill(neutral);
+    target[n - margin..].fill(neutral);
     if n <= 2 * margin {
         return;
     }
     let inner = n - 2 * margin;
-    // The first offset, then every `step` up to the last, `reach`.
-    let mut offset = 0;
-    loop {
-        let from = &source[offset * stride..][..inner];
-        let out = &mut target[margin..][..inner];
-        if offset == 0 {
-            out.copy_from_slice(from);
-        } else {
-            combine(out, from, op);
-        }
-        if offset == 2 * reach {
-            break;
-        }
+    let out = &mut target[margin..][..inner];
+    let at = |offset: usize| &source[offset * stride..][..inner];
+    if reach == 0 {
+        out.copy_from_slice(at(0));
+        return;
+    }
+    // The first offset and the next in one pass, then every `step` up to
+    // the last, `2·reach` (the window's `+reach`).
+    let mut offset = step.min(2 * reach);
+    combine_into(out, at(0), at(offset), op);
+    while offset < 2 * reach {
         offset = (offset + step).min(2 * reach);
+        combine(out, at(offset), op);
     }
 }
 
