@@ -131,6 +131,8 @@ pub(crate) struct Projector {
     /// none) and level-frame z.
     row_cells: Vec<u32>,
     row_z: Vec<f32>,
+    /// A row's runs (cell, highest, lowest), for the AVX2 hand-over.
+    runs: Vec<(u32, f32, f32)>,
 }
 
 /// The level frame of `world_from_vehicle` and where `image`'s sensor
@@ -313,7 +315,7 @@ impl Projector {
             #[cfg(target_arch = "x86_64")]
             if AVX2 {
                 // SAFETY: AVX2 is set only where the processor has AVX2.
-                unsafe { hand_over_runs_avx2(row_cells, row_z, &mut each) };
+                unsafe { hand_over_runs_avx2(row_cells, row_z, &mut self.runs, &mut each) };
                 continue;
             }
             hand_over_runs(row_cells, row_z, 0, None, &mut each);
@@ -402,7 +404,12 @@ fn hand_over_runs(
 /// The processor must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn hand_over_runs_avx2(cells: &[u32], z: &[f32], each: &mut impl FnMut(usize, f32, f32)) {
+unsafe fn hand_over_runs_avx2(
+    cells: &[u32],
+    z: &[f32],
+    runs: &mut Vec<(u32, f32, f32)>,
+    each: &mut impl FnMut(usize, f32, f32),
+) {
     use std::arch::x86_64::*;
     let n = cells.len().min(z.len());
     // Blocks of eight with a ninth column after them (whether the eighth
@@ -414,6 +421,8 @@ unsafe fn hand_over_runs_avx2(cells: &[u32], z: &[f32], each: &mut impl FnMut(us
     let (mut carry_high, mut carry_low) = (f32::NEG_INFINITY, f32::INFINITY);
     let mut ended_last = true;
     let (mut highs, mut lows) = ([0f32; 8], [0f32; 8]);
+    runs.resize(8 * blocks + 8, (0, 0.0, 0.0));
+    let mut kept = 0;
     // SAFETY (whole block): every load reads lanes c - 1 ..= c + 8 with
     // 8 <= c + 8 < n for c >= 8, and lanes 0 ..= 8 < n for c = 0.
     unsafe {
@@ -472,17 +481,21 @@ unsafe fn hand_over_runs_avx2(cells: &[u32], z: &[f32], each: &mut impl FnMut(us
                 ),
                 _mm256_set1_epi32(-1),
             );
-            let mut bits = _mm256_movemask_ps(_mm256_castsi256_ps(ends)) as u32;
+            let bits = _mm256_movemask_ps(_mm256_castsi256_ps(ends)) as u32;
             _mm256_storeu_ps(highs.as_mut_ptr(), high);
             _mm256_storeu_ps(lows.as_mut_ptr(), low);
-            while bits != 0 {
-                let i = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                each(cells[c + i] as usize, highs[i], lows[i]);
+            // Every lane is written, the ends kept: a fixed count of steps
+            // (how many of eight end a run is a coin toss on noisy ground).
+            for i in 0..8 {
+                runs[kept] = (cells[c + i], highs[i], lows[i]);
+                kept += ((bits >> i) & 1) as usize;
             }
             (carry_high, carry_low) = (highs[7], lows[7]);
             ended_last = cells[c + 7] != cells[c + 8];
         }
+    }
+    for &(cell, high, low) in &runs[..kept] {
+        each(cell as usize, high, low);
     }
     let from = 8 * blocks;
     let open = (!ended_last).then(|| (cells[from - 1], carry_high, carry_low));
@@ -791,7 +804,7 @@ mod tests {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: called only where the processor has AVX2.
             unsafe {
-                hand_over_runs_avx2(cells, z, &mut each)
+                hand_over_runs_avx2(cells, z, &mut Vec::new(), &mut each)
             };
         } else {
             hand_over_runs(cells, z, 0, None, &mut each);
