@@ -343,16 +343,15 @@ impl HeightDiff {
                 (grid, cell),
                 &mut ImageStats::default(),
                 |i, highest, lowest| {
-                    // Heights are finite: plain comparisons, selects.
+                    // Heights are finite. Selected without a branch:
+                    // whether a run is higher is a coin toss on noisy
+                    // ground.
+                    use std::hint::select_unpredictable as select;
                     let bin = &mut bins[i];
                     let higher = highest > bin.highest;
-                    sensors[i] = if higher { k as u8 } else { sensors[i] };
-                    bin.highest = if higher { highest } else { bin.highest };
-                    bin.lowest = if lowest < bin.lowest {
-                        lowest
-                    } else {
-                        bin.lowest
-                    };
+                    sensors[i] = select(higher, k as u8, sensors[i]);
+                    bin.highest = select(higher, highest, bin.highest);
+                    bin.lowest = select(lowest < bin.lowest, lowest, bin.lowest);
                 },
             );
         }
