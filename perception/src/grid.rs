@@ -831,12 +831,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx2_and_scalar_hand_over_the_same_runs() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
-            assert!(
-                std::env::var("CI").as_deref() != Ok("true"),
-                "CI's machine has no AVX2: the AVX2 hand-over is untested"
-            );
-            eprintln!("no AVX2 on this processor: nothing to compare");
+        if !crate::avx2_to_test("the AVX2 hand-over") {
             return;
         }
         // Rows of every length up to 70 with runs of 1 to 20 returns

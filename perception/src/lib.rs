@@ -51,3 +51,20 @@ pub use raycast::RayCast;
 pub use registry::{EvaluatorPlugin, EvaluatorRegistry};
 pub use sensor::{SensorConfig, SensorModel, SensorPreset};
 pub use shadow::{Shadow, ShadowIndex, Shadows};
+
+/// Whether this processor can run the AVX2 paths a test compares with the
+/// portable ones. Under `CI=true` a processor without AVX2 fails the test
+/// (the comparison would be skipped unseen); elsewhere it is said and the
+/// comparison skipped.
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn avx2_to_test(what: &str) -> bool {
+    if std::arch::is_x86_feature_detected!("avx2") {
+        return true;
+    }
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "CI's machine has no AVX2: {what} is untested"
+    );
+    eprintln!("no AVX2 on this processor: {what} not compared");
+    false
+}
