@@ -396,7 +396,9 @@ fn hand_over_runs(
 /// with the one that far back while both lie in one run) gives every lane
 /// the highest and lowest of its run so far; the leading lanes that
 /// continue the eight before take its last lane's too; the lanes that end
-/// a run are handed over. The same runs, values and order as
+/// a run are kept in `runs` (every lane written, the count advanced by the
+/// ends: a fixed number of steps) and handed over at the row's end, in
+/// order. The same runs, values and order as
 /// [`hand_over_runs`] (max and min are exact), without its dependency from
 /// one return to the next.
 ///

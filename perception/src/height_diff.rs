@@ -223,8 +223,8 @@ struct Scratch {
     bins: Vec<Bin>,
 }
 
-/// A cell's returns while they are binned: the highest (-∞: none yet),
-/// the image it came from, and the lowest.
+/// A cell's returns while they are binned: the highest (-∞: none yet) and
+/// the lowest (the image the highest came from is kept in the sensor map).
 #[derive(Debug, Clone, Copy)]
 struct Bin {
     highest: f32,
