@@ -297,10 +297,10 @@ impl MedianOutliers {
             });
             // Eight pixels at a time past the decided ones.
             let undecided = &self.bounds.undecided;
-            for j in (0..inner).step_by(8).filter(|&j| {
-                let block = &undecided[j..(j + 8).min(inner)];
-                <[u8; 8]>::try_from(block).map_or(true, |b| u64::from_ne_bytes(b) != 0)
-            }) {
+            for j in (0..inner)
+                .step_by(8)
+                .filter(|&j| any_undecided(&undecided[j..(j + 8).min(inner)]))
+            {
                 for j in j..(j + 8).min(inner) {
                     if undecided[j] == 0 || line[hc + j].is_nan() {
                         continue;
@@ -556,6 +556,17 @@ impl WindowBounds {
     }
 }
 
+/// Whether a block of `undecided` flags (eight, or the fewer at a row's
+/// end) holds a pixel that only counts can decide; eight at once as one
+/// word.
+#[inline(always)]
+fn any_undecided(block: &[u8]) -> bool {
+    match <[u8; 8]>::try_from(block) {
+        Ok(eight) => u64::from_ne_bytes(eight) != 0,
+        Err(_) => block.iter().any(|&u| u != 0),
+    }
+}
+
 /// Byte b of `SPREAD[m]` is bit b of m: eight comparison bits as eight
 /// 0-or-1 bytes.
 #[cfg(target_arch = "x86_64")]
@@ -586,8 +597,8 @@ struct RowBounds<'a> {
 /// One row's windows for the counting method: the window rows of
 /// `values` (`cols` wide), and per inner pixel `first + j` of the row
 /// (window columns `first + j ..= first + j + 2·half_cols`) its bounds and
-/// counts to write (the counting functions set them): window values below `lo[j]`, up to `hi[j]`, and
-/// defined.
+/// the counts the counting functions write: window values below `lo[j]`,
+/// up to `hi[j]`, and defined.
 struct RowWindows<'a> {
     values: &'a [f32],
     cols: usize,
@@ -647,7 +658,7 @@ unsafe fn window_counts_avx2(w: RowWindows<'_>) {
     let blocks = inner / 8;
     for block in 0..blocks {
         let j = 8 * block;
-        if w.undecided[j..j + 8].iter().all(|&u| u == 0) {
+        if !any_undecided(&w.undecided[j..j + 8]) {
             continue;
         }
         debug_assert_eq!(w.first, 0);
