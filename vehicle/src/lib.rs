@@ -12,6 +12,7 @@
 pub mod arcs;
 pub mod command;
 pub mod config;
+pub mod drive;
 pub mod files;
 pub mod frames;
 pub mod model;
@@ -23,6 +24,7 @@ pub mod watchdog;
 pub use arcs::{Arc, ArcPose, ArcSet, ArcSetConfig, SweptFootprint};
 pub use command::SteeringCommand;
 pub use config::ConfigError;
+pub use drive::{DrivenPath, Steering, SteeringResponse};
 pub use frames::{Isometry, Pose};
 pub use model::{Footprint, VehicleConfig};
 pub use motion::{MotionLimits, MotionModel, PlanarState};
