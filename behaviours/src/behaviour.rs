@@ -2,7 +2,7 @@
 
 use arcnav_arbiter::Votes;
 use arcnav_localmap::{LocalMapConfig, MapSnapshot};
-use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime, VehicleConfig};
+use arcnav_vehicle::{ArcSet, Pose, Steering, SteeringCommand, Utime, VehicleConfig};
 
 /// A point to reach, world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,6 +54,30 @@ impl<'a> VoteContext<'a> {
             mission,
             arcs,
             last_command: None,
+        }
+    }
+}
+
+impl VoteContext<'_> {
+    /// How the vehicle steers as this vote is taken: its speed forwards
+    /// (0 backing up), the curvature it drives (yaw rate over speed when
+    /// it moves faster than 0.5 m/s; the last command's otherwise) and
+    /// the command on its way, which it steers towards until a new one
+    /// takes effect. With [`DrivenPath`](arcnav_vehicle::DrivenPath), the
+    /// path each arc's command would really put the vehicle on.
+    pub fn steering(&self) -> Steering {
+        let (sin, cos) = self.pose.yaw().sin_cos();
+        let forwards = (self.pose.velocity.x * cos + self.pose.velocity.y * sin).max(0.0);
+        let commanded = self.last_command.map(|c| c.curvature);
+        let curvature = if forwards > 0.5 {
+            self.pose.yaw_rate / forwards
+        } else {
+            commanded.unwrap_or(0.0)
+        };
+        Steering {
+            speed_mps: forwards,
+            curvature,
+            commanded_curvature: commanded.unwrap_or(curvature),
         }
     }
 }

@@ -13,6 +13,7 @@
 use arcnav_arbiter::Votes;
 use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::wrap_angle;
+use arcnav_vehicle::{DrivenPath, SteeringResponse, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
@@ -117,10 +118,13 @@ impl WaypointTracker {
 
 /// Votes for the arcs that head for world point `target`: each arc's vote
 /// is the cosine of the angle between the vehicle's heading after
-/// `lookahead_m` along it (or the distance to the target, if nearer) and
-/// the direction from there to the target.
+/// `lookahead_m` along the path its command would put it on ([`DrivenPath`]:
+/// the latency and the steering's rate first, the arc after; or the
+/// distance to the target, if nearer) and the direction from there to the
+/// target.
 pub(crate) fn vote_towards(
     ctx: &VoteContext<'_>,
+    response: &SteeringResponse,
     target: [f64; 2],
     lookahead_m: f64,
     votes: &mut Votes,
@@ -131,8 +135,9 @@ pub(crate) fn vote_towards(
     let (sin, cos) = ctx.pose.yaw().sin_cos();
     let (gx, gy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
     let lookahead = lookahead_m.min(gx.hypot(gy));
-    for (index, arc) in ctx.arcs.iter().enumerate() {
-        let end = arc.pose_at(lookahead);
+    let steering = ctx.steering();
+    for (index, &k) in ctx.arcs.curvatures().iter().enumerate() {
+        let end = DrivenPath::new(&steering, response, k).pose_at(lookahead);
         let bearing = (gy - end.position.y).atan2(gx - end.position.x);
         votes.set(index, wrap_angle(bearing - end.heading).cos() as f32);
     }
@@ -143,14 +148,26 @@ pub(crate) fn vote_towards(
 pub struct GoalSeeking {
     config: GoalSeekingConfig,
     tracker: WaypointTracker,
+    response: SteeringResponse,
 }
 
 impl GoalSeeking {
+    /// Goal seeking for a vehicle that takes each arc at once (arcs
+    /// judged as arcs); [`GoalSeeking::for_vehicle`] judges the paths a
+    /// real vehicle drives, as the registry builds it.
     pub fn new(config: GoalSeekingConfig) -> Self {
         Self {
             tracker: WaypointTracker::new(config.arrival_radius_m, config.pass_radius_factor),
             config,
+            response: SteeringResponse::immediate(),
         }
+    }
+
+    /// Judges each arc along the path `vehicle` drives when commanded onto it.
+    #[must_use]
+    pub fn for_vehicle(mut self, vehicle: &VehicleConfig) -> Self {
+        self.response = SteeringResponse::of(vehicle);
+        self
     }
 }
 
@@ -165,7 +182,13 @@ impl Behaviour for GoalSeeking {
             votes.vote_speed(0.0);
             return;
         };
-        vote_towards(ctx, [goal.x, goal.y], self.config.lookahead_m, votes);
+        vote_towards(
+            ctx,
+            &self.response,
+            [goal.x, goal.y],
+            self.config.lookahead_m,
+            votes,
+        );
     }
 
     fn reset(&mut self) {
@@ -188,7 +211,7 @@ impl Plugin for GoalSeeking {
         Ok(())
     }
 
-    fn build(config: Self::Config, _setup: &Setup<'_>) -> Self {
-        Self::new(config)
+    fn build(config: Self::Config, setup: &Setup<'_>) -> Self {
+        Self::new(config).for_vehicle(setup.vehicle)
     }
 }

@@ -56,7 +56,7 @@ use std::collections::HashMap;
 
 use arcnav_arbiter::Votes;
 use arcnav_vehicle::config::{self, ConfigError};
-use arcnav_vehicle::{Arc, Footprint, SweptFootprint};
+use arcnav_vehicle::{Arc, ArcPose, DrivenPath, Footprint, SteeringResponse, SweptFootprint};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
@@ -205,6 +205,10 @@ struct Raster {
     graded: Vec<u64>,
     graded_cost: Vec<f32>,
     graded_cells: Vec<u32>,
+    /// Cells and unseen ground together, when unseen ground is an
+    /// obstacle (`unseen_blocks`).
+    blocked: Vec<u64>,
+    unseen_blocks: bool,
 }
 
 impl Raster {
@@ -230,6 +234,8 @@ impl Raster {
             graded: vec![0; words],
             graded_cost: vec![0.0; grid.rows * grid.columns],
             graded_cells: Vec::new(),
+            blocked: vec![0; words],
+            unseen_blocks: false,
             mirror,
             grid,
         }
@@ -237,6 +243,13 @@ impl Raster {
 
     /// Rasterises the map's cells (clearing the last cycle's).
     fn rasterise(&mut self, ctx: &VoteContext<'_>) {
+        let mirror = self.mirror;
+        self.rasterise_with(ctx, |x, y| (mirror * x, y));
+    }
+
+    /// Rasterises the map's cells placed by `to_grid` (vehicle frame to
+    /// this raster's frame), clearing the last ones.
+    fn rasterise_with(&mut self, ctx: &VoteContext<'_>, to_grid: impl Fn(f64, f64) -> (f64, f64)) {
         for &cell in &self.set_cells {
             let (row, column) = (
                 cell as usize / self.grid.columns,
@@ -256,7 +269,7 @@ impl Raster {
         }
         self.graded_cells.clear();
         for (index, patch) in ctx.map.patches.iter().enumerate() {
-            let (x, y) = (self.mirror * f64::from(patch.x), f64::from(patch.y));
+            let (x, y) = to_grid(f64::from(patch.x), f64::from(patch.y));
             let Some((row, column)) = self.grid.cell(x, y) else {
                 continue;
             };
@@ -298,12 +311,59 @@ impl Raster {
         }
     }
 
-    /// The map cell behind a hit entry, vehicle frame.
+    /// The map cell behind a hit entry of the blocked layer, vehicle
+    /// frame (none for unseen ground).
     fn cause(&self, entry: &Entry, ctx: &VoteContext<'_>) -> Option<[f32; 2]> {
-        let (row, column) = self.grid.first_cell(entry, &self.bitmap);
+        let (row, column) = self.grid.first_cell(entry, self.blocked());
+        self.cause_at(row, column, ctx)
+    }
+
+    /// The map patch behind grid cell (row, column), vehicle frame.
+    fn cause_at(&self, row: usize, column: usize, ctx: &VoteContext<'_>) -> Option<[f32; 2]> {
         let patch = self.causes.get(row * self.grid.columns + column)?;
         let patch = ctx.map.patches.get(*patch as usize)?;
         Some([patch.x, patch.y])
+    }
+
+    /// What collisions are tested against: the map's cells, and unseen
+    /// ground when it is an obstacle (see [`Raster::block`]).
+    fn blocked(&self) -> &[u64] {
+        if self.unseen_blocks {
+            &self.blocked
+        } else {
+            &self.bitmap
+        }
+    }
+
+    /// Makes unseen ground block (`obstacle`) or not.
+    fn block(&mut self, policy: UnseenGround) {
+        self.unseen_blocks = policy == UnseenGround::Obstacle;
+        if self.unseen_blocks {
+            for ((blocked, cell), unseen) in
+                self.blocked.iter_mut().zip(&self.bitmap).zip(&self.unseen)
+            {
+                *blocked = cell | unseen;
+            }
+        }
+    }
+
+    /// Marks as unseen the cells of `band` within `reach` (this raster's
+    /// frame) that `unseen` says no image has seen; the rest of the layer
+    /// is cleared.
+    fn unseen_over(&mut self, band: &[Entry], reach: f32, unseen: impl Fn(Point2<f64>) -> bool) {
+        self.unseen.fill(0);
+        for entry in band.iter().take_while(|e| e.s <= reach) {
+            let row = entry.word as usize / self.grid.words_per_row;
+            let base = (entry.word as usize % self.grid.words_per_row) * 64;
+            let mut bits = entry.mask;
+            while bits != 0 {
+                let bit = bits.trailing_zeros();
+                bits &= bits - 1;
+                if unseen(self.grid.centre(row, base + bit as usize)) {
+                    self.unseen[entry.word as usize] |= 1 << bit;
+                }
+            }
+        }
     }
 }
 
@@ -387,13 +447,66 @@ pub struct ObstacleAvoidance {
     reverse: Option<Reverse>,
     /// Per arc: first collision distance (∞ if none within max), for speed.
     free: Vec<f64>,
-    /// Per arc: where its footprint first meets unseen ground, when
-    /// `unseen_ground` is `slow` (as an obstacle it is a collision in `free`).
-    unseen_at: Vec<Option<Entry>>,
+    /// Per arc: where its footprint first meets unseen ground (distance,
+    /// vehicle-frame point), when `unseen_ground` is `slow` (as an
+    /// obstacle it is a collision in `free`).
+    unseen_at: Vec<Option<(f64, [f32; 2])>>,
     terrain: TerrainCheck,
     /// Per arc: this cycle's verdict on the ground.
     verdicts: Vec<ArcTerrain>,
     cruise_mps: f64,
+    /// The body grown by half a patch ahead and to the sides (band 0).
+    footprint: Footprint,
+    /// The ground the wheels stand on, vehicle frame: never unseen.
+    standing: Footprint,
+    /// How the vehicle answers a command, and per arc this cycle's path
+    /// its command would put it on.
+    response: SteeringResponse,
+    paths: Vec<DrivenPath>,
+    /// Scratch: the map in the frame where a path settles on its arc, and
+    /// the poses of the path before it does.
+    shifted: Raster,
+    lead_poses: Vec<(f64, ArcPose)>,
+}
+
+/// What one part of a path meets: its distances are along the path.
+#[derive(Debug, Clone, Copy, Default)]
+struct Met {
+    /// The first cell (or unseen ground, when it is an obstacle) the
+    /// footprint meets, and the map patch behind it (vehicle frame).
+    collision: Option<(f64, Option<[f32; 2]>)>,
+    /// The narrowest near-miss band that meets a cell.
+    grazed: Option<usize>,
+    /// The first ground no image has seen (`slow`), and where (vehicle frame).
+    unseen: Option<(f64, [f32; 2])>,
+    /// The highest graded cost crossed, and within the speed horizon.
+    graded: (f32, f32),
+}
+
+/// The nearer of two things met (the first on a tie).
+fn nearer<T>(a: Option<(f64, T)>, b: Option<(f64, T)>) -> Option<(f64, T)> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(if b.0 < a.0 { b } else { a }),
+        (a, b) => a.or(b),
+    }
+}
+
+impl Met {
+    /// What the whole path meets, this part or `other`.
+    fn and(self, other: Met) -> Met {
+        Met {
+            collision: nearer(self.collision, other.collision),
+            grazed: match (self.grazed, other.grazed) {
+                (Some(a), Some(b)) => Some(a.min(b)),
+                (a, b) => a.or(b),
+            },
+            unseen: nearer(self.unseen, other.unseen),
+            graded: (
+                self.graded.0.max(other.graded.0),
+                self.graded.1.max(other.graded.1),
+            ),
+        }
+    }
 }
 
 impl ObstacleAvoidance {
@@ -486,8 +599,24 @@ impl ObstacleAvoidance {
         if reverse.is_some() {
             terrain = terrain.with_reverse(setup.arcs.curvatures(), config.reverse_reach_m);
         }
+        let shifted = Raster::new(ahead.grid.clone(), 1.0, |_| false);
         Self {
             terrain,
+            footprint,
+            standing: Footprint {
+                x_min: footprint.x_min,
+                x_max: setup.vehicle.wheelbase_m.min(body.x_max),
+                half_width: footprint.half_width,
+            },
+            response: SteeringResponse::of(setup.vehicle),
+            paths: setup
+                .arcs
+                .curvatures()
+                .iter()
+                .map(|&k| DrivenPath::arc(k))
+                .collect(),
+            shifted,
+            lead_poses: Vec::new(),
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
             cruise_mps: setup.cruise_mps,
             deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
@@ -502,9 +631,133 @@ impl ObstacleAvoidance {
         }
     }
 
-    /// The first entry of `band` that holds a map cell within `reach`.
-    fn first_hit<'t>(&self, band: &'t [Entry], reach: f32) -> Option<&'t Entry> {
-        first_in(&self.ahead.bitmap, band, reach)
+    /// What arc `arc`'s path meets: before it settles on its arc, its
+    /// footprints sampled every grid cell on the map as it is; after, the
+    /// arc's precomputed sweep over the map placed where the path settles.
+    fn meet(&mut self, arc: usize, ctx: &VoteContext<'_>, horizon: f64) -> Met {
+        let path = self.paths[arc];
+        let reach = self.config.max_distance_m;
+        let lead = path.settled_at().min(reach);
+        let policy = self.config.unseen_ground;
+        let mut met = Met::default();
+        if lead > 0.0 {
+            path.sample_into(lead, self.ahead.grid.resolution, &mut self.lead_poses);
+            met = self.meet_lead(ctx, horizon);
+        }
+        let rest = reach - lead;
+        if rest <= 0.0 {
+            return met;
+        }
+        let settled = path.settled_pose();
+        let template = &self.templates[arc];
+        let widest = self.margins.len() - 1;
+        let raster = if settled.position == Point2::origin() && settled.heading == 0.0 {
+            &self.ahead
+        } else {
+            // The map in the frame where the path settles on its arc.
+            let (sin, cos) = settled.heading.sin_cos();
+            let (px, py) = (settled.position.x, settled.position.y);
+            self.shifted.rasterise_with(ctx, |x, y| {
+                let (dx, dy) = (x - px, y - py);
+                (cos * dx + sin * dy, -sin * dx + cos * dy)
+            });
+            if policy != UnseenGround::Free {
+                let seen = ctx.map.seen_lookup();
+                let standing = self.standing;
+                self.shifted
+                    .unseen_over(&template.bands[widest], rest as f32, |c| {
+                        let q = settled.transform_point(c);
+                        !seen(q.x, q.y) && !standing.contains(q)
+                    });
+            }
+            self.shifted.block(policy);
+            &self.shifted
+        };
+        let rest = rest as f32;
+        let blocked = raster.blocked();
+        let mut part = Met::default();
+        if first_in(blocked, &template.bands[widest], rest).is_some() {
+            part.collision = first_in(blocked, &template.bands[0], rest)
+                .map(|hit| (f64::from(hit.s) + lead, raster.cause(hit, ctx)));
+            part.grazed =
+                (1..=widest).find(|&b| first_in(blocked, &template.bands[b], rest).is_some());
+        }
+        part.graded = raster.graded_crossed(&template.bands[0], rest, (horizon - lead) as f32);
+        if policy == UnseenGround::Slow {
+            part.unseen = first_in(&raster.unseen, &template.bands[0], rest).map(|hit| {
+                let (row, column) = raster.grid.first_cell(hit, &raster.unseen);
+                let q = settled.transform_point(raster.grid.centre(row, column));
+                (f64::from(hit.s) + lead, [q.x as f32, q.y as f32])
+            });
+        }
+        met.and(part)
+    }
+
+    /// What the path meets before it settles on its arc (`lead_poses`):
+    /// the footprint at each pose on the map as it is.
+    fn meet_lead(&self, ctx: &VoteContext<'_>, horizon: f64) -> Met {
+        let raster = &self.ahead;
+        let grid = &raster.grid;
+        let widest = self.margins.len() - 1;
+        let corners = |pose: &ArcPose, band: usize| {
+            self.footprint
+                .widened(self.margins[band])
+                .corners()
+                .map(|c| pose.transform_point(c))
+        };
+        // The first cell of `layer` under the footprint of `band` at `pose`.
+        let under = |pose: &ArcPose, band: usize, layer: &[u64]| {
+            let mut found = None;
+            cells_inside(grid, &corners(pose, band), |row, from, to| {
+                found = first_set(layer, grid, row, from, to).map(|column| (row, column));
+                found.is_some()
+            });
+            found
+        };
+        let poses = &self.lead_poses;
+        let blocked = raster.blocked();
+        let mut met = Met::default();
+        if let Some(from) = poses
+            .iter()
+            .position(|(_, p)| under(p, widest, blocked).is_some())
+        {
+            met.collision = poses[from..].iter().find_map(|(s, p)| {
+                under(p, 0, blocked).map(|(row, column)| (*s, raster.cause_at(row, column, ctx)))
+            });
+            met.grazed = (1..=widest).find(|&b| {
+                poses[from..]
+                    .iter()
+                    .any(|(_, p)| under(p, b, blocked).is_some())
+            });
+        }
+        if self.config.unseen_ground == UnseenGround::Slow {
+            met.unseen = poses.iter().find_map(|(s, p)| {
+                under(p, 0, &raster.unseen).map(|(row, column)| {
+                    let c = grid.centre(row, column);
+                    (*s, [c.x as f32, c.y as f32])
+                })
+            });
+        }
+        if !raster.graded_cells.is_empty() {
+            for (s, p) in poses {
+                cells_inside(grid, &corners(p, 0), |row, from, to| {
+                    for column in from..=to {
+                        if raster.graded[row * grid.words_per_row + column / 64]
+                            & (1 << (column % 64))
+                            != 0
+                        {
+                            let cost = raster.graded_cost[row * grid.columns + column];
+                            met.graded.0 = met.graded.0.max(cost);
+                            if *s <= horizon {
+                                met.graded.1 = met.graded.1.max(cost);
+                            }
+                        }
+                    }
+                    false
+                });
+            }
+        }
+        met
     }
 
     /// Each arc's clearance backing up: cells, unseen ground and ground the
@@ -555,6 +808,72 @@ fn first_in<'t>(bitmap: &[u64], band: &'t [Entry], reach: f32) -> Option<&'t Ent
     band.iter()
         .take_while(|e| e.s <= reach)
         .find(|e| bitmap[e.word as usize] & e.mask != 0)
+}
+
+/// Visits, row by row, the cells of `grid` whose centres lie inside the
+/// convex quadrilateral `corners` (grid frame) as runs `(row, first
+/// column, last column)`; stops when `visit` returns true, and says
+/// whether it did.
+fn cells_inside(
+    grid: &Grid,
+    corners: &[Point2<f64>; 4],
+    mut visit: impl FnMut(usize, usize, usize) -> bool,
+) -> bool {
+    let r = grid.resolution;
+    let (lo_x, hi_x) = corners
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+            (lo.min(c.x), hi.max(c.x))
+        });
+    // Rows whose centre x lies within the corners' span.
+    let first = ((lo_x - grid.x0) / r - 0.5).ceil().max(0.0);
+    let last = ((hi_x - grid.x0) / r - 0.5).floor();
+    if first.is_nan() || last.is_nan() || first > last || first >= grid.rows as f64 {
+        return false;
+    }
+    let last = (last as usize).min(grid.rows - 1);
+    for row in first as usize..=last {
+        let x = grid.x0 + (row as f64 + 0.5) * r;
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (i, a) in corners.iter().enumerate() {
+            let b = corners[(i + 1) % 4];
+            if (a.x - x) * (b.x - x) > 0.0 {
+                continue;
+            }
+            let ys = if a.x == b.x {
+                [a.y, b.y]
+            } else {
+                let y = a.y + (x - a.x) * (b.y - a.y) / (b.x - a.x);
+                [y, y]
+            };
+            lo = lo.min(ys[0]).min(ys[1]);
+            hi = hi.max(ys[0]).max(ys[1]);
+        }
+        let from = ((lo - grid.y0) / r - 0.5).ceil().max(0.0);
+        let to = ((hi - grid.y0) / r - 0.5).floor();
+        if from.is_nan() || to.is_nan() || from > to || from >= grid.columns as f64 {
+            continue;
+        }
+        if visit(row, from as usize, (to as usize).min(grid.columns - 1)) {
+            return true;
+        }
+    }
+    false
+}
+
+/// The first column in `from..=to` of `row` set in `layer`.
+fn first_set(layer: &[u64], grid: &Grid, row: usize, from: usize, to: usize) -> Option<usize> {
+    let base = row * grid.words_per_row;
+    for word in from / 64..=to / 64 {
+        let low = if word == from / 64 { from % 64 } else { 0 };
+        let high = if word == to / 64 { to % 64 } else { 63 };
+        let mask = (u64::MAX << low) & (u64::MAX >> (63 - high));
+        let hits = layer[base + word] & mask;
+        if hits != 0 {
+            return Some(word * 64 + hits.trailing_zeros() as usize);
+        }
+    }
+    None
 }
 
 fn build_template(
@@ -637,48 +956,40 @@ impl Behaviour for ObstacleAvoidance {
         let policy = self.config.unseen_ground;
         if policy != UnseenGround::Free {
             self.ahead.rasterise_unseen(ctx);
-            if policy == UnseenGround::Obstacle {
-                let ahead = &mut self.ahead;
-                for (cell, unseen) in ahead.bitmap.iter_mut().zip(&ahead.unseen) {
-                    *cell |= unseen;
-                }
-            }
         }
+        self.ahead.block(policy);
         let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
-        let reach = max as f32;
-        let widest = self.margins.len() - 1;
         // The ground ahead at the vehicle's scale: the speed horizon is
         // where the vehicle gets to while it reacts and brakes from cruise.
         let cruise = self.cruise_mps;
         let horizon = cruise * self.config.reaction_s
             + cruise * cruise / (2.0 * self.deceleration)
             + self.terrain.config().step_m;
-        self.terrain.judge_arcs(
+        // The path each arc's command would put the vehicle on.
+        let steering = ctx.steering();
+        let arcs = self.templates.len().min(votes.len()).min(ctx.arcs.len());
+        for (path, &k) in self.paths.iter_mut().zip(ctx.arcs.curvatures()) {
+            *path = DrivenPath::new(&steering, &self.response, k);
+        }
+        self.terrain.judge_paths(
             &ctx.map.elevation,
             &ctx.map.world_from_vehicle,
             horizon,
+            &self.paths[..arcs],
             &mut self.verdicts,
         );
         let terrain_penalty = self.config.terrain.penalty;
-        for arc in 0..self.templates.len().min(votes.len()) {
-            let template = &self.templates[arc];
+        for arc in 0..arcs {
+            let met = self.meet(arc, ctx, horizon);
             let verdict = self.verdicts[arc];
             self.free[arc] = f64::INFINITY;
-            // The bands are nested: when the widest touches no cell, no
-            // band does (most arcs are decided by this one pass).
-            let grazed = self.first_hit(&template.bands[widest], reach).is_some();
+            self.unseen_at[arc] = met.unseen;
             // The first collision with a cell, or with ground the vehicle
             // cannot stand on (its attitude or chassis), whichever is nearer.
-            let cell = grazed
-                .then(|| self.first_hit(&template.bands[0], reach))
-                .flatten()
-                .map(|hit| (f64::from(hit.s), hit));
-            let ground = verdict.forbidden;
-            let collision = match (cell, ground) {
-                (Some((d, hit)), Some((g, _))) if d <= g => Some((d, self.ahead.cause(hit, ctx))),
+            let collision = match (met.collision, verdict.forbidden) {
+                (Some((d, cause)), Some((g, _))) if d <= g => Some((d, cause)),
                 (_, Some((g, at))) => Some((g, Some(at))),
-                (Some((d, hit)), None) => Some((d, self.ahead.cause(hit, ctx))),
-                (None, None) => None,
+                (cell, None) => cell,
             };
             if let Some((distance, cause)) = collision {
                 self.free[arc] = distance;
@@ -690,13 +1001,8 @@ impl Behaviour for ObstacleAvoidance {
                 continue;
             }
             // Clear of collisions: the narrowest band that grazes a cell,
-            // and how hard the ground along the arc is.
-            let narrowest = grazed
-                .then(|| {
-                    (1..=widest).find(|&b| self.first_hit(&template.bands[b], reach).is_some())
-                })
-                .flatten();
-            let penalty = match narrowest {
+            // and how hard the ground along the path is.
+            let penalty = match met.grazed {
                 Some(band) => {
                     let clearance = self.margins[band - 1];
                     self.config.near_miss_penalty * (1.0 - clearance / self.config.near_miss_m)
@@ -705,9 +1011,7 @@ impl Behaviour for ObstacleAvoidance {
             };
             // Graded ground the footprint crosses (perception's graded
             // cells, e.g. 000's D̃) counts like the terrain's severity.
-            let (crossed, near) =
-                self.ahead
-                    .graded_crossed(&template.bands[0], reach, horizon as f32);
+            let (crossed, near) = met.graded;
             self.verdicts[arc].near_severity =
                 self.verdicts[arc].near_severity.max(f64::from(near));
             let severity = verdict.severity.max(f64::from(crossed));
@@ -715,12 +1019,8 @@ impl Behaviour for ObstacleAvoidance {
         }
         // How far each arc is clear at a crawl: to the first collision or
         // unseen ground, however close (a turning manoeuvre's leg).
-        for arc in 0..self.templates.len().min(votes.len()) {
-            self.unseen_at[arc] = (policy == UnseenGround::Slow)
-                .then(|| first_in(&self.ahead.unseen, &self.templates[arc].bands[0], reach))
-                .flatten()
-                .copied();
-            let unseen = self.unseen_at[arc].map_or(f64::INFINITY, |hit| f64::from(hit.s));
+        for arc in 0..arcs {
+            let unseen = self.unseen_at[arc].map_or(f64::INFINITY, |(s, _)| s);
             votes.set_forward_clearance(arc, self.free[arc].min(unseen).min(max));
         }
         if !self.config.speed_vote {
@@ -735,23 +1035,19 @@ impl Behaviour for ObstacleAvoidance {
         // can from its speed now.
         let speed = ctx.pose.velocity.norm();
         let braking = speed * t + speed * speed / (2.0 * self.max_deceleration);
-        for arc in 0..self.templates.len().min(votes.len()) {
+        for arc in 0..arcs {
             if votes.is_vetoed(arc) {
                 continue;
             }
             let mut room = self.free[arc].min(max) - self.config.stop_margin_m;
-            if let Some(unseen) = &self.unseen_at[arc] {
+            if let Some((distance, at)) = self.unseen_at[arc] {
                 // Stop `stop_margin_m` before the first unseen ground the
                 // footprint meets (its patch may begin past the edge);
                 // an arc the vehicle can no longer stop on before it, at
                 // the speed it has, is forbidden: its speed limit would
                 // come too late.
-                let distance = f64::from(unseen.s);
                 if distance < braking {
-                    let grid = &self.ahead.grid;
-                    let (row, column) = grid.first_cell(unseen, &self.ahead.unseen);
-                    let p = grid.centre(row, column);
-                    votes.veto(arc, Some([p.x as f32, p.y as f32]));
+                    votes.veto(arc, Some(at));
                     continue;
                 }
                 room = room.min(distance - self.config.stop_margin_m);

@@ -48,7 +48,7 @@
 use arcnav_localmap::ElevationGrid;
 use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::yaw_of;
-use arcnav_vehicle::{Arc, Isometry, VehicleConfig};
+use arcnav_vehicle::{Arc, DrivenPath, Isometry, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
 /// Lives in `[behaviours.obstacle_avoidance.terrain]`.
@@ -307,6 +307,11 @@ pub struct TerrainCheck {
     limits: TanLimits,
     /// The chassis is checked every this many poses.
     belly_stride: usize,
+    /// How far arcs are judged, m.
+    reach_m: f64,
+    /// Scratch: per path, the poses [`TerrainCheck::judge_paths`] judges.
+    driven: Vec<Vec<(f64, [f64; 4])>>,
+    sampled: Vec<(f64, arcnav_vehicle::ArcPose)>,
 }
 
 impl TerrainCheck {
@@ -368,6 +373,9 @@ impl TerrainCheck {
             // M998): poses at most that far apart let every ground point
             // pass under the span, so within half a row spacing of a row.
             belly_stride: ((l - 1.2) / config.step_m).floor().max(1.0) as usize,
+            reach_m,
+            driven: Vec::new(),
+            sampled: Vec::new(),
         }
     }
 
@@ -603,6 +611,31 @@ impl TerrainCheck {
         out: &mut [ArcTerrain],
     ) {
         self.judge_poses(&self.poses, grid, world_from_vehicle, horizon_m, true, out);
+    }
+
+    /// [`TerrainCheck::judge_arcs`] along the paths the vehicle drives
+    /// when commanded onto each arc ([`DrivenPath`]: latency and steering
+    /// rate first), one verdict per path.
+    pub fn judge_paths(
+        &mut self,
+        grid: &ElevationGrid,
+        world_from_vehicle: &Isometry,
+        horizon_m: f64,
+        paths: &[DrivenPath],
+        out: &mut [ArcTerrain],
+    ) {
+        self.driven.resize_with(paths.len(), Vec::new);
+        for (path, poses) in paths.iter().zip(&mut self.driven) {
+            path.sample_into(self.reach_m, self.config.step_m, &mut self.sampled);
+            poses.clear();
+            poses.extend(self.sampled.iter().map(|(s, p)| {
+                let (sin, cos) = p.heading.sin_cos();
+                (*s, [p.position.x, p.position.y, cos, sin])
+            }));
+        }
+        let driven = std::mem::take(&mut self.driven);
+        self.judge_poses(&driven, grid, world_from_vehicle, horizon_m, true, out);
+        self.driven = driven;
     }
 
     /// [`TerrainCheck::judge_arcs`] backing up along every arc (none unless

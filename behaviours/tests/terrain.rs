@@ -273,3 +273,40 @@ fn backing_onto_a_bank_steeper_than_the_attitude_limits_is_not_clear() {
     // Forwards, the same stance forbids every arc outright.
     assert!((0..arcs.len()).all(|arc| side.is_vetoed(arc)));
 }
+
+/// 020 item 2: the ground is judged along the path the vehicle drives
+/// when commanded onto an arc, not along the arc.
+#[test]
+fn at_speed_the_ground_is_judged_where_the_vehicle_will_drive() {
+    use arcnav_vehicle::{Arc, DrivenPath, Steering, SteeringResponse};
+    let vehicle = VehicleConfig::default();
+    let k = 0.125;
+    let steering = Steering {
+        speed_mps: 8.0,
+        ..Default::default()
+    };
+    let path = DrivenPath::new(&steering, &SteeringResponse::of(&vehicle), k);
+    // A 1 m block 2 m across under the path's rear axle 11 m on, which
+    // the arc's body and its margin never touch.
+    let on_path = path.pose_at(11.0).position;
+    let swept = Arc::new(k).swept(vehicle.footprint().widened(1.5), 18.0);
+    assert!(!swept.covers(on_path), "{on_path}");
+    let block = grid(|x, y| {
+        if (x - on_path.x).abs() < 1.0 && (y - on_path.y).abs() < 1.0 {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let mut check = TerrainCheck::new(&TerrainConfig::default(), &vehicle, &[k], 18.0);
+    let pose = planar_isometry(0.0, 0.0, 0.0);
+    let mut verdict = [arcnav_behaviours::ArcTerrain::default()];
+    check.judge_arcs(&block, &pose, 6.0, &mut verdict);
+    assert_eq!(verdict[0].forbidden, None, "the arc passes inside it");
+    check.judge_paths(&block, &pose, 6.0, &[path], &mut verdict);
+    let (s, _) = verdict[0].forbidden.expect("the path climbs it");
+    assert!((6.0..11.5).contains(&s), "forbidden at {s} m");
+    // Taken at once, the same arc is the arc.
+    check.judge_paths(&block, &pose, 6.0, &[DrivenPath::arc(k)], &mut verdict);
+    assert_eq!(verdict[0].forbidden, None);
+}

@@ -12,7 +12,10 @@ use arcnav_behaviours::{
 use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot};
 use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
 use arcnav_vehicle::frames::planar_isometry;
-use arcnav_vehicle::{ArcSet, ArcSetConfig, Pose, VehicleConfig};
+use arcnav_vehicle::{
+    Arc, ArcSet, ArcSetConfig, DrivenPath, Pose, Steering, SteeringCommand, SteeringResponse,
+    VehicleConfig,
+};
 use nalgebra::Point2;
 
 static LOCALMAP: std::sync::LazyLock<arcnav_localmap::LocalMapConfig> =
@@ -206,6 +209,83 @@ fn unseen_ground_slows_forbids_or_is_ignored_as_configured() {
     assert_eq!(free, seen);
 }
 
+/// Obstacle avoidance's vote for `arc` with the vehicle at `speed` m/s
+/// driving curvature `curvature`, which its last command also asked for.
+fn arc_vote_steering(map: &MapSnapshot, arc: usize, speed: f64, curvature: f64) -> (f32, bool) {
+    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let mut behaviour =
+        ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, &vehicle));
+    let mut pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    pose.velocity.x = speed;
+    pose.yaw_rate = speed * curvature;
+    let last = SteeringCommand {
+        utime: 0,
+        curvature,
+        speed_mps: speed,
+        arc_index: Some(arcs.nearest_index(curvature)),
+        vote: 1.0,
+    };
+    let mission = Mission::default();
+    let mut ctx = VoteContext::new(0, &pose, map, &mission, &arcs);
+    ctx.last_command = Some(&last);
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    (votes.values()[arc], votes.is_vetoed(arc))
+}
+
+/// A point the arc's widest band (body, half a patch and the near-miss
+/// margin) never touches, over which the body drives on the path the
+/// vehicle takes when commanded onto the arc at `speed` from `curvature`:
+/// the first such rear-axle position from `from_m` along the path.
+fn driven_over_not_swept(k: f64, speed: f64, curvature: f64, from_m: f64) -> Point2<f64> {
+    let vehicle = VehicleConfig::default();
+    let body = vehicle.footprint();
+    let steering = Steering {
+        speed_mps: speed,
+        curvature,
+        commanded_curvature: curvature,
+    };
+    let path = DrivenPath::new(&steering, &SteeringResponse::of(&vehicle), k);
+    let widest = Arc::new(k).swept(body.widened(0.2 + 1.0 + 0.3), 18.0);
+    path.sample(16.0, 0.1)
+        .into_iter()
+        .filter(|(s, _)| *s >= from_m)
+        .map(|(_, pose)| pose.position)
+        .find(|&p| !widest.covers(p))
+        .expect("the path leaves the arc's sweep")
+}
+
+#[test]
+fn at_speed_an_arc_is_judged_along_the_path_the_vehicle_drives_onto_it() {
+    let arcs = arcs();
+    // Straight at 8 m/s, the hardest left: 2 m of latency, then 6.7 m
+    // to steer full left: the turn comes late, wide of the arc.
+    let left = arcs.len() - 1;
+    let k = arcs.curvature(left).unwrap();
+    let p = driven_over_not_swept(k, 8.0, 0.0, 8.0);
+    let map = snapshot(&[(p.x, p.y)]);
+    let (still, vetoed) = arc_vote_steering(&map, left, 0.0, 0.0);
+    assert!(
+        still > 0.99 && !vetoed,
+        "standing, the arc is clear: {still}"
+    );
+    let (moving, vetoed) = arc_vote_steering(&map, left, 8.0, 0.0);
+    assert!(
+        vetoed || moving < 0.0,
+        "at 8 m/s the path meets the cell at {p}: {moving}"
+    );
+    // Turning hard right at 6 m/s, straight ahead: the vehicle first goes
+    // on turning right for the latency, then unwinds over 5 m.
+    let straight = arcs.straight_index();
+    let p = driven_over_not_swept(0.0, 6.0, -0.125, 4.0);
+    assert!(p.y < -2.0, "{p}");
+    let map = snapshot(&[(p.x, p.y)]);
+    let (still, _) = arc_vote_steering(&map, straight, 0.0, -0.125);
+    assert!(still > 0.99, "standing, straight is clear: {still}");
+    let (moving, vetoed) = arc_vote_steering(&map, straight, 6.0, -0.125);
+    assert!(vetoed || moving < 0.0, "turning right at 6 m/s: {moving}");
+}
+
 #[test]
 fn an_arc_the_vehicle_can_no_longer_stop_on_before_unseen_ground_is_forbidden() {
     // 4 m of seen ground ahead of the bumper. At 5 m/s the vehicle needs
@@ -340,10 +420,15 @@ fn being_boxed_in_slows_the_speed_vote() {
 }
 
 fn goal_votes(goal: (f64, f64)) -> Votes {
+    goal_votes_moving(goal, GoalSeeking::new(GoalSeekingConfig::default()), 0.0)
+}
+
+/// ... by `behaviour`, the vehicle driving straight at `speed` m/s.
+fn goal_votes_moving(goal: (f64, f64), mut behaviour: GoalSeeking, speed: f64) -> Votes {
     let arcs = arcs();
-    let mut behaviour = GoalSeeking::new(GoalSeekingConfig::default());
     let map = MapSnapshot::default();
-    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mut pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    pose.velocity.x = speed;
     let mission = Mission {
         version: 1,
         waypoints: vec![Waypoint {
@@ -356,6 +441,35 @@ fn goal_votes(goal: (f64, f64)) -> Votes {
     let mut votes = Votes::new(arcs.len());
     behaviour.vote(&ctx, &mut votes);
     votes
+}
+
+#[test]
+fn at_speed_goal_seeking_asks_for_more_turn_to_head_for_the_goal_in_time() {
+    // The goal 45° to the left, 14 m off. Standing, the arc that heads
+    // for it after the lookahead; at 8 m/s the turn comes late (2 m of
+    // latency, then the steering's rate), so it takes a harder one.
+    let vehicle = VehicleConfig::default();
+    let goal = (10.0, 10.0);
+    let best = |votes: &Votes| best_arc(votes);
+    let still = best(&goal_votes_moving(
+        goal,
+        GoalSeeking::new(GoalSeekingConfig::default()).for_vehicle(&vehicle),
+        0.0,
+    ));
+    let moving = best(&goal_votes_moving(
+        goal,
+        GoalSeeking::new(GoalSeekingConfig::default()).for_vehicle(&vehicle),
+        8.0,
+    ));
+    assert!(still > 19 && still < 38, "standing: arc {still}");
+    assert!(moving > still, "at 8 m/s arc {moving}, standing {still}");
+    // A vehicle that takes arcs at once asks for the same at any speed.
+    let ideal = best(&goal_votes_moving(
+        goal,
+        GoalSeeking::new(GoalSeekingConfig::default()),
+        8.0,
+    ));
+    assert_eq!(ideal, still);
 }
 
 #[test]

@@ -77,13 +77,26 @@ impl SteeringResponse {
 /// the moment the command is chosen (rear axle at the origin, heading +x):
 /// a curvature profile, piecewise linear in distance, that ends on the
 /// arc's curvature and stays there.
-#[derive(Debug, Clone, PartialEq)]
+/// Fixed-size, so that behaviours build paths every cycle without
+/// allocating.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DrivenPath {
-    /// (distance, curvature) where the profile bends; the last holds on.
-    knots: Vec<(f64, f64)>,
+    /// (distance, curvature) where the profile bends, `count` of them;
+    /// the last holds on.
+    knots: [(f64, f64); MAX_KNOTS],
     /// The pose at each knot.
-    poses: Vec<ArcPose>,
+    poses: [ArcPose; MAX_KNOTS],
+    count: usize,
 }
+
+/// Knots of a profile: the start, the command in flight reached, the
+/// latency's end, the arc reached.
+const MAX_KNOTS: usize = 4;
+
+const ORIGIN: ArcPose = ArcPose {
+    position: nalgebra::Point2::new(0.0, 0.0),
+    heading: 0.0,
+};
 
 impl DrivenPath {
     /// The path driven from `steering` after commanding curvature `target`.
@@ -103,7 +116,8 @@ impl DrivenPath {
             f64::INFINITY
         };
         let target = clamp(target);
-        let mut knots = vec![(0.0, clamp(steering.curvature))];
+        let mut knots = [(0.0, clamp(steering.curvature)); MAX_KNOTS];
+        let mut count = 1;
         // Distance to move the curvature from `from` to `to`.
         let ramp = |from: f64, to: f64| {
             if per_m.is_infinite() {
@@ -112,11 +126,13 @@ impl DrivenPath {
                 (to - from).abs() / per_m
             }
         };
-        let push = |knots: &mut Vec<(f64, f64)>, s: f64, k: f64| {
-            if s > knots.last().map_or(0.0, |&(last, _)| last) {
-                knots.push((s, k));
-            } else if let Some(last) = knots.last_mut() {
-                last.1 = k;
+        // A knot further on, or a new curvature at the same distance.
+        let push = |knots: &mut [(f64, f64); MAX_KNOTS], count: &mut usize, s: f64, k: f64| {
+            if s > knots[*count - 1].0 && *count < MAX_KNOTS {
+                knots[*count] = (s, k);
+                *count += 1;
+            } else {
+                knots[*count - 1].1 = k;
             }
         };
         // The latency: steering on towards the command in flight.
@@ -125,28 +141,27 @@ impl DrivenPath {
         let in_flight = clamp(steering.commanded_curvature);
         let reach = ramp(k0, in_flight);
         let k_effect = if reach <= latency_m {
-            push(&mut knots, reach, in_flight);
+            push(&mut knots, &mut count, reach, in_flight);
             in_flight
         } else {
             k0 + (in_flight - k0).signum() * latency_m * per_m
         };
-        push(&mut knots, latency_m, k_effect);
+        push(&mut knots, &mut count, latency_m, k_effect);
         // Then towards the new command.
-        let start = knots.last().map_or(0.0, |&(s, _)| s);
-        push(&mut knots, start + ramp(k_effect, target), target);
+        let start = knots[count - 1].0;
+        push(
+            &mut knots,
+            &mut count,
+            start + ramp(k_effect, target),
+            target,
+        );
         let mut path = Self {
-            poses: Vec::with_capacity(knots.len()),
             knots,
+            poses: [ORIGIN; MAX_KNOTS],
+            count,
         };
-        let mut pose = ArcPose {
-            position: nalgebra::Point2::origin(),
-            heading: 0.0,
-        };
-        for i in 0..path.knots.len() {
-            path.poses.push(pose);
-            if let Some(&(s1, _)) = path.knots.get(i + 1) {
-                pose = path.advance(i, pose, s1 - path.knots[i].0);
-            }
+        for i in 1..count {
+            path.poses[i] = path.advance(i - 1, path.poses[i - 1], knots[i].0 - knots[i - 1].0);
         }
         path
     }
@@ -167,20 +182,17 @@ impl DrivenPath {
     /// Where the curvature reaches the arc's: from here on the path is
     /// the arc, m.
     pub fn settled_at(&self) -> f64 {
-        self.knots.last().map_or(0.0, |&(s, _)| s)
+        self.knots[self.count - 1].0
     }
 
     /// The pose at [`DrivenPath::settled_at`].
     pub fn settled_pose(&self) -> ArcPose {
-        self.poses.last().copied().unwrap_or(ArcPose {
-            position: nalgebra::Point2::origin(),
-            heading: 0.0,
-        })
+        self.poses[self.count - 1]
     }
 
     /// The arc's curvature, which the path ends on, 1/m.
     pub fn curvature(&self) -> f64 {
-        self.knots.last().map_or(0.0, |&(_, k)| k)
+        self.knots[self.count - 1].1
     }
 
     /// Curvature at `s`, 1/m.
@@ -199,12 +211,20 @@ impl DrivenPath {
     /// Poses every `step_m` from 0 to `length_m` inclusive, with their
     /// distances (as [`Arc::sample`]), integrated once along the way.
     pub fn sample(&self, length_m: f64, step_m: f64) -> Vec<(f64, ArcPose)> {
+        let mut out = Vec::new();
+        self.sample_into(length_m, step_m, &mut out);
+        out
+    }
+
+    /// [`DrivenPath::sample`] into `out` (cleared first), allocating only
+    /// when it must grow.
+    pub fn sample_into(&self, length_m: f64, step_m: f64, out: &mut Vec<(f64, ArcPose)>) {
         let steps = if step_m > 0.0 && length_m > 0.0 {
             (length_m / step_m).ceil() as usize
         } else {
             0
         };
-        let mut out = Vec::with_capacity(steps + 1);
+        out.clear();
         let (mut at, mut pose) = (0.0, self.poses[0]);
         for i in 0..=steps {
             let s = (i as f64 * step_m).min(length_m.max(0.0));
@@ -212,7 +232,7 @@ impl DrivenPath {
             while at < s {
                 let segment = self.segment(at);
                 let end = self
-                    .knots
+                    .knots()
                     .get(segment + 1)
                     .map_or(s, |&(next, _)| next.min(s));
                 let end = if end > at { end } else { s };
@@ -221,12 +241,16 @@ impl DrivenPath {
             }
             out.push((s, pose));
         }
-        out
+    }
+
+    /// The profile's knots in use.
+    fn knots(&self) -> &[(f64, f64)] {
+        &self.knots[..self.count]
     }
 
     /// The knot segment holding distance `s`.
     fn segment(&self, s: f64) -> usize {
-        self.knots
+        self.knots()
             .partition_point(|&(start, _)| start <= s)
             .saturating_sub(1)
     }
@@ -234,7 +258,7 @@ impl DrivenPath {
     /// Curvature `d` metres into segment `i`.
     fn profile(&self, i: usize, d: f64) -> f64 {
         let (s0, k0) = self.knots[i];
-        match self.knots.get(i + 1) {
+        match self.knots().get(i + 1) {
             Some(&(s1, k1)) if s1 > s0 => k0 + (k1 - k0) * (d / (s1 - s0)).clamp(0.0, 1.0),
             _ => k0,
         }
@@ -248,10 +272,12 @@ impl DrivenPath {
 
     /// The pose at `to` from the pose `from` at `at`, both in segment `i`.
     fn advance_between(&self, i: usize, from: ArcPose, at: f64, to: f64) -> ArcPose {
-        let k0 = self.knots[i].1;
-        let ramped = self.knots.get(i + 1).is_some_and(|&(_, k1)| k1 != k0);
+        let (s0, k0) = self.knots[i];
+        let ramped = self.knots().get(i + 1).is_some_and(|&(_, k1)| k1 != k0);
         if !ramped {
-            return compose(from, Arc::new(k0).pose_at(to - at));
+            // On an arc: from the knot, in closed form (an arc taken at
+            // once samples exactly as `Arc::sample`).
+            return compose(self.poses[i], Arc::new(k0).pose_at(to - s0));
         }
         let steps = ((to - at) / RAMP_STEP_M).ceil().max(1.0) as usize;
         let h = (to - at) / steps as f64;
@@ -324,6 +350,18 @@ mod tests {
         let slow = DrivenPath::new(&straight(2.0), &response, 0.125);
         assert!(slow.settled_at() < 2.5);
         assert!(slow.pose_at(10.0).position.y > path.pose_at(10.0).position.y + 1.0);
+    }
+
+    #[test]
+    fn an_arc_taken_at_once_samples_as_the_arc() {
+        let arc = Arc::new(-0.07);
+        let path = DrivenPath::arc(-0.07);
+        let samples = path.sample(18.0, 0.5);
+        let expected: Vec<_> = arc.sample(18.0, 0.5).collect();
+        assert_eq!(samples.len(), expected.len());
+        for ((_, a), b) in samples.iter().zip(&expected) {
+            assert_eq!(a, b);
+        }
     }
 
     #[test]

@@ -29,6 +29,7 @@ pub mod dstar;
 
 use arcnav_arbiter::Votes;
 use arcnav_localmap::{LocalMapConfig, MapSnapshot};
+use arcnav_vehicle::SteeringResponse;
 use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::yaw_of;
 use serde::{Deserialize, Serialize};
@@ -130,6 +131,9 @@ pub struct Route {
     /// wherever the memory reaches, seen or not.
     statics: Option<std::sync::Arc<arcnav_localmap::StaticMap>>,
     stats: RouteStats,
+    /// How the vehicle answers a command: arcs are judged along the paths
+    /// it drives.
+    response: SteeringResponse,
 }
 
 impl Route {
@@ -153,6 +157,7 @@ impl Route {
             has_path: false,
             statics: setup.statics.cloned(),
             stats: RouteStats::default(),
+            response: SteeringResponse::of(setup.vehicle),
             config,
         }
     }
@@ -489,7 +494,7 @@ impl Behaviour for Route {
                 _ => self.goal_cell(here, target),
             },
         ) else {
-            vote_towards(ctx, target, self.config.lookahead_m, votes);
+            vote_towards(ctx, &self.response, target, self.config.lookahead_m, votes);
             return;
         };
         if moved || self.goal != Some((index, goal)) {
@@ -509,7 +514,7 @@ impl Behaviour for Route {
                 );
             }
             self.has_path = false;
-            vote_towards(ctx, target, self.config.lookahead_m, votes);
+            vote_towards(ctx, &self.response, target, self.config.lookahead_m, votes);
             return;
         }
         self.has_path = true;
@@ -531,7 +536,7 @@ impl Behaviour for Route {
                 .or_else(|| self.path.last().map(|&c| self.centre(c)))
                 .unwrap_or(target)
         };
-        vote_towards(ctx, carrot, self.config.lookahead_m, votes);
+        vote_towards(ctx, &self.response, carrot, self.config.lookahead_m, votes);
     }
 
     fn reset(&mut self) {
