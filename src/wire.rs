@@ -711,6 +711,7 @@ mod tests {
         let other = ArcSet::new(&ArcSetConfig {
             count: 39,
             min_radius_m: 10.0,
+            ..Default::default()
         })
         .unwrap();
         let err = votes_from_wire(&votes_to_wire(&bv, &other), &arcs).unwrap_err();

@@ -2,7 +2,9 @@
 
 use arcnav_arbiter::Votes;
 use arcnav_localmap::{LocalMapConfig, MapSnapshot};
-use arcnav_vehicle::{ArcSet, Pose, Steering, SteeringCommand, Utime, VehicleConfig};
+use arcnav_vehicle::{
+    ArcSet, Pose, Steering, SteeringCommand, SteeringResponse, Utime, VehicleConfig,
+};
 
 /// A point to reach, world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,6 +99,20 @@ pub struct Setup<'a> {
     /// (`arbiter.cruise_speed_mps`): speed limits given as a fraction of it
     /// (terrain speed) use it.
     pub cruise_mps: f64,
+}
+
+impl Setup<'_> {
+    /// How the vehicle answers a command, as behaviours judge arcs: its
+    /// latency and steering rate when `[arcs] driven_paths` is on (each
+    /// arc judged along the [`DrivenPath`](arcnav_vehicle::DrivenPath) the
+    /// vehicle drives onto it), taking each arc at once otherwise.
+    pub fn steering_response(&self) -> SteeringResponse {
+        if self.arcs.driven_paths() {
+            SteeringResponse::of(self.vehicle)
+        } else {
+            SteeringResponse::immediate()
+        }
+    }
 }
 
 /// How far a mission has come.

@@ -13,7 +13,7 @@
 use arcnav_arbiter::Votes;
 use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::wrap_angle;
-use arcnav_vehicle::{DrivenPath, SteeringResponse, VehicleConfig};
+use arcnav_vehicle::{DrivenPath, SteeringResponse};
 use serde::{Deserialize, Serialize};
 
 use crate::behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
@@ -153,8 +153,8 @@ pub struct GoalSeeking {
 
 impl GoalSeeking {
     /// Goal seeking for a vehicle that takes each arc at once (arcs
-    /// judged as arcs); [`GoalSeeking::for_vehicle`] judges the paths a
-    /// real vehicle drives, as the registry builds it.
+    /// judged as arcs); [`GoalSeeking::with_response`] judges the paths a
+    /// real vehicle drives (the registry's, with `[arcs] driven_paths`).
     pub fn new(config: GoalSeekingConfig) -> Self {
         Self {
             tracker: WaypointTracker::new(config.arrival_radius_m, config.pass_radius_factor),
@@ -163,10 +163,11 @@ impl GoalSeeking {
         }
     }
 
-    /// Judges each arc along the path `vehicle` drives when commanded onto it.
+    /// Judges each arc along the path the vehicle drives when commanded
+    /// onto it, answering commands as `response` says.
     #[must_use]
-    pub fn for_vehicle(mut self, vehicle: &VehicleConfig) -> Self {
-        self.response = SteeringResponse::of(vehicle);
+    pub fn with_response(mut self, response: SteeringResponse) -> Self {
+        self.response = response;
         self
     }
 }
@@ -212,6 +213,6 @@ impl Plugin for GoalSeeking {
     }
 
     fn build(config: Self::Config, setup: &Setup<'_>) -> Self {
-        Self::new(config).for_vehicle(setup.vehicle)
+        Self::new(config).with_response(setup.steering_response())
     }
 }

@@ -144,6 +144,9 @@ struct Entry {
 #[derive(Debug, Clone)]
 struct Template {
     bands: Vec<Vec<Entry>>,
+    /// The body's band (band 0) cell by cell: the distance at which the
+    /// footprint first touches the cell, and its centre, by distance.
+    body: Vec<(f32, [f32; 2])>,
 }
 
 /// The vehicle-frame grid the map is rasterised into.
@@ -152,6 +155,8 @@ struct Grid {
     x0: f64,
     y0: f64,
     resolution: f64,
+    /// 1 / resolution.
+    per_m: f64,
     rows: usize,
     columns: usize,
     words_per_row: usize,
@@ -159,10 +164,7 @@ struct Grid {
 
 impl Grid {
     fn cell(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let (fx, fy) = (
-            (x - self.x0) / self.resolution,
-            (y - self.y0) / self.resolution,
-        );
+        let (fx, fy) = ((x - self.x0) * self.per_m, (y - self.y0) * self.per_m);
         (fx >= 0.0 && fy >= 0.0 && fx < self.rows as f64 && fy < self.columns as f64)
             .then_some((fx as usize, fy as usize))
     }
@@ -244,12 +246,17 @@ impl Raster {
     /// Rasterises the map's cells (clearing the last cycle's).
     fn rasterise(&mut self, ctx: &VoteContext<'_>) {
         let mirror = self.mirror;
-        self.rasterise_with(ctx, |x, y| (mirror * x, y));
+        self.rasterise_with(ctx, 0..ctx.map.patches.len(), |x, y| (mirror * x, y));
     }
 
-    /// Rasterises the map's cells placed by `to_grid` (vehicle frame to
-    /// this raster's frame), clearing the last ones.
-    fn rasterise_with(&mut self, ctx: &VoteContext<'_>, to_grid: impl Fn(f64, f64) -> (f64, f64)) {
+    /// Rasterises the map's patches of index `patches` placed by `to_grid`
+    /// (vehicle frame to this raster's frame), clearing the last ones.
+    fn rasterise_with(
+        &mut self,
+        ctx: &VoteContext<'_>,
+        patches: impl Iterator<Item = usize>,
+        to_grid: impl Fn(f64, f64) -> (f64, f64),
+    ) {
         for &cell in &self.set_cells {
             let (row, column) = (
                 cell as usize / self.grid.columns,
@@ -268,7 +275,10 @@ impl Raster {
             self.graded_cost[cell as usize] = 0.0;
         }
         self.graded_cells.clear();
-        for (index, patch) in ctx.map.patches.iter().enumerate() {
+        for index in patches {
+            let Some(patch) = ctx.map.patches.get(index) else {
+                continue;
+            };
             let (x, y) = to_grid(f64::from(patch.x), f64::from(patch.y));
             let Some((row, column)) = self.grid.cell(x, y) else {
                 continue;
@@ -323,6 +333,13 @@ impl Raster {
         let patch = self.causes.get(row * self.grid.columns + column)?;
         let patch = ctx.map.patches.get(*patch as usize)?;
         Some([patch.x, patch.y])
+    }
+
+    /// Whether the ground at `p` (this raster's frame) is unseen, if `p`
+    /// lies on the grid.
+    fn unseen_at(&self, p: Point2<f64>) -> Option<bool> {
+        let (row, column) = self.grid.cell(p.x, p.y)?;
+        Some(self.unseen[row * self.grid.words_per_row + column / 64] & (1 << (column % 64)) != 0)
     }
 
     /// What collisions are tested against: the map's cells, and unseen
@@ -426,6 +443,7 @@ fn grid_around(arcs: &arcnav_vehicle::ArcSet, footprint: Footprint, reach: f64, 
         x0: lo.x,
         y0: lo.y,
         resolution: r,
+        per_m: 1.0 / r,
         rows,
         columns,
         words_per_row: columns.div_ceil(64),
@@ -467,6 +485,19 @@ pub struct ObstacleAvoidance {
     /// the poses of the path before it does.
     shifted: Raster,
     lead_poses: Vec<(f64, ArcPose)>,
+    /// Scratch: the map patches a path's arc may reach this cycle.
+    near: Vec<u32>,
+    /// This cycle: distance from the rear axle to the nearest cell of each
+    /// [`Layer`] of the vehicle-frame raster, m (∞ when it has none).
+    nearest: [f64; 3],
+}
+
+/// The layers of a raster a path's lead is checked against.
+#[derive(Debug, Clone, Copy)]
+enum Layer {
+    Blocked,
+    Unseen,
+    Graded,
 }
 
 /// What one part of a path meets: its distances are along the path.
@@ -608,7 +639,7 @@ impl ObstacleAvoidance {
                 x_max: setup.vehicle.wheelbase_m.min(body.x_max),
                 half_width: footprint.half_width,
             },
-            response: SteeringResponse::of(setup.vehicle),
+            response: setup.steering_response(),
             paths: setup
                 .arcs
                 .curvatures()
@@ -617,6 +648,8 @@ impl ObstacleAvoidance {
                 .collect(),
             shifted,
             lead_poses: Vec::new(),
+            near: Vec::new(),
+            nearest: [f64::INFINITY; 3],
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
             cruise_mps: setup.cruise_mps,
             deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
@@ -649,6 +682,8 @@ impl ObstacleAvoidance {
             return met;
         }
         let settled = path.settled_pose();
+        let rigid = Rigid::of(&settled);
+        let to_vehicle = |c| rigid.apply(c);
         let template = &self.templates[arc];
         let widest = self.margins.len() - 1;
         let raster = if settled.position == Point2::origin() && settled.heading == 0.0 {
@@ -657,17 +692,23 @@ impl ObstacleAvoidance {
             // The map in the frame where the path settles on its arc.
             let (sin, cos) = settled.heading.sin_cos();
             let (px, py) = (settled.position.x, settled.position.y);
-            self.shifted.rasterise_with(ctx, |x, y| {
+            let near = self.near.iter().map(|&i| i as usize);
+            self.shifted.rasterise_with(ctx, near, |x, y| {
                 let (dx, dy) = (x - px, y - py);
                 (cos * dx + sin * dy, -sin * dx + cos * dy)
             });
-            if policy != UnseenGround::Free {
+            if policy == UnseenGround::Obstacle {
+                // Unseen ground is an obstacle, in every near-miss band:
+                // read off the vehicle-frame layer (it comes in areas, not
+                // single cells), or the map's own beyond that layer.
+                let (ahead, standing) = (&self.ahead, self.standing);
                 let seen = ctx.map.seen_lookup();
-                let standing = self.standing;
                 self.shifted
                     .unseen_over(&template.bands[widest], rest as f32, |c| {
-                        let q = settled.transform_point(c);
-                        !seen(q.x, q.y) && !standing.contains(q)
+                        let q = to_vehicle(c);
+                        ahead
+                            .unseen_at(q)
+                            .unwrap_or_else(|| !seen(q.x, q.y) && !standing.contains(q))
                     });
             }
             self.shifted.block(policy);
@@ -684,11 +725,28 @@ impl ObstacleAvoidance {
         }
         part.graded = raster.graded_crossed(&template.bands[0], rest, (horizon - lead) as f32);
         if policy == UnseenGround::Slow {
-            part.unseen = first_in(&raster.unseen, &template.bands[0], rest).map(|hit| {
-                let (row, column) = raster.grid.first_cell(hit, &raster.unseen);
-                let q = settled.transform_point(raster.grid.centre(row, column));
-                (f64::from(hit.s) + lead, [q.x as f32, q.y as f32])
-            });
+            part.unseen = if std::ptr::eq(raster, &self.ahead) {
+                first_in(&raster.unseen, &template.bands[0], rest).map(|hit| {
+                    let (row, column) = raster.grid.first_cell(hit, &raster.unseen);
+                    let c = raster.grid.centre(row, column);
+                    (f64::from(hit.s), [c.x as f32, c.y as f32])
+                })
+            } else {
+                // Cell by cell along the body's band, nearest first.
+                let seen = ctx.map.seen_lookup();
+                template
+                    .body
+                    .iter()
+                    .take_while(|(s, _)| *s <= rest)
+                    .find_map(|&(s, [x, y])| {
+                        let q = to_vehicle(Point2::new(f64::from(x), f64::from(y)));
+                        let unseen = self
+                            .ahead
+                            .unseen_at(q)
+                            .unwrap_or_else(|| !seen(q.x, q.y) && !self.standing.contains(q));
+                        unseen.then_some((f64::from(s) + lead, [q.x as f32, q.y as f32]))
+                    })
+            };
         }
         met.and(part)
     }
@@ -700,10 +758,11 @@ impl ObstacleAvoidance {
         let grid = &raster.grid;
         let widest = self.margins.len() - 1;
         let corners = |pose: &ArcPose, band: usize| {
+            let rigid = Rigid::of(pose);
             self.footprint
                 .widened(self.margins[band])
                 .corners()
-                .map(|c| pose.transform_point(c))
+                .map(|c| rigid.apply(c))
         };
         // The first cell of `layer` under the footprint of `band` at `pose`.
         let under = |pose: &ArcPose, band: usize, layer: &[u64]| {
@@ -717,9 +776,16 @@ impl ObstacleAvoidance {
         let poses = &self.lead_poses;
         let blocked = raster.blocked();
         let mut met = Met::default();
-        if let Some(from) = poses
-            .iter()
-            .position(|(_, p)| under(p, widest, blocked).is_some())
+        // How far from the rear axle the footprints of this lead reach: a
+        // layer with nothing that near has nothing to meet.
+        let lead = poses.last().map_or(0.0, |(s, _)| *s);
+        let body = self.footprint.widened(self.margins[widest]);
+        let within = lead + body.x_max.max(-body.x_min).hypot(body.half_width) + grid.resolution;
+        let near = |layer: Layer| self.nearest[layer as usize] <= within;
+        if near(Layer::Blocked)
+            && let Some(from) = poses
+                .iter()
+                .position(|(_, p)| under(p, widest, blocked).is_some())
         {
             met.collision = poses[from..].iter().find_map(|(s, p)| {
                 under(p, 0, blocked).map(|(row, column)| (*s, raster.cause_at(row, column, ctx)))
@@ -730,7 +796,7 @@ impl ObstacleAvoidance {
                     .any(|(_, p)| under(p, b, blocked).is_some())
             });
         }
-        if self.config.unseen_ground == UnseenGround::Slow {
+        if self.config.unseen_ground == UnseenGround::Slow && near(Layer::Unseen) {
             met.unseen = poses.iter().find_map(|(s, p)| {
                 under(p, 0, &raster.unseen).map(|(row, column)| {
                     let c = grid.centre(row, column);
@@ -738,7 +804,7 @@ impl ObstacleAvoidance {
                 })
             });
         }
-        if !raster.graded_cells.is_empty() {
+        if !raster.graded_cells.is_empty() && near(Layer::Graded) {
             for (s, p) in poses {
                 cells_inside(grid, &corners(p, 0), |row, from, to| {
                     for column in from..=to {
@@ -826,31 +892,36 @@ fn cells_inside(
             (lo.min(c.x), hi.max(c.x))
         });
     // Rows whose centre x lies within the corners' span.
-    let first = ((lo_x - grid.x0) / r - 0.5).ceil().max(0.0);
-    let last = ((hi_x - grid.x0) / r - 0.5).floor();
+    let first = ceil((lo_x - grid.x0) / r - 0.5).max(0.0);
+    let last = floor((hi_x - grid.x0) / r - 0.5);
     if first.is_nan() || last.is_nan() || first > last || first >= grid.rows as f64 {
         return false;
     }
     let last = (last as usize).min(grid.rows - 1);
+    // Each edge: its ends and its slope dy/dx (none when it runs along y).
+    let edges: [(Point2<f64>, Point2<f64>, Option<f64>); 4] = std::array::from_fn(|i| {
+        let (a, b) = (corners[i], corners[(i + 1) % 4]);
+        (a, b, (a.x != b.x).then(|| (b.y - a.y) / (b.x - a.x)))
+    });
     for row in first as usize..=last {
         let x = grid.x0 + (row as f64 + 0.5) * r;
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for (i, a) in corners.iter().enumerate() {
-            let b = corners[(i + 1) % 4];
+        for &(a, b, slope) in &edges {
             if (a.x - x) * (b.x - x) > 0.0 {
                 continue;
             }
-            let ys = if a.x == b.x {
-                [a.y, b.y]
-            } else {
-                let y = a.y + (x - a.x) * (b.y - a.y) / (b.x - a.x);
-                [y, y]
+            let (y0, y1) = match slope {
+                Some(slope) => {
+                    let y = a.y + (x - a.x) * slope;
+                    (y, y)
+                }
+                None => (a.y, b.y),
             };
-            lo = lo.min(ys[0]).min(ys[1]);
-            hi = hi.max(ys[0]).max(ys[1]);
+            lo = lo.min(y0).min(y1);
+            hi = hi.max(y0).max(y1);
         }
-        let from = ((lo - grid.y0) / r - 0.5).ceil().max(0.0);
-        let to = ((hi - grid.y0) / r - 0.5).floor();
+        let from = ceil((lo - grid.y0) / r - 0.5).max(0.0);
+        let to = floor((hi - grid.y0) / r - 0.5);
         if from.is_nan() || to.is_nan() || from > to || from >= grid.columns as f64 {
             continue;
         }
@@ -859,6 +930,67 @@ fn cells_inside(
         }
     }
     false
+}
+
+/// `x.floor()` without the library call the baseline x86-64 target makes
+/// of it (no SSE4.1); NaN stays NaN, and beyond ±2⁵³ x is whole already.
+fn floor(x: f64) -> f64 {
+    if x.is_nan() || x.abs() >= 9.0e15 {
+        return x;
+    }
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
+/// `x.ceil()`, as [`floor`].
+fn ceil(x: f64) -> f64 {
+    -floor(-x)
+}
+
+/// A pose's rotation and translation, its sine and cosine taken once.
+#[derive(Debug, Clone, Copy)]
+struct Rigid {
+    cos: f64,
+    sin: f64,
+    x: f64,
+    y: f64,
+}
+
+impl Rigid {
+    fn of(pose: &ArcPose) -> Self {
+        let (sin, cos) = pose.heading.sin_cos();
+        Self {
+            cos,
+            sin,
+            x: pose.position.x,
+            y: pose.position.y,
+        }
+    }
+
+    /// `p`, given in the pose's frame, in the frame the pose is given in.
+    fn apply(&self, p: Point2<f64>) -> Point2<f64> {
+        Point2::new(
+            self.x + self.cos * p.x - self.sin * p.y,
+            self.y + self.sin * p.x + self.cos * p.y,
+        )
+    }
+}
+
+/// Distance from the origin to the nearest cell centre set in `layer`, m.
+fn nearest_set(layer: &[u64], grid: &Grid) -> f64 {
+    let mut nearest = f64::INFINITY;
+    for (word, &bits) in layer.iter().enumerate() {
+        let mut bits = bits;
+        let row = word / grid.words_per_row;
+        let base = (word % grid.words_per_row) * 64;
+        while bits != 0 {
+            let column = base + bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let c = grid.centre(row, column);
+            nearest = nearest.min(c.x.hypot(c.y));
+        }
+    }
+    nearest
 }
 
 /// The first column in `from..=to` of `row` set in `layer`.
@@ -919,6 +1051,14 @@ fn build_template(
             }
         }
     }
+    let mut body: Vec<(f32, [f32; 2])> = cells[0]
+        .iter()
+        .map(|&(s, row, column)| {
+            let c = grid.centre(row, column);
+            (s, [c.x as f32, c.y as f32])
+        })
+        .collect();
+    body.sort_by(|a, b| a.0.total_cmp(&b.0));
     let bin = grid.resolution as f32;
     let bands = cells
         .into_iter()
@@ -942,7 +1082,7 @@ fn build_template(
             entries
         })
         .collect();
-    Template { bands }
+    Template { bands, body }
 }
 
 impl Behaviour for ObstacleAvoidance {
@@ -965,6 +1105,21 @@ impl Behaviour for ObstacleAvoidance {
         let horizon = cruise * self.config.reaction_s
             + cruise * cruise / (2.0 * self.deceleration)
             + self.terrain.config().step_m;
+        // The patches any path may reach: within its length and the
+        // widest band's reach from the rear axle.
+        let body = self.footprint.widened(self.config.near_miss_m);
+        let within = max + body.x_max.max(-body.x_min).hypot(body.half_width);
+        self.near.clear();
+        self.near.extend(
+            ctx.map
+                .patches
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| f64::from(p.x).hypot(f64::from(p.y)) <= within)
+                .map(|(i, _)| i as u32),
+        );
+        self.nearest = [self.ahead.blocked(), &self.ahead.unseen, &self.ahead.graded]
+            .map(|layer| nearest_set(layer, &self.ahead.grid));
         // The path each arc's command would put the vehicle on.
         let steering = ctx.steering();
         let arcs = self.templates.len().min(votes.len()).min(ctx.arcs.len());

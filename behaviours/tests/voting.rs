@@ -212,7 +212,12 @@ fn unseen_ground_slows_forbids_or_is_ignored_as_configured() {
 /// Obstacle avoidance's vote for `arc` with the vehicle at `speed` m/s
 /// driving curvature `curvature`, which its last command also asked for.
 fn arc_vote_steering(map: &MapSnapshot, arc: usize, speed: f64, curvature: f64) -> (f32, bool) {
-    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let arcs = ArcSet::new(&ArcSetConfig {
+        driven_paths: true,
+        ..Default::default()
+    })
+    .unwrap();
+    let vehicle = VehicleConfig::default();
     let mut behaviour =
         ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, &vehicle));
     let mut pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
@@ -453,12 +458,14 @@ fn at_speed_goal_seeking_asks_for_more_turn_to_head_for_the_goal_in_time() {
     let best = |votes: &Votes| best_arc(votes);
     let still = best(&goal_votes_moving(
         goal,
-        GoalSeeking::new(GoalSeekingConfig::default()).for_vehicle(&vehicle),
+        GoalSeeking::new(GoalSeekingConfig::default())
+            .with_response(SteeringResponse::of(&vehicle)),
         0.0,
     ));
     let moving = best(&goal_votes_moving(
         goal,
-        GoalSeeking::new(GoalSeekingConfig::default()).for_vehicle(&vehicle),
+        GoalSeeking::new(GoalSeekingConfig::default())
+            .with_response(SteeringResponse::of(&vehicle)),
         8.0,
     ));
     assert!(still > 19 && still < 38, "standing: arc {still}");

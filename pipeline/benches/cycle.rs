@@ -63,6 +63,7 @@ fn bench_cycle(bencher: Bencher, arc_count: usize) {
     let arcs = ArcSet::new(&ArcSetConfig {
         count: arc_count,
         min_radius_m: 8.0,
+        ..Default::default()
     })
     .expect("valid arcs");
     let vehicle = VehicleConfig::default();

@@ -21,6 +21,10 @@ pub struct ArcSetConfig {
     pub count: usize,
     /// Radius of the two tightest arcs, m (002 §6: 8 m).
     pub min_radius_m: f64,
+    /// Judge each arc along the path the vehicle drives when commanded
+    /// onto it ([`crate::DrivenPath`]: the latency, then the steering's
+    /// rate) rather than along the arc itself (020 item 2).
+    pub driven_paths: bool,
 }
 
 impl Default for ArcSetConfig {
@@ -28,6 +32,7 @@ impl Default for ArcSetConfig {
         Self {
             count: 39,
             min_radius_m: 8.0,
+            driven_paths: false,
         }
     }
 }
@@ -72,6 +77,7 @@ impl ArcSetConfig {
 pub struct ArcSet {
     curvatures: Vec<f64>,
     max_curvature: f64,
+    driven_paths: bool,
 }
 
 impl ArcSet {
@@ -88,6 +94,7 @@ impl ArcSet {
         Ok(Self {
             curvatures,
             max_curvature,
+            driven_paths: config.driven_paths,
         })
     }
 
@@ -98,6 +105,12 @@ impl ArcSet {
     /// Never true: a valid set holds at least three arcs.
     pub fn is_empty(&self) -> bool {
         self.curvatures.is_empty()
+    }
+
+    /// Whether behaviours judge each arc along the path the vehicle drives
+    /// onto it (`[arcs] driven_paths`) rather than along the arc.
+    pub fn driven_paths(&self) -> bool {
+        self.driven_paths
     }
 
     /// Curvatures in index order, 1/m.

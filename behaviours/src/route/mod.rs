@@ -157,7 +157,7 @@ impl Route {
             has_path: false,
             statics: setup.statics.cloned(),
             stats: RouteStats::default(),
-            response: SteeringResponse::of(setup.vehicle),
+            response: setup.steering_response(),
             config,
         }
     }
