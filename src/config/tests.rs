@@ -354,3 +354,19 @@ fn two_sensors_with_one_id_or_sensor_and_sensors_together_are_refused() {
     let msg = parse_error("[[sensors]]\npreset = \"erim\"\nrate_hz = 0.0\n");
     assert!(msg.contains("`sensors[0].rate_hz`"), "{msg}");
 }
+
+#[test]
+fn driven_paths_reach_the_behaviours_steering_response() {
+    let config = Config::from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
+    let arcs = config.arc_set().unwrap();
+    assert!(arcs.driven_paths());
+    let response = config.setup(&arcs, None).steering_response();
+    assert_eq!(
+        response,
+        arcnav_vehicle::SteeringResponse::of(&config.vehicle)
+    );
+    let defaults = Config::default();
+    let arcs = defaults.arc_set().unwrap();
+    let response = defaults.setup(&arcs, None).steering_response();
+    assert_eq!(response, arcnav_vehicle::SteeringResponse::immediate());
+}
