@@ -686,16 +686,17 @@ impl ObstacleAvoidance {
         let to_vehicle = |c| rigid.apply(c);
         let template = &self.templates[arc];
         let widest = self.margins.len() - 1;
-        let raster = if settled.position == Point2::origin() && settled.heading == 0.0 {
+        // Taken at once (standing, or arcs judged as arcs), the arc starts
+        // where the vehicle is: the vehicle-frame raster serves.
+        let at_once = settled.position == Point2::origin() && settled.heading == 0.0;
+        let raster = if at_once {
             &self.ahead
         } else {
             // The map in the frame where the path settles on its arc.
-            let (sin, cos) = settled.heading.sin_cos();
-            let (px, py) = (settled.position.x, settled.position.y);
             let near = self.near.iter().map(|&i| i as usize);
             self.shifted.rasterise_with(ctx, near, |x, y| {
-                let (dx, dy) = (x - px, y - py);
-                (cos * dx + sin * dy, -sin * dx + cos * dy)
+                let p = rigid.invert(Point2::new(x, y));
+                (p.x, p.y)
             });
             if policy == UnseenGround::Obstacle {
                 // Unseen ground is an obstacle, in every near-miss band:
@@ -725,7 +726,7 @@ impl ObstacleAvoidance {
         }
         part.graded = raster.graded_crossed(&template.bands[0], rest, (horizon - lead) as f32);
         if policy == UnseenGround::Slow {
-            part.unseen = if std::ptr::eq(raster, &self.ahead) {
+            part.unseen = if at_once {
                 first_in(&raster.unseen, &template.bands[0], rest).map(|hit| {
                     let (row, column) = raster.grid.first_cell(hit, &raster.unseen);
                     let c = raster.grid.centre(row, column);
@@ -972,6 +973,15 @@ impl Rigid {
         Point2::new(
             self.x + self.cos * p.x - self.sin * p.y,
             self.y + self.sin * p.x + self.cos * p.y,
+        )
+    }
+
+    /// `p`, given in the frame the pose is given in, in the pose's frame.
+    fn invert(&self, p: Point2<f64>) -> Point2<f64> {
+        let (dx, dy) = (p.x - self.x, p.y - self.y);
+        Point2::new(
+            self.cos * dx + self.sin * dy,
+            -self.sin * dx + self.cos * dy,
         )
     }
 }
