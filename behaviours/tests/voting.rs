@@ -209,6 +209,35 @@ fn unseen_ground_slows_forbids_or_is_ignored_as_configured() {
     assert_eq!(free, seen);
 }
 
+#[test]
+fn unseen_ground_as_an_obstacle_stops_blocking_once_it_has_been_seen() {
+    use arcnav_behaviours::UnseenGround;
+    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let config = ObstacleAvoidanceConfig {
+        unseen_ground: UnseenGround::Obstacle,
+        ..ObstacleAvoidanceConfig::default()
+    };
+    let mut behaviour = ObstacleAvoidance::new(config, &setup(&arcs, &vehicle));
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = Mission::default();
+    let mut vote = |map: &MapSnapshot| {
+        let ctx = VoteContext::new(0, &pose, map, &mission, &arcs);
+        let mut votes = Votes::new(arcs.len());
+        behaviour.vote(&ctx, &mut votes);
+        votes
+    };
+    // Seen only 8 m around: every arc forbidden; then all of it seen,
+    // with no cell anywhere: none (the same behaviour, one cycle later).
+    let blind = vote(&snapshot_seeing(&[], 8.0));
+    assert!((0..blind.len()).all(|i| blind.is_vetoed(i)));
+    let seen = vote(&snapshot(&[]));
+    assert!(
+        (0..seen.len()).all(|i| !seen.is_vetoed(i) && seen.values()[i] == 1.0),
+        "{:?}",
+        seen.values()
+    );
+}
+
 /// Obstacle avoidance's vote for `arc` with the vehicle at `speed` m/s
 /// driving curvature `curvature`, which its last command also asked for.
 fn arc_vote_steering(map: &MapSnapshot, arc: usize, speed: f64, curvature: f64) -> (f32, bool) {
