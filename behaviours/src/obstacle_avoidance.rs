@@ -688,7 +688,7 @@ impl ObstacleAvoidance {
         let widest = self.margins.len() - 1;
         // Taken at once (standing, or arcs judged as arcs), the arc starts
         // where the vehicle is: the vehicle-frame raster serves.
-        let at_once = settled.position == Point2::origin() && settled.heading == 0.0;
+        let at_once = path.is_arc();
         let raster = if at_once {
             &self.ahead
         } else {
@@ -1115,34 +1115,45 @@ impl Behaviour for ObstacleAvoidance {
         let horizon = cruise * self.config.reaction_s
             + cruise * cruise / (2.0 * self.deceleration)
             + self.terrain.config().step_m;
-        // The patches any path may reach: within its length and the
-        // widest band's reach from the rear axle.
-        let body = self.footprint.widened(self.config.near_miss_m);
-        let within = max + body.x_max.max(-body.x_min).hypot(body.half_width);
-        self.near.clear();
-        self.near.extend(
-            ctx.map
-                .patches
-                .iter()
-                .enumerate()
-                .filter(|(_, p)| f64::from(p.x).hypot(f64::from(p.y)) <= within)
-                .map(|(i, _)| i as u32),
-        );
-        self.nearest = [self.ahead.blocked(), &self.ahead.unseen, &self.ahead.graded]
-            .map(|layer| nearest_set(layer, &self.ahead.grid));
         // The path each arc's command would put the vehicle on.
         let steering = ctx.steering();
         let arcs = self.templates.len().min(votes.len()).min(ctx.arcs.len());
         for (path, &k) in self.paths.iter_mut().zip(ctx.arcs.curvatures()) {
             *path = DrivenPath::new(&steering, &self.response, k);
         }
-        self.terrain.judge_paths(
-            &ctx.map.elevation,
-            &ctx.map.world_from_vehicle,
-            horizon,
-            &self.paths[..arcs],
-            &mut self.verdicts,
-        );
+        if self.paths[..arcs].iter().all(DrivenPath::is_arc) {
+            // Every arc taken at once (standing, or arcs judged as arcs):
+            // the arcs' own precomputed poses.
+            self.terrain.judge_arcs(
+                &ctx.map.elevation,
+                &ctx.map.world_from_vehicle,
+                horizon,
+                &mut self.verdicts,
+            );
+        } else {
+            // The patches any path may reach: within its length and the
+            // widest band's reach from the rear axle.
+            let body = self.footprint.widened(self.config.near_miss_m);
+            let within = max + body.x_max.max(-body.x_min).hypot(body.half_width);
+            self.near.clear();
+            self.near.extend(
+                ctx.map
+                    .patches
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| f64::from(p.x).hypot(f64::from(p.y)) <= within)
+                    .map(|(i, _)| i as u32),
+            );
+            self.nearest = [self.ahead.blocked(), &self.ahead.unseen, &self.ahead.graded]
+                .map(|layer| nearest_set(layer, &self.ahead.grid));
+            self.terrain.judge_paths(
+                &ctx.map.elevation,
+                &ctx.map.world_from_vehicle,
+                horizon,
+                &self.paths[..arcs],
+                &mut self.verdicts,
+            );
+        }
         let terrain_penalty = self.config.terrain.penalty;
         for arc in 0..arcs {
             let met = self.meet(arc, ctx, horizon);

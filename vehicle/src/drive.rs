@@ -116,6 +116,14 @@ impl DrivenPath {
             f64::INFINITY
         };
         let target = clamp(target);
+        if v == 0.0 || per_m.is_infinite() {
+            // Standing, or steering at once: the arc.
+            return Self {
+                knots: [(0.0, target); MAX_KNOTS],
+                poses: [ORIGIN; MAX_KNOTS],
+                count: 1,
+            };
+        }
         let mut knots = [(0.0, clamp(steering.curvature)); MAX_KNOTS];
         let mut count = 1;
         // Distance to move the curvature from `from` to `to`.
@@ -179,6 +187,12 @@ impl DrivenPath {
         )
     }
 
+    /// True when the path is its arc from the start (standing, or a
+    /// vehicle that takes arcs at once).
+    pub fn is_arc(&self) -> bool {
+        self.count == 1
+    }
+
     /// Where the curvature reaches the arc's: from here on the path is
     /// the arc, m.
     pub fn settled_at(&self) -> f64 {
@@ -204,6 +218,9 @@ impl DrivenPath {
     /// The pose after `s` metres (`s` ≥ 0).
     pub fn pose_at(&self, s: f64) -> ArcPose {
         let s = s.max(0.0);
+        if self.count == 1 {
+            return Arc::new(self.knots[0].1).pose_at(s);
+        }
         let i = self.segment(s);
         self.advance(i, self.poses[i], s - self.knots[i].0)
     }
@@ -316,6 +333,7 @@ mod tests {
         };
         for k in [-0.125, 0.0, 0.07] {
             let path = DrivenPath::new(&steering, &response, k);
+            assert!(path.is_arc());
             assert_eq!(path.settled_at(), 0.0);
             for s in [0.0, 3.0, 17.5] {
                 let (a, b) = (path.pose_at(s), Arc::new(k).pose_at(s));
@@ -334,6 +352,7 @@ mod tests {
         };
         // 0.25 s of latency, then 0.125 1/m at 0.15 1/(m·s): 0.83 s.
         let path = DrivenPath::new(&straight(10.0), &response, 0.125);
+        assert!(!path.is_arc());
         assert_relative_eq!(path.settled_at(), 2.5 + 10.0 * 0.125 / 0.15, epsilon = 1e-9);
         assert_relative_eq!(path.curvature_at(2.5), 0.0);
         assert_relative_eq!(path.curvature_at(2.5 + 8.333 / 2.0), 0.0625, epsilon = 1e-3);
