@@ -127,13 +127,7 @@ impl DrivenPath {
         let mut knots = [(0.0, clamp(steering.curvature)); MAX_KNOTS];
         let mut count = 1;
         // Distance to move the curvature from `from` to `to`.
-        let ramp = |from: f64, to: f64| {
-            if per_m.is_infinite() {
-                0.0
-            } else {
-                (to - from).abs() / per_m
-            }
-        };
+        let ramp = |from: f64, to: f64| (to - from).abs() / per_m;
         // A knot further on, or a new curvature at the same distance.
         let push = |knots: &mut [(f64, f64); MAX_KNOTS], count: &mut usize, s: f64, k: f64| {
             if s > knots[*count - 1].0 && *count < MAX_KNOTS {
@@ -202,11 +196,6 @@ impl DrivenPath {
     /// The pose at [`DrivenPath::settled_at`].
     pub fn settled_pose(&self) -> ArcPose {
         self.poses[self.count - 1]
-    }
-
-    /// The arc's curvature, which the path ends on, 1/m.
-    pub fn curvature(&self) -> f64 {
-        self.knots[self.count - 1].1
     }
 
     /// Curvature at `s`, 1/m.
