@@ -8,15 +8,16 @@ use nalgebra::Vector3;
 
 use crate::codec::{DecodeError, EncodeError, Message, peek_fingerprint};
 use crate::lcmtypes::{
-    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, steering_command_t,
-    waypoints_t,
+    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, range_slice_t,
+    steering_command_t, waypoints_t,
 };
 use crate::log::{EventSource, LogStats};
 
 /// The channel names arcnav publishes and listens to.
 pub mod channels {
     pub const POSE: &str = "POSE";
-    /// Range images; with several sensors, `RANGE_IMAGE_<SENSOR>`.
+    /// Range images; with several sensors, `RANGE_IMAGE_<SENSOR>`. Slices
+    /// of range images (`range_slice_t`, streamed) use the same channels.
     pub const RANGE_IMAGE: &str = "RANGE_IMAGE";
     pub const WAYPOINTS: &str = "WAYPOINTS";
     pub const OBSTACLE_CELLS: &str = "OBSTACLE_CELLS";
@@ -46,6 +47,7 @@ pub mod channels {
 pub enum AnyMessage {
     Pose(pose_t),
     RangeImage(range_image_t),
+    RangeSlice(range_slice_t),
     SteeringCommand(steering_command_t),
     ArcVotes(arc_votes_t),
     ObstacleCells(obstacle_cells_t),
@@ -63,6 +65,7 @@ impl AnyMessage {
         Ok(Some(match fingerprint {
             pose_t::FINGERPRINT => Self::Pose(pose_t::decode(bytes)?),
             range_image_t::FINGERPRINT => Self::RangeImage(range_image_t::decode(bytes)?),
+            range_slice_t::FINGERPRINT => Self::RangeSlice(range_slice_t::decode(bytes)?),
             steering_command_t::FINGERPRINT => {
                 Self::SteeringCommand(steering_command_t::decode(bytes)?)
             }
@@ -78,6 +81,7 @@ impl AnyMessage {
         match self {
             Self::Pose(m) => m.encode(),
             Self::RangeImage(m) => m.encode(),
+            Self::RangeSlice(m) => m.encode(),
             Self::SteeringCommand(m) => m.encode(),
             Self::ArcVotes(m) => m.encode(),
             Self::ObstacleCells(m) => m.encode(),
@@ -91,6 +95,7 @@ impl AnyMessage {
         match self {
             Self::Pose(m) => m.utime,
             Self::RangeImage(m) => m.utime,
+            Self::RangeSlice(m) => m.utime,
             Self::SteeringCommand(m) => m.utime,
             Self::ArcVotes(m) => m.utime,
             Self::ObstacleCells(m) => m.utime,
@@ -108,7 +113,7 @@ impl AnyMessage {
         use channels::*;
         match self {
             Self::Pose(_) => channel == POSE,
-            Self::RangeImage(_) => {
+            Self::RangeImage(_) | Self::RangeSlice(_) => {
                 channel == RANGE_IMAGE
                     || channel
                         .strip_prefix(RANGE_IMAGE)
@@ -130,6 +135,7 @@ impl AnyMessage {
         match self {
             Self::Pose(_) => pose_t::TYPE_NAME,
             Self::RangeImage(_) => range_image_t::TYPE_NAME,
+            Self::RangeSlice(_) => range_slice_t::TYPE_NAME,
             Self::SteeringCommand(_) => steering_command_t::TYPE_NAME,
             Self::ArcVotes(_) => arc_votes_t::TYPE_NAME,
             Self::ObstacleCells(_) => obstacle_cells_t::TYPE_NAME,

@@ -764,6 +764,8 @@ impl Projection<'_> {
 /// or [`CellClassifier::new`].
 pub struct CellClassifier {
     cell_size: f32,
+    /// Half the slope window, cells.
+    slope_radius: usize,
     min_points: u32,
     max_height_variation: f32,
     max_slope_tan2: f64,
@@ -814,6 +816,7 @@ impl CellClassifier {
             })
             .collect();
         Self {
+            slope_radius: radius as usize,
             cell_size,
             min_points: c.min_points,
             max_height_variation: c.max_height_variation_m as f32,
@@ -1180,6 +1183,18 @@ impl crate::registry::EvaluatorPlugin for CellClassifier {
 impl TerrainEvaluator for CellClassifier {
     fn name(&self) -> &'static str {
         "cells"
+    }
+
+    /// A cell's own returns, its slope window's and its neighbours' (the
+    /// discontinuity), each a cell diagonal from its centre at most. The
+    /// drop-off rule looks along the cell's own columns only.
+    fn support(&self) -> crate::Support {
+        let cells = (self.slope_radius + 2) as f64;
+        crate::Support {
+            metres: cells * f64::from(self.cell_size) * std::f64::consts::SQRT_2,
+            pixels: 1,
+            radians: 0.0,
+        }
     }
 
     fn evaluate(

@@ -13,6 +13,7 @@ use arcnav_vehicle::{Isometry, Utime};
 use crate::fov::FovPolygon;
 use crate::image::{ImageError, RangeImage};
 use crate::shadow::Shadows;
+use crate::stream::Support;
 
 /// Why a cell is untraversable (a bit set; evaluators may combine reasons).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, PartialOrd, Ord)]
@@ -132,8 +133,13 @@ pub struct Region {
 /// Everything perception reports about one image.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ObstacleReport {
-    /// Capture time of the image.
+    /// Capture time of the image (the start of the frame; every report of
+    /// a streamed frame carries it).
     pub utime: Utime,
+    /// When the last return the report rests on was acquired: the end of
+    /// the slice for a streamed frame (see [`crate::stream`]); for a whole
+    /// image, its capture time (0 = `utime`).
+    pub acquired: Utime,
     pub sensor: String,
     pub cell_size_m: f64,
     pub cells: Vec<ObstacleCell>,
@@ -155,6 +161,7 @@ impl ObstacleReport {
     /// Empties the report, keeping its allocations.
     pub fn clear(&mut self) {
         self.utime = 0;
+        self.acquired = 0;
         self.sensor.clear();
         self.cells.clear();
         self.regions.clear();
@@ -270,4 +277,35 @@ pub trait TerrainEvaluator: Send {
 
     /// Forgets anything carried between images (for evaluators that fuse).
     fn reset(&mut self) {}
+
+    /// How far from a cell's centre the returns that decide its verdict
+    /// may lie. Streaming perception ([`crate::stream`]) reports a cell
+    /// once every return within it has arrived, so an evaluator must not
+    /// understate it; the default is generous (3 m, 8 pixels).
+    fn support(&self) -> Support {
+        Support {
+            metres: 3.0,
+            pixels: 8,
+            radians: 0.0,
+        }
+    }
+
+    /// Whether this evaluator judges each image on its own (002 §4's early
+    /// traversability evaluation). One that fuses images (a Kalman
+    /// elevation map) must say false: a streamed frame is evaluated in
+    /// overlapping parts, which it would fuse again and again.
+    fn judges_each_image_alone(&self) -> bool {
+        true
+    }
+}
+
+/// Time of the last return a report rests on.
+impl ObstacleReport {
+    pub fn acquired_utime(&self) -> Utime {
+        if self.acquired == 0 {
+            self.utime
+        } else {
+            self.acquired
+        }
+    }
 }

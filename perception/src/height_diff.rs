@@ -793,6 +793,20 @@ impl TerrainEvaluator for HeightDiff {
         "height_diff"
     }
 
+    /// The largest scale's window, the gap filling's reach at the farthest
+    /// return (δ = δ0 + Δ·r), the obstacles' inflation by the robot's
+    /// radius, and the median window in beam angle.
+    fn support(&self) -> crate::Support {
+        let c = &self.config;
+        let largest = f64::from(c.scales.iter().copied().max().unwrap_or(1)) * c.cell_size_m;
+        let gap = c.gap_base_m + c.gap_per_m * f64::from(self.max_range);
+        crate::Support {
+            metres: (largest + gap + c.robot_radius_m) * std::f64::consts::SQRT_2,
+            pixels: 1,
+            radians: c.median_window_deg.to_radians(),
+        }
+    }
+
     fn evaluate(
         &mut self,
         image: &RangeImage,

@@ -16,6 +16,8 @@
 //! - [`registry`]: evaluators by name, and the plug-in trait;
 //! - [`fov`]: the observed footprint polygon;
 //! - [`shadow`]: the ground in it the image did not see;
+//! - [`stream`]: range images arriving in slices, judged as they come
+//!   (002 §7's integrated mode);
 //! - [`scene`]: analytic scenes for tests and benchmarks;
 //! - [`config`]: `[perception]` and the evaluator registry.
 
@@ -34,6 +36,7 @@ pub mod registry;
 pub mod scene;
 pub mod sensor;
 pub mod shadow;
+pub mod stream;
 mod window;
 
 pub use cells::CellClassifier;
@@ -51,6 +54,9 @@ pub use raycast::RayCast;
 pub use registry::{EvaluatorPlugin, EvaluatorRegistry};
 pub use sensor::{SensorConfig, SensorModel, SensorPreset};
 pub use shadow::{Shadow, ShadowIndex, Shadows};
+pub use stream::{
+    FrameStream, RangeSlice, SliceAxis, SliceError, StreamCounts, StreamingConfig, Support,
+};
 
 /// Whether this processor can run the AVX2 paths a test compares with the
 /// portable ones. Under `CI=true` a processor without AVX2 fails the test

@@ -674,6 +674,17 @@ impl TerrainEvaluator for HierarchicalPca {
         "pca"
     }
 
+    /// A tile (the largest region the recursion judges), the roughness
+    /// pool, and the scan-line filter's half window.
+    fn support(&self) -> crate::Support {
+        let c = &self.config;
+        crate::Support {
+            metres: (c.tile_m + c.roughness_pool_m + c.cell_size_m) * std::f64::consts::SQRT_2,
+            pixels: c.roughness_window / 2 + 1,
+            radians: 0.0,
+        }
+    }
+
     fn evaluate(
         &mut self,
         image: &RangeImage,

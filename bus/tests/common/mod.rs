@@ -122,7 +122,35 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         ("obstacle_cells_t", AnyMessage::ObstacleCells(cells)),
         ("waypoints_t", AnyMessage::Waypoints(waypoints)),
         ("local_map_t", AnyMessage::LocalMap(map)),
+        ("range_slice_t", AnyMessage::RangeSlice(range_slice())),
     ]
+}
+
+/// `range_slice(...)` of `lcm_peer.py`: columns 32..48 of a 4-row image.
+pub fn range_slice() -> range_slice_t {
+    let (rows, cols) = (4usize, 16usize);
+    let mut range: Vec<f32> = (0..rows * cols).map(|i| i as f32 * 0.25).collect();
+    range[3] = f32::NAN;
+    range_slice_t {
+        utime: 1_700_000_000_530_000,
+        frame_utime: 1_700_000_000_500_000,
+        sensor: "lidar64".into(),
+        mount_position: [0.5, 0.0, 2.0],
+        mount_orientation: [1.0, 0.0, 0.0, 0.0],
+        frame_rows: rows as i32,
+        frame_cols: 2048,
+        axis: 0,
+        first: 32,
+        rows: rows as i32,
+        cols: cols as i32,
+        elevation: (0..rows).map(|r| (0.25 - r as f64 * 0.125) as f32).collect(),
+        azimuth: (0..cols).map(|c| (3.0 - c as f64 * 0.0625) as f32).collect(),
+        num_lines: cols as i32,
+        line_utime: (0..cols as i64)
+            .map(|c| 1_700_000_000_515_000 + c * 1_000)
+            .collect(),
+        range,
+    }
 }
 
 /// `range_image(...)` of `lcm_peer.py`.
@@ -225,10 +253,10 @@ impl Rng {
     }
 }
 
-/// A random message of type `kind` (0..7, the order of [`samples`]).
+/// A random message of type `kind` (0..8, the order of [`samples`]).
 pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) {
     let utime = rng.next_u64() as i64;
-    match kind % 7 {
+    match kind % 8 {
         0 => (
             "pose_t",
             AnyMessage::Pose(pose_t {
@@ -328,6 +356,30 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     num_waypoints: n as i32,
                     position: (0..n).map(|_| [rng.f64(), rng.f64()]).collect(),
                     radius: (0..n).map(|_| rng.f32()).collect(),
+                }),
+            )
+        }
+        7 => {
+            let (rows, cols, lines) = (rng.len(), rng.len(), rng.len());
+            (
+                "range_slice_t",
+                AnyMessage::RangeSlice(range_slice_t {
+                    utime,
+                    frame_utime: rng.next_u64() as i64,
+                    sensor: rng.string(),
+                    mount_position: [rng.f64(), rng.f64(), rng.f64()],
+                    mount_orientation: [rng.f64(), rng.f64(), rng.f64(), rng.f64()],
+                    frame_rows: rng.next_u64() as i32,
+                    frame_cols: rng.next_u64() as i32,
+                    axis: rng.next_u64() as i8,
+                    first: rng.next_u64() as i32,
+                    rows: rows as i32,
+                    cols: cols as i32,
+                    elevation: (0..rows).map(|_| rng.f32()).collect(),
+                    azimuth: (0..cols).map(|_| rng.f32()).collect(),
+                    num_lines: lines as i32,
+                    line_utime: (0..lines).map(|_| rng.next_u64() as i64).collect(),
+                    range: (0..rows * cols).map(|_| rng.f32()).collect(),
                 }),
             )
         }

@@ -134,6 +134,26 @@ def samples(arcnav):
     nan = float("nan")
     m.elevation = [[1.5, 0.0025], [nan, nan], [-0.25, 0.5], [2.0, 0.125]]
     out["local_map_t"] = m
+
+    m = arcnav.range_slice_t()
+    m.utime = 1_700_000_000_530_000
+    m.frame_utime = 1_700_000_000_500_000
+    m.sensor = "lidar64"
+    m.mount_position = [0.5, 0.0, 2.0]
+    m.mount_orientation = [1.0, 0.0, 0.0, 0.0]
+    m.frame_rows = 4
+    m.frame_cols = 2048
+    m.axis = 0
+    m.first = 32
+    m.rows = 4
+    m.cols = 16
+    m.elevation = [0.25 - r * 0.125 for r in range(4)]
+    m.azimuth = [3.0 - c * 0.0625 for c in range(16)]
+    m.num_lines = 16
+    m.line_utime = [1_700_000_000_515_000 + c * 1_000 for c in range(16)]
+    m.range = [[(r * 16 + c) * 0.25 for c in range(16)] for r in range(4)]
+    m.range[0][3] = float("nan")
+    out["range_slice_t"] = m
     return out
 
 
