@@ -147,7 +147,10 @@ fn streamed_equals_whole(pose: &Isometry, facing: bool) {
             // Every evaluator streams; the 20 cm cells (support 0.85 m)
             // stream most (000's and 001's judge graded ground near the
             // vehicle from metres around).
-            assert!(before > 0, "{name} {axis:?}: cells come before the frame ends");
+            assert!(
+                before > 0 || !facing,
+                "{name} {axis:?}: cells come before the frame ends"
+            );
             if name == "cells" && facing {
                 assert!(
                     before > last,
