@@ -152,6 +152,15 @@ struct Topics {
 }
 
 impl Topics {
+    /// Logs the returns of `image` as a point cloud on `topic`.
+    fn cloud(&mut self, topic: &str, image: &arcnav_perception::RangeImage, time: PartialMetadata) {
+        let ctx = &self.ctx;
+        self.clouds
+            .entry(topic.to_owned())
+            .or_insert_with(|| ctx.channel_builder(topic).build())
+            .log_with_meta(&point_cloud(image), time);
+    }
+
     /// Logs `entity` (stamped `utime`, in `frame`) as the one entity of a
     /// scene update on `topic`.
     fn scene(
@@ -321,16 +330,21 @@ pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSumm
                 let topic = topic(&event.channel);
                 match wire::range_image_from_wire(msg) {
                     Ok(image) => {
-                        let cloud = point_cloud(&image);
-                        let ctx = &ctx;
-                        topics
-                            .clouds
-                            .entry(topic.clone())
-                            .or_insert_with(|| ctx.channel_builder(topic.as_str()).build())
-                            .log_with_meta(&cloud, time);
+                        topics.cloud(&topic, &image, time);
                         wrote(&topic);
                     }
                     Err(e) => summary.skip(&event.channel, format!("range image refused: {e}")),
+                }
+            }
+            // Each slice is a cloud of its own, on its sensor's topic.
+            AnyMessage::RangeSlice(msg) => {
+                let topic = topic(&event.channel);
+                match wire::range_slice_from_wire(msg) {
+                    Ok(slice) => {
+                        topics.cloud(&topic, &slice.to_image(), time);
+                        wrote(&topic);
+                    }
+                    Err(e) => summary.skip(&event.channel, format!("range slice refused: {e}")),
                 }
             }
             AnyMessage::ObstacleCells(msg) => {

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use arcnav_bus::codec::Message;
 use arcnav_bus::lcmtypes::{
-    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, steering_command_t,
-    waypoints_t,
+    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, range_slice_t,
+    steering_command_t, waypoints_t,
 };
 use arcnav_bus::log::{InTimeOrder, LogReader, ReorderWindow};
 use arcnav_bus::messages::{AnyMessage, TypedEvents};
@@ -45,6 +45,7 @@ pub fn lcm_messages(data: &[u8]) {
         match message {
             AnyMessage::Pose(m) => drop(arcnav_vehicle::Pose::try_from(&m)),
             AnyMessage::RangeImage(m) => drop(crate::wire::range_image_from_wire(m)),
+            AnyMessage::RangeSlice(m) => drop(crate::wire::range_slice_from_wire(m)),
             AnyMessage::ObstacleCells(m) => drop(crate::wire::obstacles_from_wire(m)),
             AnyMessage::Waypoints(m) => drop(crate::wire::mission_from_wire(&m)),
             AnyMessage::LocalMap(m) => drop(crate::wire::map_from_wire(&m)),
@@ -56,6 +57,7 @@ pub fn lcm_messages(data: &[u8]) {
     }
     let _ = pose_t::decode(data);
     let _ = range_image_t::decode(data);
+    let _ = range_slice_t::decode(data);
     let _ = steering_command_t::decode(data);
     let _ = arc_votes_t::decode(data);
     let _ = obstacle_cells_t::decode(data);

@@ -20,11 +20,14 @@ use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, Reasons, SensorModel};
 use arcnav_sim::drape::drape;
 use arcnav_sim::rng::Rng;
+use arcnav_sim::sensor::Slicer;
 use arcnav_sim::tiles::TileCache;
 use arcnav_sim::{Collision, CollisionPolicy, Truth, World};
 use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
-use arcnav_vehicle::{MotionLimits, MotionModel, PlanarState, Pose, SteeringCommand, Utime};
+use arcnav_vehicle::{
+    Isometry, MotionLimits, MotionModel, PlanarState, Pose, SteeringCommand, Utime,
+};
 use nalgebra::Vector3;
 use serde::Serialize;
 
@@ -388,6 +391,14 @@ pub fn run_mission(
 
     // Each sensor images at its own rate, the first image of each at t0.
     let mut next_images: Vec<Utime> = vec![t0; sensors.len()];
+    // Sensors that send their images in slices: each one's slicer, and the
+    // next slice of the frame under way.
+    let slicers: Vec<Option<Slicer>> = rendered
+        .iter()
+        .map(|sensor| (sim.slice_lines > 0).then(|| Slicer::new(sensor, sim.slice_lines)))
+        .collect();
+    let mut next_slices: Vec<usize> = vec![0; sensors.len()];
+    let mut previous_stance: Option<(Utime, Isometry)> = None;
     let time_limit = t0 + seconds_to_micros(sim.time_limit_s);
     let stuck_after = seconds_to_micros(sim.stuck_after_s);
     let (mut images, mut image_positions) = (0u64, Vec::new());
@@ -455,12 +466,69 @@ pub fn run_mission(
             ),
             yaw_rate: state.speed_mps * state.curvature,
         };
+        // Slices acquired since the last step come before this step's pose
+        // (they wait in perception for the pose after them).
+        for (i, slicer) in slicers.iter().enumerate() {
+            let Some(slicer) = slicer else { continue };
+            loop {
+                let frame = next_images[i];
+                let k = next_slices[i];
+                let (done, middle) = slicer.times(frame, k);
+                if done > t {
+                    break;
+                }
+                let started = Instant::now();
+                let at = match previous_stance {
+                    Some((before, ref from)) if t > before => {
+                        let f = ((middle - before) as f64 / (t - before) as f64).clamp(0.0, 1.0);
+                        from.lerp_slerp(&stance.world_from_vehicle, f)
+                    }
+                    _ => stance.world_from_vehicle,
+                };
+                let sensor = &rendered[i];
+                let sensor_position = (at * sensor.vehicle_from_sensor).translation.vector;
+                let view = tiles.view(
+                    sensor_position.x,
+                    sensor_position.y,
+                    sensor.max_range_m + 1.0,
+                );
+                let slice = slicer.render(
+                    k,
+                    frame,
+                    &view,
+                    &at,
+                    (sim.range_noise_m, sim.dropout_probability),
+                    (sim.seed, images.wrapping_mul(65_536).wrapping_add(k as u64)),
+                );
+                render_ms += started.elapsed().as_secs_f64() * 1e3;
+                if options.log_mode == LogMode::All {
+                    sink.log.message(
+                        done,
+                        &channels::range_image(&sensors[i].id),
+                        &wire::range_slice_to_wire(&slice),
+                    );
+                }
+                pipeline.input(Input::Slice(slice), &mut sink);
+                next_slices[i] = k + 1;
+                if next_slices[i] == slicer.len() {
+                    next_slices[i] = 0;
+                    next_images[i] += sensors[i].period_us();
+                    images += 1;
+                    image_positions.push([state.x, state.y]);
+                }
+            }
+        }
+        previous_stance = Some((t, stance.world_from_vehicle));
         sink.log
             .message(t, channels::POSE, &pose_t::from(&measured));
         pipeline.input(Input::Pose(measured), &mut sink);
-        for ((sensor, rendered), next_image) in sensors.iter().zip(&rendered).zip(&mut next_images)
+        for (((sensor, rendered), next_image), slicer) in sensors
+            .iter()
+            .zip(&rendered)
+            .zip(&mut next_images)
+            .zip(&slicers)
         {
-            if t < *next_image {
+            if slicer.is_some() || t < *next_image {
                 continue;
             }
             let started = Instant::now();

@@ -6,12 +6,12 @@ use arcnav_arbiter::{BehaviourVotes, Votes};
 use arcnav_behaviours::{Mission, Waypoint};
 use arcnav_bus::lcmtypes::{
     arc_votes_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t, range_image_t,
-    waypoints_t,
+    range_slice_t, waypoints_t,
 };
 use arcnav_localmap::{ElevationGrid, MapSnapshot, Patch, SeenGround};
 use arcnav_perception::{
-    BeamTable, FovPolygon, HeightSample, ObstacleCell, ObstacleReport, RangeImage, Reasons, Region,
-    Shadow, Shadows,
+    BeamTable, FovPolygon, HeightSample, ObstacleCell, ObstacleReport, RangeImage, RangeSlice,
+    Reasons, Region, Shadow, Shadows, SliceAxis,
 };
 use arcnav_vehicle::frames::{FrameError, isometry_from_parts, rotation_to_wxyz};
 use arcnav_vehicle::{ArcSet, Isometry, Pose, Utime};
@@ -74,6 +74,81 @@ pub fn range_image_from_wire(msg: range_image_t) -> Result<RangeImage, WireError
     Ok(image)
 }
 
+/// A range-image slice for the wire.
+pub fn range_slice_to_wire(slice: &RangeSlice) -> range_slice_t {
+    let (mount_position, mount_orientation) = position_and_rotation(&slice.vehicle_from_sensor);
+    range_slice_t {
+        utime: slice.utime,
+        frame_utime: slice.frame_utime,
+        sensor: slice.sensor.clone(),
+        mount_position,
+        mount_orientation,
+        frame_rows: saturate_len(slice.frame_rows),
+        frame_cols: saturate_len(slice.frame_cols),
+        axis: match slice.axis {
+            SliceAxis::Columns => 0,
+            SliceAxis::Rows => 1,
+        },
+        first: saturate_len(slice.first),
+        rows: saturate_len(slice.beams.rows()),
+        cols: saturate_len(slice.beams.cols()),
+        elevation: slice.beams.elevation.clone(),
+        azimuth: slice.beams.azimuth.clone(),
+        num_lines: saturate_len(slice.line_utimes.len()),
+        line_utime: slice.line_utimes.clone(),
+        range: slice.range.clone(),
+    }
+}
+
+fn saturate_len(n: usize) -> i32 {
+    i32::try_from(n).unwrap_or(i32::MAX)
+}
+
+/// A range-image slice from the wire: sizes were checked by the decoder,
+/// the slice's place in its image here (before anything is allocated
+/// from the image's declared size).
+pub fn range_slice_from_wire(msg: range_slice_t) -> Result<RangeSlice, WireError> {
+    let invalid = |reason: String| WireError::Invalid {
+        what: "range slice",
+        reason,
+    };
+    let vehicle_from_sensor = isometry_from_parts(msg.mount_position, msg.mount_orientation)
+        .map_err(|source| WireError::Frame {
+            what: "range slice mount",
+            source,
+        })?;
+    let axis = match msg.axis {
+        0 => SliceAxis::Columns,
+        1 => SliceAxis::Rows,
+        other => {
+            return Err(invalid(format!(
+                "axis {other}: 0 (columns) or 1 (rows) expected"
+            )));
+        }
+    };
+    let size = |name: &str, v: i32| {
+        usize::try_from(v).map_err(|_| invalid(format!("{name} is {v}, must not be negative")))
+    };
+    let slice = RangeSlice {
+        utime: msg.utime,
+        frame_utime: msg.frame_utime,
+        sensor: msg.sensor,
+        vehicle_from_sensor,
+        frame_rows: size("frame_rows", msg.frame_rows)?,
+        frame_cols: size("frame_cols", msg.frame_cols)?,
+        axis,
+        first: size("first", msg.first)?,
+        beams: BeamTable {
+            elevation: msg.elevation,
+            azimuth: msg.azimuth,
+        },
+        line_utimes: msg.line_utime,
+        range: msg.range,
+    };
+    slice.validate().map_err(|e| invalid(e.to_string()))?;
+    Ok(slice)
+}
+
 /// An obstacle report for the wire.
 pub fn obstacles_to_wire(report: &ObstacleReport) -> obstacle_cells_t {
     obstacle_cells_t {
@@ -114,6 +189,7 @@ pub fn obstacles_to_wire(report: &ObstacleReport) -> obstacle_cells_t {
             .map(|h| [saturate(h.i), saturate(h.j)])
             .collect(),
         heights: report.heights.iter().map(|h| [h.z, h.variance]).collect(),
+        acquired_utime: report.acquired_utime(),
     }
 }
 
@@ -214,8 +290,15 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
             variance,
         });
     }
+    if msg.acquired_utime < msg.utime {
+        return Err(invalid(format!(
+            "cells acquired at {} µs, before their image's capture at {} µs",
+            msg.acquired_utime, msg.utime
+        )));
+    }
     Ok(ObstacleReport {
         utime: msg.utime,
+        acquired: msg.acquired_utime,
         sensor: msg.sensor,
         cell_size_m: f64::from(msg.cell_size),
         cells,
@@ -570,9 +653,52 @@ mod tests {
     }
 
     #[test]
+    fn range_slices_round_trip_and_bad_ones_are_refused_with_a_reason() {
+        let mut image = SensorModel::lidar64().blank_image(1_000);
+        image.range[70] = 3.25;
+        let slices = RangeSlice::cut(&image, SliceAxis::Columns, 16, |c| 1_000 + c as Utime);
+        for slice in &slices[..3] {
+            let back = range_slice_from_wire(range_slice_to_wire(slice)).unwrap();
+            assert_eq!(back.range.len(), slice.range.len());
+            assert_eq!(back.line_utimes, slice.line_utimes);
+            assert_eq!(
+                (back.first, back.axis, back.utime),
+                (slice.first, slice.axis, slice.utime)
+            );
+            assert_eq!(back.beams, slice.beams);
+        }
+        assert_eq!(
+            range_slice_from_wire(range_slice_to_wire(&slices[4]))
+                .unwrap()
+                .range[6],
+            3.25
+        );
+        let refused = |edit: &dyn Fn(&mut range_slice_t)| {
+            let mut msg = range_slice_to_wire(&slices[1]);
+            edit(&mut msg);
+            range_slice_from_wire(msg).unwrap_err().to_string()
+        };
+        assert!(refused(&|m| m.axis = 2).contains("axis 2"));
+        assert!(refused(&|m| m.first = -1).contains("first is -1"));
+        assert!(refused(&|m| m.first = 2040).contains("does not fit"));
+        assert!(refused(&|m| m.frame_rows = i32::MAX).contains("more than"));
+        assert!(refused(&|m| m.frame_cols = 0).contains("empty"));
+        assert!(refused(&|m| m.mount_orientation = [0.0; 4]).contains("mount"));
+        assert!(refused(&|m| m.utime = m.frame_utime - 1).contains("before its frame"));
+        assert!(
+            refused(&|m| {
+                m.line_utime.pop();
+                m.num_lines -= 1;
+            })
+            .contains("line times")
+        );
+    }
+
+    #[test]
     fn obstacle_reports_round_trip_with_their_regions() {
         let report = ObstacleReport {
             utime: 5,
+            acquired: 7,
             sensor: "erim".into(),
             cell_size_m: 0.2,
             cells: vec![

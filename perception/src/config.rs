@@ -39,6 +39,9 @@ pub struct PerceptionConfig {
     /// The height measurements of the local map's elevation layer (004
     /// §III), taken from every image whichever evaluator judges it.
     pub heights: HeightsConfig,
+    /// Range images arriving in slices (`range_slice_t`), judged as they
+    /// arrive (002 §7's integrated mode).
+    pub streaming: crate::stream::StreamingConfig,
     /// Tables of evaluators added to the registry by a program,
     /// `[perception.plugins.NAME]`.
     pub plugins: BTreeMap<String, toml::Table>,
@@ -57,6 +60,7 @@ impl Default for PerceptionConfig {
             height_diff: HeightDiffConfig::default(),
             pca: PcaConfig::default(),
             heights: HeightsConfig::default(),
+            streaming: crate::stream::StreamingConfig::default(),
             plugins: BTreeMap::new(),
         }
     }
@@ -247,6 +251,9 @@ impl PerceptionConfig {
             }
         }
         self.heights.validate().map_err(|e| e.within("heights"))?;
+        self.streaming
+            .validate()
+            .map_err(|e| e.within("streaming"))?;
         // The sampler's world-aligned grid covers the region at any heading:
         // up to twice the region's area (a square region at 45°).
         let diagonal = (r.ahead_m + r.behind_m).hypot(2.0 * r.half_width_m);

@@ -97,9 +97,7 @@ pub struct RangeSlice {
 pub enum SliceError {
     #[error(transparent)]
     Image(#[from] ImageError),
-    #[error(
-        "the slice's image is {rows} × {cols}: empty, or more than {MAX_FRAME_PIXELS} pixels"
-    )]
+    #[error("the slice's image is {rows} × {cols}: empty, or more than {MAX_FRAME_PIXELS} pixels")]
     FrameSize { rows: usize, cols: usize },
     #[error(
         "the slice ({rows} × {cols}, {axis:?} from {first}) does not fit its {frame_rows} × {frame_cols} image"
@@ -147,12 +145,18 @@ impl RangeSlice {
             SliceAxis::Columns => {
                 rows == self.frame_rows
                     && cols > 0
-                    && self.first.checked_add(cols).is_some_and(|end| end <= self.frame_cols)
+                    && self
+                        .first
+                        .checked_add(cols)
+                        .is_some_and(|end| end <= self.frame_cols)
             }
             SliceAxis::Rows => {
                 cols == self.frame_cols
                     && rows > 0
-                    && self.first.checked_add(rows).is_some_and(|end| end <= self.frame_rows)
+                    && self
+                        .first
+                        .checked_add(rows)
+                        .is_some_and(|end| end <= self.frame_rows)
             }
         };
         if !fits {
@@ -359,6 +363,8 @@ struct Frame {
     /// Pose of the last step (the frame's last evaluation uses it).
     pose: Option<Isometry>,
     last_utime: Utime,
+    /// Columns: the azimuth between neighbouring columns, once known (0).
+    column_step: f64,
 }
 
 /// Assembles one sensor's slices and reports the cells they complete.
@@ -373,6 +379,9 @@ pub struct FrameStream {
     sub: RangeImage,
     scratch: ObstacleReport,
     fov: FovBuilder,
+    /// Evaluate each frame once, whole, when it ends (for evaluators that
+    /// fuse images).
+    whole_frames: bool,
     pub counts: StreamCounts,
 }
 
@@ -461,8 +470,16 @@ impl FrameStream {
             },
             scratch: ObstacleReport::default(),
             fov: FovBuilder::default(),
+            whole_frames: false,
             counts: StreamCounts::default(),
         }
+    }
+
+    /// Judges each frame once, whole, when its last slice arrives (an
+    /// evaluator that fuses images must not see parts of one again and
+    /// again); cells then come at the frame's end, as with whole images.
+    pub fn set_whole_frames(&mut self, whole: bool) {
+        self.whole_frames = whole;
     }
 
     /// Capture time of the frame being assembled.
@@ -518,10 +535,11 @@ impl FrameStream {
         frame.last_utime = slice.utime;
         let complete = frame.received.iter().all(|&r| r);
         if !complete {
-            let due = match frame.axis {
-                SliceAxis::Columns => frame.columns_due(self.support, &self.config),
-                SliceAxis::Rows => frame.order != 0,
-            };
+            let due = !self.whole_frames
+                && match frame.axis {
+                    SliceAxis::Columns => frame.columns_due(self.support, &self.config),
+                    SliceAxis::Rows => frame.order != 0,
+                };
             if due {
                 stats.accumulate(&self.step(slice.utime, evaluator, runner, out)?);
             }
@@ -609,7 +627,7 @@ impl FrameStream {
                 // The last received column at or before that angle.
                 let reference = frame.reference.map_or(0, |(c, _)| c);
                 let lo = (reference..frame.next)
-                    .take_while(|&c| !(frame.swept[c] > lo_angle))
+                    .take_while(|&c| frame.swept[c].is_nan() || frame.swept[c] <= lo_angle)
                     .last()
                     .unwrap_or(reference);
                 frame.copy_columns(lo..frame.next, &mut self.sub);
@@ -672,7 +690,7 @@ impl FrameStream {
         renumber_regions(&report.regions, &mut kept);
         let mut stats = ImageStats::default();
         count_cells(&kept, &mut stats);
-        self.footprint(&pose, &geometry, &mut kept);
+        self.footprint(&pose, &geometry, window, &mut kept);
         self.scratch = report;
         out(kept);
         Ok(stats)
@@ -680,7 +698,13 @@ impl FrameStream {
 
     /// The step's footprint: the returns of the evaluated part whose disc,
     /// grown by a cell, is complete.
-    fn footprint(&mut self, pose: &Isometry, geometry: &Geometry, report: &mut ObstacleReport) {
+    fn footprint(
+        &mut self,
+        pose: &Isometry,
+        geometry: &Geometry,
+        lo: Option<usize>,
+        report: &mut ObstacleReport,
+    ) {
         let Some(frame) = self.frame.as_ref() else {
             return;
         };
@@ -688,46 +712,78 @@ impl FrameStream {
         let sensor_at = world_from_sensor.translation.vector;
         let (yaw_sin, yaw_cos) = {
             let forward = pose.rotation * Vector3::x();
-            let yaw = forward.y.atan2(forward.x);
-            yaw.sin_cos()
+            forward.y.atan2(forward.x).sin_cos()
         };
         let vehicle_at = pose.translation.vector;
         let region = &self.region;
         let sub = &self.sub;
         let cols = sub.cols();
-        self.fov.start(cols, [sensor_at.x as f32, sensor_at.y as f32]);
         let grown = geometry.radius + geometry.grow;
+        // Per column, the nearest horizontal distance at which a return's
+        // grown disc is complete (columns: from the column's swept angle
+        // and the window; rows: found per return below).
+        let near: Vec<f64> = match (frame.axis, lo, frame.windows.last()) {
+            (SliceAxis::Columns, Some(lo), Some(&(bottom, top))) => (0..cols)
+                .map(|col| {
+                    let a = frame.swept[lo + col];
+                    let room = f64::from((a - bottom).min(top - a)) - geometry.filter;
+                    if room.is_nan() || room <= 0.0 {
+                        f64::INFINITY
+                    } else if room >= std::f64::consts::FRAC_PI_2 {
+                        grown
+                    } else {
+                        grown / room.sin()
+                    }
+                })
+                .collect(),
+            (SliceAxis::Columns, ..) => vec![f64::INFINITY; cols],
+            (SliceAxis::Rows, ..) => vec![f64::NAN; cols],
+        };
+        let trig = |angles: &[f32]| -> Vec<(f64, f64)> {
+            angles.iter().map(|&a| f64::from(a).sin_cos()).collect()
+        };
+        let (rows_trig, cols_trig) = (trig(&sub.beams.elevation), trig(&sub.beams.azimuth));
+        self.fov
+            .start(cols, [sensor_at.x as f32, sensor_at.y as f32]);
         for (row, ranges) in sub.range.chunks(cols.max(1)).enumerate() {
+            let (sin_el, cos_el) = rows_trig[row];
             for (col, &r) in ranges.iter().enumerate() {
                 let r = f64::from(r);
                 if !(r.is_finite() && r >= self.min_range && r <= self.max_range) {
                     continue;
                 }
-                let Some(dir) = sub.beams.direction(row, col) else {
-                    continue;
+                let d = r * cos_el;
+                let complete = if near[col].is_nan() {
+                    let place = Place {
+                        d,
+                        phi: f64::from(sub.beams.azimuth[col]),
+                    };
+                    frame.complete_now(geometry, place, grown)
+                } else {
+                    d >= near[col] && grown < d
                 };
-                let local = Point3::new(dir[0] * r, dir[1] * r, dir[2] * r);
-                let place = Place {
-                    d: local.x.hypot(local.y),
-                    phi: local.y.atan2(local.x),
-                };
-                if !frame.complete_now(geometry, place, grown) {
+                if !complete {
                     continue;
                 }
-                let p = world_from_sensor * local;
+                let (sin_az, cos_az) = cols_trig[col];
+                let p = world_from_sensor * Point3::new(d * cos_az, d * sin_az, r * sin_el);
                 let (dx, dy) = (p.x - vehicle_at.x, p.y - vehicle_at.y);
-                let (ahead, left) = (
-                    yaw_cos * dx + yaw_sin * dy,
-                    -yaw_sin * dx + yaw_cos * dy,
-                );
-                if ahead > region.ahead_m || ahead < -region.behind_m || left.abs() > region.half_width_m {
+                let ahead = yaw_cos * dx + yaw_sin * dy;
+                let left = -yaw_sin * dx + yaw_cos * dy;
+                if ahead > region.ahead_m
+                    || ahead < -region.behind_m
+                    || left.abs() > region.half_width_m
+                {
                     continue;
                 }
                 self.fov.add(col, p.x as f32, p.y as f32);
             }
         }
-        self.fov
-            .finish(&Isometry::identity(), self.fov_max_vertices, &mut report.fov);
+        self.fov.finish(
+            &Isometry::identity(),
+            self.fov_max_vertices,
+            &mut report.fov,
+        );
     }
 }
 
@@ -812,6 +868,7 @@ impl Frame {
             previous_finals: vec![[f32::INFINITY, f32::NEG_INFINITY]; cols],
             pose: None,
             last_utime: slice.utime,
+            column_step: 0.0,
         }
     }
 
@@ -834,7 +891,10 @@ impl Frame {
                     self.received[c] = true;
                 }
                 let n = slice.beams.cols();
-                self.image.beams.elevation.clone_from(&slice.beams.elevation);
+                self.image
+                    .beams
+                    .elevation
+                    .clone_from(&slice.beams.elevation);
                 for (k, &az) in slice.beams.azimuth.iter().enumerate() {
                     let c = slice.first + k;
                     self.image.beams.azimuth[c] = az;
@@ -845,6 +905,9 @@ impl Frame {
                     self.image.range[row * cols + slice.first..][..n].copy_from_slice(values);
                 }
                 self.next = slice.first + n;
+                if self.column_step == 0.0 {
+                    self.column_step = smallest_step(&slice.beams.azimuth);
+                }
             }
             SliceAxis::Rows => {
                 let (lo, hi) = self.received_elevations();
@@ -876,6 +939,9 @@ impl Frame {
                     self.order = 0;
                 }
                 self.image.beams.azimuth.clone_from(&slice.beams.azimuth);
+                if self.column_step == 0.0 {
+                    self.column_step = smallest_step(&slice.beams.azimuth);
+                }
                 for (k, &el) in slice.beams.elevation.iter().enumerate() {
                     self.image.beams.elevation[slice.first + k] = el;
                     self.received[slice.first + k] = true;
@@ -906,7 +972,11 @@ impl Frame {
         if self.sweep == 0.0 {
             // The second column sets the direction (the nearer way round).
             let ccw = swept_angle(az0, az, 1.0);
-            self.sweep = if ccw <= std::f32::consts::PI { 1.0 } else { -1.0 };
+            self.sweep = if ccw <= std::f32::consts::PI {
+                1.0
+            } else {
+                -1.0
+            };
         }
         let a = swept_angle(az0, az, self.sweep);
         let previous = self.swept[..c]
@@ -915,7 +985,7 @@ impl Frame {
             .find(|v| v.is_finite())
             .copied()
             .unwrap_or(0.0);
-        if c != reference && !(a > previous) {
+        if c != reference && (a.is_nan() || a <= previous) {
             self.monotone = false;
         }
         self.swept[c] = a;
@@ -923,6 +993,9 @@ impl Frame {
 
     /// Azimuth between neighbouring columns, radians.
     fn column_step(&self) -> f64 {
+        if self.column_step > 0.0 {
+            return self.column_step;
+        }
         let az = &self.image.beams.azimuth;
         az.windows(2)
             .map(|w| f64::from((w[1] - w[0]).abs()))
@@ -1005,7 +1078,13 @@ impl Frame {
         (a - w >= 0.0 && a + w < std::f32::consts::TAU).then_some((a - w, a + w))
     }
 
-    fn in_window(&self, geometry: &Geometry, place: Place, radius: f64, window: (f32, f32)) -> bool {
+    fn in_window(
+        &self,
+        geometry: &Geometry,
+        place: Place,
+        radius: f64,
+        window: (f32, f32),
+    ) -> bool {
         self.span(geometry, place, radius)
             .is_some_and(|(lo, hi)| lo >= window.0 && hi <= window.1)
     }
@@ -1054,10 +1133,7 @@ impl Frame {
         let mut received: Vec<usize> = (0..rows).filter(|&r| self.received[r]).collect();
         // Nearest the beams to come first.
         received.sort_by(|&a, &b| {
-            let (ea, eb) = (
-                self.image.beams.elevation[a],
-                self.image.beams.elevation[b],
-            );
+            let (ea, eb) = (self.image.beams.elevation[a], self.image.beams.elevation[b]);
             if self.order > 0 {
                 ea.total_cmp(&eb)
             } else {
@@ -1139,10 +1215,24 @@ impl Frame {
     }
 }
 
+/// The smallest gap between neighbouring angles (0 when none), at most 0.1.
+fn smallest_step(angles: &[f32]) -> f64 {
+    let step = angles
+        .windows(2)
+        .map(|w| f64::from((w[1] - w[0]).abs()))
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    if step.is_finite() { step.min(0.1) } else { 0.0 }
+}
+
 /// Replaces each NaN by the nearest finite value before it (or after it,
 /// at the start); all NaN becomes zeros.
 fn fill_nan(values: &mut [f32]) {
-    let first = values.iter().copied().find(|v| v.is_finite()).unwrap_or(0.0);
+    let first = values
+        .iter()
+        .copied()
+        .find(|v| v.is_finite())
+        .unwrap_or(0.0);
     let mut last = first;
     for v in values {
         if v.is_finite() {

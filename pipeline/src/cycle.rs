@@ -94,8 +94,9 @@ pub struct Cycle<T = ()> {
     pub map: Arc<MapSnapshot>,
     /// Map resets so far: a change tells behaviours to forget their state.
     pub resets: u64,
-    /// Capture time and tag (a live executor's arrival time) of the images
-    /// whose cells are new in this map.
+    /// Acquisition time (an image's capture time, a streamed slice's last
+    /// line) and tag (a live executor's arrival time) of the reports whose
+    /// cells are new in this map.
     pub images: Vec<(Utime, T)>,
     /// Run because new cells arrived, not by the fixed-rate clock.
     pub event: bool,
@@ -219,7 +220,7 @@ impl<T> DecisionCycle<T> {
         let now = self.pose.map_or(Utime::MIN, |p| p.utime);
         match self.delivery {
             Delivery::Held { latency_us } => {
-                let due = report.utime.saturating_add(latency_us);
+                let due = report.acquired_utime().saturating_add(latency_us);
                 // A cycle after the modelled delivery time ran without it.
                 if self.last_cycle.is_some_and(|c| c >= due) {
                     self.counts.late_reports += 1;
@@ -230,7 +231,7 @@ impl<T> DecisionCycle<T> {
             }
             Delivery::OnArrival { decide_at_once } => {
                 self.map.on_obstacles(&report);
-                self.images.push((report.utime, tag));
+                self.images.push((report.acquired_utime(), tag));
                 if decide_at_once && self.pose.is_some() {
                     let at = self.last_cycle.map_or(now, |c| c.max(now));
                     self.counts.event_cycles += 1;
@@ -275,7 +276,7 @@ impl<T> DecisionCycle<T> {
     fn deliver_first(&mut self) {
         if let Some(w) = self.waiting.pop_front() {
             self.map.on_obstacles(&w.report);
-            self.images.push((w.report.utime, w.tag));
+            self.images.push((w.report.acquired_utime(), w.tag));
         }
     }
 

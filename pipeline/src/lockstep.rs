@@ -13,7 +13,7 @@ use std::time::Instant;
 use arcnav_arbiter::{Arbiter, BehaviourVotes, Decision};
 use arcnav_behaviours::Mission;
 use arcnav_localmap::MapSnapshot;
-use arcnav_perception::{ObstacleReport, RangeImage};
+use arcnav_perception::{ObstacleReport, RangeImage, RangeSlice};
 use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime};
 use serde::Serialize;
 
@@ -26,6 +26,8 @@ use crate::perception::PerceptionNode;
 pub enum Input {
     Pose(Pose),
     Image(RangeImage),
+    /// A slice of a range image (streamed; 002 §7's integrated mode).
+    Slice(RangeSlice),
     Waypoints(Mission),
     /// Obstacle cells perceived elsewhere (a recorded log's OBSTACLE_CELLS,
     /// or a distributed perception node): straight to the local map.
@@ -37,6 +39,7 @@ impl Input {
         match self {
             Input::Pose(p) => p.utime,
             Input::Image(i) => i.utime,
+            Input::Slice(s) => s.utime,
             Input::Waypoints(m) => m.version,
             Input::Obstacles(r) => r.utime,
         }
@@ -201,6 +204,13 @@ impl Pipeline {
                     .on_image(image, &mut |r| self.reports.push(r));
                 self.perceived(now, started, sink);
             }
+            Input::Slice(slice) => {
+                self.advance(now, false, sink);
+                let started = self.started();
+                self.perception
+                    .on_slice(slice, &mut |r| self.reports.push(r));
+                self.perceived(now, started, sink);
+            }
             Input::Waypoints(mission) => {
                 self.advance(now, false, sink);
                 self.behaviours.on_waypoints(mission);
@@ -222,6 +232,15 @@ impl Pipeline {
             sink.on_obstacles(now, &report);
             self.cycle.on_report(report, (), &mut self.cycles);
         }
+    }
+
+    /// Ends the frames being streamed (the end of the inputs): their cells
+    /// not yet reported reach the map.
+    pub fn flush(&mut self, sink: &mut dyn Sink) {
+        let now = self.pose().map_or(0, |p| p.utime);
+        let started = self.started();
+        self.perception.flush(&mut |r| self.reports.push(r));
+        self.perceived(now, started, sink);
     }
 
     /// Runs every internal event at or before `until`.

@@ -5,8 +5,8 @@
 use std::collections::VecDeque;
 
 use arcnav_perception::{
-    HeightSampler, ImageStats, InOrder, ObstacleReport, PerceptionConfig, RangeImage, Runner,
-    TerrainEvaluator,
+    FrameStream, HeightSampler, ImageStats, InOrder, ObstacleReport, PerceptionConfig, RangeImage,
+    RangeSlice, Runner, StreamCounts, StreamingConfig, TerrainEvaluator,
 };
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::time::seconds_to_micros;
@@ -34,13 +34,47 @@ pub struct PerceptionDrops {
     pub clock_restart: u64,
 }
 
+/// A range image or a slice of one, waiting for its pose.
+#[derive(Debug)]
+enum Pending {
+    Image(RangeImage),
+    Slice(RangeSlice),
+}
+
+impl Pending {
+    /// When its last line was acquired: the pose it is judged with.
+    fn utime(&self) -> Utime {
+        match self {
+            Pending::Image(image) => image.utime,
+            Pending::Slice(slice) => slice.utime,
+        }
+    }
+}
+
+/// What streamed slices did, summed over sensors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct SliceCounts {
+    /// Slices received (also counted in `images`' drops when dropped).
+    pub received: u64,
+    /// Slices refused by perception (malformed; inconsistent with their frame).
+    pub invalid: u64,
+    pub stream: StreamCounts,
+}
+
 /// Perception: range images + poses → obstacle reports.
 pub struct PerceptionNode {
     evaluator: Box<dyn TerrainEvaluator>,
     heights: HeightSampler,
     runner: Box<dyn Runner + Send>,
     poses: PoseHistory,
-    waiting: VecDeque<RangeImage>,
+    waiting: VecDeque<Pending>,
+    streaming: StreamingConfig,
+    perception_config: PerceptionConfig,
+    /// One assembler per sensor streaming slices.
+    streams: Vec<(String, FrameStream)>,
+    /// Heights sampled from slices not yet sent with a report.
+    pending_heights: ObstacleReport,
+    pub slices: SliceCounts,
     max_waiting: usize,
     max_gap_us: Utime,
     newest_capture: Vec<(String, Utime)>,
@@ -78,6 +112,11 @@ impl PerceptionNode {
             runner: Box::new(InOrder),
             poses: PoseHistory::spanning(seconds_to_micros(timing.pose_history_s), MAX_POSES),
             waiting: VecDeque::new(),
+            streaming: perception.streaming,
+            perception_config: perception.clone(),
+            streams: Vec::new(),
+            pending_heights: ObstacleReport::default(),
+            slices: SliceCounts::default(),
             max_waiting: timing.max_waiting_images,
             max_gap_us: seconds_to_micros(timing.max_pose_gap_s),
             newest_capture: Vec::new(),
@@ -102,6 +141,7 @@ impl PerceptionNode {
                 self.drops.clock_restart += self.waiting.len() as u64;
                 self.waiting.clear();
                 self.newest_capture.clear();
+                self.streams.clear();
                 let _ = self.poses.push(*pose);
             }
         }
@@ -117,6 +157,24 @@ impl PerceptionNode {
     /// Images waiting for the pose at their capture time.
     pub fn waiting(&self) -> usize {
         self.waiting.len()
+    }
+
+    /// Slices stand in for images in the waiting room: as many as make up
+    /// `max_waiting_images` of the largest streamed frame seen.
+    fn slices_per_image(&self) -> usize {
+        if self.waiting.iter().any(|p| matches!(p, Pending::Slice(_))) {
+            self.waiting
+                .iter()
+                .filter_map(|p| match p {
+                    Pending::Slice(s) => Some(s.frame_rows.max(s.frame_cols) / s.lines().max(1)),
+                    Pending::Image(_) => None,
+                })
+                .max()
+                .unwrap_or(1)
+                .clamp(1, 4096)
+        } else {
+            1
+        }
     }
 
     fn newest_pose(&self) -> Utime {
@@ -140,8 +198,75 @@ impl PerceptionNode {
                 );
             }
         }
-        self.waiting.push_back(image);
+        self.waiting.push_back(Pending::Image(image));
         self.drain(out);
+    }
+
+    /// A slice of a range image (002 §7's integrated mode): judged as soon
+    /// as the pose when its last line was acquired is known; the cells it
+    /// completes are reported at once (see [`arcnav_perception::stream`]).
+    pub fn on_slice(&mut self, slice: RangeSlice, out: &mut dyn FnMut(ObstacleReport)) {
+        self.slices.received += 1;
+        if let Err(e) = slice.validate() {
+            tracing::warn!(%e, sensor = %slice.sensor, "range slice refused");
+            self.slices.invalid += 1;
+            return;
+        }
+        self.waiting.push_back(Pending::Slice(slice));
+        self.drain(out);
+    }
+
+    /// Ends every frame being streamed (its last slices will not come:
+    /// the end of a log). Their cells not yet reported are.
+    pub fn flush(&mut self, out: &mut dyn FnMut(ObstacleReport)) {
+        let mut streams = std::mem::take(&mut self.streams);
+        for (_, stream) in &mut streams {
+            let result = stream.finish(self.evaluator.as_mut(), &*self.runner, &mut |report| {
+                Self::send(&mut self.pending_heights, &mut self.reports, report, out)
+            });
+            self.account(result);
+        }
+        self.streams = streams;
+        self.refresh_stream_counts();
+    }
+
+    /// Counts of every sensor's stream.
+    fn refresh_stream_counts(&mut self) {
+        let mut total = StreamCounts::default();
+        for (_, stream) in &self.streams {
+            let c = stream.counts;
+            total.slices += c.slices;
+            total.frames += c.frames;
+            total.steps += c.steps;
+            total.out_of_order += c.out_of_order;
+            total.inconsistent += c.inconsistent;
+            total.lost_lines += c.lost_lines;
+            total.incomplete_frames += c.incomplete_frames;
+        }
+        self.slices.stream = total;
+    }
+
+    fn account(&mut self, result: Result<ImageStats, arcnav_perception::SliceError>) {
+        match result {
+            Ok(stats) => self.totals.accumulate(&stats),
+            Err(e) => {
+                tracing::warn!(%e, "range slice dropped by perception");
+                self.slices.invalid += 1;
+            }
+        }
+    }
+
+    /// Hands `report` on with the heights of the slices since the last one.
+    fn send(
+        pending: &mut ObstacleReport,
+        reports: &mut u64,
+        mut report: ObstacleReport,
+        out: &mut dyn FnMut(ObstacleReport),
+    ) {
+        report.heights_cell_m = pending.heights_cell_m;
+        report.heights.append(&mut pending.heights);
+        *reports += 1;
+        out(report);
     }
 
     fn drain(&mut self, out: &mut dyn FnMut(ObstacleReport)) {
@@ -149,17 +274,67 @@ impl PerceptionNode {
         while self
             .waiting
             .front()
-            .is_some_and(|image| image.utime <= newest)
+            .is_some_and(|pending| pending.utime() <= newest)
         {
-            if let Some(image) = self.waiting.pop_front() {
-                self.evaluate(image, out);
+            match self.waiting.pop_front() {
+                Some(Pending::Image(image)) => self.evaluate(image, out),
+                Some(Pending::Slice(slice)) => self.evaluate_slice(slice, out),
+                None => {}
             }
         }
         // Images whose pose never comes (a stopped pose stream) are dropped.
-        while self.waiting.len() > self.max_waiting {
+        while self.waiting.len() > self.max_waiting * self.slices_per_image() {
             self.waiting.pop_front();
             self.drops.no_pose += 1;
         }
+    }
+
+    fn evaluate_slice(&mut self, slice: RangeSlice, out: &mut dyn FnMut(ObstacleReport)) {
+        let pose = match self.poses.at_within(slice.utime, self.max_gap_us) {
+            Ok(pose) => pose,
+            Err(e) => {
+                tracing::debug!(%e, slice = slice.utime, "slice dropped: no pose when acquired");
+                self.drops.no_pose += 1;
+                return;
+            }
+        };
+        // A sensor that streams is newer than its last whole image.
+        if self
+            .newest_capture
+            .iter()
+            .any(|(s, newest)| *s == slice.sensor && slice.frame_utime <= *newest)
+        {
+            self.drops.out_of_order += 1;
+            return;
+        }
+        let index = match self.streams.iter().position(|(s, _)| *s == slice.sensor) {
+            Some(i) => i,
+            None => {
+                let mut stream = FrameStream::new(
+                    self.streaming,
+                    self.evaluator.support(),
+                    &self.perception_config,
+                );
+                // An evaluator that fuses images sees each frame once, whole.
+                stream.set_whole_frames(!self.evaluator.judges_each_image_alone());
+                self.streams.push((slice.sensor.clone(), stream));
+                self.streams.len() - 1
+            }
+        };
+        // The slice's own heights go with the next report.
+        let image = slice.to_image();
+        self.heights
+            .sample(&image, &pose.world_from_vehicle, &mut self.pending_heights);
+        let stream = &mut self.streams[index].1;
+        let result = stream.on_slice(
+            &slice,
+            &pose.world_from_vehicle,
+            self.evaluator.as_mut(),
+            &*self.runner,
+            &mut |report| Self::send(&mut self.pending_heights, &mut self.reports, report, out),
+        );
+        self.account(result);
+        self.refresh_stream_counts();
     }
 
     fn evaluate(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
@@ -171,6 +346,13 @@ impl PerceptionNode {
                 return;
             }
         };
+        if let Some((_, stream)) = self.streams.iter_mut().find(|(s, _)| *s == image.sensor)
+            && stream.frame_utime().is_some_and(|f| image.utime <= f)
+        {
+            // A whole image no newer than the frame being streamed.
+            self.drops.out_of_order += 1;
+            return;
+        }
         match self
             .newest_capture
             .iter_mut()
@@ -193,6 +375,7 @@ impl PerceptionNode {
             &*self.runner,
         ) {
             Ok(stats) => {
+                report.acquired = image.utime;
                 self.heights
                     .sample(&image, &pose.world_from_vehicle, &mut report);
                 self.totals.accumulate(&stats);

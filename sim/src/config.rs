@@ -41,6 +41,13 @@ pub struct SimConfig {
     /// Rays are cast only this far beyond `perception.max_range_m` (returns
     /// perception would ignore are not rendered), m.
     pub render_margin_m: f64,
+    /// 0: each range image is sent whole at its capture time. N: it is sent
+    /// in slices of N lines as the sensor acquires them (002 §7's
+    /// integrated mode, `range_slice_t`), each rendered where the vehicle
+    /// is then — columns for a sensor spanning 180° or more (a rotating
+    /// lidar; an Ouster sends 16 per packet), rows for a scanning one (the
+    /// ERIM), highest beam first.
+    pub slice_lines: usize,
 }
 
 impl Default for SimConfig {
@@ -58,6 +65,7 @@ impl Default for SimConfig {
             seed: 1,
             threads: 0,
             render_margin_m: 5.0,
+            slice_lines: 0,
         }
     }
 }

@@ -5,7 +5,7 @@
 
 use std::sync::Mutex;
 
-use arcnav_perception::{RangeImage, SensorModel};
+use arcnav_perception::{RangeImage, RangeSlice, SensorModel, SliceAxis};
 use arcnav_vehicle::{Isometry, Utime};
 
 use crate::rng::Rng;
@@ -59,6 +59,134 @@ pub fn render(
         work();
     });
     image
+}
+
+/// A sensor that sends each image in slices as it acquires it (002 §7's
+/// integrated mode): blocks of columns for a sensor whose columns span
+/// 180° or more (a rotating lidar), else blocks of rows, highest beam
+/// first (a scanning sensor like the ERIM). Line `i` of `n` of a frame
+/// starting at `t` is acquired at `t + period·(i + 1)/n`; each slice is
+/// rendered with the vehicle where it was at the slice's middle line.
+#[derive(Debug, Clone)]
+pub struct Slicer {
+    axis: SliceAxis,
+    /// Each slice's sensor (its rows or columns only) and its first line.
+    parts: Vec<(SensorModel, usize)>,
+    lines: usize,
+    frame_rows: usize,
+    frame_cols: usize,
+    period_us: Utime,
+}
+
+impl Slicer {
+    /// `lines` lines per slice (at least 1).
+    pub fn new(sensor: &SensorModel, lines: usize) -> Self {
+        let (rows, cols) = (sensor.beams.rows(), sensor.beams.cols());
+        let az = &sensor.beams.azimuth;
+        let span = match (az.first(), az.last()) {
+            (Some(a), Some(b)) => f64::from((a - b).abs()) * cols as f64 / (cols.max(2) - 1) as f64,
+            _ => 0.0,
+        };
+        let axis = if span >= std::f64::consts::PI {
+            SliceAxis::Columns
+        } else {
+            SliceAxis::Rows
+        };
+        let total = match axis {
+            SliceAxis::Columns => cols,
+            SliceAxis::Rows => rows,
+        };
+        let lines = lines.clamp(1, total.max(1));
+        let parts = (0..total)
+            .step_by(lines)
+            .map(|first| {
+                let end = (first + lines).min(total);
+                let mut part = sensor.clone();
+                match axis {
+                    SliceAxis::Columns => part.beams.azimuth = az[first..end].to_vec(),
+                    SliceAxis::Rows => {
+                        part.beams.elevation = sensor.beams.elevation[first..end].to_vec();
+                    }
+                }
+                (part, first)
+            })
+            .collect();
+        Self {
+            axis,
+            parts,
+            lines: total,
+            frame_rows: rows,
+            frame_cols: cols,
+            period_us: sensor.period_us(),
+        }
+    }
+
+    pub fn axis(&self) -> SliceAxis {
+        self.axis
+    }
+
+    /// Slices per frame.
+    pub fn len(&self) -> usize {
+        self.parts.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.parts.is_empty()
+    }
+
+    /// When line `line` of the frame starting at `frame` was acquired.
+    pub fn line_utime(&self, frame: Utime, line: usize) -> Utime {
+        frame + self.period_us * (line as Utime + 1) / self.lines.max(1) as Utime
+    }
+
+    /// When slice `k` of the frame starting at `frame` is complete, and
+    /// when its middle line was acquired (the pose it is rendered at).
+    pub fn times(&self, frame: Utime, k: usize) -> (Utime, Utime) {
+        let (part, first) = &self.parts[k.min(self.parts.len() - 1)];
+        let n = match self.axis {
+            SliceAxis::Columns => part.beams.cols(),
+            SliceAxis::Rows => part.beams.rows(),
+        };
+        (
+            self.line_utime(frame, first + n - 1),
+            self.line_utime(frame, first + n / 2),
+        )
+    }
+
+    /// Renders slice `k` of the frame starting at `frame`, the vehicle at
+    /// `world_from_vehicle`.
+    pub fn render(
+        &self,
+        k: usize,
+        frame: Utime,
+        view: &TileView,
+        world_from_vehicle: &Isometry,
+        noise: (f64, f64),
+        seed: (u64, u64),
+    ) -> RangeSlice {
+        let (part, first) = &self.parts[k.min(self.parts.len() - 1)];
+        let image = render(part, view, world_from_vehicle, frame, noise, seed, 1);
+        let n = match self.axis {
+            SliceAxis::Columns => part.beams.cols(),
+            SliceAxis::Rows => part.beams.rows(),
+        };
+        let line_utimes: Vec<Utime> = (*first..first + n)
+            .map(|line| self.line_utime(frame, line))
+            .collect();
+        RangeSlice {
+            utime: *line_utimes.last().unwrap_or(&frame),
+            frame_utime: frame,
+            sensor: image.sensor,
+            vehicle_from_sensor: image.vehicle_from_sensor,
+            frame_rows: self.frame_rows,
+            frame_cols: self.frame_cols,
+            axis: self.axis,
+            first: *first,
+            beams: image.beams,
+            line_utimes,
+            range: image.range,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -59,6 +59,39 @@ impl<T> NewestWins<T> {
     }
 }
 
+/// Where range images and their slices go: images to a newest-wins slot
+/// (a perception that falls behind skips to the latest), slices to a queue
+/// (a skipped slice would be lines of an image lost).
+pub struct SensorFeed {
+    pub images: NewestWins<Arrived<arcnav_perception::RangeImage>>,
+    pub slices: Sender<Arrived<arcnav_perception::RangeSlice>>,
+}
+
+/// Perception's side of a [`SensorFeed`].
+pub struct SensorInputs {
+    pub images: Receiver<Arrived<arcnav_perception::RangeImage>>,
+    pub slices: Receiver<Arrived<arcnav_perception::RangeSlice>>,
+    /// Images replaced by newer ones before perception took them.
+    pub replaced: Arc<AtomicU64>,
+}
+
+/// A feed whose slice queue holds `slices` slices.
+pub fn sensor_feed(slices: usize) -> (SensorFeed, SensorInputs) {
+    let (images, image_receiver, replaced) = newest_wins();
+    let (slice_sender, slice_receiver) = crossbeam_channel::bounded(slices.max(1));
+    (
+        SensorFeed {
+            images,
+            slices: slice_sender,
+        },
+        SensorInputs {
+            images: image_receiver,
+            slices: slice_receiver,
+            replaced,
+        },
+    )
+}
+
 /// Sends without blocking; a full queue drops the item and counts it.
 pub fn offer<T>(sender: &Sender<T>, item: T, dropped: &mut u64) -> bool {
     match sender.try_send(item) {

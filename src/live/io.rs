@@ -8,14 +8,13 @@ use arcnav_behaviours::Mission;
 use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_bus::transport::{Lcm, Publisher, ReceivedMessage};
-use arcnav_perception::RangeImage;
 use arcnav_pipeline::{Decided, LiveConfig, Why};
 use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{ArcSet, Pose};
 use crossbeam_channel::Sender;
 
 use super::NodeStatus;
-use super::handoff::{Arrived, NewestWins, offer};
+use super::handoff::{Arrived, SensorFeed, offer};
 use super::threaded::{LiveError, LiveOptions, ToArbiter};
 use crate::wire;
 
@@ -194,7 +193,8 @@ pub(crate) fn publish_command(
 pub(crate) struct IoRoutes {
     pub perception_poses: Option<Sender<Pose>>,
     pub map_poses: Option<Sender<Pose>>,
-    pub images: Option<NewestWins<Arrived<RangeImage>>>,
+    /// Range images and their slices.
+    pub images: Option<SensorFeed>,
     pub waypoints: Option<Sender<Mission>>,
     pub(crate) arbiter: Option<Sender<ToArbiter>>,
     /// Behaviours in processes of their own, whose votes go to `arbiter`.
@@ -236,7 +236,7 @@ pub(crate) fn io_loop(
 ) -> Result<NodeStatus, LiveError> {
     let mut status = NodeStatus::new("io");
     let mut ticker = Ticker::new(live.status_period_s, options.clock().now_us());
-    let (mut poses, mut images, mut queue_full) = (0u64, 0u64, 0u64);
+    let (mut poses, mut images, mut slices, mut queue_full) = (0u64, 0u64, 0u64, 0u64);
     let (mut bad, mut undecodable, mut external_votes) = (Refused::default(), 0u64, 0u64);
     let result = pump(
         lcm,
@@ -265,14 +265,27 @@ pub(crate) fn io_loop(
                     Some(AnyMessage::RangeImage(msg)) => match wire::range_image_from_wire(msg) {
                         Ok(image) => {
                             images += 1;
-                            if let Some(slot) = &routes.images {
-                                slot.put(Arrived {
+                            if let Some(feed) = &routes.images {
+                                feed.images.put(Arrived {
                                     item: image,
                                     wall: now,
                                 });
                             }
                         }
                         Err(e) => bad.refuse("range image", &message.channel, &e),
+                    },
+                    Some(AnyMessage::RangeSlice(msg)) => match wire::range_slice_from_wire(msg) {
+                        Ok(slice) => {
+                            slices += 1;
+                            if let Some(feed) = &routes.images {
+                                let slice = Arrived {
+                                    item: slice,
+                                    wall: now,
+                                };
+                                offer(&feed.slices, slice, &mut queue_full);
+                            }
+                        }
+                        Err(e) => bad.refuse("range slice", &message.channel, &e),
                     },
                     Some(AnyMessage::Waypoints(msg)) => match wire::mission_from_wire(&msg) {
                         Ok(mission) => {
@@ -328,6 +341,7 @@ pub(crate) fn io_loop(
     status.queue(depth.unwrap_or(0));
     status.set("poses", poses);
     status.set("images", images);
+    status.set("slices", slices);
     status.set("refused", refused);
     if routes.external.is_some() {
         status.set("external_votes", external_votes);

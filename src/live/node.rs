@@ -83,14 +83,14 @@ fn perception(
 ) -> Result<LiveReport, LiveError> {
     let node = perception_node(config)?;
     let publisher = lcm.publisher();
-    let (slot, images, replaced) = handoff::newest_wins();
+    let (feed, sensed) = handoff::sensor_feed(super::threaded::SLICE_QUEUE);
     let (poses_tx, poses) = crossbeam_channel::bounded(config.live.queue_capacity);
     let live = config.live.clone();
     let clock = options.clock();
     let worker = std::thread::Builder::new()
         .name("perception".into())
         .spawn(move || {
-            perception_worker(node, poses, images, replaced, &live, clock, |report, _| {
+            perception_worker(node, poses, sensed, &live, clock, |report, _| {
                 if let Err(e) = publisher
                     .publish_message(channels::OBSTACLE_CELLS, &wire::obstacles_to_wire(&report))
                 {
@@ -104,7 +104,7 @@ fn perception(
         })?;
     let routes = IoRoutes {
         perception_poses: Some(poses_tx),
-        images: Some(slot),
+        images: Some(feed),
         ..IoRoutes::default()
     };
     routes.subscribe(&mut lcm)?;

@@ -31,7 +31,7 @@ use std::time::{Duration, Instant};
 use arcnav_arbiter::BehaviourVotes;
 use arcnav_behaviours::{Mission, Registry};
 use arcnav_bus::transport::{Lcm, Publisher, TransportError};
-use arcnav_perception::{ObstacleReport, RangeImage};
+use arcnav_perception::ObstacleReport;
 use arcnav_pipeline::{ArbiterNode, BehaviourSet, Cycle, Decided};
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::{Pose, SteeringCommand, Utime};
@@ -44,6 +44,11 @@ use super::workers::{MapStage, map_worker, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
 use crate::config::Config;
 use crate::wire;
+
+/// Range-image slices that may wait for perception: 16 frames of a
+/// 2048-column lidar in 16-column slices. Beyond, slices are dropped
+/// (counted by the io node as a full queue; their lines count as lost).
+pub(crate) const SLICE_QUEUE: usize = 2048;
 use arcnav_bus::messages::channels;
 
 /// A live executor that cannot run.
@@ -152,7 +157,7 @@ pub fn run(
 
     let publisher = lcm.publisher();
 
-    let (image_slot, images, replaced) = handoff::newest_wins::<Arrived<RangeImage>>();
+    let (feed, sensed) = handoff::sensor_feed(SLICE_QUEUE);
     let (perception_poses_tx, perception_poses) = crossbeam_channel::bounded::<Pose>(capacity);
     let (map_poses_tx, map_poses) = crossbeam_channel::bounded::<Pose>(capacity);
     let (reports_tx, reports) = crossbeam_channel::bounded::<Arrived<ObstacleReport>>(capacity);
@@ -170,8 +175,7 @@ pub fn run(
             perception_worker(
                 perception,
                 perception_poses,
-                images,
-                replaced,
+                sensed,
                 &live,
                 clock,
                 |report, arrival| {
@@ -243,7 +247,7 @@ pub fn run(
     let routes = IoRoutes {
         perception_poses: Some(perception_poses_tx),
         map_poses: Some(map_poses_tx),
-        images: Some(image_slot),
+        images: Some(feed),
         waypoints: Some(waypoints_tx),
         arbiter: Some(arbiter_tx),
         external,

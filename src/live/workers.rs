@@ -3,17 +3,16 @@
 //! pipeline's nodes, and keep the nodes' figures.
 
 use std::collections::VecDeque;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use arcnav_perception::{ObstacleReport, RangeImage};
+use arcnav_perception::ObstacleReport;
 use arcnav_pipeline::{Cycle, DecisionCycle, LiveConfig, PerceptionNode};
 use arcnav_vehicle::{Pose, Utime};
 use crossbeam_channel::{Receiver, select};
 
 use super::clock::{Clock, SharedClock};
-use super::handoff::{Arrived, Handoff};
+use super::handoff::{Arrived, Handoff, SensorInputs};
 use super::io::Ticker;
 use super::threaded::LiveError;
 use super::{NodeStatus, Samples};
@@ -64,14 +63,15 @@ pub(crate) fn perception_node(config: &Config) -> Result<PerceptionNode, LiveErr
     Ok(node)
 }
 
-/// Perception on its own thread's loop: poses and the newest image in,
-/// reports (with their image's arrival time) out, until the inputs close.
-/// With `live.perception_busy_poll` it polls its inputs instead of sleeping.
+/// Perception on its own thread's loop: poses, the newest image and every
+/// slice in, reports (with the arrival time of what they rest on: their
+/// image, or the first of the slices since the last report of the frame)
+/// out, until the inputs close. With `live.perception_busy_poll` it polls
+/// its inputs instead of sleeping.
 pub(crate) fn perception_worker(
     mut node: PerceptionNode,
     poses: Receiver<Pose>,
-    images: Receiver<Arrived<RangeImage>>,
-    replaced: Arc<AtomicU64>,
+    sensed: SensorInputs,
     live: &LiveConfig,
     clock: SharedClock,
     mut out: impl FnMut(ObstacleReport, i64),
@@ -86,7 +86,15 @@ pub(crate) fn perception_worker(
     let mut busy = Samples::default();
     let mut ticker = Ticker::new(status_period_s, clock.now_us());
     let mut arrivals: VecDeque<(Utime, i64)> = VecDeque::new();
+    // Per streamed frame (its capture time), the arrival of the first slice
+    // no report has covered yet.
+    let mut slice_arrivals: VecDeque<(Utime, i64)> = VecDeque::new();
     let mut reports = Vec::new();
+    let SensorInputs {
+        images,
+        slices,
+        replaced,
+    } = sensed;
     let fill = |status: &mut NodeStatus, node: &PerceptionNode, busy: &Samples| {
         let replaced = replaced.load(Ordering::Relaxed);
         status.handled = node.reports;
@@ -107,9 +115,19 @@ pub(crate) fn perception_worker(
         status.set("out_of_order", node.drops.out_of_order);
         status.set("clock_restart", node.drops.clock_restart);
         status.set("late", node.late);
+        let s = node.slices;
+        status.dropped += s.invalid + s.stream.out_of_order + s.stream.inconsistent;
+        status.set("slices", s.received);
+        status.set("slices_invalid", s.invalid);
+        status.set(
+            "slices_out_of_order",
+            s.stream.out_of_order + s.stream.inconsistent,
+        );
+        status.set("slice_lines_lost", s.stream.lost_lines);
+        status.set("streamed_frames", s.stream.frames);
     };
     loop {
-        let event = next(&poses, &images, wait);
+        let event = next(&poses, &images, &slices, wait);
         let started = Instant::now();
         match event {
             Next::First(pose) => node.on_pose(&pose, &mut |r| reports.push(r)),
@@ -123,6 +141,18 @@ pub(crate) fn perception_worker(
                 arrivals.push_back((item.utime, wall));
                 node.on_image(item, &mut |r| reports.push(r));
             }
+            Next::Third(Arrived { item, wall }) => {
+                for pose in poses.try_iter() {
+                    node.on_pose(&pose, &mut |r| reports.push(r));
+                }
+                if !slice_arrivals.iter().any(|(f, _)| *f == item.frame_utime) {
+                    if slice_arrivals.len() >= 64 {
+                        slice_arrivals.pop_front();
+                    }
+                    slice_arrivals.push_back((item.frame_utime, wall));
+                }
+                node.on_slice(item, &mut |r| reports.push(r));
+            }
             Next::Idle => {}
             Next::Closed => break,
         }
@@ -134,11 +164,22 @@ pub(crate) fn perception_worker(
             "range images replaced by newer ones before evaluation",
         );
         for report in reports.drain(..) {
-            let arrival = arrivals
+            let streamed = slice_arrivals
                 .iter()
-                .find(|(utime, _)| *utime == report.utime)
-                .map_or_else(|| clock.now_us(), |(_, wall)| *wall);
-            arrivals.retain(|(utime, _)| *utime > report.utime);
+                .position(|(frame, _)| *frame == report.utime);
+            let arrival = if let Some(i) = streamed {
+                // The slices since this frame's last report are covered.
+                slice_arrivals
+                    .remove(i)
+                    .map_or_else(|| clock.now_us(), |(_, wall)| wall)
+            } else {
+                let arrival = arrivals
+                    .iter()
+                    .find(|(utime, _)| *utime == report.utime)
+                    .map_or_else(|| clock.now_us(), |(_, wall)| *wall);
+                arrivals.retain(|(utime, _)| *utime > report.utime);
+                arrival
+            };
             out(report, arrival);
         }
         if ticker.due(clock.now_us()) {
@@ -150,9 +191,10 @@ pub(crate) fn perception_worker(
     status
 }
 
-enum Next<A, B> {
+enum Next<A, B, C> {
     First(A),
     Second(B),
+    Third(C),
     /// Nothing for 100 ms.
     Idle,
     /// An input closed: the executor is shutting down.
@@ -169,13 +211,19 @@ enum Wait {
     Poll,
 }
 
-/// The next message of either receiver.
-fn next<A, B>(first: &Receiver<A>, second: &Receiver<B>, wait: Wait) -> Next<A, B> {
+/// The next message of any of the receivers.
+fn next<A, B, C>(
+    first: &Receiver<A>,
+    second: &Receiver<B>,
+    third: &Receiver<C>,
+    wait: Wait,
+) -> Next<A, B, C> {
     const IDLE: Duration = Duration::from_millis(100);
     if wait == Wait::Block {
         return select! {
             recv(first) -> m => m.map_or(Next::Closed, Next::First),
             recv(second) -> m => m.map_or(Next::Closed, Next::Second),
+            recv(third) -> m => m.map_or(Next::Closed, Next::Third),
             default(IDLE) => Next::Idle,
         };
     }
@@ -184,6 +232,7 @@ fn next<A, B>(first: &Receiver<A>, second: &Receiver<B>, wait: Wait) -> Next<A, 
         select! {
             recv(first) -> m => return m.map_or(Next::Closed, Next::First),
             recv(second) -> m => return m.map_or(Next::Closed, Next::Second),
+            recv(third) -> m => return m.map_or(Next::Closed, Next::Third),
             default => {}
         }
         if since.elapsed() >= IDLE {
@@ -257,12 +306,17 @@ pub(crate) fn map_worker(
         status.dropped = cycles.dropped();
     };
     loop {
-        let event = next(&poses, &reports, Wait::Block);
+        let event = next(
+            &poses,
+            &reports,
+            &crossbeam_channel::never::<()>(),
+            Wait::Block,
+        );
         let started = Instant::now();
         match event {
             Next::First(pose) => map.on_pose(pose),
             Next::Second(Arrived { item, wall }) => map.on_report(item, wall),
-            Next::Idle => {}
+            Next::Third(()) | Next::Idle => {}
             Next::Closed => break,
         }
         let ms = started.elapsed().as_secs_f64() * 1e3;
@@ -290,29 +344,38 @@ mod tests {
     use super::*;
 
     #[test]
-    fn next_brings_either_input_then_idle_then_closed_sleeping_or_polling() {
+    fn next_brings_any_input_then_idle_then_closed_sleeping_or_polling() {
         for wait in [Wait::Block, Wait::Poll] {
             let (poses_tx, poses) = crossbeam_channel::bounded::<u8>(4);
             let (images_tx, images) = crossbeam_channel::bounded::<&str>(4);
+            let (slices_tx, slices) = crossbeam_channel::bounded::<u16>(4);
+            slices_tx.send(3).unwrap();
+            assert!(matches!(
+                next(&poses, &images, &slices, wait),
+                Next::Third(3)
+            ));
             let late = std::thread::spawn(move || {
                 std::thread::sleep(Duration::from_millis(20));
                 images_tx.send("image").unwrap();
                 images_tx
             });
             assert!(
-                matches!(next(&poses, &images, wait), Next::Second("image")),
+                matches!(next(&poses, &images, &slices, wait), Next::Second("image")),
                 "{wait:?}"
             );
             poses_tx.send(7).unwrap();
-            assert!(matches!(next(&poses, &images, wait), Next::First(7)));
+            assert!(matches!(
+                next(&poses, &images, &slices, wait),
+                Next::First(7)
+            ));
             let images_tx = late.join().unwrap();
             // Nothing for 100 ms: idle, so the status still gets logged.
             let since = Instant::now();
-            assert!(matches!(next(&poses, &images, wait), Next::Idle));
+            assert!(matches!(next(&poses, &images, &slices, wait), Next::Idle));
             assert!(since.elapsed() >= Duration::from_millis(100), "{wait:?}");
             // An input closed: the executor is shutting down.
             drop(images_tx);
-            assert!(matches!(next(&poses, &images, wait), Next::Closed));
+            assert!(matches!(next(&poses, &images, &slices, wait), Next::Closed));
         }
     }
 }

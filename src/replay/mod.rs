@@ -59,6 +59,8 @@ pub struct ReplayOptions {
 pub struct InputCounts {
     pub poses: u64,
     pub images: u64,
+    /// Slices of range images (streamed, `range_slice_t`).
+    pub slices: u64,
     pub waypoints: u64,
     pub recorded_cells: u64,
 }
@@ -338,6 +340,20 @@ pub fn replay(
                     }
                 }
             }
+            AnyMessage::RangeSlice(msg) if !options.recorded_cells => {
+                let encoded = arcnav_bus::Message::encode(&msg).unwrap_or_default();
+                match wire::range_slice_from_wire(msg) {
+                    Ok(slice) => {
+                        inputs.slices += 1;
+                        sink.out.event(t, channel, &encoded);
+                        pipeline.input(Input::Slice(slice), &mut sink);
+                    }
+                    Err(e) => {
+                        tracing::debug!(%e, "invalid range slice skipped");
+                        problems.invalid_slices += 1;
+                    }
+                }
+            }
             AnyMessage::ObstacleCells(msg) if options.recorded_cells => {
                 match wire::obstacles_from_wire(msg) {
                     Ok(report) => {
@@ -375,7 +391,10 @@ pub fn replay(
             }
             // Recomputed by the replay: the recorded ones are replaced.
             AnyMessage::ObstacleCells(_) => recorded_cells += 1,
-            AnyMessage::RangeImage(_) | AnyMessage::Waypoints(_) | AnyMessage::LocalMap(_) => {
+            AnyMessage::RangeImage(_)
+            | AnyMessage::RangeSlice(_)
+            | AnyMessage::Waypoints(_)
+            | AnyMessage::LocalMap(_) => {
                 *problems.ignored.entry(event.channel).or_default() += 1;
             }
         }
@@ -385,6 +404,8 @@ pub fn replay(
     }
     // The cycles due by the newest pose (of the last run, when the log
     // starts over; never those an absurd pose time would claim).
+    // A frame whose last slices the log does not hold ends here.
+    pipeline.flush(&mut sink);
     if let Some(newest) = pipeline.pose().map(|p| p.utime) {
         pipeline.run_until(newest, &mut sink);
     }
@@ -393,6 +414,10 @@ pub fn replay(
     problems.images_without_pose = drops.no_pose;
     problems.images_out_of_order = drops.out_of_order;
     problems.invalid_images += drops.invalid;
+    let slices = pipeline.perception.slices;
+    problems.invalid_slices += slices.invalid;
+    problems.slices_out_of_order = slices.stream.out_of_order + slices.stream.inconsistent;
+    problems.lost_slice_lines = slices.stream.lost_lines;
     let counts = pipeline.cycle.counts();
     problems.map_resets = counts.map_resets;
     problems.skipped_cycles = counts.skipped_cycles;
@@ -407,7 +432,7 @@ pub fn replay(
     problems.max_reorder_lag_s = order.max_lag_us as f64 * 1e-6;
     problems.fed_late = order.beyond_window;
     problems.log_restarts = order.restarts;
-    if inputs.images == 0 && !options.recorded_cells {
+    if inputs.images == 0 && inputs.slices == 0 && !options.recorded_cells {
         problems.cells_unused = recorded_cells;
     }
     problems.unknown_channels = events.stats().unknown.clone();

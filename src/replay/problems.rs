@@ -18,7 +18,15 @@ pub struct InputProblems {
     pub invalid_poses: u64,
     /// Range images that are not images (bad mount, sizes, angles).
     pub invalid_images: u64,
-    /// Images with no pose around their capture time.
+    /// Range-image slices that are not slices (bad mount, sizes, place in
+    /// their image), or that perception refused.
+    pub invalid_slices: u64,
+    /// Slices repeated, out of order, older than their sensor's frame, or
+    /// unlike their frame's earlier slices.
+    pub slices_out_of_order: u64,
+    /// Lines (columns or rows) of streamed frames that never arrived.
+    pub lost_slice_lines: u64,
+    /// Images (and slices) with no pose around their capture time.
     pub images_without_pose: u64,
     /// Images older than one already evaluated from the same sensor.
     pub images_out_of_order: u64,
@@ -87,6 +95,9 @@ impl InputProblems {
             || !self.undecodable.is_empty()
             || self.invalid_poses > 0
             || self.invalid_images > 0
+            || self.invalid_slices > 0
+            || self.slices_out_of_order > 0
+            || self.lost_slice_lines > 0
             || self.images_without_pose > 0
             || self.images_out_of_order > 0
             || self.fed_late > 0
@@ -150,6 +161,15 @@ impl InputProblems {
         for (what, n) in [
             ("invalid pose(s)", self.invalid_poses),
             ("invalid range image(s)", self.invalid_images),
+            ("invalid range-image slice(s)", self.invalid_slices),
+            (
+                "range-image slice(s) skipped: repeated, out of order or unlike their frame",
+                self.slices_out_of_order,
+            ),
+            (
+                "line(s) of streamed range images never arrived (no return there)",
+                self.lost_slice_lines,
+            ),
             (
                 "image(s) skipped: no pose around the capture time",
                 self.images_without_pose,

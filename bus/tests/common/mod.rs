@@ -62,6 +62,7 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         num_heights: 2,
         height_cells: vec![[500, -253], [-1, 7]],
         heights: vec![[1.25, 0.0004], [-0.5, 0.015625]],
+        acquired_utime: 1_700_000_000_820_000,
     };
     let waypoints = waypoints_t {
         utime: 1_700_000_000_900_000,
@@ -143,8 +144,12 @@ pub fn range_slice() -> range_slice_t {
         first: 32,
         rows: rows as i32,
         cols: cols as i32,
-        elevation: (0..rows).map(|r| (0.25 - r as f64 * 0.125) as f32).collect(),
-        azimuth: (0..cols).map(|c| (3.0 - c as f64 * 0.0625) as f32).collect(),
+        elevation: (0..rows)
+            .map(|r| (0.25 - r as f64 * 0.125) as f32)
+            .collect(),
+        azimuth: (0..cols)
+            .map(|c| (3.0 - c as f64 * 0.0625) as f32)
+            .collect(),
         num_lines: cols as i32,
         line_utime: (0..cols as i64)
             .map(|c| 1_700_000_000_515_000 + c * 1_000)
@@ -344,6 +349,7 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                         .map(|_| [rng.next_u64() as i32, rng.next_u64() as i32])
                         .collect(),
                     heights: (0..h).map(|_| [rng.f32(), rng.f32()]).collect(),
+                    acquired_utime: rng.next_u64() as i64,
                 }),
             )
         }

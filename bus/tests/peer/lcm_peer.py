@@ -87,6 +87,7 @@ def samples(arcnav):
     m.num_heights = 2
     m.height_cells = [[500, -253], [-1, 7]]
     m.heights = [[1.25, 0.0004], [-0.5, 0.015625]]
+    m.acquired_utime = 1_700_000_000_820_000
     out["obstacle_cells_t"] = m
 
     m = arcnav.waypoints_t()
