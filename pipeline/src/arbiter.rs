@@ -230,6 +230,13 @@ impl ArbiterNode {
         now: i64,
         out: &mut Vec<Decided>,
     ) -> Result<(), VoteSizeError> {
+        // The images belong to the cycle, whichever behaviour's votes
+        // carry them (the first of a cycle may be one the arbiter ignores).
+        self.images.extend(
+            images
+                .iter()
+                .map(|&(capture, arrival)| (capture, Some(arrival))),
+        );
         let Some(slot) = self.expected.iter().position(|e| *e == votes.behaviour) else {
             // Not a configured behaviour with a weight: a stray publisher.
             self.counts.ignored_votes += 1;
@@ -246,11 +253,6 @@ impl ArbiterNode {
             self.counts.late_votes += 1;
             return Ok(());
         }
-        self.images.extend(
-            images
-                .iter()
-                .map(|&(capture, arrival)| (capture, Some(arrival))),
-        );
         let i = self.pending.partition_point(|p| p.utime < votes.utime);
         if self.pending.get(i).is_none_or(|p| p.utime != votes.utime) {
             self.pending.insert(

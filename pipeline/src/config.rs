@@ -25,6 +25,11 @@ pub struct PipelineConfig {
     /// An image is placed only with poses at most this far apart around its
     /// capture time; in a hole of the pose stream it is dropped, s.
     pub max_pose_gap_s: f64,
+    /// A range-image slice acquired up to this long after the newest pose
+    /// is judged at once, with that pose carried ahead at its velocity and
+    /// yaw rate, rather than waiting for the next pose (at 50 Hz, up to
+    /// 20 ms); 0: slices wait, as whole images always do, s.
+    pub slice_pose_extrapolation_s: f64,
 }
 
 impl Default for PipelineConfig {
@@ -35,6 +40,7 @@ impl Default for PipelineConfig {
             pose_history_s: 10.0,
             max_waiting_images: 4,
             max_pose_gap_s: 0.2,
+            slice_pose_extrapolation_s: 0.05,
         }
     }
 }
@@ -46,6 +52,12 @@ impl PipelineConfig {
         check::in_range("perception_latency_s", self.perception_latency_s, 0.0, 10.0)?;
         check::in_range("pose_history_s", self.pose_history_s, 0.5, 600.0)?;
         check::in_range("max_pose_gap_s", self.max_pose_gap_s, 0.001, 60.0)?;
+        check::in_range(
+            "slice_pose_extrapolation_s",
+            self.slice_pose_extrapolation_s,
+            0.0,
+            0.5,
+        )?;
         if !(1..=1000).contains(&self.max_waiting_images) {
             return Err(ConfigError::new(
                 "max_waiting_images",

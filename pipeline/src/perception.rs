@@ -42,11 +42,13 @@ enum Pending {
 }
 
 impl Pending {
-    /// When its last line was acquired: the pose it is judged with.
-    fn utime(&self) -> Utime {
+    /// The newest pose it needs before it is judged: an image's at its
+    /// capture time; a slice's at its last line, less what may be
+    /// extrapolated.
+    fn due(&self, extrapolation_us: Utime) -> Utime {
         match self {
             Pending::Image(image) => image.utime,
-            Pending::Slice(slice) => slice.utime,
+            Pending::Slice(slice) => slice.utime.saturating_sub(extrapolation_us),
         }
     }
 }
@@ -77,6 +79,7 @@ pub struct PerceptionNode {
     pub slices: SliceCounts,
     max_waiting: usize,
     max_gap_us: Utime,
+    extrapolation_us: Utime,
     newest_capture: Vec<(String, Utime)>,
     pub images: u64,
     pub reports: u64,
@@ -119,6 +122,7 @@ impl PerceptionNode {
             slices: SliceCounts::default(),
             max_waiting: timing.max_waiting_images,
             max_gap_us: seconds_to_micros(timing.max_pose_gap_s),
+            extrapolation_us: seconds_to_micros(timing.slice_pose_extrapolation_s),
             newest_capture: Vec::new(),
             images: 0,
             reports: 0,
@@ -274,7 +278,7 @@ impl PerceptionNode {
         while self
             .waiting
             .front()
-            .is_some_and(|pending| pending.utime() <= newest)
+            .is_some_and(|pending| pending.due(self.extrapolation_us) <= newest)
         {
             match self.waiting.pop_front() {
                 Some(Pending::Image(image)) => self.evaluate(image, out),
@@ -290,7 +294,15 @@ impl PerceptionNode {
     }
 
     fn evaluate_slice(&mut self, slice: RangeSlice, out: &mut dyn FnMut(ObstacleReport)) {
-        let pose = match self.poses.at_within(slice.utime, self.max_gap_us) {
+        let newest = self.poses.newest().copied();
+        let pose = match newest {
+            // Acquired after the newest pose (within the extrapolation).
+            Some(newest) if newest.utime < slice.utime => {
+                Ok(newest.extrapolated(slice.utime - newest.utime))
+            }
+            _ => self.poses.at_within(slice.utime, self.max_gap_us),
+        };
+        let pose = match pose {
             Ok(pose) => pose,
             Err(e) => {
                 tracing::debug!(%e, slice = slice.utime, "slice dropped: no pose when acquired");

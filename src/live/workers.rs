@@ -86,9 +86,8 @@ pub(crate) fn perception_worker(
     let mut busy = Samples::default();
     let mut ticker = Ticker::new(status_period_s, clock.now_us());
     let mut arrivals: VecDeque<(Utime, i64)> = VecDeque::new();
-    // Per streamed frame (its capture time), the arrival of the first slice
-    // no report has covered yet.
-    let mut slice_arrivals: VecDeque<(Utime, i64)> = VecDeque::new();
+    // Slices no report has covered yet: (frame, last line, arrival).
+    let mut slice_arrivals: VecDeque<(Utime, Utime, i64)> = VecDeque::new();
     let mut reports = Vec::new();
     let SensorInputs {
         images,
@@ -145,12 +144,10 @@ pub(crate) fn perception_worker(
                 for pose in poses.try_iter() {
                     node.on_pose(&pose, &mut |r| reports.push(r));
                 }
-                if !slice_arrivals.iter().any(|(f, _)| *f == item.frame_utime) {
-                    if slice_arrivals.len() >= 64 {
-                        slice_arrivals.pop_front();
-                    }
-                    slice_arrivals.push_back((item.frame_utime, wall));
+                if slice_arrivals.len() >= 4096 {
+                    slice_arrivals.pop_front();
                 }
+                slice_arrivals.push_back((item.frame_utime, item.utime, wall));
                 node.on_slice(item, &mut |r| reports.push(r));
             }
             Next::Idle => {}
@@ -164,14 +161,22 @@ pub(crate) fn perception_worker(
             "range images replaced by newer ones before evaluation",
         );
         for report in reports.drain(..) {
-            let streamed = slice_arrivals
+            // A streamed frame's report covers its slices acquired up to
+            // its own acquisition: its arrival is the first of theirs.
+            let covered = |&(frame, utime, _): &(Utime, Utime, i64)| {
+                frame == report.utime && utime <= report.acquired_utime()
+            };
+            let first = slice_arrivals
                 .iter()
-                .position(|(frame, _)| *frame == report.utime);
-            let arrival = if let Some(i) = streamed {
-                // The slices since this frame's last report are covered.
-                slice_arrivals
-                    .remove(i)
-                    .map_or_else(|| clock.now_us(), |(_, wall)| wall)
+                .filter(|s| covered(s))
+                .map(|&(_, _, wall)| wall)
+                .min();
+            let arrival = if let Some(first) = first {
+                slice_arrivals.retain(|s| !covered(s));
+                first
+            } else if report.acquired_utime() > report.utime {
+                // Its slices were covered by an earlier report of the frame.
+                clock.now_us()
             } else {
                 let arrival = arrivals
                     .iter()

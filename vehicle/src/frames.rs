@@ -111,6 +111,22 @@ impl Pose {
         }
     }
 
+    /// This pose carried `dt_us` ahead at its velocity and yaw rate (a
+    /// constant twist, turning about the world's vertical).
+    pub fn extrapolated(&self, dt_us: Utime) -> Pose {
+        let dt = dt_us as f64 * 1e-6;
+        let turn =
+            nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.yaw_rate * dt);
+        let mut world_from_vehicle = self.world_from_vehicle;
+        world_from_vehicle.translation.vector += self.velocity * dt;
+        world_from_vehicle.rotation = turn * world_from_vehicle.rotation;
+        Pose {
+            utime: self.utime + dt_us,
+            world_from_vehicle,
+            ..*self
+        }
+    }
+
     /// Origin of the vehicle frame in the world.
     pub fn position(&self) -> Point3<f64> {
         Point3::from(self.world_from_vehicle.translation.vector)
