@@ -54,8 +54,24 @@ fn config(sensor: SensorPreset, reproduce: bool) -> Config {
 
 /// The first `LOG_S` seconds of the short course, made once per test run.
 fn sim_log(sensor: SensorPreset) -> PathBuf {
+    sim_log_of(&config(sensor, false))
+}
+
+/// `config` streaming its images in slices of 16 lines (002 §7's
+/// integrated mode), each judged with the poses around it (extrapolating
+/// past the newest pose depends on which arrives first: live runs that
+/// reproduce lock-step do not).
+fn sliced(mut config: Config) -> Config {
+    config.sim.slice_lines = 16;
+    config.pipeline.slice_pose_extrapolation_s = 0.0;
+    config
+}
+
+/// The first `LOG_S` seconds of the short course under `config`, made once
+/// per test run.
+fn sim_log_of(config: &Config) -> PathBuf {
     static LOGS: Mutex<BTreeMap<String, PathBuf>> = Mutex::new(BTreeMap::new());
-    let key = format!("{sensor:?}");
+    let key = format!("{:?}-{}", config.sensor.preset, config.sim.slice_lines);
     let mut logs = LOGS.lock().unwrap_or_else(|e| e.into_inner());
     logs.entry(key.clone())
         .or_insert_with(|| {
@@ -65,14 +81,7 @@ fn sim_log(sensor: SensorPreset) -> PathBuf {
                 log: Some(path.clone()),
                 ..MissionOptions::default()
             };
-            run_mission(
-                &config(sensor, false),
-                &Registry::builtin(),
-                world,
-                &options,
-                &mut |_| {},
-            )
-            .unwrap();
+            run_mission(config, &Registry::builtin(), world, &options, &mut |_| {}).unwrap();
             path
         })
         .clone()
@@ -159,17 +168,31 @@ fn a_busy_polling_perception_thread_gives_the_same_commands() {
     assert_threaded_gives_lockstep(true);
 }
 
+/// 020 item 3: a 64-beam lidar's images streamed in 16-column slices,
+/// each judged as it arrives: the threaded executor gives lock-step's
+/// commands.
+#[test]
+fn streamed_slices_give_the_lockstep_commands_in_the_threaded_executor() {
+    assert_threaded_gives_lockstep_on(sliced(config(SensorPreset::Lidar64, true)));
+}
+
+fn assert_threaded_gives_lockstep(perception_busy_poll: bool) {
+    let mut config = config(SensorPreset::Erim, true);
+    config.live.perception_busy_poll = perception_busy_poll;
+    assert_threaded_gives_lockstep_on(config);
+}
+
 /// `arcnav run`'s executor over memq, fed a sim log at 4× real time, gives
 /// lock-step replay's commands, its perception thread sleeping between
 /// images or polling for them.
-fn assert_threaded_gives_lockstep(perception_busy_poll: bool) {
+fn assert_threaded_gives_lockstep_on(mut config: Config) {
     let _serial = serial();
-    let mut config = config(SensorPreset::Erim, true);
-    config.live.perception_busy_poll = perception_busy_poll;
     // The feed's end is the test's, not the vehicle's: its last poses stay
     // fresh while the run decides the cycles still in its queues.
     config.live.pose_timeout_s = 3.0;
-    let log = sim_log(SensorPreset::Erim);
+    let mut log_config = config.clone();
+    log_config.live.reproduce_lockstep = false;
+    let log = sim_log_of(&log_config);
     let expected = lockstep(&log, &config);
     let (tap, taken) = crossbeam_channel::unbounded::<Decided>();
     let run = InProcess::start(&config, Registry::builtin(), Some(tap)).unwrap();

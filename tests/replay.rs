@@ -10,6 +10,7 @@ use arcnav::mission::{MissionOptions, run_mission};
 use arcnav::replay::{ReplayOptions, ReplayResult, compare, replay};
 use arcnav_behaviours::Registry;
 use arcnav_bus::log::{LogReader, LogWriter};
+use arcnav_perception::SensorPreset;
 use arcnav_sim::World;
 use serde_json::Value;
 
@@ -914,5 +915,130 @@ fn a_flipped_bit_in_one_events_log_time_does_not_end_the_replay_early() {
     assert!(
         b.abs_diff(a) <= 1,
         "{b} decisions with the flipped bit, {a} without"
+    );
+}
+
+/// A log of `seconds` of the short course with `sensor` streaming each
+/// image in slices of `lines` lines (002 §7's integrated mode).
+fn streamed_log(tag: &str, sensor: SensorPreset, lines: usize, seconds: f64) -> (PathBuf, Config) {
+    let path = dir(tag).join("streamed.lcm");
+    let mut config = Config::default();
+    config.sensor.preset = sensor;
+    config.sim.slice_lines = lines;
+    config.sim.time_limit_s = seconds;
+    config.pipeline.perception_latency_s = 0.02;
+    let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+    let options = MissionOptions {
+        log: Some(path.clone()),
+        ..MissionOptions::default()
+    };
+    run_mission(&config, &Registry::builtin(), world, &options, &mut |_| {}).unwrap();
+    (path, config)
+}
+
+/// 020 item 3: a log of range-image slices (a lidar's blocks of columns,
+/// the ERIM's blocks of rows) replays to the simulator's own commands, every
+/// slice used.
+#[test]
+fn a_log_of_streamed_slices_replays_to_the_sims_own_commands() {
+    for (tag, sensor, lines) in [
+        ("slices-lidar", SensorPreset::Lidar64, 16),
+        ("slices-erim", SensorPreset::Erim, 4),
+    ] {
+        let (log, config) = streamed_log(tag, sensor, lines, 12.0);
+        let result = replay(
+            &log,
+            &config,
+            &Registry::builtin(),
+            &ReplayOptions::default(),
+            &mut |_| {},
+        )
+        .unwrap();
+        assert_eq!(result.inputs.images, 0, "{tag}");
+        let frames = 12.0
+            * if sensor == SensorPreset::Erim {
+                2.0
+            } else {
+                10.0
+            };
+        let per_frame = match sensor {
+            SensorPreset::Erim => 64 / lines,
+            _ => 2048 / lines,
+        };
+        assert!(
+            result.inputs.slices as f64 >= (frames - 1.0) * per_frame as f64,
+            "{tag}: {} slices",
+            result.inputs.slices
+        );
+        let same = |name: &str| config.arbiter.weight(name);
+        let comparison = compare(
+            ("recorded", "replayed"),
+            &result.recorded,
+            &result.cycles,
+            (&same, &same),
+            0,
+        );
+        assert!(comparison.compared > 100, "{tag}");
+        assert_eq!(
+            comparison.agreement_percent,
+            Some(100.0),
+            "{tag}: {:?}",
+            comparison.first_divergence
+        );
+        assert!(
+            !result.problems.lost_input(),
+            "{tag}: {:?}",
+            result.problems.lines()
+        );
+    }
+}
+
+/// Slices missing from a log (a lost packet) are lines of an image lost:
+/// counted and said, the replay goes on.
+#[test]
+fn slices_missing_from_a_log_are_counted_as_lost_lines() {
+    let (log, config) = streamed_log("slices-lost", SensorPreset::Lidar64, 16, 3.0);
+    let holed = dir("slices-lost").join("holed.lcm");
+    let mut seen = 0;
+    let mut writer = LogWriter::create(&holed).unwrap();
+    for event in LogReader::open(&log).unwrap() {
+        let event = event.unwrap();
+        if event.channel.starts_with("RANGE_IMAGE") {
+            seen += 1;
+            // Every 50th slice lost.
+            if seen % 50 == 0 {
+                continue;
+            }
+        }
+        writer
+            .write_event(event.timestamp, &event.channel, &event.data)
+            .unwrap();
+    }
+    drop(writer);
+    let result = replay(
+        &holed,
+        &config,
+        &Registry::builtin(),
+        &ReplayOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    // Every dropped slice but perhaps the log's last is a gap before the
+    // next slice of its frame.
+    let dropped = (seen / 50) as u64;
+    let lost = result.problems.lost_slice_lines;
+    assert!(
+        lost == dropped * 16 || lost == (dropped - 1) * 16,
+        "{lost} lines lost, {dropped} slices dropped"
+    );
+    assert!(result.problems.lost_input());
+    assert!(
+        result
+            .problems
+            .lines()
+            .iter()
+            .any(|l| l.contains("line(s) of streamed range images never arrived")),
+        "{:?}",
+        result.problems.lines()
     );
 }

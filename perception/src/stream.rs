@@ -323,6 +323,8 @@ pub struct StreamCounts {
     pub inconsistent: u64,
     /// Lines that never arrived in frames that ended (no return there).
     pub lost_lines: u64,
+    /// Lines of the frame under way when the input ended ([`FrameStream::flush`]).
+    pub cut_off_lines: u64,
     /// Frames ended early because a newer frame's slice arrived.
     pub incomplete_frames: u64,
 }
@@ -549,6 +551,24 @@ impl FrameStream {
         Ok(stats)
     }
 
+    /// The input ended (a log's end): the frame under way is judged with
+    /// the lines it has ([`FrameStream::finish`]); those it lacks are
+    /// counted as cut off, not lost.
+    pub fn flush(
+        &mut self,
+        evaluator: &mut dyn TerrainEvaluator,
+        runner: &dyn Runner,
+        out: &mut dyn FnMut(ObstacleReport),
+    ) -> Result<ImageStats, SliceError> {
+        if let Some(frame) = &self.frame {
+            let missing = frame.received.iter().filter(|&&r| !r).count();
+            self.counts.cut_off_lines += missing as u64;
+            self.counts.lost_lines += frame.lost as u64;
+            self.counts.frames += 1;
+        }
+        self.end(evaluator, runner, out)
+    }
+
     /// Ends the frame being assembled: the whole image (lines that never
     /// came hold no return) is evaluated and the cells no step completed
     /// are reported. Nothing when no frame is under way.
@@ -558,12 +578,23 @@ impl FrameStream {
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
     ) -> Result<ImageStats, SliceError> {
+        if let Some(frame) = &self.frame {
+            let lost = frame.received.iter().filter(|&&r| !r).count() + frame.lost;
+            self.counts.lost_lines += lost as u64;
+            self.counts.frames += 1;
+        }
+        self.end(evaluator, runner, out)
+    }
+
+    fn end(
+        &mut self,
+        evaluator: &mut dyn TerrainEvaluator,
+        runner: &dyn Runner,
+        out: &mut dyn FnMut(ObstacleReport),
+    ) -> Result<ImageStats, SliceError> {
         let Some(mut frame) = self.frame.take() else {
             return Ok(ImageStats::default());
         };
-        self.counts.frames += 1;
-        let lost = frame.received.iter().filter(|&&r| !r).count() + frame.lost;
-        self.counts.lost_lines += lost as u64;
         let Some(pose) = frame.pose else {
             return Ok(ImageStats::default());
         };

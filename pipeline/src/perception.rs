@@ -225,7 +225,7 @@ impl PerceptionNode {
     pub fn flush(&mut self, out: &mut dyn FnMut(ObstacleReport)) {
         let mut streams = std::mem::take(&mut self.streams);
         for (_, stream) in &mut streams {
-            let result = stream.finish(self.evaluator.as_mut(), &*self.runner, &mut |report| {
+            let result = stream.flush(self.evaluator.as_mut(), &*self.runner, &mut |report| {
                 Self::send(&mut self.pending_heights, &mut self.reports, report, out)
             });
             self.account(result);
@@ -245,6 +245,7 @@ impl PerceptionNode {
             total.out_of_order += c.out_of_order;
             total.inconsistent += c.inconsistent;
             total.lost_lines += c.lost_lines;
+            total.cut_off_lines += c.cut_off_lines;
             total.incomplete_frames += c.incomplete_frames;
         }
         self.slices.stream = total;
