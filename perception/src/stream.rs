@@ -316,6 +316,9 @@ pub struct StreamCounts {
     pub frames: u64,
     /// Evaluations of part of a frame.
     pub steps: u64,
+    /// Lines (columns or rows) those evaluations took, all told: the work
+    /// streaming costs (a frame's own lines once more at its end).
+    pub evaluated_lines: u64,
     /// Slices refused: older than the frame being assembled, or a line
     /// already received (a repeated or reordered packet).
     pub out_of_order: u64,
@@ -357,11 +360,14 @@ struct Frame {
     /// Swept angle evaluated at the last step.
     last_step: f32,
     /// Rows: which way beams arrive (+1: highest first, −1: lowest first,
-    /// 0: no order), and each column's final distances now and at the
-    /// last step.
+    /// 0: no order), the rows in the order they came, how many had come at
+    /// the last step, and each step's final distances per column.
     order: i8,
-    finals: Vec<[f32; 2]>,
-    previous_finals: Vec<[f32; 2]>,
+    arrived: Vec<usize>,
+    rows_at_last_step: usize,
+    step_finals: Vec<Vec<[f32; 2]>>,
+    /// When each line was acquired (0: not yet).
+    line_utimes: Vec<Utime>,
     /// Pose of the last step (the frame's last evaluation uses it).
     pose: Option<Isometry>,
     last_utime: Utime,
@@ -381,11 +387,17 @@ pub struct FrameStream {
     sub: RangeImage,
     scratch: ObstacleReport,
     fov: FovBuilder,
+    /// Rows: the rows of the window being evaluated.
+    rows: Vec<usize>,
     /// Evaluate each frame once, whole, when it ends (for evaluators that
     /// fuse images).
     whole_frames: bool,
     pub counts: StreamCounts,
 }
+
+/// The vehicle's pose at a time (interpolated between poses, or carried
+/// past the newest): `None` when not known.
+pub type PoseAt<'a> = &'a dyn Fn(Utime) -> Option<Isometry>;
 
 /// A cell's place in the sensor frame.
 #[derive(Debug, Clone, Copy)]
@@ -472,6 +484,7 @@ impl FrameStream {
             },
             scratch: ObstacleReport::default(),
             fov: FovBuilder::default(),
+            rows: Vec::new(),
             whole_frames: false,
             counts: StreamCounts::default(),
         }
@@ -489,14 +502,15 @@ impl FrameStream {
         self.frame.as_ref().map(|f| f.utime)
     }
 
-    /// Takes `slice`, judged with the vehicle at `world_from_vehicle` (the
-    /// pose when its last line was acquired), and reports every cell it
-    /// completes to `out`. Stats are those of the reported cells, plus the
-    /// whole image's pixel counts when the slice ends its frame.
+    /// Takes `slice` and reports every cell it completes to `out`. Each
+    /// evaluation places its returns with the pose (from `poses`) at the
+    /// middle of the time its lines were acquired over. Stats are those of
+    /// the reported cells, plus the whole image's pixel counts when the
+    /// slice ends its frame.
     pub fn on_slice(
         &mut self,
         slice: &RangeSlice,
-        world_from_vehicle: &Isometry,
+        poses: PoseAt,
         evaluator: &mut dyn TerrainEvaluator,
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
@@ -510,7 +524,7 @@ impl FrameStream {
             }
             if slice.frame_utime > frame.utime {
                 self.counts.incomplete_frames += 1;
-                stats = self.finish(evaluator, runner, out)?;
+                stats = self.finish(poses, evaluator, runner, out)?;
             }
         }
         if self.frame.is_none() {
@@ -533,7 +547,9 @@ impl FrameStream {
             return Ok(stats);
         }
         self.counts.slices += 1;
-        frame.pose = Some(*world_from_vehicle);
+        if let Some(pose) = poses(slice.utime) {
+            frame.pose = Some(pose);
+        }
         frame.last_utime = slice.utime;
         let complete = frame.received.iter().all(|&r| r);
         if !complete {
@@ -543,11 +559,11 @@ impl FrameStream {
                     SliceAxis::Rows => frame.order != 0,
                 };
             if due {
-                stats.accumulate(&self.step(slice.utime, evaluator, runner, out)?);
+                stats.accumulate(&self.step(slice.utime, poses, evaluator, runner, out)?);
             }
             return Ok(stats);
         }
-        stats.accumulate(&self.finish(evaluator, runner, out)?);
+        stats.accumulate(&self.finish(poses, evaluator, runner, out)?);
         Ok(stats)
     }
 
@@ -556,6 +572,7 @@ impl FrameStream {
     /// counted as cut off, not lost.
     pub fn flush(
         &mut self,
+        poses: PoseAt,
         evaluator: &mut dyn TerrainEvaluator,
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
@@ -566,7 +583,7 @@ impl FrameStream {
             self.counts.lost_lines += frame.lost as u64;
             self.counts.frames += 1;
         }
-        self.end(evaluator, runner, out)
+        self.end(poses, evaluator, runner, out)
     }
 
     /// Ends the frame being assembled: the whole image (lines that never
@@ -574,6 +591,7 @@ impl FrameStream {
     /// are reported. Nothing when no frame is under way.
     pub fn finish(
         &mut self,
+        poses: PoseAt,
         evaluator: &mut dyn TerrainEvaluator,
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
@@ -583,11 +601,12 @@ impl FrameStream {
             self.counts.lost_lines += lost as u64;
             self.counts.frames += 1;
         }
-        self.end(evaluator, runner, out)
+        self.end(poses, evaluator, runner, out)
     }
 
     fn end(
         &mut self,
+        poses: PoseAt,
         evaluator: &mut dyn TerrainEvaluator,
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
@@ -595,9 +614,11 @@ impl FrameStream {
         let Some(mut frame) = self.frame.take() else {
             return Ok(ImageStats::default());
         };
-        let Some(pose) = frame.pose else {
+        let Some(newest) = frame.pose else {
             return Ok(ImageStats::default());
         };
+        let lines = frame.line_utimes.len();
+        let pose = frame.middle_pose(0..lines, poses).unwrap_or(newest);
         frame.fill_missing_beams();
         let mut report = std::mem::take(&mut self.scratch);
         let evaluated = evaluator.evaluate_with(&frame.image, &pose, &mut report, runner);
@@ -615,7 +636,8 @@ impl FrameStream {
         for cell in &report.cells {
             let place = geometry.place(cell);
             if !frame.ever_complete(&geometry, place, geometry.radius + geometry.grow) {
-                kept.cells.push(*cell);
+                kept.cells
+                    .push(frame.deskewed(cell, place, &pose, poses, None));
             }
         }
         renumber_regions(&report.regions, &mut kept);
@@ -640,6 +662,7 @@ impl FrameStream {
     fn step(
         &mut self,
         utime: Utime,
+        poses: PoseAt,
         evaluator: &mut dyn TerrainEvaluator,
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
@@ -647,7 +670,7 @@ impl FrameStream {
         let Some(frame) = self.frame.as_mut() else {
             return Ok(ImageStats::default());
         };
-        let Some(pose) = frame.pose else {
+        let Some(newest) = frame.pose else {
             return Ok(ImageStats::default());
         };
         self.counts.steps += 1;
@@ -662,16 +685,30 @@ impl FrameStream {
                     .last()
                     .unwrap_or(reference);
                 frame.copy_columns(lo..frame.next, &mut self.sub);
+                self.counts.evaluated_lines += (frame.next - lo) as u64;
                 Some(lo)
             }
             SliceAxis::Rows => {
-                frame.copy_received_rows(&mut self.sub);
-                let rows = self.support.pixels as usize
+                let filter = self.support.pixels as usize
                     + (self.support.radians / frame.row_step()).ceil() as usize;
-                frame.update_finals(rows);
+                // The cells this step completes rest on returns within two
+                // support radii and a cell (and the tilt) of the last
+                // step's final distances.
+                let tilt = TILT_HEIGHT_M * 0.35;
+                let reach = (2.0 * (self.support.metres + tilt) + 0.5) as f32;
+                let mut rows = std::mem::take(&mut self.rows);
+                frame.rows_window(filter, reach, &mut rows);
+                frame.copy_rows(&rows, &mut self.sub);
+                self.counts.evaluated_lines += rows.len() as u64;
+                self.rows = rows;
                 None
             }
         };
+        let pose = match window {
+            Some(lo) => frame.middle_pose(lo..frame.next, poses),
+            None => frame.middle_pose(self.rows.iter().copied(), poses),
+        }
+        .unwrap_or(newest);
         let mut report = std::mem::take(&mut self.scratch);
         let evaluated = evaluator.evaluate_with(&self.sub, &pose, &mut report, runner);
         if let Err(PerceptionError::Image(e)) = evaluated {
@@ -707,15 +744,19 @@ impl FrameStream {
                 SliceAxis::Columns => previous_window.is_some_and(|w| {
                     frame.in_window(&geometry, place, geometry.radius + geometry.grow, w)
                 }),
-                SliceAxis::Rows => frame.complete_in(
-                    &frame.previous_finals,
-                    &geometry,
-                    place,
-                    geometry.radius + geometry.grow,
-                ),
+                SliceAxis::Rows => frame
+                    .step_finals
+                    .len()
+                    .checked_sub(2)
+                    .and_then(|i| frame.step_finals.get(i))
+                    .is_some_and(|finals| {
+                        frame.complete_in(finals, &geometry, place, geometry.radius + geometry.grow)
+                    }),
             };
             if now && !before {
-                kept.cells.push(*cell);
+                let rows = (frame.axis == SliceAxis::Rows).then_some(&self.rows[..]);
+                kept.cells
+                    .push(frame.deskewed(cell, place, &pose, poses, rows));
             }
         }
         renumber_regions(&report.regions, &mut kept);
@@ -895,8 +936,10 @@ impl Frame {
             windows: Vec::new(),
             last_step: 0.0,
             order: 0,
-            finals: vec![[f32::INFINITY, f32::NEG_INFINITY]; cols],
-            previous_finals: vec![[f32::INFINITY, f32::NEG_INFINITY]; cols],
+            arrived: Vec::new(),
+            rows_at_last_step: 0,
+            step_finals: Vec::new(),
+            line_utimes: vec![0; lines],
             pose: None,
             last_utime: slice.utime,
             column_step: 0.0,
@@ -911,11 +954,12 @@ impl Frame {
             return false;
         }
         let cols = self.image.cols();
+        if self.axis == SliceAxis::Columns && slice.first < self.next {
+            return false;
+        }
+        self.line_utimes[lines.clone()].copy_from_slice(&slice.line_utimes);
         match self.axis {
             SliceAxis::Columns => {
-                if slice.first < self.next {
-                    return false;
-                }
                 // Columns skipped are lost: they hold no return.
                 self.lost += slice.first - self.next;
                 for c in self.next..slice.first {
@@ -976,6 +1020,7 @@ impl Frame {
                 for (k, &el) in slice.beams.elevation.iter().enumerate() {
                     self.image.beams.elevation[slice.first + k] = el;
                     self.received[slice.first + k] = true;
+                    self.arrived.push(slice.first + k);
                 }
                 self.image.range[slice.first * cols..][..slice.range.len()]
                     .copy_from_slice(&slice.range);
@@ -1077,7 +1122,10 @@ impl Frame {
                 .windows
                 .last()
                 .is_some_and(|&w| self.in_window(geometry, place, radius, w)),
-            SliceAxis::Rows => self.complete_in(&self.finals, geometry, place, radius),
+            SliceAxis::Rows => self
+                .step_finals
+                .last()
+                .is_some_and(|finals| self.complete_in(finals, geometry, place, radius)),
         }
     }
 
@@ -1095,8 +1143,10 @@ impl Frame {
                     .get(first)
                     .is_some_and(|&(bottom, _)| bottom <= span.0)
             }
-            // Rows arriving in order only add final distances.
-            SliceAxis::Rows => self.complete_in(&self.finals, geometry, place, radius),
+            SliceAxis::Rows => self
+                .step_finals
+                .iter()
+                .any(|finals| self.complete_in(finals, geometry, place, radius)),
         }
     }
 
@@ -1150,39 +1200,86 @@ impl Frame {
             .all(|(_, f)| f[0] <= near && far <= f[1])
     }
 
-    /// Rows: each column's distances whose returns are all in. Beams
-    /// still to come lie below (highest first) or above (lowest first)
-    /// every beam received; in a height field, a lower beam of a column
-    /// meets the ground no farther than a higher one. The `filter` rows
-    /// received last, and the two returns nearest the rows to come, are
-    /// not relied on (image filters, and the drop-off rule's look at the
-    /// returns beyond).
-    fn update_finals(&mut self, filter: usize) {
-        std::mem::swap(&mut self.finals, &mut self.previous_finals);
-        let rows = self.image.rows();
+    /// Rows: the window of rows this step evaluates, in image order, and
+    /// each column's distances whose returns the window holds in full.
+    ///
+    /// Beams still to come lie below (highest first) or above (lowest
+    /// first) every beam received; in a height field a lower beam of a
+    /// column meets the ground no farther than a higher one, so returns to
+    /// come lie nearer (farther) than the newest rows' (the `filter` rows
+    /// received last and the two returns nearest the rows to come are not
+    /// relied on: image filters, the drop-off rule's look beyond). The
+    /// window holds the rows since the last step and the older ones whose
+    /// returns the cells this step may complete rest on (within `reach` of
+    /// the last step's final distances); older rows, left out, bound the
+    /// final distances on the other side. Rows acquired long apart are not
+    /// judged together with one pose: a window spans little time.
+    fn rows_window(&mut self, filter: usize, reach: f32, rows: &mut Vec<usize>) {
         let cols = self.image.cols();
-        let mut received: Vec<usize> = (0..rows).filter(|&r| self.received[r]).collect();
-        // Nearest the beams to come first.
-        received.sort_by(|&a, &b| {
-            let (ea, eb) = (self.image.beams.elevation[a], self.image.beams.elevation[b]);
-            if self.order > 0 {
-                ea.total_cmp(&eb)
-            } else {
-                eb.total_cmp(&ea)
-            }
+        let far_first = self.order > 0;
+        let distance = |frame: &Self, r: usize, c: usize| {
+            let range = frame.image.range[r * cols + c];
+            (range.is_finite() && range > 0.0).then(|| range * frame.image.beams.elevation[r].cos())
+        };
+        // Newest first.
+        let arrived: Vec<usize> = self.arrived.iter().rev().copied().collect();
+        let new = self.arrived.len() - self.rows_at_last_step;
+        let previous = self.step_finals.last().cloned();
+        // Older rows go in while some column's return lies within reach of
+        // where the last step's final distances ended.
+        let mut take = new.min(arrived.len());
+        let bounded = previous.as_ref().is_some_and(|previous| {
+            previous.iter().any(|f| {
+                if far_first {
+                    f[0].is_finite()
+                } else {
+                    f[1].is_finite()
+                }
+            })
         });
-        for c in 0..cols {
-            let mut returns = 0;
-            let mut frontier = if self.order > 0 {
-                f32::NEG_INFINITY
-            } else {
-                f32::INFINITY
-            };
-            for (k, &r) in received.iter().enumerate() {
-                let range = self.image.range[r * cols + c];
-                if range.is_finite() && range > 0.0 {
-                    let d = range * self.image.beams.elevation[r].cos();
-                    frontier = if self.order > 0 {
+        if let (Some(previous), true) = (&previous, bounded) {
+            let mut beyond = 0;
+            while take < arrived.len() && beyond <= filter + 2 {
+                let r = arrived[take];
+                let within = (0..cols).any(|c| {
+                    let bound = if far_first {
+                        previous[c][0]
+                    } else {
+                        previous[c][1]
+                    };
+                    bound.is_finite()
+                        && distance(self, r, c).is_some_and(|d| {
+                            if far_first {
+                                d <= bound + reach
+                            } else {
+                                d >= bound - reach
+                            }
+                        })
+                });
+                if !within {
+                    beyond += 1;
+                }
+                take += 1;
+            }
+        } else {
+            take = arrived.len();
+        }
+        let window = &arrived[..take];
+        let all = take == arrived.len();
+        let mut finals = vec![[f32::INFINITY, f32::NEG_INFINITY]; cols];
+        for (c, f) in finals.iter_mut().enumerate() {
+            // The side of the rows to come.
+            let (mut returns, mut frontier) = (
+                0,
+                if far_first {
+                    f32::NEG_INFINITY
+                } else {
+                    f32::INFINITY
+                },
+            );
+            for (k, &r) in window.iter().enumerate() {
+                if let Some(d) = distance(self, r, c) {
+                    frontier = if far_first {
                         frontier.max(d)
                     } else {
                         frontier.min(d)
@@ -1193,14 +1290,171 @@ impl Frame {
                     break;
                 }
             }
-            self.finals[c] = if returns < 2 {
-                [f32::INFINITY, f32::NEG_INFINITY]
-            } else if self.order > 0 {
-                [frontier, f32::INFINITY]
+            if returns < 2 {
+                continue;
+            }
+            // The side of the rows left out.
+            let mut bound = if far_first {
+                f32::INFINITY
             } else {
-                [0.0, frontier]
+                f32::NEG_INFINITY
+            };
+            if !all {
+                let (mut seen, mut rows_seen) = (0, 0);
+                for &r in window.iter().rev() {
+                    if let Some(d) = distance(self, r, c) {
+                        bound = if far_first {
+                            bound.min(d)
+                        } else {
+                            bound.max(d)
+                        };
+                        seen += 1;
+                    }
+                    rows_seen += 1;
+                    if rows_seen > filter && seen >= 2 {
+                        break;
+                    }
+                }
+                if seen < 2 {
+                    continue;
+                }
+            }
+            *f = if far_first {
+                [frontier, bound]
+            } else {
+                [bound, frontier]
             };
         }
+        self.step_finals.push(finals);
+        self.rows_at_last_step = self.arrived.len();
+        rows.clear();
+        rows.extend_from_slice(window);
+        rows.sort_unstable();
+    }
+
+    /// `cell`, judged with the vehicle at `pose`, moved to where the
+    /// vehicle was when its returns were acquired (a frame's lines are
+    /// acquired over its whole period, the ERIM's over half a second):
+    /// the line of its column (columns), or of the return nearest it in
+    /// its column among `rows` (rows; all received rows when `None`).
+    fn deskewed(
+        &self,
+        cell: &ObstacleCell,
+        place: Place,
+        pose: &Isometry,
+        poses: PoseAt,
+        rows: Option<&[usize]>,
+    ) -> ObstacleCell {
+        let column = |phi: f64| self.nearest_column(phi);
+        let Some(c) = column(place.phi) else {
+            return *cell;
+        };
+        let line = match self.axis {
+            SliceAxis::Columns => Some(c),
+            SliceAxis::Rows => {
+                let cols = self.image.cols();
+                let all: Vec<usize>;
+                let rows = match rows {
+                    Some(rows) => rows,
+                    None => {
+                        all = (0..self.image.rows())
+                            .filter(|&r| self.received[r])
+                            .collect();
+                        &all
+                    }
+                };
+                rows.iter()
+                    .filter_map(|&r| {
+                        let range = self.image.range[r * cols + c];
+                        (range.is_finite() && range > 0.0).then(|| {
+                            let d = f64::from(range * self.image.beams.elevation[r].cos());
+                            ((d - place.d).abs(), r)
+                        })
+                    })
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .map(|(_, r)| r)
+            }
+        };
+        let Some(acquired) = line
+            .and_then(|l| self.line_utimes.get(l).copied())
+            .filter(|&t| t != 0)
+            .and_then(poses)
+        else {
+            return *cell;
+        };
+        let moved = acquired * pose.inverse();
+        let z = 0.5 * (f64::from(cell.z_min) + f64::from(cell.z_max));
+        let p = moved * Point3::new(cell.x, cell.y, z);
+        let dz = (p.z - z) as f32;
+        ObstacleCell {
+            x: p.x,
+            y: p.y,
+            z_min: cell.z_min + dz,
+            z_max: cell.z_max + dz,
+            ..*cell
+        }
+    }
+
+    /// The received column whose azimuth is nearest `phi` (found near
+    /// where evenly spaced columns would put it: only a line's time rests
+    /// on it).
+    fn nearest_column(&self, phi: f64) -> Option<usize> {
+        let az = &self.image.beams.azimuth;
+        let cols = az.len();
+        let (first, last) = (f64::from(*az.first()?), f64::from(*az.last()?));
+        let off = |a: f64| {
+            ((a - phi + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI)
+                .abs()
+        };
+        let guess = match (self.axis, self.reference) {
+            // Columns still to come have no azimuth yet: count from the
+            // first one along the sweep.
+            (SliceAxis::Columns, Some((reference, az0))) if self.sweep != 0.0 => {
+                let a = f64::from(swept_angle(az0, phi as f32, self.sweep));
+                let step = self.column_step();
+                if step > 0.0 {
+                    (reference + (a / step).round() as usize).min(cols - 1)
+                } else {
+                    reference
+                }
+            }
+            _ => {
+                let step = if cols > 1 && first.is_finite() && last.is_finite() {
+                    (last - first) / (cols - 1) as f64
+                } else {
+                    0.0
+                };
+                if step != 0.0 {
+                    let turns =
+                        ((phi - first) / step).rem_euclid(std::f64::consts::TAU / step.abs());
+                    (turns.round() as usize).min(cols - 1)
+                } else {
+                    0
+                }
+            }
+        };
+        let usable =
+            |c: &usize| az[*c].is_finite() && (self.axis == SliceAxis::Rows || self.received[*c]);
+        (guess.saturating_sub(8)..(guess + 9).min(cols))
+            .filter(usable)
+            .min_by(|&a, &b| off(f64::from(az[a])).total_cmp(&off(f64::from(az[b]))))
+    }
+
+    /// The pose at the middle of the time `lines` were acquired over.
+    fn middle_pose(&self, lines: impl Iterator<Item = usize>, poses: PoseAt) -> Option<Isometry> {
+        let (first, last) = self.span_of(lines)?;
+        poses(first + (last - first) / 2)
+    }
+
+    /// Acquisition times of the given lines: the earliest and the latest.
+    fn span_of(&self, lines: impl Iterator<Item = usize>) -> Option<(Utime, Utime)> {
+        lines
+            .filter_map(|l| self.line_utimes.get(l).copied().filter(|&t| t != 0))
+            .fold(None, |span, t| match span {
+                None => Some((t, t)),
+                Some((a, b)) => Some((a.min(t), b.max(t))),
+            })
     }
 
     fn copy_columns(&self, columns: std::ops::Range<usize>, sub: &mut RangeImage) {
@@ -1223,7 +1477,7 @@ impl Frame {
         fill_nan(&mut sub.beams.elevation);
     }
 
-    fn copy_received_rows(&self, sub: &mut RangeImage) {
+    fn copy_rows(&self, rows: &[usize], sub: &mut RangeImage) {
         let cols = self.image.cols();
         sub.utime = self.utime;
         sub.sensor.clone_from(&self.sensor);
@@ -1231,7 +1485,7 @@ impl Frame {
         sub.beams.azimuth.clone_from(&self.image.beams.azimuth);
         sub.beams.elevation.clear();
         sub.range.clear();
-        for (r, _) in self.received.iter().enumerate().filter(|(_, r)| **r) {
+        for &r in rows {
             sub.beams.elevation.push(self.image.beams.elevation[r]);
             sub.range
                 .extend_from_slice(&self.image.range[r * cols..(r + 1) * cols]);

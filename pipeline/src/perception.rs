@@ -224,13 +224,21 @@ impl PerceptionNode {
     /// the end of a log). Their cells not yet reported are.
     pub fn flush(&mut self, out: &mut dyn FnMut(ObstacleReport)) {
         let mut streams = std::mem::take(&mut self.streams);
+        let (poses, max_gap, newest) = (&self.poses, self.max_gap_us, self.poses.newest().copied());
+        let pose_at = |t: Utime| Self::pose_at(poses, newest, max_gap, t);
+        let mut results = Vec::new();
         for (_, stream) in &mut streams {
-            let result = stream.flush(self.evaluator.as_mut(), &*self.runner, &mut |report| {
-                Self::send(&mut self.pending_heights, &mut self.reports, report, out)
-            });
-            self.account(result);
+            results.push(stream.flush(
+                &pose_at,
+                self.evaluator.as_mut(),
+                &*self.runner,
+                &mut |report| Self::send(&mut self.pending_heights, &mut self.reports, report, out),
+            ));
         }
         self.streams = streams;
+        for result in results {
+            self.account(result);
+        }
         self.refresh_stream_counts();
     }
 
@@ -294,22 +302,34 @@ impl PerceptionNode {
         }
     }
 
+    /// The pose at `t`: interpolated between poses, or carried ahead from
+    /// the newest when `t` is after it.
+    fn pose_at(
+        poses: &PoseHistory,
+        newest: Option<Pose>,
+        max_gap_us: Utime,
+        t: Utime,
+    ) -> Option<arcnav_vehicle::Isometry> {
+        match newest {
+            Some(newest) if newest.utime < t => {
+                Some(newest.extrapolated(t - newest.utime).world_from_vehicle)
+            }
+            _ => poses
+                .at_within(t, max_gap_us)
+                .ok()
+                .map(|p| p.world_from_vehicle),
+        }
+    }
+
     fn evaluate_slice(&mut self, slice: RangeSlice, out: &mut dyn FnMut(ObstacleReport)) {
         let newest = self.poses.newest().copied();
-        let pose = match newest {
-            // Acquired after the newest pose (within the extrapolation).
-            Some(newest) if newest.utime < slice.utime => {
-                Ok(newest.extrapolated(slice.utime - newest.utime))
-            }
-            _ => self.poses.at_within(slice.utime, self.max_gap_us),
-        };
-        let pose = match pose {
-            Ok(pose) => pose,
-            Err(e) => {
-                tracing::debug!(%e, slice = slice.utime, "slice dropped: no pose when acquired");
-                self.drops.no_pose += 1;
-                return;
-            }
+        let Some(pose) = Self::pose_at(&self.poses, newest, self.max_gap_us, slice.utime) else {
+            tracing::debug!(
+                slice = slice.utime,
+                "slice dropped: no pose around its last line"
+            );
+            self.drops.no_pose += 1;
+            return;
         };
         // A sensor that streams is newer than its last whole image.
         if self
@@ -337,11 +357,13 @@ impl PerceptionNode {
         // The slice's own heights go with the next report.
         let image = slice.to_image();
         self.heights
-            .sample(&image, &pose.world_from_vehicle, &mut self.pending_heights);
+            .sample(&image, &pose, &mut self.pending_heights);
         let stream = &mut self.streams[index].1;
+        let (poses, max_gap, newest) = (&self.poses, self.max_gap_us, self.poses.newest().copied());
+        let pose_at = |t: Utime| Self::pose_at(poses, newest, max_gap, t);
         let result = stream.on_slice(
             &slice,
-            &pose.world_from_vehicle,
+            &pose_at,
             self.evaluator.as_mut(),
             &*self.runner,
             &mut |report| Self::send(&mut self.pending_heights, &mut self.reports, report, out),
