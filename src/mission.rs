@@ -101,6 +101,10 @@ pub struct MissionReport {
     pub cruise_speed_mps: f64,
     pub images: u64,
     pub images_dropped: u64,
+    /// Images sent in slices (`sim.slice_lines`): what perception did
+    /// with them (slices, steps, lines lost). Absent for whole images.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub slices: Option<arcnav_pipeline::SliceCounts>,
     /// Untraversable cells perception reported, summed over the images,
     /// per reason (a cell with two reasons counts in both).
     pub untraversable_cells: BTreeMap<&'static str, u64>,
@@ -647,6 +651,7 @@ pub fn run_mission(
         cruise_speed_mps: config.arbiter.cruise_speed_mps,
         images,
         images_dropped: drops.no_pose + drops.invalid + drops.out_of_order,
+        slices: (pipeline.perception.slices.received > 0).then_some(pipeline.perception.slices),
         untraversable_cells: Reasons::ALL
             .iter()
             .zip(pipeline.perception.totals.by_reason)

@@ -316,6 +316,8 @@ pub struct StreamCounts {
     pub frames: u64,
     /// Evaluations of part of a frame.
     pub steps: u64,
+    /// Lines (columns or rows) received.
+    pub received_lines: u64,
     /// Lines (columns or rows) those evaluations took, all told: the work
     /// streaming costs (a frame's own lines once more at its end).
     pub evaluated_lines: u64,
@@ -547,6 +549,7 @@ impl FrameStream {
             return Ok(stats);
         }
         self.counts.slices += 1;
+        self.counts.received_lines += slice.lines() as u64;
         if let Some(pose) = poses(slice.utime) {
             frame.pose = Some(pose);
         }

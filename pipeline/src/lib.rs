@@ -36,5 +36,5 @@ pub use behaviours::BehaviourSet;
 pub use config::{LiveConfig, PipelineConfig};
 pub use cycle::{Cycle, CycleCounts, DecisionCycle, Delivery, LocalMapNode, MAX_CATCH_UP_US};
 pub use lockstep::{Commands, Discard, Input, Pipeline, Sink, StageTime, StageTimes, Stopwatch};
-pub use perception::{PerceptionDrops, PerceptionNode};
+pub use perception::{PerceptionDrops, PerceptionNode, SliceCounts};
 pub use stats::{Samples, Summary};

@@ -250,6 +250,8 @@ impl PerceptionNode {
             total.slices += c.slices;
             total.frames += c.frames;
             total.steps += c.steps;
+            total.received_lines += c.received_lines;
+            total.evaluated_lines += c.evaluated_lines;
             total.out_of_order += c.out_of_order;
             total.inconsistent += c.inconsistent;
             total.lost_lines += c.lost_lines;

@@ -181,6 +181,17 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         "images        {} processed, {} dropped",
         r.images, r.images_dropped
     );
+    if let Some(s) = &r.slices {
+        let c = &s.stream;
+        println!(
+            "streamed      {} slices judged as they came: {} evaluations of parts of frames over \
+             {:.1}× the lines received, then each frame whole at its end; {} lines lost",
+            s.received,
+            c.steps,
+            c.evaluated_lines as f64 / c.received_lines.max(1) as f64,
+            c.lost_lines
+        );
+    }
     let cells: Vec<String> = r
         .untraversable_cells
         .iter()
