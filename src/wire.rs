@@ -685,6 +685,7 @@ mod tests {
         assert!(refused(&|m| m.frame_cols = 0).contains("empty"));
         assert!(refused(&|m| m.mount_orientation = [0.0; 4]).contains("mount"));
         assert!(refused(&|m| m.utime = m.frame_utime - 1).contains("before its frame"));
+        assert!(refused(&|m| m.line_utime[3] = i64::MAX).contains("outside its frame"));
         assert!(
             refused(&|m| {
                 m.line_utime.pop();

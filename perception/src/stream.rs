@@ -114,6 +114,15 @@ pub enum SliceError {
     LineTimes { lines: usize, times: usize },
     #[error("the slice's last line ({utime} µs) is before its frame's start ({frame_utime} µs)")]
     BeforeFrame { utime: Utime, frame_utime: Utime },
+    #[error(
+        "line {line} was acquired at {at} µs, outside its frame's start ({frame_utime} µs) and the slice's time ({utime} µs)"
+    )]
+    LineTime {
+        line: usize,
+        at: Utime,
+        frame_utime: Utime,
+        utime: Utime,
+    },
 }
 
 impl RangeSlice {
@@ -179,6 +188,18 @@ impl RangeSlice {
             return Err(SliceError::BeforeFrame {
                 utime: self.utime,
                 frame_utime: self.frame_utime,
+            });
+        }
+        if let Some(k) = self
+            .line_utimes
+            .iter()
+            .position(|&t| t < self.frame_utime || t > self.utime)
+        {
+            return Err(SliceError::LineTime {
+                line: self.first + k,
+                at: self.line_utimes[k],
+                frame_utime: self.frame_utime,
+                utime: self.utime,
             });
         }
         Ok(())

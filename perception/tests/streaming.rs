@@ -265,20 +265,20 @@ fn repeated_lost_and_stale_slices_are_counted() {
     assert_eq!(stream.counts.frames, 1);
     assert_eq!(stream.counts.lost_lines, 64);
     // A slice of the frame before: stale.
-    let mut older = slices[5].clone();
-    older.frame_utime -= 100_000;
-    older.utime -= 100_000;
-    let mut next = slices[0].clone();
-    next.frame_utime += 100_000;
-    next.utime += 100_000;
+    let shifted = |slice: &RangeSlice, dt: Utime| {
+        let mut s = slice.clone();
+        s.frame_utime += dt;
+        s.utime += dt;
+        s.line_utimes.iter_mut().for_each(|t| *t += dt);
+        s
+    };
+    let older = shifted(&slices[5], -100_000);
+    let next = shifted(&slices[0], 100_000);
     feed(&mut stream, &next);
     feed(&mut stream, &older);
     assert_eq!(stream.counts.out_of_order, 3);
     // A newer frame's slice ends the unfinished one.
-    let mut newer = slices[0].clone();
-    newer.frame_utime += 200_000;
-    newer.utime += 200_000;
-    feed(&mut stream, &newer);
+    feed(&mut stream, &shifted(&slices[0], 200_000));
     assert_eq!(stream.counts.incomplete_frames, 1);
     assert_eq!(stream.counts.frames, 2);
     assert!(reports > 0);
@@ -317,6 +317,9 @@ fn malformed_slices_are_refused() {
     let mut early = good.clone();
     early.utime = early.frame_utime - 1;
     broken.push(early);
+    let mut line = good.clone();
+    line.line_utimes[2] = i64::MAX;
+    broken.push(line);
     for slice in &broken {
         let result = stream.on_slice(slice, &|_| Some(pose), ev.as_mut(), &InOrder, &mut |_| {});
         let error = result.expect_err("refused");

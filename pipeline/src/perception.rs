@@ -305,7 +305,7 @@ impl PerceptionNode {
     }
 
     /// The pose at `t`: interpolated between poses, or carried ahead from
-    /// the newest when `t` is after it.
+    /// the newest when `t` is after it, by at most `max_gap_us`.
     fn pose_at(
         poses: &PoseHistory,
         newest: Option<Pose>,
@@ -314,7 +314,8 @@ impl PerceptionNode {
     ) -> Option<arcnav_vehicle::Isometry> {
         match newest {
             Some(newest) if newest.utime < t => {
-                Some(newest.extrapolated(t - newest.utime).world_from_vehicle)
+                let ahead = t.checked_sub(newest.utime).filter(|&d| d <= max_gap_us)?;
+                Some(newest.extrapolated(ahead).world_from_vehicle)
             }
             _ => poses
                 .at_within(t, max_gap_us)
