@@ -601,18 +601,12 @@ impl FrameStream {
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
     ) -> Result<ImageStats, SliceError> {
-        if let Some(frame) = &self.frame {
-            let missing = frame.received.iter().filter(|&&r| !r).count();
-            self.counts.cut_off_lines += missing as u64;
-            self.counts.lost_lines += frame.lost as u64;
-            self.counts.frames += 1;
-        }
-        self.end(poses, evaluator, runner, out)
+        self.end(true, poses, evaluator, runner, out)
     }
 
     /// Ends the frame being assembled: the whole image (lines that never
-    /// came hold no return) is evaluated and the cells no step completed
-    /// are reported. Nothing when no frame is under way.
+    /// came hold no return, counted lost) is evaluated and the cells no
+    /// step completed are reported. Nothing when no frame is under way.
     pub fn finish(
         &mut self,
         poses: PoseAt,
@@ -620,21 +614,27 @@ impl FrameStream {
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
     ) -> Result<ImageStats, SliceError> {
-        if let Some(frame) = &self.frame {
-            let lost = frame.received.iter().filter(|&&r| !r).count() + frame.lost;
-            self.counts.lost_lines += lost as u64;
-            self.counts.frames += 1;
-        }
-        self.end(poses, evaluator, runner, out)
+        self.end(false, poses, evaluator, runner, out)
     }
 
     fn end(
         &mut self,
+        input_ended: bool,
         poses: PoseAt,
         evaluator: &mut dyn TerrainEvaluator,
         runner: &dyn Runner,
         out: &mut dyn FnMut(ObstacleReport),
     ) -> Result<ImageStats, SliceError> {
+        if let Some(frame) = &self.frame {
+            let missing = frame.received.iter().filter(|&&r| !r).count() as u64;
+            self.counts.frames += 1;
+            self.counts.lost_lines += frame.lost as u64;
+            if input_ended {
+                self.counts.cut_off_lines += missing;
+            } else {
+                self.counts.lost_lines += missing;
+            }
+        }
         let Some(mut frame) = self.frame.take() else {
             return Ok(ImageStats::default());
         };
