@@ -370,6 +370,15 @@ pub struct StreamCounts {
 /// for the horizontal spread a tilted sensor sees them at, m.
 const TILT_HEIGHT_M: f64 = 3.0;
 
+/// The sine of the sensor tilt the sweep window `W` allows for (~11.5°): a
+/// more tilted sensor's cells near `near_m` wait for the frame's end (they
+/// are still reported, by its last evaluation).
+const WINDOW_TILT_SIN: f64 = 0.2;
+
+/// The sine of the sensor tilt a rows window reaches for (~20°: the ERIM
+/// looks 18° down): a row farther out is left out of the window.
+const ROWS_TILT_SIN: f64 = 0.35;
+
 /// A frame being assembled.
 struct Frame {
     utime: Utime,
@@ -729,7 +738,7 @@ impl FrameStream {
                 // The cells this step completes rest on returns within two
                 // support radii and a cell (and the tilt) of the last
                 // step's final distances.
-                let tilt = TILT_HEIGHT_M * 0.35;
+                let tilt = TILT_HEIGHT_M * ROWS_TILT_SIN;
                 let reach = (2.0 * (self.support.metres + tilt) + 0.5) as f32;
                 let mut rows = std::mem::take(&mut self.rows);
                 frame.rows_window(filter, reach, &mut rows);
@@ -1135,7 +1144,7 @@ impl Frame {
 
     /// `W`: half the azimuth span of a support disc at `near_m`.
     fn half_window(&self, support: Support, config: &StreamingConfig) -> f32 {
-        let radius = (support.metres + TILT_HEIGHT_M * 0.2).min(config.near_m * 0.99);
+        let radius = (support.metres + TILT_HEIGHT_M * WINDOW_TILT_SIN).min(config.near_m * 0.99);
         ((radius / config.near_m).asin()
             + f64::from(support.pixels) * self.column_step()
             + support.radians) as f32
