@@ -33,6 +33,20 @@ impl BeamTable {
         self.elevation.len()
     }
 
+    /// Checks that the table has `values` pixels and finite angles.
+    pub fn check(&self, values: usize) -> Result<(), ImageError> {
+        let (rows, cols) = (self.rows(), self.cols());
+        if rows.checked_mul(cols) != Some(values) {
+            return Err(ImageError::ShapeMismatch { rows, cols, values });
+        }
+        for (table, angles) in [("elevation", &self.elevation), ("azimuth", &self.azimuth)] {
+            if let Some(index) = angles.iter().position(|v| !v.is_finite()) {
+                return Err(ImageError::BadBeamAngle { table, index });
+            }
+        }
+        Ok(())
+    }
+
     pub fn cols(&self) -> usize {
         self.azimuth.len()
     }
@@ -71,27 +85,7 @@ impl RangeImage {
 
     /// Checks that the table and the data agree.
     pub fn validate(&self) -> Result<(), ImageError> {
-        let (rows, cols) = (self.rows(), self.cols());
-        if rows.checked_mul(cols) != Some(self.range.len()) {
-            return Err(ImageError::ShapeMismatch {
-                rows,
-                cols,
-                values: self.range.len(),
-            });
-        }
-        if let Some(i) = self.beams.elevation.iter().position(|v| !v.is_finite()) {
-            return Err(ImageError::BadBeamAngle {
-                table: "elevation",
-                index: i,
-            });
-        }
-        if let Some(i) = self.beams.azimuth.iter().position(|v| !v.is_finite()) {
-            return Err(ImageError::BadBeamAngle {
-                table: "azimuth",
-                index: i,
-            });
-        }
-        Ok(())
+        self.beams.check(self.range.len())
     }
 }
 

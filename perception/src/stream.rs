@@ -148,7 +148,7 @@ impl RangeSlice {
     /// Checks the slice on its own: shapes, angles, its place in its image.
     pub fn validate(&self) -> Result<(), SliceError> {
         let (rows, cols) = (self.beams.rows(), self.beams.cols());
-        self.as_image_ref_shape()?;
+        self.beams.check(self.range.len())?;
         if self.frame_rows == 0
             || self.frame_cols == 0
             || self
@@ -212,26 +212,6 @@ impl RangeSlice {
                 frame_utime: self.frame_utime,
                 utime: self.utime,
             });
-        }
-        Ok(())
-    }
-
-    fn as_image_ref_shape(&self) -> Result<(), ImageError> {
-        let (rows, cols) = (self.beams.rows(), self.beams.cols());
-        if rows.checked_mul(cols) != Some(self.range.len()) {
-            return Err(ImageError::ShapeMismatch {
-                rows,
-                cols,
-                values: self.range.len(),
-            });
-        }
-        for (table, angles) in [
-            ("elevation", &self.beams.elevation),
-            ("azimuth", &self.beams.azimuth),
-        ] {
-            if let Some(index) = angles.iter().position(|v| !v.is_finite()) {
-                return Err(ImageError::BadBeamAngle { table, index });
-            }
         }
         Ok(())
     }
@@ -673,7 +653,13 @@ impl FrameStream {
                 return Err(e.into());
             }
         };
-        let geometry = self.geometry(&frame, &pose, report.cell_size_m);
+        let geometry = frame.geometry(&pose, self.support, report.cell_size_m);
+        let received: Vec<usize> = match frame.axis {
+            SliceAxis::Rows => (0..frame.image.rows())
+                .filter(|&r| frame.received[r])
+                .collect(),
+            SliceAxis::Columns => Vec::new(),
+        };
         let mut kept = report.clone();
         kept.cells.clear();
         kept.acquired = frame.last_utime;
@@ -681,7 +667,7 @@ impl FrameStream {
             let place = geometry.place(cell);
             if !frame.ever_complete(&geometry, place, geometry.radius + geometry.grow) {
                 kept.cells
-                    .push(frame.deskewed(cell, place, &pose, poses, None));
+                    .push(frame.deskewed(cell, place, &pose, poses, &received));
             }
         }
         renumber_regions(&report.regions, &mut kept);
@@ -689,16 +675,6 @@ impl FrameStream {
         self.scratch = report;
         out(kept);
         Ok(stats)
-    }
-
-    fn geometry(&self, frame: &Frame, pose: &Isometry, cell_size: f64) -> Geometry {
-        Geometry::new(
-            pose,
-            &frame.vehicle_from_sensor,
-            self.support,
-            cell_size,
-            frame.column_step(),
-        )
     }
 
     /// Evaluates the part of the frame received so far (a window of it,
@@ -760,13 +736,7 @@ impl FrameStream {
             return Err(e.into());
         }
         let frame = self.frame.as_mut().expect("checked above");
-        let geometry = Geometry::new(
-            &pose,
-            &frame.vehicle_from_sensor,
-            self.support,
-            report.cell_size_m,
-            frame.column_step(),
-        );
+        let geometry = frame.geometry(&pose, self.support, report.cell_size_m);
         let previous_window = frame.windows.last().copied();
         if let Some(lo) = window {
             let top = frame.swept[frame.next - 1];
@@ -798,9 +768,8 @@ impl FrameStream {
                     }),
             };
             if now && !before {
-                let rows = (frame.axis == SliceAxis::Rows).then_some(&self.rows[..]);
                 kept.cells
-                    .push(frame.deskewed(cell, place, &pose, poses, rows));
+                    .push(frame.deskewed(cell, place, &pose, poses, &self.rows));
             }
         }
         renumber_regions(&report.regions, &mut kept);
@@ -1111,17 +1080,24 @@ impl Frame {
         self.swept[c] = a;
     }
 
-    /// Azimuth between neighbouring columns, radians.
+    /// The geometry of an evaluation with the vehicle at `pose`.
+    fn geometry(&self, pose: &Isometry, support: Support, cell_size: f64) -> Geometry {
+        Geometry::new(
+            pose,
+            &self.vehicle_from_sensor,
+            support,
+            cell_size,
+            self.column_step(),
+        )
+    }
+
+    /// Azimuth between neighbouring columns, radians (0.1 while unknown).
     fn column_step(&self) -> f64 {
         if self.column_step > 0.0 {
             return self.column_step;
         }
-        let az = &self.image.beams.azimuth;
-        az.windows(2)
-            .map(|w| f64::from((w[1] - w[0]).abs()))
-            .filter(|s| s.is_finite() && *s > 0.0)
-            .fold(f64::INFINITY, f64::min)
-            .min(0.1)
+        let step = smallest_step(&self.image.beams.azimuth);
+        if step > 0.0 { step } else { 0.1 }
     }
 
     /// Elevation between neighbouring received rows, radians.
@@ -1380,14 +1356,14 @@ impl Frame {
     /// vehicle was when its returns were acquired (a frame's lines are
     /// acquired over its whole period, the ERIM's over half a second):
     /// the line of its column (columns), or of the return nearest it in
-    /// its column among `rows` (rows; all received rows when `None`).
+    /// its column among `rows` (rows).
     fn deskewed(
         &self,
         cell: &ObstacleCell,
         place: Place,
         pose: &Isometry,
         poses: PoseAt,
-        rows: Option<&[usize]>,
+        rows: &[usize],
     ) -> ObstacleCell {
         let column = |phi: f64| self.nearest_column(phi);
         let Some(c) = column(place.phi) else {
@@ -1397,16 +1373,6 @@ impl Frame {
             SliceAxis::Columns => Some(c),
             SliceAxis::Rows => {
                 let cols = self.image.cols();
-                let all: Vec<usize>;
-                let rows = match rows {
-                    Some(rows) => rows,
-                    None => {
-                        all = (0..self.image.rows())
-                            .filter(|&r| self.received[r])
-                            .collect();
-                        &all
-                    }
-                };
                 rows.iter()
                     .filter_map(|&r| {
                         let range = self.image.range[r * cols + c];
