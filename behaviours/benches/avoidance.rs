@@ -71,7 +71,7 @@ fn main() {
     );
     for driven_paths in [false, true] {
         let arcs = ArcSet::new(&ArcSetConfig {
-            driven_paths,
+            driven_paths: driven_paths.into(),
             ..Default::default()
         })
         .expect("default arcs");

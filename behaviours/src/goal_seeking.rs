@@ -25,8 +25,11 @@ use crate::registry::Plugin;
 pub struct GoalSeekingConfig {
     /// A waypoint is reached within this distance (unless the waypoint has its own), m.
     pub arrival_radius_m: f64,
-    /// Arcs are judged by where they point after this distance, m.
+    /// Arcs are judged by where they point after this distance, m ...
     pub lookahead_m: f64,
+    /// ... or after this many seconds at the cruise speed, if farther, s
+    /// (see [`lookahead`]).
+    pub lookahead_s: f64,
     /// A waypoint behind the vehicle and within this many arrival radii is
     /// passed (0 = only the radius counts).
     pub pass_radius_factor: f64,
@@ -37,6 +40,7 @@ impl Default for GoalSeekingConfig {
         Self {
             arrival_radius_m: 5.0,
             lookahead_m: 10.0,
+            lookahead_s: 0.0,
             pass_radius_factor: 2.0,
         }
     }
@@ -116,6 +120,21 @@ impl WaypointTracker {
     }
 }
 
+/// How far ahead a goal-directed behaviour aims: `lookahead_m`, or
+/// `lookahead_s` of driving at the cruise speed if that is farther,
+/// `L = max(L_min, v_c·t_L)` — regulated pure pursuit scales its lookahead
+/// with speed for the same reason (Macenski et al., 2023). Aimed a fixed
+/// distance ahead, a fast vehicle turns as hard for a metre off its path
+/// as a slow one: a 1 m offset 8 m ahead asks for curvature
+/// `2·1/8² = 0.031 1/m`, which allows only √(1.5/0.031) = 7 m/s at 1.5 m/s²
+/// of lateral acceleration, and it weaves; 20 m ahead the same offset asks
+/// for 0.005 1/m. The cruise speed, not the speed of the moment: a
+/// lookahead that shrinks as the vehicle slows for a turn makes the next
+/// turn sharper still.
+pub(crate) fn lookahead(lookahead_m: f64, lookahead_s: f64, cruise_mps: f64) -> f64 {
+    lookahead_m.max(lookahead_s * cruise_mps)
+}
+
 /// Votes for the arcs that head for world point `target`: each arc's vote
 /// is the cosine of the angle between the vehicle's heading after
 /// `lookahead_m` along the path its command would put it on ([`DrivenPath`]:
@@ -149,6 +168,8 @@ pub struct GoalSeeking {
     config: GoalSeekingConfig,
     tracker: WaypointTracker,
     response: SteeringResponse,
+    /// Arcs are judged by where they point this far along, m.
+    aim_m: f64,
 }
 
 impl GoalSeeking {
@@ -158,6 +179,7 @@ impl GoalSeeking {
     pub fn new(config: GoalSeekingConfig) -> Self {
         Self {
             tracker: WaypointTracker::new(config.arrival_radius_m, config.pass_radius_factor),
+            aim_m: config.lookahead_m,
             config,
             response: SteeringResponse::immediate(),
         }
@@ -168,6 +190,14 @@ impl GoalSeeking {
     #[must_use]
     pub fn with_response(mut self, response: SteeringResponse) -> Self {
         self.response = response;
+        self
+    }
+
+    /// Aims `lookahead_s` of driving at `cruise_mps` ahead when that is
+    /// farther than `lookahead_m` ([`lookahead`]; the registry's does).
+    #[must_use]
+    pub fn with_cruise(mut self, cruise_mps: f64) -> Self {
+        self.aim_m = lookahead(self.config.lookahead_m, self.config.lookahead_s, cruise_mps);
         self
     }
 }
@@ -183,13 +213,7 @@ impl Behaviour for GoalSeeking {
             votes.vote_speed(0.0);
             return;
         };
-        vote_towards(
-            ctx,
-            &self.response,
-            [goal.x, goal.y],
-            self.config.lookahead_m,
-            votes,
-        );
+        vote_towards(ctx, &self.response, [goal.x, goal.y], self.aim_m, votes);
     }
 
     fn reset(&mut self) {
@@ -208,11 +232,14 @@ impl Plugin for GoalSeeking {
     fn validate(c: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
         config::positive("arrival_radius_m", c.arrival_radius_m)?;
         config::positive("lookahead_m", c.lookahead_m)?;
+        config::in_range("lookahead_s", c.lookahead_s, 0.0, 10.0)?;
         config::non_negative("pass_radius_factor", c.pass_radius_factor)?;
         Ok(())
     }
 
     fn build(config: Self::Config, setup: &Setup<'_>) -> Self {
-        Self::new(config).with_response(setup.steering_response())
+        Self::new(config)
+            .with_response(setup.steering_response())
+            .with_cruise(setup.cruise_mps)
     }
 }

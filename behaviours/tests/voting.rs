@@ -242,7 +242,7 @@ fn unseen_ground_as_an_obstacle_stops_blocking_once_it_has_been_seen() {
 /// driving curvature `curvature`, which its last command also asked for.
 fn arc_vote_steering(map: &MapSnapshot, arc: usize, speed: f64, curvature: f64) -> (f32, bool) {
     let arcs = ArcSet::new(&ArcSetConfig {
-        driven_paths: true,
+        driven_paths: arcnav_vehicle::DrivenPaths::On,
         ..Default::default()
     })
     .unwrap();

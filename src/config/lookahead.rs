@@ -54,9 +54,11 @@ pub struct LookaheadConfig {
 impl Default for LookaheadConfig {
     fn default() -> Self {
         Self {
-            // Off by default: see `config/default.toml` (a ditch seen 5-9 m
-            // ahead is driven into at 8 m/s).
-            from_speed: false,
+            // On: nothing moves below 5.9 m/s, and above 3 m/s arcs are
+            // judged along driven paths (`[arcs] driven_paths = "auto"`),
+            // without which a ditch seen 5-9 m ahead was driven into at
+            // 10 m/s (see `config/default.toml`).
+            from_speed: true,
             max_ahead_m: 60.0,
         }
     }

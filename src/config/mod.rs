@@ -274,9 +274,10 @@ impl Config {
         Self::from_toml_in(&text, &path.display().to_string(), registry, path.parent())
     }
 
-    /// The arc set this configuration describes.
+    /// The arc set this configuration describes (`driven_paths = "auto"`
+    /// decided at its cruise speed).
     pub fn arc_set(&self) -> Result<ArcSet, ConfigError> {
-        ArcSet::new(&self.arcs).map_err(|e| e.within("arcs"))
+        ArcSet::for_cruise(&self.arcs, self.arbiter.cruise_speed_mps).map_err(|e| e.within("arcs"))
     }
 
     fn setup<'a>(

@@ -370,3 +370,46 @@ fn driven_paths_reach_the_behaviours_steering_response() {
     let response = defaults.setup(&arcs, None).steering_response();
     assert_eq!(response, arcnav_vehicle::SteeringResponse::immediate());
 }
+
+/// `driven_paths = "auto"` (the default) judges arcs as arcs at the paper's
+/// 2-3 m/s and along driven paths above 3 m/s; `true` and `false` hold at
+/// every speed; anything else is refused naming the key and what it takes.
+#[test]
+fn driven_paths_auto_follows_the_cruise_speed() {
+    let at = |driven: &str, cruise: f64| {
+        let text =
+            format!("[arcs]\ndriven_paths = {driven}\n[arbiter]\ncruise_speed_mps = {cruise}\n");
+        Config::from_toml(&text, "test.toml")
+            .unwrap()
+            .arc_set()
+            .unwrap()
+            .driven_paths()
+    };
+    assert!(!at("\"auto\"", 2.5));
+    assert!(!at("\"auto\"", 3.0));
+    assert!(at("\"auto\"", 3.5));
+    assert!(at("\"auto\"", 10.0));
+    assert!(at("true", 2.5));
+    assert!(!at("false", 10.0));
+    let cruise = |v: f64| {
+        let text = format!("[arbiter]\ncruise_speed_mps = {v}\n");
+        Config::from_toml(&text, "test.toml")
+            .unwrap()
+            .arc_set()
+            .unwrap()
+            .driven_paths()
+    };
+    assert!(!cruise(2.5) && cruise(4.5), "the default is auto");
+    let error = Config::from_toml("[arcs]\ndriven_paths = \"sometimes\"\n", "test.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("driven_paths") && error.contains("auto"),
+        "{error}"
+    );
+    // The effective configuration prints what was set, and reads back.
+    let effective = Config::default().effective().to_toml();
+    assert!(effective.contains("driven_paths = \"auto\""), "{effective}");
+    let on = Config::from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
+    assert!(on.effective().to_toml().contains("driven_paths = true"));
+}

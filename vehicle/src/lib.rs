@@ -21,7 +21,7 @@ pub mod pose_history;
 pub mod time;
 pub mod watchdog;
 
-pub use arcs::{Arc, ArcPose, ArcSet, ArcSetConfig, SweptFootprint};
+pub use arcs::{Arc, ArcPose, ArcSet, ArcSetConfig, DrivenPaths, SweptFootprint};
 pub use command::SteeringCommand;
 pub use config::ConfigError;
 pub use drive::{DrivenPath, Steering, SteeringResponse};

@@ -21,7 +21,8 @@
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
 //!   waypoint outside the memory is sought where the line to it leaves it.
 //! - **Votes**: for the arcs that head for the point of the path
-//!   `lookahead_m` from the vehicle, scored as goal seeking scores arcs
+//!   `lookahead_m` from the vehicle (`lookahead_s` of driving at the cruise
+//!   speed, if farther), scored as goal seeking scores arcs
 //!   towards a waypoint. With no path (the waypoint walled off) it says so
 //!   once and votes towards the waypoint itself.
 
@@ -35,7 +36,7 @@ use arcnav_vehicle::frames::yaw_of;
 use serde::{Deserialize, Serialize};
 
 use crate::behaviour::{Behaviour, Progress, Setup, VoteContext};
-use crate::goal_seeking::{WaypointTracker, vote_towards};
+use crate::goal_seeking::{WaypointTracker, lookahead, vote_towards};
 use crate::registry::Plugin;
 use dstar::{DStarLite, PlannerStats};
 
@@ -47,8 +48,11 @@ pub struct RouteConfig {
     pub size_m: f64,
     /// Side of a memory cell, m (≤ 1 m).
     pub cell_m: f64,
-    /// Arcs head for the point of the path this far from the vehicle, m.
+    /// Arcs head for the point of the path this far from the vehicle, m ...
     pub lookahead_m: f64,
+    /// ... or this many seconds ahead at the cruise speed, if farther, s
+    /// (see [`crate::goal_seeking::lookahead`]).
+    pub lookahead_s: f64,
     /// Cost of crossing ground no image has seen, relative to seen free ground.
     pub unseen_cost: f64,
     /// Extra cost of ground next to an obstacle (half a vehicle width away).
@@ -74,6 +78,7 @@ impl Default for RouteConfig {
             size_m: 200.0,
             cell_m: 1.0,
             lookahead_m: 8.0,
+            lookahead_s: 0.0,
             unseen_cost: 2.0,
             clearance_cost: 4.0,
             rough_cost: 4.0,
@@ -134,6 +139,8 @@ pub struct Route {
     /// How the vehicle answers a command: arcs are judged along the paths
     /// it drives.
     response: SteeringResponse,
+    /// Arcs head for the path's point this far away, m.
+    aim_m: f64,
 }
 
 impl Route {
@@ -158,6 +165,7 @@ impl Route {
             statics: setup.statics.cloned(),
             stats: RouteStats::default(),
             response: setup.steering_response(),
+            aim_m: lookahead(config.lookahead_m, config.lookahead_s, setup.cruise_mps),
             config,
         }
     }
@@ -481,6 +489,7 @@ impl Behaviour for Route {
             votes.vote_speed(0.0);
             return;
         };
+        let reach = self.aim_m;
         let target = [waypoint.x, waypoint.y];
         let position = ctx.pose.position();
         let here = [position.x, position.y];
@@ -494,7 +503,7 @@ impl Behaviour for Route {
                 _ => self.goal_cell(here, target),
             },
         ) else {
-            vote_towards(ctx, &self.response, target, self.config.lookahead_m, votes);
+            vote_towards(ctx, &self.response, target, reach, votes);
             return;
         };
         if moved || self.goal != Some((index, goal)) {
@@ -514,14 +523,13 @@ impl Behaviour for Route {
                 );
             }
             self.has_path = false;
-            vote_towards(ctx, &self.response, target, self.config.lookahead_m, votes);
+            vote_towards(ctx, &self.response, target, reach, votes);
             return;
         }
         self.has_path = true;
-        // The point of the path `lookahead_m` from the vehicle.
-        let steps = (2.0 * self.config.lookahead_m / self.config.cell_m).ceil() as usize + 2;
+        // The point of the path `reach` from the vehicle.
+        let steps = (2.0 * reach / self.config.cell_m).ceil() as usize + 2;
         self.planner.path(&self.costs, steps, &mut self.path);
-        let reach = self.config.lookahead_m;
         let carrot = if self
             .goal
             .is_some_and(|(_, c)| self.cell_at(target[0], target[1]) == Some(c))
@@ -536,7 +544,7 @@ impl Behaviour for Route {
                 .or_else(|| self.path.last().map(|&c| self.centre(c)))
                 .unwrap_or(target)
         };
-        vote_towards(ctx, &self.response, carrot, self.config.lookahead_m, votes);
+        vote_towards(ctx, &self.response, carrot, reach, votes);
     }
 
     fn reset(&mut self) {
@@ -581,6 +589,7 @@ impl Plugin for Route {
             ));
         }
         config::positive("lookahead_m", c.lookahead_m)?;
+        config::in_range("lookahead_s", c.lookahead_s, 0.0, 10.0)?;
         config::in_range("unseen_cost", c.unseen_cost, 1.0, 100.0)?;
         config::in_range("clearance_cost", c.clearance_cost, 0.0, 100.0)?;
         config::in_range("rough_cost", c.rough_cost, 0.0, 100.0)?;
