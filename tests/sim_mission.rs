@@ -557,7 +557,7 @@ fn at_speed_arcs_judged_along_driven_paths_keep_clear_of_ditches_and_boulders() 
 /// 020 item 1: a faster vehicle looks farther. With the 18 m of arc and
 /// the 20 m window of 002 §5, obstacle avoidance's stopping-distance vote
 /// caps every sensor at 5.9 m/s; with the lookahead from speed
-/// (`lookahead.from_speed`, off by default) the 64-beam lidar at 10 m/s
+/// (`lookahead.from_speed`, on by default since 020) the 64-beam lidar at 10 m/s
 /// cruise drives faster than that, still without a collision, and the
 /// report says what set the speed.
 #[test]

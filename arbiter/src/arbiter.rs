@@ -5,7 +5,8 @@
 //! non-zero weight are summed with their weights and normalised by the total
 //! weight, so the fused vote stays in [-1, 1]; optionally smoothed across
 //! neighbouring arcs; an arc any of them vetoes can never win; the best arc
-//! wins (ties go to the straighter arc), optionally refined to the peak of a
+//! wins (ties go to the straighter arc; of arcs within `speed_tie_vote` of
+//! the best, the one that may be driven fastest), optionally refined to the peak of a
 //! parabola through its neighbours. The command is stop when a required
 //! behaviour is stale, when nobody voted, when every arc is vetoed, or when the
 //! best vote is below the acceptable minimum. Speed is the minimum of the
@@ -592,14 +593,28 @@ impl Arbiter {
         }
         self.smooth();
         let straight = self.arcs.straight_index();
+        let by_vote = |a: usize, b: usize| {
+            self.smoothed[a]
+                .total_cmp(&self.smoothed[b])
+                // Ties: the straighter arc wins.
+                .then(b.abs_diff(straight).cmp(&a.abs_diff(straight)))
+        };
         let best = (0..self.smoothed.len())
             .filter(|&i| !self.vetoed[i])
-            .max_by(|&a, &b| {
-                self.smoothed[a]
-                    .total_cmp(&self.smoothed[b])
-                    // Ties: the straighter arc wins.
-                    .then(b.abs_diff(straight).cmp(&a.abs_diff(straight)))
-            });
+            .max_by(|&a, &b| by_vote(a, b));
+        // Near-ties: the arc that may be driven fastest.
+        let margin = self.config.speed_tie_vote as f32;
+        let best = best.map(|best| {
+            if margin <= 0.0 {
+                return best;
+            }
+            let floor = self.smoothed[best] - margin;
+            (0..self.smoothed.len())
+                .filter(|&i| !self.vetoed[i] && self.smoothed[i] >= floor)
+                .map(|i| (i, self.speed_on(i, self.arcs.curvatures()[i], now).0))
+                .max_by(|&(a, va), &(b, vb)| va.total_cmp(&vb).then(by_vote(a, b)))
+                .map_or(best, |(i, _)| i)
+        });
         let Some(best) = best else {
             return Err(StopReason::AllArcsForbidden {
                 vetoes: self
@@ -616,30 +631,7 @@ impl Arbiter {
             return Err(StopReason::NoAcceptableArc { best_vote });
         }
         let curvature = self.peak_curvature(best);
-        // The lowest speed a behaviour accepts, on the arc driven or on any.
-        let mut speed_vote: Option<(String, f64)> = None;
-        for (input, votes) in self.used(now) {
-            let speeds = votes.speed_mps().into_iter().chain(votes.arc_speed(best));
-            if let Some(speed) = speeds.reduce(f64::min)
-                && speed_vote.as_ref().is_none_or(|(_, s)| speed < *s)
-            {
-                speed_vote = Some((input.name.clone(), speed));
-            }
-        }
-        let mut limits = vec![
-            ("cruise".to_owned(), self.config.cruise_speed_mps),
-            ("vehicle".to_owned(), self.max_speed_mps),
-        ];
-        if let Some((behaviour, speed)) = speed_vote {
-            limits.push((behaviour, speed));
-        }
-        if curvature != 0.0 {
-            limits.push((
-                "lateral".to_owned(),
-                (self.config.max_lateral_accel_mps2 / curvature.abs()).sqrt(),
-            ));
-        }
-        let base = limits.iter().map(|(_, s)| *s).fold(f64::INFINITY, f64::min);
+        let (base, mut limits) = self.speed_on(best, curvature, now);
         let slow = self.config.slow_below_vote;
         let floor = self.config.min_acceptable_vote;
         let factor = if f64::from(best_vote) >= slow {
@@ -660,6 +652,37 @@ impl Arbiter {
             },
             limits,
         ))
+    }
+
+    /// The speed arc `arc` may be driven at, steering `curvature`, and the
+    /// limits that set it: the cruise speed, the vehicle's top speed, the
+    /// lowest speed a behaviour accepts (on that arc or on any) and the
+    /// lateral-acceleration limit `v = √(a_lat/|k|)`.
+    fn speed_on(&self, arc: usize, curvature: f64, now: Utime) -> (f64, Vec<(String, f64)>) {
+        let mut speed_vote: Option<(String, f64)> = None;
+        for (input, votes) in self.used(now) {
+            let speeds = votes.speed_mps().into_iter().chain(votes.arc_speed(arc));
+            if let Some(speed) = speeds.reduce(f64::min)
+                && speed_vote.as_ref().is_none_or(|(_, s)| speed < *s)
+            {
+                speed_vote = Some((input.name.clone(), speed));
+            }
+        }
+        let mut limits = vec![
+            ("cruise".to_owned(), self.config.cruise_speed_mps),
+            ("vehicle".to_owned(), self.max_speed_mps),
+        ];
+        if let Some((behaviour, speed)) = speed_vote {
+            limits.push((behaviour, speed));
+        }
+        if curvature != 0.0 {
+            limits.push((
+                "lateral".to_owned(),
+                (self.config.max_lateral_accel_mps2 / curvature.abs()).sqrt(),
+            ));
+        }
+        let base = limits.iter().map(|(_, s)| *s).fold(f64::INFINITY, f64::min);
+        (base, limits)
     }
 
     /// Gaussian smoothing of the fused votes across arcs (vetoed arcs count as -1).

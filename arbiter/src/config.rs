@@ -33,6 +33,10 @@ pub struct ArbiterConfig {
     pub min_speed_fraction: f64,
     /// Speed on an arc is limited so that v²·|k| stays below this, m/s².
     pub max_lateral_accel_mps2: f64,
+    /// Arcs whose fused vote is within this of the best are near-ties; of
+    /// them the arbiter takes the one it may drive fastest (0 = the best
+    /// vote always wins).
+    pub speed_tie_vote: f64,
     /// Weight of each behaviour in the fused vote; 0 skips a behaviour. A
     /// `[arbiter.weights]` table changes the weights it names; the others
     /// keep their defaults.
@@ -63,6 +67,7 @@ impl Default for ArbiterConfig {
             slow_below_vote: 0.5,
             min_speed_fraction: 0.3,
             max_lateral_accel_mps2: 1.5,
+            speed_tie_vote: 0.0,
             weights: BTreeMap::from([
                 ("obstacle_avoidance".into(), 1.0),
                 ("route".into(), 0.5),
@@ -98,6 +103,7 @@ impl ArbiterConfig {
         }
         config::in_range("min_speed_fraction", self.min_speed_fraction, 0.0, 1.0)?;
         config::positive("max_lateral_accel_mps2", self.max_lateral_accel_mps2)?;
+        config::in_range("speed_tie_vote", self.speed_tie_vote, 0.0, 0.5)?;
         for (name, weight) in &self.weights {
             config::non_negative(&format!("weights.{name}"), *weight)?;
         }

@@ -223,6 +223,50 @@ fn ties_go_to_the_straighter_arc() {
     );
 }
 
+/// Of arcs whose fused votes are within `speed_tie_vote` of the best, the
+/// one that may be driven fastest wins: at 10 m/s a vote a hundredth
+/// higher on an arc the lateral limit holds to 4.9 m/s does not beat the
+/// straighter arc allowed 8.7 m/s (at 1.5 m/s²). At 2.5 m/s every arc
+/// allows cruise and the best vote wins; nor does a faster arc win from
+/// outside the margin, nor one whose speed vote is lower.
+#[test]
+fn near_ties_go_to_the_arc_that_may_be_driven_fastest() {
+    let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
+    let decide = |cruise: f64, margin: f64, hard: f32, straighter: f32, limit: Option<f64>| {
+        let mut a = arbiter(ArbiterConfig {
+            cruise_speed_mps: cruise,
+            speed_tie_vote: margin,
+            ..plain()
+        });
+        let mut avoid = votes("obstacle_avoidance", 0, |i| match i {
+            7 => hard,
+            16 => straighter,
+            _ => 0.0,
+        });
+        if let Some(limit) = limit {
+            avoid.votes.limit_arc_speed(16, limit);
+        }
+        a.on_votes(&avoid).unwrap();
+        a.decide(0)
+    };
+    // Arc 7 (k = 0.079 1/m: 4.4 m/s) votes 0.99, arc 16 (0.020: 8.7 m/s) 0.98.
+    let lateral = |i: usize| (1.5 / arcs.curvatures()[i].abs()).sqrt();
+    assert!(lateral(7) < 5.0 && lateral(16) > 8.0);
+    let command = decide(10.0, 0.02, 0.99, 0.98, None);
+    assert_eq!(command.arc_index, Some(16));
+    assert!((command.speed_mps - lateral(16)).abs() < 1e-9);
+    // The margin off: the best vote wins, and with it the lower speed.
+    let command = decide(10.0, 0.0, 0.99, 0.98, None);
+    assert_eq!(command.arc_index, Some(7));
+    assert!((command.speed_mps - lateral(7)).abs() < 1e-9);
+    // Outside the margin the faster arc loses.
+    assert_eq!(decide(10.0, 0.02, 0.99, 0.95, None).arc_index, Some(7));
+    // At the paper's speed both allow cruise: the best vote wins.
+    assert_eq!(decide(2.5, 0.02, 0.99, 0.98, None).arc_index, Some(7));
+    // A behaviour's speed limit on the straighter arc counts too.
+    assert_eq!(decide(10.0, 0.02, 0.99, 0.98, Some(3.0)).arc_index, Some(7));
+}
+
 #[test]
 fn smoothing_keeps_the_vehicle_away_from_a_forbidden_neighbour() {
     // Arcs 20 and 23 vote equally; arc 21 is forbidden. Smoothed, the choice

@@ -1,8 +1,9 @@
 //! Obstacle avoidance's vote (020 item 2): the 39 arcs judged on a local
 //! map holding 600 cells scattered ahead (trunks and rocks of a forest)
 //! and unseen ground beyond 30 m and behind, one core. Judged along the
-//! arcs (`[arcs] driven_paths = false`, the default) and along the paths
-//! the vehicle drives onto them (`true`) with the vehicle straight at 0,
+//! arcs (`[arcs] driven_paths = false`; the default `"auto"` does so up to
+//! 3 m/s of cruise) and along the paths the vehicle drives onto them
+//! (`true`; `"auto"` above 3 m/s) with the vehicle straight at 0,
 //! 2.5, 5 and 10 m/s, turning right at 5 m/s. Prints the median and the
 //! 99th percentile over 300 votes. No target: the cost of the driven paths
 //! shown against the arcs'.

@@ -22,7 +22,11 @@
 //!   waypoint outside the memory is sought where the line to it leaves it.
 //! - **Votes**: for the arcs that head for the point of the path
 //!   `lookahead_m` from the vehicle (`lookahead_s` of driving at the cruise
-//!   speed, if farther), scored as goal seeking scores arcs
+//!   speed, if farther) or, with `sight_line`, for the farthest point of
+//!   the path the vehicle sees in a straight line over ground no costlier
+//!   than the path's own when that is farther (string pulling: the
+//!   8-connected path's point a fixed distance ahead jumps sideways from
+//!   cycle to cycle). Scored as goal seeking scores arcs
 //!   towards a waypoint. With no path (the waypoint walled off) it says so
 //!   once and votes towards the waypoint itself.
 
@@ -53,6 +57,11 @@ pub struct RouteConfig {
     /// ... or this many seconds ahead at the cruise speed, if farther, s
     /// (see [`crate::goal_seeking::lookahead`]).
     pub lookahead_s: f64,
+    /// Head for the farthest point of the path in a straight line over
+    /// ground no costlier than the path's (`Route::farthest_in_sight`)
+    /// when it is at least the lookahead away, rather than for the
+    /// path's point the lookahead along.
+    pub sight_line: bool,
     /// Cost of crossing ground no image has seen, relative to seen free ground.
     pub unseen_cost: f64,
     /// Extra cost of ground next to an obstacle (half a vehicle width away).
@@ -79,6 +88,7 @@ impl Default for RouteConfig {
             cell_m: 1.0,
             lookahead_m: 8.0,
             lookahead_s: 0.0,
+            sight_line: false,
             unseen_cost: 2.0,
             clearance_cost: 4.0,
             rough_cost: 4.0,
@@ -304,6 +314,43 @@ impl Route {
             _ => 1.0,
         };
         base * factor as f32
+    }
+
+    /// The farthest point of the planned path that the vehicle at `here`
+    /// sees along a straight line crossing no cell costlier than the path
+    /// itself up to that point, every nearer path point in sight too
+    /// (string pulling, as any-angle planners smooth a grid path). On an
+    /// 8-connected grid many paths cost the same — diagonal steps first or
+    /// straight ones first — and the one the planner returns changes from
+    /// cycle to cycle, so the path's point a fixed distance ahead jumps
+    /// sideways by metres; the straight line over the same open ground does
+    /// not. Only ground the path itself would cross is crossed: where the
+    /// path bends round an obstacle's margin the sight line stops there.
+    fn farthest_in_sight(&self, here: [f64; 2]) -> Option<[f64; 2]> {
+        let step = 0.25 * self.config.cell_m;
+        let mut limit = self
+            .cell_at(here[0], here[1])
+            .map_or(1.0, |c| self.costs[c]);
+        let mut sighted = None;
+        for &cell in &self.path {
+            limit = limit.max(self.costs[cell]);
+            if !limit.is_finite() {
+                break;
+            }
+            let point = self.centre(cell);
+            let (dx, dy) = (point[0] - here[0], point[1] - here[1]);
+            let samples = (dx.hypot(dy) / step).ceil().max(1.0) as usize;
+            let clear = (1..samples).all(|k| {
+                let f = k as f64 / samples as f64;
+                self.cell_at(here[0] + f * dx, here[1] + f * dy)
+                    .is_some_and(|c| self.costs[c] <= limit * (1.0 + 1e-6))
+            });
+            if !clear {
+                break;
+            }
+            sighted = Some(point);
+        }
+        sighted
     }
 
     /// Sets cell `c`'s state; re-costs the cells around it that change.
@@ -536,6 +583,14 @@ impl Behaviour for Route {
             && (target[0] - here[0]).hypot(target[1] - here[1]) <= reach
         {
             target
+        } else if let Some(sighted) = self
+            .config
+            .sight_line
+            .then(|| self.farthest_in_sight(here))
+            .flatten()
+            .filter(|p| (p[0] - here[0]).hypot(p[1] - here[1]) >= reach)
+        {
+            sighted
         } else {
             self.path
                 .iter()
