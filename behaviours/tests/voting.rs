@@ -845,3 +845,46 @@ fn with_a_sight_line_the_route_turns_steadily_with_the_bearing_of_the_waypoint()
     }
     assert!(previous.is_some_and(|best| best >= 30), "{previous:?}");
 }
+
+/// `lookahead_s`: goal seeking and the route aim that many seconds of
+/// cruise ahead when that is farther than `lookahead_m`. At 10 m/s with
+/// 2 s they vote as if `lookahead_m` were 20; at 2.5 m/s (5 m) the 8 or
+/// 10 m hold. Goal seeking's votes for a waypoint 40 m ahead and 6 m to
+/// the left show which distance was used.
+#[test]
+fn lookahead_s_aims_seconds_of_cruise_ahead_when_that_is_farther() {
+    let arcs = arcs();
+    let vehicle = VehicleConfig::default();
+    let map = snapshot_seeing(&[], 20.0);
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = Mission {
+        version: 1,
+        waypoints: vec![Waypoint {
+            x: 40.0,
+            y: 6.0,
+            radius_m: None,
+        }],
+    };
+    let votes = |name: &str, table: &str, cruise: f64| {
+        let setup = Setup {
+            cruise_mps: cruise,
+            ..setup(&arcs, &vehicle)
+        };
+        let mut behaviour = Registry::builtin()
+            .build(name, &toml::from_str(table).unwrap(), &setup)
+            .unwrap();
+        let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
+        let mut votes = Votes::new(arcs.len());
+        behaviour.vote(&ctx, &mut votes);
+        votes.values().to_vec()
+    };
+    for (name, metres) in [("goal_seeking", 10.0), ("route", 8.0)] {
+        let by_seconds = votes(name, "lookahead_s = 2.0", 10.0);
+        let by_metres = votes(name, "lookahead_m = 20.0", 10.0);
+        assert_eq!(by_seconds, by_metres, "{name}: 2 s at 10 m/s is 20 m");
+        let slow = votes(name, "lookahead_s = 2.0", 2.5);
+        let fixed = votes(name, &format!("lookahead_m = {metres}"), 2.5);
+        assert_eq!(slow, fixed, "{name}: 5 m at 2.5 m/s is under {metres} m");
+        assert_ne!(by_seconds, fixed, "{name}: the distance matters here");
+    }
+}
