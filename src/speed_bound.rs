@@ -26,6 +26,21 @@
 //!   itself keeps `v²/r ≤ arbiter.max_lateral_accel_mps2`.
 //! - The bound is the faster of the two manoeuvres, at most
 //!   `vehicle.max_speed_mps`.
+//!
+//! A hole is seen differently (016: "no data is not free ground"). Its
+//! near edge is flagged a drop-off when the ray that grazed it meets the
+//! far side more than `δ = δ0 + Δ·R` below the edge
+//! (`[perception.drop_off]`, 000 §4.2's gap rule). From a sensor `H` above
+//! the ground a ray falls `H/R` per metre at range `R`, so across a hole
+//! `w` wide it shows `w·H/R` of the far side, whatever the hole's depth.
+//! A hole the wheels do not bridge (`w = max_gap_m`) is therefore certain
+//! to be flagged only within the `R` that solves `Δ·R² + δ0·R = w·H`, and
+//! only where the rows of returns are closer than `w` on the ground
+//! (`R²·δθ/H ≤ w`). `hole_range_m` is the smaller, within the sensor's
+//! range and the window, and `hole_bound_mps` the same stop-or-swerve
+//! bound over it: 8.4 m and 4.0 m/s for the 64-beam lidar 2.4 m up, where
+//! steps allow 10 m/s. A hole across the whole way cannot be swerved
+//! round; the swerve counts for one narrower than the way.
 
 use serde::Serialize;
 
@@ -48,6 +63,11 @@ pub struct SpeedBound {
     pub reaction_s: f64,
     /// The sensor's vertical angle between adjacent beams, degrees.
     pub beam_spacing_deg: f64,
+    /// Range within which a hole the wheels do not bridge is certain to be
+    /// flagged, and the stop-or-swerve speed over it, m and m/s (none when
+    /// `[perception.drop_off]` is off).
+    pub hole_range_m: Option<f64>,
+    pub hole_bound_mps: Option<f64>,
 }
 
 /// The bound of `config` (its sensors, vehicle, map window and timing):
@@ -103,7 +123,7 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
     );
     let front = v.length_m - v.rear_overhang_m;
     let sensor_x = sensor.vehicle_from_sensor.translation.vector.x;
-    let free = (range - (front - sensor_x).max(0.0)).max(0.0);
+    let free_within = |range: f64| (range - (front - sensor_x).max(0.0)).max(0.0);
     let acquisition = if config.sim.slice_lines > 0 {
         let slicer = arcnav_sim::sensor::Slicer::new(sensor, config.sim.slice_lines);
         (slicer.times(0, 0).0 as f64 * 1e-6).min(1.0 / sensor.rate_hz)
@@ -115,14 +135,46 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
         + 1.0 / config.pipeline.command_rate_hz
         + v.command_latency_s;
     let a = v.max_deceleration_mps2;
-    let stop = a * ((reaction * reaction + 2.0 * free / a).sqrt() - reaction);
     let r = v.min_turning_radius_m;
     let w = (v.width_m / 2.0).min(r);
     let sideways = (w * (2.0 * r - w)).sqrt();
     let steer = (1.0 / r) / v.max_curvature_rate;
-    let swerve = ((free - sideways) / (reaction + steer))
-        .max(0.0)
-        .min((config.arbiter.max_lateral_accel_mps2 * r).sqrt());
+    // Stopping and swerving within `free` metres.
+    let manoeuvres = |free: f64| {
+        let stop = a * ((reaction * reaction + 2.0 * free / a).sqrt() - reaction);
+        let swerve = ((free - sideways) / (reaction + steer))
+            .max(0.0)
+            .min((config.arbiter.max_lateral_accel_mps2 * r).sqrt());
+        (stop, swerve)
+    };
+    let (stop, swerve) = manoeuvres(free_within(range));
+    let drop_off = &config.perception.drop_off;
+    let height = (sensor.vehicle_from_sensor * nalgebra::Point3::origin()).z;
+    let hole_range = (drop_off.enabled && height > 0.0).then(|| {
+        let (gap, step, per_m) = (
+            drop_off.max_gap_m,
+            drop_off.min_depth_m,
+            drop_off.depth_per_m,
+        );
+        let shown = if per_m > 0.0 {
+            (-step + (step * step + 4.0 * per_m * gap * height).sqrt()) / (2.0 * per_m)
+        } else {
+            gap * height / step
+        };
+        let rows = if spacing > 0.0 {
+            (gap * height / spacing).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        shown
+            .min(rows)
+            .min(sensor.max_range_m)
+            .min(config.lookahead().map_ahead_m)
+    });
+    let hole_bound = hole_range.map(|range| {
+        let (stop, swerve) = manoeuvres(free_within(range));
+        stop.max(swerve).min(v.max_speed_mps)
+    });
     SpeedBound {
         bound_mps: stop.max(swerve).min(v.max_speed_mps),
         stop_mps: stop,
@@ -131,6 +183,8 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
         range_limited_by: limited_by,
         reaction_s: reaction,
         beam_spacing_deg: spacing.to_degrees(),
+        hole_range_m: hole_range,
+        hole_bound_mps: hole_bound,
     }
 }
 
@@ -175,6 +229,40 @@ mod tests {
         let mut brakes = Config::default();
         brakes.vehicle.max_deceleration_mps2 = 6.0;
         assert!(speed_bound(&brakes).unwrap().bound_mps > base);
+    }
+
+    /// 016's holes: the 64-beam lidar 2.4 m up shows a 0.77 m hole's far
+    /// side 0.2 m + 0.0025·R down only within 8.4 m (`Δ·R² + δ0·R = w·H`),
+    /// well inside the 27 m at which it resolves a 20 cm step, so holes
+    /// hold the speed far lower; mounted higher it sees them farther; with
+    /// drop-off detection off there is no such bound.
+    #[test]
+    fn holes_are_seen_nearer_than_steps_and_a_higher_mount_sees_them_farther() {
+        let mut lidar = Config::default();
+        lidar.sensor.preset = SensorPreset::Lidar64;
+        lidar.arbiter.cruise_speed_mps = 10.0;
+        let b = speed_bound(&lidar).unwrap();
+        let range = b.hole_range_m.unwrap();
+        let d = &lidar.perception.drop_off;
+        let shown = d.max_gap_m * 2.4 / range;
+        assert!(
+            (shown - (d.min_depth_m + d.depth_per_m * range)).abs() < 1e-9,
+            "{b:?}"
+        );
+        assert!((8.0..9.0).contains(&range), "{b:?}");
+        assert!(b.detection_range_m > 25.0, "{b:?}");
+        let hole = b.hole_bound_mps.unwrap();
+        assert!(hole < 0.5 * b.bound_mps, "{b:?}");
+        let mut higher = lidar.clone();
+        higher.sensor.mount_position_m = Some([1.2, 0.0, 3.6]);
+        let h = speed_bound(&higher).unwrap();
+        assert!(h.hole_range_m.unwrap() > 1.4 * range, "{h:?}");
+        assert!(h.hole_bound_mps.unwrap() > hole);
+        let mut off = lidar.clone();
+        off.perception.drop_off.enabled = false;
+        let o = speed_bound(&off).unwrap();
+        assert_eq!((o.hole_range_m, o.hole_bound_mps), (None, None));
+        assert_eq!(o.bound_mps, b.bound_mps);
     }
 
     #[test]

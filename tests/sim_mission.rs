@@ -109,6 +109,15 @@ fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
         (fraction * bound - report["average_speed_mps"].as_f64().unwrap()).abs() < 1e-9,
         "{fraction} of {bound}"
     );
+    // Holes the wheels do not bridge are seen nearer than steps: the
+    // ERIM flags one only within ~7.7 m, so the paper's 2-3 m/s.
+    let holes = &report["speed_bound"];
+    let hole_range = holes["hole_range_m"].as_f64().unwrap();
+    let hole_bound = holes["hole_bound_mps"].as_f64().unwrap();
+    assert!(
+        hole_range < holes["detection_range_m"].as_f64().unwrap() && hole_bound < bound,
+        "{holes}"
+    );
     assert!(
         report["stage_times"]["perception"]["count"]
             .as_u64()

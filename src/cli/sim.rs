@@ -174,6 +174,13 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         b.reaction_s,
         100.0 * r.speed_fraction_of_bound
     );
+    if let (Some(range), Some(bound)) = (b.hole_range_m, b.hole_bound_mps) {
+        println!(
+            "              holes the wheels do not bridge are flagged within {range:.1} m: {bound:.2} m/s \
+             (the average is {:.0} % of it)",
+            100.0 * r.average_speed_mps / bound.max(1e-9)
+        );
+    }
     if !r.speed_limited_by_s.is_empty() {
         println!("speed set by  {}", seconds_list(&r.speed_limited_by_s));
     }
