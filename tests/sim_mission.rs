@@ -594,6 +594,12 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
             code, 0,
             "{tag}: completes without a collision:\n{stdout}\n{stderr}"
         );
+        // 10 m/s is beyond what holes allow (3.95 m/s): said before the run.
+        assert!(
+            stderr.contains("note: 10.0 m/s is faster than 3.95 m/s"),
+            "{stderr}"
+        );
+        assert!(stdout.contains("holes the wheels do not bridge are flagged within 8.4 m"));
         let report: Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
                 .unwrap();

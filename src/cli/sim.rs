@@ -108,6 +108,19 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         config.perception.evaluator,
         config.arbiter.cruise_speed_mps
     );
+    // Faster than holes can be seen: say so before the run, not only in
+    // the report.
+    let cruise = config.arbiter.cruise_speed_mps;
+    if let Ok(bound) = arcnav::speed_bound::speed_bound(&config)
+        && let (Some(range), Some(holes)) = (bound.hole_range_m, bound.hole_bound_mps)
+        && cruise > holes
+    {
+        eprintln!(
+            "note: {cruise:.1} m/s is faster than {holes:.2} m/s, at which a hole the wheels do not \
+             bridge is certain to be seen in time: the sensor flags one only within {range:.1} m \
+             (report.json speed_bound; a higher mount sees farther)"
+        );
+    }
     let bar = indicatif::ProgressBar::new(world.waypoints.len() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("{spinner} [{bar:30}] waypoint {pos}/{len} {msg}")
