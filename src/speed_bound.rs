@@ -149,7 +149,7 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
     };
     let (stop, swerve) = manoeuvres(free_within(range));
     let drop_off = &config.perception.drop_off;
-    let height = (sensor.vehicle_from_sensor * nalgebra::Point3::origin()).z;
+    let height = sensor.vehicle_from_sensor.translation.vector.z;
     let hole_range = (drop_off.enabled && height > 0.0).then(|| {
         let (gap, step, per_m) = (
             drop_off.max_gap_m,
