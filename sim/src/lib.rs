@@ -6,7 +6,8 @@
 //!   boulders, trees, bushes, ditches, holes, banks, waypoints, start), three
 //!   embedded ones and [`generate`](mod@generate)d ones;
 //! - [`tiles`]: the world as 0.1 m height tiles and a ray caster implementing
-//!   perception's [`arcnav_perception::RayCast`] — the one rendering path;
+//!   perception's [`arcnav_perception::RayCast`] — the one rendering path,
+//!   and [`polar`], the same answers faster for a frame's rays from one point;
 //! - [`sensor`]: range images with noise and dropouts;
 //! - [`drape`]: the vehicle standing on the ground;
 //! - [`truth`]: collisions of the footprint with the true hazards.
@@ -16,6 +17,7 @@ pub mod drape;
 pub mod generate;
 pub mod heightmap;
 pub mod noise;
+pub mod polar;
 pub mod ride;
 pub mod rng;
 pub mod sensor;
