@@ -129,6 +129,10 @@ pub struct MissionReport {
     /// much the vehicle weaves.
     pub steering_activity: f64,
     pub map_resets: u64,
+    /// What the local map did with the reports: patches made, confirmed,
+    /// pruned by newer images, misses not counted because the image looked
+    /// from too far (`miss_range_factor`), cleared under the vehicle.
+    pub localmap: arcnav_localmap::MapStats,
     pub stage_times: StageTimes,
     /// Rendering range images (simulator, not pipeline), ms per image.
     pub render_ms_mean: f64,
@@ -674,6 +678,7 @@ pub fn run_mission(
         behaviour_counters,
         steering_activity: sink.curvature_change.0 / sink.curvature_change.1.max(1) as f64,
         map_resets: pipeline.cycle.counts().map_resets,
+        localmap: *pipeline.cycle.map.map.stats(),
         stage_times: pipeline.times,
         render_ms_mean: if images > 0 {
             render_ms / images as f64

@@ -487,6 +487,55 @@ fn narrow_cul_de_sacs_are_left_by_turning_round() {
     }
 }
 
+/// A ditch square across the way that a sensor flags only from near (the
+/// 64-beam lidar: within about 8 m), its near end beyond the map's side.
+/// The vehicle stops at it and turns round; the images it takes backing
+/// away see the ditch from farther than it can be flagged from. Counted as
+/// misses (002 §5 as written), they erased it, the route planned through
+/// it, and the vehicle came back, turned round again and was stuck after
+/// 130 s. With `localmap.miss_range_factor` those images count no miss:
+/// both sensors complete at 2.5 m/s without a collision.
+#[test]
+fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
+    let world = format!(
+        "{}/tests/worlds/ditch_across.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let run = |tag, sensor: &str, factor: &str| {
+        let config = out_dir(&format!("ditch-config-{tag}"));
+        let path = config.join("config.toml");
+        std::fs::write(&path, format!("[localmap]\nmiss_range_factor = {factor}\n")).unwrap();
+        let args = [
+            "--world",
+            &world,
+            "--sensor",
+            sensor,
+            "--no-images",
+            "--config",
+            path.to_str().unwrap(),
+        ];
+        ((tag, args.map(String::from).to_vec()), config)
+    };
+    let (runs, _configs): (Vec<_>, Vec<_>) = [
+        run("lidar64", "lidar64", "1.25"),
+        run("erim", "erim", "1.25"),
+        run("lidar64-as-002", "lidar64", "0"),
+    ]
+    .into_iter()
+    .unzip();
+    let reports = missions("ditch", &runs);
+    for (tag, report, stdout) in &reports[..2] {
+        assert_completed_without_collision(tag, report, stdout);
+        assert!(stdout.contains("misses not counted"), "{stdout}");
+    }
+    let lidar = &reports[0].1["localmap"];
+    assert!(lidar["seen_from_afar"].as_u64().unwrap() > 0, "{lidar}");
+    // Every overlapping image counting a miss, the same vehicle is stuck.
+    let (tag, report, stdout) = &reports[2];
+    assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
+    assert_eq!(report["localmap"]["seen_from_afar"], 0, "{tag}");
+}
+
 /// 017, narrower still: a dead-end lane with 5.7 m of floor, where no
 /// K-point turn gets the vehicle round. It backs out the way it came (at
 /// least 20 m of the 30 m lane, both sensors), turns once out, and

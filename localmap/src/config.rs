@@ -41,6 +41,13 @@ pub struct LocalMapConfig {
     pub misses_to_drop: u32,
     /// Also let images of one sensor drop cells only other sensors reported.
     pub cross_sensor_pruning: bool,
+    /// An image that sees a cell from farther than this many times the
+    /// nearest distance an image reported it from counts no miss (0: every
+    /// overlapping image counts one, as in 002 §5). A hole shows its far
+    /// wall `w·H/R` high to a sensor `H` up at `R`: flagged from 8 m, it is
+    /// not there to see from 12, and a vehicle backing away from a ditch
+    /// must not erase it.
+    pub miss_range_factor: f64,
     /// Consecutive poses further apart than this (plus what the vehicle's
     /// top speed explains) are a jump, m.
     pub max_pose_jump_m: f64,
@@ -99,6 +106,7 @@ impl Default for LocalMapConfig {
             driven_memory_m: 100.0,
             misses_to_drop: 1,
             cross_sensor_pruning: false,
+            miss_range_factor: 1.25,
             max_pose_jump_m: 2.0,
             on_pose_jump: JumpPolicy::Reset,
             assume_seen_m: 8.0,
@@ -120,6 +128,9 @@ impl LocalMapConfig {
         config::non_negative("behind_m", self.behind_m)?;
         config::in_range("driven_memory_m", self.driven_memory_m, 0.0, 10_000.0)?;
         config::positive("max_pose_jump_m", self.max_pose_jump_m)?;
+        if self.miss_range_factor != 0.0 {
+            config::in_range("miss_range_factor", self.miss_range_factor, 1.0, 100.0)?;
+        }
         config::in_range("assume_seen_m", self.assume_seen_m, 0.0, 100.0)?;
         let o = &self.occupancy;
         config::in_range("occupancy.resolution_m", o.resolution_m, 0.001, 100.0)?;

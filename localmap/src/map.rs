@@ -13,7 +13,13 @@
 //!   (tried the other way, more drop-off cells stayed and the vehicle found
 //!   its way round other trenches, not more of them). An image older than a
 //!   patch's last confirmation counts no miss, so out-of-order reports never
-//!   prune what newer images confirmed.
+//!   prune what newer images confirmed. Nor does an image whose sensor
+//!   stood farther from the patch than `miss_range_factor` times the
+//!   nearest distance any image reported it from: 002 §5 drops cells "not
+//!   reported ... in the next overlapping images" because they follow
+//!   quickly as the vehicle drives on, from nearer; a vehicle backing away
+//!   from a ditch sees it again from farther, where its far wall no longer
+//!   shows (`w·H/R`), and must not erase it.
 //! - **The loop** ([`LocalMap::update`]): with the current pose every patch is
 //!   re-expressed in the vehicle frame and those outside the window dropped.
 //! - **Seen ground**: the ground each image observed (its footprint, less
@@ -76,6 +82,9 @@ pub struct Patch {
     /// Highest cost of its cells: 1 untraversable, below 1 graded ground
     /// (see `arcnav_perception::ObstacleCell::cost`).
     pub cost: f32,
+    /// Nearest horizontal distance from which an image reported it, m
+    /// (infinite: not known; any overlapping image may miss it).
+    pub nearest_m: f32,
     /// Last report that touched it.
     stamp: u64,
 }
@@ -104,6 +113,7 @@ impl Patch {
             z_min: 0.0,
             z_max: 0.0,
             cost: 1.0,
+            nearest_m: f32::INFINITY,
             stamp: 0,
         }
     }
@@ -158,6 +168,30 @@ pub enum InsertError {
     BadFootprint { x: f64, y: f64 },
 }
 
+/// Where the report's sensor stood (its ground position at capture), when
+/// the report says so plausibly: on or within [`VIEWPOINT_SLACK_M`] of the
+/// box around its footprint (a producer that leaves `shadow_origin` at 0
+/// far from where it looked tells nothing).
+fn viewpoint(report: &ObstacleReport) -> Option<Point2<f64>> {
+    let o = report.shadows.origin;
+    let vertices = &report.fov.vertices;
+    if vertices.len() < 3 || !(o.x.is_finite() && o.y.is_finite()) {
+        return None;
+    }
+    let (mut lo, mut hi) = (vertices[0], vertices[0]);
+    for v in vertices {
+        lo = Point2::new(lo.x.min(v.x), lo.y.min(v.y));
+        hi = Point2::new(hi.x.max(v.x), hi.y.max(v.y));
+    }
+    let within =
+        |v: f64, lo: f64, hi: f64| v >= lo - VIEWPOINT_SLACK_M && v <= hi + VIEWPOINT_SLACK_M;
+    (within(o.x, lo.x, hi.x) && within(o.y, lo.y, hi.y)).then_some(o)
+}
+
+/// How far outside its footprint's box a report's sensor may stand, m (a
+/// sensor looking ahead sees no ground right before the bumper).
+const VIEWPOINT_SLACK_M: f64 = 10.0;
+
 /// The farthest a footprint vertex may be from the world origin, m: no
 /// local frame on Earth reaches further (a larger value is damage).
 pub const MAX_COORDINATE_M: f64 = 1e8;
@@ -174,7 +208,7 @@ pub struct InsertOutcome {
 }
 
 /// Counters over the map's life.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct MapStats {
     pub reports: u64,
     pub reports_refused: u64,
@@ -191,6 +225,13 @@ pub struct MapStats {
     pub already_in_static_map: u64,
     /// Static-map patches that entered the window.
     pub static_patches_added: u64,
+    /// Times an image's footprint covered a patch it did not report, from
+    /// farther than `miss_range_factor` times the nearest distance the
+    /// patch was reported from: no miss.
+    pub seen_from_afar: u64,
+    /// Reports whose sensor position (`shadows.origin`) was not plausible:
+    /// their misses count whatever the distance.
+    pub reports_without_viewpoint: u64,
 }
 
 /// Which patches of a square of the world some image observed: patch
@@ -617,6 +658,13 @@ impl LocalMap {
         let stamp = self.stamp;
         let mut outcome = InsertOutcome::default();
         let s = self.config.patch_size_m;
+        let viewpoint = viewpoint(report);
+        if viewpoint.is_none() {
+            self.stats.reports_without_viewpoint += 1;
+        }
+        // How far the image's sensor stood from a cell (infinite: not known).
+        let distance =
+            |x: f64, y: f64| viewpoint.map_or(f32::INFINITY, |o| ((x - o.x).hypot(y - o.y)) as f32);
         for cell in &report.cells {
             let (i, j) = ((cell.x / s).floor() as i64, (cell.y / s).floor() as i64);
             if self.is_static(i, j) {
@@ -641,6 +689,7 @@ impl LocalMap {
                     patch.z_min = patch.z_min.min(cell.z_min);
                     patch.z_max = patch.z_max.max(cell.z_max);
                     patch.cost = patch.cost.max(cell.cost);
+                    patch.nearest_m = patch.nearest_m.min(distance(cell.x, cell.y));
                     continue;
                 }
                 // The ring wrapped onto a patch far outside the window.
@@ -671,13 +720,14 @@ impl LocalMap {
                 z_min: cell.z_min,
                 z_max: cell.z_max,
                 cost: cell.cost,
+                nearest_m: distance(cell.x, cell.y),
                 stamp,
             };
             self.slots[slot] = self.patches.len() as u32;
             self.patches.push(patch);
             outcome.new_patches += 1;
         }
-        outcome.pruned = self.prune(report, sensor_bit, stamp);
+        outcome.pruned = self.prune(report, viewpoint, sensor_bit, stamp);
         if self.pose.is_some() {
             // Cells placed under the vehicle (captured before it drove there).
             self.clear_under_vehicle();
@@ -772,20 +822,38 @@ impl LocalMap {
         self.shadows.contains(x, y)
     }
 
-    fn prune(&mut self, report: &ObstacleReport, sensor_bit: u32, stamp: u64) -> u32 {
+    fn prune(
+        &mut self,
+        report: &ObstacleReport,
+        viewpoint: Option<Point2<f64>>,
+        sensor_bit: u32,
+        stamp: u64,
+    ) -> u32 {
         if !self.observe(report) {
             return 0;
         }
+        let factor = self.config.miss_range_factor;
+        let s = self.config.patch_size_m;
         let mut pruned = 0;
         let mut index = 0;
         while index < self.patches.len() {
             let patch = &mut self.patches[index];
+            // Seen from farther than it could be seen from, it is not missed.
+            let near_enough = || match viewpoint {
+                Some(o) if factor > 0.0 && patch.nearest_m.is_finite() => {
+                    let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
+                    (x - o.x).hypot(y - o.y) <= factor * f64::from(patch.nearest_m)
+                }
+                _ => true,
+            };
             let judged = patch.stamp != stamp
                 && !patch.reasons.contains(Reasons::STATIC_MAP)
                 && patch.last_seen < report.utime
                 && (self.config.cross_sensor_pruning || patch.sensors & sensor_bit != 0)
                 && self.coverage.covers(patch.i, patch.j);
-            if judged {
+            if judged && !near_enough() {
+                self.stats.seen_from_afar += 1;
+            } else if judged {
                 patch.misses += 1;
                 if patch.misses >= self.config.misses_to_drop {
                     self.remove(index);

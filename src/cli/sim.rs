@@ -222,6 +222,16 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         cells.join(", "),
         r.graded_cells
     );
+    let m = &r.localmap;
+    println!(
+        "local map     {} patches, {} confirmations; dropped: {} missed by a newer image, {} under \
+         the vehicle; {} misses not counted (seen from farther than reported from)",
+        m.new_patches,
+        m.confirmations,
+        m.pruned_inconsistent,
+        m.cleared_under_vehicle,
+        m.seen_from_afar
+    );
     println!("collisions    {}", r.collisions.len());
     for c in &r.collisions {
         println!(
