@@ -446,18 +446,17 @@ impl SensorModel {
             .iter()
             .map(|&az| f64::from(az).sin_cos())
             .collect();
+        let mut directions = Vec::with_capacity(cols);
         for (row, chunk) in rows.zip(out.chunks_mut(cols)) {
             let Some(&el) = self.beams.elevation.get(row) else {
                 break;
             };
             let (sin_el, cos_el) = f64::from(el).sin_cos();
-            for (value, &(sin_az, cos_az)) in chunk.iter_mut().zip(&trig) {
-                let beam = Vector3::new(cos_el * cos_az, cos_el * sin_az, sin_el);
-                let direction = world_from_sensor.rotation * beam;
-                *value = scene
-                    .cast(&origin, &direction, self.max_range_m)
-                    .map_or(f32::NAN, |d| d as f32);
-            }
+            directions.clear();
+            directions.extend(trig.iter().map(|&(sin_az, cos_az)| {
+                world_from_sensor.rotation * Vector3::new(cos_el * cos_az, cos_el * sin_az, sin_el)
+            }));
+            scene.cast_each(&origin, &directions, self.max_range_m, chunk);
         }
     }
 }

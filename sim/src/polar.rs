@@ -38,6 +38,7 @@ const GROUP: usize = 8;
 const ANGLE_MARGIN: f64 = 1e-7;
 const DISTANCE_MARGIN: f64 = 1e-6;
 const HEIGHT_MARGIN: f64 = 1e-9;
+const RISE_MARGIN: f64 = 1e-9;
 
 /// A monotone stand-in for the heading of (x, y), in [0, 4): 0 along +x,
 /// 1 along +y, 2 along −x, 3 along −y ("diamond angle").
@@ -63,6 +64,10 @@ pub struct PolarView<'a> {
     highest: Vec<f32>,
     /// The same over groups of `GROUP` distance bins.
     coarse: Vec<f32>,
+    /// Per (distance bin, heading bin): a ray rising faster than this (per
+    /// horizontal metre) meets nothing in that bin or any nearer one
+    /// (rounded up): where a neighbouring ray's search may start.
+    clears: Vec<f32>,
 }
 
 impl<'a> PolarView<'a> {
@@ -77,7 +82,8 @@ impl<'a> PolarView<'a> {
         let bins = ((range_m / BIN_M).ceil() as usize).max(1);
         let parts = threads.max(1);
         // Each thread bins a share of the tiles into a table of its own;
-        // the tables are then merged, highest wins.
+        // then each takes a share of the headings, merges the tables there
+        // (highest wins) and derives the coarse bins and the clearing rises.
         let bin_part = |part: usize| {
             let mut highest = vec![f32::NEG_INFINITY; bins * HEADINGS];
             view.for_each_tile(part, parts, |x0, y0, block_max| {
@@ -85,36 +91,62 @@ impl<'a> PolarView<'a> {
             });
             highest
         };
-        let mut highest = if parts == 1 {
-            bin_part(0)
+        let groups = bins.div_ceil(GROUP);
+        let mut coarse = vec![f32::NEG_INFINITY; groups * HEADINGS];
+        let mut clears = vec![f32::NEG_INFINITY; bins * HEADINGS];
+        let z = origin.z as f32;
+        let highest = if parts == 1 {
+            let mut highest = bin_part(0);
+            derive(
+                &mut columns(&mut highest, 1)[0],
+                &[],
+                0,
+                &mut columns(&mut coarse, 1)[0],
+                &mut columns(&mut clears, 1)[0],
+                z,
+            );
+            highest
         } else {
-            std::thread::scope(|scope| {
+            let (mut highest, others) = std::thread::scope(|scope| {
                 let others: Vec<_> = (1..parts)
                     .map(|part| scope.spawn(move || bin_part(part)))
                     .collect();
-                let mut highest = bin_part(0);
-                for other in others {
-                    // A thread that panicked binned nothing: cast in the view.
-                    let Ok(other) = other.join() else {
-                        highest.fill(f32::INFINITY);
-                        continue;
-                    };
-                    for (h, o) in highest.iter_mut().zip(other) {
-                        *h = h.max(o);
-                    }
+                let highest = bin_part(0);
+                // A thread that panicked binned nothing: its share of the
+                // ground is treated as everywhere high (cast in the view).
+                let others: Vec<Vec<f32>> = others
+                    .into_iter()
+                    .map(|other| {
+                        other
+                            .join()
+                            .unwrap_or_else(|_| vec![f32::INFINITY; bins * HEADINGS])
+                    })
+                    .collect();
+                (highest, others)
+            });
+            let width = HEADINGS.div_ceil(parts);
+            let others = &others;
+            std::thread::scope(|scope| {
+                let shares = columns(&mut highest, parts)
+                    .into_iter()
+                    .zip(columns(&mut coarse, parts))
+                    .zip(columns(&mut clears, parts))
+                    .enumerate();
+                for (part, ((mut highest, mut coarse), mut clears)) in shares {
+                    scope.spawn(move || {
+                        derive(
+                            &mut highest,
+                            others,
+                            part * width,
+                            &mut coarse,
+                            &mut clears,
+                            z,
+                        );
+                    });
                 }
-                highest
-            })
+            });
+            highest
         };
-        highest.shrink_to_fit();
-        let groups = bins.div_ceil(GROUP);
-        let mut coarse = vec![f32::NEG_INFINITY; groups * HEADINGS];
-        for (bin, row) in highest.chunks_exact(HEADINGS).enumerate() {
-            let group = &mut coarse[(bin / GROUP) * HEADINGS..(bin / GROUP + 1) * HEADINGS];
-            for (g, h) in group.iter_mut().zip(row) {
-                *g = g.max(*h);
-            }
-        }
         Self {
             view,
             origin,
@@ -122,6 +154,75 @@ impl<'a> PolarView<'a> {
             bins,
             highest,
             coarse,
+            clears,
+        }
+    }
+}
+
+/// The rows of a `[bin · HEADINGS + heading]` table cut into `parts`
+/// ranges of headings: part k's piece of every row.
+fn columns(table: &mut [f32], parts: usize) -> Vec<Vec<&mut [f32]>> {
+    let width = HEADINGS.div_ceil(parts.max(1));
+    let mut out: Vec<Vec<&mut [f32]>> = (0..parts.max(1)).map(|_| Vec::new()).collect();
+    for row in table.chunks_exact_mut(HEADINGS) {
+        for (k, piece) in row.chunks_mut(width).enumerate() {
+            out[k].push(piece);
+        }
+    }
+    out
+}
+
+/// For one range of headings (starting at `first`; rows of `highest`,
+/// `coarse` and `clears` cut to it): merges the other threads' tables into
+/// `highest`, then fills the coarse bins and the clearing rises.
+fn derive(
+    highest: &mut [&mut [f32]],
+    others: &[Vec<f32>],
+    first: usize,
+    coarse: &mut [&mut [f32]],
+    clears: &mut [&mut [f32]],
+    z: f32,
+) {
+    for (bin, row) in highest.iter_mut().enumerate() {
+        for other in others {
+            let theirs = &other[bin * HEADINGS + first..][..row.len()];
+            for (h, o) in row.iter_mut().zip(theirs) {
+                *h = h.max(*o);
+            }
+        }
+    }
+    for (bin, row) in highest.iter().enumerate() {
+        for (g, h) in coarse[bin / GROUP].iter_mut().zip(row.iter()) {
+            *g = g.max(*h);
+        }
+    }
+    // A ray rising s per metre clears bin j (from r_j to r_{j+1}) with
+    // highest cell h iff min(z + s·r_j, z + s·r_{j+1}) > h: iff
+    // s > (h − z)/r_j when h ≥ z (the near edge binds), iff
+    // s > (h − z)/r_{j+1} when h < z (the far edge binds). In f32, raised
+    // by far more than its rounding: a bound only too high starts fewer
+    // searches late, never one too late.
+    let mut running = vec![f32::NEG_INFINITY; highest.first().map_or(0, |r| r.len())];
+    for (bin, (row, out)) in highest.iter().zip(clears.iter_mut()).enumerate() {
+        let per_near = if bin == 0 {
+            0.0
+        } else {
+            1.0 / (bin as f32 * BIN_M as f32)
+        };
+        let per_far = 1.0 / ((bin + 1) as f32 * BIN_M as f32);
+        for ((&top, run), out) in row.iter().zip(&mut running).zip(out.iter_mut()) {
+            let above = top - z;
+            let bound = if above >= 0.0 {
+                if bin == 0 {
+                    f32::INFINITY
+                } else {
+                    above * per_near
+                }
+            } else {
+                above * per_far
+            };
+            *run = run.max(bound + bound.abs() * 1e-4 + 1e-6);
+            *out = *run;
         }
     }
 }
@@ -215,10 +316,20 @@ fn bin_tile(
     }
 }
 
-impl RayCast for PolarView<'_> {
-    fn cast(&self, origin: &Point3<f64>, d: &Vector3<f64>, max_range: f64) -> Option<f64> {
+impl PolarView<'_> {
+    /// Whether rays from `origin` to `max_range` may be cast through the
+    /// table (else they are cast in the view).
+    fn binned(&self, origin: &Point3<f64>, max_range: f64) -> bool {
+        *origin == self.origin && max_range <= self.range_m
+    }
+
+    /// The first distance along `d` (from the table's origin) to a cell the
+    /// ray dips to. `hint` is where a neighbouring ray's search started (0:
+    /// none); it is set to where this one's started.
+    fn cast_from(&self, d: &Vector3<f64>, max_range: f64, hint: &mut usize) -> Option<f64> {
+        let origin = &self.origin;
         let across = (d.x * d.x + d.y * d.y).sqrt();
-        if *origin != self.origin || max_range > self.range_m || across < 1e-9 {
+        if across < 1e-9 {
             return self.view.cast(origin, d, max_range);
         }
         let inverse = (1.0 / d.x, 1.0 / d.y);
@@ -230,35 +341,79 @@ impl RayCast for PolarView<'_> {
         };
         let reach = max_range * across;
         let last = ((reach / BIN_M) as usize).min(self.bins - 1);
-        for group in 0..=last / GROUP {
-            let near = (group * GROUP) as f64 * BIN_M;
-            let far = near + GROUP as f64 * BIN_M;
-            if lowest(near, far) > f64::from(self.coarse[group * HEADINGS + heading]) {
+        // Start where the neighbour's search did when every bin before is
+        // clear for this ray too; else at the sensor.
+        let mut bin = match *hint {
+            h if h > 0
+                && h <= last
+                && rise - RISE_MARGIN > f64::from(self.clears[(h - 1) * HEADINGS + heading]) =>
+            {
+                h
+            }
+            _ => 0,
+        };
+        let mut first = None;
+        while bin <= last {
+            let near = bin as f64 * BIN_M;
+            if bin % GROUP == 0 {
+                let group = bin / GROUP;
+                let far = near + GROUP as f64 * BIN_M;
+                if lowest(near, far) > f64::from(self.coarse[group * HEADINGS + heading]) {
+                    bin += GROUP;
+                    continue;
+                }
+            }
+            let top = f64::from(self.highest[bin * HEADINGS + heading]);
+            bin += 1;
+            if lowest(near, near + BIN_M) > top {
                 continue;
             }
-            for bin in group * GROUP..((group + 1) * GROUP).min(last + 1) {
-                let top = f64::from(self.highest[bin * HEADINGS + heading]);
-                let near = bin as f64 * BIN_M;
-                if lowest(near, near + BIN_M) > top {
-                    continue;
-                }
-                let mut t0 = near / across;
-                let mut t1 = ((near + BIN_M) / across).min(max_range);
-                // Only where the ray is down at the bin's highest cell.
-                if d.z < 0.0 {
-                    t0 = t0.max((top - origin.z) / d.z - HEIGHT_MARGIN);
-                } else if d.z > 0.0 {
-                    t1 = t1.min((top - origin.z) / d.z + HEIGHT_MARGIN);
-                }
-                if t0 > t1 {
-                    continue;
-                }
-                if let Some(t) = self.view.cast_cells(origin, d, inverse, t0, t1) {
-                    return Some(t);
-                }
+            first.get_or_insert(bin - 1);
+            let mut t0 = near / across;
+            let mut t1 = ((near + BIN_M) / across).min(max_range);
+            // Only where the ray is down at the bin's highest cell.
+            if d.z < 0.0 {
+                t0 = t0.max((top - origin.z) / d.z - HEIGHT_MARGIN);
+            } else if d.z > 0.0 {
+                t1 = t1.min((top - origin.z) / d.z + HEIGHT_MARGIN);
+            }
+            if t0 > t1 {
+                continue;
+            }
+            if let Some(t) = self.view.cast_cells(origin, d, inverse, t0, t1) {
+                *hint = first.unwrap_or(0);
+                return Some(t);
             }
         }
+        *hint = first.unwrap_or(0);
         None
+    }
+}
+
+impl RayCast for PolarView<'_> {
+    fn cast(&self, origin: &Point3<f64>, d: &Vector3<f64>, max_range: f64) -> Option<f64> {
+        if !self.binned(origin, max_range) {
+            return self.view.cast(origin, d, max_range);
+        }
+        self.cast_from(d, max_range, &mut 0)
+    }
+
+    fn cast_each(
+        &self,
+        origin: &Point3<f64>,
+        directions: &[Vector3<f64>],
+        max_range: f64,
+        out: &mut [f32],
+    ) {
+        if !self.binned(origin, max_range) {
+            return self.view.cast_each(origin, directions, max_range, out);
+        }
+        let mut hint = 0;
+        for (d, value) in directions.iter().zip(out) {
+            *value = self
+                .cast_from(d, max_range, &mut hint)
+                .map_or(f32::NAN, |t| t as f32);
+        }
     }
 }
 
