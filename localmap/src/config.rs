@@ -37,7 +37,9 @@ pub struct LocalMapConfig {
     /// way the vehicle came in), m; 0: not remembered.
     pub driven_memory_m: f64,
     /// A cell is dropped after this many newer overlapping images of a
-    /// sensor that reported it did not report it again (002 §5: 1).
+    /// sensor that reported it did not report it again (002 §5: 1; 2 by
+    /// default: a 10 Hz lidar at 10 m/s looks again 1 m on, where its rows
+    /// land elsewhere on a hole's edge, and flags it in one frame of two).
     pub misses_to_drop: u32,
     /// Also let images of one sensor drop cells only other sensors reported.
     pub cross_sensor_pruning: bool,
@@ -104,7 +106,7 @@ impl Default for LocalMapConfig {
             half_width_m: 10.0,
             behind_m: 20.0,
             driven_memory_m: 100.0,
-            misses_to_drop: 1,
+            misses_to_drop: 2,
             cross_sensor_pruning: false,
             miss_range_factor: 1.25,
             max_pose_jump_m: 2.0,

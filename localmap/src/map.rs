@@ -9,7 +9,10 @@
 //! - **Consistency pruning**: a patch whose centre lies in the observed
 //!   footprint of a newer image from a sensor that reported it, and which
 //!   that image did not report again, takes a miss; after `misses_to_drop`
-//!   misses it is dropped. Shadows count as in the footprint, as in 002 §5
+//!   misses it is dropped: 2 by default, where the paper drops it at the
+//!   next image. A 10 Hz lidar at 10 m/s looks again 1 m on, where its rows
+//!   land elsewhere on a hole's edge: a cell flagged in one frame and not
+//!   the next is still a hole's edge. Shadows count as in the footprint, as in 002 §5
 //!   (tried the other way, more drop-off cells stayed and the vehicle found
 //!   its way round other trenches, not more of them). An image older than a
 //!   patch's last confirmation counts no miss, so out-of-order reports never

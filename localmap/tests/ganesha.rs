@@ -17,6 +17,15 @@ fn map() -> LocalMap {
     map_with(LocalMapConfig::default())
 }
 
+/// A map that drops a cell at the first newer image that misses it (002
+/// §5; the default waits for a second).
+fn map_as_002() -> LocalMap {
+    map_with(LocalMapConfig {
+        misses_to_drop: 1,
+        ..LocalMapConfig::default()
+    })
+}
+
 fn map_with(config: LocalMapConfig) -> LocalMap {
     config.validate().unwrap();
     LocalMap::new(&config, &VehicleConfig::default())
@@ -151,7 +160,7 @@ fn cells_are_dropped_at_each_window_boundary() {
 
 #[test]
 fn a_phantom_cell_disappears_after_one_overlapping_image_that_does_not_see_it() {
-    let mut map = map();
+    let mut map = map_as_002();
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
     map.insert(&report(
         100,
@@ -171,6 +180,17 @@ fn a_phantom_cell_disappears_after_one_overlapping_image_that_does_not_see_it() 
         .unwrap();
     assert_eq!(outcome.pruned, 1);
     assert!(map.is_empty());
+    // By default it takes a second image that misses it.
+    let mut map = map_with(LocalMapConfig::default());
+    map.update(&pose_at(0, 0.0, 0.0, 0.0));
+    let fov = rectangle(4.0, 25.0, -8.0, 8.0);
+    map.insert(&report(100, "lidar64", &[(10.0, 0.0)], fov.clone()))
+        .unwrap();
+    map.insert(&report(100_000, "lidar64", &[], fov.clone()))
+        .unwrap();
+    assert_eq!(map.len(), 1);
+    map.insert(&report(200_000, "lidar64", &[], fov)).unwrap();
+    assert!(map.is_empty());
 }
 
 /// A report whose sensor stood at (`x`, `y`) when it looked.
@@ -185,7 +205,7 @@ fn an_image_from_farther_than_a_cell_was_reported_from_does_not_drop_it() {
     // near); the vehicle backs away and looks again from 12 m: that image
     // could not have flagged it, so it is no evidence against it.
     let fov = rectangle(-20.0, 40.0, -10.0, 10.0);
-    let mut map = map();
+    let mut map = map_as_002();
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
     map.insert(&seen_from(
         report(100, "lidar64", &[(10.0, 0.0)], fov.clone()),
@@ -216,6 +236,7 @@ fn an_image_from_farther_than_a_cell_was_reported_from_does_not_drop_it() {
     // far from its footprint) prunes as 002 §5 does, and is counted.
     let far = rectangle(500.0, 540.0, -10.0, 10.0);
     let mut map = map_with(LocalMapConfig {
+        misses_to_drop: 1,
         half_width_m: 60.0,
         ahead_m: 600.0,
         ..LocalMapConfig::default()
@@ -234,6 +255,7 @@ fn an_image_from_farther_than_a_cell_was_reported_from_does_not_drop_it() {
     // With the rule off (0), every overlapping image counts a miss.
     let mut map = map_with(LocalMapConfig {
         miss_range_factor: 0.0,
+        misses_to_drop: 1,
         ..LocalMapConfig::default()
     });
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
@@ -299,7 +321,7 @@ fn a_patch_carries_the_highest_cost_of_its_cells() {
 
 #[test]
 fn a_cell_outside_the_newer_images_footprint_survives() {
-    let mut map = map();
+    let mut map = map_as_002();
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
     map.insert(&report(
         100,
@@ -340,7 +362,7 @@ fn misses_to_drop_sets_how_many_images_must_disagree() {
 
 #[test]
 fn two_sensors_with_different_footprints() {
-    let mut map = map();
+    let mut map = map_as_002();
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
     let erim_fov = rectangle(4.0, 25.0, -8.0, 8.0);
     let side_fov = rectangle(-5.0, 12.0, -10.0, 2.0);
@@ -379,6 +401,7 @@ fn two_sensors_with_different_footprints() {
     // With cross-sensor pruning any overlapping image may retract any cell.
     let mut shared = map_with(LocalMapConfig {
         cross_sensor_pruning: true,
+        misses_to_drop: 1,
         ..Default::default()
     });
     shared.update(&pose_at(0, 0.0, 0.0, 0.0));
@@ -391,7 +414,7 @@ fn two_sensors_with_different_footprints() {
 
 #[test]
 fn an_out_of_order_report_never_prunes_what_a_newer_image_confirmed() {
-    let mut map = map();
+    let mut map = map_as_002();
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
     let fov = rectangle(4.0, 25.0, -8.0, 8.0);
     map.insert(&report(500_000, "erim", &[(10.0, 0.0)], fov.clone()))
@@ -526,7 +549,7 @@ fn bad_reports_are_refused_with_a_reason() {
 
 #[test]
 fn a_footprint_reaching_around_the_earth_still_prunes_and_an_absurd_one_is_refused_and_counted() {
-    let mut map = map();
+    let mut map = map_as_002();
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
     map.insert(&report(
         100,
@@ -721,6 +744,7 @@ fn a_reset_forgets_the_driven_ground() {
 fn ground_in_a_shadow_is_not_seen_and_an_old_cell_there_is_still_pruned() {
     let mut map = map_with(LocalMapConfig {
         assume_seen_m: 0.0,
+        misses_to_drop: 1,
         ..LocalMapConfig::default()
     });
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
@@ -818,7 +842,7 @@ fn wall() -> std::sync::Arc<arcnav_localmap::StaticMap> {
 
 #[test]
 fn a_static_map_joins_the_window_is_never_pruned_and_is_not_stored_twice() {
-    let mut map = map();
+    let mut map = map_as_002();
     map.set_static_map(wall());
     assert!(map.is_empty(), "no pose yet: nothing is placed");
     // 15 m back, facing +x: the wall is beyond the 20 m window... at 25 m.
