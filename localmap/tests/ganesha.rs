@@ -201,73 +201,59 @@ fn seen_from(mut report: ObstacleReport, x: f64, y: f64) -> ObstacleReport {
 
 #[test]
 fn an_image_from_farther_than_a_cell_was_reported_from_does_not_drop_it() {
-    // A ditch's edge is flagged 8 m ahead (its far wall shows only from
-    // near); the vehicle backs away and looks again from 12 m: that image
-    // could not have flagged it, so it is no evidence against it.
-    let fov = rectangle(-20.0, 40.0, -10.0, 10.0);
-    let mut map = map_as_002();
-    map.update(&pose_at(0, 0.0, 0.0, 0.0));
-    map.insert(&seen_from(
-        report(100, "lidar64", &[(10.0, 0.0)], fov.clone()),
-        2.0,
-        0.0,
-    ))
-    .unwrap();
-    let outcome = map
-        .insert(&seen_from(
-            report(600_000, "lidar64", &[], fov.clone()),
-            -2.0,
+    // A cell at (x, 0) reported by a sensor standing 8 m short of it; then
+    // `image(t, from)`: an image of the same ground from (from, 0) (or from
+    // nowhere it says plausibly) that does not report it.
+    let start = |config: LocalMapConfig, x: f64| {
+        let mut map = map_with(config);
+        map.update(&pose_at(0, x - 10.0, 0.0, 0.0));
+        let fov = rectangle(x - 30.0, x + 30.0, -10.0, 10.0);
+        map.insert(&seen_from(
+            report(100, "lidar64", &[(x, 0.0)], fov.clone()),
+            x - 8.0,
             0.0,
         ))
         .unwrap();
+        (map, fov)
+    };
+    let image = |t, fov: &FovPolygon, from: Option<f64>| {
+        let image = report(t, "lidar64", &[], fov.clone());
+        match from {
+            Some(x) => seen_from(image, x, 0.0),
+            None => image,
+        }
+    };
+    let as_002 = LocalMapConfig {
+        misses_to_drop: 1,
+        ..LocalMapConfig::default()
+    };
+    // A ditch's edge flagged 8 m ahead (its far wall shows only from near);
+    // the vehicle backs away and looks again from 12 m: that image could
+    // not have flagged it, so it is no evidence against it.
+    let (mut map, fov) = start(as_002.clone(), 10.0);
+    let outcome = map.insert(&image(600_000, &fov, Some(-2.0))).unwrap();
     assert_eq!((outcome.pruned, map.len()), (0, 1));
     assert_eq!(map.stats().seen_from_afar, 1);
     // From 9.5 m (within 1.25 times 8 m) it is missed and dropped.
-    let outcome = map
-        .insert(&seen_from(
-            report(1_200_000, "lidar64", &[], fov.clone()),
-            0.5,
-            0.0,
-        ))
-        .unwrap();
+    let outcome = map.insert(&image(1_200_000, &fov, Some(0.5))).unwrap();
     assert_eq!((outcome.pruned, map.len()), (1, 0));
 
-    // A report that does not say plausibly where its sensor stood (0, 0
+    // A report that does not say plausibly where its sensor stood (0, 0,
     // far from its footprint) prunes as 002 §5 does, and is counted.
-    let far = rectangle(500.0, 540.0, -10.0, 10.0);
-    let mut map = map_with(LocalMapConfig {
-        misses_to_drop: 1,
-        half_width_m: 60.0,
-        ahead_m: 600.0,
-        ..LocalMapConfig::default()
-    });
-    map.update(&pose_at(0, 495.0, 0.0, 0.0));
-    map.insert(&seen_from(
-        report(100, "lidar64", &[(510.0, 0.0)], far.clone()),
-        502.0,
-        0.0,
-    ))
-    .unwrap();
-    let outcome = map.insert(&report(600_000, "lidar64", &[], far)).unwrap();
+    let (mut map, fov) = start(as_002.clone(), 510.0);
+    let outcome = map.insert(&image(600_000, &fov, None)).unwrap();
     assert_eq!(outcome.pruned, 1);
     assert_eq!(map.stats().reports_without_viewpoint, 1);
 
     // With the rule off (0), every overlapping image counts a miss.
-    let mut map = map_with(LocalMapConfig {
-        miss_range_factor: 0.0,
-        misses_to_drop: 1,
-        ..LocalMapConfig::default()
-    });
-    map.update(&pose_at(0, 0.0, 0.0, 0.0));
-    map.insert(&seen_from(
-        report(100, "lidar64", &[(10.0, 0.0)], fov.clone()),
-        2.0,
-        0.0,
-    ))
-    .unwrap();
-    let outcome = map
-        .insert(&seen_from(report(600_000, "lidar64", &[], fov), -2.0, 0.0))
-        .unwrap();
+    let (mut map, fov) = start(
+        LocalMapConfig {
+            miss_range_factor: 0.0,
+            ..as_002
+        },
+        10.0,
+    );
+    let outcome = map.insert(&image(600_000, &fov, Some(-2.0))).unwrap();
     assert_eq!(outcome.pruned, 1);
 }
 

@@ -332,7 +332,6 @@ impl PolarView<'_> {
         if across < 1e-9 {
             return self.view.cast(origin, d, max_range);
         }
-        let inverse = (1.0 / d.x, 1.0 / d.y);
         let heading = heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize;
         // Rise per horizontal metre; the lowest height over [near, far].
         let rise = d.z / across;
@@ -380,7 +379,7 @@ impl PolarView<'_> {
             if t0 > t1 {
                 continue;
             }
-            if let Some(t) = self.view.cast_cells(origin, d, inverse, t0, t1) {
+            if let Some(t) = self.view.cast_cells(origin, d, t0, t1) {
                 *hint = first.unwrap_or(0);
                 return Some(t);
             }

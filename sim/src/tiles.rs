@@ -48,6 +48,20 @@ fn cell_index(i: usize, j: usize) -> usize {
     ((j / PATCH) * (TILE / PATCH) + i / PATCH) * PATCH * PATCH + (j % PATCH) * PATCH + i % PATCH
 }
 
+/// Where a ray crossing a cell from `t0` (at height `z0`) to `t1` (at
+/// `z1`) meets the flat-topped column of height `h`: its face at `t0`, or
+/// its top.
+#[inline]
+fn dip(z0: f64, z1: f64, h: f64, t0: f64, t1: f64) -> Option<f64> {
+    if z0 <= h {
+        Some(t0)
+    } else if z1 <= h {
+        Some(t0 + (z0 - h) / (z0 - z1) * (t1 - t0))
+    } else {
+        None
+    }
+}
+
 /// One tile of heights.
 #[derive(Debug)]
 pub struct Tile {
@@ -277,73 +291,31 @@ impl TileView {
 
     /// The first cell along the ray between `t0` and `t1` that the ray dips
     /// to (at or below its top), walked cell by cell: where it meets its
-    /// face or its top. `inverse` is (1/d.x, 1/d.y), infinite along an axis.
+    /// face or its top.
     pub(crate) fn cast_cells(
         &self,
         origin: &Point3<f64>,
         d: &Vector3<f64>,
-        inverse: (f64, f64),
         t0: f64,
         t1: f64,
     ) -> Option<f64> {
         let per_tile = TILE as i64;
-        let start = origin + d * t0;
-        let (mut cx, mut cy) = (floor(start.x / CELL_M), floor(start.y / CELL_M));
-        let (sx, sy) = (
-            if d.x > 0.0 { 1 } else { -1 },
-            if d.y > 0.0 { 1 } else { -1 },
-        );
-        // Where the ray crosses the next cell boundary along x and y, and
-        // how far apart the crossings are.
-        let crossing = |c: i64, s: i64, o: f64, inv: f64| {
-            if inv.is_finite() {
-                ((if s > 0 { c + 1 } else { c }) as f64 * CELL_M - o) * inv
-            } else {
-                f64::INFINITY
-            }
-        };
-        let mut tx = crossing(cx, sx, origin.x, inverse.0);
-        let mut ty = crossing(cy, sy, origin.y, inverse.1);
-        let (dx, dy) = (CELL_M * inverse.0.abs(), CELL_M * inverse.1.abs());
-        let mut tile: Option<(i64, i64, &Tile)> = None;
-        let mut t_in = t0;
-        let mut z_in = origin.z + d.z * t0;
-        loop {
-            let t_out = tx.min(ty).min(t1);
-            let z_out = origin.z + d.z * t_out;
-            let (kx, ky) = (cx.div_euclid(per_tile), cy.div_euclid(per_tile));
-            let here = match tile {
-                Some((x, y, t)) if (x, y) == (kx, ky) => Some(t),
+        // The tile of the last cell, found again only when the walk leaves it.
+        let mut current: Option<(i64, i64, &Tile)> = None;
+        TileView::walk(origin, d, t0, t1, CELL_M, |cx, cy, c0, c1| {
+            let (tx, ty) = (cx.div_euclid(per_tile), cy.div_euclid(per_tile));
+            let tile = match current {
+                Some((x, y, tile)) if (x, y) == (tx, ty) => tile,
                 _ => {
-                    let found = self.tile(kx, ky);
-                    tile = found.map(|t| (kx, ky, t));
-                    found
+                    let tile = self.tile(tx, ty)?;
+                    current = Some((tx, ty, tile));
+                    tile
                 }
             };
-            if let Some(here) = here {
-                let (i, j) = (cx.rem_euclid(per_tile), cy.rem_euclid(per_tile));
-                let h = f64::from(here.heights[cell_index(i as usize, j as usize)]);
-                if z_in <= h {
-                    return Some(t_in);
-                }
-                if z_out <= h {
-                    return Some(t_in + (z_in - h) / (z_in - z_out) * (t_out - t_in));
-                }
-            }
-            if t_out >= t1 {
-                return None;
-            }
-            if tx < ty {
-                cx += sx;
-                t_in = tx;
-                tx += dx;
-            } else {
-                cy += sy;
-                t_in = ty;
-                ty += dy;
-            }
-            z_in = z_out;
-        }
+            let (i, j) = (cx.rem_euclid(per_tile), cy.rem_euclid(per_tile));
+            let h = f64::from(tile.heights[cell_index(i as usize, j as usize)]);
+            dip(origin.z + d.z * c0, origin.z + d.z * c1, h, c0, c1)
+        })
     }
 
     /// Walks the cells of size `size` along the ray from `t0` to `t1`,
@@ -441,14 +413,7 @@ impl RayCast for TileView {
                         Some((i, j)) => f64::from(tile.heights[cell_index(i, j)]),
                         None => self.cell_height(cx, cy)?,
                     };
-                    let (z0, z1) = (z_at(c0), z_at(c1));
-                    if z0 <= h {
-                        Some(c0)
-                    } else if z1 <= h {
-                        Some(c0 + (z0 - h) / (z0 - z1) * (c1 - c0))
-                    } else {
-                        None
-                    }
+                    dip(z_at(c0), z_at(c1), h, c0, c1)
                 })
             })
         })
