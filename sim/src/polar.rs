@@ -94,7 +94,7 @@ impl<'a> PolarView<'a> {
         let groups = bins.div_ceil(GROUP);
         let mut coarse = vec![f32::NEG_INFINITY; groups * HEADINGS];
         let mut clears = vec![f32::NEG_INFINITY; bins * HEADINGS];
-        let z = origin.z as f32;
+        let z = origin.z;
         let highest = if parts == 1 {
             let mut highest = bin_part(0);
             derive(
@@ -181,7 +181,7 @@ fn derive(
     first: usize,
     coarse: &mut [&mut [f32]],
     clears: &mut [&mut [f32]],
-    z: f32,
+    z: f64,
 ) {
     for (bin, row) in highest.iter_mut().enumerate() {
         for other in others {
@@ -199,29 +199,26 @@ fn derive(
     // A ray rising s per metre clears bin j (from r_j to r_{j+1}) with
     // highest cell h iff min(z + s·r_j, z + s·r_{j+1}) > h: iff
     // s > (h − z)/r_j when h ≥ z (the near edge binds), iff
-    // s > (h − z)/r_{j+1} when h < z (the far edge binds). In f32, raised
-    // by far more than its rounding: a bound only too high starts fewer
-    // searches late, never one too late.
+    // s > (h − z)/r_{j+1} when h < z (the far edge binds). Worked out in
+    // f64 (z may be hundreds of metres, h within a millimetre of it), kept
+    // in f32 raised by far more than the rounding: a bound only too high
+    // starts fewer searches late, never one too late.
     let mut running = vec![f32::NEG_INFINITY; highest.first().map_or(0, |r| r.len())];
     for (bin, (row, out)) in highest.iter().zip(clears.iter_mut()).enumerate() {
-        let per_near = if bin == 0 {
-            0.0
-        } else {
-            1.0 / (bin as f32 * BIN_M as f32)
-        };
-        let per_far = 1.0 / ((bin + 1) as f32 * BIN_M as f32);
+        let near = bin as f64 * BIN_M;
+        let far = near + BIN_M;
         for ((&top, run), out) in row.iter().zip(&mut running).zip(out.iter_mut()) {
-            let above = top - z;
+            let above = f64::from(top) - z;
             let bound = if above >= 0.0 {
                 if bin == 0 {
                     f32::INFINITY
                 } else {
-                    above * per_near
+                    (above / near) as f32
                 }
             } else {
-                above * per_far
+                (above / far) as f32
             };
-            *run = run.max(bound + bound.abs() * 1e-4 + 1e-6);
+            *run = run.max(bound + bound.abs() * 1e-5 + 1e-9);
             *out = *run;
         }
     }
