@@ -95,58 +95,49 @@ impl<'a> PolarView<'a> {
         let mut coarse = vec![f32::NEG_INFINITY; groups * HEADINGS];
         let mut clears = vec![f32::NEG_INFINITY; bins * HEADINGS];
         let z = origin.z;
-        let highest = if parts == 1 {
-            let mut highest = bin_part(0);
-            derive(
-                &mut columns(&mut highest, 1)[0],
-                &[],
-                0,
-                &mut columns(&mut coarse, 1)[0],
-                &mut columns(&mut clears, 1)[0],
-                z,
-            );
-            highest
-        } else {
-            let (mut highest, others) = std::thread::scope(|scope| {
-                let others: Vec<_> = (1..parts)
-                    .map(|part| scope.spawn(move || bin_part(part)))
-                    .collect();
-                let highest = bin_part(0);
-                // A thread that panicked binned nothing: its share of the
-                // ground is treated as everywhere high (cast in the view).
-                let others: Vec<Vec<f32>> = others
-                    .into_iter()
-                    .map(|other| {
-                        other
-                            .join()
-                            .unwrap_or_else(|_| vec![f32::INFINITY; bins * HEADINGS])
-                    })
-                    .collect();
-                (highest, others)
-            });
-            let width = HEADINGS.div_ceil(parts);
-            let others = &others;
-            std::thread::scope(|scope| {
-                let shares = columns(&mut highest, parts)
-                    .into_iter()
-                    .zip(columns(&mut coarse, parts))
-                    .zip(columns(&mut clears, parts))
-                    .enumerate();
-                for (part, ((mut highest, mut coarse), mut clears)) in shares {
-                    scope.spawn(move || {
-                        derive(
-                            &mut highest,
-                            others,
-                            part * width,
-                            &mut coarse,
-                            &mut clears,
-                            z,
-                        );
-                    });
-                }
-            });
-            highest
-        };
+        let (mut highest, others) = std::thread::scope(|scope| {
+            let others: Vec<_> = (1..parts)
+                .map(|part| scope.spawn(move || bin_part(part)))
+                .collect();
+            let highest = bin_part(0);
+            // A thread that panicked binned nothing: its share of the
+            // ground is treated as everywhere high (cast in the view).
+            let others: Vec<Vec<f32>> = others
+                .into_iter()
+                .map(|other| {
+                    other
+                        .join()
+                        .unwrap_or_else(|_| vec![f32::INFINITY; bins * HEADINGS])
+                })
+                .collect();
+            (highest, others)
+        });
+        let width = HEADINGS.div_ceil(parts);
+        let others = &others;
+        std::thread::scope(|scope| {
+            let mut shares = columns(&mut highest, parts)
+                .into_iter()
+                .zip(columns(&mut coarse, parts))
+                .zip(columns(&mut clears, parts))
+                .enumerate();
+            // The first share on this thread, the others each on one more.
+            let here = shares.next();
+            for (part, ((mut highest, mut coarse), mut clears)) in shares {
+                scope.spawn(move || {
+                    derive(
+                        &mut highest,
+                        others,
+                        part * width,
+                        &mut coarse,
+                        &mut clears,
+                        z,
+                    );
+                });
+            }
+            if let Some((_, ((mut highest, mut coarse), mut clears))) = here {
+                derive(&mut highest, others, 0, &mut coarse, &mut clears, z);
+            }
+        });
         Self {
             view,
             origin,
@@ -162,8 +153,8 @@ impl<'a> PolarView<'a> {
 /// The rows of a `[bin · HEADINGS + heading]` table cut into `parts`
 /// ranges of headings: part k's piece of every row.
 fn columns(table: &mut [f32], parts: usize) -> Vec<Vec<&mut [f32]>> {
-    let width = HEADINGS.div_ceil(parts.max(1));
-    let mut out: Vec<Vec<&mut [f32]>> = (0..parts.max(1)).map(|_| Vec::new()).collect();
+    let width = HEADINGS.div_ceil(parts);
+    let mut out: Vec<Vec<&mut [f32]>> = (0..parts).map(|_| Vec::new()).collect();
     for row in table.chunks_exact_mut(HEADINGS) {
         for (k, piece) in row.chunks_mut(width).enumerate() {
             out[k].push(piece);

@@ -299,21 +299,8 @@ impl TileView {
         t0: f64,
         t1: f64,
     ) -> Option<f64> {
-        let per_tile = TILE as i64;
-        // The tile of the last cell, found again only when the walk leaves it.
-        let mut current: Option<(i64, i64, &Tile)> = None;
         TileView::walk(origin, d, t0, t1, CELL_M, |cx, cy, c0, c1| {
-            let (tx, ty) = (cx.div_euclid(per_tile), cy.div_euclid(per_tile));
-            let tile = match current {
-                Some((x, y, tile)) if (x, y) == (tx, ty) => tile,
-                _ => {
-                    let tile = self.tile(tx, ty)?;
-                    current = Some((tx, ty, tile));
-                    tile
-                }
-            };
-            let (i, j) = (cx.rem_euclid(per_tile), cy.rem_euclid(per_tile));
-            let h = f64::from(tile.heights[cell_index(i as usize, j as usize)]);
+            let h = self.cell_height(cx, cy)?;
             dip(origin.z + d.z * c0, origin.z + d.z * c1, h, c0, c1)
         })
     }
