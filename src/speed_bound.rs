@@ -68,6 +68,10 @@ pub struct SpeedBound {
     /// `[perception.drop_off]` is off).
     pub hole_range_m: Option<f64>,
     pub hole_bound_mps: Option<f64>,
+    /// How far the front is from such a hole when it is flagged, m
+    /// (`hole_range_m` less the sensor's setback from the front): what
+    /// obstacle avoidance's `hole_seen_within_m` is set to.
+    pub hole_seen_within_m: Option<f64>,
 }
 
 /// The bound of `config` (its sensors, vehicle, map window and timing):
@@ -185,6 +189,7 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
         beam_spacing_deg: spacing.to_degrees(),
         hole_range_m: hole_range,
         hole_bound_mps: hole_bound,
+        hole_seen_within_m: hole_range.map(free_within),
     }
 }
 

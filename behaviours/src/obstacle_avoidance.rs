@@ -88,6 +88,12 @@ pub struct ObstacleAvoidanceConfig {
     /// What ground no image has seen is: slow (drive only as fast as the
     /// vehicle can stop within seen ground), obstacle, or free.
     pub unseen_ground: UnseenGround,
+    /// How far the front is from a hole when perception is certain to flag
+    /// it, m: a suspected drop-off (graded ground with the reason
+    /// drop-off) slows an arc only to the speed at which the vehicle stops
+    /// within this of it (0: stop short of it; the pipeline sets it from
+    /// the sensor, `speed_bound.hole_range_m` less the sensor's setback).
+    pub hole_seen_within_m: f64,
     /// Backward arcs are checked this far, m (0: no opinion on backing up,
     /// so the arbiter never backs up).
     pub reverse_reach_m: f64,
@@ -123,6 +129,7 @@ impl Default for ObstacleAvoidanceConfig {
             stop_margin_m: 2.0,
             reaction_s: 0.75,
             unseen_ground: UnseenGround::Slow,
+            hole_seen_within_m: 0.0,
             reverse_reach_m: 5.0,
             reverse_margin_m: 0.3,
             terrain: TerrainConfig::default(),
@@ -207,6 +214,10 @@ struct Raster {
     graded: Vec<u64>,
     graded_cost: Vec<f32>,
     graded_cells: Vec<u32>,
+    /// Cells holding a suspected drop-off (graded patches with the reason
+    /// drop-off), same layout as `bitmap`, and which they are.
+    suspect: Vec<u64>,
+    suspect_cells: Vec<u32>,
     /// Cells and unseen ground together, when unseen ground is an
     /// obstacle (`unseen_blocks`).
     blocked: Vec<u64>,
@@ -236,6 +247,8 @@ impl Raster {
             graded: vec![0; words],
             graded_cost: vec![0.0; grid.rows * grid.columns],
             graded_cells: Vec::new(),
+            suspect: vec![0; words],
+            suspect_cells: Vec::new(),
             blocked: vec![0; words],
             unseen_blocks: false,
             mirror,
@@ -275,6 +288,14 @@ impl Raster {
             self.graded_cost[cell as usize] = 0.0;
         }
         self.graded_cells.clear();
+        for &cell in &self.suspect_cells {
+            let (row, column) = (
+                cell as usize / self.grid.columns,
+                cell as usize % self.grid.columns,
+            );
+            self.suspect[row * self.grid.words_per_row + column / 64] = 0;
+        }
+        self.suspect_cells.clear();
         for index in patches {
             let Some(patch) = ctx.map.patches.get(index) else {
                 continue;
@@ -284,6 +305,16 @@ impl Raster {
                 continue;
             };
             let cell = row * self.grid.columns + column;
+            let bit = 1 << (column % 64);
+            if patch.is_suspected_drop_off() {
+                // A suspected drop-off: it only slows the vehicle.
+                let word = &mut self.suspect[row * self.grid.words_per_row + column / 64];
+                if *word & bit == 0 {
+                    self.suspect_cells.push(cell as u32);
+                }
+                *word |= bit;
+                continue;
+            }
             if !patch.is_obstacle() {
                 // Graded ground: no collision, a price (highest per cell).
                 self.graded[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
@@ -469,6 +500,9 @@ pub struct ObstacleAvoidance {
     /// vehicle-frame point), when `unseen_ground` is `slow` (as an
     /// obstacle it is a collision in `free`).
     unseen_at: Vec<Option<(f64, [f32; 2])>>,
+    /// Per arc: how far along it its footprint first meets a suspected
+    /// drop-off.
+    suspect_at: Vec<Option<f64>>,
     terrain: TerrainCheck,
     /// Per arc: this cycle's verdict on the ground.
     verdicts: Vec<ArcTerrain>,
@@ -489,7 +523,7 @@ pub struct ObstacleAvoidance {
     near: Vec<u32>,
     /// This cycle: distance from the rear axle to the nearest cell of each
     /// [`Layer`] of the vehicle-frame raster, m (∞ when it has none).
-    nearest: [f64; 3],
+    nearest: [f64; 4],
 }
 
 /// The layers of a raster a path's lead is checked against.
@@ -498,6 +532,7 @@ enum Layer {
     Blocked,
     Unseen,
     Graded,
+    Suspect,
 }
 
 /// What one part of a path meets: its distances are along the path.
@@ -512,6 +547,8 @@ struct Met {
     unseen: Option<(f64, [f32; 2])>,
     /// The highest graded cost crossed, and within the speed horizon.
     graded: (f32, f32),
+    /// The first suspected drop-off the footprint meets.
+    suspect: Option<f64>,
 }
 
 /// The nearer of two things met (the first on a tie).
@@ -536,6 +573,11 @@ impl Met {
                 self.graded.0.max(other.graded.0),
                 self.graded.1.max(other.graded.1),
             ),
+            suspect: nearer(
+                self.suspect.map(|s| (s, ())),
+                other.suspect.map(|s| (s, ())),
+            )
+            .map(|(s, ())| s),
         }
     }
 }
@@ -649,13 +691,14 @@ impl ObstacleAvoidance {
             shifted,
             lead_poses: Vec::new(),
             near: Vec::new(),
-            nearest: [f64::INFINITY; 3],
+            nearest: [f64::INFINITY; 4],
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
             cruise_mps: setup.cruise_mps,
             deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
             max_deceleration: setup.vehicle.max_deceleration_mps2,
             free: vec![f64::INFINITY; setup.arcs.len()],
             unseen_at: vec![None; setup.arcs.len()],
+            suspect_at: vec![None; setup.arcs.len()],
             config,
             ahead,
             templates,
@@ -725,6 +768,10 @@ impl ObstacleAvoidance {
                 (1..=widest).find(|&b| first_in(blocked, &template.bands[b], rest).is_some());
         }
         part.graded = raster.graded_crossed(&template.bands[0], rest, (horizon - lead) as f32);
+        if !raster.suspect_cells.is_empty() {
+            part.suspect = first_in(&raster.suspect, &template.bands[0], rest)
+                .map(|hit| f64::from(hit.s) + lead);
+        }
         if policy == UnseenGround::Slow {
             part.unseen = if at_once {
                 first_in(&raster.unseen, &template.bands[0], rest).map(|hit| {
@@ -804,6 +851,12 @@ impl ObstacleAvoidance {
                     (*s, [c.x as f32, c.y as f32])
                 })
             });
+        }
+        if !raster.suspect_cells.is_empty() && near(Layer::Suspect) {
+            met.suspect = poses
+                .iter()
+                .find(|(_, p)| under(p, 0, &raster.suspect).is_some())
+                .map(|(s, _)| *s);
         }
         if !raster.graded_cells.is_empty() && near(Layer::Graded) {
             for (s, p) in poses {
@@ -1144,8 +1197,13 @@ impl Behaviour for ObstacleAvoidance {
                     .filter(|(_, p)| f64::from(p.x).hypot(f64::from(p.y)) <= within)
                     .map(|(i, _)| i as u32),
             );
-            self.nearest = [self.ahead.blocked(), &self.ahead.unseen, &self.ahead.graded]
-                .map(|layer| nearest_set(layer, &self.ahead.grid));
+            self.nearest = [
+                self.ahead.blocked(),
+                &self.ahead.unseen,
+                &self.ahead.graded,
+                &self.ahead.suspect,
+            ]
+            .map(|layer| nearest_set(layer, &self.ahead.grid));
             self.terrain.judge_paths(
                 &ctx.map.elevation,
                 &ctx.map.world_from_vehicle,
@@ -1160,6 +1218,7 @@ impl Behaviour for ObstacleAvoidance {
             let verdict = self.verdicts[arc];
             self.free[arc] = f64::INFINITY;
             self.unseen_at[arc] = met.unseen;
+            self.suspect_at[arc] = met.suspect;
             // The first collision with a cell, or with ground the vehicle
             // cannot stand on (its attitude or chassis), whichever is nearer.
             let collision = match (met.collision, verdict.forbidden) {
@@ -1211,6 +1270,13 @@ impl Behaviour for ObstacleAvoidance {
         // can from its speed now.
         let speed = ctx.pose.velocity.norm();
         let braking = speed * t + speed * speed / (2.0 * self.max_deceleration);
+        // A suspected drop-off is flagged for certain, if it is a hole, once
+        // the front is `hole_seen_within_m` from it: an arc towards one is
+        // driven no faster than the vehicle stops short of it, and never
+        // slower than it stops within that distance (by then a hole would
+        // be a cell, and an edge still suspected is none).
+        let margin = self.config.stop_margin_m;
+        let hole_speed = stopping_speed(self.config.hole_seen_within_m - margin);
         for arc in 0..arcs {
             if votes.is_vetoed(arc) {
                 continue;
@@ -1239,7 +1305,10 @@ impl Behaviour for ObstacleAvoidance {
             } else {
                 f64::INFINITY
             };
-            votes.limit_arc_speed(arc, stopping_speed(room).min(terrain));
+            let suspect = self.suspect_at[arc].map_or(f64::INFINITY, |distance| {
+                stopping_speed(distance - margin).max(hole_speed)
+            });
+            votes.limit_arc_speed(arc, stopping_speed(room).min(terrain).min(suspect));
         }
     }
 }

@@ -99,6 +99,13 @@ impl Patch {
         self.cost >= 1.0
     }
 
+    /// Whether this is a suspected drop-off: graded ground with the reason
+    /// drop-off (a hole seen from too far to show its depth; see
+    /// `[perception.drop_off] suspect_cost`).
+    pub fn is_suspected_drop_off(&self) -> bool {
+        !self.is_obstacle() && self.reasons.contains(Reasons::DROP_OFF)
+    }
+
     /// An empty patch at world index (`i`, `j`), to fill in field by field
     /// (a map snapshot rebuilt from a message, a test).
     pub fn at(i: i64, j: i64) -> Self {
@@ -835,19 +842,27 @@ impl LocalMap {
         if !self.observe(report) {
             return 0;
         }
-        let factor = self.config.miss_range_factor;
+        let (factor, hole_range) = (self.config.miss_range_factor, self.config.hole_range_m);
         let s = self.config.patch_size_m;
         let mut pruned = 0;
         let mut index = 0;
         while index < self.patches.len() {
             let patch = &mut self.patches[index];
-            // Seen from farther than it could be seen from, it is not missed.
+            // Seen from farther than it could be seen from, it is not
+            // missed; nor is a suspected hole seen from beyond where a
+            // hole is certain to show.
             let near_enough = || match viewpoint {
-                Some(o) if factor > 0.0 && patch.nearest_m.is_finite() => {
+                Some(o) => {
                     let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
-                    (x - o.x).hypot(y - o.y) <= factor * f64::from(patch.nearest_m)
+                    let distance = (x - o.x).hypot(y - o.y);
+                    let afar = factor > 0.0
+                        && patch.nearest_m.is_finite()
+                        && distance > factor * f64::from(patch.nearest_m);
+                    let unsure =
+                        hole_range > 0.0 && patch.is_suspected_drop_off() && distance > hole_range;
+                    !(afar || unsure)
                 }
-                _ => true,
+                None => true,
             };
             let judged = patch.stamp != stamp
                 && !patch.reasons.contains(Reasons::STATIC_MAP)

@@ -237,7 +237,7 @@ struct Walk {
     /// Per pixel of the row: its gap to the column's previous return is
     /// longer than the vehicle bridges and the ground beyond lower, or
     /// beams between them returned nothing.
-    long_gap: Vec<bool>,
+    long_gap: Vec<u8>,
 }
 
 /// This many beams in a row that return nothing between two returns are
@@ -273,7 +273,10 @@ impl Walk {
         let n = points.index.len();
         let rule = &row.projection.drop_off;
         let (max_gap, min_depth, depth_per_m) = (rule.max_gap, rule.min_depth, rule.depth_per_m);
-        self.long_gap.resize(n, false);
+        // Gaps that dip less than that are looked at too when suspected
+        // drop-offs are reported.
+        let shallow_depth = rule.shallow_depth();
+        self.long_gap.resize(n, 0);
         let (index, d, z) = (&points.index[..n], &points.d[..n], &points.z[..n]);
         let (wd, wz, bd, bz) = (
             &mut self.d[..n],
@@ -289,13 +292,14 @@ impl Walk {
             // Only a near edge in the region can be flagged. Far returns lie
             // farther apart than a wheel bridges: only those with ground
             // lower beyond (or none), or with beams lost between, go on.
-            let long = (index[k] < OUTSIDE_GRID)
-                & (wd[k] - d[k] > max_gap)
-                & ((wd[k] == f32::INFINITY)
-                    | (z[k] - wz[k] > min_depth + depth_per_m * d[k])
-                    | (missed[k] >= MISSED_BEAMS));
-            long_gap[k] = long;
-            any |= long;
+            let gap = (index[k] < OUTSIDE_GRID) & (wd[k] - d[k] > max_gap);
+            let deep = (wd[k] == f32::INFINITY)
+                | (z[k] - wz[k] > min_depth + depth_per_m * d[k])
+                | (missed[k] >= MISSED_BEAMS);
+            let shallow = z[k] - wz[k] > shallow_depth + depth_per_m * d[k];
+            // 2: a shadow, drop-off or not; 1: at most a suspected drop-off.
+            long_gap[k] = u8::from(gap & deep) * 2 + u8::from(gap & !deep & shallow);
+            any |= long_gap[k] != 0;
             // Counted between returns; any return (in the region or not,
             // in range or not) ends the count.
             missed[k] = if index[k] == NO_RETURN {
@@ -305,7 +309,7 @@ impl Walk {
             };
         }
         if any {
-            for k in (0..n).filter(|&k| long_gap[k]) {
+            for k in (0..n).filter(|&k| long_gap[k] != 0) {
                 let previous = Previous {
                     d: wd[k],
                     z: wz[k],
@@ -313,7 +317,14 @@ impl Walk {
                     beyond_z: bz[k],
                 };
                 let col = row.first_col + k;
-                if rule.judge(row.projection, &previous, (d[k], z[k]), row.position, col) {
+                let edge = (d[k], z[k]);
+                if long_gap[k] == 1 {
+                    if rule.suspected(row.projection, &previous, edge, row.position, col) {
+                        found.suspects.push(index[k]);
+                    }
+                    continue;
+                }
+                if rule.judge(row.projection, &previous, edge, row.position, col) {
                     found.drop_offs.push(index[k]);
                 }
                 if previous.d < f32::INFINITY {
@@ -346,6 +357,8 @@ impl Walk {
 struct Found {
     /// Grid indices of the cells at the near edge of a drop-off.
     drop_offs: Vec<u32>,
+    /// Grid indices of the cells at the near edge of a suspected drop-off.
+    suspects: Vec<u32>,
     /// Shadows: (image column, distance of the edge, of the return beyond),
     /// level frame.
     shadows: Vec<(u32, f32, f32)>,
@@ -354,6 +367,7 @@ struct Found {
 impl Found {
     fn clear(&mut self) {
         self.drop_offs.clear();
+        self.suspects.clear();
         self.shadows.clear();
     }
 }
@@ -378,11 +392,61 @@ struct DropOffRule<'a> {
     noise: f32,
     /// tan of the tolerated slope.
     tan_slope: f32,
+    /// Suspected drop-offs are reported (`suspect_cost` > 0).
+    suspects: bool,
     /// Rows, highest beam first.
     order: &'a [u32],
 }
 
 impl DropOffRule<'_> {
+    /// The least dip under a near edge (less Δ·d) that may be a suspected
+    /// drop-off: the noise (∞ when none are reported).
+    fn shallow_depth(&self) -> f32 {
+        if self.suspects {
+            self.noise
+        } else {
+            f32::INFINITY
+        }
+    }
+
+    /// Whether the return (`d`, `z`) of column `col` is the near edge of a
+    /// *suspected* drop-off, its gap to the column's previous return
+    /// (`previous`, the far side) being longer than `max_gap` and dipping
+    /// under it by `v` = `z − z_f`, less than δ. From a sensor `H` above
+    /// the edge at horizontal distance `d`, the ray falls `s = H/d` per
+    /// metre, so it ran at least `v/s` below the edge before it met the
+    /// far side: a hole at least that wide (000 §4.2: "this creates a
+    /// sizable gap through occlusion"), of a depth the image cannot tell.
+    /// It is suspected when
+    /// - `v > noise + Δ·d` (not range noise),
+    /// - `v/s · |cos φ| > max_gap`, `φ` the column's bearing from the
+    ///   vehicle's heading: the width along the heading exceeds what the
+    ///   wheels bridge (a slot across the way, seen by a column 50° off,
+    ///   is crossed 1.6 times its width along the ray), and
+    /// - the return beyond the far side lies at least `v/2` above it: the
+    ///   ground rises back (a crest falling away does not).
+    #[cold]
+    #[inline(never)]
+    fn suspected(
+        &self,
+        projection: &Projection,
+        previous: &Previous,
+        (d, z): (f32, f32),
+        position: usize,
+        col: usize,
+    ) -> bool {
+        let v = z - previous.z;
+        let fall = (projection.t[2] - z) / d;
+        if !(v > self.noise + self.depth_per_m * d && fall > 0.0) {
+            return false;
+        }
+        let [x, y, _] = projection.direction(self.order[position] as usize, col);
+        let along_heading = x.abs() / x.hypot(y).max(f32::MIN_POSITIVE);
+        v / fall * along_heading > self.max_gap
+            && previous.beyond_d < f32::INFINITY
+            && previous.beyond_z - previous.z > 0.5 * v
+    }
+
     /// Whether the return (`d`, `z`) of row `order[position]`, column `col`,
     /// whose column's previous returns (farther, higher beams) are `previous`,
     /// is the near edge of a drop-off. Called only when the gap to the
@@ -779,6 +843,10 @@ pub struct CellClassifier {
     drop_off: DropOffRule<'static>,
     /// Grid indices of this image's drop-off cells (the parts' merged).
     drop_offs: Vec<u32>,
+    /// Grid indices of this image's suspected drop-off cells (the parts'
+    /// merged), and the cost they are reported at.
+    suspects: Vec<u32>,
+    suspect_cost: f32,
     /// This image's shadows (the parts' merged): (column, edge, beyond).
     shadows: Vec<(u32, f32, f32)>,
     /// The sensor's position in the level frame, this image.
@@ -842,10 +910,13 @@ impl CellClassifier {
                     depth_per_m: d.depth_per_m as f32,
                     noise: d.noise_m as f32,
                     tan_slope: c.max_slope_deg.to_radians().tan() as f32,
+                    suspects: d.suspect_cost > 0.0,
                     order: &[],
                 }
             },
             drop_offs: Vec::new(),
+            suspects: Vec::new(),
+            suspect_cost: config.drop_off.suspect_cost as f32,
             shadows: Vec::new(),
             sensor_xy: [0.0; 2],
             grid,
@@ -939,9 +1010,11 @@ impl CellClassifier {
             }
         }
         self.drop_offs.clear();
+        self.suspects.clear();
         self.shadows.clear();
         for bins in &self.bins {
             self.drop_offs.extend_from_slice(&bins.found.drop_offs);
+            self.suspects.extend_from_slice(&bins.found.suspects);
             self.shadows.extend_from_slice(&bins.found.shadows);
         }
         self.sensor_xy = [t[0], t[1]];
@@ -1090,30 +1163,53 @@ impl CellClassifier {
             }
             report.regions.push(summary);
         }
-        stats.regions = report.regions.len() as u32;
         let (sin, cos) = arcnav_vehicle::frames::yaw_of(world_from_level).sin_cos();
         let origin = world_from_level.translation.vector;
-        for (cell, &(reasons, region)) in self.bins[0].cells.iter().zip(&self.labels) {
-            if reasons.is_empty() {
-                continue;
-            }
-            let (ix, iy) = (
-                cell.index as usize % self.grid.cols,
-                cell.index as usize / self.grid.cols,
-            );
-            let [ox, oy] = self.grid.corner;
-            let cx = f64::from((ix as f32 + 0.5 - ox) * self.cell_size);
-            let cy = f64::from((iy as f32 + 0.5 - oy) * self.cell_size);
-            report.cells.push(ObstacleCell {
+        let [ox, oy] = self.grid.corner;
+        let (cols, size) = (self.grid.cols, self.cell_size);
+        let world = |cell: &Cell, reasons, region, cost| {
+            let (ix, iy) = (cell.index as usize % cols, cell.index as usize / cols);
+            let cx = f64::from((ix as f32 + 0.5 - ox) * size);
+            let cy = f64::from((iy as f32 + 0.5 - oy) * size);
+            ObstacleCell {
                 x: origin.x + cos * cx - sin * cy,
                 y: origin.y + sin * cx + cos * cy,
                 z_min: cell.z_min + origin.z as f32,
                 z_max: cell.z_max + origin.z as f32,
                 reasons,
                 region,
-                cost: 1.0,
+                cost,
+            }
+        };
+        for (cell, &(reasons, region)) in self.bins[0].cells.iter().zip(&self.labels) {
+            if !reasons.is_empty() {
+                report.cells.push(world(cell, reasons, region, 1.0));
+            }
+        }
+        // Suspected drop-offs on cells judged traversable: graded ground
+        // with the reason drop-off, in one region of their own.
+        self.suspects.sort_unstable();
+        self.suspects.dedup();
+        let region = report.regions.len() as u32;
+        let mut graded = 0;
+        for &index in &self.suspects {
+            let slot = self.bins[0].slots[index as usize] as usize;
+            if self.labels[slot].0.is_empty() {
+                let cell = &self.bins[0].cells[slot];
+                report
+                    .cells
+                    .push(world(cell, Reasons::DROP_OFF, region, self.suspect_cost));
+                graded += 1;
+            }
+        }
+        if graded > 0 {
+            report.regions.push(Region {
+                cells: graded,
+                reasons: Reasons::NONE,
             });
         }
+        stats.graded += graded;
+        stats.regions = report.regions.len() as u32;
     }
 
     /// Writes the image's shadows, in the world frame, into `report`. A

@@ -90,6 +90,16 @@ pub struct DropOffConfig {
     /// Range noise allowance when deciding that the ground beyond the gap
     /// rises as a wall (a hole's far side), m.
     pub noise_m: f64,
+    /// Cost of a *suspected* drop-off (0: none are reported). From afar a
+    /// hole shows only `w·H/R` of its far side, less than δ; a near edge
+    /// whose gap dips at least `noise_m + Δ·r` under it, by a depth that
+    /// puts the ray at least `max_gap_m` (along the vehicle's heading)
+    /// below the edge before it meets the far side, with the return beyond
+    /// rising back at least halfway, may be a hole and is reported as
+    /// graded ground of this cost with the reason drop-off. Obstacle
+    /// avoidance slows for it to the speed at which a hole there will be
+    /// flagged in time.
+    pub suspect_cost: f64,
 }
 
 impl Default for DropOffConfig {
@@ -101,6 +111,7 @@ impl Default for DropOffConfig {
             min_depth_m: vehicle.tolerated_step_m,
             depth_per_m: 0.0025,
             noise_m: 0.05,
+            suspect_cost: 0.5,
         }
     }
 }
@@ -309,6 +320,7 @@ impl PerceptionConfig {
         config::positive("drop_off.min_depth_m", d.min_depth_m)?;
         config::in_range("drop_off.depth_per_m", d.depth_per_m, 0.0, 0.1)?;
         config::in_range("drop_off.noise_m", d.noise_m, 0.0, 1.0)?;
+        config::in_range("drop_off.suspect_cost", d.suspect_cost, 0.0, 0.99)?;
         let too_lax = |key: &str, value: f64, vehicle_key: &str, limit: f64| {
             (value > limit).then(|| {
                 ConfigError::new(

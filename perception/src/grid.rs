@@ -548,7 +548,13 @@ pub(crate) fn emit(
         if merged > 0 && marked[merged - 1].index == marked[k].index {
             let m = marked[k];
             let last = &mut marked[merged - 1];
-            last.reasons.insert(m.reasons);
+            // The reasons of the costlier mark: a suspected drop-off adds
+            // none to an untraversable cell.
+            if m.cost > last.cost {
+                last.reasons = m.reasons;
+            } else if m.cost == last.cost {
+                last.reasons.insert(m.reasons);
+            }
             last.cost = last.cost.max(m.cost);
             last.z_min = last.z_min.min(m.z_min);
             last.z_max = last.z_max.max(m.z_max);
@@ -693,7 +699,7 @@ impl SeenGround {
         })
     }
 
-    /// The drop-off cells of the last image, marked on `grid` (the same
+    /// The drop-off cells of the last image (suspected ones graded), marked on `grid` (the same
     /// cell size, so the same squares of ground); `world_from_level` is the
     /// level frame of its capture pose.
     pub(crate) fn drop_offs(
@@ -711,7 +717,8 @@ impl SeenGround {
                 marked.push(Marked {
                     index: index as u32,
                     reasons: Reasons::DROP_OFF,
-                    cost: 1.0,
+                    // 1, or a suspected drop-off's cost.
+                    cost: c.cost,
                     z_min: c.z_min - z0,
                     z_max: c.z_max - z0,
                 });

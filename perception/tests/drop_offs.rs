@@ -8,7 +8,7 @@ use arcnav_perception::scene::HeightFunction;
 use arcnav_perception::{ObstacleReport, PerceptionConfig, Reasons, SensorModel};
 use arcnav_vehicle::Isometry;
 
-/// The drop-off cells of one image of `height` taken from the origin.
+/// The drop-off cells (definite ones) of one image of `height` taken from the origin.
 fn drop_offs(
     sensor: &SensorModel,
     height: impl Fn(f64, f64) -> f64 + Sync,
@@ -28,7 +28,7 @@ fn classify(image: &arcnav_perception::RangeImage, config: &PerceptionConfig) ->
     let cells: Vec<(f64, f64)> = report
         .cells
         .iter()
-        .filter(|c| c.reasons.contains(Reasons::DROP_OFF))
+        .filter(|c| c.is_obstacle() && c.reasons.contains(Reasons::DROP_OFF))
         .map(|c| (c.x, c.y))
         .collect();
     assert_eq!(
@@ -211,4 +211,96 @@ fn detection_follows_the_configuration() {
     config.drop_off.max_gap_m = 5.0;
     let wide = drop_offs(&sensor, trench(10.0), &config);
     assert!(wide.iter().all(|(_, y)| y.abs() > 8.0), "{wide:?}");
+}
+
+/// The suspected drop-offs (graded, reason drop-off) of one image of
+/// `height` taken from the origin, with their cost.
+fn suspected(
+    sensor: &SensorModel,
+    height: impl Fn(f64, f64) -> f64 + Sync,
+    config: &PerceptionConfig,
+) -> Vec<(f64, f64, f32)> {
+    let image = sensor.render(0, &Isometry::identity(), &HeightFunction::new(height));
+    let mut report = ObstacleReport::default();
+    let stats = config
+        .build_evaluator()
+        .unwrap()
+        .evaluate(&image, &Isometry::identity(), &mut report)
+        .unwrap();
+    let cells: Vec<(f64, f64, f32)> = report
+        .cells
+        .iter()
+        .filter(|c| !c.is_obstacle())
+        .map(|c| {
+            assert_eq!(c.reasons, Reasons::DROP_OFF);
+            (c.x, c.y, c.cost)
+        })
+        .collect();
+    assert_eq!(stats.graded as usize, cells.len(), "counted as graded");
+    cells
+}
+
+#[test]
+fn a_ditch_too_far_to_show_its_depth_is_a_suspected_drop_off_and_a_slot_is_not() {
+    // From 16-20 m a ray dips 0.15-0.3 m into a 1.5 m ditch before it
+    // meets the far side, less than δ (0.24-0.25 m): no definite drop-off
+    // there, but a dip wider than the wheels bridge, whose far side rises.
+    let config = PerceptionConfig::default();
+    let ditch = |near: f64, width: f64| {
+        move |x: f64, _: f64| {
+            if (near..near + width).contains(&x) {
+                -1.0
+            } else {
+                0.0
+            }
+        }
+    };
+    for sensor in [
+        SensorModel::erim(),
+        SensorModel::lidar64(),
+        SensorModel::lidar128(),
+    ] {
+        let id = sensor.to_custom().id;
+        for near in [16.0, 20.0] {
+            let cells = suspected(&sensor, ditch(near, 1.5), &config);
+            for &(x, y, cost) in &cells {
+                assert!(
+                    (near - 1.6..near).contains(&x),
+                    "{id}, ditch at {near} m: suspected drop-off at ({x:.2}, {y:.2}) is not at the near edge"
+                );
+                assert_eq!(f64::from(cost), config.drop_off.suspect_cost, "{id}");
+            }
+            let mut ahead: Vec<i64> = cells
+                .iter()
+                .filter(|(_, y, _)| y.abs() < 3.0)
+                .map(|(_, y, _)| (y / 0.2).floor() as i64)
+                .collect();
+            ahead.sort_unstable();
+            ahead.dedup();
+            assert!(
+                ahead.len() >= 8,
+                "{id}, ditch at {near} m: only {} of the 30 cells of the edge ahead are suspected",
+                ahead.len()
+            );
+        }
+        // A 0.5 m slot: bridged, from near or far.
+        for near in [12.0, 16.0] {
+            let slot = ditch(near, 0.5);
+            assert_eq!(
+                suspected(&sensor, slot, &config),
+                [],
+                "{id}: slot at {near} m"
+            );
+            assert_eq!(
+                drop_offs(&sensor, slot, &config),
+                [],
+                "{id}: slot at {near} m"
+            );
+        }
+        assert_eq!(suspected(&sensor, |_, _| 0.0, &config), [], "{id}: flat");
+        // Off: nothing suspected.
+        let mut off = config.clone();
+        off.drop_off.suspect_cost = 0.0;
+        assert_eq!(suspected(&sensor, ditch(16.0, 1.5), &off), [], "{id}: off");
+    }
 }

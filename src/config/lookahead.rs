@@ -163,6 +163,21 @@ impl Config {
     pub fn effective(&self) -> Config {
         let look = self.lookahead();
         let mut config = self.clone();
+        // Where the sensor flags a hole for certain: a suspected drop-off
+        // is missed only from within it, and slows the vehicle only until
+        // then (0: not configured).
+        let bound = crate::speed_bound::speed_bound(self).ok();
+        if config.localmap.hole_range_m == 0.0
+            && let Some(range) = bound.as_ref().and_then(|b| b.hole_range_m)
+        {
+            config.localmap.hole_range_m = range;
+        }
+        if self.obstacle_avoidance().hole_seen_within_m == 0.0
+            && let Some(within) = bound.as_ref().and_then(|b| b.hole_seen_within_m)
+            && let Some(table) = config.behaviours.get_mut("obstacle_avoidance")
+        {
+            table.insert("hole_seen_within_m".to_owned(), toml::Value::Float(within));
+        }
         if look.moved_m > 0.0 {
             config.localmap.ahead_m = look.map_ahead_m;
             config.perception.region.ahead_m = look.region_ahead_m;
