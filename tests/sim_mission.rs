@@ -541,6 +541,52 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
     assert_eq!(report["localmap"]["seen_from_afar"], 0, "{tag}");
 }
 
+/// 020 at 10 m/s: a 0.9 m ditch square across the way. The 64-beam lidar
+/// 2.4 m up flags it for certain only within 8.4 m (the hole bound, 3.95
+/// m/s); from 15-20 m its rays dip 0.1-0.2 m into it, less than δ, and it
+/// is a *suspected* drop-off: the vehicle slows for it to the speed at
+/// which it stops once the ditch shows, then goes round. Without the
+/// suspicion (`suspect_cost = 0`) it learns of the ditch at 6 m/s, 5-7 m
+/// short of it, and drives in.
+#[test]
+fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
+    let world = format!(
+        "{}/tests/worlds/ditch_square.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let run = |tag, perception: &str| {
+        let config = out_dir(&format!("suspect-config-{tag}"));
+        let path = config.join("config.toml");
+        std::fs::write(&path, format!("[perception.drop_off]\n{perception}\n")).unwrap();
+        let args = [
+            "--world",
+            &world,
+            "--sensor",
+            "lidar64",
+            "--speed",
+            "10",
+            "--no-images",
+            "--config",
+            path.to_str().unwrap(),
+        ];
+        ((tag, args.map(String::from).to_vec()), config)
+    };
+    let (runs, _configs): (Vec<_>, Vec<_>) =
+        [run("suspected", ""), run("unsuspected", "suspect_cost = 0")]
+            .into_iter()
+            .unzip();
+    let reports = missions("suspect", &runs);
+    let (tag, report, stdout) = &reports[0];
+    assert_completed_without_collision(tag, report, stdout);
+    assert!(
+        report["graded_cells"].as_u64().unwrap() > 0,
+        "{tag}:\n{stdout}"
+    );
+    let (tag, report, stdout) = &reports[1];
+    assert_eq!(report["outcome"], "collision", "{tag}:\n{stdout}");
+    assert_eq!(report["graded_cells"], 0, "{tag}");
+}
+
 /// 017, narrower still: a dead-end lane with 5.7 m of floor, where no
 /// K-point turn gets the vehicle round. It backs out the way it came (at
 /// least 20 m of the 30 m lane, both sensors), turns once out, and

@@ -52,6 +52,25 @@ fn snapshot_seeing(cells: &[(f64, f64)], reach: f64) -> MapSnapshot {
 /// ... that saw the ground from `near` to `reach` ahead of the vehicle
 /// origin, within `reach` to each side.
 fn snapshot_seeing_from(cells: &[(f64, f64)], near: f64, reach: f64) -> MapSnapshot {
+    let cells = cells
+        .iter()
+        .map(|&(x, y)| ObstacleCell {
+            x,
+            y,
+            z_min: 0.0,
+            z_max: 0.6,
+            reasons: Reasons::HEIGHT_VARIATION,
+            region: 0,
+            cost: 1.0,
+        })
+        .collect();
+    snapshot_of(cells, near, reach)
+}
+
+/// The map after one image that saw the ground from `near` to `reach`
+/// ahead of the vehicle origin, within `reach` to each side, and reported
+/// `cells`.
+fn snapshot_of(cells: Vec<ObstacleCell>, near: f64, reach: f64) -> MapSnapshot {
     let mut map = LocalMap::new(
         &LocalMapConfig {
             assume_seen_m: 0.0,
@@ -64,18 +83,7 @@ fn snapshot_seeing_from(cells: &[(f64, f64)], near: f64, reach: f64) -> MapSnaps
         utime: 0,
         sensor: "test".into(),
         cell_size_m: 0.2,
-        cells: cells
-            .iter()
-            .map(|&(x, y)| ObstacleCell {
-                x,
-                y,
-                z_min: 0.0,
-                z_max: 0.6,
-                reasons: Reasons::HEIGHT_VARIATION,
-                region: 0,
-                cost: 1.0,
-            })
-            .collect(),
+        cells,
         regions: vec![],
         fov: FovPolygon::new(vec![
             Point2::new(near, -reach),
@@ -207,6 +215,60 @@ fn unseen_ground_slows_forbids_or_is_ignored_as_configured() {
     // Free: as if it had been seen.
     let free = avoidance_votes_on(&map, config(UnseenGround::Free));
     assert_eq!(free, seen);
+}
+
+#[test]
+fn a_suspected_drop_off_slows_an_arc_only_to_the_speed_that_stops_where_a_hole_would_show() {
+    let straight = 19;
+    // The near edge of a suspected hole across the way, `ahead` m beyond
+    // the bumper; as a definite drop-off with `cost` 1.
+    let edge = |ahead: f64, cost: f32| {
+        let cells = (0..16)
+            .map(|i| ObstacleCell {
+                x: FRONT + ahead + 0.1,
+                y: -1.5 + 0.2 * f64::from(i),
+                z_min: 0.0,
+                z_max: 0.0,
+                reasons: Reasons::DROP_OFF,
+                region: 0,
+                cost,
+            })
+            .collect();
+        snapshot_of(cells, -40.0, 40.0)
+    };
+    let config = |hole_seen_within_m| ObstacleAvoidanceConfig {
+        hole_seen_within_m,
+        ..ObstacleAvoidanceConfig::default()
+    };
+    let (a, t): (f64, f64) = (1.5, 0.75);
+    let stopping = |room: f64| -a * t + ((a * t).powi(2) + 2.0 * a * room).sqrt();
+    // (Within a map patch of the edge.)
+    let near = |v: f64, expected: f64| (v - expected).abs() < 0.1;
+    // 12 m ahead: stop 2 m short of it (4.5 m/s), the vote untouched.
+    let far = avoidance_votes_on(&edge(12.0, 0.5), config(6.0));
+    let v = far.arc_speed(straight).unwrap();
+    assert!(near(v, stopping(10.0)), "{v} m/s, not {}", stopping(10.0));
+    assert!(
+        far.values().iter().all(|&v| v == 1.0),
+        "a suspect does not steer"
+    );
+    // 1 m ahead: no slower than stopping within the 6 m where a hole
+    // would have been flagged by now (it is not one, or it would be a cell).
+    let close = avoidance_votes_on(&edge(1.0, 0.5), config(6.0));
+    assert!(!close.is_vetoed(straight));
+    let v = close.arc_speed(straight).unwrap();
+    assert!(
+        (v - stopping(4.0)).abs() < 1e-6,
+        "{v} m/s, not {}",
+        stopping(4.0)
+    );
+    // Where a hole shows unknown (0): stop short of it.
+    let unknown = avoidance_votes_on(&edge(1.0, 0.5), config(0.0));
+    assert_eq!(unknown.arc_speed(straight), Some(0.0));
+    assert!((0..close.len()).all(|i| !close.is_vetoed(i)));
+    // The same edge flagged for certain forbids the arc.
+    let definite = avoidance_votes_on(&edge(1.0, 1.0), config(6.0));
+    assert!(definite.is_vetoed(straight));
 }
 
 #[test]

@@ -258,6 +258,56 @@ fn an_image_from_farther_than_a_cell_was_reported_from_does_not_drop_it() {
 }
 
 #[test]
+fn a_suspected_drop_off_is_missed_only_by_images_from_where_a_hole_would_show() {
+    // A suspected hole's edge (graded, reason drop-off) at x = 40, flagged
+    // from 18 m; a hole there is flagged for certain within 8 m.
+    let config = LocalMapConfig {
+        hole_range_m: 8.0,
+        misses_to_drop: 1,
+        ahead_m: 40.0,
+        ..LocalMapConfig::default()
+    };
+    let fov = rectangle(10.0, 60.0, -10.0, 10.0);
+    let mut map = map_with(config.clone());
+    map.update(&pose_at(0, 21.0, 0.0, 0.0));
+    let mut suspect = report(100, "lidar64", &[], fov.clone());
+    suspect.cells.push(ObstacleCell {
+        reasons: Reasons::DROP_OFF,
+        cost: 0.5,
+        ..cell(40.0, 0.0)
+    });
+    map.insert(&seen_from(suspect.clone(), 22.0, 0.0)).unwrap();
+    assert!(map.snapshot().patches[0].is_suspected_drop_off());
+    // Images from 15 m and 10 m that do not flag it: it stays (the rows of
+    // a far image land elsewhere on a hole's edge each frame).
+    let empty = |t, from| seen_from(report(t, "lidar64", &[], fov.clone()), from, 0.0);
+    for (t, from) in [(200_000, 25.0), (300_000, 30.0)] {
+        let outcome = map.insert(&empty(t, from)).unwrap();
+        assert_eq!(
+            (outcome.pruned, map.len()),
+            (0, 1),
+            "from {} m",
+            40.0 - from
+        );
+    }
+    // From 7 m a hole would show: not flagged, it is dropped.
+    let outcome = map.insert(&empty(400_000, 33.0)).unwrap();
+    assert_eq!((outcome.pruned, map.len()), (1, 0));
+
+    // A definite cell reported from 18 m is missed from 15 m, as before.
+    let mut map = map_with(config);
+    map.update(&pose_at(0, 21.0, 0.0, 0.0));
+    map.insert(&seen_from(
+        report(100, "lidar64", &[(40.0, 0.0)], fov.clone()),
+        22.0,
+        0.0,
+    ))
+    .unwrap();
+    let outcome = map.insert(&empty(200_000, 25.0)).unwrap();
+    assert_eq!((outcome.pruned, map.len()), (1, 0));
+}
+
+#[test]
 fn a_cell_reported_again_is_kept_and_confirmed() {
     let mut map = map();
     map.update(&pose_at(0, 0.0, 0.0, 0.0));
