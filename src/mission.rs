@@ -110,6 +110,8 @@ pub struct MissionReport {
     pub untraversable_cells: BTreeMap<&'static str, u64>,
     /// Graded cells (cost below 1) perception reported, summed over the images.
     pub graded_cells: u64,
+    /// Of those, suspected drop-offs (`[perception.drop_off] suspect_cost`).
+    pub suspected_drop_offs: u64,
     pub collisions: Vec<Collision>,
     /// Smallest gap between the footprint and a true hazard, m.
     pub closest_approach_m: Option<f64>,
@@ -662,6 +664,7 @@ pub fn run_mission(
             .map(|(&(_, name), count)| (name, u64::from(count)))
             .collect(),
         graded_cells: u64::from(pipeline.perception.totals.graded),
+        suspected_drop_offs: u64::from(pipeline.perception.totals.suspected),
         collisions: truth.collisions.clone(),
         closest_approach_m: truth
             .closest_approach_m

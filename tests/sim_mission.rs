@@ -579,12 +579,12 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
     let (tag, report, stdout) = &reports[0];
     assert_completed_without_collision(tag, report, stdout);
     assert!(
-        report["graded_cells"].as_u64().unwrap() > 0,
+        report["suspected_drop_offs"].as_u64().unwrap() > 0,
         "{tag}:\n{stdout}"
     );
     let (tag, report, stdout) = &reports[1];
     assert_eq!(report["outcome"], "collision", "{tag}:\n{stdout}");
-    assert_eq!(report["graded_cells"], 0, "{tag}");
+    assert_eq!(report["suspected_drop_offs"], 0, "{tag}");
 }
 
 /// 017, narrower still: a dead-end lane with 5.7 m of floor, where no

@@ -1209,6 +1209,7 @@ impl CellClassifier {
             });
         }
         stats.graded += graded;
+        stats.suspected += graded;
         stats.regions = report.regions.len() as u32;
     }
 

@@ -187,6 +187,8 @@ pub struct ImageStats {
     pub cells_evaluated: u32,
     /// Cells reported as graded ground (cost below 1).
     pub graded: u32,
+    /// Of those, suspected drop-offs (reason drop-off).
+    pub suspected: u32,
     /// Cells classified untraversable.
     pub untraversable: u32,
     /// Untraversable cells per reason, in [`Reasons::ALL`] order (a cell
@@ -211,6 +213,7 @@ impl ImageStats {
         add(&mut self.cells_evaluated, other.cells_evaluated);
         add(&mut self.untraversable, other.untraversable);
         add(&mut self.graded, other.graded);
+        add(&mut self.suspected, other.suspected);
         for (a, b) in self.by_reason.iter_mut().zip(other.by_reason) {
             add(a, b);
         }

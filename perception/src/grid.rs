@@ -629,6 +629,7 @@ pub(crate) fn emit(
         });
         if !m.is_obstacle() {
             stats.graded += 1;
+            stats.suspected += u32::from(m.reasons.contains(Reasons::DROP_OFF));
             continue;
         }
         stats.untraversable += 1;

@@ -901,6 +901,7 @@ fn renumber_regions(regions: &[Region], report: &mut ObstacleReport) {
 fn count_cells(report: &ObstacleReport, stats: &mut ImageStats) {
     stats.untraversable = 0;
     stats.graded = 0;
+    stats.suspected = 0;
     stats.by_reason = [0; Reasons::ALL.len()];
     for cell in &report.cells {
         if cell.is_obstacle() {
@@ -912,6 +913,7 @@ fn count_cells(report: &ObstacleReport, stats: &mut ImageStats) {
             }
         } else {
             stats.graded += 1;
+            stats.suspected += u32::from(cell.reasons.contains(Reasons::DROP_OFF));
         }
     }
     stats.regions = report.regions.len() as u32;

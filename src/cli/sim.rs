@@ -218,9 +218,10 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         .map(|(reason, n)| format!("{reason} {n}"))
         .collect();
     println!(
-        "cells         untraversable: {}; graded {}",
+        "cells         untraversable: {}; graded {} (suspected drop-offs {})",
         cells.join(", "),
-        r.graded_cells
+        r.graded_cells,
+        r.suspected_drop_offs
     );
     let m = &r.localmap;
     println!(

@@ -197,7 +197,7 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         50.0,
         14.0,
         BLACK,
-        &format!("black: cells in the local map · orange: drop-offs · purple: graded ground · light: ground seen · white: images · circles: waypoints ({} reached) · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
+        &format!("black: cells in the local map · orange: drop-offs (pale: suspected) · purple: graded ground · light: ground seen · white: images · circles: waypoints ({} reached) · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
     );
     canvas.save(path)
 }
@@ -207,10 +207,13 @@ const SEEN: [u8; 4] = [255, 255, 255, 90];
 /// Ground no image observed (snapshot picture).
 const UNSEEN: [u8; 4] = [200, 200, 205, 255];
 
-/// A map patch's colour: drop-offs orange, other obstacles black, graded
+/// A map patch's colour: drop-offs orange, other obstacles black,
+/// suspected drop-offs (graded, reason drop-off) pale orange, other graded
 /// ground (cost below 1) purple, the more opaque the costlier.
 fn patch_color(reasons: Reasons, cost: f32, alpha: u8) -> [u8; 4] {
-    if cost < 1.0 {
+    if cost < 1.0 && reasons.contains(Reasons::DROP_OFF) {
+        [250, 190, 110, alpha]
+    } else if cost < 1.0 {
         [
             130,
             40,
@@ -294,7 +297,7 @@ pub fn snapshot_picture(
         map_h as f32 - 8.0,
         12.0,
         [60, 60, 60, 255],
-        "grey: ground not seen · black: cells · orange: drop-offs · purple: graded ground (by cost)",
+        "grey: ground not seen · black: cells · orange: drop-offs (pale: suspected) · purple: graded ground (by cost)",
     );
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);
