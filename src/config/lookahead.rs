@@ -210,9 +210,39 @@ mod tests {
         config
     }
 
+    /// `config` with where holes show configured, as `effective` would
+    /// otherwise set it from the sensor.
+    fn holes_configured(mut config: Config) -> Config {
+        config.localmap.hole_range_m = 7.0;
+        config
+            .behaviours
+            .get_mut("obstacle_avoidance")
+            .unwrap()
+            .insert("hole_seen_within_m".into(), toml::Value::Float(5.0));
+        config
+    }
+
+    #[test]
+    fn where_holes_show_comes_from_the_sensor_unless_configured() {
+        for sensor in [SensorPreset::Erim, SensorPreset::Lidar64] {
+            let config = at(2.5, sensor);
+            let bound = crate::speed_bound::speed_bound(&config).unwrap();
+            let effective = config.effective();
+            assert_eq!(Some(effective.localmap.hole_range_m), bound.hole_range_m);
+            assert_eq!(
+                Some(effective.obstacle_avoidance().hole_seen_within_m),
+                bound.hole_seen_within_m
+            );
+            // The front is the sensor's setback nearer.
+            assert!(bound.hole_seen_within_m < bound.hole_range_m, "{bound:?}");
+            let configured = holes_configured(config);
+            assert_eq!(configured.effective(), configured);
+        }
+    }
+
     #[test]
     fn the_default_speed_looks_as_far_as_configured() {
-        let config = at(2.5, SensorPreset::Erim);
+        let config = holes_configured(at(2.5, SensorPreset::Erim));
         let look = config.lookahead();
         // 2.5·0.75 + 2.5²/(2·1.5) + 2 = 5.96 m: well inside 18 m.
         assert!((look.needed_m - 5.958).abs() < 1e-3, "{look:?}");
@@ -268,6 +298,7 @@ mod tests {
         assert_eq!(config.lookahead().map_ahead_m, 30.0);
         config.lookahead.from_speed = false;
         assert_eq!(config.lookahead().moved_m, 0.0);
+        let config = holes_configured(config);
         assert_eq!(config.effective(), config);
     }
 }
