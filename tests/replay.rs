@@ -14,8 +14,12 @@ use arcnav_perception::SensorPreset;
 use arcnav_sim::World;
 use serde_json::Value;
 
+/// The directory of files the tests of `tag` write: under the target
+/// directory, the same each run (so runs replace what the last one wrote
+/// rather than leave a gigabyte of logs in the system's temporary
+/// directory each time).
 fn dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("arcnav-replay-{tag}-{}", std::process::id()));
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("replay-{tag}"));
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }

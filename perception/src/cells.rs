@@ -414,9 +414,11 @@ impl DropOffRule<'_> {
     /// (`previous`, the far side) being longer than `max_gap` and dipping
     /// under it by `v` = `z − z_f`, less than δ. From a sensor `H` above
     /// the edge at horizontal distance `d`, the ray falls `s = H/d` per
-    /// metre, so it ran at least `v/s` below the edge before it met the
-    /// far side: a hole at least that wide (000 §4.2: "this creates a
-    /// sizable gap through occlusion"), of a depth the image cannot tell.
+    /// metre, so it ran `v/s` (horizontally) below the edge's height before
+    /// it met the far side: a hole at least that wide, of a depth the image
+    /// cannot tell (000 §4.2: "Larger gaps are problematic because they may
+    /// contain dangerous negative obstacles").
+    ///
     /// It is suspected when
     /// - `v > noise + Δ·d` (not range noise),
     /// - `v/s · |cos φ| > max_gap`, `φ` the column's bearing from the
