@@ -22,7 +22,11 @@
 //!   reported ... in the next overlapping images" because they follow
 //!   quickly as the vehicle drives on, from nearer; a vehicle backing away
 //!   from a ditch sees it again from farther, where its far wall no longer
-//!   shows (`w·H/R`), and must not erase it.
+//!   shows (`w·H/R`), and must not erase it. A suspected drop-off (graded,
+//!   reason drop-off: a hole's edge seen from too far to show its depth)
+//!   takes a miss only from an image whose sensor stood within
+//!   `hole_range_m` of it, where a hole would have been flagged for
+//!   certain: far frames flag a ditch's edge in one frame and not the next.
 //! - **The loop** ([`LocalMap::update`]): with the current pose every patch is
 //!   re-expressed in the vehicle frame and those outside the window dropped.
 //! - **Seen ground**: the ground each image observed (its footprint, less
