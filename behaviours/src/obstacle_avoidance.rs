@@ -185,6 +185,12 @@ impl Grid {
         (row, column)
     }
 
+    /// The bitmap word holding cell `cell` (`row · columns + column`).
+    fn word_of(&self, cell: u32) -> usize {
+        let (row, column) = (cell as usize / self.columns, cell as usize % self.columns);
+        row * self.words_per_row + column / 64
+    }
+
     fn centre(&self, row: usize, column: usize) -> Point2<f64> {
         Point2::new(
             self.x0 + (row as f64 + 0.5) * self.resolution,
@@ -271,29 +277,17 @@ impl Raster {
         to_grid: impl Fn(f64, f64) -> (f64, f64),
     ) {
         for &cell in &self.set_cells {
-            let (row, column) = (
-                cell as usize / self.grid.columns,
-                cell as usize % self.grid.columns,
-            );
-            self.bitmap[row * self.grid.words_per_row + column / 64] = 0;
+            self.bitmap[self.grid.word_of(cell)] = 0;
             self.causes[cell as usize] = u32::MAX;
         }
         self.set_cells.clear();
         for &cell in &self.graded_cells {
-            let (row, column) = (
-                cell as usize / self.grid.columns,
-                cell as usize % self.grid.columns,
-            );
-            self.graded[row * self.grid.words_per_row + column / 64] = 0;
+            self.graded[self.grid.word_of(cell)] = 0;
             self.graded_cost[cell as usize] = 0.0;
         }
         self.graded_cells.clear();
         for &cell in &self.suspect_cells {
-            let (row, column) = (
-                cell as usize / self.grid.columns,
-                cell as usize % self.grid.columns,
-            );
-            self.suspect[row * self.grid.words_per_row + column / 64] = 0;
+            self.suspect[self.grid.word_of(cell)] = 0;
         }
         self.suspect_cells.clear();
         for index in patches {
@@ -573,11 +567,10 @@ impl Met {
                 self.graded.0.max(other.graded.0),
                 self.graded.1.max(other.graded.1),
             ),
-            suspect: nearer(
-                self.suspect.map(|s| (s, ())),
-                other.suspect.map(|s| (s, ())),
-            )
-            .map(|(s, ())| s),
+            suspect: match (self.suspect, other.suspect) {
+                (Some(a), Some(b)) => Some(a.min(b)),
+                (a, b) => a.or(b),
+            },
         }
     }
 }
