@@ -556,7 +556,7 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
 #[test]
 fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
     let world = format!(
-        "{}/tests/worlds/ditch_square.toml",
+        "{}/tests/worlds/ditch_across.toml",
         env!("CARGO_MANIFEST_DIR")
     );
     let run = |tag, perception: &str| {
