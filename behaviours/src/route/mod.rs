@@ -389,14 +389,7 @@ impl Route {
         for patch in &map.patches {
             let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
             if let Some(c) = self.cell_at(x, y) {
-                if patch.is_obstacle() || patch.is_suspected_drop_off() {
-                    // A suspected hole is planned round like a flagged one
-                    // (the local map drops it once an image from within
-                    // the hole range misses it). Planned as rough ground,
-                    // or not at all, the route aimed a vehicle stopped at a
-                    // ditch through the stretches seen only as a suspicion
-                    // or between its flagged cells, and it turned in place
-                    // until it was stuck (lidar64, 4.5 and 10 m/s).
+                if patch.is_obstacle() {
                     self.hits[c] = self.stamp;
                 } else {
                     // Graded ground: rough, as costly as its cost says.
