@@ -135,7 +135,8 @@ struct SimArgs {
     /// Write a local-map picture every S simulated seconds.
     #[arg(long, value_name = "S")]
     snapshot_every: Option<f64>,
-    /// Leave range images out of the log (replay then cannot re-run perception).
+    /// Leave range images out of the log (replay and render then cannot re-run
+    /// perception: give them --recorded-cells to use the logged cells).
     #[arg(long)]
     no_images: bool,
     /// Save the world (e.g. a generated one) as TOML to this file.

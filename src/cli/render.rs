@@ -64,6 +64,12 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         args.log.display(),
         log.skipped_bytes + log.truncated_tail_bytes
     );
+    // What the redone decision could not use (a log without range images
+    // perceives nothing unless its recorded cells are used): said before
+    // the picture, which would otherwise show an empty map.
+    for line in result.problems.lines() {
+        eprintln!("warning: {line}");
+    }
     let Some((at, decision, map)) = &result.kept else {
         anyhow::bail!(
             "no decision at or after {} s: the log spans {:.1} s and yielded {} decisions",

@@ -154,7 +154,7 @@ impl InputProblems {
         }
         if self.cells_unused > 0 {
             lines.push(format!(
-                "the log holds {} OBSTACLE_CELLS and no range image: nothing was perceived (replay with --recorded-cells to use them)",
+                "the log holds {} OBSTACLE_CELLS and no range image: nothing was perceived (--recorded-cells uses them)",
                 self.cells_unused
             ));
         }
