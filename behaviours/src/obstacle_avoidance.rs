@@ -85,6 +85,9 @@ pub struct ObstacleAvoidanceConfig {
     pub speed_vote: bool,
     pub stop_margin_m: f64,
     pub reaction_s: f64,
+    /// Fraction of `vehicle.max_deceleration_mps2` the speed votes count
+    /// on when stopping (the rest is margin for ground that brakes worse).
+    pub braking_fraction: f64,
     /// What ground no image has seen is: slow (drive only as fast as the
     /// vehicle can stop within seen ground), obstacle, or free.
     pub unseen_ground: UnseenGround,
@@ -128,6 +131,7 @@ impl Default for ObstacleAvoidanceConfig {
             speed_vote: true,
             stop_margin_m: 2.0,
             reaction_s: 0.75,
+            braking_fraction: 0.5,
             unseen_ground: UnseenGround::Slow,
             hole_seen_within_m: 0.0,
             reverse_reach_m: 5.0,
@@ -687,7 +691,7 @@ impl ObstacleAvoidance {
             nearest: [f64::INFINITY; 4],
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
             cruise_mps: setup.cruise_mps,
-            deceleration: setup.vehicle.max_deceleration_mps2 * 0.5,
+            deceleration: setup.vehicle.max_deceleration_mps2 * config.braking_fraction,
             max_deceleration: setup.vehicle.max_deceleration_mps2,
             free: vec![f64::INFINITY; setup.arcs.len()],
             unseen_at: vec![None; setup.arcs.len()],
@@ -1339,6 +1343,7 @@ impl Plugin for ObstacleAvoidance {
         config::in_range("grid_resolution_m", c.grid_resolution_m, 0.05, 1.0)?;
         config::non_negative("stop_margin_m", c.stop_margin_m)?;
         config::non_negative("reaction_s", c.reaction_s)?;
+        config::in_range("braking_fraction", c.braking_fraction, 0.1, 1.0)?;
         config::in_range("reverse_reach_m", c.reverse_reach_m, 0.0, 20.0)?;
         config::in_range("reverse_margin_m", c.reverse_margin_m, 0.0, 2.0)?;
         c.terrain

@@ -215,6 +215,22 @@ fn unseen_ground_slows_forbids_or_is_ignored_as_configured() {
     // Free: as if it had been seen.
     let free = avoidance_votes_on(&map, config(UnseenGround::Free));
     assert_eq!(free, seen);
+    // Counting on all of the vehicle's braking (3 m/s²), not half: the
+    // speed that stops in the same room, higher.
+    let braking = avoidance_votes_on(
+        &map,
+        ObstacleAvoidanceConfig {
+            braking_fraction: 1.0,
+            ..config(UnseenGround::Slow)
+        },
+    );
+    let a = 3.0;
+    let harder = -a * t + ((a * t).powi(2) + 2.0 * a * 2.0).sqrt();
+    let w = braking.arc_speed(straight).unwrap();
+    assert!(
+        w <= harder && w > v && w > 0.7 * harder,
+        "{w} m/s braking at 3 m/s², stopping 2 m short of 4 m: {harder} (at 1.5 m/s²: {v})"
+    );
 }
 
 #[test]
@@ -817,6 +833,16 @@ fn route_votes_to(
     statics: Option<&std::sync::Arc<arcnav_localmap::StaticMap>>,
     table: &toml::Table,
 ) -> Votes {
+    route_votes_on(None, goal, statics, table)
+}
+
+/// ... on `map` (an empty map seen 20 m round if none).
+fn route_votes_on(
+    map: Option<&MapSnapshot>,
+    goal: [f64; 2],
+    statics: Option<&std::sync::Arc<arcnav_localmap::StaticMap>>,
+    table: &toml::Table,
+) -> Votes {
     let arcs = arcs();
     let vehicle = VehicleConfig::default();
     let setup = Setup {
@@ -824,7 +850,7 @@ fn route_votes_to(
         ..setup(&arcs, &vehicle)
     };
     let mut behaviour = Registry::builtin().build("route", table, &setup).unwrap();
-    let map = snapshot_seeing(&[], 20.0);
+    let map = map.cloned().unwrap_or_else(|| snapshot_seeing(&[], 20.0));
     let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
     let mission = Mission {
         version: 1,
@@ -870,6 +896,55 @@ fn the_route_plans_around_a_wall_the_static_map_knows_before_any_image_shows_it(
     assert!(
         with >= 30,
         "the way round is well to the left: best arc {with}"
+    );
+}
+
+/// A suspected drop-off (graded, reason drop-off: a hole's edge seen from
+/// too far to show its depth) across the way: the route plans round it
+/// when the way round is short (`suspect_cost`, 30 cells), as round a
+/// flagged ditch, and not across its suspected stretch. Counted as rough
+/// ground (`suspect_cost = 0`, what it was), crossing it cost less than a
+/// few metres of detour: a vehicle stopped at a ditch whose ends were only
+/// suspected was sent across them, and turned in place until stuck.
+#[test]
+fn the_route_plans_round_a_suspected_drop_off_when_the_way_round_is_short() {
+    // 8 m of suspected edge across the way 12 m ahead, 0.2 m apart.
+    let line = |cost: f32| {
+        (0..41)
+            .map(|i| ObstacleCell {
+                x: 12.0,
+                y: -4.0 + 0.2 * f64::from(i),
+                z_min: 0.0,
+                z_max: 0.0,
+                reasons: Reasons::DROP_OFF,
+                region: 0,
+                cost,
+            })
+            .collect()
+    };
+    let best = |cost: f32, table: &str| {
+        let map = snapshot_of(line(cost), -40.0, 40.0);
+        best_arc(&route_votes_on(
+            Some(&map),
+            [60.0, 0.0],
+            None,
+            &toml::from_str(table).unwrap(),
+        ))
+    };
+    let suspected = best(0.5, "");
+    let flagged = best(1.0, "");
+    let as_rough = best(0.5, "suspect_cost = 0.0");
+    assert!(
+        as_rough.abs_diff(19) <= 2,
+        "as rough ground it is crossed: about straight, not {as_rough}"
+    );
+    assert!(
+        flagged.abs_diff(19) >= 6,
+        "a flagged ditch is planned round: {flagged}"
+    );
+    assert!(
+        suspected.abs_diff(19) >= 6,
+        "so is a suspected one, when the way round is short: {suspected}"
     );
 }
 

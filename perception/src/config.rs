@@ -53,7 +53,7 @@ impl Default for PerceptionConfig {
             evaluator: "cells".into(),
             min_range_m: 0.5,
             max_range_m: 40.0,
-            fov_max_vertices: 128,
+            fov_max_vertices: 512,
             region: RegionConfig::default(),
             cells: CellsConfig::default(),
             drop_off: DropOffConfig::default(),

@@ -2,7 +2,7 @@
 //!
 //! Obstacle avoidance votes each arc a speed at which the vehicle stops
 //! within the arc's free distance D (less `stop_margin_m` m), reacting
-//! after t = `reaction_s` and braking at a = half of
+//! after t = `reaction_s` and braking at a = `braking_fraction` (half) of
 //! `vehicle.max_deceleration_mps2`: `v·t + v²/(2a) = D − margin`. An arc
 //! clear for `max_distance_m` therefore allows at most the v of
 //! D = `max_distance_m`; with the window of 002 §5 (20 m ahead, 18 m of
@@ -103,7 +103,7 @@ impl Config {
     pub fn lookahead(&self) -> Lookahead {
         let oa = self.obstacle_avoidance();
         let cruise = self.arbiter.cruise_speed_mps;
-        let a = 0.5 * self.vehicle.max_deceleration_mps2;
+        let a = oa.braking_fraction * self.vehicle.max_deceleration_mps2;
         let judged = |v: f64| v * oa.reaction_s + v * v / (2.0 * a) + oa.stop_margin_m;
         let needed = judged(cruise);
         let (map, region) = (self.localmap.ahead_m, self.perception.region.ahead_m);
@@ -286,6 +286,15 @@ mod tests {
         // 6 m/s needs 4.5 + 12 + 2 = 18.5 m: a little farther than configured.
         let look = at(6.0, SensorPreset::Lidar64).lookahead();
         assert!((look.moved_m - 0.5).abs() < 1e-9, "{look:?}");
+        // Counting on all of the braking (braking_fraction = 1): 10·0.75 +
+        // 100/6 + 2 = 26.17 m.
+        let mut full = at(10.0, SensorPreset::Lidar64);
+        full.behaviours
+            .get_mut("obstacle_avoidance")
+            .unwrap()
+            .insert("braking_fraction".into(), toml::Value::Float(1.0));
+        let look = full.lookahead();
+        assert!((look.needed_m - 26.167).abs() < 1e-3, "{look:?}");
     }
 
     #[test]

@@ -15,7 +15,10 @@
 //!   the last metre, the route keeps away from narrow gaps); seen ground
 //!   as rough as stones or ruts costs up to `1 + rough_cost` (four levels
 //!   from the elevation layer's second differences: see
-//!   `Route::roughness_level`), so a smooth track beside rubble wins.
+//!   `Route::roughness_level`), so a smooth track beside rubble wins;
+//!   ground with a suspected drop-off in it (a hole's edge seen from too
+//!   far to show its depth) costs `suspect_cost`, so a short way round it
+//!   is taken and a long one is not.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
@@ -73,6 +76,11 @@ pub struct RouteConfig {
     /// at which ground starts to count as rough, and at which it is the
     /// roughest, m.
     pub rough_m: [f64; 2],
+    /// Cost of crossing a cell with a suspected drop-off in it, relative to
+    /// seen free ground: a detour shorter than about this many cells is
+    /// taken rather than a crossing (0: as costly as its graded cost says,
+    /// like rough ground).
+    pub suspect_cost: f64,
     /// A waypoint is reached within this distance (unless it has its own), m.
     pub arrival_radius_m: f64,
     /// A waypoint behind the vehicle and within this many arrival radii is passed.
@@ -93,6 +101,7 @@ impl Default for RouteConfig {
             clearance_cost: 4.0,
             rough_cost: 4.0,
             rough_m: [0.04, 0.15],
+            suspect_cost: 30.0,
             arrival_radius_m: 5.0,
             pass_radius_factor: 2.0,
             max_expansions: 200_000,
@@ -106,6 +115,12 @@ const OBSTACLE: u8 = 2;
 /// Seen free ground of roughness level 1 to [`ROUGH_LEVELS`]: `ROUGH + level - 1`.
 const ROUGH: u8 = 3;
 const ROUGH_LEVELS: u8 = 4;
+/// Seen ground with a suspected drop-off in it (graded, reason drop-off:
+/// a hole's edge seen from too far to show its depth).
+const SUSPECT: u8 = ROUGH + ROUGH_LEVELS;
+/// The graded level that stands for a suspected drop-off in
+/// [`Route::graded`] (above every roughness level).
+const SUSPECTED_LEVEL: u8 = u8::MAX;
 
 /// What the route behaviour did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -289,6 +304,7 @@ impl Route {
             OBSTACLE => return f32::INFINITY,
             FREE => 1.0,
             UNKNOWN => self.config.unseen_cost as f32,
+            SUSPECT => self.config.suspect_cost as f32,
             rough => {
                 let level = f64::from(rough - ROUGH + 1) / f64::from(ROUGH_LEVELS);
                 (1.0 + self.config.rough_cost * level) as f32
@@ -392,8 +408,18 @@ impl Route {
                 if patch.is_obstacle() {
                     self.hits[c] = self.stamp;
                 } else {
-                    // Graded ground: rough, as costly as its cost says.
-                    let level = (f64::from(patch.cost) * f64::from(ROUGH_LEVELS)).round() as u8;
+                    // Graded ground: rough, as costly as its cost says; a
+                    // suspected drop-off costs `suspect_cost`. Planned as
+                    // rough ground, the way past a ditch whose ends were only
+                    // suspected led across them, and a vehicle stopped at
+                    // its flagged middle turned in place until it was stuck;
+                    // planned round like a flagged cell (infinite cost), no
+                    // way is left through a ditch suspected end to end.
+                    let level = if patch.is_suspected_drop_off() && self.config.suspect_cost > 0.0 {
+                        SUSPECTED_LEVEL
+                    } else {
+                        (f64::from(patch.cost) * f64::from(ROUGH_LEVELS)).round() as u8
+                    };
                     let graded = &mut self.graded[c];
                     *graded = if graded.0 == self.stamp {
                         (self.stamp, graded.1.max(level))
@@ -441,8 +467,15 @@ impl Route {
                     } else if seen {
                         let graded = self.graded[c];
                         let graded = if graded.0 == self.stamp { graded.1 } else { 0 };
-                        let level = self.roughness_level(map, x, y).max(graded);
-                        self.set_state(c, if level == 0 { FREE } else { ROUGH + level - 1 });
+                        let state = if graded == SUSPECTED_LEVEL {
+                            SUSPECT
+                        } else {
+                            match self.roughness_level(map, x, y).max(graded) {
+                                0 => FREE,
+                                level => ROUGH + level - 1,
+                            }
+                        };
+                        self.set_state(c, state);
                     }
                 } else if hit {
                     self.set_state(c, OBSTACLE);
@@ -648,6 +681,7 @@ impl Plugin for Route {
         config::in_range("unseen_cost", c.unseen_cost, 1.0, 100.0)?;
         config::in_range("clearance_cost", c.clearance_cost, 0.0, 100.0)?;
         config::in_range("rough_cost", c.rough_cost, 0.0, 100.0)?;
+        config::in_range("suspect_cost", c.suspect_cost, 0.0, 1000.0)?;
         let [smooth, rough] = c.rough_m;
         config::non_negative("rough_m", smooth)?;
         if !(rough > smooth && rough.is_finite()) {
