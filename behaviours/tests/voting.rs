@@ -900,14 +900,14 @@ fn the_route_plans_around_a_wall_the_static_map_knows_before_any_image_shows_it(
 }
 
 /// A suspected drop-off (graded, reason drop-off: a hole's edge seen from
-/// too far to show its depth) across the way: the route plans round it
-/// when the way round is short (`suspect_cost`, 30 cells), as round a
+/// too far to show its depth) across the way: with `suspect_cost = 30`
+/// the route plans round it when the way round is short, as round a
 /// flagged ditch, and not across its suspected stretch. Counted as rough
-/// ground (`suspect_cost = 0`, what it was), crossing it cost less than a
-/// few metres of detour: a vehicle stopped at a ditch whose ends were only
-/// suspected was sent across them, and turned in place until stuck.
+/// ground (the default), crossing it costs less than a few metres of
+/// detour: a vehicle stopped at a ditch whose ends were only suspected is
+/// sent across them.
 #[test]
-fn the_route_plans_round_a_suspected_drop_off_when_the_way_round_is_short() {
+fn with_a_suspect_cost_the_route_plans_round_a_suspected_drop_off_when_the_way_round_is_short() {
     // 8 m of suspected edge across the way 12 m ahead, 0.2 m apart.
     let line = |cost: f32| {
         (0..41)
@@ -931,9 +931,9 @@ fn the_route_plans_round_a_suspected_drop_off_when_the_way_round_is_short() {
             &toml::from_str(table).unwrap(),
         ))
     };
-    let suspected = best(0.5, "");
+    let suspected = best(0.5, "suspect_cost = 30.0");
     let flagged = best(1.0, "");
-    let as_rough = best(0.5, "suspect_cost = 0.0");
+    let as_rough = best(0.5, "");
     assert!(
         as_rough.abs_diff(19) <= 2,
         "as rough ground it is crossed: about straight, not {as_rough}"
@@ -944,7 +944,7 @@ fn the_route_plans_round_a_suspected_drop_off_when_the_way_round_is_short() {
     );
     assert!(
         suspected.abs_diff(19) >= 6,
-        "so is a suspected one, when the way round is short: {suspected}"
+        "so is a suspected one with a suspect cost, when the way round is short: {suspected}"
     );
 }
 

@@ -17,8 +17,9 @@
 //!   from the elevation layer's second differences: see
 //!   `Route::roughness_level`), so a smooth track beside rubble wins;
 //!   ground with a suspected drop-off in it (a hole's edge seen from too
-//!   far to show its depth) costs `suspect_cost`, so a short way round it
-//!   is taken and a long one is not.
+//!   far to show its depth) is rough ground too, or, with `suspect_cost`,
+//!   costs that much, so that a short way round it is taken and a long one
+//!   is not.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
@@ -78,8 +79,8 @@ pub struct RouteConfig {
     pub rough_m: [f64; 2],
     /// Cost of crossing a cell with a suspected drop-off in it, relative to
     /// seen free ground: a detour shorter than about this many cells is
-    /// taken rather than a crossing (0: as costly as its graded cost says,
-    /// like rough ground).
+    /// taken rather than a crossing (0, the default: as costly as its
+    /// graded cost says, like rough ground).
     pub suspect_cost: f64,
     /// A waypoint is reached within this distance (unless it has its own), m.
     pub arrival_radius_m: f64,
@@ -101,7 +102,7 @@ impl Default for RouteConfig {
             clearance_cost: 4.0,
             rough_cost: 4.0,
             rough_m: [0.04, 0.15],
-            suspect_cost: 30.0,
+            suspect_cost: 0.0,
             arrival_radius_m: 5.0,
             pass_radius_factor: 2.0,
             max_expansions: 200_000,
@@ -409,12 +410,11 @@ impl Route {
                     self.hits[c] = self.stamp;
                 } else {
                     // Graded ground: rough, as costly as its cost says; a
-                    // suspected drop-off costs `suspect_cost`. Planned as
-                    // rough ground, the way past a ditch whose ends were only
-                    // suspected led across them, and a vehicle stopped at
-                    // its flagged middle turned in place until it was stuck;
-                    // planned round like a flagged cell (infinite cost), no
-                    // way is left through a ditch suspected end to end.
+                    // suspected drop-off costs `suspect_cost` when set (see
+                    // config/default.toml for what it does to which
+                    // vehicle). Planned round like a flagged cell (infinite
+                    // cost), no way would be left through a ditch suspected
+                    // end to end.
                     let level = if patch.is_suspected_drop_off() && self.config.suspect_cost > 0.0 {
                         SUSPECTED_LEVEL
                     } else {
