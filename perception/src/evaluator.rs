@@ -119,6 +119,13 @@ impl ObstacleCell {
     pub fn is_obstacle(&self) -> bool {
         self.cost >= 1.0
     }
+
+    /// Whether this is a suspected drop-off: graded ground with the reason
+    /// drop-off (a hole's edge seen from too far to show its depth; see
+    /// `[perception.drop_off] suspect_cost`).
+    pub fn is_suspected_drop_off(&self) -> bool {
+        !self.is_obstacle() && self.reasons.contains(Reasons::DROP_OFF)
+    }
 }
 
 /// A connected group of untraversable cells of one image.

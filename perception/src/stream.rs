@@ -913,7 +913,7 @@ fn count_cells(report: &ObstacleReport, stats: &mut ImageStats) {
             }
         } else {
             stats.graded += 1;
-            stats.suspected += u32::from(cell.reasons.contains(Reasons::DROP_OFF));
+            stats.suspected += u32::from(cell.is_suspected_drop_off());
         }
     }
     stats.regions = report.regions.len() as u32;
