@@ -942,6 +942,16 @@ fn with_a_suspect_cost_the_route_plans_round_a_suspected_drop_off_when_the_way_r
         flagged.abs_diff(19) >= 6,
         "a flagged ditch is planned round: {flagged}"
     );
+    // Cheaper than free ground it would break the planner's heuristic.
+    let arcs = arcs();
+    let vehicle = VehicleConfig::default();
+    let cheap: toml::Table = toml::from_str("suspect_cost = 0.5").unwrap();
+    let refused = Registry::builtin()
+        .build("route", &cheap, &setup(&arcs, &vehicle))
+        .err()
+        .expect("suspect_cost 0.5 is refused")
+        .to_string();
+    assert!(refused.contains("suspect_cost"), "{refused}");
     assert!(
         suspected.abs_diff(19) >= 6,
         "so is a suspected one with a suspect cost, when the way round is short: {suspected}"

@@ -682,6 +682,17 @@ impl Plugin for Route {
         config::in_range("clearance_cost", c.clearance_cost, 0.0, 100.0)?;
         config::in_range("rough_cost", c.rough_cost, 0.0, 100.0)?;
         config::in_range("suspect_cost", c.suspect_cost, 0.0, 1000.0)?;
+        if c.suspect_cost > 0.0 && c.suspect_cost < 1.0 {
+            // Cheaper than free ground, it would break the planner's
+            // heuristic (a cell costs at least 1).
+            return Err(ConfigError::new(
+                "suspect_cost",
+                format!(
+                    "is {}, must be 0 (rough ground) or at least 1 (free ground's cost)",
+                    c.suspect_cost
+                ),
+            ));
+        }
         let [smooth, rough] = c.rough_m;
         config::non_negative("rough_m", smooth)?;
         if !(rough > smooth && rough.is_finite()) {
