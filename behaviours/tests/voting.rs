@@ -946,11 +946,10 @@ fn with_a_suspect_cost_the_route_plans_round_a_suspected_drop_off_when_the_way_r
     let arcs = arcs();
     let vehicle = VehicleConfig::default();
     let cheap: toml::Table = toml::from_str("suspect_cost = 0.5").unwrap();
-    let refused = Registry::builtin()
-        .build("route", &cheap, &setup(&arcs, &vehicle))
-        .err()
-        .expect("suspect_cost 0.5 is refused")
-        .to_string();
+    let Err(refused) = Registry::builtin().build("route", &cheap, &setup(&arcs, &vehicle)) else {
+        panic!("suspect_cost 0.5 is refused");
+    };
+    let refused = refused.to_string();
     assert!(refused.contains("suspect_cost"), "{refused}");
     assert!(
         suspected.abs_diff(19) >= 6,
