@@ -67,6 +67,24 @@ fn snapshot_seeing_from(cells: &[(f64, f64)], near: f64, reach: f64) -> MapSnaps
     snapshot_of(cells, near, reach)
 }
 
+/// The near edge of a drop-off across the way at `x`, from `-half_width`
+/// to `half_width`: cells 0.2 m apart with the reason drop-off, of `cost`
+/// (1: flagged; below 1: suspected).
+fn drop_off_edge(x: f64, half_width: f64, cost: f32) -> Vec<ObstacleCell> {
+    let cells = (2.0 * half_width / 0.2).round() as u32;
+    (0..=cells)
+        .map(|i| ObstacleCell {
+            x,
+            y: -half_width + 0.2 * f64::from(i),
+            z_min: 0.0,
+            z_max: 0.0,
+            reasons: Reasons::DROP_OFF,
+            region: 0,
+            cost,
+        })
+        .collect()
+}
+
 /// The map after one image that saw the ground from `near` to `reach`
 /// ahead of the vehicle origin, within `reach` to each side, and reported
 /// `cells`.
@@ -239,18 +257,7 @@ fn a_suspected_drop_off_slows_an_arc_only_to_the_speed_that_stops_where_a_hole_w
     // The near edge of a suspected hole across the way, `ahead` m beyond
     // the bumper; as a definite drop-off with `cost` 1.
     let edge = |ahead: f64, cost: f32| {
-        let cells = (0..16)
-            .map(|i| ObstacleCell {
-                x: FRONT + ahead + 0.1,
-                y: -1.5 + 0.2 * f64::from(i),
-                z_min: 0.0,
-                z_max: 0.0,
-                reasons: Reasons::DROP_OFF,
-                region: 0,
-                cost,
-            })
-            .collect();
-        snapshot_of(cells, -40.0, 40.0)
+        snapshot_of(drop_off_edge(FRONT + ahead + 0.1, 1.5, cost), -40.0, 40.0)
     };
     let config = |hole_seen_within_m| ObstacleAvoidanceConfig {
         hole_seen_within_m,
@@ -908,22 +915,9 @@ fn the_route_plans_around_a_wall_the_static_map_knows_before_any_image_shows_it(
 /// sent across them.
 #[test]
 fn with_a_suspect_cost_the_route_plans_round_a_suspected_drop_off_when_the_way_round_is_short() {
-    // 8 m of suspected edge across the way 12 m ahead, 0.2 m apart.
-    let line = |cost: f32| {
-        (0..41)
-            .map(|i| ObstacleCell {
-                x: 12.0,
-                y: -4.0 + 0.2 * f64::from(i),
-                z_min: 0.0,
-                z_max: 0.0,
-                reasons: Reasons::DROP_OFF,
-                region: 0,
-                cost,
-            })
-            .collect()
-    };
+    // 8 m of suspected edge across the way 12 m ahead.
     let best = |cost: f32, table: &str| {
-        let map = snapshot_of(line(cost), -40.0, 40.0);
+        let map = snapshot_of(drop_off_edge(12.0, 4.0, cost), -40.0, 40.0);
         best_arc(&route_votes_on(
             Some(&map),
             [60.0, 0.0],
