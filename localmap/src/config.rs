@@ -50,13 +50,20 @@ pub struct LocalMapConfig {
     /// not there to see from 12, and a vehicle backing away from a ditch
     /// must not erase it.
     pub miss_range_factor: f64,
-    /// A suspected drop-off (graded, reason drop-off) counts a miss only
-    /// from an image taken within this distance of it, where a hole would
-    /// have been flagged for certain: images from farther, which flag a
-    /// ditch's edge in one frame and not in the next, must not erase it
+    /// A suspected drop-off (graded, reason drop-off), and a flagged one
+    /// reported from within `drop_off_trust_factor` times this, count a
+    /// miss only from an image taken within this distance of them, where a
+    /// hole would have been flagged for certain: images from farther,
+    /// which flag a ditch's edge in one frame and not in the next, must
+    /// not erase them
     /// (0: from any distance; the pipeline sets it from the sensor,
     /// `speed_bound.hole_range_m`), m.
     pub hole_range_m: f64,
+    /// A drop-off flagged from within this many times `hole_range_m` is
+    /// kept like a suspected one (see there); flagged only from farther,
+    /// it is missed like any cell: far rows flag rough ground as often as
+    /// holes (0: only suspected drop-offs are kept).
+    pub drop_off_trust_factor: f64,
     /// Consecutive poses further apart than this (plus what the vehicle's
     /// top speed explains) are a jump, m.
     pub max_pose_jump_m: f64,
@@ -117,6 +124,7 @@ impl Default for LocalMapConfig {
             cross_sensor_pruning: false,
             miss_range_factor: 1.25,
             hole_range_m: 0.0,
+            drop_off_trust_factor: 2.0,
             max_pose_jump_m: 2.0,
             on_pose_jump: JumpPolicy::Reset,
             assume_seen_m: 8.0,
@@ -143,6 +151,14 @@ impl LocalMapConfig {
         }
         config::in_range("assume_seen_m", self.assume_seen_m, 0.0, 100.0)?;
         config::in_range("hole_range_m", self.hole_range_m, 0.0, 1000.0)?;
+        if self.drop_off_trust_factor != 0.0 {
+            config::in_range(
+                "drop_off_trust_factor",
+                self.drop_off_trust_factor,
+                1.0,
+                100.0,
+            )?;
+        }
         let o = &self.occupancy;
         config::in_range("occupancy.resolution_m", o.resolution_m, 0.001, 100.0)?;
         config::in_range("occupancy.occupied_thresh", o.occupied_thresh, 0.0, 1.0)?;

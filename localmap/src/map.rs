@@ -23,10 +23,15 @@
 //!   quickly as the vehicle drives on, from nearer; a vehicle backing away
 //!   from a ditch sees it again from farther, where its far wall no longer
 //!   shows (`w·H/R`), and must not erase it. A suspected drop-off (graded,
-//!   reason drop-off: a hole's edge seen from too far to show its depth)
-//!   takes a miss only from an image whose sensor stood within
-//!   `hole_range_m` of it, where a hole would have been flagged for
-//!   certain: far frames flag a ditch's edge in one frame and not the next.
+//!   reason drop-off: a hole's edge seen from too far to show its depth),
+//!   and a flagged one reported from within `drop_off_trust_factor` times
+//!   `hole_range_m`, take a miss only from an image whose sensor stood
+//!   within `hole_range_m` of them, where a hole would have been flagged
+//!   for certain: far frames flag a ditch's edge in one frame and not the
+//!   next (a vehicle turning round 10 m before a ditch it had flagged lost
+//!   it that way, and the route sent it across). A drop-off flagged only
+//!   from farther is missed like any cell: far rows flag rough ground as
+//!   often as holes.
 //! - **The loop** ([`LocalMap::update`]): with the current pose every patch is
 //!   re-expressed in the vehicle frame and those outside the window dropped.
 //! - **Seen ground**: the ground each image observed (its footprint, less
@@ -846,15 +851,19 @@ impl LocalMap {
         if !self.observe(report) {
             return 0;
         }
-        let (factor, hole_range) = (self.config.miss_range_factor, self.config.hole_range_m);
+        let (factor, hole_range, trust) = (
+            self.config.miss_range_factor,
+            self.config.hole_range_m,
+            self.config.drop_off_trust_factor,
+        );
         let s = self.config.patch_size_m;
         let mut pruned = 0;
         let mut index = 0;
         while index < self.patches.len() {
             let patch = &mut self.patches[index];
             // Seen from farther than it could be seen from, it is not
-            // missed; nor is a suspected hole seen from beyond where a
-            // hole is certain to show.
+            // missed; nor is a drop-off (suspected, or flagged from near
+            // where a hole is certain to show) seen from beyond there.
             let near_enough = || match viewpoint {
                 Some(o) => {
                     let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
@@ -862,8 +871,11 @@ impl LocalMap {
                     let afar = factor > 0.0
                         && patch.nearest_m.is_finite()
                         && distance > factor * f64::from(patch.nearest_m);
-                    let unsure =
-                        hole_range > 0.0 && patch.is_suspected_drop_off() && distance > hole_range;
+                    let unsure = hole_range > 0.0
+                        && patch.reasons.contains(Reasons::DROP_OFF)
+                        && (patch.is_suspected_drop_off()
+                            || f64::from(patch.nearest_m) <= trust * hole_range)
+                        && distance > hole_range;
                     !(afar || unsure)
                 }
                 None => true,

@@ -258,53 +258,76 @@ fn an_image_from_farther_than_a_cell_was_reported_from_does_not_drop_it() {
 }
 
 #[test]
-fn a_suspected_drop_off_is_missed_only_by_images_from_where_a_hole_would_show() {
-    // A suspected hole's edge (graded, reason drop-off) at x = 40, flagged
-    // from 18 m; a hole there is flagged for certain within 8 m.
+fn a_drop_off_is_missed_only_by_images_from_where_a_hole_would_show() {
+    // A cell at x = 40; a hole there is flagged for certain within 8 m
+    // (`hole_range_m`). Each case: the cell's reasons and cost, the
+    // distance it was reported from, then the distances of later images
+    // that do not report it and how many patches are left after each.
     let config = LocalMapConfig {
         hole_range_m: 8.0,
         misses_to_drop: 1,
         ahead_m: 40.0,
         ..LocalMapConfig::default()
     };
+    type Case = (&'static str, Reasons, f32, f64, &'static [(f64, usize)]);
+    let cases: [Case; 4] = [
+        // The rows of a far image land elsewhere on a hole's edge each
+        // frame: a suspicion stays until an image from within 8 m.
+        (
+            "suspected from 18 m",
+            Reasons::DROP_OFF,
+            0.5,
+            18.0,
+            &[(15.0, 1), (10.0, 1), (7.0, 0)],
+        ),
+        // Flagged from 9.5 m, within twice the hole range
+        // (`drop_off_trust_factor`), it stays
+        // the same way (a vehicle turning round 10 m before a ditch lost
+        // its flagged cells to images from 9-12 m that did not flag them,
+        // and the route sent it across).
+        (
+            "flagged from 9.5 m",
+            Reasons::DROP_OFF,
+            1.0,
+            9.5,
+            &[(11.5, 1), (9.0, 1), (7.5, 0)],
+        ),
+        // Flagged from farther, it is missed like any cell: far rows flag
+        // rough ground as often as holes (the ERIM at 10 m/s, its
+        // perception region 30 m deep).
+        (
+            "flagged from 18 m",
+            Reasons::DROP_OFF,
+            1.0,
+            18.0,
+            &[(15.0, 0)],
+        ),
+        (
+            "a rock from 10 m",
+            Reasons::HEIGHT_VARIATION,
+            1.0,
+            10.0,
+            &[(9.0, 0)],
+        ),
+    ];
     let fov = rectangle(10.0, 60.0, -10.0, 10.0);
-    let mut map = map_with(config.clone());
-    map.update(&pose_at(0, 21.0, 0.0, 0.0));
-    let mut suspect = report(100, "lidar64", &[], fov.clone());
-    suspect.cells.push(ObstacleCell {
-        reasons: Reasons::DROP_OFF,
-        cost: 0.5,
-        ..cell(40.0, 0.0)
-    });
-    map.insert(&seen_from(suspect.clone(), 22.0, 0.0)).unwrap();
-    assert!(map.snapshot().patches[0].is_suspected_drop_off());
-    // Images from 15 m and 10 m that do not flag it: it stays (the rows of
-    // a far image land elsewhere on a hole's edge each frame).
-    let empty = |t, from| seen_from(report(t, "lidar64", &[], fov.clone()), from, 0.0);
-    for (t, from) in [(200_000, 25.0), (300_000, 30.0)] {
-        let outcome = map.insert(&empty(t, from)).unwrap();
-        assert_eq!(
-            (outcome.pruned, map.len()),
-            (0, 1),
-            "from {} m",
-            40.0 - from
-        );
+    let empty = |t, from: f64| seen_from(report(t, "lidar64", &[], fov.clone()), 40.0 - from, 0.0);
+    for (name, reasons, cost, reported_from, looks) in cases {
+        let mut map = map_with(config.clone());
+        map.update(&pose_at(0, 21.0, 0.0, 0.0));
+        let mut first = empty(100, reported_from);
+        first.cells.push(ObstacleCell {
+            reasons,
+            cost,
+            ..cell(40.0, 0.0)
+        });
+        map.insert(&first).unwrap();
+        assert_eq!(map.len(), 1, "{name}");
+        for (k, &(from, left)) in looks.iter().enumerate() {
+            map.insert(&empty(200_000 * (k as i64 + 1), from)).unwrap();
+            assert_eq!(map.len(), left, "{name}, then not reported from {from} m");
+        }
     }
-    // From 7 m a hole would show: not flagged, it is dropped.
-    let outcome = map.insert(&empty(400_000, 33.0)).unwrap();
-    assert_eq!((outcome.pruned, map.len()), (1, 0));
-
-    // A definite cell reported from 18 m is missed from 15 m, as before.
-    let mut map = map_with(config);
-    map.update(&pose_at(0, 21.0, 0.0, 0.0));
-    map.insert(&seen_from(
-        report(100, "lidar64", &[(40.0, 0.0)], fov.clone()),
-        22.0,
-        0.0,
-    ))
-    .unwrap();
-    let outcome = map.insert(&empty(200_000, 25.0)).unwrap();
-    assert_eq!((outcome.pruned, map.len()), (1, 0));
 }
 
 #[test]
