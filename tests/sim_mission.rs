@@ -495,9 +495,10 @@ fn narrow_cul_de_sacs_are_left_by_turning_round() {
 /// it, and the vehicle came back, turned round again and was stuck after
 /// 130 s. With `localmap.miss_range_factor` those images count no miss:
 /// both sensors complete at 2.5 m/s without a collision (the defaults; as
-/// 002 §5 has it, a factor of 0, one miss to drop a cell and no suspected
-/// drop-offs, stuck: suspected ones alone, kept until seen from within the
-/// hole range, also see it through).
+/// 002 §5 has it, a factor of 0, one miss to drop a cell, no suspected
+/// drop-offs and no flagged ones kept (`drop_off_trust_factor = 0`),
+/// stuck: drop-offs kept until seen from within the hole range, suspected
+/// or flagged from near, also see it through).
 #[test]
 fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
     let world = format!(
@@ -528,6 +529,7 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
             "lidar64-as-002",
             "lidar64",
             "[localmap]\nmiss_range_factor = 0\nmisses_to_drop = 1\n\
+             drop_off_trust_factor = 0\n\
              [perception.drop_off]\nsuspect_cost = 0\n",
         ),
     ]
@@ -544,6 +546,56 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
     let (tag, report, stdout) = &reports[2];
     assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
     assert_eq!(report["localmap"]["seen_from_afar"], 0, "{tag}");
+}
+
+/// A ditch square across the way whose ends lie out of sight, at 4.5 m/s
+/// with the 64-beam lidar: it stops 8-10 m short of the ditch, where the
+/// ditch is flagged in one frame and not in the next, and turns towards
+/// the nearer end. Its images from 9-12 m, which did not happen to catch
+/// the far wall, erased the flags; the route then planned across the
+/// stretch they had left, wished for the other side's hardest arc, and
+/// the K-turn went on for 12 legs, 380°, until stuck. A drop-off flagged
+/// from within twice the hole range is now kept until an image from
+/// within the hole range misses it (`localmap.drop_off_trust_factor`):
+/// the vehicle turns once and drives round the end.
+#[test]
+fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
+    let world = format!(
+        "{}/tests/worlds/ditch_ends_out_of_sight.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let config = out_dir("ditch-ends-config");
+    let as_before = config.join("as_before.toml");
+    std::fs::write(&as_before, "[localmap]\ndrop_off_trust_factor = 0\n").unwrap();
+    let args = |extra: &[&str]| {
+        let mut args = vec![
+            "--world",
+            &world,
+            "--sensor",
+            "lidar64",
+            "--speed",
+            "4.5",
+            "--no-images",
+        ];
+        args.extend(extra);
+        args.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let runs = [
+        ("kept", args(&[])),
+        (
+            "as-before",
+            args(&["--config", as_before.to_str().unwrap()]),
+        ),
+    ];
+    let reports = missions("ditch-ends", &runs);
+    let (tag, report, stdout) = &reports[0];
+    assert_completed_without_collision(tag, report, stdout);
+    assert!(
+        report["recovery"]["turns"].as_u64().unwrap() <= 1,
+        "{tag}: one turn towards the near end:\n{stdout}"
+    );
+    let (tag, report, stdout) = &reports[1];
+    assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
 }
 
 /// 020 at 10 m/s: a 0.9 m ditch square across the way. The 64-beam lidar
