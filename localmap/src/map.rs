@@ -874,7 +874,7 @@ impl LocalMap {
                     let unsure = hole_range > 0.0
                         && patch.reasons.contains(Reasons::DROP_OFF)
                         && (patch.is_suspected_drop_off()
-                            || f64::from(patch.nearest_m) <= trust * hole_range)
+                            || (trust > 0.0 && f64::from(patch.nearest_m) <= trust * hole_range))
                         && distance > hole_range;
                     !(afar || unsure)
                 }

@@ -261,16 +261,24 @@ fn an_image_from_farther_than_a_cell_was_reported_from_does_not_drop_it() {
 fn a_drop_off_is_missed_only_by_images_from_where_a_hole_would_show() {
     // A cell at x = 40; a hole there is flagged for certain within 8 m
     // (`hole_range_m`). Each case: the cell's reasons and cost, the
-    // distance it was reported from, then the distances of later images
-    // that do not report it and how many patches are left after each.
+    // distance it was reported from, `drop_off_trust_factor`, then the
+    // distances of later images that do not report it and how many
+    // patches are left after each.
     let config = LocalMapConfig {
         hole_range_m: 8.0,
         misses_to_drop: 1,
         ahead_m: 40.0,
         ..LocalMapConfig::default()
     };
-    type Case = (&'static str, Reasons, f32, f64, &'static [(f64, usize)]);
-    let cases: [Case; 4] = [
+    type Case = (
+        &'static str,
+        Reasons,
+        f32,
+        f64,
+        f64,
+        &'static [(f64, usize)],
+    );
+    let cases: [Case; 5] = [
         // The rows of a far image land elsewhere on a hole's edge each
         // frame: a suspicion stays until an image from within 8 m.
         (
@@ -278,18 +286,20 @@ fn a_drop_off_is_missed_only_by_images_from_where_a_hole_would_show() {
             Reasons::DROP_OFF,
             0.5,
             18.0,
+            2.0,
             &[(15.0, 1), (10.0, 1), (7.0, 0)],
         ),
         // Flagged from 9.5 m, within twice the hole range
-        // (`drop_off_trust_factor`), it stays
-        // the same way (a vehicle turning round 10 m before a ditch lost
-        // its flagged cells to images from 9-12 m that did not flag them,
-        // and the route sent it across).
+        // (`drop_off_trust_factor`), it stays the same way (a vehicle
+        // turning round 10 m before a ditch lost its flagged cells to
+        // images from 9-12 m that did not flag them, and the route sent it
+        // across).
         (
             "flagged from 9.5 m",
             Reasons::DROP_OFF,
             1.0,
             9.5,
+            2.0,
             &[(11.5, 1), (9.0, 1), (7.5, 0)],
         ),
         // Flagged from farther, it is missed like any cell: far rows flag
@@ -300,20 +310,34 @@ fn a_drop_off_is_missed_only_by_images_from_where_a_hole_would_show() {
             Reasons::DROP_OFF,
             1.0,
             18.0,
+            2.0,
             &[(15.0, 0)],
+        ),
+        // With the factor 0, only suspicions are kept so.
+        (
+            "flagged from 9.5 m, factor 0",
+            Reasons::DROP_OFF,
+            1.0,
+            9.5,
+            0.0,
+            &[(11.5, 0)],
         ),
         (
             "a rock from 10 m",
             Reasons::HEIGHT_VARIATION,
             1.0,
             10.0,
+            2.0,
             &[(9.0, 0)],
         ),
     ];
     let fov = rectangle(10.0, 60.0, -10.0, 10.0);
     let empty = |t, from: f64| seen_from(report(t, "lidar64", &[], fov.clone()), 40.0 - from, 0.0);
-    for (name, reasons, cost, reported_from, looks) in cases {
-        let mut map = map_with(config.clone());
+    for (name, reasons, cost, reported_from, trust, looks) in cases {
+        let mut map = map_with(LocalMapConfig {
+            drop_off_trust_factor: trust,
+            ..config.clone()
+        });
         map.update(&pose_at(0, 21.0, 0.0, 0.0));
         let mut first = empty(100, reported_from);
         first.cells.push(ObstacleCell {
