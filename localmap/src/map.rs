@@ -55,7 +55,7 @@ use std::sync::Arc;
 
 use nalgebra::Point2;
 
-use arcnav_perception::{ObstacleReport, Reasons, ShadowIndex};
+use arcnav_perception::{ObstacleReport, Reasons, ShadowIndex, suspected_drop_off};
 use arcnav_vehicle::frames::yaw_of;
 use arcnav_vehicle::time::micros_to_seconds;
 use arcnav_vehicle::{Footprint, Isometry, Pose, Utime, VehicleConfig};
@@ -108,11 +108,10 @@ impl Patch {
         self.cost >= 1.0
     }
 
-    /// Whether this is a suspected drop-off: graded ground with the reason
-    /// drop-off (a hole seen from too far to show its depth; see
-    /// `[perception.drop_off] suspect_cost`).
+    /// Whether this is a suspected drop-off (see
+    /// [`arcnav_perception::suspected_drop_off`]).
     pub fn is_suspected_drop_off(&self) -> bool {
-        !self.is_obstacle() && self.reasons.contains(Reasons::DROP_OFF)
+        suspected_drop_off(self.cost, self.reasons)
     }
 
     /// An empty patch at world index (`i`, `j`), to fill in field by field

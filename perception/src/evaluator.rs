@@ -120,12 +120,18 @@ impl ObstacleCell {
         self.cost >= 1.0
     }
 
-    /// Whether this is a suspected drop-off: graded ground with the reason
-    /// drop-off (a hole's edge seen from too far to show its depth; see
-    /// `[perception.drop_off] suspect_cost`).
+    /// Whether this is a suspected drop-off (see [`suspected_drop_off`]).
     pub fn is_suspected_drop_off(&self) -> bool {
-        !self.is_obstacle() && self.reasons.contains(Reasons::DROP_OFF)
+        suspected_drop_off(self.cost, self.reasons)
     }
+}
+
+/// Whether ground of `cost` with `reasons` is a suspected drop-off: graded
+/// (cost below 1) with the reason drop-off, a hole's edge seen from too far
+/// to show its depth (see `[perception.drop_off] suspect_cost`). The one
+/// definition behind cells, the local map's patches and the pictures.
+pub fn suspected_drop_off(cost: f32, reasons: Reasons) -> bool {
+    cost < 1.0 && reasons.contains(Reasons::DROP_OFF)
 }
 
 /// A connected group of untraversable cells of one image.

@@ -13,7 +13,9 @@ use arcnav_vehicle::Isometry;
 use arcnav_vehicle::config::ConfigError;
 
 use crate::config::{GridShape, RegionConfig};
-use crate::evaluator::{ImageStats, ObstacleCell, ObstacleReport, Reasons, Region};
+use crate::evaluator::{
+    ImageStats, ObstacleCell, ObstacleReport, Reasons, Region, suspected_drop_off,
+};
 use crate::image::RangeImage;
 
 /// Refuses a `cell`-sized grid over `region` of more than
@@ -629,7 +631,7 @@ pub(crate) fn emit(
         });
         if !m.is_obstacle() {
             stats.graded += 1;
-            stats.suspected += u32::from(m.reasons.contains(Reasons::DROP_OFF));
+            stats.suspected += u32::from(suspected_drop_off(m.cost, m.reasons));
             continue;
         }
         stats.untraversable += 1;

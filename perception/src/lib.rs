@@ -43,7 +43,7 @@ pub use cells::CellClassifier;
 pub use config::{CellsConfig, DropOffConfig, PerceptionConfig, RegionConfig};
 pub use evaluator::{
     ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner,
-    TerrainEvaluator,
+    TerrainEvaluator, suspected_drop_off,
 };
 pub use fov::FovPolygon;
 pub use height_diff::{HeightDiff, HeightDiffConfig, HeightDiffMaps};

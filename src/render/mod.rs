@@ -6,7 +6,7 @@ use std::path::Path;
 
 use arcnav_arbiter::Decision;
 use arcnav_localmap::MapSnapshot;
-use arcnav_perception::Reasons;
+use arcnav_perception::{Reasons, suspected_drop_off};
 use arcnav_sim::{FeatureKind, World};
 use arcnav_vehicle::{ArcSet, Utime};
 
@@ -211,7 +211,7 @@ const UNSEEN: [u8; 4] = [200, 200, 205, 255];
 /// suspected drop-offs (graded, reason drop-off) pale orange, other graded
 /// ground (cost below 1) purple, the more opaque the costlier.
 fn patch_color(reasons: Reasons, cost: f32, alpha: u8) -> [u8; 4] {
-    if cost < 1.0 && reasons.contains(Reasons::DROP_OFF) {
+    if suspected_drop_off(cost, reasons) {
         [250, 190, 110, alpha]
     } else if cost < 1.0 {
         [
