@@ -89,6 +89,13 @@ fn drop_off_edge(x: f64, half_width: f64, cost: f32) -> Vec<ObstacleCell> {
 /// ahead of the vehicle origin, within `reach` to each side, and reported
 /// `cells`.
 fn snapshot_of(cells: Vec<ObstacleCell>, near: f64, reach: f64) -> MapSnapshot {
+    snapshot_after(vec![(cells, [near, reach, reach])])
+}
+
+/// The map after images, each reporting its cells and seeing the ground
+/// from `[near, far, half_width]`: `near` to `far` ahead of the vehicle
+/// origin, within `half_width` to each side.
+fn snapshot_after(images: Vec<(Vec<ObstacleCell>, [f64; 3])>) -> MapSnapshot {
     let mut map = LocalMap::new(
         &LocalMapConfig {
             assume_seen_m: 0.0,
@@ -97,22 +104,24 @@ fn snapshot_of(cells: Vec<ObstacleCell>, near: f64, reach: f64) -> MapSnapshot {
         &VehicleConfig::default(),
     );
     map.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
-    let report = ObstacleReport {
-        utime: 0,
-        sensor: "test".into(),
-        cell_size_m: 0.2,
-        cells,
-        regions: vec![],
-        fov: FovPolygon::new(vec![
-            Point2::new(near, -reach),
-            Point2::new(reach, -reach),
-            Point2::new(reach, reach),
-            Point2::new(near, reach),
-        ]),
-        shadows: Default::default(),
-        ..ObstacleReport::default()
-    };
-    map.insert(&report).unwrap();
+    for (cells, [near, far, half]) in images {
+        let report = ObstacleReport {
+            utime: 0,
+            sensor: "test".into(),
+            cell_size_m: 0.2,
+            cells,
+            regions: vec![],
+            fov: FovPolygon::new(vec![
+                Point2::new(near, -half),
+                Point2::new(far, -half),
+                Point2::new(far, half),
+                Point2::new(near, half),
+            ]),
+            shadows: Default::default(),
+            ..ObstacleReport::default()
+        };
+        map.insert(&report).unwrap();
+    }
     (*map.snapshot()).clone()
 }
 
@@ -859,18 +868,23 @@ fn route_votes_on(
     let mut behaviour = Registry::builtin().build("route", table, &setup).unwrap();
     let map = map.cloned().unwrap_or_else(|| snapshot_seeing(&[], 20.0));
     let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
-    let mission = Mission {
+    let mission = mission_to(goal);
+    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    votes
+}
+
+/// A mission of one waypoint at `goal`.
+fn mission_to(goal: [f64; 2]) -> Mission {
+    Mission {
         version: 1,
         waypoints: vec![Waypoint {
             x: goal[0],
             y: goal[1],
             radius_m: None,
         }],
-    };
-    let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
-    let mut votes = Votes::new(arcs.len());
-    behaviour.vote(&ctx, &mut votes);
-    votes
+    }
 }
 
 /// The arc with the highest vote (0 hardest right, 19 straight, 38 hardest left).
@@ -1027,4 +1041,125 @@ fn lookahead_s_aims_seconds_of_cruise_ahead_when_that_is_farther() {
         assert_eq!(slow, fixed, "{name}: 5 m at 2.5 m/s is under {metres} m");
         assert_ne!(by_seconds, fixed, "{name}: the distance matters here");
     }
+}
+
+/// The map after images that saw the ground within 20 m round the vehicle
+/// except a strip across the way from `near` to `far` ahead of its origin,
+/// 40 m long: the shadow beyond a ledge, with the floor seen beyond it.
+fn snapshot_with_shadow(near: f64, far: f64) -> MapSnapshot {
+    snapshot_after(vec![
+        (vec![], [-20.0, near, 20.0]),
+        (vec![], [far, 20.0, 20.0]),
+    ])
+}
+
+/// The route's best arc, and its counters, after one vote on `map` per
+/// entry of `commands` (the last command sent before each), for a
+/// waypoint at `goal` (vehicle at the origin heading east).
+fn route_after(
+    maps: &[&MapSnapshot],
+    commands: &[Option<f64>],
+    goal: [f64; 2],
+    table: &str,
+) -> (usize, Vec<(&'static str, u64)>) {
+    let arcs = arcs();
+    let vehicle = VehicleConfig::default();
+    let setup = setup(&arcs, &vehicle);
+    let table: toml::Table = toml::from_str(table).unwrap();
+    let mut behaviour = Registry::builtin().build("route", &table, &setup).unwrap();
+    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let mission = mission_to(goal);
+    let mut best = 0;
+    for (map, speed) in maps.iter().zip(commands) {
+        let command = speed.map(|speed_mps| SteeringCommand {
+            speed_mps,
+            ..SteeringCommand::stop(0)
+        });
+        let ctx = VoteContext {
+            last_command: command.as_ref(),
+            ..VoteContext::new(0, &pose, map, &mission, &arcs)
+        };
+        let mut votes = Votes::new(arcs.len());
+        behaviour.vote(&ctx, &mut votes);
+        best = best_arc(&votes);
+    }
+    (best, behaviour.counters())
+}
+
+fn counter(counters: &[(&'static str, u64)], name: &str) -> u64 {
+    counters
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|&(_, v)| v)
+        .unwrap_or_else(|| panic!("no counter {name}: {counters:?}"))
+}
+
+/// A vehicle held short of ground no image shows (the shadow beyond a
+/// ledge, 3 m deep, 40 m long, 3 m beyond its front) backs up. Counted
+/// passable at `unseen_cost`, the shadow kept the route's path across it,
+/// and the vehicle came back to the same edge after every backing-up
+/// (`tests/worlds/ledge.toml`: stuck). From the first backward command the
+/// unseen ground ahead, and the shadow along the edge within sight, are
+/// shut: the route turns away to go round. Once an image sees that ground
+/// it is open again; with `shut_unseen_m = 0` nothing is shut.
+#[test]
+fn the_route_shuts_unseen_ground_the_vehicle_backed_away_from_until_it_is_seen() {
+    let shadow = snapshot_with_shadow(FRONT + 3.0, FRONT + 6.0);
+    let seen = snapshot_with_shadow(FRONT + 3.0, FRONT + 3.0);
+    let goal = [60.0, 0.0];
+    let forward = Some(1.0);
+    let back = Some(-1.0);
+    let (before, _) = route_after(&[&shadow], &[forward], goal, "");
+    assert!(
+        before.abs_diff(19) <= 2,
+        "unseen ground is crossed: about straight, not {before}"
+    );
+    let (after, counters) = route_after(&[&shadow, &shadow], &[forward, back], goal, "");
+    assert!(
+        after.abs_diff(19) >= 6,
+        "backed away from it, the route goes round: {after}"
+    );
+    // Shut within sight: the strip, 3 cells deep, where it lies 2 m inside
+    // the window (±10 m to the sides): about 3 × 17 cells.
+    let shut = counter(&counters, "shut_cells");
+    assert!((30..=80).contains(&shut), "{shut} cells shut");
+    let (reseen, _) = route_after(
+        &[&shadow, &shadow, &seen],
+        &[forward, back, forward],
+        goal,
+        "",
+    );
+    assert!(
+        reseen.abs_diff(19) <= 2,
+        "seen, the ground is open again: about straight, not {reseen}"
+    );
+    let (never, counters) = route_after(
+        &[&shadow, &shadow],
+        &[forward, back],
+        goal,
+        "shut_unseen_m = 0.0",
+    );
+    assert!(
+        never.abs_diff(19) <= 2,
+        "nothing shut: straight, not {never}"
+    );
+    assert_eq!(counter(&counters, "shut_cells"), 0);
+}
+
+/// Shut ground that leaves no way to the waypoint (here the waypoint lies
+/// in it) is opened again: the way may lie through it.
+#[test]
+fn shut_ground_that_leaves_no_way_is_opened_again() {
+    let shadow = snapshot_with_shadow(FRONT + 3.0, FRONT + 6.0);
+    let goal = [FRONT + 4.5, 0.0];
+    let (best, counters) = route_after(&[&shadow, &shadow], &[Some(1.0), Some(-1.0)], goal, "");
+    assert!(counter(&counters, "shut_cells") > 0);
+    assert_eq!(
+        counter(&counters, "reopened_cells"),
+        counter(&counters, "shut_cells")
+    );
+    assert!(
+        best.abs_diff(19) <= 2,
+        "straight for the waypoint, not {best}"
+    );
 }

@@ -20,6 +20,21 @@
 //!   far to show its depth) is rough ground too, or, with `suspect_cost`,
 //!   costs that much, so that a short way round it is taken and a long one
 //!   is not.
+//! - **Unseen ground it was held short of**: when the vehicle starts to
+//!   back up (the arbiter's recovery: held standing before the ground
+//!   ahead), the cells never seen within `shut_unseen_m` of its front and
+//!   within 60° of its heading are shut, planned round like an obstacle,
+//!   until an image sees them. The shadow beyond a ledge stays unseen
+//!   from wherever the vehicle can stand (a 2 m drop seen from 10 m shows
+//!   its floor no steeper than a slope the vehicle may drive, so the edge
+//!   is not flagged; the vehicle is held 2 m short of the shadow), and
+//!   counted passable at `unseen_cost` the path would lead back to the
+//!   same edge after every backing-up. From those cells the shutting
+//!   spreads along the edge of the seen ground, through unseen cells
+//!   within `shut_along_m` and well inside the local map's window (in view
+//!   yet unseen: the rest of the shadow), so that one backing-up closes
+//!   the edge within sight, not the next metre of it. Shut cells that
+//!   leave no way to the waypoint are opened again.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
@@ -82,6 +97,14 @@ pub struct RouteConfig {
     /// taken rather than a crossing (0, the default: as costly as its
     /// graded cost says, like rough ground).
     pub suspect_cost: f64,
+    /// When the vehicle starts to back up, ground no image has seen within
+    /// this distance of its front (and 60° of its heading) is shut until
+    /// seen, m (0: never).
+    pub shut_unseen_m: f64,
+    /// ... and from there the unseen cells along the edge of the seen
+    /// ground within this distance of its front, m (at least
+    /// `shut_unseen_m`).
+    pub shut_along_m: f64,
     /// A waypoint is reached within this distance (unless it has its own), m.
     pub arrival_radius_m: f64,
     /// A waypoint behind the vehicle and within this many arrival radii is passed.
@@ -103,6 +126,8 @@ impl Default for RouteConfig {
             rough_cost: 4.0,
             rough_m: [0.04, 0.15],
             suspect_cost: 0.0,
+            shut_unseen_m: 8.0,
+            shut_along_m: 25.0,
             arrival_radius_m: 5.0,
             pass_radius_factor: 2.0,
             max_expansions: 200_000,
@@ -122,6 +147,31 @@ const SUSPECT: u8 = ROUGH + ROUGH_LEVELS;
 /// The graded level that stands for a suspected drop-off in
 /// [`Route::graded`] (above every roughness level).
 const SUSPECTED_LEVEL: u8 = u8::MAX;
+/// Ground never seen that the vehicle was held short of: planned round
+/// like an obstacle until an image sees it.
+const SHUT: u8 = SUSPECT + 1;
+
+/// Half the angle ahead of the vehicle's heading in which unseen ground is
+/// shut when it starts to back up (`shut_unseen_m`).
+const SHUT_HALF_ANGLE_DEG: f64 = 60.0;
+/// Shutting spreads only through cells at least this far inside the local
+/// map's window (at the pose the vehicle backed up from), m: ground that
+/// close to the vehicle and still unseen lay in view and out of sight (a
+/// shadow), where the edge of the ground ever seen runs along the edge of
+/// the window.
+const SHUT_IN_VIEW_M: f64 = 2.0;
+
+/// A memory cell's eight neighbours.
+const NEIGHBOURS: [(i64, i64); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
 
 /// What the route behaviour did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -133,6 +183,10 @@ pub struct RouteStats {
     pub no_path_cycles: u64,
     /// Memory cells that changed state, in all.
     pub cell_changes: u64,
+    /// Unseen cells shut when the vehicle started to back up, in all.
+    pub shut_cells: u64,
+    /// Shut cells opened again because they left no way, in all.
+    pub reopened_cells: u64,
 }
 
 /// The route behaviour.
@@ -167,6 +221,12 @@ pub struct Route {
     response: SteeringResponse,
     /// Arcs head for the path's point this far away, m.
     aim_m: f64,
+    /// From the vehicle's origin to its front bumper, m.
+    front_m: f64,
+    /// The last command seen backed up.
+    backing: bool,
+    /// Scratch: the cells a shutting spreads from.
+    flood: Vec<usize>,
 }
 
 impl Route {
@@ -192,6 +252,9 @@ impl Route {
             stats: RouteStats::default(),
             response: setup.steering_response(),
             aim_m: lookahead(config.lookahead_m, config.lookahead_s, setup.cruise_mps),
+            front_m: setup.vehicle.length_m - setup.vehicle.rear_overhang_m,
+            backing: false,
+            flood: Vec::new(),
             config,
         }
     }
@@ -214,7 +277,7 @@ impl Route {
         // state, costs, hits, graded; the planner's g, rhs, queued key, marks.
         n * (1 + 4 + 4 + std::mem::size_of::<(u32, u8)>())
             + n * (4 + 4 + 12 + 4)
-            + self.path.capacity() * 8
+            + (self.path.capacity() + self.flood.capacity()) * 8
     }
 
     /// Memory cell of world point (x, y), if inside.
@@ -302,7 +365,7 @@ impl Route {
     /// The cost of crossing cell `c` (see the module docs).
     fn cost_of(&self, c: usize) -> f32 {
         let base = match self.state[c] {
-            OBSTACLE => return f32::INFINITY,
+            OBSTACLE | SHUT => return f32::INFINITY,
             FREE => 1.0,
             UNKNOWN => self.config.unseen_cost as f32,
             SUSPECT => self.config.suspect_cost as f32,
@@ -319,7 +382,7 @@ impl Route {
                 let (nx, ny) = (x + dx, y + dy);
                 if (0..side).contains(&nx)
                     && (0..side).contains(&ny)
-                    && self.state[(ny * side + nx) as usize] == OBSTACLE
+                    && matches!(self.state[(ny * side + nx) as usize], OBSTACLE | SHUT)
                 {
                     nearest = nearest.min(dx.abs().max(dy.abs()));
                 }
@@ -532,6 +595,123 @@ impl Route {
         (severity * f64::from(ROUGH_LEVELS)).round() as u8
     }
 
+    /// Shuts the cells no image has seen within `shut_unseen_m` of the
+    /// front of a vehicle at `position` heading `yaw` and within
+    /// [`SHUT_HALF_ANGLE_DEG`] of its heading (seen from the front), and
+    /// from them the unseen cells along the edge of the seen ground (those
+    /// with a seen neighbour) within `shut_along_m` of the front: the
+    /// shadow of a ledge runs along its edge, and shut only where the
+    /// vehicle was held, the path would lead it to the next metres of the
+    /// same edge, one backing-up at a time.
+    fn shut_unseen_ahead(&mut self, position: [f64; 2], yaw: f64) {
+        let reach = self.config.shut_unseen_m;
+        if reach <= 0.0 {
+            return;
+        }
+        let (sin, cos) = yaw.sin_cos();
+        let front = [
+            position[0] + self.front_m * cos,
+            position[1] + self.front_m * sin,
+        ];
+        let cell = self.config.cell_m;
+        let min_cos = SHUT_HALF_ANGLE_DEG.to_radians().cos();
+        let before = self.stats.shut_cells;
+        let mut frontier = std::mem::take(&mut self.flood);
+        frontier.clear();
+        let (lo_i, hi_i) = (
+            ((front[0] - reach) / cell).floor() as i64,
+            ((front[0] + reach) / cell).ceil() as i64,
+        );
+        let (lo_j, hi_j) = (
+            ((front[1] - reach) / cell).floor() as i64,
+            ((front[1] + reach) / cell).ceil() as i64,
+        );
+        for j in lo_j..=hi_j {
+            for i in lo_i..=hi_i {
+                let (x, y) = ((i as f64 + 0.5) * cell, (j as f64 + 0.5) * cell);
+                let (dx, dy) = (x - front[0], y - front[1]);
+                let distance = dx.hypot(dy);
+                if distance > reach || dx * cos + dy * sin < distance * min_cos {
+                    continue;
+                }
+                if let Some(c) = self.cell_at(x, y)
+                    && self.state[c] == UNKNOWN
+                {
+                    self.shut(c);
+                    frontier.push(c);
+                }
+            }
+        }
+        // Along the edge of the seen ground, within `shut_along_m`.
+        let along = self.config.shut_along_m.max(reach);
+        let side = self.side as i64;
+        while let Some(c) = frontier.pop() {
+            let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
+            for (dx, dy) in NEIGHBOURS {
+                let (nx, ny) = (x + dx, y + dy);
+                if !((0..side).contains(&nx) && (0..side).contains(&ny)) {
+                    continue;
+                }
+                let n = (ny * side + nx) as usize;
+                let [cx, cy] = self.centre(n);
+                let (wx, wy) = (cx - position[0], cy - position[1]);
+                let (vx, vy) = (cos * wx + sin * wy, -sin * wx + cos * wy);
+                let in_view = vx <= self.window.ahead_m - SHUT_IN_VIEW_M
+                    && vx >= -self.window.behind_m + SHUT_IN_VIEW_M
+                    && vy.abs() <= self.window.half_width_m - SHUT_IN_VIEW_M;
+                if self.state[n] == UNKNOWN
+                    && in_view
+                    && (cx - front[0]).hypot(cy - front[1]) <= along
+                    && self.borders_seen(n)
+                {
+                    self.shut(n);
+                    frontier.push(n);
+                }
+            }
+        }
+        self.flood = frontier;
+        tracing::debug!(
+            cells = self.stats.shut_cells - before,
+            x = position[0],
+            y = position[1],
+            "route: backing up; unseen ground ahead shut until seen"
+        );
+    }
+
+    fn shut(&mut self, c: usize) {
+        self.set_state(c, SHUT);
+        self.stats.shut_cells += 1;
+    }
+
+    /// Whether a neighbour of cell `c` is seen ground (or an obstacle).
+    fn borders_seen(&self, c: usize) -> bool {
+        let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
+        let side = self.side as i64;
+        NEIGHBOURS.iter().any(|&(dx, dy)| {
+            let (nx, ny) = (x + dx, y + dy);
+            (0..side).contains(&nx)
+                && (0..side).contains(&ny)
+                && !matches!(self.state[(ny * side + nx) as usize], UNKNOWN | SHUT)
+        })
+    }
+
+    /// Opens every shut cell again (unseen ground at `unseen_cost`): when
+    /// they leave no way to the waypoint, the way may lie through them.
+    fn reopen(&mut self) {
+        let mut opened = 0;
+        for c in 0..self.state.len() {
+            if self.state[c] == SHUT {
+                self.set_state(c, UNKNOWN);
+                opened += 1;
+            }
+        }
+        self.stats.reopened_cells += opened;
+        tracing::debug!(
+            cells = opened,
+            "route: no way round the shut ground; opened again"
+        );
+    }
+
     /// The memory cell to plan to for waypoint (x, y): its own, or where
     /// the line from the vehicle to it leaves the memory.
     fn goal_cell(&self, from: [f64; 2], to: [f64; 2]) -> Option<usize> {
@@ -576,6 +756,11 @@ impl Behaviour for Route {
         let moved = self.recentre(here[0], here[1]);
         self.changed.clear();
         self.integrate(ctx.map);
+        let backing = ctx.last_command.is_some_and(|c| c.speed_mps < 0.0);
+        if backing && !self.backing {
+            self.shut_unseen_ahead(here, ctx.pose.yaw());
+        }
+        self.backing = backing;
         let (Some(start), Some(goal)) = (
             self.cell_at(here[0], here[1]),
             match self.goal {
@@ -593,7 +778,17 @@ impl Behaviour for Route {
             self.planner.move_start(start);
             self.planner.cells_changed(&self.costs, &self.changed);
         }
-        let found = self.planner.plan(&self.costs, self.config.max_expansions);
+        let expanded = self.planner.stats.expansions;
+        let mut found = self.planner.plan(&self.costs, self.config.max_expansions);
+        // No path within the budget's reach (not cut short by it) while
+        // shut cells stand: the way may lie through them.
+        let searched = self.planner.stats.expansions - expanded < self.config.max_expansions;
+        if !found && searched && self.state.contains(&SHUT) {
+            self.changed.clear();
+            self.reopen();
+            self.planner.cells_changed(&self.costs, &self.changed);
+            found = self.planner.plan(&self.costs, self.config.max_expansions);
+        }
         if !found {
             self.stats.no_path_cycles += 1;
             if self.has_path || self.stats.no_path_cycles == 1 {
@@ -641,6 +836,7 @@ impl Behaviour for Route {
         self.goal = None;
         self.state.fill(UNKNOWN);
         self.has_path = false;
+        self.backing = false;
     }
 
     fn progress(&self) -> Option<Progress> {
@@ -655,6 +851,8 @@ impl Behaviour for Route {
             ("expansions", planner.expansions),
             ("recentres", self.stats.recentres),
             ("no_path_cycles", self.stats.no_path_cycles),
+            ("shut_cells", self.stats.shut_cells),
+            ("reopened_cells", self.stats.reopened_cells),
         ]
     }
 }
@@ -682,6 +880,8 @@ impl Plugin for Route {
         config::in_range("clearance_cost", c.clearance_cost, 0.0, 100.0)?;
         config::in_range("rough_cost", c.rough_cost, 0.0, 100.0)?;
         config::in_range("suspect_cost", c.suspect_cost, 0.0, 1000.0)?;
+        config::in_range("shut_unseen_m", c.shut_unseen_m, 0.0, 100.0)?;
+        config::in_range("shut_along_m", c.shut_along_m, 0.0, 200.0)?;
         if c.suspect_cost > 0.0 && c.suspect_cost < 1.0 {
             // Cheaper than free ground, it would break the planner's
             // heuristic (a cell costs at least 1).
