@@ -414,7 +414,10 @@ pub fn run_mission(
     let (mut images, mut image_positions) = (0u64, Vec::new());
     let (mut distance, mut max_speed, mut drift) = (0.0f64, 0.0f64, [0.0f64; 2]);
     let (mut render_ms, mut next_progress) = (0.0f64, t0);
-    let mut best_gap = (usize::MAX, f64::INFINITY, t0);
+    // The nearest the vehicle came to its waypoint; where and when the
+    // span without progress began.
+    let mut best_gap = (usize::MAX, f64::INFINITY);
+    let mut anchor = ([f64::NAN; 2], t0);
     let mut previous = *motion.state();
     let mut ride = arcnav_sim::Ride::new(t0, config.vehicle.max_slope_deg);
     let outcome;
@@ -584,14 +587,21 @@ pub fn run_mission(
             outcome = Outcome::Completed;
             break;
         }
-        // Stuck: no nearer to the current waypoint for too long.
+        // Stuck: for too long no nearer to the current waypoint, and
+        // confined: within `stuck_radius_m` of where that span began (a
+        // vehicle driving along a ledge to its end, or backing out of a
+        // lane, gets no nearer for a while without being stuck).
         if let Some(p) = status
             && let Some(w) = world.waypoints.get(p.current)
         {
             let gap = (w.x - state.x).hypot(w.y - state.y);
+            let roamed = (state.x - anchor.0[0]).hypot(state.y - anchor.0[1]) > sim.stuck_radius_m;
             if p.current != best_gap.0 || gap < best_gap.1 - 1.0 {
-                best_gap = (p.current, gap, t);
-            } else if t - best_gap.2 > stuck_after {
+                best_gap = (p.current, gap);
+                anchor = ([state.x, state.y], t);
+            } else if roamed {
+                anchor = ([state.x, state.y], t);
+            } else if t - anchor.1 > stuck_after {
                 outcome = Outcome::Stuck;
                 break;
             }

@@ -32,8 +32,12 @@ pub struct SimConfig {
     pub on_collision: CollisionPolicy,
     /// The mission fails when it takes longer, s.
     pub time_limit_s: f64,
-    /// The mission fails when the vehicle gets no nearer to its waypoint for this long, s.
+    /// The mission fails when the vehicle gets no nearer to its waypoint
+    /// for this long while staying within `stuck_radius_m` of where it was
+    /// when that began, s.
     pub stuck_after_s: f64,
+    /// See `stuck_after_s`, m.
+    pub stuck_radius_m: f64,
     /// Seed of the sensor and pose noise.
     pub seed: u64,
     /// Threads rendering range images and building terrain tiles (0: all cores).
@@ -62,6 +66,7 @@ impl Default for SimConfig {
             on_collision: CollisionPolicy::Stop,
             time_limit_s: 1800.0,
             stuck_after_s: 90.0,
+            stuck_radius_m: 15.0,
             seed: 1,
             threads: 0,
             render_margin_m: 5.0,
@@ -81,6 +86,7 @@ impl SimConfig {
         config::non_negative("drift_per_m", self.drift_per_m)?;
         config::positive("time_limit_s", self.time_limit_s)?;
         config::positive("stuck_after_s", self.stuck_after_s)?;
+        config::positive("stuck_radius_m", self.stuck_radius_m)?;
         config::non_negative("render_margin_m", self.render_margin_m)?;
         Ok(())
     }
