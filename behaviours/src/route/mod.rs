@@ -30,11 +30,12 @@
 //!   is not flagged; the vehicle is held 2 m short of the shadow), and
 //!   counted passable at `unseen_cost` the path would lead back to the
 //!   same edge after every backing-up. From those cells the shutting
-//!   spreads along the edge of the seen ground, through unseen cells
-//!   within `shut_along_m` and well inside the local map's window (in view
-//!   yet unseen: the rest of the shadow), so that one backing-up closes
-//!   the edge within sight, not the next metre of it. Shut cells that
-//!   leave no way to the waypoint are opened again.
+//!   spreads through unseen cells with seen ground on both sides (a
+//!   shadow lies between the edge and the ground it falls to), within
+//!   `shut_along_m` and well inside the local map's window (in view yet
+//!   unseen), so that one backing-up closes the edge within sight, not the
+//!   next metre of it. Shut cells that leave no way to the waypoint are
+//!   opened again.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
@@ -160,6 +161,9 @@ const SHUT_HALF_ANGLE_DEG: f64 = 60.0;
 /// shadow), where the edge of the ground ever seen runs along the edge of
 /// the window.
 const SHUT_IN_VIEW_M: f64 = 2.0;
+/// Shutting spreads through unseen cells with seen ground this many cells
+/// away on both sides (see `Route::between_seen`).
+const SHADOW_CELLS: i64 = 8;
 
 /// A memory cell's eight neighbours.
 const NEIGHBOURS: [(i64, i64); 8] = [
@@ -598,11 +602,12 @@ impl Route {
     /// Shuts the cells no image has seen within `shut_unseen_m` of the
     /// front of a vehicle at `position` heading `yaw` and within
     /// [`SHUT_HALF_ANGLE_DEG`] of its heading (seen from the front), and
-    /// from them the unseen cells along the edge of the seen ground (those
-    /// with a seen neighbour) within `shut_along_m` of the front: the
-    /// shadow of a ledge runs along its edge, and shut only where the
-    /// vehicle was held, the path would lead it to the next metres of the
-    /// same edge, one backing-up at a time.
+    /// from them the unseen cells between seen ground
+    /// ([`Route::between_seen`]) within `shut_along_m` of the front and
+    /// [`SHUT_IN_VIEW_M`] inside the window: the shadow of a ledge runs
+    /// along its edge, and shut only where the vehicle was held, the path
+    /// would lead it to the next metres of the same edge, one backing-up
+    /// at a time.
     fn shut_unseen_ahead(&mut self, position: [f64; 2], yaw: f64) {
         let reach = self.config.shut_unseen_m;
         if reach <= 0.0 {
@@ -662,7 +667,7 @@ impl Route {
                 if self.state[n] == UNKNOWN
                     && in_view
                     && (cx - front[0]).hypot(cy - front[1]) <= along
-                    && self.borders_seen(n)
+                    && self.between_seen(n)
                 {
                     self.shut(n);
                     frontier.push(n);
@@ -683,16 +688,25 @@ impl Route {
         self.stats.shut_cells += 1;
     }
 
-    /// Whether a neighbour of cell `c` is seen ground (or an obstacle).
-    fn borders_seen(&self, c: usize) -> bool {
+    /// Whether cell `c` lies between seen ground (or obstacles): seen
+    /// cells within [`SHADOW_CELLS`] on both sides of it along a row, a
+    /// column or a diagonal. A shadow beyond an edge has the near ground on
+    /// one side and the ground it falls to on the other; ground that was
+    /// never in view (round the end of a ledge) has seen ground on one side.
+    fn between_seen(&self, c: usize) -> bool {
         let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
         let side = self.side as i64;
-        NEIGHBOURS.iter().any(|&(dx, dy)| {
-            let (nx, ny) = (x + dx, y + dy);
-            (0..side).contains(&nx)
-                && (0..side).contains(&ny)
-                && !matches!(self.state[(ny * side + nx) as usize], UNKNOWN | SHUT)
-        })
+        let seen_towards = |dx: i64, dy: i64| {
+            (1..=SHADOW_CELLS).any(|k| {
+                let (nx, ny) = (x + k * dx, y + k * dy);
+                (0..side).contains(&nx)
+                    && (0..side).contains(&ny)
+                    && !matches!(self.state[(ny * side + nx) as usize], UNKNOWN | SHUT)
+            })
+        };
+        [(1, 0), (0, 1), (1, 1), (1, -1)]
+            .into_iter()
+            .any(|(dx, dy)| seen_towards(dx, dy) && seen_towards(-dx, -dy))
     }
 
     /// Opens every shut cell again (unseen ground at `unseen_cost`): when
