@@ -410,14 +410,10 @@ pub fn run_mission(
     let mut next_slices: Vec<usize> = vec![0; sensors.len()];
     let mut previous_stance: Option<(Utime, Isometry)> = None;
     let time_limit = t0 + seconds_to_micros(sim.time_limit_s);
-    let stuck_after = seconds_to_micros(sim.stuck_after_s);
     let (mut images, mut image_positions) = (0u64, Vec::new());
     let (mut distance, mut max_speed, mut drift) = (0.0f64, 0.0f64, [0.0f64; 2]);
     let (mut render_ms, mut next_progress) = (0.0f64, t0);
-    // The nearest the vehicle came to its waypoint; where and when the
-    // span without progress began.
-    let mut best_gap = (usize::MAX, f64::INFINITY);
-    let mut anchor = ([f64::NAN; 2], t0);
+    let mut stuck = StuckWatch::new(sim.stuck_after_s, sim.stuck_radius_m);
     let mut previous = *motion.state();
     let mut ride = arcnav_sim::Ride::new(t0, config.vehicle.max_slope_deg);
     let outcome;
@@ -587,24 +583,12 @@ pub fn run_mission(
             outcome = Outcome::Completed;
             break;
         }
-        // Stuck: for too long no nearer to the current waypoint, and
-        // confined: within `stuck_radius_m` of where that span began (a
-        // vehicle driving along a ledge to its end, or backing out of a
-        // lane, gets no nearer for a while without being stuck).
         if let Some(p) = status
             && let Some(w) = world.waypoints.get(p.current)
+            && stuck.is_stuck(p.current, [w.x, w.y], [state.x, state.y], t)
         {
-            let gap = (w.x - state.x).hypot(w.y - state.y);
-            let roamed = (state.x - anchor.0[0]).hypot(state.y - anchor.0[1]) > sim.stuck_radius_m;
-            if p.current != best_gap.0 || gap < best_gap.1 - 1.0 {
-                best_gap = (p.current, gap);
-                anchor = ([state.x, state.y], t);
-            } else if roamed {
-                anchor = ([state.x, state.y], t);
-            } else if t - anchor.1 > stuck_after {
-                outcome = Outcome::Stuck;
-                break;
-            }
+            outcome = Outcome::Stuck;
+            break;
         }
         if t >= time_limit {
             outcome = Outcome::Timeout;
@@ -718,4 +702,80 @@ pub fn run_mission(
         patch_size_m: config.localmap.patch_size_m,
         snapshots: sink.snapshots,
     })
+}
+
+/// When a simulated mission is stuck: for `after` no nearer to its
+/// current waypoint (by a metre) while staying within `radius` of where
+/// that span began. A vehicle that drives along a ledge to its end, or
+/// backs out of a lane, gets no nearer for a while and is not stuck.
+#[derive(Debug, Clone)]
+struct StuckWatch {
+    after: Utime,
+    radius: f64,
+    /// The waypoint sought and the nearest the vehicle came to it.
+    best: (usize, f64),
+    /// Where and when the span without progress began.
+    anchor: ([f64; 2], Utime),
+}
+
+impl StuckWatch {
+    fn new(after_s: f64, radius_m: f64) -> Self {
+        Self {
+            after: seconds_to_micros(after_s),
+            radius: radius_m,
+            best: (usize::MAX, f64::INFINITY),
+            anchor: ([f64::NAN; 2], 0),
+        }
+    }
+
+    /// Takes the vehicle at `position` at time `t`, seeking waypoint
+    /// `index` at `waypoint`; true when it is stuck.
+    fn is_stuck(&mut self, index: usize, waypoint: [f64; 2], position: [f64; 2], t: Utime) -> bool {
+        let gap = (waypoint[0] - position[0]).hypot(waypoint[1] - position[1]);
+        let (from, since) = self.anchor;
+        let roamed = (position[0] - from[0]).hypot(position[1] - from[1]) > self.radius;
+        if index != self.best.0 || gap < self.best.1 - 1.0 {
+            self.best = (index, gap);
+            self.anchor = (position, t);
+        } else if roamed {
+            self.anchor = (position, t);
+        } else if t - since > self.after {
+            return true;
+        }
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StuckWatch;
+
+    #[test]
+    fn a_mission_is_stuck_only_when_it_neither_gains_on_its_waypoint_nor_roams() {
+        let s = 1_000_000;
+        let goal = [100.0, 0.0];
+        // Standing 100 m from its waypoint: stuck after 90 s.
+        let mut watch = StuckWatch::new(90.0, 15.0);
+        assert!(!watch.is_stuck(0, goal, [0.0, 0.0], 0));
+        assert!(!watch.is_stuck(0, goal, [0.5, 0.0], 90 * s));
+        assert!(watch.is_stuck(0, goal, [0.0, 0.5], 91 * s));
+        // Driving along a ledge 20 m to one side and back, a minute each
+        // way: never nearer, never stuck while it roams; stuck 90 s after
+        // it stops roaming.
+        let mut watch = StuckWatch::new(90.0, 15.0);
+        assert!(!watch.is_stuck(0, goal, [0.0, 0.0], 0));
+        for k in 1..=20 {
+            let side = if k % 2 == 1 { 20.0 } else { -20.0 };
+            assert!(!watch.is_stuck(0, goal, [0.0, side], k * 60 * s), "{k}");
+        }
+        assert!(!watch.is_stuck(0, goal, [0.0, -20.0], 1290 * s));
+        assert!(watch.is_stuck(0, goal, [0.0, -20.0], 1291 * s));
+        // Gaining a metre on the waypoint, or a new waypoint, starts afresh.
+        let mut watch = StuckWatch::new(90.0, 15.0);
+        assert!(!watch.is_stuck(0, goal, [0.0, 0.0], 0));
+        assert!(!watch.is_stuck(0, goal, [2.0, 0.0], 80 * s));
+        assert!(!watch.is_stuck(0, goal, [2.0, 0.0], 160 * s));
+        assert!(!watch.is_stuck(1, goal, [2.0, 0.0], 250 * s));
+        assert!(watch.is_stuck(1, goal, [2.0, 0.0], 341 * s));
+    }
 }
