@@ -125,7 +125,7 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
         (f64::INFINITY, ""),
         |best, c| if c.0 < best.0 { c } else { best },
     );
-    let front = v.length_m - v.rear_overhang_m;
+    let front = v.footprint().x_max;
     let sensor_x = sensor.vehicle_from_sensor.translation.vector.x;
     let free_within = |range: f64| (range - (front - sensor_x).max(0.0)).max(0.0);
     let acquisition = if config.sim.slice_lines > 0 {

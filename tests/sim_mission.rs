@@ -58,6 +58,29 @@ fn missions<'a>(prefix: &str, runs: &'a [(&'a str, Vec<String>)]) -> Vec<(&'a st
     })
 }
 
+/// Two missions in parallel with `args`: with the defaults ("now") and
+/// with `as_before` (TOML merged over them: the setting that turns the
+/// change off). Their reports, in that order.
+fn now_and_as_before(prefix: &str, args: &[&str], as_before: &str) -> Vec<(String, Value, String)> {
+    let config = out_dir(&format!("{prefix}-config"));
+    let path = config.join("as_before.toml");
+    std::fs::write(&path, as_before).unwrap();
+    let with = |extra: &[&str]| {
+        args.iter()
+            .chain(extra)
+            .map(|a| a.to_string())
+            .collect::<Vec<_>>()
+    };
+    let runs = [
+        ("now", with(&[])),
+        ("as-before", with(&["--config", path.to_str().unwrap()])),
+    ];
+    missions(prefix, &runs)
+        .into_iter()
+        .map(|(tag, report, stdout)| (tag.to_owned(), report, stdout))
+        .collect()
+}
+
 fn run_short_course(tag: &str) -> ScratchDir {
     let out = out_dir(tag);
     let (code, stdout, stderr) = arcnav(&[
@@ -561,11 +584,9 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
         "{}/tests/worlds/ditch_ends_out_of_sight.toml",
         env!("CARGO_MANIFEST_DIR")
     );
-    let config = out_dir("ditch-ends-config");
-    let as_before = config.join("as_before.toml");
-    std::fs::write(&as_before, "[localmap]\ndrop_off_trust_factor = 0\n").unwrap();
-    let args = |extra: &[&str]| {
-        let mut args = vec![
+    let reports = now_and_as_before(
+        "ditch-ends",
+        &[
             "--world",
             &world,
             "--sensor",
@@ -573,18 +594,9 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
             "--speed",
             "4.5",
             "--no-images",
-        ];
-        args.extend(extra);
-        args.into_iter().map(String::from).collect::<Vec<_>>()
-    };
-    let runs = [
-        ("kept", args(&[])),
-        (
-            "as-before",
-            args(&["--config", as_before.to_str().unwrap()]),
-        ),
-    ];
-    let reports = missions("ditch-ends", &runs);
+        ],
+        "[localmap]\ndrop_off_trust_factor = 0\n",
+    );
     let (tag, report, stdout) = &reports[0];
     assert_completed_without_collision(tag, report, stdout);
     assert!(
@@ -608,22 +620,11 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
 #[test]
 fn held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge() {
     let world = format!("{}/tests/worlds/ledge.toml", env!("CARGO_MANIFEST_DIR"));
-    let config = out_dir("ledge-shut-config");
-    let as_before = config.join("as_before.toml");
-    std::fs::write(&as_before, "[behaviours.route]\nshut_unseen_m = 0.0\n").unwrap();
-    let args = |extra: &[&str]| {
-        let mut args = vec!["--world", &world, "--sensor", "lidar64", "--no-images"];
-        args.extend(extra);
-        args.into_iter().map(String::from).collect::<Vec<_>>()
-    };
-    let runs = [
-        ("shut", args(&[])),
-        (
-            "as-before",
-            args(&["--config", as_before.to_str().unwrap()]),
-        ),
-    ];
-    let reports = missions("ledge-shut", &runs);
+    let reports = now_and_as_before(
+        "ledge-shut",
+        &["--world", &world, "--sensor", "lidar64", "--no-images"],
+        "[behaviours.route]\nshut_unseen_m = 0.0\n",
+    );
     let (tag, report, stdout) = &reports[0];
     assert_completed_without_collision(tag, report, stdout);
     assert!(

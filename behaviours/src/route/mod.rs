@@ -102,8 +102,8 @@ pub struct RouteConfig {
     /// this distance of its front (and 60° of its heading) is shut until
     /// seen, m (0: never).
     pub shut_unseen_m: f64,
-    /// ... and from there the unseen cells along the edge of the seen
-    /// ground within this distance of its front, m (at least
+    /// ... and from there the unseen cells with seen ground on both sides
+    /// (a shadow) within this distance of its front, m (at least
     /// `shut_unseen_m`).
     pub shut_along_m: f64,
     /// A waypoint is reached within this distance (unless it has its own), m.
@@ -256,7 +256,7 @@ impl Route {
             stats: RouteStats::default(),
             response: setup.steering_response(),
             aim_m: lookahead(config.lookahead_m, config.lookahead_s, setup.cruise_mps),
-            front_m: setup.vehicle.length_m - setup.vehicle.rear_overhang_m,
+            front_m: setup.vehicle.footprint().x_max,
             backing: false,
             flood: Vec::new(),
             config,
@@ -295,10 +295,31 @@ impl Route {
         ((0..side).contains(&i) && (0..side).contains(&j)).then(|| (j * side + i) as usize)
     }
 
+    /// Memory cell (`x`, `y`) by its column and row, if inside.
+    fn index(&self, x: i64, y: i64) -> Option<usize> {
+        let side = self.side as i64;
+        ((0..side).contains(&x) && (0..side).contains(&y)).then(|| (y * side + x) as usize)
+    }
+
+    /// Column and row of memory cell `c`.
+    fn column_row(&self, c: usize) -> (i64, i64) {
+        ((c % self.side) as i64, (c / self.side) as i64)
+    }
+
+    /// Whether vehicle-frame point (`vx`, `vy`) lies at least `margin`
+    /// inside the local map's window.
+    fn in_window(&self, vx: f64, vy: f64, margin: f64) -> bool {
+        let w = &self.window;
+        vx >= -w.behind_m + margin
+            && vx <= w.ahead_m - margin
+            && vy.abs() <= w.half_width_m - margin
+    }
+
     /// World centre of memory cell `c`.
     fn centre(&self, c: usize) -> [f64; 2] {
         let (i0, j0) = self.origin.unwrap_or((0, 0));
-        let (i, j) = ((c % self.side) as i64 + i0, (c / self.side) as i64 + j0);
+        let (i, j) = self.column_row(c);
+        let (i, j) = (i + i0, j + j0);
         [
             (i as f64 + 0.5) * self.config.cell_m,
             (j as f64 + 0.5) * self.config.cell_m,
@@ -378,15 +399,13 @@ impl Route {
                 (1.0 + self.config.rough_cost * level) as f32
             }
         };
-        let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
-        let side = self.side as i64;
+        let (x, y) = self.column_row(c);
         let mut nearest = 3;
         for dy in -2..=2i64 {
             for dx in -2..=2i64 {
-                let (nx, ny) = (x + dx, y + dy);
-                if (0..side).contains(&nx)
-                    && (0..side).contains(&ny)
-                    && matches!(self.state[(ny * side + nx) as usize], OBSTACLE | SHUT)
+                if self
+                    .index(x + dx, y + dy)
+                    .is_some_and(|n| matches!(self.state[n], OBSTACLE | SHUT))
                 {
                     nearest = nearest.min(dx.abs().max(dy.abs()));
                 }
@@ -444,13 +463,10 @@ impl Route {
         }
         self.state[c] = state;
         self.stats.cell_changes += 1;
-        let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
-        let side = self.side as i64;
+        let (x, y) = self.column_row(c);
         for dy in -2..=2i64 {
             for dx in -2..=2i64 {
-                let (nx, ny) = (x + dx, y + dy);
-                if (0..side).contains(&nx) && (0..side).contains(&ny) {
-                    let n = (ny * side + nx) as usize;
+                if let Some(n) = self.index(x + dx, y + dy) {
                     let cost = self.cost_of(n);
                     if cost != self.costs[n] {
                         self.costs[n] = cost;
@@ -501,13 +517,7 @@ impl Route {
         let cell = self.config.cell_m;
         // A cell follows the map only when wholly inside its window.
         let margin = cell * std::f64::consts::FRAC_1_SQRT_2;
-        let w = self.window.clone();
-        let inside = |vx: f64, vy: f64| {
-            vx >= -w.behind_m + margin
-                && vx <= w.ahead_m - margin
-                && vy.abs() <= w.half_width_m - margin
-        };
-        let reach = w.radius_m();
+        let reach = self.window.radius_m();
         let (lo_x, hi_x) = (
             ((t.x - reach) / cell).floor(),
             ((t.x + reach) / cell).ceil(),
@@ -525,7 +535,7 @@ impl Route {
                 let hit = self.hits[c] == self.stamp;
                 let (dx, dy) = (x - t.x, y - t.y);
                 let (vx, vy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
-                if inside(vx, vy) {
+                if self.in_window(vx, vy, margin) {
                     let seen = map
                         .seen
                         .contains((x / s).floor() as i64, (y / s).floor() as i64);
@@ -647,25 +657,19 @@ impl Route {
                 }
             }
         }
-        // Along the edge of the seen ground, within `shut_along_m`.
+        // Through the shadow, within `shut_along_m`.
         let along = self.config.shut_along_m.max(reach);
-        let side = self.side as i64;
         while let Some(c) = frontier.pop() {
-            let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
+            let (x, y) = self.column_row(c);
             for (dx, dy) in NEIGHBOURS {
-                let (nx, ny) = (x + dx, y + dy);
-                if !((0..side).contains(&nx) && (0..side).contains(&ny)) {
+                let Some(n) = self.index(x + dx, y + dy) else {
                     continue;
-                }
-                let n = (ny * side + nx) as usize;
+                };
                 let [cx, cy] = self.centre(n);
                 let (wx, wy) = (cx - position[0], cy - position[1]);
                 let (vx, vy) = (cos * wx + sin * wy, -sin * wx + cos * wy);
-                let in_view = vx <= self.window.ahead_m - SHUT_IN_VIEW_M
-                    && vx >= -self.window.behind_m + SHUT_IN_VIEW_M
-                    && vy.abs() <= self.window.half_width_m - SHUT_IN_VIEW_M;
                 if self.state[n] == UNKNOWN
-                    && in_view
+                    && self.in_window(vx, vy, SHUT_IN_VIEW_M)
                     && (cx - front[0]).hypot(cy - front[1]) <= along
                     && self.between_seen(n)
                 {
@@ -694,14 +698,11 @@ impl Route {
     /// one side and the ground it falls to on the other; ground that was
     /// never in view (round the end of a ledge) has seen ground on one side.
     fn between_seen(&self, c: usize) -> bool {
-        let (x, y) = ((c % self.side) as i64, (c / self.side) as i64);
-        let side = self.side as i64;
+        let (x, y) = self.column_row(c);
         let seen_towards = |dx: i64, dy: i64| {
             (1..=SHADOW_CELLS).any(|k| {
-                let (nx, ny) = (x + k * dx, y + k * dy);
-                (0..side).contains(&nx)
-                    && (0..side).contains(&ny)
-                    && !matches!(self.state[(ny * side + nx) as usize], UNKNOWN | SHUT)
+                self.index(x + k * dx, y + k * dy)
+                    .is_some_and(|n| !matches!(self.state[n], UNKNOWN | SHUT))
             })
         };
         [(1, 0), (0, 1), (1, 1), (1, -1)]
