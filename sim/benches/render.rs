@@ -8,7 +8,8 @@
 //! ~31 ms measured in missions (≤ 3.2 ms), so lidar missions run ≥ 20× real
 //! time; 6.4 ms on two threads on 2026-11-26. See docs/simulator.md for what
 //! has been measured and tried.
-//! Run with `cargo bench -p arcnav-sim --bench render`.
+//! Run with `cargo bench -p arcnav-sim --bench render`, or `… -- lidar64`
+//! for one sensor.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -61,11 +62,19 @@ fn main() {
         "{:<10} {:>9} {:>7} {:>11} {:>11} {:>14}",
         "sensor", "poses", "threads", "median ms", "p90 ms", "10 Hz × real"
     );
+    // `cargo bench --bench render -- lidar64` times only the sensors named.
+    let only: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
     for sensor in [
         SensorModel::lidar64(),
         SensorModel::lidar128(),
         SensorModel::erim(),
-    ] {
+    ]
+    .into_iter()
+    .filter(|s| only.is_empty() || only.contains(&s.id))
+    {
         for tilted in [false, true] {
             let poses = poses(&world, tilted);
             let views: Vec<_> = poses

@@ -34,6 +34,8 @@ const HEADINGS: usize = 2048;
 const BIN_M: f64 = 0.8;
 /// Distance bins per coarse bin (the first pass over a ray's bins).
 const GROUP: usize = 8;
+/// Rays aimed together before they are cast.
+const AIM_BATCH: usize = 64;
 /// Widening of every bound, against rounding: pseudo-angle, metres.
 const ANGLE_MARGIN: f64 = 1e-7;
 const DISTANCE_MARGIN: f64 = 1e-6;
@@ -315,18 +317,23 @@ impl PolarView<'_> {
     /// ray dips to. `hint` is where a neighbouring ray's search started (0:
     /// none); it is set to where this one's started.
     fn cast_from(&self, d: &Vector3<f64>, max_range: f64, hint: &mut usize) -> Option<f64> {
-        let origin = &self.origin;
-        let across = (d.x * d.x + d.y * d.y).sqrt();
-        if across < 1e-9 {
-            return self.view.cast(origin, d, max_range);
+        match Aimed::new(d) {
+            Some(ray) => self.cast_aimed(&ray, max_range, hint),
+            None => self.view.cast(&self.origin, d, max_range),
         }
-        let heading = heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize;
-        // Rise per horizontal metre; the lowest height over [near, far].
-        let rise = d.z / across;
+    }
+
+    /// [`cast_from`](Self::cast_from) for a ray already aimed.
+    fn cast_aimed(&self, ray: &Aimed, max_range: f64, hint: &mut usize) -> Option<f64> {
+        let origin = &self.origin;
+        let d = &ray.d;
+        let heading = ray.heading;
+        let rise = ray.rise;
+        // The lowest height over [near, far].
         let lowest = |near: f64, far: f64| {
             origin.z + rise * if rise < 0.0 { far } else { near } - HEIGHT_MARGIN
         };
-        let reach = max_range * across;
+        let reach = max_range / ray.per_across;
         let last = ((reach / BIN_M) as usize).min(self.bins - 1);
         // Start where the neighbour's search did when every bin before is
         // clear for this ray too; else at the sensor.
@@ -356,24 +363,57 @@ impl PolarView<'_> {
                 continue;
             }
             first.get_or_insert(bin - 1);
-            let mut t0 = near / across;
-            let mut t1 = ((near + BIN_M) / across).min(max_range);
+            let mut t0 = near * ray.per_across;
+            let mut t1 = ((near + BIN_M) * ray.per_across).min(max_range);
             // Only where the ray is down at the bin's highest cell.
             if d.z < 0.0 {
-                t0 = t0.max((top - origin.z) / d.z - HEIGHT_MARGIN);
+                t0 = t0.max((top - origin.z) * ray.inverse.z - HEIGHT_MARGIN);
             } else if d.z > 0.0 {
-                t1 = t1.min((top - origin.z) / d.z + HEIGHT_MARGIN);
+                t1 = t1.min((top - origin.z) * ray.inverse.z + HEIGHT_MARGIN);
             }
             if t0 > t1 {
                 continue;
             }
-            if let Some(t) = self.view.cast_cells(origin, d, t0, t1) {
+            if let Some(t) = self.view.cast_cells(origin, d, &ray.inverse, t0, t1) {
                 *hint = first.unwrap_or(0);
                 return Some(t);
             }
         }
         *hint = first.unwrap_or(0);
         None
+    }
+}
+
+/// A ray from the table's origin, aimed: its heading bin, its rise per
+/// horizontal metre and the reciprocals its search and walk multiply by.
+/// A row's rays are aimed in one pass before any is cast, so their
+/// divisions and square roots overlap rather than each ray waiting on its
+/// own.
+#[derive(Debug, Clone, Copy)]
+struct Aimed {
+    d: Vector3<f64>,
+    /// 1 / d per axis (infinite along an axis it does not move on).
+    inverse: Vector3<f64>,
+    /// Along the ray per horizontal metre.
+    per_across: f64,
+    rise: f64,
+    heading: usize,
+}
+
+impl Aimed {
+    /// None for a ray (nearly) straight up or down: it has no heading.
+    fn new(d: &Vector3<f64>) -> Option<Self> {
+        let across = (d.x * d.x + d.y * d.y).sqrt();
+        (across >= 1e-9).then(|| {
+            let per_across = 1.0 / across;
+            Self {
+                d: *d,
+                inverse: Vector3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z),
+                per_across,
+                rise: d.z * per_across,
+                heading: heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize,
+            }
+        })
     }
 }
 
@@ -395,11 +435,20 @@ impl RayCast for PolarView<'_> {
         if !self.binned(origin, max_range) {
             return self.view.cast_each(origin, directions, max_range, out);
         }
+        // Aimed a batch at a time, on the stack.
+        let mut aimed = [None; AIM_BATCH];
         let mut hint = 0;
-        for (d, value) in directions.iter().zip(out) {
-            *value = self
-                .cast_from(d, max_range, &mut hint)
-                .map_or(f32::NAN, |t| t as f32);
+        for (directions, out) in directions.chunks(AIM_BATCH).zip(out.chunks_mut(AIM_BATCH)) {
+            for (ray, d) in aimed.iter_mut().zip(directions) {
+                *ray = Aimed::new(d);
+            }
+            for ((ray, d), value) in aimed.iter().zip(directions).zip(out) {
+                let hit = match ray {
+                    Some(ray) => self.cast_aimed(ray, max_range, &mut hint),
+                    None => self.view.cast(origin, d, max_range),
+                };
+                *value = hit.map_or(f32::NAN, |t| t as f32);
+            }
         }
     }
 }

@@ -18,6 +18,8 @@ use crate::world::World;
 
 /// Cell size, m.
 pub const CELL_M: f64 = 0.1;
+/// Cells per metre.
+const PER_CELL: f64 = 10.0;
 /// Cells per block side (blocks carry the max height of their cells).
 const BLOCK: usize = 8;
 /// Cells per super-block side (8 × 8 blocks).
@@ -291,18 +293,82 @@ impl TileView {
 
     /// The first cell along the ray between `t0` and `t1` that the ray dips
     /// to (at or below its top), walked cell by cell: where it meets its
-    /// face or its top.
+    /// face or its top. The cells `walk` visits, with the tile found once
+    /// and again only where the walk leaves it (the hot loop of a frame
+    /// cast through [`crate::polar::PolarView`]).
     pub(crate) fn cast_cells(
         &self,
         origin: &Point3<f64>,
         d: &Vector3<f64>,
+        inverse: &Vector3<f64>,
         t0: f64,
         t1: f64,
     ) -> Option<f64> {
-        TileView::walk(origin, d, t0, t1, CELL_M, |cx, cy, c0, c1| {
-            let h = self.cell_height(cx, cy)?;
-            dip(origin.z + d.z * c0, origin.z + d.z * c1, h, c0, c1)
-        })
+        let start = origin + d * t0;
+        let (mut cx, mut cy) = (floor(start.x * PER_CELL), floor(start.y * PER_CELL));
+        let (sx, sy) = (
+            if d.x > 0.0 { 1 } else { -1 },
+            if d.y > 0.0 { 1 } else { -1 },
+        );
+        let boundary = |c: i64, s: i64| (if s > 0 { c + 1 } else { c }) as f64 * CELL_M;
+        let (mut tx, dx) = if d.x.abs() < 1e-12 {
+            (f64::INFINITY, f64::INFINITY)
+        } else {
+            (
+                (boundary(cx, sx) - origin.x) * inverse.x,
+                CELL_M * inverse.x.abs(),
+            )
+        };
+        let (mut ty, dy) = if d.y.abs() < 1e-12 {
+            (f64::INFINITY, f64::INFINITY)
+        } else {
+            (
+                (boundary(cy, sy) - origin.y) * inverse.y,
+                CELL_M * inverse.y.abs(),
+            )
+        };
+        let per_tile = TILE as i64;
+        let tile_of = |cx: i64, cy: i64| {
+            let key = (cx.div_euclid(per_tile), cy.div_euclid(per_tile));
+            (key, self.tile(key.0, key.1).map(|t| t.heights.as_slice()))
+        };
+        let (mut key, mut heights) = tile_of(cx, cy);
+        let mut t_in = t0;
+        loop {
+            let t_out = tx.min(ty).min(t1);
+            if (cx.div_euclid(per_tile), cy.div_euclid(per_tile)) != key {
+                (key, heights) = tile_of(cx, cy);
+            }
+            if let Some(heights) = heights {
+                let (i, j) = (
+                    cx.rem_euclid(per_tile) as usize,
+                    cy.rem_euclid(per_tile) as usize,
+                );
+                let h = f64::from(heights[cell_index(i, j)]);
+                let hit = dip(
+                    origin.z + d.z * t_in,
+                    origin.z + d.z * t_out,
+                    h,
+                    t_in,
+                    t_out,
+                );
+                if hit.is_some() {
+                    return hit;
+                }
+            }
+            if t_out >= t1 {
+                return None;
+            }
+            if tx < ty {
+                cx += sx;
+                t_in = tx;
+                tx += dx;
+            } else {
+                cy += sy;
+                t_in = ty;
+                ty += dy;
+            }
+        }
     }
 
     /// Walks the cells of size `size` along the ray from `t0` to `t1`,
