@@ -329,12 +329,18 @@ impl PolarView<'_> {
         let d = &ray.d;
         let heading = ray.heading;
         let rise = ray.rise;
-        // The lowest height over [near, far].
-        let lowest = |near: f64, far: f64| {
-            origin.z + rise * if rise < 0.0 { far } else { near } - HEIGHT_MARGIN
+        // The ray's lowest height over a bin (a group of bins) starting at
+        // `near`: at its near edge when it rises, at its far edge when it
+        // falls.
+        let base = origin.z - HEIGHT_MARGIN;
+        let (bin_drop, group_drop) = if rise < 0.0 {
+            (rise * BIN_M, rise * (GROUP as f64 * BIN_M))
+        } else {
+            (0.0, 0.0)
         };
-        let reach = max_range / ray.per_across;
-        let last = ((reach / BIN_M) as usize).min(self.bins - 1);
+        // One bin more than the range reaches into: the bound is
+        // multiplied out, not divided, and must not fall short by a rounding.
+        let last = ((max_range / ray.per_across * (1.0 / BIN_M)) as usize + 1).min(self.bins - 1);
         // Start where the neighbour's search did when every bin before is
         // clear for this ray too; else at the sensor.
         let mut bin = match *hint {
@@ -348,18 +354,18 @@ impl PolarView<'_> {
         };
         let mut first = None;
         while bin <= last {
-            let near = bin as f64 * BIN_M;
-            if bin % GROUP == 0 {
-                let group = bin / GROUP;
-                let far = near + GROUP as f64 * BIN_M;
-                if lowest(near, far) > f64::from(self.coarse[group * HEADINGS + heading]) {
-                    bin += GROUP;
-                    continue;
-                }
+            // Bins number a few hundred: u32 converts in one instruction.
+            let near = f64::from(bin as u32) * BIN_M;
+            let above = base + rise * near;
+            if bin % GROUP == 0
+                && above + group_drop > f64::from(self.coarse[bin / GROUP * HEADINGS + heading])
+            {
+                bin += GROUP;
+                continue;
             }
             let top = f64::from(self.highest[bin * HEADINGS + heading]);
             bin += 1;
-            if lowest(near, near + BIN_M) > top {
+            if above + bin_drop > top {
                 continue;
             }
             first.get_or_insert(bin - 1);

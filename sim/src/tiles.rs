@@ -27,6 +27,11 @@ const SUPER: usize = 64;
 /// Cells per tile side.
 const TILE: usize = 256;
 pub(crate) const BLOCKS: usize = TILE / BLOCK;
+/// A cell's tile is its coordinate shifted right by this (`TILE` = 2^8);
+/// its place in the tile, the coordinate masked by `TILE_MASK`.
+const TILE_SHIFT: i64 = 8;
+const TILE_MASK: i64 = TILE as i64 - 1;
+const _: () = assert!(TILE == 1 << TILE_SHIFT);
 const SUPERS: usize = TILE / SUPER;
 pub(crate) const TILE_M: f64 = TILE as f64 * CELL_M;
 pub(crate) const BLOCK_M: f64 = BLOCK as f64 * CELL_M;
@@ -67,7 +72,8 @@ fn dip(z0: f64, z1: f64, h: f64, t0: f64, t1: f64) -> Option<f64> {
 /// One tile of heights.
 #[derive(Debug)]
 pub struct Tile {
-    heights: Vec<f32>,
+    /// `TILE × TILE` heights, laid out by [`cell_index`].
+    heights: Box<[f32; TILE * TILE]>,
     block_max: Vec<f32>,
     super_max: Vec<f32>,
     max: f32,
@@ -76,7 +82,7 @@ pub struct Tile {
 impl Tile {
     fn build(world: &World, tx: i64, ty: i64) -> Self {
         let (x0, y0) = (tx as f64 * TILE_M, ty as f64 * TILE_M);
-        let mut heights = vec![0.0; TILE * TILE];
+        let mut heights = Box::new([0.0; TILE * TILE]);
         for j in 0..TILE {
             let y = y0 + (j as f64 + 0.5) * CELL_M;
             for i in 0..TILE {
@@ -306,6 +312,11 @@ impl TileView {
     ) -> Option<f64> {
         let start = origin + d * t0;
         let (mut cx, mut cy) = (floor(start.x * PER_CELL), floor(start.y * PER_CELL));
+        // Written for few instructions a cell (the walk is most of a
+        // frame): minima as plain comparisons (no NaN can arise: the ray's
+        // reciprocals are finite or infinite, never NaN along an axis it
+        // moves on), tiles and cells found by shifts and masks.
+        let least = |a: f64, b: f64| if a < b { a } else { b };
         let (sx, sy) = (
             if d.x > 0.0 { 1 } else { -1 },
             if d.y > 0.0 { 1 } else { -1 },
@@ -327,24 +338,20 @@ impl TileView {
                 CELL_M * inverse.y.abs(),
             )
         };
-        let per_tile = TILE as i64;
         let tile_of = |cx: i64, cy: i64| {
-            let key = (cx.div_euclid(per_tile), cy.div_euclid(per_tile));
-            (key, self.tile(key.0, key.1).map(|t| t.heights.as_slice()))
+            let key = (cx >> TILE_SHIFT, cy >> TILE_SHIFT);
+            (key, self.tile(key.0, key.1).map(|t| &*t.heights))
         };
         let (mut key, mut heights) = tile_of(cx, cy);
         let mut t_in = t0;
         loop {
-            let t_out = tx.min(ty).min(t1);
-            if (cx.div_euclid(per_tile), cy.div_euclid(per_tile)) != key {
+            let t_out = least(least(tx, ty), t1);
+            if (cx >> TILE_SHIFT, cy >> TILE_SHIFT) != key {
                 (key, heights) = tile_of(cx, cy);
             }
             if let Some(heights) = heights {
-                let (i, j) = (
-                    cx.rem_euclid(per_tile) as usize,
-                    cy.rem_euclid(per_tile) as usize,
-                );
-                let h = f64::from(heights[cell_index(i, j)]);
+                let (i, j) = ((cx & TILE_MASK) as usize, (cy & TILE_MASK) as usize);
+                let h = f64::from(heights[cell_index(i, j) & (TILE * TILE - 1)]);
                 let hit = dip(
                     origin.z + d.z * t_in,
                     origin.z + d.z * t_out,
