@@ -437,25 +437,52 @@ impl SensorModel {
         rows: Range<usize>,
         out: &mut [f32],
     ) {
-        let world_from_sensor = world_from_vehicle * self.vehicle_from_sensor;
-        let origin = Point3::from(world_from_sensor.translation.vector);
-        let cols = self.beams.cols();
-        let trig: Vec<(f64, f64)> = self
-            .beams
+        let trig = self.azimuth_trig();
+        self.render_rows_with(&trig, world_from_vehicle, scene, rows, out);
+    }
+
+    /// The sine and cosine of every column's azimuth, for
+    /// [`render_rows_with`](Self::render_rows_with): computed once by a
+    /// caller that renders an image in many parts.
+    pub fn azimuth_trig(&self) -> Vec<(f64, f64)> {
+        self.beams
             .azimuth
             .iter()
             .map(|&az| f64::from(az).sin_cos())
+            .collect()
+    }
+
+    /// [`render_rows`](Self::render_rows) with the azimuths' trig given
+    /// (as [`azimuth_trig`](Self::azimuth_trig) computes it).
+    pub fn render_rows_with(
+        &self,
+        trig: &[(f64, f64)],
+        world_from_vehicle: &Isometry,
+        scene: &impl RayCast,
+        rows: Range<usize>,
+        out: &mut [f32],
+    ) {
+        let world_from_sensor = world_from_vehicle * self.vehicle_from_sensor;
+        let origin = Point3::from(world_from_sensor.translation.vector);
+        let cols = self.beams.cols();
+        // Beams are separable: R·(cos el cos az, cos el sin az, sin el) =
+        // cos el · R·(cos az, sin az, 0) + sin el · R·z, the first factor
+        // once per column, the second once per row.
+        let rotation = world_from_sensor.rotation.to_rotation_matrix();
+        let across: Vec<Vector3<f64>> = trig
+            .iter()
+            .map(|&(sin_az, cos_az)| rotation * Vector3::new(cos_az, sin_az, 0.0))
             .collect();
+        let up = rotation * Vector3::z();
         let mut directions = Vec::with_capacity(cols);
         for (row, chunk) in rows.zip(out.chunks_mut(cols)) {
             let Some(&el) = self.beams.elevation.get(row) else {
                 break;
             };
             let (sin_el, cos_el) = f64::from(el).sin_cos();
+            let lift = up * sin_el;
             directions.clear();
-            directions.extend(trig.iter().map(|&(sin_az, cos_az)| {
-                world_from_sensor.rotation * Vector3::new(cos_el * cos_az, cos_el * sin_az, sin_el)
-            }));
+            directions.extend(across.iter().map(|a| a * cos_el + lift));
             scene.cast_each(&origin, &directions, self.max_range_m, chunk);
         }
     }

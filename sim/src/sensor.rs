@@ -45,6 +45,7 @@ pub fn render(
     );
     let polar = (rows * cols >= POLAR_MIN_RAYS)
         .then(|| PolarView::new(view, origin, sensor.max_range_m, threads));
+    let trig = sensor.azimuth_trig();
     let bands = Mutex::new(image.range.chunks_mut(per_band * cols).enumerate());
     // The lock is held only to take a band.
     let next_band = || bands.lock().ok().and_then(|mut queue| queue.next());
@@ -54,8 +55,10 @@ pub fn render(
             let rows_here = chunk.len() / cols;
             let band = first..first + rows_here;
             match &polar {
-                Some(polar) => sensor.render_rows(world_from_vehicle, polar, band, chunk),
-                None => sensor.render_rows(world_from_vehicle, view, band, chunk),
+                Some(polar) => {
+                    sensor.render_rows_with(&trig, world_from_vehicle, polar, band, chunk)
+                }
+                None => sensor.render_rows_with(&trig, world_from_vehicle, view, band, chunk),
             }
             for (r, row) in chunk.chunks_mut(cols).enumerate() {
                 let mut rng = Rng::stream(
