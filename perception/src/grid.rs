@@ -135,6 +135,27 @@ pub(crate) struct Projector {
     row_z: Vec<f32>,
     /// A row's runs (cell, highest, lowest), for the AVX2 hand-over.
     runs: Vec<(u32, f32, f32)>,
+    /// [`Projector::for_each_row`]'s row.
+    row_points: RowPoints,
+}
+
+/// One row of an image projected into the level frame, by column.
+#[derive(Debug, Default)]
+pub(crate) struct RowPoints {
+    pub x: Vec<f32>,
+    pub y: Vec<f32>,
+    pub z: Vec<f32>,
+    /// A return within the ranges kept.
+    pub used: Vec<bool>,
+}
+
+impl RowPoints {
+    fn resize(&mut self, cols: usize) {
+        self.x.resize(cols, 0.0);
+        self.y.resize(cols, 0.0);
+        self.z.resize(cols, 0.0);
+        self.used.resize(cols, false);
+    }
 }
 
 /// The level frame of `world_from_vehicle` and where `image`'s sensor
@@ -216,6 +237,54 @@ impl Projector {
                 each(xyz, row, col);
             }
         }
+    }
+
+    /// [`Projector::for_each`] a row at a time: `each_row(row, points)`
+    /// gets every column's level-frame point, with whether it is a return
+    /// in range (`points.used`; the others' coordinates are meaningless).
+    /// Computed with no branch per point, so it vectorises, for a caller
+    /// whose own work on a row does too.
+    pub(crate) fn for_each_row(
+        &mut self,
+        image: &RangeImage,
+        ranges: &[f32],
+        level_from_sensor: &Isometry,
+        (min_range, max_range): (f32, f32),
+        stats: &mut ImageStats,
+        mut each_row: impl FnMut(usize, &RowPoints),
+    ) {
+        let ([tx, ty, tz], vertical) = self.prepare(image, level_from_sensor);
+        let cols = image.cols();
+        let mut points = std::mem::take(&mut self.row_points);
+        points.resize(cols);
+        let (mut no_return, mut out_of_range) = (0u32, 0u32);
+        for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
+            let line = &ranges[row * cols..(row + 1) * cols];
+            let (vx, vy, vz) = (se * vertical[0], se * vertical[1], se * vertical[2]);
+            let beams = self.cos_az.iter().zip(&self.sin_az).zip(&self.up);
+            let RowPoints { x, y, z, used } = &mut points;
+            for (((((&range, ((&ca, &sa), &up)), x), y), z), used) in line
+                .iter()
+                .zip(beams)
+                .zip(x.iter_mut())
+                .zip(y.iter_mut())
+                .zip(z.iter_mut())
+                .zip(used.iter_mut())
+            {
+                let returned = range.is_finite() && range > 0.0;
+                let in_range = range >= min_range && range <= max_range;
+                no_return += u32::from(!returned);
+                out_of_range += u32::from(returned && !in_range);
+                *x = (ce * ca + vx) * range + tx;
+                *y = (ce * sa + vy) * range + ty;
+                *z = (ce * up + vz) * range + tz;
+                *used = returned && in_range;
+            }
+            each_row(row, &points);
+        }
+        self.row_points = points;
+        stats.no_return += no_return;
+        stats.out_of_range += out_of_range;
     }
 
     /// [`Projector::for_each`] binned into `grid` of `cell`-sized cells,

@@ -115,6 +115,8 @@ pub struct HeightSampler {
     projector: Projector,
     bins: Vec<Bin>,
     touched: Vec<u32>,
+    /// A row's cells by column (u32::MAX: none).
+    row_cells: Vec<u32>,
 }
 
 impl HeightSampler {
@@ -188,40 +190,53 @@ impl HeightSampler {
         let tz = t.z as f32;
         let ranges = &image.range;
         let image_cols = image.cols();
-        let (bins, touched) = (&mut self.bins, &mut self.touched);
+        let (bins, touched, cells) = (&mut self.bins, &mut self.touched, &mut self.row_cells);
         let mut stats = ImageStats::default();
-        self.projector.for_each(
+        self.projector.for_each_row(
             image,
             ranges,
             &level_from_sensor,
             (self.min_range, self.max_range),
             &mut stats,
-            |[x, y, z], row, col| {
-                if !(x <= ahead && x >= -behind && y.abs() <= half) {
-                    return;
-                }
-                let (gx, gy) = (
-                    (ox + cos * x - sin * y) * inverse,
-                    (oy + sin * x + cos * y) * inverse,
-                );
-                if !(gx >= 0.0 && gy >= 0.0) {
-                    return;
-                }
-                let (ci, cj) = (gx as usize, gy as usize);
-                if ci >= cols || cj >= rows {
-                    return;
-                }
-                let index = cj * cols + ci;
-                let bin = &mut bins[index];
-                if bin.z == f32::NEG_INFINITY {
-                    touched.push(index as u32);
-                }
-                let z = z + tz;
-                if z > bin.z {
-                    *bin = Bin {
-                        z,
-                        range: ranges[row * image_cols + col],
+            |row, points| {
+                // Each column's cell (u32::MAX: none) with no branch, so it
+                // vectorises; then the bins, return by return.
+                cells.resize(points.x.len(), u32::MAX);
+                let columns = points.x.iter().zip(&points.y).zip(&points.used);
+                for (((&x, &y), &used), cell) in columns.zip(cells.iter_mut()) {
+                    let inside = used && x <= ahead && x >= -behind && y.abs() <= half;
+                    let (gx, gy) = (
+                        (ox + cos * x - sin * y) * inverse,
+                        (oy + sin * x + cos * y) * inverse,
+                    );
+                    // In the grid: whole cells below its size (at most a
+                    // few thousand), so the conversions are exact.
+                    let inside =
+                        inside && gx >= 0.0 && gy >= 0.0 && gx < cols as f32 && gy < rows as f32;
+                    let (ci, cj) = if inside {
+                        (gx as u32, gy as u32)
+                    } else {
+                        (0, 0)
                     };
+                    *cell = if inside {
+                        cj * cols as u32 + ci
+                    } else {
+                        u32::MAX
+                    };
+                }
+                let line = &ranges[row * image_cols..(row + 1) * image_cols];
+                for ((&index, &z), &range) in cells.iter().zip(&points.z).zip(line) {
+                    if index == u32::MAX {
+                        continue;
+                    }
+                    let bin = &mut bins[index as usize];
+                    if bin.z == f32::NEG_INFINITY {
+                        touched.push(index);
+                    }
+                    let z = z + tz;
+                    if z > bin.z {
+                        *bin = Bin { z, range };
+                    }
                 }
             },
         );
