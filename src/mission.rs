@@ -245,6 +245,8 @@ struct MissionSink<'a> {
     snapshots: Vec<PathBuf>,
     config: &'a Config,
     track: Vec<TrackPoint>,
+    /// The behaviours' overlays of the cycle whose snapshot is due.
+    overlays: Vec<(String, arcnav_behaviours::Overlay)>,
 }
 
 impl Sink for MissionSink<'_> {
@@ -254,6 +256,16 @@ impl Sink for MissionSink<'_> {
 
     fn on_votes(&mut self, at: Utime, votes: &[BehaviourVotes]) {
         self.log.votes(at, votes, &self.arcs);
+    }
+
+    fn wants_overlays(&self, at: Utime) -> bool {
+        self.snapshot
+            .as_ref()
+            .is_some_and(|(_, _, next)| at >= *next)
+    }
+
+    fn on_overlays(&mut self, _at: Utime, overlays: Vec<(String, arcnav_behaviours::Overlay)>) {
+        self.overlays = overlays;
     }
 
     fn on_command(
@@ -306,7 +318,7 @@ impl Sink for MissionSink<'_> {
                 map,
                 decision,
                 at - SIM_EPOCH_US,
-                &self.track,
+                &std::mem::take(&mut self.overlays),
             ) {
                 Ok(()) => self.snapshots.push(path),
                 Err(e) => self.log.error = Some(e.into()),
@@ -393,6 +405,7 @@ pub fn run_mission(
         snapshots: Vec::new(),
         config,
         track: Vec::new(),
+        overlays: Vec::new(),
     };
     let mission = mission_of(&world, t0);
     sink.log

@@ -359,6 +359,45 @@ fn render_draws_a_decision_and_refuses_a_time_past_the_log() {
     );
 }
 
+/// The decision a picture is drawn of comes with what the behaviours'
+/// votes rested on: the route's planned path from the vehicle on, and the
+/// point it steered for.
+#[test]
+fn the_kept_decision_carries_the_routes_path() {
+    let result = replay(
+        sim_log(),
+        &Config::default(),
+        &Registry::builtin(),
+        &ReplayOptions {
+            stop_at_s: Some(12.5),
+            ..ReplayOptions::default()
+        },
+        &mut |_| {},
+    )
+    .unwrap();
+    let kept = result.kept.expect("a decision at 12.5 s");
+    let route = &kept
+        .overlays
+        .iter()
+        .find(|(name, _)| name == "route")
+        .expect("the route shows its reasoning")
+        .1;
+    let path = &route.lines[0].points;
+    assert!(path.len() > 10, "{path:?}");
+    assert!(
+        path[0][0].hypot(path[0][1]) < 1.0,
+        "from the vehicle: {:?}",
+        path[0]
+    );
+    assert_eq!(route.points.len(), 1, "the point steered for");
+    // Only the behaviours that show something.
+    assert!(
+        kept.overlays.iter().all(|(_, o)| !o.is_empty()),
+        "{:?}",
+        kept.overlays
+    );
+}
+
 #[test]
 fn waypoints_can_come_from_a_file() {
     let out = dir("waypoints");

@@ -157,6 +157,56 @@ pub trait Behaviour: Send {
     fn counters(&self) -> Vec<(&'static str, u64)> {
         Vec::new()
     }
+
+    /// What its last vote rested on that the votes alone do not show (a
+    /// planner's path, the point it steered for, ground it set apart), in
+    /// the vehicle frame of `pose`: drawn on `arcnav render`'s and the
+    /// simulator's snapshot pictures. Asked only for those, never in the
+    /// loop that drives.
+    fn overlay(&self, _pose: &Pose) -> Overlay {
+        Overlay::default()
+    }
+}
+
+/// What a behaviour shows of its reasoning on a picture of a decision
+/// ([`Behaviour::overlay`]): lines, points and cells in the vehicle frame
+/// (x forward, y left, m), each kind under a label for the legend.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overlay {
+    pub lines: Vec<OverlayLine>,
+    pub points: Vec<OverlayPoint>,
+    pub cells: Vec<OverlayCells>,
+}
+
+impl Overlay {
+    pub fn is_empty(&self) -> bool {
+        self.lines.is_empty() && self.points.is_empty() && self.cells.is_empty()
+    }
+}
+
+/// A polyline (a planned path, say).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OverlayLine {
+    pub label: String,
+    pub points: Vec<[f64; 2]>,
+}
+
+/// One point (what the behaviour steered for, say).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OverlayPoint {
+    pub label: String,
+    pub at: [f64; 2],
+}
+
+/// Square cells of one size, by centre (a planner's memory of some kind of
+/// ground, say). Their sides run along the world's axes, at `yaw` (rad)
+/// from the vehicle's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OverlayCells {
+    pub label: String,
+    pub size_m: f64,
+    pub yaw: f64,
+    pub centres: Vec<[f64; 2]>,
 }
 
 impl std::fmt::Debug for dyn Behaviour {

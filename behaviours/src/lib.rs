@@ -17,7 +17,10 @@ pub mod registry;
 pub mod route;
 pub mod terrain;
 
-pub use behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
+pub use behaviour::{
+    Behaviour, Mission, Overlay, OverlayCells, OverlayLine, OverlayPoint, Progress, Setup,
+    VoteContext, Waypoint,
+};
 pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
 pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig, UnseenGround};
 pub use registry::{Plugin, Prepared, Registry, RegistryError};

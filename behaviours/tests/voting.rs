@@ -7,7 +7,7 @@
 use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, StopReason, Votes};
 use arcnav_behaviours::{
     Behaviour, GoalSeeking, GoalSeekingConfig, Mission, ObstacleAvoidance, ObstacleAvoidanceConfig,
-    Registry, RegistryError, Setup, VoteContext, Waypoint,
+    Overlay, Registry, RegistryError, Setup, VoteContext, Waypoint,
 };
 use arcnav_localmap::{LocalMap, LocalMapConfig, MapSnapshot};
 use arcnav_perception::{FovPolygon, ObstacleCell, ObstacleReport, Reasons};
@@ -1053,15 +1053,15 @@ fn snapshot_with_shadow(near: f64, far: f64) -> MapSnapshot {
     ])
 }
 
-/// The route's best arc, and its counters, after one vote on `map` per
-/// entry of `commands` (the last command sent before each), for a
-/// waypoint at `goal` (vehicle at the origin heading east).
+/// The route's best arc, its counters and its overlay, after one vote on
+/// `map` per entry of `commands` (the last command sent before each), for
+/// a waypoint at `goal` (vehicle at the origin heading east).
 fn route_after(
     maps: &[&MapSnapshot],
     commands: &[Option<f64>],
     goal: [f64; 2],
     table: &str,
-) -> (usize, Vec<(&'static str, u64)>) {
+) -> (usize, Vec<(&'static str, u64)>, Overlay) {
     let arcs = arcs();
     let vehicle = VehicleConfig::default();
     let setup = setup(&arcs, &vehicle);
@@ -1083,7 +1083,7 @@ fn route_after(
         behaviour.vote(&ctx, &mut votes);
         best = best_arc(&votes);
     }
-    (best, behaviour.counters())
+    (best, behaviour.counters(), behaviour.overlay(&pose))
 }
 
 fn counter(counters: &[(&'static str, u64)], name: &str) -> u64 {
@@ -1109,12 +1109,12 @@ fn the_route_shuts_unseen_ground_the_vehicle_backed_away_from_until_it_is_seen()
     let goal = [60.0, 0.0];
     let forward = Some(1.0);
     let back = Some(-1.0);
-    let (before, _) = route_after(&[&shadow], &[forward], goal, "");
+    let (before, _, _) = route_after(&[&shadow], &[forward], goal, "");
     assert!(
         before.abs_diff(19) <= 2,
         "unseen ground is crossed: about straight, not {before}"
     );
-    let (after, counters) = route_after(&[&shadow, &shadow], &[forward, back], goal, "");
+    let (after, counters, overlay) = route_after(&[&shadow, &shadow], &[forward, back], goal, "");
     assert!(
         after.abs_diff(19) >= 6,
         "backed away from it, the route goes round: {after}"
@@ -1123,7 +1123,48 @@ fn the_route_shuts_unseen_ground_the_vehicle_backed_away_from_until_it_is_seen()
     // the window (±10 m to the sides): about 3 × 17 cells.
     let shut = counter(&counters, "shut_cells");
     assert!((30..=80).contains(&shut), "{shut} cells shut");
-    let (reseen, _) = route_after(
+    // The overlay shows the shut cells, in the strip, and the path round
+    // them, from the vehicle to the waypoint, with the point steered for
+    // on it.
+    let shut_cells = overlay
+        .cells
+        .iter()
+        .find(|c| c.label.contains("shut"))
+        .expect("shut cells drawn");
+    assert_eq!(shut_cells.centres.len() as u64, shut);
+    assert!(
+        shut_cells
+            .centres
+            .iter()
+            .all(|&[x, _]| (FRONT + 2.5..=FRONT + 6.5).contains(&x)),
+        "{:?}",
+        shut_cells.centres
+    );
+    let path = &overlay
+        .lines
+        .iter()
+        .find(|l| l.label.contains("path"))
+        .expect("the path drawn")
+        .points;
+    let (first, last) = (path[0], path[path.len() - 1]);
+    assert!(
+        first[0].hypot(first[1]) < 1.0,
+        "from the vehicle: {first:?}"
+    );
+    // Drawn for 60 m: most of the way to the waypoint, 60 m off.
+    assert!(
+        (last[0] - goal[0]).hypot(last[1] - goal[1]) < 12.0,
+        "towards the waypoint: {last:?}"
+    );
+    let in_strip = |&[x, y]: &[f64; 2]| (FRONT + 3.0..=FRONT + 6.0).contains(&x) && y.abs() < 8.0;
+    assert!(!path.iter().any(in_strip), "round the strip: {path:?}");
+    let aim = overlay.points[0].at;
+    assert!(
+        path.iter()
+            .any(|p| (p[0] - aim[0]).hypot(p[1] - aim[1]) < 0.5),
+        "steering for a point on the path: {aim:?}"
+    );
+    let (reseen, _, _) = route_after(
         &[&shadow, &shadow, &seen],
         &[forward, back, forward],
         goal,
@@ -1133,7 +1174,7 @@ fn the_route_shuts_unseen_ground_the_vehicle_backed_away_from_until_it_is_seen()
         reseen.abs_diff(19) <= 2,
         "seen, the ground is open again: about straight, not {reseen}"
     );
-    let (never, counters) = route_after(
+    let (never, counters, _) = route_after(
         &[&shadow, &shadow],
         &[forward, back],
         goal,
@@ -1152,7 +1193,7 @@ fn the_route_shuts_unseen_ground_the_vehicle_backed_away_from_until_it_is_seen()
 fn shut_ground_that_leaves_no_way_is_opened_again() {
     let shadow = snapshot_with_shadow(FRONT + 3.0, FRONT + 6.0);
     let goal = [FRONT + 4.5, 0.0];
-    let (best, counters) = route_after(&[&shadow, &shadow], &[Some(1.0), Some(-1.0)], goal, "");
+    let (best, counters, _) = route_after(&[&shadow, &shadow], &[Some(1.0), Some(-1.0)], goal, "");
     assert!(counter(&counters, "shut_cells") > 0);
     assert_eq!(
         counter(&counters, "reopened_cells"),

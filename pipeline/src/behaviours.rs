@@ -1,7 +1,7 @@
 //! The configured behaviours voting on one cycle (002 §6).
 
 use arcnav_arbiter::{BehaviourVotes, Votes};
-use arcnav_behaviours::{Behaviour, Mission, Progress, VoteContext};
+use arcnav_behaviours::{Behaviour, Mission, Overlay, Progress, VoteContext};
 use arcnav_localmap::MapSnapshot;
 use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime};
 
@@ -89,6 +89,17 @@ impl BehaviourSet {
             behaviour.vote(&ctx, &mut out.votes);
         }
         &self.votes
+    }
+
+    /// What each behaviour's last vote rested on, by name, in the vehicle
+    /// frame of `pose` (the pose of that vote): those that show nothing
+    /// left out. For pictures ([`Behaviour::overlay`]).
+    pub fn overlays(&self, pose: &Pose) -> Vec<(String, Overlay)> {
+        self.behaviours
+            .iter()
+            .map(|b| (b.name().to_owned(), b.overlay(pose)))
+            .filter(|(_, o)| !o.is_empty())
+            .collect()
     }
 
     /// The command the arbiter sent: every behaviour is debriefed, and the

@@ -11,7 +11,7 @@
 use std::time::Instant;
 
 use arcnav_arbiter::{Arbiter, BehaviourVotes, Decision};
-use arcnav_behaviours::Mission;
+use arcnav_behaviours::{Mission, Overlay};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, RangeImage, RangeSlice};
 use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime};
@@ -52,6 +52,15 @@ pub trait Sink {
     fn on_obstacles(&mut self, _at: Utime, _report: &ObstacleReport) {}
     /// The behaviours voted at `at`.
     fn on_votes(&mut self, _at: Utime, _votes: &[BehaviourVotes]) {}
+    /// Whether [`Sink::on_overlays`] should be called for the cycle at
+    /// `at`: the behaviours' overlays cost a little, and only pictures use
+    /// them.
+    fn wants_overlays(&self, _at: Utime) -> bool {
+        false
+    }
+    /// What the behaviours' votes of the cycle at `at` rested on
+    /// ([`arcnav_behaviours::Behaviour::overlay`]), before its command.
+    fn on_overlays(&mut self, _at: Utime, _overlays: Vec<(String, Overlay)>) {}
     /// The arbiter decided at `at` (with its explanation when explaining).
     fn on_command(
         &mut self,
@@ -275,6 +284,9 @@ impl Pipeline {
             }
             let command = self.arbiter.decide(cycle.utime);
             self.times.arbiter.add(begun, stopwatch);
+            if sink.wants_overlays(cycle.utime) {
+                sink.on_overlays(cycle.utime, self.behaviours.overlays(&cycle.pose));
+            }
             self.behaviours.on_command(&command);
             self.commands += 1;
             sink.on_command(cycle.utime, &command, self.arbiter.decision(), &cycle.map);

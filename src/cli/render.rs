@@ -70,7 +70,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
     for line in result.problems.lines() {
         eprintln!("warning: {line}");
     }
-    let Some((at, decision, map)) = &result.kept else {
+    let Some(kept) = &result.kept else {
         anyhow::bail!(
             "no decision at or after {} s: the log spans {:.1} s and yielded {} decisions",
             args.at,
@@ -82,14 +82,14 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         &out,
         &config,
         &result.arcs,
-        map,
-        Some(decision),
-        at - origin,
-        &[],
+        &kept.map,
+        Some(&kept.decision),
+        kept.at - origin,
+        &kept.overlays,
     )?;
     println!(
         "decision at {:.2} s drawn to {}",
-        (at - origin) as f64 * 1e-6,
+        (kept.at - origin) as f64 * 1e-6,
         out.display()
     );
     Ok(ExitCode::SUCCESS)

@@ -5,13 +5,14 @@
 use std::path::Path;
 
 use arcnav_arbiter::Decision;
+use arcnav_behaviours::Overlay;
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{Reasons, suspected_drop_off};
 use arcnav_sim::{FeatureKind, World};
 use arcnav_vehicle::{ArcSet, Utime};
 
 use crate::config::Config;
-use crate::mission::{MissionRun, TrackPoint};
+use crate::mission::MissionRun;
 
 mod canvas;
 pub mod detection;
@@ -19,6 +20,95 @@ mod sweep;
 
 pub use canvas::{BLACK, BLUE, Canvas, RED, RenderError, Rgba, WHITE, speed_color, vote_color};
 pub use sweep::sweep_picture;
+
+/// Colours of the behaviours' overlays: cells, lines and points each take
+/// the next of their own list.
+const OVERLAY_CELLS: [Rgba; 3] = [[0, 150, 150, 120], [150, 90, 30, 110], [120, 60, 160, 110]];
+const OVERLAY_LINES: [Rgba; 3] = [[0, 140, 50, 230], [200, 120, 0, 230], [150, 0, 150, 230]];
+const OVERLAY_POINTS: [Rgba; 3] = [[220, 0, 140, 255], [0, 100, 220, 255], [120, 120, 0, 255]];
+
+/// Where the behaviours' overlays go on a snapshot: the map panel's size,
+/// pixels per metre and the vehicle frame to pixels.
+struct OverlayPanel<'a, F: Fn(f32, f32) -> (f32, f32)> {
+    size: (f32, f32),
+    ppm: f32,
+    to_px: &'a F,
+}
+
+impl<F: Fn(f32, f32) -> (f32, f32)> OverlayPanel<'_, F> {
+    fn px(&self, [x, y]: [f64; 2]) -> (f32, f32) {
+        (self.to_px)(x as f32, y as f32)
+    }
+
+    fn on(&self, (u, v): (f32, f32)) -> bool {
+        (0.0..=self.size.0).contains(&u) && (0.0..=self.size.1).contains(&v)
+    }
+
+    /// The overlays' cells (under the arcs), what falls on the panel.
+    /// Returns the legend: each label with its colour.
+    fn cells(&self, canvas: &mut Canvas, overlays: &[(String, Overlay)]) -> Vec<(String, Rgba)> {
+        let mut legend = Vec::new();
+        let cells = overlays.iter().flat_map(|(_, o)| &o.cells);
+        for (kind, colour) in cells.zip(OVERLAY_CELLS.iter().cycle()) {
+            let (sin, cos) = kind.yaw.sin_cos();
+            let h = kind.size_m / 2.0;
+            let corners = [(h, h), (h, -h), (-h, -h), (-h, h)];
+            let mut drawn = 0;
+            for &[cx, cy] in &kind.centres {
+                if !self.on(self.px([cx, cy])) {
+                    continue;
+                }
+                let square: Vec<(f32, f32)> = corners
+                    .iter()
+                    .map(|&(a, b)| self.px([cx + cos * a - sin * b, cy + sin * a + cos * b]))
+                    .collect();
+                canvas.polygon(&square, Some(*colour), None);
+                drawn += 1;
+            }
+            legend.push((format!("{} ({drawn} on the map)", kind.label), *colour));
+        }
+        legend
+    }
+
+    /// The overlays' lines and points (over the arcs), what falls on the
+    /// panel. Returns the legend.
+    fn marks(&self, canvas: &mut Canvas, overlays: &[(String, Overlay)]) -> Vec<(String, Rgba)> {
+        let mut legend = Vec::new();
+        let lines = overlays.iter().flat_map(|(_, o)| &o.lines);
+        for (line, colour) in lines.zip(OVERLAY_LINES.iter().cycle()) {
+            // Each stretch on the panel on its own.
+            let points: Vec<(f32, f32)> = line.points.iter().map(|&p| self.px(p)).collect();
+            for stretch in points.split(|&p| !self.on(p)) {
+                canvas.polyline(stretch, *colour, 3.0, false);
+            }
+            let length: f64 = line
+                .points
+                .windows(2)
+                .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+                .sum();
+            legend.push((format!("{} ({length:.0} m)", line.label), *colour));
+        }
+        let points = overlays.iter().flat_map(|(_, o)| &o.points);
+        for (point, colour) in points.zip(OVERLAY_POINTS.iter().cycle()) {
+            let (u, v) = self.px(point.at);
+            let seen = self.on((u, v));
+            if seen {
+                canvas.circle(u, v, 0.4 * self.ppm, None, Some((*colour, 3.0)));
+            }
+            legend.push((
+                format!(
+                    "{}: ({:.1}, {:.1}) m{}",
+                    point.label,
+                    point.at[0],
+                    point.at[1],
+                    if seen { "" } else { ", off the map" }
+                ),
+                *colour,
+            ));
+        }
+        legend
+    }
+}
 
 /// The whole mission: shaded terrain, hazards, the obstacle cells the local
 /// map held, the path coloured by speed, image positions, waypoints and
@@ -237,7 +327,7 @@ pub fn snapshot_picture(
     map: &MapSnapshot,
     decision: Option<&Decision>,
     elapsed_us: Utime,
-    _track: &[TrackPoint],
+    overlays: &[(String, Overlay)],
 ) -> Result<(), RenderError> {
     let ppm = 20.0f32;
     // The picture reaches 2 m past the map window (farther at speed, see
@@ -292,13 +382,14 @@ pub fn snapshot_picture(
         let (x, y) = to_px(p.x + s / 2.0, p.y + s / 2.0);
         canvas.fill_rect(x, y, s * ppm, s * ppm, patch_color(p.reasons, p.cost, 255));
     }
-    canvas.text(
-        6.0,
-        map_h as f32 - 8.0,
-        12.0,
-        [60, 60, 60, 255],
-        "grey: ground not seen · black: cells · orange: drop-offs (pale: suspected) · purple: graded ground (by cost)",
-    );
+    // What the behaviours' votes rested on: cells under the arcs, lines
+    // and points over them.
+    let panel_overlays = OverlayPanel {
+        size: (map_w as f32, map_h as f32),
+        ppm,
+        to_px: &to_px,
+    };
+    let cell_legend = panel_overlays.cells(&mut canvas, overlays);
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);
     // As far as obstacle avoidance judges them.
@@ -334,6 +425,23 @@ pub fn snapshot_picture(
         let points = arc_pixels(&arc);
         canvas.polyline(&points, BLUE, 4.0, false);
     }
+    let mut legend = cell_legend;
+    legend.extend(panel_overlays.marks(&mut canvas, overlays));
+    // The map's key, over whatever lies under it.
+    canvas.fill_rect(
+        0.0,
+        map_h as f32 - 22.0,
+        map_w as f32,
+        22.0,
+        [255, 255, 255, 210],
+    );
+    canvas.text(
+        6.0,
+        map_h as f32 - 8.0,
+        12.0,
+        [60, 60, 60, 255],
+        "grey: ground not seen · black: cells · orange: drop-offs (pale: suspected) · purple: graded ground (by cost)",
+    );
     let f = config.vehicle.footprint();
     let body = [
         to_px(f.x_max as f32, f.half_width as f32),
@@ -412,7 +520,13 @@ pub fn snapshot_picture(
         [90, 90, 90, 255],
         "bars: hard left ... straight ... hard right; dark red: vetoed",
     );
-    y += 24.0;
+    y += 20.0;
+    for (label, colour) in &legend {
+        canvas.fill_rect(x0, y - 9.0, 14.0, 10.0, *colour);
+        canvas.text(x0 + 20.0, y, 12.0, BLACK, label);
+        y += 16.0;
+    }
+    y += 4.0;
     if let Some(d) = decision {
         let c = &d.command;
         let line = match &d.stop {
@@ -469,4 +583,78 @@ pub fn snapshot_picture(
         }
     }
     canvas.save(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_behaviours::{OverlayCells, OverlayLine, OverlayPoint};
+
+    /// A behaviour's overlay is drawn on the snapshot where it lies in the
+    /// vehicle frame: its line in the line colour over everything, its
+    /// cells tinted; what lies off the map is left out.
+    #[test]
+    fn a_snapshot_draws_the_behaviours_overlays_where_they_lie() {
+        let config = Config::default();
+        let arcs = config.arc_set().unwrap();
+        let map = MapSnapshot {
+            patch_size_m: 0.5,
+            ..MapSnapshot::default()
+        };
+        let overlay = Overlay {
+            // Across the map 6 m behind the vehicle, and on far off it.
+            lines: vec![OverlayLine {
+                label: "a path".to_owned(),
+                points: vec![[-6.0, 8.0], [-6.0, -8.0], [-6.0, -400.0]],
+            }],
+            cells: vec![OverlayCells {
+                label: "some ground".to_owned(),
+                size_m: 1.0,
+                yaw: 0.0,
+                centres: vec![[-3.0, 6.0], [500.0, 0.0]],
+            }],
+            points: vec![OverlayPoint {
+                label: "a point".to_owned(),
+                at: [-3.0, -6.0],
+            }],
+        };
+        let dir = arcnav_testkit::temp_dir("render-overlay");
+        let picture = |overlays: &[(String, Overlay)], name: &str| {
+            let path = dir.join(name);
+            snapshot_picture(&path, &config, &arcs, &map, None, 0, overlays).unwrap();
+            tiny_skia::Pixmap::load_png(&path).unwrap()
+        };
+        let with = picture(&[("b".to_owned(), overlay)], "with.png");
+        let without = picture(&[], "without.png");
+        // The map panel's vehicle frame, as snapshot_picture lays it out.
+        let look = config.lookahead();
+        let x_ahead = (look.map_ahead_m as f32 + 2.0).max(22.0);
+        let half = (look.map_half_width_m as f32 + 3.0).max(13.0);
+        let pixel = |image: &tiny_skia::Pixmap, x: f32, y: f32| {
+            let (u, v) = (((half - y) * 20.0) as u32, ((x_ahead - x) * 20.0) as u32);
+            let p = image.pixel(u, v).unwrap();
+            [p.red(), p.green(), p.blue()]
+        };
+        // Within the blending of a colour not quite opaque.
+        let near = |p: [u8; 3], c: Rgba| (0..3).all(|k| p[k].abs_diff(c[k]) <= 30);
+        let line = OVERLAY_LINES[0];
+        assert!(
+            near(pixel(&with, -6.0, 3.0), line),
+            "{:?}",
+            pixel(&with, -6.0, 3.0)
+        );
+        assert!(!near(pixel(&without, -6.0, 3.0), line));
+        // Teal over the map: green and blue above red, unlike without.
+        let [r, g, b] = pixel(&with, -3.0, 6.0);
+        assert!(g > r + 40 && b > r + 40, "{r} {g} {b}");
+        assert_ne!(pixel(&without, -3.0, 6.0), [r, g, b]);
+        // The point's ring, 0.4 m round it.
+        let ring = OVERLAY_POINTS[0];
+        assert!(
+            near(pixel(&with, -3.0, -6.4), ring),
+            "{:?}",
+            pixel(&with, -3.0, -6.4)
+        );
+        assert!(!near(pixel(&without, -3.0, -6.4), ring));
+    }
 }

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use arcnav_arbiter::{BehaviourVotes, Decision};
-use arcnav_behaviours::{Mission, Registry};
+use arcnav_behaviours::{Mission, Overlay, Registry};
 use arcnav_bus::log::{InTimeOrder, LogReader, LogWriteError, ReorderWindow};
 use arcnav_bus::messages::{AnyMessage, TypedEvents};
 use arcnav_localmap::MapSnapshot;
@@ -83,9 +83,20 @@ pub struct ReplayResult {
     pub problems: InputProblems,
     /// First and last message time of the log, µs.
     pub span: Option<(Utime, Utime)>,
-    /// The decision and map kept for `stop_at_s`.
-    pub kept: Option<(Utime, Decision, MapSnapshot)>,
+    /// The decision kept for `stop_at_s`.
+    pub kept: Option<KeptDecision>,
     pub arcs: ArcSet,
+}
+
+/// The first decision at or after `stop_at_s`, with what a picture of it
+/// needs.
+#[derive(Debug, Clone)]
+pub struct KeptDecision {
+    pub at: Utime,
+    pub decision: Decision,
+    pub map: MapSnapshot,
+    /// What each behaviour's vote rested on (those that show anything).
+    pub overlays: Vec<(String, Overlay)>,
 }
 
 impl From<WriteFailed> for ReplayError {
@@ -123,7 +134,9 @@ struct ReplaySink<'a> {
     cycles: BTreeMap<Utime, Cycle>,
     pending_votes: Vec<BehaviourVotes>,
     keep_at: Option<Utime>,
-    kept: Option<(Utime, Decision, MapSnapshot)>,
+    kept: Option<KeptDecision>,
+    /// The overlays of the cycle about to be decided, when it may be kept.
+    overlays: Vec<(String, Overlay)>,
 }
 
 impl Sink for ReplaySink<'_> {
@@ -134,6 +147,14 @@ impl Sink for ReplaySink<'_> {
     fn on_votes(&mut self, at: Utime, votes: &[BehaviourVotes]) {
         self.out.votes(at, votes, &self.arcs);
         self.pending_votes = votes.to_vec();
+    }
+
+    fn wants_overlays(&self, at: Utime) -> bool {
+        self.kept.is_none() && self.keep_at.is_some_and(|keep| at >= keep)
+    }
+
+    fn on_overlays(&mut self, _at: Utime, overlays: Vec<(String, Overlay)>) {
+        self.overlays = overlays;
     }
 
     fn on_command(
@@ -154,7 +175,12 @@ impl Sink for ReplaySink<'_> {
         if let (Some(keep), None, Some(decision)) = (self.keep_at, &self.kept, decision)
             && at >= keep
         {
-            self.kept = Some((at, decision.clone(), map.clone()));
+            self.kept = Some(KeptDecision {
+                at,
+                decision: decision.clone(),
+                map: map.clone(),
+                overlays: std::mem::take(&mut self.overlays),
+            });
         }
     }
 }
@@ -222,6 +248,7 @@ pub fn replay(
         pending_votes: Vec::new(),
         keep_at: None,
         kept: None,
+        overlays: Vec::new(),
     };
     let mut recorded: BTreeMap<Utime, Cycle> = BTreeMap::new();
     let mut recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>> = BTreeMap::new();

@@ -59,7 +59,9 @@ use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::yaw_of;
 use serde::{Deserialize, Serialize};
 
-use crate::behaviour::{Behaviour, Progress, Setup, VoteContext};
+use crate::behaviour::{
+    Behaviour, Overlay, OverlayCells, OverlayLine, OverlayPoint, Progress, Setup, VoteContext,
+};
 use crate::goal_seeking::{WaypointTracker, lookahead, vote_towards};
 use crate::registry::Plugin;
 use dstar::{DStarLite, PlannerStats};
@@ -152,6 +154,9 @@ const SUSPECTED_LEVEL: u8 = u8::MAX;
 /// like an obstacle until an image sees it.
 const SHUT: u8 = SUSPECT + 1;
 
+/// The planned path is drawn this far along ([`Behaviour::overlay`]), m.
+const OVERLAY_PATH_M: f64 = 60.0;
+
 /// Half the angle ahead of the vehicle's heading in which unseen ground is
 /// shut when it starts to back up (`shut_unseen_m`).
 const SHUT_HALF_ANGLE_DEG: f64 = 60.0;
@@ -231,6 +236,9 @@ pub struct Route {
     backing: bool,
     /// Scratch: the cells a shutting spreads from.
     flood: Vec<usize>,
+    /// World point the last vote steered for, and whether it lay on a
+    /// planned path (else the waypoint, with no path).
+    aimed_at: Option<([f64; 2], bool)>,
 }
 
 impl Route {
@@ -259,6 +267,7 @@ impl Route {
             front_m: setup.vehicle.footprint().x_max,
             backing: false,
             flood: Vec::new(),
+            aimed_at: None,
             config,
         }
     }
@@ -760,6 +769,7 @@ impl Behaviour for Route {
     }
 
     fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
+        self.aimed_at = None;
         let Some((index, waypoint)) = self.tracker.seek(ctx) else {
             votes.vote_speed(0.0);
             return;
@@ -783,6 +793,7 @@ impl Behaviour for Route {
                 _ => self.goal_cell(here, target),
             },
         ) else {
+            self.aimed_at = Some((target, false));
             vote_towards(ctx, &self.response, target, reach, votes);
             return;
         };
@@ -813,6 +824,7 @@ impl Behaviour for Route {
                 );
             }
             self.has_path = false;
+            self.aimed_at = Some((target, false));
             vote_towards(ctx, &self.response, target, reach, votes);
             return;
         }
@@ -842,10 +854,70 @@ impl Behaviour for Route {
                 .or_else(|| self.path.last().map(|&c| self.centre(c)))
                 .unwrap_or(target)
         };
+        self.aimed_at = Some((carrot, true));
         vote_towards(ctx, &self.response, carrot, reach, votes);
     }
 
+    /// The planned path (as far as [`OVERLAY_PATH_M`]), the point the vote
+    /// steered for, and the memory's obstacles and shut ground.
+    fn overlay(&self, pose: &arcnav_vehicle::Pose) -> Overlay {
+        let mut overlay = Overlay::default();
+        let Some(_) = self.origin else {
+            return overlay;
+        };
+        let p = pose.position();
+        let yaw = pose.yaw();
+        let (sin, cos) = yaw.sin_cos();
+        let local = |[x, y]: [f64; 2]| {
+            let (dx, dy) = (x - p.x, y - p.y);
+            [cos * dx + sin * dy, -sin * dx + cos * dy]
+        };
+        if self.has_path {
+            let mut path = Vec::new();
+            let cells = (OVERLAY_PATH_M / self.config.cell_m).ceil() as usize;
+            self.planner.path(&self.costs, cells, &mut path);
+            let from = self.planner.start();
+            overlay.lines.push(OverlayLine {
+                label: "route: planned path".to_owned(),
+                points: std::iter::once(from)
+                    .chain(path)
+                    .map(|c| local(self.centre(c)))
+                    .collect(),
+            });
+        }
+        if let Some((at, on_path)) = self.aimed_at {
+            overlay.points.push(OverlayPoint {
+                label: if on_path {
+                    "route: steering for (on the path)"
+                } else {
+                    "route: steering for the waypoint (no path)"
+                }
+                .to_owned(),
+                at: local(at),
+            });
+        }
+        for (state, label) in [
+            (OBSTACLE, "route: obstacles remembered"),
+            (SHUT, "route: shut (unseen, backed away from)"),
+        ] {
+            let centres: Vec<[f64; 2]> = (0..self.state.len())
+                .filter(|&c| self.state[c] == state)
+                .map(|c| local(self.centre(c)))
+                .collect();
+            if !centres.is_empty() {
+                overlay.cells.push(OverlayCells {
+                    label: label.to_owned(),
+                    size_m: self.config.cell_m,
+                    yaw: -yaw,
+                    centres,
+                });
+            }
+        }
+        overlay
+    }
+
     fn reset(&mut self) {
+        self.aimed_at = None;
         self.tracker.reset();
         self.origin = None;
         self.goal = None;
