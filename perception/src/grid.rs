@@ -271,13 +271,17 @@ impl Projector {
                 .zip(z.iter_mut())
                 .zip(used.iter_mut())
             {
-                let returned = range.is_finite() && range > 0.0;
-                let in_range = range >= min_range && range <= max_range;
+                let (returned, in_range, point) = beam_point(
+                    range,
+                    (min_range, max_range),
+                    ce,
+                    (ca, sa, up),
+                    [vx, vy, vz],
+                    [tx, ty, tz],
+                );
                 no_return += u32::from(!returned);
                 out_of_range += u32::from(returned && !in_range);
-                *x = (ce * ca + vx) * range + tx;
-                *y = (ce * sa + vy) * range + ty;
-                *z = (ce * up + vz) * range + tz;
+                [*x, *y, *z] = point;
                 *used = returned && in_range;
             }
             each_row(row, &points);
@@ -362,13 +366,17 @@ impl Projector {
                 .zip(row_cells.iter_mut())
                 .zip(row_z.iter_mut())
             {
-                let returned = range.is_finite() && range > 0.0;
-                let in_range = range >= min_range && range <= max_range;
+                let (returned, in_range, [x, y, point_z]) = beam_point(
+                    range,
+                    (min_range, max_range),
+                    ce,
+                    (ca, sa, up),
+                    [vx, vy, vz],
+                    [tx, ty, tz],
+                );
                 no_return += u32::from(!returned);
                 out_of_range += u32::from(returned && !in_range);
-                let x = (ce * ca + vx) * range + tx;
-                let y = (ce * sa + vy) * range + ty;
-                *z = (ce * up + vz) * range + tz;
+                *z = point_z;
                 let (fx, fy) = (x / cell + cx, y / cell + cy);
                 let used = returned && in_range && fx >= m && fy >= m && fx < x_end && fy < y_end;
                 // Truncating the cell coordinates of a point outside is
@@ -429,6 +437,31 @@ impl Projector {
         let t = level_from_sensor.translation.vector;
         ([t.x as f32, t.y as f32, t.z as f32], vertical)
     }
+}
+
+/// One beam's return in the level frame: whether it returned, whether it
+/// lies within the ranges `kept`, and its point, from the row's elevation
+/// cosine `ce`, the column's rotated horizontal direction `(ca, sa, up)`,
+/// the row's share of the rotated vertical `v` and the sensor's position
+/// `t`. Every projection here does this arithmetic, so a return is the
+/// same point whichever projects it.
+#[inline(always)]
+fn beam_point(
+    range: f32,
+    kept: (f32, f32),
+    ce: f32,
+    (ca, sa, up): (f32, f32, f32),
+    v: [f32; 3],
+    t: [f32; 3],
+) -> (bool, bool, [f32; 3]) {
+    let returned = range.is_finite() && range > 0.0;
+    let in_range = range >= kept.0 && range <= kept.1;
+    let point = [
+        (ce * ca + v[0]) * range + t[0],
+        (ce * sa + v[1]) * range + t[1],
+        (ce * up + v[2]) * range + t[2],
+    ];
+    (returned, in_range, point)
 }
 
 /// Hands `each` every run of neighbouring returns of a row in one cell:

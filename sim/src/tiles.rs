@@ -310,42 +310,19 @@ impl TileView {
         t0: f64,
         t1: f64,
     ) -> Option<f64> {
-        let start = origin + d * t0;
-        let (mut cx, mut cy) = (floor(start.x * PER_CELL), floor(start.y * PER_CELL));
         // Written for few instructions a cell (the walk is most of a
-        // frame): minima as plain comparisons (no NaN can arise: the ray's
-        // reciprocals are finite or infinite, never NaN along an axis it
-        // moves on), tiles and cells found by shifts and masks.
-        let least = |a: f64, b: f64| if a < b { a } else { b };
-        let (sx, sy) = (
-            if d.x > 0.0 { 1 } else { -1 },
-            if d.y > 0.0 { 1 } else { -1 },
-        );
-        let boundary = |c: i64, s: i64| (if s > 0 { c + 1 } else { c }) as f64 * CELL_M;
-        let (mut tx, dx) = if d.x.abs() < 1e-12 {
-            (f64::INFINITY, f64::INFINITY)
-        } else {
-            (
-                (boundary(cx, sx) - origin.x) * inverse.x,
-                CELL_M * inverse.x.abs(),
-            )
-        };
-        let (mut ty, dy) = if d.y.abs() < 1e-12 {
-            (f64::INFINITY, f64::INFINITY)
-        } else {
-            (
-                (boundary(cy, sy) - origin.y) * inverse.y,
-                CELL_M * inverse.y.abs(),
-            )
-        };
+        // frame): the ray's reciprocals given, tiles and cells found by
+        // shifts and masks.
+        let mut dda = Dda::with_inverse(origin, d, inverse, t0);
         let tile_of = |cx: i64, cy: i64| {
             let key = (cx >> TILE_SHIFT, cy >> TILE_SHIFT);
             (key, self.tile(key.0, key.1).map(|t| &*t.heights))
         };
-        let (mut key, mut heights) = tile_of(cx, cy);
+        let (mut key, mut heights) = tile_of(dda.cx, dda.cy);
         let mut t_in = t0;
         loop {
-            let t_out = least(least(tx, ty), t1);
+            let t_out = least(dda.exit(), t1);
+            let (cx, cy) = (dda.cx, dda.cy);
             if (cx >> TILE_SHIFT, cy >> TILE_SHIFT) != key {
                 (key, heights) = tile_of(cx, cy);
             }
@@ -366,15 +343,7 @@ impl TileView {
             if t_out >= t1 {
                 return None;
             }
-            if tx < ty {
-                cx += sx;
-                t_in = tx;
-                tx += dx;
-            } else {
-                cy += sy;
-                t_in = ty;
-                ty += dy;
-            }
+            t_in = dda.step();
         }
     }
 
@@ -388,49 +357,136 @@ impl TileView {
         size: f64,
         mut visit: impl FnMut(i64, i64, f64, f64) -> Option<T>,
     ) -> Option<T> {
-        let start = origin + d * t0;
-        let (mut cx, mut cy) = (floor(start.x / size), floor(start.y / size));
-        let step = |dir: f64| if dir > 0.0 { 1 } else { -1 };
-        let (sx, sy) = (step(d.x), step(d.y));
-        let next_boundary = |c: i64, s: i64| (if s > 0 { c + 1 } else { c }) as f64 * size;
-        let delta = |dir: f64| {
-            if dir.abs() < 1e-12 {
-                f64::INFINITY
-            } else {
-                size / dir.abs()
-            }
-        };
-        let (dx, dy) = (delta(d.x), delta(d.y));
-        let mut tx = if d.x.abs() < 1e-12 {
-            f64::INFINITY
-        } else {
-            (next_boundary(cx, sx) - origin.x) / d.x
-        };
-        let mut ty = if d.y.abs() < 1e-12 {
-            f64::INFINITY
-        } else {
-            (next_boundary(cy, sy) - origin.y) / d.y
-        };
+        let mut dda = Dda::new(origin, d, t0, size);
         let mut t_in = t0;
         loop {
-            let t_out = tx.min(ty).min(t1);
-            if let Some(hit) = visit(cx, cy, t_in, t_out) {
+            let t_out = least(dda.exit(), t1);
+            if let Some(hit) = visit(dda.cx, dda.cy, t_in, t_out) {
                 return Some(hit);
             }
             if t_out >= t1 {
                 return None;
             }
-            if tx < ty {
-                cx += sx;
-                t_in = tx;
-                tx += dx;
-            } else {
-                cy += sy;
-                t_in = ty;
-                ty += dy;
-            }
+            t_in = dda.step();
         }
     }
+}
+
+/// The smaller of two distances: a plain comparison (`f64::min` also
+/// handles NaN, in five instructions; a ray's distances are never NaN).
+#[inline(always)]
+fn least(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
+/// A 2-D DDA over square cells (Amanatides & Woo, 1987): the cell a ray
+/// is in, and the distances along it at which it crosses the next column
+/// and row boundary.
+struct Dda {
+    cx: i64,
+    cy: i64,
+    sx: i64,
+    sy: i64,
+    tx: f64,
+    ty: f64,
+    dx: f64,
+    dy: f64,
+}
+
+impl Dda {
+    /// Cells of `size`, the ray from `origin` along `d` entered at `t0`.
+    #[inline(always)]
+    fn new(origin: &Point3<f64>, d: &Vector3<f64>, t0: f64, size: f64) -> Self {
+        let start = origin + d * t0;
+        let (cx, cy) = (floor(start.x / size), floor(start.y / size));
+        let (sx, sy) = (sign(d.x), sign(d.y));
+        let axis = |c: i64, s: i64, o: f64, dir: f64| {
+            if dir.abs() < 1e-12 {
+                (f64::INFINITY, f64::INFINITY)
+            } else {
+                ((boundary(c, s) * size - o) / dir, size / dir.abs())
+            }
+        };
+        let ((tx, dx), (ty, dy)) = (axis(cx, sx, origin.x, d.x), axis(cy, sy, origin.y, d.y));
+        Self {
+            cx,
+            cy,
+            sx,
+            sy,
+            tx,
+            ty,
+            dx,
+            dy,
+        }
+    }
+
+    /// Cells of [`CELL_M`], with the ray's reciprocals given (no division).
+    #[inline(always)]
+    fn with_inverse(
+        origin: &Point3<f64>,
+        d: &Vector3<f64>,
+        inverse: &Vector3<f64>,
+        t0: f64,
+    ) -> Self {
+        let start = origin + d * t0;
+        let (cx, cy) = (floor(start.x * PER_CELL), floor(start.y * PER_CELL));
+        let (sx, sy) = (sign(d.x), sign(d.y));
+        let axis = |c: i64, s: i64, o: f64, dir: f64, inv: f64| {
+            if dir.abs() < 1e-12 {
+                (f64::INFINITY, f64::INFINITY)
+            } else {
+                ((boundary(c, s) * CELL_M - o) * inv, CELL_M * inv.abs())
+            }
+        };
+        let ((tx, dx), (ty, dy)) = (
+            axis(cx, sx, origin.x, d.x, inverse.x),
+            axis(cy, sy, origin.y, d.y, inverse.y),
+        );
+        Self {
+            cx,
+            cy,
+            sx,
+            sy,
+            tx,
+            ty,
+            dx,
+            dy,
+        }
+    }
+
+    /// Where the ray leaves the current cell.
+    #[inline(always)]
+    fn exit(&self) -> f64 {
+        least(self.tx, self.ty)
+    }
+
+    /// On to the next cell; returns where the ray enters it.
+    #[inline(always)]
+    fn step(&mut self) -> f64 {
+        if self.tx < self.ty {
+            let t = self.tx;
+            self.cx += self.sx;
+            self.tx += self.dx;
+            t
+        } else {
+            let t = self.ty;
+            self.cy += self.sy;
+            self.ty += self.dy;
+            t
+        }
+    }
+}
+
+/// The step along an axis a ray moves along with direction `dir`.
+#[inline(always)]
+fn sign(dir: f64) -> i64 {
+    if dir > 0.0 { 1 } else { -1 }
+}
+
+/// The index of the boundary a ray in cell `c` stepping `s` crosses next.
+#[inline(always)]
+fn boundary(c: i64, s: i64) -> f64 {
+    (if s > 0 { c + 1 } else { c }) as f64
 }
 
 impl RayCast for TileView {
