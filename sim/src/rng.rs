@@ -40,21 +40,6 @@ impl Rng {
         let u2 = self.unit();
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
     }
-
-    /// Two independent standard normals (Marsaglia's polar method: a point
-    /// drawn uniformly in the unit disc, one logarithm and no trigonometry
-    /// for the pair). Cheaper per value than [`normal`](Self::normal) where
-    /// many are drawn, as for a range image's noise.
-    pub fn normal_pair(&mut self) -> (f64, f64) {
-        loop {
-            let (u, v) = (2.0 * self.unit() - 1.0, 2.0 * self.unit() - 1.0);
-            let s = u * u + v * v;
-            if s > 0.0 && s < 1.0 {
-                let scale = (-2.0 * s.ln() / s).sqrt();
-                return (u * scale, v * scale);
-            }
-        }
-    }
 }
 
 #[cfg(test)]
@@ -73,22 +58,5 @@ mod tests {
         let mean = values.iter().sum::<f64>() / values.len() as f64;
         assert!((mean - 0.5).abs() < 0.02);
         assert_ne!(Rng::stream(1, 2).next_u64(), Rng::stream(1, 3).next_u64());
-    }
-
-    #[test]
-    fn normal_pairs_are_standard_normal_and_independent() {
-        let mut r = Rng::stream(7, 1);
-        let pairs: Vec<(f64, f64)> = (0..50_000).map(|_| r.normal_pair()).collect();
-        let n = 2.0 * pairs.len() as f64;
-        let values = || pairs.iter().flat_map(|&(a, b)| [a, b]);
-        let mean = values().sum::<f64>() / n;
-        let variance = values().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
-        let within_one = values().filter(|x| x.abs() < 1.0).count() as f64 / n;
-        let correlation = pairs.iter().map(|&(a, b)| a * b).sum::<f64>() / (n / 2.0);
-        assert!(mean.abs() < 0.01, "mean {mean}");
-        assert!((variance - 1.0).abs() < 0.02, "variance {variance}");
-        // 68.27 % of a standard normal lies within one sigma.
-        assert!((within_one - 0.6827).abs() < 0.005, "{within_one}");
-        assert!(correlation.abs() < 0.02, "correlation {correlation}");
     }
 }

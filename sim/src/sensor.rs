@@ -65,17 +65,11 @@ pub fn render(
                     seed.0,
                     seed.1.wrapping_mul(65_536).wrapping_add((first + r) as u64),
                 );
-                // Normals come in pairs; the second waits for the next return.
-                let mut spare = None;
                 for value in row {
                     if dropout > 0.0 && rng.unit() < dropout {
                         *value = f32::NAN;
                     } else if value.is_finite() && sigma > 0.0 {
-                        let normal = spare.take().unwrap_or_else(|| {
-                            let (a, b) = rng.normal_pair();
-                            spare = Some(b);
-                            a
-                        });
+                        let normal = rng.normal();
                         *value = (f64::from(*value) + sigma * normal).max(0.01) as f32;
                     }
                 }
