@@ -70,7 +70,9 @@ enum Command {
     /// controller's own LCM link (--forward).
     Vehicle(VehicleArgs),
     /// Picture of one decision of a log: the local map, the vehicle, the arcs
-    /// coloured by fused vote, each behaviour's votes and who vetoed what.
+    /// coloured by fused vote, each behaviour's votes and what they rested on
+    /// (the route's planned path, the point it steered for, the ground it
+    /// remembers as obstacles or shut), and who vetoed what.
     Render(RenderArgs),
     /// Write an LCM log as MCAP, the format Foxglove opens: range images as
     /// point clouds in the vehicle frame, obstacle cells, local map and
