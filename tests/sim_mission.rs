@@ -562,7 +562,10 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
     }
     let lidar = &reports[0].1["localmap"];
     assert!(lidar["seen_from_afar"].as_u64().unwrap() > 0, "{lidar}");
-    // Every overlapping image counting a miss, the same vehicle is stuck.
+    // Every overlapping image counting a miss, the same vehicle is stuck
+    // (with the default noise seed; over sim.seed 1-6, stuck with 1, 3 and
+    // 4, through with 2, 5 and 6, while the defaults complete with all six
+    // and both sensors: 2026-11-27).
     let (tag, report, stdout) = &reports[2];
     assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
     assert_eq!(report["localmap"]["seen_from_afar"], 0, "{tag}");
@@ -603,6 +606,9 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
         report["recovery"]["turns"].as_u64().unwrap() <= 1,
         "{tag}: one turn towards the near end:\n{stdout}"
     );
+    // As before: stuck with the default noise seed (over sim.seed 1-6,
+    // stuck with 1 and 4 only, while the defaults complete with all six:
+    // 2026-11-27).
     let (tag, report, stdout) = &reports[1];
     assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
 }
@@ -687,7 +693,11 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
 /// 017, narrower still: a dead-end lane with 5.7 m of floor, where no
 /// K-point turn gets the vehicle round. It backs out the way it came (at
 /// least 20 m of the 30 m lane, both sensors), turns once out, and
-/// completes without a collision, keeping off the banks' sides.
+/// completes without a collision, keeping off the banks' sides. (With the
+/// default noise seed. Over sim.seed 1-6 the ERIM came 0.61, 0.61, 0.24,
+/// 0.61, 0.62 and 0.20 m from a side, the lidar 0.50 m every time: with
+/// seeds 3 and 6 the K-turns it tries before backing out bring a corner
+/// within 0.3 m, 2026-11-27.)
 #[test]
 fn a_dead_end_lane_too_narrow_to_turn_in_is_left_backing_out_the_way_it_came() {
     let world = format!(
