@@ -185,65 +185,34 @@ impl Projector {
         out: &mut Vec<Point>,
         stats: &mut ImageStats,
     ) {
-        self.for_each(
+        self.for_each_row(
             image,
             ranges,
             level_from_sensor,
             (min_range, max_range),
             stats,
-            |xyz, row, col| {
-                out.push(Point {
-                    xyz,
-                    row: row as u32,
-                    col: col as u32,
-                })
+            |row, points| {
+                for (col, &used) in points.used.iter().enumerate() {
+                    if used {
+                        out.push(Point {
+                            xyz: [points.x[col], points.y[col], points.z[col]],
+                            row: row as u32,
+                            col: col as u32,
+                        });
+                    }
+                }
             },
         );
     }
 
-    /// [`Projector::project`], handing each point (level-frame xyz, row,
-    /// column) to `each` instead of storing it. Beam directions are
-    /// separable, so per image one rotated 3-vector per column and the
-    /// elevation's cosine and sine per row are computed: a point costs six
-    /// multiplications.
-    pub(crate) fn for_each(
-        &mut self,
-        image: &RangeImage,
-        ranges: &[f32],
-        level_from_sensor: &Isometry,
-        (min_range, max_range): (f32, f32),
-        stats: &mut ImageStats,
-        mut each: impl FnMut([f32; 3], usize, usize),
-    ) {
-        let ([tx, ty, tz], vertical) = self.prepare(image, level_from_sensor);
-        let cols = image.cols();
-        for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
-            let line = &ranges[row * cols..(row + 1) * cols];
-            let (vx, vy, vz) = (se * vertical[0], se * vertical[1], se * vertical[2]);
-            for (col, &range) in line.iter().enumerate() {
-                if !(range.is_finite() && range > 0.0) {
-                    stats.no_return += 1;
-                    continue;
-                }
-                if range < min_range || range > max_range {
-                    stats.out_of_range += 1;
-                    continue;
-                }
-                let xyz = [
-                    (ce * self.cos_az[col] + vx) * range + tx,
-                    (ce * self.sin_az[col] + vy) * range + ty,
-                    (ce * self.up[col] + vz) * range + tz,
-                ];
-                each(xyz, row, col);
-            }
-        }
-    }
-
-    /// [`Projector::for_each`] a row at a time: `each_row(row, points)`
-    /// gets every column's level-frame point, with whether it is a return
-    /// in range (`points.used`; the others' coordinates are meaningless).
-    /// Computed with no branch per point, so it vectorises, for a caller
-    /// whose own work on a row does too.
+    /// Every return of `image` projected into the level frame, a row at a
+    /// time: `each_row(row, points)` gets every column's point, with
+    /// whether it is a return in range (`points.used`; the others'
+    /// coordinates are meaningless). Beam directions are separable, so per
+    /// image one rotated 3-vector per column and the elevation's cosine and
+    /// sine per row are computed: a point costs six multiplications, with
+    /// no branch (it vectorises, for a caller whose own work on a row does
+    /// too).
     pub(crate) fn for_each_row(
         &mut self,
         image: &RangeImage,
@@ -291,7 +260,7 @@ impl Projector {
         stats.out_of_range += out_of_range;
     }
 
-    /// [`Projector::for_each`] binned into `grid` of `cell`-sized cells,
+    /// [`Projector::for_each_row`] binned into `grid` of `cell`-sized cells,
     /// keeping each cell's highest and lowest level-frame z: `each` gets
     /// the cell (as [`GridShape::index`] finds it, the same arithmetic)
     /// with the highest and lowest z of a run of neighbouring returns in

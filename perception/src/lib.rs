@@ -52,7 +52,7 @@ pub use image::{BeamTable, ImageError, RangeImage};
 pub use pca::{HierarchicalPca, PcaConfig, PcaMaps};
 pub use raycast::RayCast;
 pub use registry::{EvaluatorPlugin, EvaluatorRegistry};
-pub use sensor::{SensorConfig, SensorModel, SensorPreset};
+pub use sensor::{PosedBeams, SensorConfig, SensorModel, SensorPreset};
 pub use shadow::{Shadow, ShadowIndex, Shadows};
 pub use stream::{
     FrameStream, RangeSlice, SliceAxis, SliceError, StreamCounts, StreamingConfig, Support,

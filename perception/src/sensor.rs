@@ -437,54 +437,72 @@ impl SensorModel {
         rows: Range<usize>,
         out: &mut [f32],
     ) {
-        let trig = self.azimuth_trig();
-        self.render_rows_with(&trig, world_from_vehicle, scene, rows, out);
+        self.render_rows_posed(&self.posed_beams(world_from_vehicle), scene, rows, out);
     }
 
-    /// The sine and cosine of every column's azimuth, for
-    /// [`render_rows_with`](Self::render_rows_with): computed once by a
-    /// caller that renders an image in many parts.
-    pub fn azimuth_trig(&self) -> Vec<(f64, f64)> {
-        self.beams
-            .azimuth
-            .iter()
-            .map(|&az| f64::from(az).sin_cos())
-            .collect()
+    /// The beams with the vehicle at `world_from_vehicle`, for
+    /// [`render_rows_posed`](Self::render_rows_posed): computed once a
+    /// frame by a caller that renders it in many parts.
+    pub fn posed_beams(&self, world_from_vehicle: &Isometry) -> PosedBeams {
+        let world_from_sensor = world_from_vehicle * self.vehicle_from_sensor;
+        let rotation = world_from_sensor.rotation.to_rotation_matrix();
+        PosedBeams {
+            origin: Point3::from(world_from_sensor.translation.vector),
+            across: self
+                .beams
+                .azimuth
+                .iter()
+                .map(|&az| {
+                    let (sin_az, cos_az) = f64::from(az).sin_cos();
+                    rotation * Vector3::new(cos_az, sin_az, 0.0)
+                })
+                .collect(),
+            up: rotation * Vector3::z(),
+        }
     }
 
-    /// [`render_rows`](Self::render_rows) with the azimuths' trig given
-    /// (as [`azimuth_trig`](Self::azimuth_trig) computes it).
-    pub fn render_rows_with(
+    /// [`render_rows`](Self::render_rows) with the beams posed (as
+    /// [`posed_beams`](Self::posed_beams) poses them).
+    pub fn render_rows_posed(
         &self,
-        trig: &[(f64, f64)],
-        world_from_vehicle: &Isometry,
+        beams: &PosedBeams,
         scene: &impl RayCast,
         rows: Range<usize>,
         out: &mut [f32],
     ) {
-        let world_from_sensor = world_from_vehicle * self.vehicle_from_sensor;
-        let origin = Point3::from(world_from_sensor.translation.vector);
         let cols = self.beams.cols();
-        // Beams are separable: R·(cos el cos az, cos el sin az, sin el) =
-        // cos el · R·(cos az, sin az, 0) + sin el · R·z, the first factor
-        // once per column, the second once per row.
-        let rotation = world_from_sensor.rotation.to_rotation_matrix();
-        let across: Vec<Vector3<f64>> = trig
-            .iter()
-            .map(|&(sin_az, cos_az)| rotation * Vector3::new(cos_az, sin_az, 0.0))
-            .collect();
-        let up = rotation * Vector3::z();
         let mut directions = Vec::with_capacity(cols);
         for (row, chunk) in rows.zip(out.chunks_mut(cols)) {
             let Some(&el) = self.beams.elevation.get(row) else {
                 break;
             };
             let (sin_el, cos_el) = f64::from(el).sin_cos();
-            let lift = up * sin_el;
+            let lift = beams.up * sin_el;
             directions.clear();
-            directions.extend(across.iter().map(|a| a * cos_el + lift));
-            scene.cast_each(&origin, &directions, self.max_range_m, chunk);
+            directions.extend(beams.across.iter().map(|a| a * cos_el + lift));
+            scene.cast_each(&beams.origin, &directions, self.max_range_m, chunk);
         }
+    }
+}
+
+/// A sensor's beams with the vehicle at one pose, in the world. Beams are
+/// separable: R·(cos el cos az, cos el sin az, sin el) =
+/// cos el · R·(cos az, sin az, 0) + sin el · R·z, so per column the first
+/// factor is kept, and R·z once.
+#[derive(Debug, Clone)]
+pub struct PosedBeams {
+    /// Where every beam starts.
+    origin: Point3<f64>,
+    /// Per column, R·(cos az, sin az, 0).
+    across: Vec<Vector3<f64>>,
+    /// R·z.
+    up: Vector3<f64>,
+}
+
+impl PosedBeams {
+    /// Where every beam starts, in the world.
+    pub fn origin(&self) -> Point3<f64> {
+        self.origin
     }
 }
 

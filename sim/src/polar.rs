@@ -341,13 +341,13 @@ impl PolarView<'_> {
         // One bin more than the range reaches into: the bound is
         // multiplied out, not divided, and must not fall short by a rounding.
         let last = ((max_range / ray.per_across * (1.0 / BIN_M)) as usize + 1).min(self.bins - 1);
-        // Start where the neighbour's search did when every bin before is
-        // clear for this ray too; else at the sensor.
         // A ray rising faster than every bin of its heading needs clears
         // them all (most rays above the horizon).
         if rise - RISE_MARGIN > f64::from(self.clears[(self.bins - 1) * HEADINGS + heading]) {
             return None;
         }
+        // Start where the neighbour's search did when every bin before is
+        // clear for this ray too; else at the sensor.
         let mut bin = match *hint {
             h if h > 0
                 && h <= last

@@ -8,8 +8,6 @@ use std::sync::Mutex;
 use arcnav_perception::{RangeImage, RangeSlice, SensorModel, SliceAxis};
 use arcnav_vehicle::{Isometry, Utime};
 
-use nalgebra::Point3;
-
 use crate::polar::PolarView;
 use crate::rng::Rng;
 use crate::tiles::TileView;
@@ -36,16 +34,11 @@ pub fn render(
     let threads = threads.max(1);
     let per_band = rows.div_ceil(threads * 8).max(1);
     let (sigma, dropout) = noise;
+    let beams = sensor.posed_beams(world_from_vehicle);
     // A frame of many rays is cast through the ground binned around the
     // sensor (built once, read by every thread); a few rays, in the view.
-    let origin = Point3::from(
-        (world_from_vehicle * sensor.vehicle_from_sensor)
-            .translation
-            .vector,
-    );
     let polar = (rows * cols >= POLAR_MIN_RAYS)
-        .then(|| PolarView::new(view, origin, sensor.max_range_m, threads));
-    let trig = sensor.azimuth_trig();
+        .then(|| PolarView::new(view, beams.origin(), sensor.max_range_m, threads));
     let bands = Mutex::new(image.range.chunks_mut(per_band * cols).enumerate());
     // The lock is held only to take a band.
     let next_band = || bands.lock().ok().and_then(|mut queue| queue.next());
@@ -55,10 +48,8 @@ pub fn render(
             let rows_here = chunk.len() / cols;
             let band = first..first + rows_here;
             match &polar {
-                Some(polar) => {
-                    sensor.render_rows_with(&trig, world_from_vehicle, polar, band, chunk)
-                }
-                None => sensor.render_rows_with(&trig, world_from_vehicle, view, band, chunk),
+                Some(polar) => sensor.render_rows_posed(&beams, polar, band, chunk),
+                None => sensor.render_rows_posed(&beams, view, band, chunk),
             }
             for (r, row) in chunk.chunks_mut(cols).enumerate() {
                 let mut rng = Rng::stream(
@@ -69,8 +60,7 @@ pub fn render(
                     if dropout > 0.0 && rng.unit() < dropout {
                         *value = f32::NAN;
                     } else if value.is_finite() && sigma > 0.0 {
-                        let normal = rng.normal();
-                        *value = (f64::from(*value) + sigma * normal).max(0.01) as f32;
+                        *value = (f64::from(*value) + sigma * rng.normal()).max(0.01) as f32;
                     }
                 }
             }
@@ -218,6 +208,7 @@ mod tests {
     use std::sync::Arc;
 
     use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+    use nalgebra::Point3;
 
     use super::*;
     use crate::World;

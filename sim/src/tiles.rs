@@ -398,26 +398,8 @@ impl Dda {
     #[inline(always)]
     fn new(origin: &Point3<f64>, d: &Vector3<f64>, t0: f64, size: f64) -> Self {
         let start = origin + d * t0;
-        let (cx, cy) = (floor(start.x / size), floor(start.y / size));
-        let (sx, sy) = (sign(d.x), sign(d.y));
-        let axis = |c: i64, s: i64, o: f64, dir: f64| {
-            if dir.abs() < 1e-12 {
-                (f64::INFINITY, f64::INFINITY)
-            } else {
-                ((boundary(c, s) * size - o) / dir, size / dir.abs())
-            }
-        };
-        let ((tx, dx), (ty, dy)) = (axis(cx, sx, origin.x, d.x), axis(cy, sy, origin.y, d.y));
-        Self {
-            cx,
-            cy,
-            sx,
-            sy,
-            tx,
-            ty,
-            dx,
-            dy,
-        }
+        let cell = (floor(start.x / size), floor(start.y / size));
+        Self::from_cell(cell, origin, d, size, |x, axis| x / d[axis])
     }
 
     /// Cells of [`CELL_M`], with the ray's reciprocals given (no division).
@@ -429,19 +411,33 @@ impl Dda {
         t0: f64,
     ) -> Self {
         let start = origin + d * t0;
-        let (cx, cy) = (floor(start.x * PER_CELL), floor(start.y * PER_CELL));
+        let cell = (floor(start.x * PER_CELL), floor(start.y * PER_CELL));
+        Self::from_cell(cell, origin, d, CELL_M, |x, axis| x * inverse[axis])
+    }
+
+    /// The ray in cell `(cx, cy)` of `size`; `along(x, axis)` is how far
+    /// along the ray it moves `x` metres along that axis (divided by, or
+    /// multiplied by the reciprocal of, its direction there).
+    #[inline(always)]
+    fn from_cell(
+        (cx, cy): (i64, i64),
+        origin: &Point3<f64>,
+        d: &Vector3<f64>,
+        size: f64,
+        along: impl Fn(f64, usize) -> f64,
+    ) -> Self {
         let (sx, sy) = (sign(d.x), sign(d.y));
-        let axis = |c: i64, s: i64, o: f64, dir: f64, inv: f64| {
-            if dir.abs() < 1e-12 {
+        let axis = |c: i64, s: i64, axis: usize| {
+            if d[axis].abs() < 1e-12 {
                 (f64::INFINITY, f64::INFINITY)
             } else {
-                ((boundary(c, s) * CELL_M - o) * inv, CELL_M * inv.abs())
+                (
+                    along(boundary(c, s) * size - origin[axis], axis),
+                    along(size, axis).abs(),
+                )
             }
         };
-        let ((tx, dx), (ty, dy)) = (
-            axis(cx, sx, origin.x, d.x, inverse.x),
-            axis(cy, sy, origin.y, d.y, inverse.y),
-        );
+        let ((tx, dx), (ty, dy)) = (axis(cx, sx, 0), axis(cy, sy, 1));
         Self {
             cx,
             cy,

@@ -27,15 +27,16 @@ const OVERLAY_CELLS: [Rgba; 3] = [[0, 150, 150, 120], [150, 90, 30, 110], [120, 
 const OVERLAY_LINES: [Rgba; 3] = [[0, 140, 50, 230], [200, 120, 0, 230], [150, 0, 150, 230]];
 const OVERLAY_POINTS: [Rgba; 3] = [[220, 0, 140, 255], [0, 100, 220, 255], [120, 120, 0, 255]];
 
-/// Where the behaviours' overlays go on a snapshot: the map panel's size,
-/// pixels per metre and the vehicle frame to pixels.
-struct OverlayPanel<'a, F: Fn(f32, f32) -> (f32, f32)> {
+/// A snapshot's map panel: its size, pixels per metre and the vehicle
+/// frame to pixels. The arcs and the behaviours' overlays are drawn where
+/// they fall on it.
+struct MapPanel<'a, F: Fn(f32, f32) -> (f32, f32)> {
     size: (f32, f32),
     ppm: f32,
     to_px: &'a F,
 }
 
-impl<F: Fn(f32, f32) -> (f32, f32)> OverlayPanel<'_, F> {
+impl<F: Fn(f32, f32) -> (f32, f32)> MapPanel<'_, F> {
     fn px(&self, [x, y]: [f64; 2]) -> (f32, f32) {
         (self.to_px)(x as f32, y as f32)
     }
@@ -384,12 +385,12 @@ pub fn snapshot_picture(
     }
     // What the behaviours' votes rested on: cells under the arcs, lines
     // and points over them.
-    let panel_overlays = OverlayPanel {
+    let map_panel = MapPanel {
         size: (map_w as f32, map_h as f32),
         ppm,
         to_px: &to_px,
     };
-    let cell_legend = panel_overlays.cells(&mut canvas, overlays);
+    let cell_legend = map_panel.cells(&mut canvas, overlays);
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);
     // As far as obstacle avoidance judges them.
@@ -399,9 +400,7 @@ pub fn snapshot_picture(
     let arc_pixels = |arc: &arcnav_vehicle::Arc| -> Vec<(f32, f32)> {
         arc.sample(reach, 0.5)
             .map(|p| to_px(p.position.x as f32, p.position.y as f32))
-            .take_while(|&(u, v)| {
-                (0.0..=map_w as f32).contains(&u) && (0.0..=map_h as f32).contains(&v)
-            })
+            .take_while(|&p| map_panel.on(p))
             .collect()
     };
     for (i, arc) in arcs.iter().enumerate() {
@@ -426,7 +425,7 @@ pub fn snapshot_picture(
         canvas.polyline(&points, BLUE, 4.0, false);
     }
     let mut legend = cell_legend;
-    legend.extend(panel_overlays.marks(&mut canvas, overlays));
+    legend.extend(map_panel.marks(&mut canvas, overlays));
     // The map's key, over whatever lies under it.
     canvas.fill_rect(
         0.0,

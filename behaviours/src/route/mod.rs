@@ -862,9 +862,9 @@ impl Behaviour for Route {
     /// steered for, and the memory's obstacles and shut ground.
     fn overlay(&self, pose: &arcnav_vehicle::Pose) -> Overlay {
         let mut overlay = Overlay::default();
-        let Some(_) = self.origin else {
+        if self.origin.is_none() {
             return overlay;
-        };
+        }
         let p = pose.position();
         let yaw = pose.yaw();
         let (sin, cos) = yaw.sin_cos();
