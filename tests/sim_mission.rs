@@ -227,6 +227,52 @@ fn the_same_mission_writes_the_same_log_byte_for_byte() {
     assert!(la == lb, "two runs of the same mission differ");
 }
 
+/// A lidar's images rendered beside the pipeline (`sim.render_ahead`) make
+/// the mission that renders each image when due, byte for byte: every image
+/// but the first was rendered ahead, none had to be rendered again, and the
+/// logs are the same. 15 s of short_course with the 64-beam lidar.
+#[test]
+fn images_rendered_beside_the_pipeline_make_the_same_mission() {
+    let run = |tag: &str, ahead: bool| {
+        let out = out_dir(tag);
+        let config = out.join("ahead.toml");
+        std::fs::write(
+            &config,
+            format!("[sim]\ntime_limit_s = 15.0\nrender_ahead = {ahead}\n"),
+        )
+        .unwrap();
+        let (_, stdout, stderr) = arcnav(&[
+            "sim",
+            "--world",
+            "short_course",
+            "--sensor",
+            "lidar64",
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let report: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap_or_else(|e| panic!("{tag}: {e}\n{stdout}\n{stderr}"));
+        assert_eq!(report["outcome"], "timeout", "{tag}: {stdout}");
+        (report, std::fs::read(out.join("mission.lcm")).unwrap(), out)
+    };
+    let (ahead, ahead_log, _a) = run("ahead-on", true);
+    let (when_due, when_due_log, _b) = run("ahead-off", false);
+    let images = ahead["images"].as_u64().unwrap();
+    assert!(images >= 150, "{ahead}");
+    assert_eq!(ahead["images_rendered_ahead"], images - 1);
+    assert_eq!(ahead["images_rendered_again"], 0);
+    assert_eq!(when_due["images_rendered_ahead"], 0);
+    assert_eq!(when_due["images"], images);
+    assert!(ahead_log.len() > 10_000_000, "{} bytes", ahead_log.len());
+    assert!(
+        ahead_log == when_due_log,
+        "rendering ahead changed the mission's log"
+    );
+}
+
 #[test]
 fn list_shows_the_embedded_worlds() {
     let (code, stdout, _) = arcnav(&["sim", "--list"]);

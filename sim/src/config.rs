@@ -52,6 +52,11 @@ pub struct SimConfig {
     /// lidar; an Ouster sends 16 per packet), rows for a scanning one (the
     /// ERIM), highest beam first.
     pub slice_lines: usize,
+    /// Render each whole image while the pipeline works on the one before,
+    /// when the vehicle's path until it is due is fixed by then (one sensor,
+    /// `vehicle.command_latency_s` at least its period). The mission is the
+    /// same byte for byte; false renders each image when due.
+    pub render_ahead: bool,
 }
 
 impl Default for SimConfig {
@@ -71,6 +76,7 @@ impl Default for SimConfig {
             threads: 0,
             render_margin_m: 5.0,
             slice_lines: 0,
+            render_ahead: true,
         }
     }
 }

@@ -302,14 +302,27 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     }
     let t = &r.stage_times;
     println!(
-        "stage time    perception {:.2} ms/image, local map {:.3} ms, behaviours {:.3} ms, arbiter {:.3} ms (mean per call)",
+        "stage time    perception {:.2} ms/image, local map {:.3} ms, behaviours {:.3} ms, arbiter {:.3} ms (mean per call{})",
         t.perception.mean_ms(),
         t.localmap.mean_ms(),
         t.behaviours.mean_ms(),
-        t.arbiter.mean_ms()
+        t.arbiter.mean_ms(),
+        if r.images_rendered_ahead > 0 {
+            ", wall clock, sharing the cores with the rendering"
+        } else {
+            ""
+        }
     );
+    let ahead = if r.images_rendered_ahead > 0 {
+        format!(
+            " ({} of {} beside the pipeline, {} again)",
+            r.images_rendered_ahead, r.images, r.images_rendered_again
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "simulation    {:.0} s simulated in {:.1} s ({:.0}× real time), rendering {:.1} ms/image",
+        "simulation    {:.0} s simulated in {:.1} s ({:.0}× real time), rendering {:.1} ms/image{ahead}",
         r.duration_s, r.wall_time_s, r.realtime_factor, r.render_ms_mean
     );
     println!(

@@ -33,6 +33,9 @@ use serde::Serialize;
 
 use crate::speed_bound::{SpeedBound, speed_bound};
 
+mod ahead;
+use ahead::{FrameRequest, Frames, view_for};
+
 use crate::config::Config;
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
@@ -138,6 +141,11 @@ pub struct MissionReport {
     pub stage_times: StageTimes,
     /// Rendering range images (simulator, not pipeline), ms per image.
     pub render_ms_mean: f64,
+    /// Images rendered ahead, while the pipeline worked on the one before
+    /// (see `mission::ahead`), and those rendered ahead in vain (the vehicle
+    /// was elsewhere when they were due) and rendered again.
+    pub images_rendered_ahead: u64,
+    pub images_rendered_again: u64,
     pub wall_time_s: f64,
     pub realtime_factor: f64,
     /// The speed this configuration allows (002 §7: sensor rate and
@@ -356,12 +364,12 @@ pub fn run_mission(
     let sensors: Vec<SensorModel> = config.sensor_models()?;
     // Returns beyond what perception evaluates are never used: not rendered.
     let evaluated = config.lookahead().max_range_m + config.sim.render_margin_m;
-    let rendered: Vec<SensorModel> = sensors
+    let rendered: Vec<Arc<SensorModel>> = sensors
         .iter()
         .map(|sensor| {
             let mut rendered = sensor.clone();
             rendered.max_range_m = sensor.max_range_m.min(evaluated);
-            rendered
+            Arc::new(rendered)
         })
         .collect();
     let sim = &config.sim;
@@ -421,6 +429,19 @@ pub fn run_mission(
         .map(|sensor| (sim.slice_lines > 0).then(|| Slicer::new(sensor, sim.slice_lines)))
         .collect();
     let mut next_slices: Vec<usize> = vec![0; sensors.len()];
+    // Whole frames of one sensor are rendered ahead when the vehicle's path
+    // until the next is fixed by then (see `ahead`).
+    let mut frames: Vec<Frames> = rendered
+        .iter()
+        .map(|sensor| {
+            let noise = (sim.range_noise_m, sim.dropout_probability);
+            Frames::new(Arc::clone(sensor), noise, sim.seed, threads)
+        })
+        .collect();
+    let render_ahead = sim.render_ahead
+        && sensors.len() == 1
+        && sim.slice_lines == 0
+        && seconds_to_micros(config.vehicle.command_latency_s) >= sensors[0].period_us();
     let mut previous_stance: Option<(Utime, Isometry)> = None;
     let time_limit = t0 + seconds_to_micros(sim.time_limit_s);
     let (mut images, mut image_positions) = (0u64, Vec::new());
@@ -507,13 +528,7 @@ pub fn run_mission(
                     }
                     _ => stance.world_from_vehicle,
                 };
-                let sensor = &rendered[i];
-                let sensor_position = (at * sensor.vehicle_from_sensor).translation.vector;
-                let view = tiles.view(
-                    sensor_position.x,
-                    sensor_position.y,
-                    sensor.max_range_m + 1.0,
-                );
+                let view = view_for(&rendered[i], &mut tiles, &at);
                 let slice = slicer.render(
                     k,
                     frame,
@@ -544,34 +559,34 @@ pub fn run_mission(
         sink.log
             .message(t, channels::POSE, &pose_t::from(&measured));
         pipeline.input(Input::Pose(measured), &mut sink);
-        for (((sensor, rendered), next_image), slicer) in sensors
+        for (((sensor, frames), next_image), slicer) in sensors
             .iter()
-            .zip(&rendered)
+            .zip(&mut frames)
             .zip(&mut next_images)
             .zip(&slicers)
         {
             if slicer.is_some() || t < *next_image {
                 continue;
             }
-            let started = Instant::now();
-            let sensor_position = (stance.world_from_vehicle * sensor.vehicle_from_sensor)
-                .translation
-                .vector;
-            let view = tiles.view(
-                sensor_position.x,
-                sensor_position.y,
-                sensor.max_range_m + 1.0,
-            );
-            let image = arcnav_sim::sensor::render(
-                rendered,
-                &view,
-                &stance.world_from_vehicle,
-                t,
-                (sim.range_noise_m, sim.dropout_probability),
-                (sim.seed, images),
-                threads,
-            );
-            render_ms += started.elapsed().as_secs_f64() * 1e3;
+            let request = FrameRequest {
+                utime: t,
+                world_from_vehicle: stance.world_from_vehicle,
+                stream: images,
+            };
+            let (image, ms) = frames.render(&mut tiles, &request);
+            render_ms += ms;
+            *next_image += sensor.period_us();
+            // The next frame, rendered while perception works on this one.
+            if render_ahead {
+                let (utime, world_from_vehicle) =
+                    pose_when_due(&motion, &world, config, (t0, dt, tick), *next_image);
+                let request = FrameRequest {
+                    utime,
+                    world_from_vehicle,
+                    stream: images + 1,
+                };
+                frames.render_ahead(&mut tiles, request);
+            }
             if options.log_mode == LogMode::All {
                 sink.log.message(
                     t,
@@ -582,7 +597,6 @@ pub fn run_mission(
             pipeline.input(Input::Image(image), &mut sink);
             images += 1;
             image_positions.push([state.x, state.y]);
-            *next_image += sensor.period_us();
         }
         pipeline.run_until(t, &mut sink);
         for command in sink.commands.drain(..) {
@@ -690,6 +704,8 @@ pub fn run_mission(
         map_resets: pipeline.cycle.counts().map_resets,
         localmap: *pipeline.cycle.map.map.stats(),
         stage_times: pipeline.times,
+        images_rendered_ahead: frames.iter().map(|f| f.used).sum(),
+        images_rendered_again: frames.iter().map(|f| f.wasted).sum(),
         render_ms_mean: if images > 0 {
             render_ms / images as f64
         } else {
@@ -715,6 +731,29 @@ pub fn run_mission(
         patch_size_m: config.localmap.patch_size_m,
         snapshots: sink.snapshots,
     })
+}
+
+/// Where the vehicle will be at the first pose tick at or after `due`, and
+/// that tick's time, under the commands `motion` holds now: the mission
+/// loop's steps (`(t0, dt, tick)`, the tick it is at) taken on a copy.
+fn pose_when_due(
+    motion: &MotionModel,
+    world: &World,
+    config: &Config,
+    (t0, dt, mut tick): (Utime, Utime, u64),
+    due: Utime,
+) -> (Utime, Isometry) {
+    let mut motion = motion.clone();
+    let mut t = t0 + tick as i64 * dt;
+    while t < due {
+        tick += 1;
+        t = t0 + tick as i64 * dt;
+        motion.advance_to(t);
+    }
+    (
+        t,
+        drape(world, &config.vehicle, motion.state()).world_from_vehicle,
+    )
 }
 
 /// When a simulated mission is stuck: for `after` no nearer to its

@@ -1,0 +1,272 @@
+//! The next whole frame, rendered while the pipeline works on this one.
+//!
+//! A command acts `vehicle.command_latency_s` after it is decided. When a
+//! frame has been rendered, the commands that will move the vehicle until
+//! the next frame are therefore already decided, as long as the latency is
+//! at least the frame period: where the vehicle will be when the next frame
+//! is due is known. The mission renders that frame on other threads while
+//! perception, the local map, the behaviours and the arbiter work on this
+//! one on the mission's thread, and a lidar mission's two halves overlap.
+//!
+//! A frame rendered ahead is used only when what it was rendered from (the
+//! time, the vehicle's pose bit for bit, the noise stream) is what the
+//! mission renders from when the frame is due. The renderer is a function
+//! of those alone, so the mission is the one that renders each frame when
+//! due, byte for byte. Otherwise the frame is thrown away and rendered then.
+
+use std::sync::Arc;
+use std::sync::mpsc;
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use arcnav_perception::{RangeImage, SensorModel};
+use arcnav_sim::tiles::{TileCache, TileView};
+use arcnav_vehicle::{Isometry, Utime};
+
+/// What a whole frame is rendered from.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct FrameRequest {
+    pub utime: Utime,
+    pub world_from_vehicle: Isometry,
+    /// The frame's noise stream (the mission's image count).
+    pub stream: u64,
+}
+
+/// One sensor's whole frames, each either rendered when due or taken from
+/// the one rendered ahead.
+pub(super) struct Frames {
+    sensor: Arc<SensorModel>,
+    /// Range noise σ (m) and dropout probability.
+    noise: (f64, f64),
+    seed: u64,
+    threads: usize,
+    /// The thread rendering ahead (started with the first frame rendered
+    /// ahead), and what it is rendering.
+    worker: Option<Worker>,
+    ahead: Option<FrameRequest>,
+    /// Frames taken from those rendered ahead, and those thrown away.
+    pub used: u64,
+    pub wasted: u64,
+}
+
+/// A thread that renders the frames it is sent, one at a time. It lives as
+/// long as the mission: a thread started for each frame waits a millisecond
+/// or two before a core takes it up, which is most of what overlapping
+/// saves.
+struct Worker {
+    jobs: mpsc::Sender<(FrameRequest, TileView)>,
+    done: mpsc::Receiver<(RangeImage, f64)>,
+    thread: JoinHandle<()>,
+}
+
+impl Frames {
+    pub(super) fn new(
+        sensor: Arc<SensorModel>,
+        noise: (f64, f64),
+        seed: u64,
+        threads: usize,
+    ) -> Self {
+        Self {
+            sensor,
+            noise,
+            seed,
+            threads,
+            worker: None,
+            ahead: None,
+            used: 0,
+            wasted: 0,
+        }
+    }
+
+    /// The frame `request` asks for, and the milliseconds spent rendering
+    /// it (on whichever thread did).
+    pub(super) fn render(
+        &mut self,
+        tiles: &mut TileCache,
+        request: &FrameRequest,
+    ) -> (RangeImage, f64) {
+        match self.finish_ahead() {
+            Some((ahead, Some(frame))) if ahead == *request => {
+                self.used += 1;
+                return frame;
+            }
+            Some(_) => self.wasted += 1,
+            None => {}
+        }
+        let view = view_for(&self.sensor, tiles, &request.world_from_vehicle);
+        render_timed(
+            &self.sensor,
+            &view,
+            request,
+            self.noise,
+            self.seed,
+            self.threads,
+        )
+    }
+
+    /// Starts rendering the frame `request` asks for on other threads.
+    pub(super) fn render_ahead(&mut self, tiles: &mut TileCache, request: FrameRequest) {
+        // One not taken is thrown away.
+        if self.finish_ahead().is_some() {
+            self.wasted += 1;
+        }
+        if self.worker.is_none() {
+            self.worker = self.start_worker();
+        }
+        let view = view_for(&self.sensor, tiles, &request.world_from_vehicle);
+        // Without the worker the frame is rendered when due, as without this.
+        if let Some(worker) = &self.worker {
+            if worker.jobs.send((request.clone(), view)).is_ok() {
+                self.ahead = Some(request);
+            } else {
+                self.worker = None;
+            }
+        }
+    }
+
+    /// Waits for the frame being rendered ahead, if one is: what it was
+    /// rendered from, and the frame (none from a worker that panicked).
+    fn finish_ahead(&mut self) -> Option<(FrameRequest, Option<(RangeImage, f64)>)> {
+        let ahead = self.ahead.take()?;
+        let frame = self.worker.as_ref().and_then(|w| w.done.recv().ok());
+        if frame.is_none() {
+            self.worker = None;
+        }
+        Some((ahead, frame))
+    }
+
+    fn start_worker(&self) -> Option<Worker> {
+        let (jobs, queue) = mpsc::channel::<(FrameRequest, TileView)>();
+        let (rendered, done) = mpsc::channel();
+        // One thread more than the cores: the mission's thread holds a core
+        // for part of each frame, and with a thread more the bands of rows
+        // keep both cores busy (paper_loop, lidar64: 37.5 s → 36.0 s; the
+        // pipeline's stage times, wall clock, grow with it: perception 2.7 →
+        // 4.3 ms).
+        let (sensor, noise, seed, threads) = (
+            Arc::clone(&self.sensor),
+            self.noise,
+            self.seed,
+            self.threads + 1,
+        );
+        let thread = std::thread::Builder::new()
+            .name("render-ahead".into())
+            .spawn(move || {
+                while let Ok((request, view)) = queue.recv() {
+                    let frame = render_timed(&sensor, &view, &request, noise, seed, threads);
+                    if rendered.send(frame).is_err() {
+                        break;
+                    }
+                }
+            })
+            .ok()?;
+        Some(Worker { jobs, done, thread })
+    }
+}
+
+impl Drop for Frames {
+    /// The worker is told there is no more and waited for, not left running.
+    fn drop(&mut self) {
+        if let Some(Worker { jobs, done, thread }) = self.worker.take() {
+            drop((jobs, done));
+            let _ = thread.join();
+        }
+    }
+}
+
+/// The tiles `sensor` on the vehicle at `world_from_vehicle` sees.
+pub(super) fn view_for(
+    sensor: &SensorModel,
+    tiles: &mut TileCache,
+    world_from_vehicle: &Isometry,
+) -> TileView {
+    let at = (world_from_vehicle * sensor.vehicle_from_sensor)
+        .translation
+        .vector;
+    tiles.view(at.x, at.y, sensor.max_range_m + 1.0)
+}
+
+fn render_timed(
+    sensor: &SensorModel,
+    view: &TileView,
+    request: &FrameRequest,
+    noise: (f64, f64),
+    seed: u64,
+    threads: usize,
+) -> (RangeImage, f64) {
+    let started = Instant::now();
+    let image = arcnav_sim::sensor::render(
+        sensor,
+        view,
+        &request.world_from_vehicle,
+        request.utime,
+        noise,
+        (seed, request.stream),
+        threads,
+    );
+    (image, started.elapsed().as_secs_f64() * 1e3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_sim::World;
+    use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+
+    fn request(x: f64, stream: u64) -> FrameRequest {
+        FrameRequest {
+            utime: 1_000_000 + stream as Utime,
+            world_from_vehicle: isometry_from_xyz_rpy([x, 0.0, 0.0], 0.0, 0.0, 0.3),
+            stream,
+        }
+    }
+
+    /// A frame rendered ahead from what the mission then asks for is the
+    /// one rendered when due; one rendered from anything else (another
+    /// pose, another noise stream) is thrown away, counted, and the frame
+    /// rendered as asked. A frame left rendering when the mission ends is
+    /// waited for.
+    #[test]
+    fn a_frame_rendered_ahead_is_used_only_when_asked_for_exactly() {
+        let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+        let mut tiles = TileCache::new(Arc::clone(&world), 64, 2);
+        let mut sensor = SensorModel::erim();
+        sensor.max_range_m = 20.0;
+        let noise = (0.02, 0.01);
+        let mut frames = Frames::new(Arc::new(sensor.clone()), noise, 7, 2);
+        let when_due = |request: &FrameRequest, tiles: &mut TileCache| {
+            let view = view_for(&sensor, tiles, &request.world_from_vehicle);
+            render_timed(&sensor, &view, request, noise, 7, 1).0
+        };
+        let same = |a: &RangeImage, b: &RangeImage| {
+            a.utime == b.utime
+                && a.range.len() == b.range.len()
+                && a.range
+                    .iter()
+                    .zip(&b.range)
+                    .all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+
+        frames.render_ahead(&mut tiles, request(10.0, 1));
+        let (image, _) = frames.render(&mut tiles, &request(10.0, 1));
+        assert!(same(&image, &when_due(&request(10.0, 1), &mut tiles)));
+        assert_eq!((frames.used, frames.wasted), (1, 0));
+
+        for asked in [request(10.5, 2), request(10.0, 3)] {
+            frames.render_ahead(&mut tiles, request(10.0, 2));
+            let (image, _) = frames.render(&mut tiles, &asked);
+            assert!(same(&image, &when_due(&asked, &mut tiles)));
+        }
+        assert_eq!((frames.used, frames.wasted), (1, 2));
+
+        // Asked for ahead twice before it was due: the first is thrown away.
+        frames.render_ahead(&mut tiles, request(11.0, 4));
+        frames.render_ahead(&mut tiles, request(12.0, 5));
+        let (image, _) = frames.render(&mut tiles, &request(12.0, 5));
+        assert!(same(&image, &when_due(&request(12.0, 5), &mut tiles)));
+        assert_eq!((frames.used, frames.wasted), (2, 3));
+
+        frames.render_ahead(&mut tiles, request(13.0, 6));
+        drop(frames);
+    }
+}
