@@ -55,7 +55,8 @@ pub struct SimConfig {
     /// Render each whole image while the pipeline works on the one before,
     /// when the vehicle's path until it is due is fixed by then (one sensor,
     /// `vehicle.command_latency_s` at least its period). The mission is the
-    /// same byte for byte; false renders each image when due.
+    /// same byte for byte; false renders each image when due, as missions
+    /// run side by side (`arcnav sweep`) always do.
     pub render_ahead: bool,
 }
 

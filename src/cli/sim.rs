@@ -98,6 +98,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         },
         snapshot_every_s: args.snapshot_every,
         snapshot_dir: Some(snapshot_dir),
+        beside_others: false,
     };
     let sensors: Vec<String> = config.sensor_models()?.into_iter().map(|s| s.id).collect();
     eprintln!(

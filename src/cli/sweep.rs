@@ -270,7 +270,7 @@ fn run_pending(
                 if stop_workers.load(Ordering::Relaxed) {
                     return;
                 }
-                let _ = tx.send(one_run(&plan_ref, &registry, run));
+                let _ = tx.send(one_run(&plan_ref, &registry, run, jobs > 1));
             });
         });
     });
@@ -314,13 +314,17 @@ fn run_pending(
 }
 
 /// One mission; a run that cannot start is a row with outcome `error`.
-fn one_run(plan: &Plan, registry: &Registry, run: usize) -> Row {
+/// Run `run` of `plan`; `beside_others` when other runs go at the same time.
+fn one_run(plan: &Plan, registry: &Registry, run: usize, beside_others: bool) -> Row {
     let (world, s, setting) = plan.run(run);
     match run_mission(
         &setting.config,
         registry,
         Arc::clone(&world.world),
-        &MissionOptions::default(),
+        &MissionOptions {
+            beside_others,
+            ..MissionOptions::default()
+        },
         &mut |_| {},
     ) {
         Ok(done) => Row::new(run, &world.label, s, &setting.values, &done.report),

@@ -64,6 +64,10 @@ pub struct MissionOptions {
     /// Write a local-map picture every this many simulated seconds, into `snapshot_dir`.
     pub snapshot_every_s: Option<f64>,
     pub snapshot_dir: Option<PathBuf>,
+    /// Other missions run beside this one and keep the cores busy: images
+    /// are rendered when due, never ahead (`sim.render_ahead` would only add
+    /// threads competing for them).
+    pub beside_others: bool,
 }
 
 /// How it ended.
@@ -439,6 +443,7 @@ pub fn run_mission(
         })
         .collect();
     let render_ahead = sim.render_ahead
+        && !options.beside_others
         && sensors.len() == 1
         && sim.slice_lines == 0
         && seconds_to_micros(config.vehicle.command_latency_s) >= sensors[0].period_us();
