@@ -1,0 +1,68 @@
+//! Lidar missions × real time (020 item 4: ≥ 20× on this two-core machine,
+//! not met): `arcnav sim --world paper_loop --sensor lidar64 --no-images`
+//! in process, each image rendered beside the pipeline (`sim.render_ahead`,
+//! the default) and each rendered when due, with where a frame's wall time
+//! goes. The two missions are the same byte for byte; only the time differs.
+//! `cargo bench --bench mission [-- lidar128]` (about a minute a mission).
+
+use std::sync::Arc;
+
+use arcnav::Config;
+use arcnav::mission::{LogMode, MissionOptions, run_mission};
+use arcnav_behaviours::Registry;
+use arcnav_perception::SensorPreset;
+use arcnav_sim::World;
+
+fn main() {
+    let preset = match std::env::args().skip(1).find(|a| !a.starts_with('-')) {
+        Some(name) if name == "lidar128" => SensorPreset::Lidar128,
+        Some(name) if name != "lidar64" => {
+            eprintln!("unknown sensor {name:?}: lidar64 (the default) or lidar128");
+            std::process::exit(2);
+        }
+        _ => SensorPreset::Lidar64,
+    };
+    let world = Arc::new(
+        World::embedded("paper_loop")
+            .expect("embedded")
+            .expect("valid"),
+    );
+    let registry = Registry::builtin();
+    println!("paper_loop, {preset:?}, default configuration, no log, two cores:");
+    for ahead in [true, false] {
+        let mut config = Config::default();
+        config.sensor.preset = preset;
+        config.sim.render_ahead = ahead;
+        let options = MissionOptions {
+            log_mode: LogMode::NoImages,
+            ..MissionOptions::default()
+        };
+        let run = run_mission(
+            &config,
+            &registry,
+            Arc::clone(&world),
+            &options,
+            &mut |_| {},
+        )
+        .expect("the mission runs");
+        let r = &run.report;
+        let frame_ms = 1e3 * r.wall_time_s / r.images.max(1) as f64;
+        let t = &r.stage_times;
+        println!(
+            "  rendered {:<8} {:>5.0} s simulated in {:>5.1} s: {:>5.1}× real time (target ≥ 20×), \
+             {frame_ms:.1} ms a frame: rendering {:.1} ms ({} of {} images ahead), \
+             perception {:.2}, behaviours {:.2}, local map {:.2} (wall clock, ms an image), {:?}",
+            if ahead { "ahead" } else { "when due" },
+            r.duration_s,
+            r.wall_time_s,
+            r.realtime_factor,
+            r.render_ms_mean,
+            r.images_rendered_ahead,
+            r.images,
+            t.perception.mean_ms(),
+            t.behaviours.total_ms / r.images.max(1) as f64,
+            t.localmap.total_ms / r.images.max(1) as f64,
+            r.outcome,
+        );
+    }
+}
