@@ -256,14 +256,22 @@ fn images_rendered_beside_the_pipeline_make_the_same_mission() {
             serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
                 .unwrap_or_else(|e| panic!("{tag}: {e}\n{stdout}\n{stderr}"));
         assert_eq!(report["outcome"], "timeout", "{tag}: {stdout}");
-        (report, std::fs::read(out.join("mission.lcm")).unwrap(), out)
+        let log = std::fs::read(out.join("mission.lcm")).unwrap();
+        (report, log, stdout, out)
     };
-    let (ahead, ahead_log, _a) = run("ahead-on", true);
-    let (when_due, when_due_log, _b) = run("ahead-off", false);
+    let (ahead, ahead_log, stdout, _a) = run("ahead-on", true);
+    let (when_due, when_due_log, _, _b) = run("ahead-off", false);
     let images = ahead["images"].as_u64().unwrap();
     assert!(images >= 150, "{ahead}");
     assert_eq!(ahead["images_rendered_ahead"], images - 1);
     assert_eq!(ahead["images_rendered_again"], 0);
+    assert!(
+        stdout.contains(&format!(
+            "({} of {images} rendered ahead, beside the pipeline; 0 rendered twice)",
+            images - 1
+        )),
+        "{stdout}"
+    );
     assert_eq!(when_due["images_rendered_ahead"], 0);
     assert_eq!(when_due["images"], images);
     assert!(ahead_log.len() > 10_000_000, "{} bytes", ahead_log.len());

@@ -316,7 +316,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     );
     let ahead = if r.images_rendered_ahead > 0 {
         format!(
-            " ({} of {} beside the pipeline, {} again)",
+            " ({} of {} rendered ahead, beside the pipeline; {} rendered twice)",
             r.images_rendered_ahead, r.images, r.images_rendered_again
         )
     } else {
