@@ -114,7 +114,9 @@ pub struct HeightSampler {
     max_range: f32,
     projector: Projector,
     bins: Vec<Bin>,
-    touched: Vec<u32>,
+    /// One bit a bin, set when the bin is first raised: read word by word,
+    /// the touched bins come out in row-major order with no sort.
+    touched: Vec<u64>,
     /// A row's cells by column (u32::MAX: none).
     row_cells: Vec<u32>,
 }
@@ -180,6 +182,11 @@ impl HeightSampler {
         if self.bins.len() < cols * rows {
             self.bins.resize(cols * rows, EMPTY);
         }
+        // Only the words covering this grid: the rest stay clear.
+        let words = (cols * rows).div_ceil(64);
+        if self.touched.len() < words {
+            self.touched.resize(words, 0);
+        }
         // Points are binned relative to the grid's corner in f32.
         let (ox, oy) = (
             (t.x - i0 as f64 * cell) as f32,
@@ -231,7 +238,7 @@ impl HeightSampler {
                     }
                     let bin = &mut bins[index as usize];
                     if bin.z == f32::NEG_INFINITY {
-                        touched.push(index);
+                        touched[index as usize / 64] |= 1 << (index % 64);
                     }
                     let z = z + tz;
                     if z > bin.z {
@@ -240,19 +247,21 @@ impl HeightSampler {
                 }
             },
         );
-        touched.sort_unstable();
-        out.reserve(touched.len());
-        for &index in touched.iter() {
-            let index = index as usize;
-            let bin = std::mem::replace(&mut bins[index], EMPTY);
-            out.push(HeightSample {
-                i: i0 + (index % cols) as i64,
-                j: j0 + (index / cols) as i64,
-                z: bin.z,
-                variance: self.config.variance(bin.range),
-            });
+        out.reserve(touched.iter().map(|w| w.count_ones() as usize).sum());
+        for (w, word) in touched.iter_mut().enumerate() {
+            let mut bits = std::mem::take(word);
+            while bits != 0 {
+                let index = w * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let bin = std::mem::replace(&mut bins[index], EMPTY);
+                out.push(HeightSample {
+                    i: i0 + (index % cols) as i64,
+                    j: j0 + (index / cols) as i64,
+                    z: bin.z,
+                    variance: self.config.variance(bin.range),
+                });
+            }
         }
-        touched.clear();
     }
 }
 

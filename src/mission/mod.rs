@@ -7,7 +7,7 @@
 //! and, at the sensor's rate, a range image ray-cast from the true pose. The
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -252,7 +252,7 @@ struct MissionSink<'a> {
     stops: StopStats,
     stopped: bool,
     patches: BTreeMap<(i64, i64), (Reasons, f32)>,
-    seen: BTreeSet<(i64, i64)>,
+    seen: SeenPatches,
     snapshot: Option<(f64, &'a Path, Utime)>,
     snapshots: Vec<PathBuf>,
     config: &'a Config,
@@ -312,7 +312,7 @@ impl Sink for MissionSink<'_> {
         // The seen ground, for the picture: every 10th decision is enough
         // (the vehicle moves less than the window meanwhile).
         if self.commands.len() % 10 == 1 {
-            self.seen.extend(map.seen.iter());
+            self.seen.add(map.seen.iter());
         }
         if let Some((every, dir, next)) = &mut self.snapshot
             && at >= *next
@@ -336,6 +336,47 @@ impl Sink for MissionSink<'_> {
                 Err(e) => self.log.error = Some(e.into()),
             }
         }
+    }
+}
+
+/// Every patch the map has seen, for the mission's picture. A window of
+/// thousands of patches, most of them already in, is added every tenth
+/// decision: the patches are kept as bits of 8 × 8 blocks, and a run of
+/// patches in one block costs one look-up.
+#[derive(Debug, Default)]
+struct SeenPatches {
+    blocks: HashMap<(i64, i64), u64>,
+}
+
+impl SeenPatches {
+    fn add(&mut self, patches: impl Iterator<Item = (i64, i64)>) {
+        let mut last: Option<((i64, i64), &mut u64)> = None;
+        for (i, j) in patches {
+            let block = (i.div_euclid(8), j.div_euclid(8));
+            let bit = 1u64 << (i.rem_euclid(8) + 8 * j.rem_euclid(8));
+            match &mut last {
+                Some((at, bits)) if *at == block => **bits |= bit,
+                _ => {
+                    let bits = self.blocks.entry(block).or_default();
+                    *bits |= bit;
+                    last = Some((block, bits));
+                }
+            }
+        }
+    }
+
+    /// The patches, in order.
+    fn patches(&self) -> BTreeSet<(i64, i64)> {
+        let mut out = BTreeSet::new();
+        for (&(bi, bj), &bits) in &self.blocks {
+            let mut bits = bits;
+            while bits != 0 {
+                let b = i64::from(bits.trailing_zeros());
+                bits &= bits - 1;
+                out.insert((bi * 8 + b % 8, bj * 8 + b / 8));
+            }
+        }
+        out
     }
 }
 
@@ -409,7 +450,7 @@ pub fn run_mission(
         stops: StopStats::default(),
         stopped: false,
         patches: BTreeMap::new(),
-        seen: BTreeSet::new(),
+        seen: SeenPatches::default(),
         snapshot: match (options.snapshot_every_s, &options.snapshot_dir) {
             (Some(every), Some(dir)) => Some((every, dir.as_path(), t0)),
             _ => None,
@@ -732,7 +773,7 @@ pub fn run_mission(
         track: sink.track,
         image_positions,
         obstacle_patches: sink.patches,
-        seen_patches: sink.seen,
+        seen_patches: sink.seen.patches(),
         patch_size_m: config.localmap.patch_size_m,
         snapshots: sink.snapshots,
     })
@@ -805,7 +846,25 @@ impl StuckWatch {
 
 #[cfg(test)]
 mod tests {
-    use super::StuckWatch;
+    use super::{SeenPatches, StuckWatch};
+    use std::collections::BTreeSet;
+
+    /// Windows of patches added again and again, either side of zero and
+    /// across blocks, come out each once, in order.
+    #[test]
+    fn seen_patches_are_each_patch_added_once_in_order() {
+        let mut seen = SeenPatches::default();
+        let mut expected = BTreeSet::new();
+        for (i0, j0) in [(-13i64, -5i64), (-9, -1), (20, 3), (-13, -5)] {
+            let window: Vec<(i64, i64)> = (j0..j0 + 11)
+                .flat_map(|j| (i0..i0 + 17).map(move |i| (i, j)))
+                .filter(|&(i, j)| (i + 3 * j).rem_euclid(5) != 0)
+                .collect();
+            expected.extend(window.iter().copied());
+            seen.add(window.into_iter());
+        }
+        assert_eq!(seen.patches(), expected);
+    }
 
     #[test]
     fn a_mission_is_stuck_only_when_it_neither_gains_on_its_waypoint_nor_roams() {
