@@ -129,6 +129,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
             .progress_chars("=> "),
     );
     let world = Arc::new(world);
+    let started = std::time::Instant::now();
     let run = run_mission(
         &config,
         &registry,
@@ -136,9 +137,13 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         &options,
         &mut |p: &MissionProgress| {
             bar.set_position(p.waypoint as u64);
+            let wall = started.elapsed().as_secs_f64();
             bar.set_message(format!(
-                "· {:.0} s · {:.0} m · {:.1} m/s",
-                p.sim_time_s, p.distance_m, p.speed_mps
+                "· {:.0} s · {:.0} m · {:.1} m/s · {:.0}× real time",
+                p.sim_time_s,
+                p.distance_m,
+                p.speed_mps,
+                p.sim_time_s / wall.max(1e-3)
             ));
         },
     )?;
