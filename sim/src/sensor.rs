@@ -4,6 +4,7 @@
 //! per row, so an image is the same whatever the thread count.
 
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use arcnav_perception::{RangeImage, RangeSlice, SensorModel, SliceAxis};
 use arcnav_vehicle::{Isometry, Utime};
@@ -201,6 +202,76 @@ impl Slicer {
             range: image.range,
         }
     }
+
+    /// Renders the slices `requests` ask for, side by side on up to
+    /// `threads` threads: each as [`Slicer::render`] makes it, in the
+    /// requests' order.
+    pub fn render_all(
+        &self,
+        requests: &[SliceRequest<'_>],
+        noise: (f64, f64),
+        seed: u64,
+        threads: usize,
+    ) -> Vec<RangeSlice> {
+        let one = |r: &SliceRequest<'_>| {
+            self.render(
+                r.k,
+                r.frame,
+                r.view,
+                &r.world_from_vehicle,
+                noise,
+                (seed, r.stream),
+            )
+        };
+        let threads = threads.clamp(1, requests.len().max(1));
+        if threads == 1 {
+            return requests.iter().map(one).collect();
+        }
+        // Slices differ in cost (the ground ahead, the sky), so threads
+        // take them one at a time.
+        let next = AtomicUsize::new(0);
+        let work = || {
+            let mut done = Vec::new();
+            loop {
+                let index = next.fetch_add(1, Ordering::Relaxed);
+                let Some(request) = requests.get(index) else {
+                    return done;
+                };
+                done.push((index, one(request)));
+            }
+        };
+        let mut rendered: Vec<(usize, RangeSlice)> = std::thread::scope(|scope| {
+            let others: Vec<_> = (1..threads).map(|_| scope.spawn(work)).collect();
+            let mut all = work();
+            for other in others {
+                // A thread that panicked: its slices are rendered here.
+                all.extend(other.join().unwrap_or_default());
+            }
+            all
+        });
+        rendered.sort_unstable_by_key(|&(index, _)| index);
+        let mut slices = Vec::with_capacity(requests.len());
+        let mut rendered = rendered.into_iter().peekable();
+        for (index, request) in requests.iter().enumerate() {
+            match rendered.next_if(|&(at, _)| at == index) {
+                Some((_, slice)) => slices.push(slice),
+                None => slices.push(one(request)),
+            }
+        }
+        slices
+    }
+}
+
+/// One slice for [`Slicer::render_all`]: slice `k` of the frame starting at
+/// `frame`, cast in `view` from the vehicle at `world_from_vehicle`, with
+/// noise stream `stream`.
+#[derive(Debug, Clone)]
+pub struct SliceRequest<'a> {
+    pub k: usize,
+    pub frame: Utime,
+    pub view: &'a TileView,
+    pub world_from_vehicle: Isometry,
+    pub stream: u64,
 }
 
 #[cfg(test)]
@@ -230,6 +301,59 @@ mod tests {
             // NaN ≠ NaN: compare the bits.
             let bits = |i: &RangeImage| i.range.iter().map(|r| r.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&one), bits(&other), "{threads} threads");
+        }
+    }
+
+    /// Slices rendered side by side are those rendered one by one, in the
+    /// order asked for, whatever the thread count.
+    #[test]
+    fn slices_rendered_side_by_side_are_the_slices_rendered_in_turn() {
+        let world = Arc::new(World::embedded("paper_loop").unwrap().unwrap());
+        let mut tiles = TileCache::new(Arc::clone(&world), 64, 2);
+        let slicer = Slicer::new(&SensorModel::lidar64(), 16);
+        let poses: Vec<Isometry> = (0..25)
+            .map(|n| {
+                let x = 0.4 * f64::from(n);
+                isometry_from_xyz_rpy([x, 1.0, world.height(x, 1.0)], 0.02, -0.03, 0.1)
+            })
+            .collect();
+        let views: Vec<TileView> = poses
+            .iter()
+            .map(|pose| tiles.view(pose.translation.x, pose.translation.y, 60.0))
+            .collect();
+        // A frame's last slices and the next frame's first, as one step
+        // hands them over.
+        let requests: Vec<SliceRequest<'_>> = (0..25)
+            .map(|n| {
+                let (k, frame) = ((120 + n) % 128, if n < 8 { 1_000 } else { 101_000 });
+                SliceRequest {
+                    k,
+                    frame,
+                    view: &views[n],
+                    world_from_vehicle: poses[n],
+                    stream: (n as u64) * 65_536 + k as u64,
+                }
+            })
+            .collect();
+        let noise = (0.02, 0.01);
+        let in_turn = slicer.render_all(&requests, noise, 5, 1);
+        assert_eq!(in_turn.len(), 25);
+        for (r, slice) in requests.iter().zip(&in_turn) {
+            assert_eq!((slice.first, slice.frame_utime), (r.k * 16, r.frame));
+        }
+        let bits = |s: &RangeSlice| s.range.iter().map(|r| r.to_bits()).collect::<Vec<_>>();
+        let returns: usize = in_turn
+            .iter()
+            .map(|s| s.range.iter().filter(|r| r.is_finite()).count())
+            .sum();
+        assert!(returns > 25 * 64 * 16 / 4, "{returns} returns");
+        for threads in [2, 3, 64] {
+            let side_by_side = slicer.render_all(&requests, noise, 5, threads);
+            assert_eq!(side_by_side.len(), in_turn.len());
+            for (n, (a, b)) in in_turn.iter().zip(&side_by_side).enumerate() {
+                assert_eq!(bits(a), bits(b), "slice {n}, {threads} threads");
+                assert_eq!(a.line_utimes, b.line_utimes);
+            }
         }
     }
 

@@ -20,8 +20,8 @@ use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, Reasons, SensorModel};
 use arcnav_sim::drape::drape;
 use arcnav_sim::rng::Rng;
-use arcnav_sim::sensor::Slicer;
-use arcnav_sim::tiles::TileCache;
+use arcnav_sim::sensor::{SliceRequest, Slicer};
+use arcnav_sim::tiles::{TileCache, TileView};
 use arcnav_sim::{Collision, CollisionPolicy, Truth, World};
 use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
@@ -556,9 +556,12 @@ pub fn run_mission(
             yaw_rate: state.speed_mps * state.curvature,
         };
         // Slices acquired since the last step come before this step's pose
-        // (they wait in perception for the pose after them).
+        // (they wait in perception for the pose after them). Each is
+        // rendered where the vehicle was at its middle line; those of one
+        // step side by side, then handed over in order.
         for (i, slicer) in slicers.iter().enumerate() {
             let Some(slicer) = slicer else { continue };
+            let mut due: Vec<(usize, Utime, Utime, Isometry, u64)> = Vec::new();
             loop {
                 let frame = next_images[i];
                 let k = next_slices[i];
@@ -566,7 +569,6 @@ pub fn run_mission(
                 if done > t {
                     break;
                 }
-                let started = Instant::now();
                 let at = match previous_stance {
                     Some((before, ref from)) if t > before => {
                         let f = ((middle - before) as f64 / (t - before) as f64).clamp(0.0, 1.0);
@@ -574,24 +576,8 @@ pub fn run_mission(
                     }
                     _ => stance.world_from_vehicle,
                 };
-                let view = view_for(&rendered[i], &mut tiles, &at);
-                let slice = slicer.render(
-                    k,
-                    frame,
-                    &view,
-                    &at,
-                    (sim.range_noise_m, sim.dropout_probability),
-                    (sim.seed, images.wrapping_mul(65_536).wrapping_add(k as u64)),
-                );
-                render_ms += started.elapsed().as_secs_f64() * 1e3;
-                if options.log_mode == LogMode::All {
-                    sink.log.message(
-                        done,
-                        &channels::range_image(&sensors[i].id),
-                        &wire::range_slice_to_wire(&slice),
-                    );
-                }
-                pipeline.input(Input::Slice(slice), &mut sink);
+                let stream = images.wrapping_mul(65_536).wrapping_add(k as u64);
+                due.push((k, frame, done, at, stream));
                 next_slices[i] = k + 1;
                 if next_slices[i] == slicer.len() {
                     next_slices[i] = 0;
@@ -599,6 +585,38 @@ pub fn run_mission(
                     images += 1;
                     image_positions.push([state.x, state.y]);
                 }
+            }
+            if due.is_empty() {
+                continue;
+            }
+            let started = Instant::now();
+            let views: Vec<TileView> = due
+                .iter()
+                .map(|(_, _, _, at, _)| view_for(&rendered[i], &mut tiles, at))
+                .collect();
+            let requests: Vec<SliceRequest<'_>> = due
+                .iter()
+                .zip(&views)
+                .map(|(&(k, frame, _, at, stream), view)| SliceRequest {
+                    k,
+                    frame,
+                    view,
+                    world_from_vehicle: at,
+                    stream,
+                })
+                .collect();
+            let noise = (sim.range_noise_m, sim.dropout_probability);
+            let slices = slicer.render_all(&requests, noise, sim.seed, threads);
+            render_ms += started.elapsed().as_secs_f64() * 1e3;
+            for ((_, _, done, _, _), slice) in due.iter().zip(slices) {
+                if options.log_mode == LogMode::All {
+                    sink.log.message(
+                        *done,
+                        &channels::range_image(&sensors[i].id),
+                        &wire::range_slice_to_wire(&slice),
+                    );
+                }
+                pipeline.input(Input::Slice(slice), &mut sink);
             }
         }
         previous_stance = Some((t, stance.world_from_vehicle));
