@@ -7,6 +7,8 @@
 //! and, at the sensor's rate, a range image ray-cast from the true pose. The
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
+mod ahead;
+
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -33,13 +35,11 @@ use serde::Serialize;
 
 use crate::speed_bound::{SpeedBound, speed_bound};
 
-mod ahead;
-use ahead::{FrameRequest, Frames, view_for};
-
 use crate::config::Config;
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
 use crate::wire;
+use ahead::{FrameRequest, Frames, view_for};
 use arcnav_pipeline::{Input, Sink, StageTimes};
 
 /// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
