@@ -197,7 +197,8 @@ impl HeightSampler {
         let tz = t.z as f32;
         let ranges = &image.range;
         let image_cols = image.cols();
-        let (bins, touched, cells) = (&mut self.bins, &mut self.touched, &mut self.row_cells);
+        let (bins, cells) = (&mut self.bins, &mut self.row_cells);
+        let touched = &mut self.touched[..words];
         let mut stats = ImageStats::default();
         self.projector.for_each_row(
             image,

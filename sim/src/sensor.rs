@@ -240,25 +240,24 @@ impl Slicer {
                 done.push((index, one(request)));
             }
         };
-        let mut rendered: Vec<(usize, RangeSlice)> = std::thread::scope(|scope| {
+        let mut slots: Vec<Option<RangeSlice>> = requests.iter().map(|_| None).collect();
+        std::thread::scope(|scope| {
             let others: Vec<_> = (1..threads).map(|_| scope.spawn(work)).collect();
-            let mut all = work();
-            for other in others {
-                // A thread that panicked: its slices are rendered here.
-                all.extend(other.join().unwrap_or_default());
+            let mine = work();
+            // A thread that panicked left its slices empty.
+            let theirs = others
+                .into_iter()
+                .flat_map(|o| o.join().unwrap_or_default());
+            for (index, slice) in mine.into_iter().chain(theirs) {
+                slots[index] = Some(slice);
             }
-            all
         });
-        rendered.sort_unstable_by_key(|&(index, _)| index);
-        let mut slices = Vec::with_capacity(requests.len());
-        let mut rendered = rendered.into_iter().peekable();
-        for (index, request) in requests.iter().enumerate() {
-            match rendered.next_if(|&(at, _)| at == index) {
-                Some((_, slice)) => slices.push(slice),
-                None => slices.push(one(request)),
-            }
-        }
-        slices
+        // The slices of a thread that panicked are rendered here.
+        slots
+            .into_iter()
+            .zip(requests)
+            .map(|(slice, request)| slice.unwrap_or_else(|| one(request)))
+            .collect()
     }
 }
 
