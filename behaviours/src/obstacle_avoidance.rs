@@ -46,11 +46,14 @@
 //! the votes ([`Votes::set_reverse_clearance`]); the arbiter backs up only
 //! along arcs clear for the distance it needs.
 //!
-//! **Creeping forwards**: each arc's distance to its first collision or
-//! unseen ground, however close, also goes out with the votes
+//! **Creeping forwards**: each arc's distance to its first collision, cell
+//! within the widest near-miss band inside `reverse_margin_m` (0.25 m) of
+//! the body, or unseen ground, however close, also goes out with the votes
 //! ([`Votes::set_forward_clearance`]). `min_distance_m` vetoes arcs for
 //! driving at speed; a turning manoeuvre's short legs at a crawl may still
-//! take them as far as they are clear.
+//! take them as far as they are clear, keeping beside the body about the
+//! room backing up keeps (clear to the body itself, a retrace's forward run
+//! brought a corner 0.2 m from a bank's side).
 
 use std::collections::HashMap;
 
@@ -100,7 +103,8 @@ pub struct ObstacleAvoidanceConfig {
     /// Backward arcs are checked this far, m (0: no opinion on backing up,
     /// so the arbiter never backs up).
     pub reverse_reach_m: f64,
-    /// Clearance kept to each side of the body when backing up, m.
+    /// Clearance kept to each side of the body when backing up, m; creeping
+    /// forwards in a manoeuvre, the widest near-miss band within it.
     pub reverse_margin_m: f64,
     /// Attitude, chassis clearance and roughness along the arcs, from the
     /// map's elevation layer (004 §IV).
@@ -487,6 +491,10 @@ pub struct ObstacleAvoidance {
     templates: Vec<Template>,
     /// Margin of band b (0 for the footprint itself).
     margins: Vec<f64>,
+    /// The widest band within `reverse_margin_m`: the clearance a
+    /// manoeuvre's leg keeps creeping forwards, as backing up keeps
+    /// `reverse_margin_m`.
+    crawl_band: usize,
     /// Deceleration the speed limits assume (half the vehicle's best), m/s².
     deceleration: f64,
     /// The vehicle's best deceleration, m/s².
@@ -494,6 +502,8 @@ pub struct ObstacleAvoidance {
     reverse: Option<Reverse>,
     /// Per arc: first collision distance (∞ if none within max), for speed.
     free: Vec<f64>,
+    /// Per arc: where the crawl band first meets a cell (∞ if none).
+    crawl_free: Vec<f64>,
     /// Per arc: where its footprint first meets unseen ground (distance,
     /// vehicle-frame point), when `unseen_ground` is `slow` (as an
     /// obstacle it is a collision in `free`).
@@ -541,6 +551,8 @@ struct Met {
     collision: Option<(f64, Option<[f32; 2]>)>,
     /// The narrowest near-miss band that meets a cell.
     grazed: Option<usize>,
+    /// The first cell the crawl band meets.
+    crawled: Option<f64>,
     /// The first ground no image has seen (`slow`), and where (vehicle frame).
     unseen: Option<(f64, [f32; 2])>,
     /// The highest graded cost crossed, and within the speed horizon.
@@ -563,6 +575,10 @@ impl Met {
         Met {
             collision: nearer(self.collision, other.collision),
             grazed: match (self.grazed, other.grazed) {
+                (Some(a), Some(b)) => Some(a.min(b)),
+                (a, b) => a.or(b),
+            },
+            crawled: match (self.crawled, other.crawled) {
                 (Some(a), Some(b)) => Some(a.min(b)),
                 (a, b) => a.or(b),
             },
@@ -596,6 +612,10 @@ impl ObstacleAvoidance {
         let margins: Vec<f64> = (0..=bands)
             .map(|b| config.near_miss_m * b as f64 / bands.max(1) as f64)
             .collect();
+        let crawl_band = margins
+            .iter()
+            .rposition(|&m| m <= config.reverse_margin_m + 1e-9)
+            .unwrap_or(0);
         let reach = config.max_distance_m;
         let r = config.grid_resolution_m;
         let grid = grid_around(setup.arcs, footprint.widened(config.near_miss_m), reach, r);
@@ -694,11 +714,13 @@ impl ObstacleAvoidance {
             deceleration: setup.vehicle.max_deceleration_mps2 * config.braking_fraction,
             max_deceleration: setup.vehicle.max_deceleration_mps2,
             free: vec![f64::INFINITY; setup.arcs.len()],
+            crawl_free: vec![f64::INFINITY; setup.arcs.len()],
             unseen_at: vec![None; setup.arcs.len()],
             suspect_at: vec![None; setup.arcs.len()],
             config,
             ahead,
             templates,
+            crawl_band,
             margins,
             reverse,
         }
@@ -763,6 +785,8 @@ impl ObstacleAvoidance {
                 .map(|hit| (f64::from(hit.s) + lead, raster.cause(hit, ctx)));
             part.grazed =
                 (1..=widest).find(|&b| first_in(blocked, &template.bands[b], rest).is_some());
+            part.crawled = first_in(blocked, &template.bands[self.crawl_band], rest)
+                .map(|hit| f64::from(hit.s) + lead);
         }
         part.graded = raster.graded_crossed(&template.bands[0], rest, (horizon - lead) as f32);
         if !raster.suspect_cells.is_empty() {
@@ -840,6 +864,10 @@ impl ObstacleAvoidance {
                     .iter()
                     .any(|(_, p)| under(p, b, blocked).is_some())
             });
+            met.crawled = poses[from..]
+                .iter()
+                .find(|(_, p)| under(p, self.crawl_band, blocked).is_some())
+                .map(|(s, _)| *s);
         }
         if self.config.unseen_ground == UnseenGround::Slow && near(Layer::Unseen) {
             met.unseen = poses.iter().find_map(|(s, p)| {
@@ -1214,6 +1242,7 @@ impl Behaviour for ObstacleAvoidance {
             let met = self.meet(arc, ctx, horizon);
             let verdict = self.verdicts[arc];
             self.free[arc] = f64::INFINITY;
+            self.crawl_free[arc] = met.crawled.unwrap_or(f64::INFINITY);
             self.unseen_at[arc] = met.unseen;
             self.suspect_at[arc] = met.suspect;
             // The first collision with a cell, or with ground the vehicle
@@ -1249,11 +1278,13 @@ impl Behaviour for ObstacleAvoidance {
             let severity = verdict.severity.max(f64::from(crossed));
             votes.set(arc, (1.0 - penalty - terrain_penalty * severity) as f32);
         }
-        // How far each arc is clear at a crawl: to the first collision or
-        // unseen ground, however close (a turning manoeuvre's leg).
+        // How far each arc is clear at a crawl: to the first collision,
+        // cell within the crawl band or unseen ground, however close (a
+        // turning manoeuvre's leg).
         for arc in 0..arcs {
             let unseen = self.unseen_at[arc].map_or(f64::INFINITY, |(s, _)| s);
-            votes.set_forward_clearance(arc, self.free[arc].min(unseen).min(max));
+            let clear = self.free[arc].min(self.crawl_free[arc]).min(unseen);
+            votes.set_forward_clearance(arc, clear.min(max));
         }
         if !self.config.speed_vote {
             return;

@@ -531,6 +531,34 @@ fn creeping_forwards_is_clear_to_the_first_cell_or_unseen_ground_however_close()
     assert!(all[19] > 2.0, "{all:?}");
 }
 
+/// A manoeuvre's leg creeping forwards keeps `reverse_margin_m` (to the
+/// near-miss band within it, 0.25 m) beside the body, as backing up does:
+/// a turn's forward legs and a retrace's forward runs brought a corner
+/// 0.2 m from a bank's side when they were clear to the body itself.
+#[test]
+fn creeping_forwards_keeps_the_reverse_margin_beside_the_body() {
+    let clearance = |votes: &Votes| votes.forward_clearance(19).unwrap();
+    let max = ObstacleAvoidanceConfig::default().max_distance_m;
+    // A rock 3 m ahead of the bumper, 0.15 m beside the straight arc's
+    // footprint (the body 1.1 m wide each side, and half a patch).
+    let beside = [(FRONT + 3.0, 1.45)];
+    let votes = avoidance_votes(&beside);
+    assert!(!votes.is_vetoed(19) && votes.values()[19] > 0.0);
+    let straight = clearance(&votes);
+    assert!((2.5..=3.1).contains(&straight), "{straight} m");
+    // Without the margin, the straight arc passes it.
+    let no_margin = avoidance_votes_on(
+        &snapshot(&beside),
+        ObstacleAvoidanceConfig {
+            reverse_margin_m: 0.0,
+            ..Default::default()
+        },
+    );
+    assert_eq!(clearance(&no_margin), max);
+    // 0.4 m beside the footprint, outside the margin: clear.
+    assert_eq!(clearance(&avoidance_votes(&[(FRONT + 3.0, 1.7)])), max);
+}
+
 #[test]
 fn being_boxed_in_slows_the_speed_vote() {
     // A wall 7 m ahead alone is avoided by turning: no reason to slow down.
