@@ -515,7 +515,7 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
             what: "local map pose",
             source,
         })?;
-    let size = f64::from(msg.patch_size);
+    let size = decimal_of(msg.patch_size);
     if !(size.is_finite() && size > 0.0) {
         return Err(invalid(format!("patch size {size} is not positive")));
     }
@@ -596,6 +596,21 @@ pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
     })
 }
 
+/// The `double` a `float` size on the wire was written from: the
+/// shortest decimal that reads back as that `float` (0.4 for a patch of
+/// 0.4 m, not 0.4000000059604645). Sizes come from configuration, in a few
+/// decimals; with the widened `float` instead, a node across the bus cut
+/// the ground into cells a hair larger than the map's own, and near a
+/// cell's edge decided a near tie otherwise than the same pipeline in one
+/// process.
+fn decimal_of(x: f32) -> f64 {
+    if x.is_finite() {
+        x.to_string().parse().unwrap_or(f64::from(x))
+    } else {
+        f64::from(x)
+    }
+}
+
 /// The elevation square of a local-map message.
 fn elevation_from_wire(msg: &local_map_t) -> Result<ElevationGrid, String> {
     let side = u32::try_from(msg.elevation_side)
@@ -608,7 +623,7 @@ fn elevation_from_wire(msg: &local_map_t) -> Result<ElevationGrid, String> {
                 msg.elevation.len()
             )
         })?;
-    let cell = f64::from(msg.elevation_cell);
+    let cell = decimal_of(msg.elevation_cell);
     if side > 0 && !(cell.is_finite() && cell >= 0.01) {
         return Err(format!(
             "elevation cells of {cell} m: at least 0.01 m is needed"
@@ -869,6 +884,18 @@ mod tests {
     }
 
     #[test]
+    fn a_float_size_reads_back_as_the_decimal_it_was_written_from() {
+        for size in [0.4, 0.2, 0.1, 0.25, 1.0, 0.35, 12.8] {
+            assert_eq!(decimal_of(size as f32), size);
+        }
+        // A `float` no short decimal wrote reads back as itself.
+        let third = 1.0f32 / 3.0;
+        assert_eq!(decimal_of(third) as f32, third);
+        assert!(decimal_of(f32::NAN).is_nan());
+        assert_eq!(decimal_of(f32::INFINITY), f64::INFINITY);
+    }
+
+    #[test]
     fn map_cycles_round_trip() {
         let pose = Pose {
             utime: 1_000,
@@ -925,6 +952,9 @@ mod tests {
         );
         assert_eq!(back.map.patches, map.patches);
         assert_eq!(back.map.seen, map.seen);
+        // The sizes are the map's own, not their `float`s widened.
+        assert_eq!(back.map.patch_size_m, 0.4);
+        assert_eq!(back.map.elevation.cell_size_m, 0.25);
         assert_eq!(back.map.elevation.at(-1.1, 2.3), Some([1.0, 0.01]));
         assert_eq!(back.map.elevation.at(-0.9, 2.3), None);
         assert_eq!(back.map.elevation.at(-0.9, 2.6), Some([-1.0, 0.25]));
