@@ -42,6 +42,37 @@ impl Rng {
     }
 }
 
+/// So that `rand_distr`'s samplers draw from it.
+impl rand_core::TryRng for Rng {
+    type Error = std::convert::Infallible;
+
+    fn try_next_u32(&mut self) -> Result<u32, Self::Error> {
+        Ok((self.next_u64() >> 32) as u32)
+    }
+
+    fn try_next_u64(&mut self) -> Result<u64, Self::Error> {
+        Ok(self.next_u64())
+    }
+
+    fn try_fill_bytes(&mut self, dst: &mut [u8]) -> Result<(), Self::Error> {
+        rand_core::utils::fill_bytes_via_next_word(dst, || self.try_next_u64())
+    }
+}
+
+impl Rng {
+    /// Standard normal by the ziggurat method (`rand_distr`'s
+    /// `StandardNormal`): one draw, a table look-up and a multiplication
+    /// nearly every time, where Box-Muller ([`normal`](Self::normal)) takes
+    /// two draws, a logarithm, a square root and a cosine. What range noise
+    /// uses, drawn for every return of every image (a 64 × 2048 lidar
+    /// mission ran 30 % faster). A different sequence from `normal`, which
+    /// worlds and poses keep so that they stay as they were.
+    pub fn ziggurat_normal(&mut self) -> f64 {
+        use rand_distr::Distribution;
+        rand_distr::StandardNormal.sample(self)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -58,5 +89,45 @@ mod tests {
         let mean = values.iter().sum::<f64>() / values.len() as f64;
         assert!((mean - 0.5).abs() < 0.02);
         assert_ne!(Rng::stream(1, 2).next_u64(), Rng::stream(1, 3).next_u64());
+    }
+
+    /// Both normals are standard normal: mean 0, variance 1, and the share
+    /// within one and two standard deviations (68.3 %, 95.4 %), over 10⁵
+    /// draws (standard errors 0.003, 0.0045, 0.0015, 0.0007).
+    #[test]
+    fn both_normals_are_standard_normal() {
+        type Draw = fn(&mut Rng) -> f64;
+        let draws: [(&str, Draw); 2] = [
+            ("box-muller", Rng::normal),
+            ("ziggurat", Rng::ziggurat_normal),
+        ];
+        for (name, draw) in draws {
+            let mut rng = Rng::stream(7, 1);
+            let values: Vec<f64> = (0..100_000).map(|_| draw(&mut rng)).collect();
+            let n = values.len() as f64;
+            let mean = values.iter().sum::<f64>() / n;
+            let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+            let within = |k: f64| values.iter().filter(|v| v.abs() < k).count() as f64 / n;
+            assert!(mean.abs() < 0.015, "{name}: mean {mean}");
+            assert!(
+                (variance - 1.0).abs() < 0.025,
+                "{name}: variance {variance}"
+            );
+            assert!(
+                (within(1.0) - 0.6827).abs() < 0.01,
+                "{name}: {}",
+                within(1.0)
+            );
+            assert!(
+                (within(2.0) - 0.9545).abs() < 0.005,
+                "{name}: {}",
+                within(2.0)
+            );
+        }
+        // The same seed, the same ziggurat draws.
+        let (mut a, mut b) = (Rng::stream(3, 4), Rng::stream(3, 4));
+        for _ in 0..1000 {
+            assert_eq!(a.ziggurat_normal().to_bits(), b.ziggurat_normal().to_bits());
+        }
     }
 }

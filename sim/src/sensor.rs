@@ -61,7 +61,8 @@ pub fn render(
                     if dropout > 0.0 && rng.unit() < dropout {
                         *value = f32::NAN;
                     } else if value.is_finite() && sigma > 0.0 {
-                        *value = (f64::from(*value) + sigma * rng.normal()).max(0.01) as f32;
+                        *value =
+                            (f64::from(*value) + sigma * rng.ziggurat_normal()).max(0.01) as f32;
                     }
                 }
             }
