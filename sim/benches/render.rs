@@ -7,8 +7,8 @@
 //! what a lidar mission's rendering alone allows: 10 Hz frames × real time.
 //! Target (020 item 4, not met): a 64×2048 frame ≥ 10× faster than the
 //! ~31 ms measured in missions (≤ 3.2 ms), so lidar missions run ≥ 20× real
-//! time; 4.9 ms on two threads on 2026-11-27. See docs/simulator.md for what
-//! has been measured and tried.
+//! time; 5.1 ms on two threads with the range noise on 2026-11-28. See
+//! docs/simulator.md for what has been measured and tried.
 //! Run with `cargo bench -p arcnav-sim --bench render`, or `… -- lidar64`
 //! for one sensor.
 
