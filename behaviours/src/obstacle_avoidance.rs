@@ -561,6 +561,14 @@ struct Met {
     suspect: Option<f64>,
 }
 
+/// The smaller of two values either part of a path may have met.
+fn least<T: PartialOrd>(a: Option<T>, b: Option<T>) -> Option<T> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(if b < a { b } else { a }),
+        (a, b) => a.or(b),
+    }
+}
+
 /// The nearer of two things met (the first on a tie).
 fn nearer<T>(a: Option<(f64, T)>, b: Option<(f64, T)>) -> Option<(f64, T)> {
     match (a, b) {
@@ -574,23 +582,14 @@ impl Met {
     fn and(self, other: Met) -> Met {
         Met {
             collision: nearer(self.collision, other.collision),
-            grazed: match (self.grazed, other.grazed) {
-                (Some(a), Some(b)) => Some(a.min(b)),
-                (a, b) => a.or(b),
-            },
-            crawled: match (self.crawled, other.crawled) {
-                (Some(a), Some(b)) => Some(a.min(b)),
-                (a, b) => a.or(b),
-            },
+            grazed: least(self.grazed, other.grazed),
+            crawled: least(self.crawled, other.crawled),
             unseen: nearer(self.unseen, other.unseen),
             graded: (
                 self.graded.0.max(other.graded.0),
                 self.graded.1.max(other.graded.1),
             ),
-            suspect: match (self.suspect, other.suspect) {
-                (Some(a), Some(b)) => Some(a.min(b)),
-                (a, b) => a.or(b),
-            },
+            suspect: least(self.suspect, other.suspect),
         }
     }
 }
