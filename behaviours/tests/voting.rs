@@ -1215,6 +1215,85 @@ fn the_route_shuts_unseen_ground_the_vehicle_backed_away_from_until_it_is_seen()
     assert_eq!(counter(&counters, "shut_cells"), 0);
 }
 
+/// A shadow 2.6 m deep across the way with a gap 1.3 m wide seen through
+/// it, straight ahead: too narrow for the vehicle, so obstacle avoidance
+/// holds it short of the unseen ground beside the gap. The route's 1 m
+/// cells astride the gap are seen at their centres, not wholly; before,
+/// they counted as free, backing up shut the shadow round them and the
+/// path kept going through the gap (`tests/worlds/ledge.toml` with the
+/// ERIM: back to the same gap five times, stuck). They are shut with the
+/// shadow, and stay shut while part of them is unseen; a gap the vehicle
+/// fits through stays open.
+#[test]
+fn a_gap_seen_only_in_part_is_shut_with_the_shadow_round_it() {
+    let (near, far) = (FRONT + 3.2, FRONT + 5.8);
+    let gap = 0.65;
+    let shadow = snapshot_after(vec![
+        (vec![], [-20.0, near, 20.0]),
+        (vec![], [far, 20.0, 20.0]),
+        (vec![], [near, far, gap]),
+    ]);
+    let goal = [60.0, 0.0];
+    let (forward, back) = (Some(1.0), Some(-1.0));
+    let (before, _, overlay) = route_after(&[&shadow], &[forward], goal, "");
+    assert!(
+        before.abs_diff(19) <= 2,
+        "through the gap before backing up: about straight, not {before}"
+    );
+    let path = |overlay: &Overlay| {
+        overlay
+            .lines
+            .iter()
+            .find(|l| l.label.contains("path"))
+            .expect("the path drawn")
+            .points
+            .clone()
+    };
+    let in_shadow = |&[x, y]: &[f64; 2]| (near..=far).contains(&x) && y.abs() < 8.0;
+    assert!(path(&overlay).iter().any(in_shadow), "the gap is taken");
+    let (after, counters, overlay) = route_after(
+        &[&shadow, &shadow, &shadow],
+        &[forward, back, back],
+        goal,
+        "",
+    );
+    assert!(
+        !path(&overlay).iter().any(in_shadow),
+        "round the shadow, gap and all: {:?}",
+        path(&overlay)
+    );
+    assert!(
+        after.abs_diff(19) >= 6,
+        "backed away from it, the route goes round: {after}"
+    );
+    let shut = overlay
+        .cells
+        .iter()
+        .find(|c| c.label.contains("shut"))
+        .expect("shut cells drawn");
+    assert!(
+        shut.centres
+            .iter()
+            .any(|&[x, y]| (near..=far).contains(&x) && y.abs() < 1.0),
+        "the cells astride the gap are shut: {:?}",
+        shut.centres
+    );
+    assert_eq!(shut.centres.len() as u64, counter(&counters, "shut_cells"));
+    // A gap 5.3 m wide, its edges seen in part as well: only what lies
+    // between shut cells is shut, and the way through stays open.
+    let wide = snapshot_after(vec![
+        (vec![], [-20.0, near, 20.0]),
+        (vec![], [far, 20.0, 20.0]),
+        (vec![], [near, far, 2.65]),
+    ]);
+    let (_, _, overlay) = route_after(&[&wide, &wide, &wide], &[forward, back, back], goal, "");
+    assert!(
+        path(&overlay).iter().any(in_shadow),
+        "through the wide gap: {:?}",
+        path(&overlay)
+    );
+}
+
 /// Shut ground that leaves no way to the waypoint (here the waypoint lies
 /// in it) is opened again: the way may lie through it.
 #[test]

@@ -34,7 +34,12 @@
 //!   shadow lies between the edge and the ground it falls to), within
 //!   `shut_along_m` and well inside the local map's window (in view yet
 //!   unseen), so that one backing-up closes the edge within sight, not the
-//!   next metre of it. Shut cells that leave no way to the waypoint are
+//!   next metre of it. A cell seen at its centre but not wholly, between
+//!   shut cells (within [`GAP_CELLS`] on both sides), is shut too: the
+//!   gap it leaves in the band is narrower than the vehicle, and obstacle
+//!   avoidance, which looks at the unseen part, holds the vehicle short of
+//!   it after every backing-up. A shut cell opens again once all of it
+//!   has been seen. Shut cells that leave no way to the waypoint are
 //!   opened again.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
@@ -169,6 +174,28 @@ const SHUT_IN_VIEW_M: f64 = 2.0;
 /// Shutting spreads through unseen cells with seen ground this many cells
 /// away on both sides (see `Route::between_seen`).
 const SHADOW_CELLS: i64 = 8;
+
+/// Whether every local-map patch that overlaps the memory cell `cell` m
+/// square centred on world (x, y) was seen.
+fn wholly_seen(map: &MapSnapshot, x: f64, y: f64, cell: f64) -> bool {
+    let s = map.patch_size_m;
+    let half = cell / 2.0;
+    // Patches from the one holding the cell's low edge to the one holding
+    // its high edge (a hair inside, so a patch that only touches it is out).
+    let span = |c: f64| {
+        (
+            ((c - half) / s).floor() as i64,
+            ((c + half) / s - 1e-9).ceil() as i64,
+        )
+    };
+    let ((i0, i1), (j0, j1)) = (span(x), span(y));
+    (j0..j1).all(|j| (i0..i1).all(|i| map.seen.contains(i, j)))
+}
+
+/// A cell seen in part only is shut when backing up if shut cells lie this
+/// many cells away on both sides (a gap in the shut band along an edge no
+/// wider than the vehicle; see `Route::shut_unseen_ahead`).
+const GAP_CELLS: i64 = 2;
 
 /// A memory cell's eight neighbours.
 const NEIGHBOURS: [(i64, i64); 8] = [
@@ -545,9 +572,15 @@ impl Route {
                 let (dx, dy) = (x - t.x, y - t.y);
                 let (vx, vy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
                 if self.in_window(vx, vy, margin) {
-                    let seen = map
-                        .seen
-                        .contains((x / s).floor() as i64, (y / s).floor() as i64);
+                    // A shut cell opens again once all of it was seen:
+                    // the ground that held the vehicle may be a corner of
+                    // a cell whose centre was seen (see `shut_unseen_ahead`).
+                    let seen = if self.state[c] == SHUT {
+                        wholly_seen(map, x, y, cell)
+                    } else {
+                        map.seen
+                            .contains((x / s).floor() as i64, (y / s).floor() as i64)
+                    };
                     if hit {
                         self.set_state(c, OBSTACLE);
                     } else if seen {
@@ -627,11 +660,12 @@ impl Route {
     /// along its edge, and shut only where the vehicle was held, the path
     /// would lead it to the next metres of the same edge, one backing-up
     /// at a time.
-    fn shut_unseen_ahead(&mut self, position: [f64; 2], yaw: f64) {
+    fn shut_unseen_ahead(&mut self, map: &MapSnapshot, position: [f64; 2], yaw: f64) {
         let reach = self.config.shut_unseen_m;
         if reach <= 0.0 {
             return;
         }
+        let margin = self.config.cell_m * std::f64::consts::FRAC_1_SQRT_2;
         let (sin, cos) = yaw.sin_cos();
         let front = [
             position[0] + self.front_m * cos,
@@ -642,6 +676,7 @@ impl Route {
         let before = self.stats.shut_cells;
         let mut frontier = std::mem::take(&mut self.flood);
         frontier.clear();
+        let mut partly_seen = Vec::new();
         let (lo_i, hi_i) = (
             ((front[0] - reach) / cell).floor() as i64,
             ((front[0] + reach) / cell).ceil() as i64,
@@ -658,11 +693,21 @@ impl Route {
                 if distance > reach || dx * cos + dy * sin < distance * min_cos {
                     continue;
                 }
-                if let Some(c) = self.cell_at(x, y)
-                    && self.state[c] == UNKNOWN
-                {
+                let Some(c) = self.cell_at(x, y) else {
+                    continue;
+                };
+                if self.state[c] == UNKNOWN {
                     self.shut(c);
                     frontier.push(c);
+                } else if matches!(self.state[c], FREE | ROUGH..SUSPECT)
+                    && self.in_window(
+                        (x - position[0]) * cos + (y - position[1]) * sin,
+                        -(x - position[0]) * sin + (y - position[1]) * cos,
+                        margin,
+                    )
+                    && !wholly_seen(map, x, y, cell)
+                {
+                    partly_seen.push(c);
                 }
             }
         }
@@ -688,6 +733,22 @@ impl Route {
             }
         }
         self.flood = frontier;
+        // Gaps in the shut band: cells seen at their centre but not wholly
+        // (obstacle avoidance holds the vehicle short of their unseen
+        // part), between shut cells, are shut too, narrowest first.
+        loop {
+            let before = partly_seen.len();
+            partly_seen.retain(|&c| {
+                let gap = self.between(c, GAP_CELLS, |state| matches!(state, OBSTACLE | SHUT));
+                if gap {
+                    self.shut(c);
+                }
+                !gap
+            });
+            if partly_seen.len() == before {
+                break;
+            }
+        }
         tracing::debug!(
             cells = self.stats.shut_cells - before,
             x = position[0],
@@ -707,16 +768,22 @@ impl Route {
     /// one side and the ground it falls to on the other; ground that was
     /// never in view (round the end of a ledge) has seen ground on one side.
     fn between_seen(&self, c: usize) -> bool {
+        self.between(c, SHADOW_CELLS, |state| !matches!(state, UNKNOWN | SHUT))
+    }
+
+    /// Whether cell `c` has cells whose state is `wanted` within `cells`
+    /// on both sides of it along a row, a column or a diagonal.
+    fn between(&self, c: usize, cells: i64, wanted: impl Fn(u8) -> bool) -> bool {
         let (x, y) = self.column_row(c);
-        let seen_towards = |dx: i64, dy: i64| {
-            (1..=SHADOW_CELLS).any(|k| {
+        let towards = |dx: i64, dy: i64| {
+            (1..=cells).any(|k| {
                 self.index(x + k * dx, y + k * dy)
-                    .is_some_and(|n| !matches!(self.state[n], UNKNOWN | SHUT))
+                    .is_some_and(|n| wanted(self.state[n]))
             })
         };
         [(1, 0), (0, 1), (1, 1), (1, -1)]
             .into_iter()
-            .any(|(dx, dy)| seen_towards(dx, dy) && seen_towards(-dx, -dy))
+            .any(|(dx, dy)| towards(dx, dy) && towards(-dx, -dy))
     }
 
     /// Opens every shut cell again (unseen ground at `unseen_cost`): when
@@ -783,7 +850,7 @@ impl Behaviour for Route {
         self.integrate(ctx.map);
         let backing = ctx.last_command.is_some_and(|c| c.speed_mps < 0.0);
         if backing && !self.backing {
-            self.shut_unseen_ahead(here, ctx.pose.yaw());
+            self.shut_unseen_ahead(ctx.map, here, ctx.pose.yaw());
         }
         self.backing = backing;
         let (Some(start), Some(goal)) = (
