@@ -39,7 +39,10 @@
 //!   gap it leaves in the band is narrower than the vehicle, and obstacle
 //!   avoidance, which looks at the unseen part, holds the vehicle short of
 //!   it after every backing-up. A shut cell opens again once all of it
-//!   has been seen. Shut cells that leave no way to the waypoint are
+//!   has been seen. A cell with shut ground right beside it on two
+//!   opposite sides (or shut ground on one and an obstacle on the other)
+//!   is impassable: a strip one cell wide seen through the shadow is no
+//!   way for the vehicle. Shut cells that leave no way to the waypoint are
 //!   opened again.
 //! - **Planning**: D* Lite ([`dstar`]) from the current waypoint to the
 //!   vehicle, repaired incrementally as cells change and as the vehicle
@@ -436,6 +439,27 @@ impl Route {
             }
         };
         let (x, y) = self.column_row(c);
+        // A cell between shut ground on both sides (or shut ground and an
+        // obstacle): a gap in a ledge's shut band one cell wide, through
+        // which an image happened to see. Obstacle avoidance holds the
+        // vehicle short of the unseen ground on either side of it.
+        let blocked = |dx: i64, dy: i64| {
+            self.index(x + dx, y + dy)
+                .map_or(0, |n| match self.state[n] {
+                    SHUT => 2,
+                    OBSTACLE => 1,
+                    _ => 0,
+                })
+        };
+        if [(1, 0), (0, 1), (1, 1), (1, -1)]
+            .into_iter()
+            .any(|(dx, dy)| {
+                let (a, b) = (blocked(dx, dy), blocked(-dx, -dy));
+                a > 0 && b > 0 && a + b > 2
+            })
+        {
+            return f32::INFINITY;
+        }
         let mut nearest = 3;
         for dy in -2..=2i64 {
             for dx in -2..=2i64 {
