@@ -759,23 +759,28 @@ fn held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge() {
     assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
 }
 
-/// The same ledge with the ERIM, over noise seeds 1-6: the route shut the
-/// shadow along the edge but left a gap in the band where its 1 m cells
-/// were seen at their centres and not wholly; obstacle avoidance, looking
-/// at the unseen part, held the vehicle short of it, and it backed away
-/// and came back to the same gap five times until stuck (seed 1; with the
-/// noise drawn by Box-Muller, seeds 4-6). Partly seen cells between shut
-/// ones are shut too: every seed goes round.
+/// The same ledge with the ERIM, over noise seeds 1-6, and the ledge open
+/// to the other side (`ledge_north`): the route shut the shadow along the
+/// edge but left gaps in the band. Where its 1 m cells were seen at their
+/// centres and not wholly (ledge, seed 1; with the noise drawn by
+/// Box-Muller, seeds 4-6), or an image saw a strip one cell wide right
+/// through the shadow (ledge_north, seed 2), the path went through the
+/// gap; obstacle avoidance, looking at the unseen ground beside it, held
+/// the vehicle short of it, and it backed away and came back until stuck.
+/// Partly seen cells between shut ones are shut too, and a cell between
+/// shut ones is impassable: every seed goes round.
 #[test]
 fn the_erim_goes_round_a_ledge_through_no_gap_in_its_shut_shadow() {
-    let world = format!("{}/tests/worlds/ledge.toml", env!("CARGO_MANIFEST_DIR"));
-    let runs = over_noise_seeds(
-        "ledge-erim",
-        &[("erim", "erim", "")],
-        &["--world", &world, "--no-images"],
-    );
-    for (tag, report, stdout) in &runs[0] {
-        assert_completed_without_collision(tag, report, stdout);
+    let world = |name: &str| format!("{}/tests/worlds/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    for name in ["ledge", "ledge_north"] {
+        let runs = over_noise_seeds(
+            &format!("{name}-erim"),
+            &[("erim", "erim", "")],
+            &["--world", &world(name), "--no-images"],
+        );
+        for (tag, report, stdout) in &runs[0] {
+            assert_completed_without_collision(tag, report, stdout);
+        }
     }
 }
 
