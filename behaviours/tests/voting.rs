@@ -1124,6 +1124,17 @@ fn route_after(
     (best, behaviour.counters(), behaviour.overlay(&pose))
 }
 
+/// The route's planned path as its overlay draws it.
+fn planned_path(overlay: &Overlay) -> Vec<[f64; 2]> {
+    overlay
+        .lines
+        .iter()
+        .find(|l| l.label.contains("path"))
+        .expect("the path drawn")
+        .points
+        .clone()
+}
+
 fn counter(counters: &[(&'static str, u64)], name: &str) -> u64 {
     counters
         .iter()
@@ -1178,12 +1189,7 @@ fn the_route_shuts_unseen_ground_the_vehicle_backed_away_from_until_it_is_seen()
         "{:?}",
         shut_cells.centres
     );
-    let path = &overlay
-        .lines
-        .iter()
-        .find(|l| l.label.contains("path"))
-        .expect("the path drawn")
-        .points;
+    let path = &planned_path(&overlay);
     let (first, last) = (path[0], path[path.len() - 1]);
     assert!(
         first[0].hypot(first[1]) < 1.0,
@@ -1250,15 +1256,7 @@ fn a_gap_seen_only_in_part_is_shut_with_the_shadow_round_it() {
         before.abs_diff(19) <= 2,
         "through the gap before backing up: about straight, not {before}"
     );
-    let path = |overlay: &Overlay| {
-        overlay
-            .lines
-            .iter()
-            .find(|l| l.label.contains("path"))
-            .expect("the path drawn")
-            .points
-            .clone()
-    };
+    let path = planned_path;
     let in_shadow = |&[x, y]: &[f64; 2]| (near..=far).contains(&x) && y.abs() < 8.0;
     assert!(path(&overlay).iter().any(in_shadow), "the gap is taken");
     let (after, counters, overlay) = route_after(
@@ -1328,12 +1326,7 @@ fn a_strip_one_cell_wide_seen_through_the_shut_shadow_is_no_way() {
         goal,
         "",
     );
-    let path = &overlay
-        .lines
-        .iter()
-        .find(|l| l.label.contains("path"))
-        .expect("the path drawn")
-        .points;
+    let path = &planned_path(&overlay);
     let in_shadow = |&[x, y]: &[f64; 2]| (near..=far).contains(&x) && y.abs() < 8.0;
     assert!(!path.iter().any(in_shadow), "round the shadow: {path:?}");
     let shut = &overlay
