@@ -200,6 +200,10 @@ fn wholly_seen(map: &MapSnapshot, x: f64, y: f64, cell: f64) -> bool {
 /// wider than the vehicle; see `Route::shut_unseen_ahead`).
 const GAP_CELLS: i64 = 2;
 
+/// A row, a column and the two diagonals through a memory cell, each as
+/// one of its two directions.
+const AXES: [(i64, i64); 4] = [(1, 0), (0, 1), (1, 1), (1, -1)];
+
 /// A memory cell's eight neighbours.
 const NEIGHBOURS: [(i64, i64); 8] = [
     (-1, -1),
@@ -340,14 +344,29 @@ impl Route {
         ((0..side).contains(&x) && (0..side).contains(&y)).then(|| (y * side + x) as usize)
     }
 
+    /// How far inside the window a memory cell's centre must lie for all
+    /// of the cell to: half its diagonal.
+    fn whole_cell_margin(&self) -> f64 {
+        self.config.cell_m * std::f64::consts::FRAC_1_SQRT_2
+    }
+
     /// Column and row of memory cell `c`.
     fn column_row(&self, c: usize) -> (i64, i64) {
         ((c % self.side) as i64, (c / self.side) as i64)
     }
 
-    /// Whether vehicle-frame point (`vx`, `vy`) lies at least `margin`
-    /// inside the local map's window.
-    fn in_window(&self, vx: f64, vy: f64, margin: f64) -> bool {
+    /// Whether world point `p` lies at least `margin` inside the local
+    /// map's window around a vehicle at `vehicle` whose yaw has sine and
+    /// cosine `(sin, cos)`.
+    fn in_window(
+        &self,
+        vehicle: [f64; 2],
+        (sin, cos): (f64, f64),
+        p: [f64; 2],
+        margin: f64,
+    ) -> bool {
+        let (dx, dy) = (p[0] - vehicle[0], p[1] - vehicle[1]);
+        let (vx, vy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
         let w = &self.window;
         vx >= -w.behind_m + margin
             && vx <= w.ahead_m - margin
@@ -443,21 +462,13 @@ impl Route {
         // obstacle): a gap in a ledge's shut band one cell wide, through
         // which an image happened to see. Obstacle avoidance holds the
         // vehicle short of the unseen ground on either side of it.
-        let blocked = |dx: i64, dy: i64| {
-            self.index(x + dx, y + dy)
-                .map_or(0, |n| match self.state[n] {
-                    SHUT => 2,
-                    OBSTACLE => 1,
-                    _ => 0,
-                })
-        };
-        if [(1, 0), (0, 1), (1, 1), (1, -1)]
-            .into_iter()
-            .any(|(dx, dy)| {
-                let (a, b) = (blocked(dx, dy), blocked(-dx, -dy));
-                a > 0 && b > 0 && a + b > 2
-            })
-        {
+        let beside = |dx: i64, dy: i64| self.index(x + dx, y + dy).map(|n| self.state[n]);
+        if AXES.into_iter().any(|(dx, dy)| {
+            matches!(
+                (beside(dx, dy), beside(-dx, -dy)),
+                (Some(SHUT), Some(SHUT | OBSTACLE)) | (Some(OBSTACLE), Some(SHUT))
+            )
+        }) {
             return f32::INFINITY;
         }
         let mut nearest = 3;
@@ -573,10 +584,10 @@ impl Route {
             }
         }
         let t = map.world_from_vehicle.translation.vector;
-        let (sin, cos) = yaw_of(&map.world_from_vehicle).sin_cos();
+        let yaw = yaw_of(&map.world_from_vehicle).sin_cos();
         let cell = self.config.cell_m;
         // A cell follows the map only when wholly inside its window.
-        let margin = cell * std::f64::consts::FRAC_1_SQRT_2;
+        let margin = self.whole_cell_margin();
         let reach = self.window.radius_m();
         let (lo_x, hi_x) = (
             ((t.x - reach) / cell).floor(),
@@ -593,9 +604,7 @@ impl Route {
                     continue;
                 };
                 let hit = self.hits[c] == self.stamp;
-                let (dx, dy) = (x - t.x, y - t.y);
-                let (vx, vy) = (cos * dx + sin * dy, -sin * dx + cos * dy);
-                if self.in_window(vx, vy, margin) {
+                if self.in_window([t.x, t.y], yaw, [x, y], margin) {
                     // A shut cell opens again once all of it was seen:
                     // the ground that held the vehicle may be a corner of
                     // a cell whose centre was seen (see `shut_unseen_ahead`).
@@ -689,7 +698,7 @@ impl Route {
         if reach <= 0.0 {
             return;
         }
-        let margin = self.config.cell_m * std::f64::consts::FRAC_1_SQRT_2;
+        let margin = self.whole_cell_margin();
         let (sin, cos) = yaw.sin_cos();
         let front = [
             position[0] + self.front_m * cos,
@@ -724,11 +733,7 @@ impl Route {
                     self.shut(c);
                     frontier.push(c);
                 } else if matches!(self.state[c], FREE | ROUGH..SUSPECT)
-                    && self.in_window(
-                        (x - position[0]) * cos + (y - position[1]) * sin,
-                        -(x - position[0]) * sin + (y - position[1]) * cos,
-                        margin,
-                    )
+                    && self.in_window(position, (sin, cos), [x, y], margin)
                     && !wholly_seen(map, x, y, cell)
                 {
                     partly_seen.push(c);
@@ -744,10 +749,8 @@ impl Route {
                     continue;
                 };
                 let [cx, cy] = self.centre(n);
-                let (wx, wy) = (cx - position[0], cy - position[1]);
-                let (vx, vy) = (cos * wx + sin * wy, -sin * wx + cos * wy);
                 if self.state[n] == UNKNOWN
-                    && self.in_window(vx, vy, SHUT_IN_VIEW_M)
+                    && self.in_window(position, (sin, cos), [cx, cy], SHUT_IN_VIEW_M)
                     && (cx - front[0]).hypot(cy - front[1]) <= along
                     && self.between_seen(n)
                 {
@@ -759,7 +762,8 @@ impl Route {
         self.flood = frontier;
         // Gaps in the shut band: cells seen at their centre but not wholly
         // (obstacle avoidance holds the vehicle short of their unseen
-        // part), between shut cells, are shut too, narrowest first.
+        // part), between shut cells, are shut too, again and again as each
+        // shut one narrows the gaps beside it, until none is left between.
         loop {
             let before = partly_seen.len();
             partly_seen.retain(|&c| {
@@ -805,8 +809,7 @@ impl Route {
                     .is_some_and(|n| wanted(self.state[n]))
             })
         };
-        [(1, 0), (0, 1), (1, 1), (1, -1)]
-            .into_iter()
+        AXES.into_iter()
             .any(|(dx, dy)| towards(dx, dy) && towards(-dx, -dy))
     }
 
