@@ -528,18 +528,28 @@ pub fn snapshot_picture(
     y += 4.0;
     if let Some(d) = decision {
         let c = &d.command;
+        let radius = if c.curvature.abs() < 1e-9 {
+            "straight".to_owned()
+        } else {
+            format!("{:.1} m", 1.0 / c.curvature)
+        };
+        // A manoeuvre's command (backing up, turning round, or stopping
+        // for one) is not the fused vote's.
+        let manoeuvre = d
+            .speed_limits
+            .iter()
+            .any(|(label, _)| label == "recovery" || label == "turning");
         let line = match &d.stop {
             Some(reason) => format!("STOP: {reason}"),
+            None if manoeuvre => format!(
+                "manoeuvre: curvature {:+.4} 1/m (radius {radius}), {:.2} m/s",
+                c.curvature, c.speed_mps
+            ),
             None => format!(
-                "arc {} of {}: curvature {:+.4} 1/m (radius {}), {:.2} m/s, fused vote {:.2}",
+                "arc {} of {}: curvature {:+.4} 1/m (radius {radius}), {:.2} m/s, fused vote {:.2}",
                 c.arc_index.map_or(0, |i| i),
                 arcs.len(),
                 c.curvature,
-                if c.curvature.abs() < 1e-9 {
-                    "straight".to_owned()
-                } else {
-                    format!("{:.1} m", 1.0 / c.curvature)
-                },
                 c.speed_mps,
                 c.vote
             ),
