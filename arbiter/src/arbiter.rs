@@ -123,6 +123,14 @@ pub struct Decision {
     pub speed_limits: Vec<(String, f64)>,
 }
 
+impl Decision {
+    /// True when the command is a manoeuvre's (backing up, turning round,
+    /// or standing for one), not the fused vote's.
+    pub fn is_manoeuvre(&self) -> bool {
+        SpeedTime::manoeuvre(&self.speed_limits)
+    }
+}
+
 /// Time spent standing, by why, µs: from each stop command to the next
 /// decision.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

@@ -533,15 +533,9 @@ pub fn snapshot_picture(
         } else {
             format!("{:.1} m", 1.0 / c.curvature)
         };
-        // A manoeuvre's command (backing up, turning round, or stopping
-        // for one) is not the fused vote's.
-        let manoeuvre = d
-            .speed_limits
-            .iter()
-            .any(|(label, _)| label == "recovery" || label == "turning");
         let line = match &d.stop {
             Some(reason) => format!("STOP: {reason}"),
-            None if manoeuvre => format!(
+            None if d.is_manoeuvre() => format!(
                 "manoeuvre: curvature {:+.4} 1/m (radius {radius}), {:.2} m/s",
                 c.curvature, c.speed_mps
             ),
