@@ -332,7 +332,7 @@ impl Voter {
                 },
                 recv(self.commands) -> command => {
                     if let Ok(command) = command {
-                        self.behaviours.on_command(&command);
+                        self.debrief(&command);
                     }
                 },
                 recv(self.waypoints) -> mission => {
@@ -354,20 +354,31 @@ impl Voter {
     /// Takes the commands and waypoints that came, waiting first for the
     /// command of the cycle voted on last when reproducing lock-step.
     fn catch_up(&mut self) {
-        if let (Some(cycle), Some(wait)) = (self.awaiting.take(), self.debrief_wait) {
+        if let Some(wait) = self.debrief_wait {
             let until = Instant::now() + wait;
-            while let Ok(command) = self.commands.recv_deadline(until) {
-                self.behaviours.on_command(&command);
-                if command.utime >= cycle {
+            while self.awaiting.is_some() {
+                let Ok(command) = self.commands.recv_deadline(until) else {
                     break;
-                }
+                };
+                self.debrief(&command);
             }
+            self.awaiting = None;
         }
-        for command in self.commands.try_iter() {
-            self.behaviours.on_command(&command);
+        while let Ok(command) = self.commands.try_recv() {
+            self.debrief(&command);
         }
         for mission in self.waypoints.try_iter() {
             self.behaviours.on_waypoints(mission);
+        }
+    }
+
+    /// Tells the behaviours the command that was sent; the cycle voted on
+    /// last is debriefed once a command as new as it has come (whether it
+    /// came while waiting for the next cycle or before).
+    fn debrief(&mut self, command: &SteeringCommand) {
+        self.behaviours.on_command(command);
+        if self.awaiting.is_some_and(|cycle| command.utime >= cycle) {
+            self.awaiting = None;
         }
     }
 }
