@@ -784,50 +784,47 @@ fn the_erim_goes_round_a_ledge_through_no_gap_in_its_shut_shadow() {
     }
 }
 
-/// 020 at 10 m/s: a 0.9 m ditch square across the way. The 64-beam lidar
+/// 020 at speed: a 0.9 m ditch square across the way. The 64-beam lidar
 /// 2.4 m up flags it for certain only within 8.4 m (the hole bound, 3.95
 /// m/s); from 15-20 m its rays dip 0.1-0.2 m into it, less than δ, and it
 /// is a *suspected* drop-off: the vehicle slows for it to the speed at
-/// which it stops once the ditch shows, then goes round. Without the
-/// suspicion (`suspect_cost = 0`) it learns of the ditch at 6 m/s, 5-7 m
-/// short of it, and drives in.
+/// which it stops once the ditch shows, then goes round, with every noise
+/// seed. Without the suspicion (`suspect_cost = 0`) it learns of the ditch
+/// 5-7 m short of it, and drives in, with every seed.
+///
+/// At 8 m/s cruise. Suspected only 15-19 m ahead, the ditch cannot stop a
+/// vehicle at 9.5 m/s (0.75 s and 3 m/s² take 22 m): at `--speed 10` one
+/// noise seed of 6 drove in, and the others got round only because the
+/// route's swings had slowed them first (2026-11-28).
 #[test]
 fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
     let world = format!(
         "{}/tests/worlds/ditch_across.toml",
         env!("CARGO_MANIFEST_DIR")
     );
-    let run = |tag, perception: &str| {
-        let config = out_dir(&format!("suspect-config-{tag}"));
-        let path = config.join("config.toml");
-        std::fs::write(&path, format!("[perception.drop_off]\n{perception}\n")).unwrap();
-        let args = [
-            "--world",
-            &world,
-            "--sensor",
-            "lidar64",
-            "--speed",
-            "10",
-            "--no-images",
-            "--config",
-            path.to_str().unwrap(),
-        ];
-        ((tag, args.map(String::from).to_vec()), config)
-    };
-    let (runs, _configs): (Vec<_>, Vec<_>) =
-        [run("suspected", ""), run("unsuspected", "suspect_cost = 0")]
-            .into_iter()
-            .unzip();
-    let reports = missions("suspect", &runs);
-    let (tag, report, stdout) = &reports[0];
-    assert_completed_without_collision(tag, report, stdout);
-    assert!(
-        report["suspected_drop_offs"].as_u64().unwrap() > 0,
-        "{tag}:\n{stdout}"
+    let runs = over_noise_seeds(
+        "suspect",
+        &[
+            ("suspected", "lidar64", ""),
+            (
+                "unsuspected",
+                "lidar64",
+                "[perception.drop_off]\nsuspect_cost = 0",
+            ),
+        ],
+        &["--world", &world, "--speed", "8", "--no-images"],
     );
-    let (tag, report, stdout) = &reports[1];
-    assert_eq!(report["outcome"], "collision", "{tag}:\n{stdout}");
-    assert_eq!(report["suspected_drop_offs"], 0, "{tag}");
+    for (tag, report, stdout) in &runs[0] {
+        assert_completed_without_collision(tag, report, stdout);
+        assert!(
+            report["suspected_drop_offs"].as_u64().unwrap() > 0,
+            "{tag}:\n{stdout}"
+        );
+    }
+    for (tag, report, stdout) in &runs[1] {
+        assert_eq!(report["outcome"], "collision", "{tag}:\n{stdout}");
+        assert_eq!(report["suspected_drop_offs"], 0, "{tag}");
+    }
 }
 
 /// 017, narrower still: a dead-end lane with 5.7 m of floor, where no
