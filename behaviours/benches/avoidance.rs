@@ -5,9 +5,8 @@
 //! 3 m/s of cruise) and along the paths the vehicle drives onto them
 //! (`true`; `"auto"` above 3 m/s) with the vehicle straight at 0,
 //! 2.5, 5 and 10 m/s, turning right at 5 m/s. Prints the median and the
-//! 99th percentile over 300 votes, with shadows counted as near misses
-//! (`near_miss_shadows`, the default) and without. No target: the cost of
-//! the driven paths shown against the arcs', and of the shadows.
+//! 99th percentile over 300 votes. No target: the cost of the driven paths
+//! shown against the arcs'.
 //! Run with `cargo bench -p arcnav-behaviours --bench avoidance`.
 
 use std::time::Instant;
@@ -68,10 +67,10 @@ fn main() {
     let map = forest();
     let mission = Mission::default();
     println!(
-        "{:<12} {:<8} {:<22} {:>10} {:>10}",
-        "judged", "shadows", "vehicle", "median ms", "p99 ms"
+        "{:<12} {:<22} {:>10} {:>10}",
+        "judged", "vehicle", "median ms", "p99 ms"
     );
-    for (driven_paths, shadows) in [(false, true), (false, false), (true, true), (true, false)] {
+    for driven_paths in [false, true] {
         let arcs = ArcSet::new(&ArcSetConfig {
             driven_paths: driven_paths.into(),
             ..Default::default()
@@ -84,11 +83,7 @@ fn main() {
             statics: None,
             cruise_mps: 2.5,
         };
-        let config = ObstacleAvoidanceConfig {
-            near_miss_shadows: shadows,
-            ..ObstacleAvoidanceConfig::default()
-        };
-        let mut behaviour = ObstacleAvoidance::new(config, &setup);
+        let mut behaviour = ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup);
         for (label, speed, curvature) in [
             ("standing", 0.0, 0.0),
             ("straight 2.5 m/s", 2.5, 0.0),
@@ -120,9 +115,8 @@ fn main() {
             }
             times.sort_by(f64::total_cmp);
             println!(
-                "{:<12} {:<8} {:<22} {:>10.3} {:>10.3}",
+                "{:<12} {:<22} {:>10.3} {:>10.3}",
                 if driven_paths { "driven paths" } else { "arcs" },
-                if shadows { "yes" } else { "no" },
                 label,
                 times[times.len() / 2],
                 times[times.len() * 99 / 100],

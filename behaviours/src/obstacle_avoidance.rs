@@ -890,21 +890,10 @@ impl ObstacleAvoidance {
                     });
             }
             if shadows {
-                // The shadows as seen from where the vehicle is now, within
-                // the speed horizon: none when none lies within its reach
-                // from the rear axle.
-                let within = (horizon - lead).min(rest);
-                let body = self.footprint.widened(self.margins[widest]);
-                let extent = body.x_max.max(-body.x_min).hypot(body.half_width);
-                let reach =
-                    if self.nearest[Layer::Shadow as usize] <= horizon.min(lead + rest) + extent {
-                        within as f32
-                    } else {
-                        -1.0
-                    };
+                // The shadows as seen from where the vehicle is now.
                 let ahead = &self.ahead;
                 self.shifted
-                    .shadows_over(&template.bands[widest], reach, |c| {
+                    .shadows_over(&template.bands[widest], rest as f32, |c| {
                         ahead.shadow_at(to_vehicle(c))
                     });
             }
