@@ -181,24 +181,6 @@ struct Template {
 /// reach: 0.7° each, 0.2 m (a grid cell) wide 18 m out.
 const SHADOW_WEDGES: usize = 512;
 
-/// Where each cell of a grid lies round its origin: the wedge, and the
-/// distance, m (cell `row · columns + column`).
-#[derive(Debug, Clone)]
-struct Polar {
-    wedges: Vec<u16>,
-    distances: Vec<f32>,
-}
-
-impl Polar {
-    fn of(grid: &Grid) -> Self {
-        let (wedges, distances) = (0..grid.rows * grid.columns)
-            .map(|cell| grid.centre(cell / grid.columns, cell % grid.columns))
-            .map(|c| (wedge_of(c), c.x.hypot(c.y) as f32))
-            .unzip();
-        Self { wedges, distances }
-    }
-}
-
 /// The wedge round the origin that `p` lies in, by a pseudo-angle (in
 /// [0, 4), monotone in the angle: no trigonometry).
 fn wedge_of(p: Point2<f64>) -> u16 {
@@ -270,6 +252,10 @@ struct Raster {
     shadow: Vec<u64>,
     /// Cells the vehicle stands on: never unseen.
     standing: Vec<u64>,
+    /// Per grid cell: its wedge round the origin, and its distance from
+    /// it, m (for the shadows).
+    wedges: Vec<u16>,
+    distances: Vec<f32>,
     /// Map patch index per grid cell that holds one (u32::MAX otherwise).
     causes: Vec<u32>,
     set_cells: Vec<u32>,
@@ -302,7 +288,14 @@ impl Raster {
                 }
             }
         }
+        let centres = (0..grid.rows * grid.columns)
+            .map(|cell| grid.centre(cell / grid.columns, cell % grid.columns));
+        let (wedges, distances) = centres
+            .map(|c| (wedge_of(c), c.x.hypot(c.y) as f32))
+            .unzip();
         Self {
+            wedges,
+            distances,
             bitmap: vec![0; words],
             unseen: vec![0; words],
             shadow: vec![0; words],
@@ -406,29 +399,35 @@ impl Raster {
     }
 
     /// Marks the shadows among the unseen cells: those nearer to the
-    /// origin than some seen cell in their direction (`polar` places the
-    /// cells). Ground no image has seen with seen ground beyond it lies in
-    /// the lee of something, beyond an edge or behind a rock; unseen
-    /// ground past the farthest seen ground is only beyond the sensor's
-    /// reach.
-    fn rasterise_shadows(&mut self, polar: &Polar) {
+    /// origin than some seen cell in their direction (of
+    /// [`SHADOW_WEDGES`] wedges round it). Ground no image has seen with
+    /// seen ground beyond it lies in the lee of something, beyond an edge
+    /// or behind a rock; unseen ground past the farthest seen ground is
+    /// only beyond the sensor's reach.
+    fn rasterise_shadows(&mut self) {
         let grid = &self.grid;
-        let unseen = |cell: usize| {
-            let (row, column) = (cell / grid.columns, cell % grid.columns);
+        let unseen = |row: usize, column: usize| {
             self.unseen[row * grid.words_per_row + column / 64] & (1 << (column % 64)) != 0
         };
         let mut farthest = [f32::NEG_INFINITY; SHADOW_WEDGES];
-        for (cell, (&wedge, &distance)) in polar.wedges.iter().zip(&polar.distances).enumerate() {
-            if !unseen(cell) {
-                let far = &mut farthest[usize::from(wedge)];
-                *far = far.max(distance);
+        for row in 0..grid.rows {
+            for column in 0..grid.columns {
+                if !unseen(row, column) {
+                    let cell = row * grid.columns + column;
+                    let wedge = &mut farthest[usize::from(self.wedges[cell])];
+                    *wedge = wedge.max(self.distances[cell]);
+                }
             }
         }
         self.shadow.fill(0);
-        for (cell, (&wedge, &distance)) in polar.wedges.iter().zip(&polar.distances).enumerate() {
-            if unseen(cell) && distance < farthest[usize::from(wedge)] {
-                let (row, column) = (cell / grid.columns, cell % grid.columns);
-                self.shadow[row * grid.words_per_row + column / 64] |= 1 << (column % 64);
+        for row in 0..grid.rows {
+            for column in 0..grid.columns {
+                let cell = row * grid.columns + column;
+                if unseen(row, column)
+                    && self.distances[cell] < farthest[usize::from(self.wedges[cell])]
+                {
+                    self.shadow[row * grid.words_per_row + column / 64] |= 1 << (column % 64);
+                }
             }
         }
     }
@@ -593,8 +592,6 @@ fn grid_around(arcs: &arcnav_vehicle::ArcSet, footprint: Footprint, reach: f64, 
 pub struct ObstacleAvoidance {
     config: ObstacleAvoidanceConfig,
     ahead: Raster,
-    /// The cells of `ahead` round the vehicle, for its shadows.
-    polar: Polar,
     templates: Vec<Template>,
     /// Margin of band b (0 for the footprint itself).
     margins: Vec<f64>,
@@ -825,7 +822,6 @@ impl ObstacleAvoidance {
             unseen_at: vec![None; setup.arcs.len()],
             suspect_at: vec![None; setup.arcs.len()],
             config,
-            polar: Polar::of(&ahead.grid),
             ahead,
             templates,
             crawl_band,
@@ -1326,7 +1322,7 @@ impl Behaviour for ObstacleAvoidance {
             self.ahead.rasterise_unseen(ctx);
         }
         if self.shadows_graze() {
-            self.ahead.rasterise_shadows(&self.polar);
+            self.ahead.rasterise_shadows();
         }
         self.ahead.block(policy);
         let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
