@@ -35,13 +35,6 @@
 //! clear. One turn counts as one recovery; a turn left unfinished is taken
 //! up towards the same side by the next one (until `progress_m` of driving).
 //!
-//! **Driving away.** When nothing blocks the vehicle but the way has lain
-//! behind (every arc's wish vote below 0) for `turn_away_s`, it stops and
-//! turns round the same way: obstacle avoidance may forbid every arc
-//! towards the way (a drop-off along that side) while the others are
-//! clear, and driving on the fused vote leads on away from it. If no leg
-//! can start, it drives on for another `turn_away_s`.
-//!
 //! **Backing out the way it came.** When no manoeuvre can start (no
 //! backward arc is clear) or a turn round ends with no leg clear (a lane
 //! narrower than the turning circle and the vehicle's length allow to turn
@@ -128,10 +121,6 @@ pub struct RecoveryConfig {
     /// A turn round that found no leg clear before turning this far was in
     /// a lane too narrow to turn in: the next recovery retraces, degrees.
     pub retrace_below_deg: f64,
-    /// Driving on while the way has lain behind (every arc leads away from
-    /// it) this long, the vehicle stops and turns round, s (0: never; it
-    /// turns round only when blocked).
-    pub turn_away_s: f64,
 }
 
 impl Default for RecoveryConfig {
@@ -153,7 +142,6 @@ impl Default for RecoveryConfig {
             retrace_max_m: 50.0,
             retrace_room_m: 8.0,
             retrace_below_deg: 45.0,
-            turn_away_s: 3.0,
         }
     }
 }
@@ -172,7 +160,6 @@ impl RecoveryConfig {
         config::in_range("retrace_max_m", self.retrace_max_m, 0.0, 1000.0)?;
         config::in_range("retrace_room_m", self.retrace_room_m, 0.0, 100.0)?;
         config::in_range("retrace_below_deg", self.retrace_below_deg, 0.0, 360.0)?;
-        config::in_range("turn_away_s", self.turn_away_s, 0.0, 600.0)?;
         for (key, value) in [
             ("max_attempts", self.max_attempts),
             ("turn_max_legs", self.turn_max_legs),
@@ -365,8 +352,6 @@ pub(crate) struct Recovery {
     limits: MotionLimits,
     mode: Mode,
     blocked_since: Option<Utime>,
-    /// Driving forward: since when the way has lain behind.
-    away_since: Option<Utime>,
     attempts: u32,
     forward_since_recovery_m: f64,
     /// The vehicle as its commands move it (dead reckoning in a frame of
@@ -408,7 +393,6 @@ impl Recovery {
             limits: MotionLimits::from_vehicle(vehicle),
             mode: Mode::Forward,
             blocked_since: None,
-            away_since: None,
             attempts: 0,
             forward_since_recovery_m: 0.0,
             model: None,
@@ -503,22 +487,6 @@ impl Recovery {
         if let Some(model) = &mut self.model {
             model.command(*command);
         }
-    }
-
-    /// Whether the way has lain behind for `turn_away_s` while the vehicle
-    /// drives forward: every arc leads away from it, and driving on takes
-    /// the vehicle farther off (a route's path swings for a cycle or two
-    /// as it re-plans: only a way behind that lasts counts).
-    fn driving_away(&mut self, now: Utime, behind: &Behind<'_>) -> bool {
-        let behind_now = self.config.turn_round
-            && self.config.turn_away_s > 0.0
-            && behind.wished().is_some_and(|wish| wish.vote < 0.0);
-        if !behind_now {
-            self.away_since = None;
-            return false;
-        }
-        let since = *self.away_since.get_or_insert(now);
-        now - since >= seconds_to_micros(self.config.turn_away_s)
     }
 
     /// The decision at `now`: `blocked` says whether the forward decision
@@ -757,53 +725,20 @@ impl Recovery {
 
     /// Driving forwards: blocked long enough, standing, starts a manoeuvre.
     fn when_forward(&mut self, now: Utime, blocked: bool, behind: &Behind<'_>) -> Outcome {
-        let away = self.driving_away(now, behind);
-        if !blocked && !away {
+        if !blocked {
             self.blocked_since = None;
             return Outcome::Keep;
         }
         let since = *self.blocked_since.get_or_insert(now);
         let standing = self.speed_and_curvature().0.abs() < STANDING_MPS;
-        if away && !blocked {
-            // Nothing holds the vehicle: it stops to turn round, at once
-            // once standing.
-            if !standing {
-                return Outcome::Drive(SteeringCommand::stop(now));
-            }
-        } else if now - since < seconds_to_micros(self.config.wait_s) || !standing {
+        if now - since < seconds_to_micros(self.config.wait_s) || !standing {
             return Outcome::Keep;
         }
         if self.attempts >= self.config.max_attempts {
-            if !blocked {
-                // Turning round has not led anywhere: driving on does no
-                // harm.
-                self.away_since = None;
-                return Outcome::Keep;
-            }
             self.stats.exhausted += 1;
             return Outcome::Exhausted {
                 attempts: self.attempts,
             };
-        }
-        if !blocked {
-            // Driving away: a turn round, if one can start here; else on
-            // for another `turn_away_s`.
-            let turn = behind
-                .wished()
-                .and_then(|wish| wish.beyond_the_arcs())
-                .and_then(|side| {
-                    [true, false]
-                        .into_iter()
-                        .find_map(|reverse| self.choose_leg(side, reverse, behind))
-                        .map(|leg| (side, leg))
-                });
-            let Some((side, leg)) = turn else {
-                self.away_since = Some(now);
-                return Outcome::Keep;
-            };
-            self.begin();
-            self.start_turn(now, side, leg, "the way behind, driving away from it");
-            return self.step(now, blocked, true, behind);
         }
         // A turn left unfinished (no leg clear) carries on towards the same
         // side: starting the other way undoes it.
@@ -888,7 +823,6 @@ impl Recovery {
 
     /// Counts a recovery starting.
     fn begin(&mut self) {
-        self.away_since = None;
         self.attempts += 1;
         self.stats.recoveries += 1;
         self.forward_since_recovery_m = 0.0;

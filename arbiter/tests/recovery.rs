@@ -313,64 +313,6 @@ fn the_turn_ends_once_the_way_has_lain_ahead_for_a_second() {
     assert!(!a.is_backing_up());
 }
 
-/// Nothing forbids the right arcs (0..=19); the left ones, towards the
-/// way, are forbidden (a drop-off along the vehicle's left, say) but have
-/// room to creep; the way lies behind and to the left.
-fn hemmed_in_driving_away(utime: i64) -> [BehaviourVotes; 2] {
-    let [mut avoid, route] = cornered(utime, false, 18.0, behind_left);
-    for arc in 20..39 {
-        avoid.votes.veto(arc, None);
-    }
-    [avoid, route]
-}
-
-#[test]
-fn driving_on_with_the_way_behind_it_stops_and_turns_round() {
-    let mut a = arbiter();
-    let commands = drive(&mut a, 0, 20.0, hemmed_in_driving_away);
-    // It drives away on the right arcs, the only ones allowed...
-    assert!(
-        commands[5..30]
-            .iter()
-            .all(|c| c.speed_mps > 0.0 && c.arc_index.is_some_and(|i| i <= 19))
-    );
-    // ... for turn_away_s (3 s), then stops ...
-    let stop = commands.iter().position(SteeringCommand::is_stop).unwrap();
-    assert_eq!(stop, 30, "stops 3 s after the way lay behind");
-    // ... and turns round towards the way (left): every leg turns the
-    // heading left.
-    let stats = *a.recovery_stats();
-    assert_eq!(stats.turns, 1, "{stats:?}");
-    assert!(stats.turn_legs >= 2, "{stats:?}");
-    for c in commands[stop..].iter().filter(|c| !c.is_stop()) {
-        assert!(c.curvature * c.speed_mps > 0.0, "{c:?}");
-    }
-    // A way behind for less than turn_away_s (a route re-planning) changes
-    // nothing: the way swings ahead for a decision every 2 s.
-    let mut a = arbiter();
-    let commands = drive(&mut a, 0, 20.0, |t| {
-        let [avoid, mut route] = hemmed_in_driving_away(t);
-        if t % (2 * SECOND) == 0 {
-            (0..39).for_each(|arc| route.votes.set(arc, 1.0 - arc.abs_diff(19) as f32 / 20.0));
-        }
-        [avoid, route]
-    });
-    assert_eq!(a.recovery_stats().turns, 0);
-    assert!(commands[5..].iter().all(|c| c.speed_mps > 0.0));
-    // turn_away_s = 0: it turns round only when blocked.
-    let mut config = ArbiterConfig::default();
-    config.recovery.turn_away_s = 0.0;
-    config.validate().unwrap();
-    let mut a = Arbiter::new(
-        &config,
-        ArcSet::new(&ArcSetConfig::default()).unwrap(),
-        &VehicleConfig::default(),
-    );
-    let commands = drive(&mut a, 0, 20.0, hemmed_in_driving_away);
-    assert_eq!(a.recovery_stats().turns, 0);
-    assert!(commands[5..].iter().all(|c| c.speed_mps > 0.0));
-}
-
 #[test]
 fn forward_legs_need_creeping_room_and_turning_round_can_be_switched_off() {
     // 1.2 m of room ahead is less than min_distance_m (1 m) + margin_m

@@ -33,13 +33,6 @@
 //! - `obstacle`: unseen ground is an obstacle like a cell;
 //! - `free`: it is ignored (the paper's behaviour).
 //!
-//! With `slow`, unseen ground lying nearer to the vehicle than seen ground
-//! in its direction is a shadow (beyond an edge, behind a rock) and counts
-//! in the near-miss bands like a cell within the speed horizon
-//! (`near_miss_shadows`): the edge of a drop a lidar never flags, in its
-//! blind zone, lies just before one. Unseen ground with nothing seen beyond
-//! it is only past the sensor's reach, and every arc runs into it.
-//!
 //! The ground under the vehicle up to its front axle counts as seen: it
 //! stands there (the front overhang does not: it may hang over a ledge).
 //!
@@ -101,11 +94,6 @@ pub struct ObstacleAvoidanceConfig {
     /// What ground no image has seen is: slow (drive only as fast as the
     /// vehicle can stop within seen ground), obstacle, or free.
     pub unseen_ground: UnseenGround,
-    /// With `unseen_ground` slow: unseen ground nearer than seen ground
-    /// in its direction from the vehicle (a shadow: beyond an edge, behind
-    /// a rock; not the ground past the sensor's reach) is a near miss like
-    /// a cell, so arcs keep clear of it.
-    pub near_miss_shadows: bool,
     /// How far the front is from a hole when perception is certain to flag
     /// it, m: a suspected drop-off (graded ground with the reason
     /// drop-off) slows an arc only to the speed at which the vehicle stops
@@ -149,7 +137,6 @@ impl Default for ObstacleAvoidanceConfig {
             reaction_s: 0.75,
             braking_fraction: 0.5,
             unseen_ground: UnseenGround::Slow,
-            near_miss_shadows: true,
             hole_seen_within_m: 0.0,
             reverse_reach_m: 5.0,
             reverse_margin_m: 0.3,
@@ -175,22 +162,6 @@ struct Template {
     /// The body's band (band 0) cell by cell: the distance at which the
     /// footprint first touches the cell, and its centre, by distance.
     body: Vec<(f32, [f32; 2])>,
-}
-
-/// Wedges round the vehicle in which shadows are told from ground out of
-/// reach: 0.7° each, 0.2 m (a grid cell) wide 18 m out.
-const SHADOW_WEDGES: usize = 512;
-
-/// The wedge round the origin that `p` lies in, by a pseudo-angle (in
-/// [0, 4), monotone in the angle: no trigonometry).
-fn wedge_of(p: Point2<f64>) -> u16 {
-    let sum = p.x.abs() + p.y.abs();
-    if sum == 0.0 {
-        return 0;
-    }
-    let ratio = p.x / sum;
-    let angle = if p.y >= 0.0 { 1.0 - ratio } else { 3.0 + ratio };
-    ((angle * SHADOW_WEDGES as f64 / 4.0) as usize).min(SHADOW_WEDGES - 1) as u16
 }
 
 /// The vehicle-frame grid the map is rasterised into.
@@ -247,15 +218,8 @@ struct Raster {
     bitmap: Vec<u64>,
     /// Cells whose ground no image has seen (same layout as `bitmap`).
     unseen: Vec<u64>,
-    /// Unseen cells with seen ground beyond them, seen from the origin
-    /// (same layout as `bitmap`; see [`Raster::rasterise_shadows`]).
-    shadow: Vec<u64>,
     /// Cells the vehicle stands on: never unseen.
     standing: Vec<u64>,
-    /// Per grid cell: its wedge round the origin, and its distance from
-    /// it, m (for the shadows).
-    wedges: Vec<u16>,
-    distances: Vec<f32>,
     /// Map patch index per grid cell that holds one (u32::MAX otherwise).
     causes: Vec<u32>,
     set_cells: Vec<u32>,
@@ -288,17 +252,9 @@ impl Raster {
                 }
             }
         }
-        let centres = (0..grid.rows * grid.columns)
-            .map(|cell| grid.centre(cell / grid.columns, cell % grid.columns));
-        let (wedges, distances) = centres
-            .map(|c| (wedge_of(c), c.x.hypot(c.y) as f32))
-            .unzip();
         Self {
-            wedges,
-            distances,
             bitmap: vec![0; words],
             unseen: vec![0; words],
-            shadow: vec![0; words],
             standing: mask,
             causes: vec![u32::MAX; grid.rows * grid.columns],
             set_cells: Vec::new(),
@@ -398,40 +354,6 @@ impl Raster {
         }
     }
 
-    /// Marks the shadows among the unseen cells: those nearer to the
-    /// origin than some seen cell in their direction (of
-    /// [`SHADOW_WEDGES`] wedges round it). Ground no image has seen with
-    /// seen ground beyond it lies in the lee of something, beyond an edge
-    /// or behind a rock; unseen ground past the farthest seen ground is
-    /// only beyond the sensor's reach.
-    fn rasterise_shadows(&mut self) {
-        let grid = &self.grid;
-        let unseen = |row: usize, column: usize| {
-            self.unseen[row * grid.words_per_row + column / 64] & (1 << (column % 64)) != 0
-        };
-        let mut farthest = [f32::NEG_INFINITY; SHADOW_WEDGES];
-        for row in 0..grid.rows {
-            for column in 0..grid.columns {
-                if !unseen(row, column) {
-                    let cell = row * grid.columns + column;
-                    let wedge = &mut farthest[usize::from(self.wedges[cell])];
-                    *wedge = wedge.max(self.distances[cell]);
-                }
-            }
-        }
-        self.shadow.fill(0);
-        for row in 0..grid.rows {
-            for column in 0..grid.columns {
-                let cell = row * grid.columns + column;
-                if unseen(row, column)
-                    && self.distances[cell] < farthest[usize::from(self.wedges[cell])]
-                {
-                    self.shadow[row * grid.words_per_row + column / 64] |= 1 << (column % 64);
-                }
-            }
-        }
-    }
-
     /// The map cell behind a hit entry of the blocked layer, vehicle
     /// frame (none for unseen ground).
     fn cause(&self, entry: &Entry, ctx: &VoteContext<'_>) -> Option<[f32; 2]> {
@@ -479,43 +401,17 @@ impl Raster {
     /// frame) that `unseen` says no image has seen; the rest of the layer
     /// is cleared.
     fn unseen_over(&mut self, band: &[Entry], reach: f32, unseen: impl Fn(Point2<f64>) -> bool) {
-        mark_over(&self.grid, &mut self.unseen, band, reach, unseen);
-    }
-
-    /// Marks as shadow the cells of `band` within `reach` that `shadow`
-    /// says lie in one; the rest of the layer is cleared.
-    fn shadows_over(&mut self, band: &[Entry], reach: f32, shadow: impl Fn(Point2<f64>) -> bool) {
-        mark_over(&self.grid, &mut self.shadow, band, reach, shadow);
-    }
-
-    /// Whether the ground at `p` (this raster's frame) lies in a shadow
-    /// (false off the grid).
-    fn shadow_at(&self, p: Point2<f64>) -> bool {
-        self.grid.cell(p.x, p.y).is_some_and(|(row, column)| {
-            self.shadow[row * self.grid.words_per_row + column / 64] & (1 << (column % 64)) != 0
-        })
-    }
-}
-
-/// Sets in `layer` (cleared first) the cells of `band` within `reach` whose
-/// centre `holds`.
-fn mark_over(
-    grid: &Grid,
-    layer: &mut [u64],
-    band: &[Entry],
-    reach: f32,
-    holds: impl Fn(Point2<f64>) -> bool,
-) {
-    layer.fill(0);
-    for entry in band.iter().take_while(|e| e.s <= reach) {
-        let row = entry.word as usize / grid.words_per_row;
-        let base = (entry.word as usize % grid.words_per_row) * 64;
-        let mut bits = entry.mask;
-        while bits != 0 {
-            let bit = bits.trailing_zeros();
-            bits &= bits - 1;
-            if holds(grid.centre(row, base + bit as usize)) {
-                layer[entry.word as usize] |= 1 << bit;
+        self.unseen.fill(0);
+        for entry in band.iter().take_while(|e| e.s <= reach) {
+            let row = entry.word as usize / self.grid.words_per_row;
+            let base = (entry.word as usize % self.grid.words_per_row) * 64;
+            let mut bits = entry.mask;
+            while bits != 0 {
+                let bit = bits.trailing_zeros();
+                bits &= bits - 1;
+                if unseen(self.grid.centre(row, base + bit as usize)) {
+                    self.unseen[entry.word as usize] |= 1 << bit;
+                }
             }
         }
     }
@@ -635,7 +531,7 @@ pub struct ObstacleAvoidance {
     near: Vec<u32>,
     /// This cycle: distance from the rear axle to the nearest cell of each
     /// [`Layer`] of the vehicle-frame raster, m (∞ when it has none).
-    nearest: [f64; 5],
+    nearest: [f64; 4],
 }
 
 /// The layers of a raster a path's lead is checked against.
@@ -645,7 +541,6 @@ enum Layer {
     Unseen,
     Graded,
     Suspect,
-    Shadow,
 }
 
 /// What one part of a path meets: its distances are along the path.
@@ -812,7 +707,7 @@ impl ObstacleAvoidance {
             shifted,
             lead_poses: Vec::new(),
             near: Vec::new(),
-            nearest: [f64::INFINITY; 5],
+            nearest: [f64::INFINITY; 4],
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
             cruise_mps: setup.cruise_mps,
             deceleration: setup.vehicle.max_deceleration_mps2 * config.braking_fraction,
@@ -830,12 +725,6 @@ impl ObstacleAvoidance {
         }
     }
 
-    /// Whether shadows (unseen ground with seen ground beyond) count as
-    /// near misses this cycle.
-    fn shadows_graze(&self) -> bool {
-        self.config.near_miss_shadows && self.config.unseen_ground == UnseenGround::Slow
-    }
-
     /// What arc `arc`'s path meets: before it settles on its arc, its
     /// footprints sampled every grid cell on the map as it is; after, the
     /// arc's precomputed sweep over the map placed where the path settles.
@@ -844,7 +733,6 @@ impl ObstacleAvoidance {
         let reach = self.config.max_distance_m;
         let lead = path.settled_at().min(reach);
         let policy = self.config.unseen_ground;
-        let shadows = self.shadows_graze();
         let mut met = Met::default();
         if lead > 0.0 {
             path.sample_into(lead, self.ahead.grid.resolution, &mut self.lead_poses);
@@ -885,14 +773,6 @@ impl ObstacleAvoidance {
                             .unwrap_or_else(|| !seen(q.x, q.y) && !standing.contains(q))
                     });
             }
-            if shadows {
-                // The shadows as seen from where the vehicle is now.
-                let ahead = &self.ahead;
-                self.shifted
-                    .shadows_over(&template.bands[widest], rest as f32, |c| {
-                        ahead.shadow_at(to_vehicle(c))
-                    });
-            }
             self.shifted.block(policy);
             &self.shifted
         };
@@ -906,14 +786,6 @@ impl ObstacleAvoidance {
                 (1..=widest).find(|&b| first_in(blocked, &template.bands[b], rest).is_some());
             part.crawled = first_in(blocked, &template.bands[self.crawl_band], rest)
                 .map(|hit| f64::from(hit.s) + lead);
-        }
-        // Shadows within the speed horizon: ground the vehicle passes
-        // beside before it could stop.
-        let near = rest.min((horizon - lead) as f32);
-        if shadows && first_in(&raster.shadow, &template.bands[widest], near).is_some() {
-            let grazed = (1..=widest)
-                .find(|&b| first_in(&raster.shadow, &template.bands[b], near).is_some());
-            part.grazed = least(part.grazed, grazed);
         }
         part.graded = raster.graded_crossed(&template.bands[0], rest, (horizon - lead) as f32);
         if !raster.suspect_cells.is_empty() {
@@ -995,15 +867,6 @@ impl ObstacleAvoidance {
                 .iter()
                 .find(|(_, p)| under(p, self.crawl_band, blocked).is_some())
                 .map(|(s, _)| *s);
-        }
-        if self.shadows_graze() && near(Layer::Shadow) {
-            let grazed = (1..=widest).find(|&b| {
-                poses
-                    .iter()
-                    .take_while(|(s, _)| *s <= horizon)
-                    .any(|(_, p)| under(p, b, &raster.shadow).is_some())
-            });
-            met.grazed = least(met.grazed, grazed);
         }
         if self.config.unseen_ground == UnseenGround::Slow && near(Layer::Unseen) {
             met.unseen = poses.iter().find_map(|(s, p)| {
@@ -1321,9 +1184,6 @@ impl Behaviour for ObstacleAvoidance {
         if policy != UnseenGround::Free {
             self.ahead.rasterise_unseen(ctx);
         }
-        if self.shadows_graze() {
-            self.ahead.rasterise_shadows();
-        }
         self.ahead.block(policy);
         let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
         // The ground ahead at the vehicle's scale: the speed horizon is
@@ -1366,7 +1226,6 @@ impl Behaviour for ObstacleAvoidance {
                 &self.ahead.unseen,
                 &self.ahead.graded,
                 &self.ahead.suspect,
-                &self.ahead.shadow,
             ]
             .map(|layer| nearest_set(layer, &self.ahead.grid));
             self.terrain.judge_paths(

@@ -212,56 +212,6 @@ fn a_near_miss_lowers_the_vote_of_the_arc_passing_beside_it() {
     assert!(closer < straight, "{closer} < {straight}");
 }
 
-/// Everything within 20 m seen but the ground from `x0` to 20 m ahead
-/// between 2 m and `beyond` m right of the centreline: a shadow beside the
-/// way when ground beyond it was seen (`beyond` > -20), else the edge of
-/// what was seen.
-fn snapshot_unseen_right(x0: f64, beyond: f64) -> MapSnapshot {
-    let mut seen = vec![
-        (vec![], [-20.0, 20.0, -2.0, 20.0]),
-        (vec![], [-20.0, x0, -20.0, -2.0]),
-    ];
-    if beyond > -20.0 {
-        seen.push((vec![], [x0, 20.0, -20.0, beyond]));
-    }
-    snapshot_after_rectangles(seen)
-}
-
-#[test]
-fn a_shadow_beside_the_way_is_a_near_miss_and_the_edge_of_what_was_seen_is_not() {
-    let (straight, left) = (19, 36);
-    // A shadow 0.8 m beside the body's right flank (the floor beyond a
-    // ledge seen 2.4 m further out), from 1 m ahead of its front.
-    let shadow = snapshot_unseen_right(5.0, -4.4);
-    let votes = avoidance_votes_on(&shadow, ObstacleAvoidanceConfig::default());
-    let beside = votes.vote(straight).unwrap();
-    assert!(beside > 0.0 && beside < 1.0, "straight grazes it: {beside}");
-    assert_eq!(votes.vote(left), Some(1.0), "a left turn leaves it");
-    // The same unseen ground with nothing seen beyond it: only past the
-    // sensor's reach, no near miss.
-    let edge = avoidance_votes_on(
-        &snapshot_unseen_right(5.0, -20.0),
-        ObstacleAvoidanceConfig::default(),
-    );
-    assert_eq!(edge.vote(straight), Some(1.0));
-    // Beyond the speed horizon (where the vehicle gets while it reacts and
-    // brakes from 2.5 m/s: about 4.5 m) a shadow is no near miss yet.
-    let far = avoidance_votes_on(
-        &snapshot_unseen_right(12.0, -4.4),
-        ObstacleAvoidanceConfig::default(),
-    );
-    assert_eq!(far.vote(straight), Some(1.0));
-    // near_miss_shadows = false: as any unseen ground.
-    let off = avoidance_votes_on(
-        &shadow,
-        ObstacleAvoidanceConfig {
-            near_miss_shadows: false,
-            ..ObstacleAvoidanceConfig::default()
-        },
-    );
-    assert_eq!(off.vote(straight), Some(1.0));
-}
-
 #[test]
 fn an_empty_map_makes_every_arc_clear() {
     let votes = avoidance_votes(&[]);
