@@ -275,7 +275,8 @@ struct RenderArgs {
     /// Configuration file (defaults merged with it).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Use the log's OBSTACLE_CELLS instead of recomputing them.
+    /// Use the log's OBSTACLE_CELLS instead of recomputing them (what a log
+    /// without range images, `arcnav sim --no-images`, is drawn from anyway).
     #[arg(long)]
     recorded_cells: bool,
 }

@@ -359,6 +359,46 @@ fn render_draws_a_decision_and_refuses_a_time_past_the_log() {
     );
 }
 
+/// A log without range images (`arcnav sim --no-images`) is drawn from
+/// its recorded cells, and says so: recomputed, its map would be empty and
+/// every arc vetoed, a picture of nothing that happened.
+#[test]
+fn render_draws_a_log_without_images_from_its_recorded_cells() {
+    let out = dir("render-no-images");
+    let log = out.join("no-images.lcm");
+    filtered(sim_log(), &log, |channel, _| {
+        !channel.starts_with("RANGE_IMAGE")
+    });
+    let draw = |log: &Path, png: &str, extra: &[&str]| {
+        let png = out.join(png);
+        let mut args = vec![
+            "render",
+            log.to_str().unwrap(),
+            "--at",
+            "12.5",
+            "--out",
+            png.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let (code, stdout, stderr) = arcnav(&args);
+        assert_eq!(code, 0, "{stdout}{stderr}");
+        (std::fs::read(&png).unwrap(), stderr)
+    };
+    let (auto, stderr) = draw(&log, "auto.png", &[]);
+    assert!(
+        stderr.contains("holds no range image") && stderr.contains("recorded OBSTACLE_CELLS"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("nothing was perceived"), "{stderr}");
+    let (asked, stderr) = draw(&log, "asked.png", &["--recorded-cells"]);
+    assert!(!stderr.contains("holds no range image"), "{stderr}");
+    assert!(auto == asked, "the same picture as --recorded-cells draws");
+    // And the same as the log with its images drawn from its cells: the
+    // map the vehicle drove on, not an empty one.
+    let (with_images, _) = draw(sim_log(), "with-images.png", &["--recorded-cells"]);
+    assert!(auto == with_images);
+}
+
 /// The decision a picture is drawn of comes with what the behaviours'
 /// votes rested on: the route's planned path from the vehicle on, and the
 /// point it steered for.

@@ -50,8 +50,22 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
     let mut inputs = vec![("the log", args.log.as_path())];
     inputs.extend(config_path.as_deref().map(|c| ("the configuration", c)));
     arcnav::output::check_outputs(&[&out], &inputs)?;
+    // A log without range images (`arcnav sim --no-images`) perceives
+    // nothing: its map would be drawn empty and every arc vetoed. Its
+    // recorded cells are what the vehicle drove on.
+    let recorded_cells = args.recorded_cells || {
+        let cells = cells_of_a_log_without_images(&args.log);
+        if cells > 0 {
+            eprintln!(
+                "note: {} holds no range image (logged with --no-images?): drawn from its {cells} \
+                 recorded OBSTACLE_CELLS, as --recorded-cells does",
+                args.log.display()
+            );
+        }
+        cells > 0
+    };
     let options = ReplayOptions {
-        recorded_cells: args.recorded_cells,
+        recorded_cells,
         stop_at_s: Some(args.at),
         ..ReplayOptions::default()
     };
@@ -64,9 +78,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         args.log.display(),
         log.skipped_bytes + log.truncated_tail_bytes
     );
-    // What the redone decision could not use (a log without range images
-    // perceives nothing unless its recorded cells are used): said before
-    // the picture, which would otherwise show an empty map.
+    // What the redone decision could not use: said before the picture.
     for line in result.problems.lines() {
         eprintln!("warning: {line}");
     }
@@ -93,6 +105,25 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// The OBSTACLE_CELLS events of `log` when it holds no range image (or
+/// slice) at all; 0 as soon as one is read, or when the log cannot be read
+/// (the replay says why).
+fn cells_of_a_log_without_images(log: &Path) -> u64 {
+    use arcnav_bus::messages::channels;
+    let Ok(reader) = arcnav_bus::log::LogReader::open(log) else {
+        return 0;
+    };
+    let mut cells = 0;
+    for event in reader {
+        let Ok(event) = event else { return 0 };
+        if event.channel.starts_with(channels::RANGE_IMAGE) {
+            return 0;
+        }
+        cells += u64::from(event.channel == channels::OBSTACLE_CELLS);
+    }
+    cells
 }
 
 /// `arcnav export LOG --mcap OUT`.
