@@ -505,3 +505,40 @@ impl InProcess {
             .map_err(|_| LiveError::Panicked("arcnav-run"))?
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Reproducing lock-step, the behaviours wait before each vote for the
+    /// command of the cycle voted on last. A command taken between cycles
+    /// (in the select loop) debriefs that cycle, so the next one does not
+    /// wait for it again: it used to wait the whole vote timeout (1 s) for
+    /// a command it already had, and the run fell further behind its feed
+    /// each time until the watchdog stopped it for stale images.
+    #[test]
+    fn a_command_taken_between_cycles_is_not_waited_for_again() {
+        let (commands_tx, commands) = crossbeam_channel::bounded(4);
+        let (_waypoints_tx, waypoints) = crossbeam_channel::bounded(1);
+        let mut voter = Voter {
+            behaviours: Config::default()
+                .behaviour_set(&Registry::builtin())
+                .unwrap(),
+            commands,
+            waypoints,
+            debrief_wait: Some(Duration::from_secs(1)),
+            awaiting: Some(5),
+            map_out: None,
+            map_elevation: false,
+        };
+        voter.debrief(&SteeringCommand::stop(4));
+        assert_eq!(voter.awaiting, Some(5), "an older command debriefs nothing");
+        voter.debrief(&SteeringCommand::stop(5));
+        assert_eq!(voter.awaiting, None, "the awaited cycle's command came");
+        // Nothing awaited: the next cycle takes what came and votes.
+        commands_tx.send(SteeringCommand::stop(6)).unwrap();
+        voter.catch_up();
+        assert!(voter.commands.is_empty());
+        assert_eq!(voter.behaviours.last_command().map(|c| c.utime), Some(6));
+    }
+}
