@@ -792,31 +792,8 @@ fn a_log_without_images_replayed_without_its_cells_says_nothing_was_perceived() 
     );
     let (code, stdout, _) = arcnav(&["replay", cells_only.to_str().unwrap(), "--recorded-cells"]);
     assert_eq!(code, 0, "{stdout}");
-    // The picture of a decision says so too, rather than drawing an empty
-    // map as if the vehicle had seen nothing.
-    let png = dir("cells-only").join("decision.png");
-    let render = |extra: &[&str]| {
-        let mut args = vec![
-            "render",
-            cells_only.to_str().unwrap(),
-            "--at",
-            "12.5",
-            "--out",
-            png.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        let _ = std::fs::remove_file(&png);
-        arcnav(&args)
-    };
-    let (code, stdout, stderr) = render(&[]);
-    assert_eq!(code, 0, "{stdout}{stderr}");
-    assert!(
-        stderr.contains("warning: the log holds") && stderr.contains("--recorded-cells uses them"),
-        "{stderr}"
-    );
-    let (code, stdout, stderr) = render(&["--recorded-cells"]);
-    assert_eq!(code, 0, "{stdout}{stderr}");
-    assert!(!stderr.contains("nothing was perceived"), "{stderr}");
+    // `arcnav render` draws such a log from its cells by itself:
+    // render_draws_a_log_without_images_from_its_recorded_cells.
 }
 
 #[test]
