@@ -246,11 +246,8 @@ mod tests {
     use super::*;
     use npyz::WriterBuilder as _;
 
-    fn dir(tag: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("arcnav-occ-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    fn dir(tag: &str) -> arcnav_testkit::ScratchDir {
+        arcnav_testkit::scratch_dir(&format!("arcnav-occ-{tag}"))
     }
 
     fn config(file: &Path) -> OccupancyConfig {
@@ -285,7 +282,6 @@ mod tests {
         .unwrap();
         let grid = load(&config(&d.join("neg.yaml"))).unwrap().unwrap();
         assert_eq!(grid.occupied, [true, true, false, false, false, true]);
-        let _ = std::fs::remove_dir_all(d);
     }
 
     #[test]
@@ -315,7 +311,6 @@ mod tests {
         assert_eq!(grid.occupied, [false, true, false, true, false, false]);
         let yaw = arcnav_vehicle::frames::yaw_of(&grid.origin);
         assert!((yaw - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
-        let _ = std::fs::remove_dir_all(d);
     }
 
     #[test]
@@ -357,6 +352,5 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("cannot read the occupancy map"), "{e}");
-        let _ = std::fs::remove_dir_all(d);
     }
 }

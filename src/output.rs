@@ -113,10 +113,8 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> io::Result<()> {
 mod tests {
     use super::*;
 
-    fn dir(tag: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("arcnav-output-{tag}-{}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    fn dir(tag: &str) -> arcnav_testkit::ScratchDir {
+        arcnav_testkit::scratch_dir(&format!("arcnav-output-{tag}"))
     }
 
     #[test]

@@ -766,9 +766,7 @@ mod tests {
 
     #[test]
     fn a_cut_off_row_is_counted_and_its_run_done_again() {
-        let dir = std::env::temp_dir().join(format!("arcnav-rows-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = arcnav_testkit::scratch_dir("arcnav-rows");
         let row = Row {
             run: 1,
             world: "w".into(),

@@ -626,14 +626,11 @@ mod tests {
         );
     }
 
+    /// The key read from a file of `contents` and `mode`, and the file's
+    /// path (the file is gone once the call returns: the error names it).
     fn key_file(contents: &str, mode: u32) -> (PathBuf, Result<GroupKey, KeyError>) {
         use std::os::unix::fs::PermissionsExt;
-        let dir = std::env::temp_dir().join(format!(
-            "arcnav-key-{}-{mode:o}-{}",
-            std::process::id(),
-            contents.len()
-        ));
-        let _ = std::fs::create_dir_all(&dir);
+        let dir = arcnav_testkit::scratch_dir("arcnav-key");
         let path = dir.join("group.key");
         std::fs::write(&path, contents).unwrap();
         std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();

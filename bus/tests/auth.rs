@@ -27,8 +27,7 @@ fn command(k: i32) -> Vec<u8> {
 
 #[test]
 fn the_python_verifier_accepts_arcnavs_commands_and_refuses_a_tampered_one() {
-    let dir = std::env::temp_dir().join(format!("arcnav-auth-python-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = arcnav_testkit::scratch_dir("arcnav-auth-python");
     let key_hex = "3f".repeat(32);
     let key_path = dir.join("group.key");
     std::fs::write(&key_path, format!("{key_hex}\n")).unwrap();
@@ -102,5 +101,4 @@ fn the_python_verifier_accepts_arcnavs_commands_and_refuses_a_tampered_one() {
         stderr.contains("group.key") && stderr.contains("chmod 600"),
         "{stderr}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

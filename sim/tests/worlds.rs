@@ -131,8 +131,7 @@ fn a_start_on_an_obstacle_and_a_world_without_waypoints_are_refused() {
 
 #[test]
 fn height_files_are_read_and_resampled() {
-    let dir = std::env::temp_dir().join(format!("arcnav-worlds-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = arcnav_testkit::scratch_dir("arcnav-worlds");
     let asc = "ncols 4\nnrows 4\nxllcorner -60\nyllcorner -60\ncellsize 40\n0 0 0 0\n0 4 4 0\n0 4 4 0\n0 0 0 0\n";
     std::fs::write(dir.join("dem.asc"), asc).unwrap();
     let text = "name = \"dem\"\n[terrain]\norigin_m = [-50.0, -50.0]\nsize_m = [100.0, 100.0]\nheightmap = \"dem.asc\"\nroughness_amplitude_m = 0.0\n[start]\nposition_m = [-45.0, -45.0]\n[[waypoints]]\nposition_m = [0.0, 0.0]\n";
@@ -190,8 +189,7 @@ fn numbers_that_are_not_finite_are_refused_naming_their_key() {
 
 #[test]
 fn a_height_file_covering_a_sliver_of_the_world_is_refused() {
-    let dir = std::env::temp_dir().join(format!("arcnav-worlds-sliver-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = arcnav_testkit::scratch_dir("arcnav-worlds-sliver");
     // 150 nm across for a 100 m world: the resolution is in the wrong unit.
     let asc = "ncols 4\nnrows 4\nxllcorner 0\nyllcorner 0\ncellsize 0.00000005\n0 0 0 0\n0 4 4 0\n0 4 4 0\n0 0 0 0\n";
     std::fs::write(dir.join("dem.asc"), asc).unwrap();

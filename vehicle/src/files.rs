@@ -41,7 +41,8 @@ mod tests {
     fn an_endless_file_is_refused_not_read_until_memory_runs_out() {
         let err = read_bounded(Path::new("/dev/zero"), 1 << 20).unwrap_err();
         assert!(err.to_string().contains("larger than 1 MiB"), "{err}");
-        let path = std::env::temp_dir().join(format!("arcnav-files-{}", std::process::id()));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("config.toml");
         std::fs::write(&path, b"[vehicle]\n").unwrap();
         assert_eq!(read_text(&path).unwrap(), "[vehicle]\n");
         std::fs::write(&path, [0xff, 0xfe]).unwrap();
