@@ -470,11 +470,18 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     None => println!("# effective configuration: the defaults"),
                 }
                 let look = config.lookahead();
+                if look.capped {
+                    println!(
+                        "# [lookahead] hole_speed_cap: cruise {} m/s held to {:.2} m/s, from which the vehicle \
+                         stops within the range at which a hole the wheels do not bridge is first suspected",
+                        config.arbiter.cruise_speed_mps, look.cruise_mps
+                    );
+                }
                 if look.moved_m > 0.0 {
                     println!(
-                        "# [lookahead]: at {} m/s a clear arc allows cruise {:.1} m along, so the \
+                        "# [lookahead]: at {:.2} m/s a clear arc allows cruise {:.1} m along, so the \
                          distances that look ahead are {:.1} m farther than configured",
-                        config.arbiter.cruise_speed_mps, look.needed_m, look.moved_m
+                        look.cruise_mps, look.needed_m, look.moved_m
                     );
                 }
                 print!("{}", config.effective().to_toml());

@@ -41,6 +41,17 @@
 //! bound over it: 8.4 m and 4.0 m/s for the 64-beam lidar 2.4 m up, where
 //! steps allow 10 m/s. A hole across the whole way cannot be swerved
 //! round; the swerve counts for one narrower than the way.
+//!
+//! From farther, such a hole is at least *suspected*: its near edge is
+//! reported as a suspected drop-off when the dip exceeds `noise_m + Δ·R`
+//! (`[perception.drop_off] suspect_cost`), so within the `R` that solves
+//! `Δ·R² + noise_m·R = w·H`, and again where the rows are closer than
+//! `w`. Obstacle avoidance slows for a suspected drop-off, but only from
+//! where it is suspected: `suspect_bound_mps`, the speed from which the
+//! vehicle stops within `suspect_range_m` (less the setback), is the
+//! fastest at which a ditch across the way is learnt of in time to stop.
+//! 15.8 m and 6.9 m/s for the 64-beam lidar 2.4 m up (7.1 streamed);
+//! `[lookahead] hole_speed_cap` holds the cruise speed to it.
 
 use serde::Serialize;
 
@@ -72,35 +83,67 @@ pub struct SpeedBound {
     /// (`hole_range_m` less the sensor's setback from the front): what
     /// obstacle avoidance's `hole_seen_within_m` is set to.
     pub hole_seen_within_m: Option<f64>,
+    /// Range within which such a hole is at least *suspected* (its dip
+    /// exceeds `noise_m + Δ·R`: `Δ·R² + noise_m·R = w·H`, and the rows'
+    /// spacing), m, and the speed from which the vehicle stops within it,
+    /// m/s: a hole first suspected there is a hole it can still stop
+    /// short of (no swerve: a ditch may cross the whole way). Faster, it
+    /// may learn of a ditch too late to stop for it, however it slows for
+    /// what it suspects. `[lookahead] hole_speed_cap` holds the cruise
+    /// speed to it. None when suspected drop-offs are not reported.
+    pub suspect_range_m: Option<f64>,
+    pub suspect_bound_mps: Option<f64>,
 }
 
 /// The bound of `config` (its sensors, vehicle, map window and timing):
 /// with several sensors, the best of those that look straight ahead (a
 /// rear camera does not see what the vehicle drives into).
 pub fn speed_bound(config: &Config) -> Result<SpeedBound, arcnav_vehicle::ConfigError> {
+    let window = config.lookahead().map_ahead_m;
+    looking_ahead(config)?
+        .iter()
+        .map(|sensor| bound_with(config, sensor, window))
+        .max_by(|a, b| a.bound_mps.total_cmp(&b.bound_mps))
+        .ok_or_else(|| arcnav_vehicle::ConfigError::new("sensors", "the vehicle has no sensor"))
+}
+
+/// The highest cruise speed at which the vehicle still stops before a
+/// hole the wheels do not bridge once it is *suspected*
+/// ([`SpeedBound::suspect_bound_mps`], from the sensor alone, whatever the
+/// map window), with the best of the sensors that look ahead; `None` when
+/// drop-offs are not suspected or no sensor is configured. What
+/// `[lookahead] hole_speed_cap` holds the cruise speed to.
+pub fn hole_speed_cap(config: &Config) -> Option<f64> {
+    looking_ahead(config)
+        .ok()?
+        .iter()
+        .filter_map(|sensor| bound_with(config, sensor, f64::INFINITY).suspect_bound_mps)
+        .max_by(f64::total_cmp)
+}
+
+/// The sensors that see what the vehicle drives into: those looking
+/// straight ahead, or all when none does.
+fn looking_ahead(
+    config: &Config,
+) -> Result<Vec<arcnav_perception::SensorModel>, arcnav_vehicle::ConfigError> {
     let sensors = config.sensor_models()?;
-    let ahead = |s: &&arcnav_perception::SensorModel| {
+    let ahead = |s: &arcnav_perception::SensorModel| {
         let yaw = arcnav_vehicle::frames::yaw_of(&s.vehicle_from_sensor);
         s.beams
             .azimuth
             .iter()
             .any(|&az| arcnav_vehicle::frames::wrap_angle(f64::from(az) + yaw).abs() < 0.1)
     };
-    let forward: Vec<&arcnav_perception::SensorModel> = sensors.iter().filter(ahead).collect();
-    let candidates = if forward.is_empty() {
-        sensors.iter().collect()
+    if sensors.iter().any(ahead) {
+        Ok(sensors.into_iter().filter(ahead).collect())
     } else {
-        forward
-    };
-    candidates
-        .into_iter()
-        .map(|sensor| bound_with(config, sensor))
-        .max_by(|a, b| a.bound_mps.total_cmp(&b.bound_mps))
-        .ok_or_else(|| arcnav_vehicle::ConfigError::new("sensors", "the vehicle has no sensor"))
+        Ok(sensors)
+    }
 }
 
-/// The bound of `config` with `sensor` alone.
-fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> SpeedBound {
+/// The bound of `config` with `sensor` alone, the map window reaching
+/// `window` m ahead.
+fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel, window: f64) -> SpeedBound {
     let v = &config.vehicle;
     let elevations = &sensor.beams.elevation;
     let span = elevations
@@ -118,7 +161,7 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
     let (range, limited_by) = [
         (resolved, "resolution"),
         (sensor.max_range_m, "sensor range"),
-        (config.lookahead().map_ahead_m, "map window"),
+        (window, "map window"),
     ]
     .into_iter()
     .fold(
@@ -144,22 +187,21 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
     let sideways = (w * (2.0 * r - w)).sqrt();
     let steer = (1.0 / r) / v.max_curvature_rate;
     // Stopping and swerving within `free` metres.
+    let stopping = |free: f64| a * ((reaction * reaction + 2.0 * free / a).sqrt() - reaction);
     let manoeuvres = |free: f64| {
-        let stop = a * ((reaction * reaction + 2.0 * free / a).sqrt() - reaction);
         let swerve = ((free - sideways) / (reaction + steer))
             .max(0.0)
             .min((config.arbiter.max_lateral_accel_mps2 * r).sqrt());
-        (stop, swerve)
+        (stopping(free), swerve)
     };
     let (stop, swerve) = manoeuvres(free_within(range));
     let drop_off = &config.perception.drop_off;
     let height = sensor.vehicle_from_sensor.translation.vector.z;
-    let hole_range = (drop_off.enabled && height > 0.0).then(|| {
-        let (gap, step, per_m) = (
-            drop_off.max_gap_m,
-            drop_off.min_depth_m,
-            drop_off.depth_per_m,
-        );
+    // Within what range a hole `max_gap_m` wide shows a dip of at least
+    // `step + per_m·R` beyond its near edge (`w·H/R`), on rows of returns
+    // closer than `w` on the ground.
+    let hole_shows_within = |step: f64| {
+        let (gap, per_m) = (drop_off.max_gap_m, drop_off.depth_per_m);
         let shown = if per_m > 0.0 {
             (-step + (step * step + 4.0 * per_m * gap * height).sqrt()) / (2.0 * per_m)
         } else {
@@ -170,15 +212,16 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
         } else {
             f64::INFINITY
         };
-        shown
-            .min(rows)
-            .min(sensor.max_range_m)
-            .min(config.lookahead().map_ahead_m)
-    });
+        shown.min(rows).min(sensor.max_range_m).min(window)
+    };
+    let holes = drop_off.enabled && height > 0.0;
+    let hole_range = holes.then(|| hole_shows_within(drop_off.min_depth_m));
     let hole_bound = hole_range.map(|range| {
         let (stop, swerve) = manoeuvres(free_within(range));
         stop.max(swerve).min(v.max_speed_mps)
     });
+    let suspect_range =
+        (holes && drop_off.suspect_cost > 0.0).then(|| hole_shows_within(drop_off.noise_m));
     SpeedBound {
         bound_mps: stop.max(swerve).min(v.max_speed_mps),
         stop_mps: stop,
@@ -190,6 +233,9 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel) -> Speed
         hole_range_m: hole_range,
         hole_bound_mps: hole_bound,
         hole_seen_within_m: hole_range.map(free_within),
+        suspect_range_m: suspect_range,
+        suspect_bound_mps: suspect_range
+            .map(|range| stopping(free_within(range)).min(v.max_speed_mps)),
     }
 }
 
@@ -246,6 +292,9 @@ mod tests {
         let mut lidar = Config::default();
         lidar.sensor.preset = SensorPreset::Lidar64;
         lidar.arbiter.cruise_speed_mps = 10.0;
+        // The window as far as 10 m/s needs (held to the suspect bound, it
+        // would reach 25 m).
+        lidar.lookahead.hole_speed_cap = false;
         let b = speed_bound(&lidar).unwrap();
         let range = b.hole_range_m.unwrap();
         let d = &lidar.perception.drop_off;
@@ -291,5 +340,36 @@ mod tests {
             (speed_bound(&Config::default()).unwrap().reaction_s - e.reaction_s - 0.46875).abs()
                 < 1e-6
         );
+    }
+
+    /// A hole is suspected farther than it is flagged (its dip need only
+    /// exceed the noise, not the step the wheels tolerate); for the 64-beam
+    /// lidar 2.4 m up the rows, 0.42° apart, lie closer than 0.77 m only
+    /// within √(w·H/δθ) ≈ 15.8 m, nearer than the dip allows (19 m). The
+    /// suspect bound is the speed that stops within that range, less the
+    /// sensor's setback from the front.
+    #[test]
+    fn holes_are_suspected_farther_than_flagged_and_the_rows_set_how_far() {
+        let mut lidar = Config::default();
+        lidar.sensor.preset = SensorPreset::Lidar64;
+        lidar.arbiter.cruise_speed_mps = 10.0;
+        let b = speed_bound(&lidar).unwrap();
+        let (range, bound) = (b.suspect_range_m.unwrap(), b.suspect_bound_mps.unwrap());
+        let d = &lidar.perception.drop_off;
+        let rows = (d.max_gap_m * 2.4 / b.beam_spacing_deg.to_radians()).sqrt();
+        assert!((range - rows).abs() < 1e-9, "{b:?}");
+        assert!((15.0..16.5).contains(&range), "{b:?}");
+        assert!(d.max_gap_m * 2.4 / range > d.noise_m + d.depth_per_m * range);
+        assert!(range > b.hole_range_m.unwrap() && bound > b.hole_bound_mps.unwrap());
+        let setback = b.hole_range_m.unwrap() - b.hole_seen_within_m.unwrap();
+        let (t, a) = (b.reaction_s, lidar.vehicle.max_deceleration_mps2);
+        let stopped_in = bound * t + bound * bound / (2.0 * a);
+        assert!((stopped_in - (range - setback)).abs() < 1e-9, "{b:?}");
+        // Suspected drop-offs not reported: no such bound.
+        let mut off = lidar.clone();
+        off.perception.drop_off.suspect_cost = 0.0;
+        let o = speed_bound(&off).unwrap();
+        assert_eq!((o.suspect_range_m, o.suspect_bound_mps), (None, None));
+        assert_eq!(o.hole_range_m, b.hole_range_m);
     }
 }

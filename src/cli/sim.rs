@@ -111,7 +111,19 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     );
     // Faster than holes can be seen: say so before the run, not only in
     // the report.
-    let cruise = config.arbiter.cruise_speed_mps;
+    let look = config.lookahead();
+    if look.capped
+        && let Ok(bound) = arcnav::speed_bound::speed_bound(&config)
+        && let Some(range) = bound.suspect_range_m
+    {
+        eprintln!(
+            "note: cruise held to {:.1} m/s: a hole the wheels do not bridge is first suspected within \
+             {range:.1} m, and from faster the vehicle could not stop short of it \
+             ([lookahead] hole_speed_cap = false to drive where the ground has no holes at {:.1} m/s)",
+            look.cruise_mps, config.arbiter.cruise_speed_mps
+        );
+    }
+    let cruise = look.cruise_mps;
     if let Ok(bound) = arcnav::speed_bound::speed_bound(&config)
         && let (Some(range), Some(holes)) = (bound.hole_range_m, bound.hole_bound_mps)
         && cruise > holes
@@ -180,8 +192,15 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     println!("mission       {} on {} with {}", outcome, r.world, r.sensor);
     println!("waypoints     {}/{}", r.waypoints_reached, r.waypoints);
     println!(
-        "distance      {:.0} m in {:.0} s: average {:.2} m/s, max {:.2} m/s (cruise {:.2} m/s)",
-        r.distance_m, r.duration_s, r.average_speed_mps, r.max_speed_mps, r.cruise_speed_mps
+        "distance      {:.0} m in {:.0} s: average {:.2} m/s, max {:.2} m/s (cruise {:.2} m/s{})",
+        r.distance_m,
+        r.duration_s,
+        r.average_speed_mps,
+        r.max_speed_mps,
+        r.cruise_speed_mps,
+        r.cruise_asked_mps.map_or(String::new(), |asked| format!(
+            ", held from {asked:.2} by [lookahead] hole_speed_cap"
+        ))
     );
     let b = &r.speed_bound;
     println!(
@@ -198,6 +217,12 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
             "              holes the wheels do not bridge are flagged within {range:.1} m: {bound:.2} m/s \
              (the average is {:.0} % of it)",
             100.0 * r.average_speed_mps / bound.max(1e-9)
+        );
+    }
+    if let (Some(range), Some(bound)) = (b.suspect_range_m, b.suspect_bound_mps) {
+        println!(
+            "              ... and first suspected within {range:.1} m: stopping short of one from \
+             there allows {bound:.2} m/s"
         );
     }
     if !r.speed_limited_by_s.is_empty() {

@@ -32,6 +32,15 @@
 //! and 1 m, exceeds the configured half width. (Ground outside the window
 //! is ground no image has seen: an arc that leaves it sideways is slowed
 //! as if it ran into fog.)
+//!
+//! Looking farther does not help with holes: the sensor suspects a hole
+//! the wheels do not bridge only within `speed_bound.suspect_range_m`
+//! (its far wall shows too little from farther), however far the window
+//! reaches. With `hole_speed_cap` (on by default) v_c is therefore at
+//! most `speed_bound.suspect_bound_mps`, the speed from which the vehicle
+//! stops within that range, and everything above follows from v_c as if
+//! it had been asked for. `arcnav config` and `arcnav sim` say when the
+//! cap holds the configured cruise speed down.
 
 use serde::{Deserialize, Serialize};
 
@@ -49,6 +58,10 @@ pub struct LookaheadConfig {
     pub from_speed: bool,
     /// The map window never reaches farther ahead than this, m.
     pub max_ahead_m: f64,
+    /// Hold the cruise speed to the speed from which the vehicle stops
+    /// within the range at which the sensor first suspects a hole the
+    /// wheels do not bridge (`speed_bound.suspect_bound_mps`).
+    pub hole_speed_cap: bool,
 }
 
 impl Default for LookaheadConfig {
@@ -60,6 +73,11 @@ impl Default for LookaheadConfig {
             // 10 m/s (see `config/default.toml`).
             from_speed: true,
             max_ahead_m: 60.0,
+            // On: lidar64 at 10 m/s learnt of a 0.9 m ditch 15-19 m
+            // ahead, too late to stop from 9.5 m/s, and drove into it on
+            // `ditch_ends_out_of_sight` and with 1 of 6 noise seeds on
+            // `ditch_across` (see `config/default.toml`).
+            hole_speed_cap: true,
         }
     }
 }
@@ -73,6 +91,12 @@ impl LookaheadConfig {
 /// The distances a configuration looks ahead with, m.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Lookahead {
+    /// The cruise speed v_c looked ahead for: `arbiter.cruise_speed_mps`,
+    /// or the hole speed cap when that is lower and `hole_speed_cap` is
+    /// on (the arbiter then drives at most this), m/s.
+    pub cruise_mps: f64,
+    /// Whether the hole speed cap lowered the cruise speed.
+    pub capped: bool,
     /// Arc length at which a clear arc allows the cruise speed: D(v_c).
     pub needed_m: f64,
     /// How far every distance that looks ahead moved out (0: as configured).
@@ -102,7 +126,18 @@ impl Config {
     /// documentation).
     pub fn lookahead(&self) -> Lookahead {
         let oa = self.obstacle_avoidance();
-        let cruise = self.arbiter.cruise_speed_mps;
+        let cap = if self.lookahead.hole_speed_cap {
+            crate::speed_bound::hole_speed_cap(self)
+        } else {
+            None
+        };
+        let configured = self.arbiter.cruise_speed_mps;
+        // Everything follows from the held speed, as if it had been asked
+        // for. Looking as far as the speed asked for needs, while driving
+        // the held one, lidar64 at 10 m/s circled the second waypoint of
+        // `forest` until the time ran out (at 6.9 m/s asked for, it
+        // completes at 4.4 m/s on average).
+        let cruise = cap.map_or(configured, |cap| configured.min(cap));
         let a = oa.braking_fraction * self.vehicle.max_deceleration_mps2;
         let judged = |v: f64| v * oa.reaction_s + v * v / (2.0 * a) + oa.stop_margin_m;
         let needed = judged(cruise);
@@ -145,6 +180,8 @@ impl Config {
             0.0
         };
         Lookahead {
+            cruise_mps: cruise,
+            capped: cruise < configured,
             needed_m: needed,
             moved_m: moved,
             max_distance_m: max_distance,
@@ -163,6 +200,7 @@ impl Config {
     pub fn effective(&self) -> Config {
         let look = self.lookahead();
         let mut config = self.clone();
+        config.arbiter.cruise_speed_mps = look.cruise_mps;
         // Where the sensor flags a hole for certain: a suspected drop-off
         // is missed only from within it, and slows the vehicle only until
         // then (0: not configured).
@@ -250,9 +288,15 @@ mod tests {
         assert_eq!(config.effective(), config);
     }
 
+    /// `config` driving at its cruise speed whatever holes it may meet.
+    fn uncapped(mut config: Config) -> Config {
+        config.lookahead.hole_speed_cap = false;
+        config
+    }
+
     #[test]
     fn a_faster_vehicle_looks_farther_so_that_a_clear_arc_allows_cruise() {
-        let config = at(10.0, SensorPreset::Lidar64);
+        let config = uncapped(at(10.0, SensorPreset::Lidar64));
         let look = config.lookahead();
         // 10·0.75 + 100/3 + 2 = 42.83 m of arc; everything moves out by 24.83 m.
         assert!((look.needed_m - 42.833).abs() < 1e-3, "{look:?}");
@@ -288,7 +332,7 @@ mod tests {
         assert!((look.moved_m - 0.5).abs() < 1e-9, "{look:?}");
         // Counting on all of the braking (braking_fraction = 1): 10·0.75 +
         // 100/6 + 2 = 26.17 m.
-        let mut full = at(10.0, SensorPreset::Lidar64);
+        let mut full = uncapped(at(10.0, SensorPreset::Lidar64));
         full.behaviours
             .get_mut("obstacle_avoidance")
             .unwrap()
@@ -300,14 +344,57 @@ mod tests {
     #[test]
     fn the_window_stops_at_the_sensor_and_the_bound_or_when_switched_off() {
         // The ERIM returns nothing beyond 40 m: the window stops there.
-        let look = at(10.0, SensorPreset::Erim).lookahead();
+        let look = uncapped(at(10.0, SensorPreset::Erim)).lookahead();
         assert_eq!(look.map_ahead_m, 40.0, "{look:?}");
-        let mut config = at(10.0, SensorPreset::Lidar64);
+        let mut config = uncapped(at(10.0, SensorPreset::Lidar64));
         config.lookahead.max_ahead_m = 30.0;
         assert_eq!(config.lookahead().map_ahead_m, 30.0);
         config.lookahead.from_speed = false;
         assert_eq!(config.lookahead().moved_m, 0.0);
         let config = holes_configured(config);
         assert_eq!(config.effective(), config);
+    }
+
+    /// However far the window reaches, a hole the wheels do not bridge is
+    /// suspected only within `suspect_range_m`: the cruise speed is held
+    /// to the speed from which the vehicle stops within it, and everything
+    /// that looks ahead follows from that speed, the arbiter's too.
+    #[test]
+    fn the_cruise_speed_is_held_to_stopping_where_a_hole_is_first_suspected() {
+        let config = at(10.0, SensorPreset::Lidar64);
+        let bound = crate::speed_bound::speed_bound(&config).unwrap();
+        let cap = bound.suspect_bound_mps.unwrap();
+        assert!((6.0..9.0).contains(&cap), "{bound:?}");
+        let look = config.lookahead();
+        assert!(look.capped && look.cruise_mps == cap, "{look:?}");
+        // Everything looks as far as the held speed needs: D(v_c) with
+        // 0.75 s and 1.5 m/s² of the default obstacle avoidance, 2 m of
+        // margin.
+        let needed = cap * 0.75 + cap * cap / 3.0 + 2.0;
+        assert!((look.needed_m - needed).abs() < 1e-9, "{look:?}");
+        let mut asked = uncapped(config.clone());
+        asked.arbiter.cruise_speed_mps = cap;
+        assert_eq!(asked.lookahead().map_ahead_m, look.map_ahead_m);
+        let effective = config.effective();
+        assert_eq!(effective.arbiter.cruise_speed_mps, cap);
+        assert_eq!(effective.effective(), effective, "applying it twice");
+        assert_eq!(config.arbiter().unwrap().config().cruise_speed_mps, cap);
+        // Slower than the cap, switched off, or with no drop-off suspected:
+        // the cruise speed is the configured one.
+        let slow = at(2.5, SensorPreset::Lidar64).lookahead();
+        assert!(!slow.capped && slow.cruise_mps == 2.5, "{slow:?}");
+        let off = uncapped(config.clone());
+        assert_eq!(off.lookahead().cruise_mps, 10.0);
+        assert_eq!(off.arbiter().unwrap().config().cruise_speed_mps, 10.0);
+        let mut unsuspected = config.clone();
+        unsuspected.perception.drop_off.suspect_cost = 0.0;
+        assert_eq!(unsuspected.lookahead().cruise_mps, 10.0);
+        // The ERIM sees holes nearer and reacts later: a lower cap, above
+        // the 4.5 m/s it is driven at.
+        let erim = at(10.0, SensorPreset::Erim).lookahead();
+        assert!(
+            erim.capped && (4.5..cap).contains(&erim.cruise_mps),
+            "{erim:?}"
+        );
     }
 }

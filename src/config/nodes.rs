@@ -86,9 +86,11 @@ impl Config {
         }
     }
 
-    /// The DAMN arbiter, from `[arbiter]`, `[arcs]` and the vehicle.
+    /// The DAMN arbiter, from `[arbiter]` (its cruise speed as
+    /// [`Config::lookahead`] holds it), `[arcs]` and the vehicle.
     pub fn arbiter(&self) -> Result<Arbiter, ConfigError> {
-        Ok(Arbiter::new(&self.arbiter, self.arc_set()?, &self.vehicle))
+        let this = self.effective();
+        Ok(Arbiter::new(&this.arbiter, self.arc_set()?, &self.vehicle))
     }
 
     /// The lock-step executor with every node of this configuration.

@@ -105,7 +105,12 @@ pub struct MissionReport {
     pub duration_s: f64,
     pub average_speed_mps: f64,
     pub max_speed_mps: f64,
+    /// The cruise speed the arbiter drove at: `arbiter.cruise_speed_mps`,
+    /// or less when `[lookahead] hole_speed_cap` held it down (then
+    /// `cruise_asked_mps` is the configured one).
     pub cruise_speed_mps: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cruise_asked_mps: Option<f64>,
     pub images: u64,
     pub images_dropped: u64,
     /// Images sent in slices (`sim.slice_lines`): what perception did
@@ -724,6 +729,7 @@ pub fn run_mission(
         0.0
     };
     let bound = speed_bound(config)?;
+    let look = config.lookahead();
     let report = MissionReport {
         world: world.spec.name.clone(),
         sensor: sensors
@@ -739,7 +745,8 @@ pub fn run_mission(
         duration_s: duration,
         average_speed_mps: average_speed,
         max_speed_mps: max_speed,
-        cruise_speed_mps: config.arbiter.cruise_speed_mps,
+        cruise_speed_mps: look.cruise_mps,
+        cruise_asked_mps: look.capped.then_some(config.arbiter.cruise_speed_mps),
         images,
         images_dropped: drops.no_pose + drops.invalid + drops.out_of_order,
         slices: (pipeline.perception.slices.received > 0).then_some(pipeline.perception.slices),
