@@ -841,7 +841,7 @@ fn the_erim_goes_round_a_ledge_through_no_gap_in_its_shut_shadow() {
 /// slowed them first (2026-11-28). The cruise speed is now held to the
 /// speed that stops within the range at which such a ditch is first
 /// suspected (`[lookahead] hole_speed_cap`, 6.9 m/s): each of seeds 1-6
-/// goes round, 1.24-1.47 m from the ditch.
+/// goes round, 0.92-1.45 m from the ditch, at 6.5 m/s at most.
 #[test]
 fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
     let world = format!(
@@ -1000,9 +1000,11 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
         max(&fixed)
     );
     let looking = run("window-from-speed", "[lookahead]\nfrom_speed = true\n");
+    // Held to 6.89 m/s (below), it looks 23 m along the arcs, not 18:
+    // 6.53 m/s at most (2026-11-28).
     assert!(
-        max(&looking) > 6.5,
-        "looking 42.8 m along the arcs lets it go faster: {}",
+        max(&looking) > 6.2,
+        "looking farther along the arcs lets it go faster: {}",
         max(&looking)
     );
     assert!(
