@@ -1135,16 +1135,19 @@ fn a_flood_of_large_range_images_keeps_memory_bounded_and_counts_drops() {
     assert_eq!(evaluated + replaced + unplaced, received);
     // Perception fell behind in the last round and skipped to the newest.
     assert!(replaced > 0, "no image replaced by a newer one");
-    // Each round starts the log over: the executor follows (the first image
-    // of a round has no pose before it yet), and evaluates in every round.
-    // How many it evaluates is the host's speed: half of them on an idle
-    // two-core host, 47 of 154 in a CI run beside a simulation
-    // (2026-11-28), so that is not asserted.
+    // Each round starts the log over: the executor follows, placing every
+    // image but the first of a round (no pose before it yet), and goes on
+    // evaluating after the first round. How many it evaluates is the
+    // host's speed (about half on an idle two-core host, 47 of 154 in a CI
+    // run beside a simulation, 2026-11-28), so no share is asserted.
     assert!(
         unplaced <= ROUNDS,
         "{unplaced} unplaceable in {ROUNDS} rounds"
     );
-    assert!(evaluated >= ROUNDS, "{evaluated} of {received} evaluated");
+    assert!(
+        evaluated > published,
+        "{evaluated} of {received} evaluated, {published} a round"
+    );
     // What did not arrive whole is counted by the transport (or never left
     // the kernel: at most the socket buffer's worth per round).
     assert!(received + incomplete <= ROUNDS * published);
