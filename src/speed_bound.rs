@@ -50,7 +50,7 @@
 //! where it is suspected: `suspect_bound_mps`, the speed from which the
 //! vehicle stops within `suspect_range_m` (less the setback), is the
 //! fastest at which a ditch across the way is learnt of in time to stop.
-//! 15.8 m and 6.9 m/s for the 64-beam lidar 2.4 m up (7.1 streamed);
+//! 15.9 m and 6.9 m/s for the 64-beam lidar 2.4 m up (7.1 streamed);
 //! `[lookahead] hole_speed_cap` holds the cruise speed to it.
 
 use serde::Serialize;
@@ -345,7 +345,7 @@ mod tests {
     /// A hole is suspected farther than it is flagged (its dip need only
     /// exceed the noise, not the step the wheels tolerate); for the 64-beam
     /// lidar 2.4 m up the rows, 0.42° apart, lie closer than 0.77 m only
-    /// within √(w·H/δθ) ≈ 15.8 m, nearer than the dip allows (19 m). The
+    /// within √(w·H/δθ) ≈ 15.9 m, nearer than the dip allows (19 m). The
     /// suspect bound is the speed that stops within that range, less the
     /// sensor's setback from the front.
     #[test]

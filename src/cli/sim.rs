@@ -112,27 +112,28 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     // Faster than holes can be seen: say so before the run, not only in
     // the report.
     let look = config.lookahead();
-    if look.capped
-        && let Ok(bound) = arcnav::speed_bound::speed_bound(&config)
-        && let Some(range) = bound.suspect_range_m
-    {
-        eprintln!(
-            "note: cruise held to {:.1} m/s: a hole the wheels do not bridge is first suspected within \
-             {range:.1} m, and from faster the vehicle could not stop short of it \
-             ([lookahead] hole_speed_cap = false to drive where the ground has no holes at {:.1} m/s)",
-            look.cruise_mps, config.arbiter.cruise_speed_mps
-        );
-    }
-    let cruise = look.cruise_mps;
-    if let Ok(bound) = arcnav::speed_bound::speed_bound(&config)
-        && let (Some(range), Some(holes)) = (bound.hole_range_m, bound.hole_bound_mps)
-        && cruise > holes
-    {
-        eprintln!(
-            "note: {cruise:.1} m/s is faster than {holes:.2} m/s, at which a hole the wheels do not \
-             bridge is certain to be seen in time: the sensor flags one only within {range:.1} m \
-             (report.json speed_bound; a higher mount sees farther)"
-        );
+    if let Ok(bound) = arcnav::speed_bound::speed_bound(&config) {
+        let cruise = look.cruise_mps;
+        if look.capped
+            && let Some(range) = bound.suspect_range_m
+        {
+            eprintln!(
+                "note: cruise held to {cruise:.1} m/s: a hole the wheels do not bridge is first \
+                 suspected within {range:.1} m, and from faster the vehicle could not stop short of \
+                 it ([lookahead] hole_speed_cap = false to drive where the ground has no holes at \
+                 {:.1} m/s)",
+                config.arbiter.cruise_speed_mps
+            );
+        }
+        if let (Some(range), Some(holes)) = (bound.hole_range_m, bound.hole_bound_mps)
+            && cruise > holes
+        {
+            eprintln!(
+                "note: {cruise:.1} m/s is faster than {holes:.2} m/s, at which a hole the wheels do \
+                 not bridge is certain to be seen in time: the sensor flags one only within \
+                 {range:.1} m (report.json speed_bound; a higher mount sees farther)"
+            );
+        }
     }
     let bar = indicatif::ProgressBar::new(world.waypoints.len() as u64);
     bar.set_style(
