@@ -386,12 +386,29 @@ fn main() -> ExitCode {
         _ => cli.quiet,
     };
     init_logging(cli.verbose, quiet);
+    if matches!(cli.command, Command::Config { .. } | Command::Evaluators) {
+        end_quietly_when_the_reader_leaves();
+    }
     match run(cli.command) {
         Ok(code) => code,
         Err(err) => {
             eprintln!("error: {}", message(&err));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// For commands that only print (no socket, no file half written): a
+/// reader that leaves early (`arcnav config | head`) ends the process
+/// quietly, as it does any Unix filter, instead of the panic Rust's
+/// ignored SIGPIPE turns a failed `println!` into. Commands that serve or
+/// write files keep SIGPIPE ignored, so a closed connection is an error
+/// they handle.
+fn end_quietly_when_the_reader_leaves() {
+    // SAFETY: called once, before any thread is started; SIG_DFL is a
+    // valid disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

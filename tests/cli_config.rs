@@ -194,3 +194,29 @@ fn the_vehicle_bridge_without_commands_executes_stops() {
     );
     assert_eq!(last["state"], "shutting_down");
 }
+
+/// A reader that leaves before `arcnav config` or `arcnav evaluators` has
+/// printed (`arcnav config | head`) ends it as it ends any Unix filter: by
+/// SIGPIPE, with nothing on standard error (it panicked with "failed
+/// printing to stdout: Broken pipe" before).
+#[test]
+fn printing_into_a_pipe_whose_reader_has_left_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    for command in ["config", "evaluators"] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+            .arg(command)
+            .stdout(writer)
+            .output()
+            .expect("the arcnav binary runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            out.status.signal(),
+            Some(libc::SIGPIPE),
+            "{command}: {:?}\n{stderr}",
+            out.status
+        );
+        assert!(stderr.is_empty(), "{command}: {stderr}");
+    }
+}
