@@ -132,16 +132,46 @@ impl LcmReference {
     }
 }
 
-/// A fresh directory under `target/test-tmp` for one test.
+/// A fresh directory under `target/test-tmp` for one test, named
+/// `TAG-PID-N`. What a test process writes there (logs shared by its tests,
+/// up to 190 MB each) stays until the process has ended and another calls
+/// this: the first call in a process removes the directories of processes
+/// that are no longer running (7 GB had piled up over a few days' runs).
 pub fn temp_dir(tag: &str) -> PathBuf {
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    static SWEPT: std::sync::Once = std::sync::Once::new();
+    let root = workspace_root().join("target/test-tmp");
+    SWEPT.call_once(|| remove_dirs_of_ended_processes(&root));
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let dir = workspace_root()
-        .join("target/test-tmp")
-        .join(format!("{tag}-{}-{n}", std::process::id()));
+    let dir = root.join(format!("{tag}-{}-{n}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("create a test directory");
     dir
+}
+
+/// Removes each `TAG-PID-N` directory in `root` whose process is not
+/// running (no `/proc/PID`). Where there is no `/proc`, removes nothing.
+fn remove_dirs_of_ended_processes(root: &Path) {
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(root) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(|name| {
+            let mut parts = name.rsplitn(3, '-');
+            let (_n, pid, _tag) = (parts.next()?, parts.next()?, parts.next()?);
+            pid.parse::<u32>().ok()
+        }) else {
+            continue;
+        };
+        if !proc.join(pid.to_string()).exists() {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 /// A fresh directory under the system's temporary directory for what one
@@ -335,5 +365,27 @@ mod scratch_tests {
         let kept = receive.recv().unwrap();
         assert!(kept.join("log").exists(), "{kept:?} kept");
         std::fs::remove_dir_all(kept).unwrap();
+    }
+
+    #[test]
+    fn directories_of_ended_processes_are_removed_and_running_ones_kept() {
+        let root = scratch_dir("arcnav-testkit-sweep");
+        // A process that has ended: a child that has been waited for.
+        let mut child = Command::new("true").spawn().unwrap();
+        let ended = child.id();
+        child.wait().unwrap();
+        let running = std::process::id();
+        let names = [
+            format!("live-log-{ended}-3"),
+            format!("live-log-{running}-0"),
+            "not-a-pid-dir".to_owned(),
+        ];
+        for name in &names {
+            std::fs::create_dir_all(root.join(name)).unwrap();
+        }
+        remove_dirs_of_ended_processes(&root);
+        assert!(!root.join(&names[0]).exists(), "ended: {}", names[0]);
+        assert!(root.join(&names[1]).exists(), "running: {}", names[1]);
+        assert!(root.join(&names[2]).exists(), "not TAG-PID-N");
     }
 }
