@@ -79,19 +79,28 @@ fn missions<'a, T: AsRef<str> + Sync>(
 }
 
 /// The range-noise seeds (`sim.seed`) a mission test asks its question
-/// over where the answer hangs on the noise: one seed's outcome may be its
-/// realisation's luck. Four, not six, since 2026-11-28: the lidar missions
-/// of this file took 14-23 minutes of a CI run; the defect each control
-/// shows is looked for over [`CONTROL_SEEDS`].
-const NOISE_SEEDS: std::ops::RangeInclusive<u64> = 1..=4;
-
-/// The seeds a control (the change switched off) is run with, in order,
-/// until one shows the defect it is there to show (a control showed it
-/// with 2 of these 6, 2026-11-28): see [`first_seed_showing`].
-const CONTROL_SEEDS: std::ops::RangeInclusive<u64> = 1..=6;
+/// over where the answer hangs on the noise (one seed's outcome may be its
+/// realisation's luck): seeds 1 to N, N from `ARCNAV_TEST_NOISE_SEEDS`,
+/// 2 when it is not set. The figures these tests quote were measured over
+/// seeds 1-6 (`ARCNAV_TEST_NOISE_SEEDS=6 cargo test --test sim_mission`,
+/// about three times as long); "with every noise seed" below means each
+/// seed asked. Two by default since 2026-11-28 (six, then four, before):
+/// the lidar missions of this file took 14-23 minutes of a CI run that is
+/// to stay well under 30. The defect each control shows is looked for over
+/// the six seeds whatever N (see [`first_seed_showing`]).
+fn noise_seeds() -> std::ops::RangeInclusive<u64> {
+    const VAR: &str = "ARCNAV_TEST_NOISE_SEEDS";
+    match std::env::var(VAR) {
+        Err(_) => 1..=2,
+        Ok(text) => match text.trim().parse::<u64>() {
+            Ok(n @ 1..=64) => 1..=n,
+            _ => panic!("{VAR}={text:?}: give how many noise seeds to ask over, 1 to 64"),
+        },
+    }
+}
 
 /// Each (tag, sensor, TOML merged over the defaults) with each of
-/// [`NOISE_SEEDS`], `args` added: the missions' reports, grouped by run in
+/// [`noise_seeds`], `args` added: the missions' reports, grouped by run in
 /// the order given, seeds in order within each, tagged `TAG-seedN`.
 fn over_noise_seeds(
     prefix: &str,
@@ -102,14 +111,14 @@ fn over_noise_seeds(
     let dir: &Path = &configs;
     let all: Vec<_> = runs
         .iter()
-        .flat_map(|&run| NOISE_SEEDS.map(move |seed| seeded(dir, run, args, seed)))
+        .flat_map(|&run| noise_seeds().map(move |seed| seeded(dir, run, args, seed)))
         .collect();
     let reports: Vec<(String, Value, String)> = missions(prefix, &all)
         .into_iter()
         .map(|(tag, report, stdout)| (tag.to_owned(), report, stdout))
         .collect();
     reports
-        .chunks(NOISE_SEEDS.count())
+        .chunks(noise_seeds().count())
         .map(<[_]>::to_vec)
         .collect()
 }
@@ -133,19 +142,22 @@ fn seeded(
 }
 
 /// The control `tag` (`sensor`, `toml` merged over the defaults, `args`
-/// added) run with each of [`CONTROL_SEEDS`] in turn, as many at a time
-/// as there are cores, until one mission's report satisfies `shows`: the
-/// missions run, in seed order, the last of them the first that shows it
-/// (none shows it when no seed does).
+/// added) run with each of the noise seeds `seeds` (1-6, those that showed
+/// the defect last first) in turn, as many at a time as there are cores,
+/// until one mission's report satisfies `shows`: the missions run, in the
+/// order of `seeds`, the last of them the first that shows it (none shows
+/// it when no seed does). A control is stuck, or collides, only with some
+/// seeds, and a stuck mission runs to the stuck timeout: trying first the
+/// seeds that showed it spares a CI run the others.
 fn first_seed_showing(
     prefix: &str,
     (tag, sensor, toml): (&str, &str, &str),
     args: &[&str],
+    seeds: [u64; 6],
     shows: impl Fn(&Value) -> bool,
 ) -> (Vec<(String, Value, String)>, bool) {
     let configs = out_dir(&format!("{prefix}-configs"));
     let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let seeds: Vec<u64> = CONTROL_SEEDS.collect();
     let mut ran = Vec::new();
     for batch in seeds.chunks(workers) {
         let runs: Vec<(String, Vec<String>)> = batch
@@ -709,11 +721,13 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
             "{tag}: {lidar}"
         );
     }
-    // Every overlapping image counting a miss, the same vehicle is stuck.
+    // Every overlapping image counting a miss, the same vehicle is stuck
+    // (with seeds 5 and 6 of 1-6, 2026-11-28: they are tried first).
     let (as_002, stuck) = first_seed_showing(
         "ditch",
         ("lidar64-as-002", "lidar64", as_002),
         &args,
+        [5, 6, 1, 2, 3, 4],
         |report| report["outcome"] == "stuck",
     );
     assert!(stuck, "as 002 never stuck");
@@ -765,6 +779,8 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
             "[localmap]\ndrop_off_trust_factor = 0\n",
         ),
         &args,
+        // Stuck with seed 1 of 1-6 (2026-11-28).
+        [1, 2, 3, 4, 5, 6],
         |report| report["outcome"] == "stuck",
     );
     assert!(stuck, "as before, never stuck");
@@ -801,7 +817,7 @@ fn held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge() {
     assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
 }
 
-/// The same ledge with the ERIM, over noise seeds 1-4, and the ledge open
+/// The same ledge with the ERIM, over the noise seeds, and the ledge open
 /// to the other side (`ledge_north`): the route shut the shadow along the
 /// edge but left gaps in the band. Where its 1 m cells were seen at their
 /// centres and not wholly (ledge, seed 1; with the noise drawn by
