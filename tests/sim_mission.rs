@@ -143,12 +143,13 @@ fn seeded(
 
 /// The control `tag` (`sensor`, `toml` merged over the defaults, `args`
 /// added) run with each of the noise seeds `seeds` (1-6, those that showed
-/// the defect last first) in turn, as many at a time as there are cores,
-/// until one mission's report satisfies `shows`: the missions run, in the
-/// order of `seeds`, the last of them the first that shows it (none shows
-/// it when no seed does). A control is stuck, or collides, only with some
-/// seeds, and a stuck mission runs to the stuck timeout: trying first the
-/// seeds that showed it spares a CI run the others.
+/// the defect last first) one at a time, until one mission's report
+/// satisfies `shows`: the missions run, in the order of `seeds`, the last
+/// of them the first that shows it (none shows it when no seed does). A
+/// control is stuck, or collides, only with some seeds, and a stuck
+/// mission runs to the stuck timeout: trying first, and alone, the seed
+/// that showed it spares a CI run the others (the other tests keep the
+/// other core busy meanwhile).
 fn first_seed_showing(
     prefix: &str,
     (tag, sensor, toml): (&str, &str, &str),
@@ -157,14 +158,10 @@ fn first_seed_showing(
     shows: impl Fn(&Value) -> bool,
 ) -> (Vec<(String, Value, String)>, bool) {
     let configs = out_dir(&format!("{prefix}-configs"));
-    let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
     let mut ran = Vec::new();
-    for batch in seeds.chunks(workers) {
-        let runs: Vec<(String, Vec<String>)> = batch
-            .iter()
-            .map(|&seed| seeded(&configs, (tag, sensor, toml), args, seed))
-            .collect();
-        for (tag, report, stdout) in missions(prefix, &runs) {
+    for seed in seeds {
+        let run = [seeded(&configs, (tag, sensor, toml), args, seed)];
+        for (tag, report, stdout) in missions(prefix, &run) {
             let shown = shows(&report);
             ran.push((tag.to_owned(), report, stdout));
             if shown {
