@@ -109,18 +109,16 @@ fn over_noise_seeds(
 ) -> Vec<Vec<(String, Value, String)>> {
     let configs = out_dir(&format!("{prefix}-configs"));
     let dir: &Path = &configs;
+    let seeds = noise_seeds();
     let all: Vec<_> = runs
         .iter()
-        .flat_map(|&run| noise_seeds().map(move |seed| seeded(dir, run, args, seed)))
+        .flat_map(|&run| seeds.clone().map(move |seed| seeded(dir, run, args, seed)))
         .collect();
     let reports: Vec<(String, Value, String)> = missions(prefix, &all)
         .into_iter()
         .map(|(tag, report, stdout)| (tag.to_owned(), report, stdout))
         .collect();
-    reports
-        .chunks(noise_seeds().count())
-        .map(<[_]>::to_vec)
-        .collect()
+    reports.chunks(seeds.count()).map(<[_]>::to_vec).collect()
 }
 
 /// The mission (tag, sensor, TOML merged over the defaults) with noise
