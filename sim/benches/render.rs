@@ -5,6 +5,10 @@
 //! Frames carry the default range noise and dropouts (`[sim]`), as a
 //! mission's do. Prints the median and the 90th percentile per frame and
 //! what a lidar mission's rendering alone allows: 10 Hz frames × real time.
+//! Lidar frames are also rendered streamed, in the 16-column slices an
+//! Ouster sends (`sim.slice_lines = 16`, 020 item 3), all from the pose of
+//! the frame (a mission renders each where the vehicle is then): the
+//! time per frame of its slices, rendered side by side as a mission does.
 //! Target (020 item 4, not met): a 64×2048 frame ≥ 10× faster than the
 //! ~31 ms measured in missions (≤ 3.2 ms), so lidar missions run ≥ 20× real
 //! time; 5.1 ms on two threads with the range noise on 2026-11-28. See
@@ -16,6 +20,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use arcnav_perception::SensorModel;
+use arcnav_sim::sensor::{SliceRequest, Slicer};
 use arcnav_sim::tiles::TileCache;
 use arcnav_sim::{SimConfig, World};
 use arcnav_vehicle::Isometry;
@@ -52,6 +57,31 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
 
+/// Every slice of the frame from `pose`, rendered as a mission does.
+fn render_streamed(
+    slicer: &Slicer,
+    view: &arcnav_sim::tiles::TileView,
+    pose: &Isometry,
+    noise: (f64, f64),
+    seed: u64,
+    threads: usize,
+) -> Vec<f32> {
+    let requests: Vec<SliceRequest<'_>> = (0..slicer.len())
+        .map(|k| SliceRequest {
+            k,
+            frame: 0,
+            view,
+            world_from_vehicle: *pose,
+            stream: k as u64,
+        })
+        .collect();
+    slicer
+        .render_all(&requests, noise, seed, threads)
+        .into_iter()
+        .flat_map(|slice| slice.range)
+        .collect()
+}
+
 fn main() {
     let world = Arc::new(
         World::embedded("paper_loop")
@@ -62,7 +92,7 @@ fn main() {
     let sim = SimConfig::default();
     let noise = (sim.range_noise_m, sim.dropout_probability);
     println!(
-        "{:<10} {:>9} {:>7} {:>11} {:>11} {:>14}",
+        "{:<10} {:>16} {:>7} {:>11} {:>11} {:>14}",
         "sensor", "poses", "threads", "median ms", "p90 ms", "10 Hz × real"
     );
     // `cargo bench --bench render -- lidar64` times only the sensors named.
@@ -87,29 +117,43 @@ fn main() {
                     tiles.view(p.x, p.y, sensor.max_range_m + 1.0)
                 })
                 .collect();
-            for threads in [1, 2] {
+            let slicer = Slicer::new(&sensor, 16);
+            let streamed = [false, true]
+                .into_iter()
+                .filter(|&s| !s || slicer.axis() == arcnav_perception::SliceAxis::Columns);
+            for (streamed, threads) in streamed.flat_map(|s| [(s, 1), (s, 2)]) {
                 let mut times = Vec::new();
                 let mut returns = 0usize;
                 for (pose, view) in poses.iter().zip(&views) {
                     let start = Instant::now();
-                    let image = arcnav_sim::sensor::render(
-                        &sensor,
-                        view,
-                        pose,
-                        0,
-                        noise,
-                        (sim.seed, 1),
-                        threads,
-                    );
+                    let range = if streamed {
+                        render_streamed(&slicer, view, pose, noise, sim.seed, threads)
+                    } else {
+                        arcnav_sim::sensor::render(
+                            &sensor,
+                            view,
+                            pose,
+                            0,
+                            noise,
+                            (sim.seed, 1),
+                            threads,
+                        )
+                        .range
+                    };
                     times.push(start.elapsed().as_secs_f64() * 1e3);
-                    returns += image.range.iter().filter(|r| r.is_finite()).count();
+                    returns += range.iter().filter(|r| r.is_finite()).count();
                 }
                 times.sort_by(f64::total_cmp);
                 let median = percentile(&times, 0.5);
                 println!(
-                    "{:<10} {:>9} {:>7} {:>11.2} {:>11.2} {:>13.0}×   ({:.0} % of beams return)",
+                    "{:<10} {:>16} {:>7} {:>11.2} {:>11.2} {:>13.0}×   ({:.0} % of beams return)",
                     sensor.id,
-                    if tilted { "tilted" } else { "level" },
+                    match (tilted, streamed) {
+                        (false, false) => "level",
+                        (true, false) => "tilted",
+                        (false, true) => "level, streamed",
+                        (true, true) => "tilted, streamed",
+                    },
                     threads,
                     median,
                     percentile(&times, 0.9),

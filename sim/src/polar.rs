@@ -22,6 +22,11 @@
 //! distances from the sensor). Headings are binned by a pseudo-angle
 //! (monotone in the angle, no trigonometry), so bins are wedges of slightly
 //! unequal widths.
+//!
+//! A slice of a rotating lidar (16 columns: 2.8° of the turn) needs only
+//! the headings its rays run along: [`PolarView::wedge`] bins those alone,
+//! from the blocks in the wedge (about 1/100 of a frame's), so a streamed
+//! frame is cast through the table too rather than walked ray by ray.
 
 use arcnav_perception::RayCast;
 use nalgebra::{Point3, Vector3};
@@ -53,6 +58,96 @@ fn heading_bin(p: f64) -> i64 {
     floor(p * HEADINGS as f64 / 4.0)
 }
 
+/// The unit direction at pseudo-angle `p` (the inverse of [`pseudo_angle`]).
+fn direction_at(p: f64) -> (f64, f64) {
+    let p = p.rem_euclid(4.0);
+    let (x, y) = if p < 2.0 {
+        (1.0 - p, 1.0 - (1.0 - p).abs())
+    } else {
+        (p - 3.0, (p - 3.0).abs() - 1.0)
+    };
+    let norm = (x * x + y * y).sqrt();
+    (x / norm, y / norm)
+}
+
+/// The heading bins a table holds: `width` of them from `first`, round
+/// the turn (all of them for a frame, a wedge for a slice).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Headings {
+    first: usize,
+    width: usize,
+}
+
+impl Headings {
+    /// Every heading.
+    pub const ALL: Self = Self {
+        first: 0,
+        width: HEADINGS,
+    };
+
+    /// The narrowest wedge holding the headings of `directions`, widened by
+    /// two bins each side against rounding; `None` when it spans more than
+    /// a quarter turn (binning it would cost about what it saves) or a
+    /// direction is (nearly) vertical.
+    pub fn around(directions: impl IntoIterator<Item = Vector3<f64>>) -> Option<Self> {
+        const WIDEN: usize = 2;
+        let mut bins = Vec::new();
+        for d in directions {
+            if (d.x * d.x + d.y * d.y).sqrt() < 1e-9 {
+                return None;
+            }
+            bins.push(heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize);
+        }
+        bins.sort_unstable();
+        bins.dedup();
+        // The wedge is the turn less the widest gap between neighbours.
+        let (&lowest, &highest) = (bins.first()?, bins.last()?);
+        let (gap_after, gap) = bins
+            .windows(2)
+            .map(|w| (w[0], w[1] - w[0]))
+            .chain(std::iter::once((highest, lowest + HEADINGS - highest)))
+            .max_by_key(|&(_, gap)| gap)?;
+        let width = HEADINGS - gap + 1 + 2 * WIDEN;
+        (width <= HEADINGS / 4).then(|| Self {
+            first: (gap_after + gap + HEADINGS - WIDEN) % HEADINGS,
+            width,
+        })
+    }
+
+    /// The table's column of heading bin `heading`, if it holds it.
+    #[cfg(test)]
+    fn column(self, heading: usize) -> Option<usize> {
+        let column = self.offset(heading);
+        (column < self.width).then_some(column)
+    }
+
+    /// How many bins `heading` is past the first: its column when that is
+    /// below `width`.
+    #[inline]
+    fn offset(self, heading: usize) -> usize {
+        heading.wrapping_sub(self.first) & (HEADINGS - 1)
+    }
+
+    /// Raises to `top` the columns of `row` (one distance bin) that hold
+    /// heading bins `lo..=hi` (`lo` may be below 0 and `hi` past the last
+    /// bin: the span wraps round the turn).
+    #[inline]
+    fn raise(self, row: &mut [f32], lo: i64, hi: i64, top: f32) {
+        let start = (lo - self.first as i64).rem_euclid(HEADINGS as i64) as usize;
+        let end = start + (hi - lo).clamp(0, HEADINGS as i64 - 1) as usize;
+        if start < self.width {
+            for h in &mut row[start..=end.min(self.width - 1)] {
+                *h = h.max(top);
+            }
+        }
+        if end >= HEADINGS {
+            for h in &mut row[..=(end - HEADINGS).min(self.width - 1)] {
+                *h = h.max(top);
+            }
+        }
+    }
+}
+
 /// A [`TileView`] with the highest ground binned around one sensor position:
 /// rays from that position are cast through the table, any other ray
 /// through the view itself.
@@ -62,7 +157,9 @@ pub struct PolarView<'a> {
     origin: Point3<f64>,
     range_m: f64,
     bins: usize,
-    /// Highest cell per (distance bin, heading bin): `[bin · HEADINGS + heading]`.
+    /// The headings binned: a row of the tables has `headings.width` columns.
+    headings: Headings,
+    /// Highest cell per (distance bin, heading bin): `[bin · width + column]`.
     highest: Vec<f32>,
     /// The same over groups of `GROUP` distance bins.
     coarse: Vec<f32>,
@@ -76,27 +173,25 @@ impl<'a> PolarView<'a> {
     /// Bins the ground of `view` within `range_m` of `origin` (horizontally),
     /// on up to `threads` threads.
     pub fn new(view: &'a TileView, origin: Point3<f64>, range_m: f64, threads: usize) -> Self {
-        let range_m = if range_m.is_finite() {
-            range_m.max(0.0)
-        } else {
-            0.0
-        };
+        let range_m = Self::binned_range(range_m);
         let bins = ((range_m / BIN_M).ceil() as usize).max(1);
         let parts = threads.max(1);
+        let table = Table {
+            origin,
+            range_m,
+            bins,
+            headings: Headings::ALL,
+        };
         // Each thread bins a share of the tiles into a table of its own;
         // then each takes a share of the headings, merges the tables there
         // (highest wins) and derives the coarse bins and the clearing rises.
         let bin_part = |part: usize| {
             let mut highest = vec![f32::NEG_INFINITY; bins * HEADINGS];
             view.for_each_tile(part, parts, |x0, y0, block_max| {
-                bin_tile(&mut highest, bins, &origin, range_m, (x0, y0), block_max);
+                table.bin_tile(&mut highest, (x0, y0), block_max);
             });
             highest
         };
-        let groups = bins.div_ceil(GROUP);
-        let mut coarse = vec![f32::NEG_INFINITY; groups * HEADINGS];
-        let mut clears = vec![f32::NEG_INFINITY; bins * HEADINGS];
-        let z = origin.z;
         let (mut highest, others) = std::thread::scope(|scope| {
             let others: Vec<_> = (1..parts)
                 .map(|part| scope.spawn(move || bin_part(part)))
@@ -114,13 +209,17 @@ impl<'a> PolarView<'a> {
                 .collect();
             (highest, others)
         });
+        let groups = bins.div_ceil(GROUP);
+        let mut coarse = vec![f32::NEG_INFINITY; groups * HEADINGS];
+        let mut clears = vec![f32::NEG_INFINITY; bins * HEADINGS];
+        let z = origin.z;
         let width = HEADINGS.div_ceil(parts);
         let others = &others;
         std::thread::scope(|scope| {
-            let mut shares = columns(&mut highest, parts)
+            let mut shares = columns(&mut highest, HEADINGS, parts)
                 .into_iter()
-                .zip(columns(&mut coarse, parts))
-                .zip(columns(&mut clears, parts))
+                .zip(columns(&mut coarse, HEADINGS, parts))
+                .zip(columns(&mut clears, HEADINGS, parts))
                 .enumerate();
             // The first share on this thread, the others each on one more.
             let here = shares.next();
@@ -128,8 +227,7 @@ impl<'a> PolarView<'a> {
                 scope.spawn(move || {
                     derive(
                         &mut highest,
-                        others,
-                        part * width,
+                        (others, HEADINGS, part * width),
                         &mut coarse,
                         &mut clears,
                         z,
@@ -137,7 +235,13 @@ impl<'a> PolarView<'a> {
                 });
             }
             if let Some((_, ((mut highest, mut coarse), mut clears))) = here {
-                derive(&mut highest, others, 0, &mut coarse, &mut clears, z);
+                derive(
+                    &mut highest,
+                    (others, HEADINGS, 0),
+                    &mut coarse,
+                    &mut clears,
+                    z,
+                );
             }
         });
         Self {
@@ -145,40 +249,92 @@ impl<'a> PolarView<'a> {
             origin,
             range_m,
             bins,
+            headings: Headings::ALL,
             highest,
             coarse,
             clears,
         }
     }
+
+    /// Bins the ground of `view` within `range_m` of `origin` along
+    /// `headings` only (on this thread): a slice's rays from there are cast
+    /// through the table, any other ray through the view. The blocks
+    /// binned are those in the wedge, found band by band of distance.
+    pub fn wedge(
+        view: &'a TileView,
+        origin: Point3<f64>,
+        range_m: f64,
+        headings: Headings,
+    ) -> Self {
+        let range_m = Self::binned_range(range_m);
+        let bins = ((range_m / BIN_M).ceil() as usize).max(1);
+        let width = headings.width;
+        let table = Table {
+            origin,
+            range_m,
+            bins,
+            headings,
+        };
+        let mut highest = vec![f32::NEG_INFINITY; bins * width];
+        table.bin_wedge(view, &mut highest);
+        let mut coarse = vec![f32::NEG_INFINITY; bins.div_ceil(GROUP) * width];
+        let mut clears = vec![f32::NEG_INFINITY; bins * width];
+        derive(
+            &mut columns(&mut highest, width, 1)[0],
+            (&[], width, 0),
+            &mut columns(&mut coarse, width, 1)[0],
+            &mut columns(&mut clears, width, 1)[0],
+            origin.z,
+        );
+        Self {
+            view,
+            origin,
+            range_m,
+            bins,
+            headings,
+            highest,
+            coarse,
+            clears,
+        }
+    }
+
+    fn binned_range(range_m: f64) -> f64 {
+        if range_m.is_finite() {
+            range_m.max(0.0)
+        } else {
+            0.0
+        }
+    }
 }
 
-/// The rows of a `[bin · HEADINGS + heading]` table cut into `parts`
-/// ranges of headings: part k's piece of every row.
-fn columns(table: &mut [f32], parts: usize) -> Vec<Vec<&mut [f32]>> {
-    let width = HEADINGS.div_ceil(parts);
+/// The rows of a `[bin · width + column]` table cut into `parts` ranges of
+/// columns: part k's piece of every row.
+fn columns(table: &mut [f32], width: usize, parts: usize) -> Vec<Vec<&mut [f32]>> {
+    let share = width.div_ceil(parts);
     let mut out: Vec<Vec<&mut [f32]>> = (0..parts).map(|_| Vec::new()).collect();
-    for row in table.chunks_exact_mut(HEADINGS) {
-        for (k, piece) in row.chunks_mut(width).enumerate() {
+    for row in table.chunks_exact_mut(width) {
+        for (k, piece) in row.chunks_mut(share).enumerate() {
             out[k].push(piece);
         }
     }
     out
 }
 
-/// For one range of headings (starting at `first`; rows of `highest`,
-/// `coarse` and `clears` cut to it): merges the other threads' tables into
-/// `highest`, then fills the coarse bins and the clearing rises.
+/// For one range of columns (rows of `highest`, `coarse` and `clears` cut
+/// to it): merges the other threads' tables (`others`: their tables, rows
+/// `width` wide, the range's first column) into `highest`, then fills the
+/// coarse bins and the clearing rises.
 fn derive(
     highest: &mut [&mut [f32]],
-    others: &[Vec<f32>],
-    first: usize,
+    others: (&[Vec<f32>], usize, usize),
     coarse: &mut [&mut [f32]],
     clears: &mut [&mut [f32]],
     z: f64,
 ) {
+    let (others, width, first) = others;
     for (bin, row) in highest.iter_mut().enumerate() {
         for other in others {
-            let theirs = &other[bin * HEADINGS + first..][..row.len()];
+            let theirs = &other[bin * width + first..][..row.len()];
             for (h, o) in row.iter_mut().zip(theirs) {
                 *h = h.max(*o);
             }
@@ -217,91 +373,143 @@ fn derive(
     }
 }
 
-/// Raises the bins of `highest` that the blocks of one tile (lower-left
-/// corner `corner`, highest cells `block_max`) overlap, as seen from `origin`.
-fn bin_tile(
-    highest: &mut [f32],
-    bins: usize,
-    origin: &Point3<f64>,
+/// What a table is binned for: the sensor position, the range, the
+/// distance bins and the headings its columns hold.
+#[derive(Debug, Clone, Copy)]
+struct Table {
+    origin: Point3<f64>,
     range_m: f64,
-    corner: (f64, f64),
-    block_max: &[f32],
-) {
-    let (ox, oy) = (origin.x, origin.y);
-    let (x0, y0) = corner;
-    let side = BLOCKS as f64 * BLOCK_M;
-    let nearest = |lo: f64, o: f64| o.clamp(lo, lo + side) - o;
-    let (nx, ny) = (nearest(x0, ox), nearest(y0, oy));
-    if (nx * nx + ny * ny).sqrt() - DISTANCE_MARGIN > range_m {
-        return;
-    }
-    // The pseudo-angle of every block corner, computed once for the four
-    // blocks that share it.
-    const SIDE: usize = BLOCKS + 1;
-    let mut corners = [0.0f64; SIDE * SIDE];
-    for j in 0..SIDE {
-        let y = y0 + j as f64 * BLOCK_M - oy;
-        for i in 0..SIDE {
-            corners[j * SIDE + i] = pseudo_angle(x0 + i as f64 * BLOCK_M - ox, y);
+    bins: usize,
+    headings: Headings,
+}
+
+impl Table {
+    /// Raises the bins of `highest` that the blocks of one tile (lower-left
+    /// corner `corner`, highest cells `block_max`) overlap.
+    fn bin_tile(&self, highest: &mut [f32], corner: (f64, f64), block_max: &[f32]) {
+        let (ox, oy) = (self.origin.x, self.origin.y);
+        let (x0, y0) = corner;
+        let side = BLOCKS as f64 * BLOCK_M;
+        let nearest = |lo: f64, o: f64| o.clamp(lo, lo + side) - o;
+        let (nx, ny) = (nearest(x0, ox), nearest(y0, oy));
+        if (nx * nx + ny * ny).sqrt() - DISTANCE_MARGIN > self.range_m {
+            return;
+        }
+        // The pseudo-angle of every block corner, computed once for the four
+        // blocks that share it.
+        const SIDE: usize = BLOCKS + 1;
+        let mut corners = [0.0f64; SIDE * SIDE];
+        for j in 0..SIDE {
+            let y = y0 + j as f64 * BLOCK_M - oy;
+            for i in 0..SIDE {
+                corners[j * SIDE + i] = pseudo_angle(x0 + i as f64 * BLOCK_M - ox, y);
+            }
+        }
+        for j in 0..BLOCKS {
+            for i in 0..BLOCKS {
+                let at = |i: usize, j: usize| corners[j * SIDE + i];
+                // The edges as the corners' pseudo-angles were computed:
+                // a corner on the sensor is then always seen to hold it.
+                let edge = |lo: f64, k: usize| lo + k as f64 * BLOCK_M;
+                self.raise_block(
+                    highest,
+                    [edge(x0, i), edge(y0, j), edge(x0, i + 1), edge(y0, j + 1)],
+                    block_max[j * BLOCKS + i],
+                    [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)],
+                );
+            }
         }
     }
-    for j in 0..BLOCKS {
-        let (by0, by1) = (y0 + j as f64 * BLOCK_M, y0 + (j + 1) as f64 * BLOCK_M);
-        for i in 0..BLOCKS {
-            let top = block_max[j * BLOCKS + i];
-            let (bx0, bx1) = (x0 + i as f64 * BLOCK_M, x0 + (i + 1) as f64 * BLOCK_M);
-            // Distances from the sensor to the block's nearest and farthest point.
-            let near_x = ox.clamp(bx0, bx1) - ox;
-            let near_y = oy.clamp(by0, by1) - oy;
-            let near = (near_x * near_x + near_y * near_y).sqrt() - DISTANCE_MARGIN;
-            if near > range_m || top == f32::NEG_INFINITY {
-                continue;
+
+    /// Raises the bins of `highest` that the blocks of `view` in the wedge
+    /// of `self.headings` overlap. Band by band of `GROUP` distance bins
+    /// (`r_a` to `r_b`), the wedge's piece (the headings `e0` to `e1`,
+    /// `δ` apart) lies in the hull of `r_a·e0`, `r_a·e1`, `r'·e0` and
+    /// `r'·e1` with `r' = r_b / cos(δ/2)` (the chord between the last two
+    /// touches the arc of radius `r_b`): the blocks over its bounding box
+    /// are binned (a block in two bands twice, to the same effect).
+    fn bin_wedge(&self, view: &TileView, highest: &mut [f32]) {
+        let (ox, oy) = (self.origin.x, self.origin.y);
+        let per_bin = 4.0 / HEADINGS as f64;
+        let (first, width) = (self.headings.first, self.headings.width);
+        let e0 = direction_at(first as f64 * per_bin - ANGLE_MARGIN);
+        let e1 = direction_at((first + width) as f64 * per_bin + ANGLE_MARGIN);
+        let cos_half = ((1.0 + e0.0 * e1.0 + e0.1 * e1.1) / 2.0).max(0.0).sqrt();
+        let block = |v: f64| floor(v / BLOCK_M);
+        for band in (0..self.bins).step_by(GROUP) {
+            let r_a = (band as f64 * BIN_M - DISTANCE_MARGIN).max(0.0);
+            let r_b = ((band + GROUP).min(self.bins) as f64 * BIN_M + DISTANCE_MARGIN) / cos_half;
+            let points = [e0, e1].map(|(x, y)| [(r_a * x, r_a * y), (r_b * x, r_b * y)]);
+            let (mut lo, mut hi) = (
+                (f64::INFINITY, f64::INFINITY),
+                (f64::NEG_INFINITY, f64::NEG_INFINITY),
+            );
+            for &(x, y) in points.iter().flatten() {
+                lo = (lo.0.min(x), lo.1.min(y));
+                hi = (hi.0.max(x), hi.1.max(y));
             }
-            let far_x = (bx0 - ox).abs().max((bx1 - ox).abs());
-            let far_y = (by0 - oy).abs().max((by1 - oy).abs());
-            let far = (far_x * far_x + far_y * far_y).sqrt() + DISTANCE_MARGIN;
-            let first = ((near.max(0.0) / BIN_M) as usize).min(bins - 1);
-            let last = ((far / BIN_M) as usize).min(bins - 1);
-            // Headings: all of them around a block holding the sensor; else
-            // the span of its corners, across +x when it straddles it.
-            let holds = bx0 <= ox && ox <= bx1 && by0 <= oy && oy <= by1;
-            let (lo, hi) = if holds {
-                (0, HEADINGS as i64 - 1)
-            } else {
-                let wraps = by0 <= oy && oy <= by1 && bx0 > ox;
-                let mut lo = f64::INFINITY;
-                let mut hi = f64::NEG_INFINITY;
-                for k in [
-                    j * SIDE + i,
-                    j * SIDE + i + 1,
-                    (j + 1) * SIDE + i,
-                    (j + 1) * SIDE + i + 1,
-                ] {
-                    let mut p = corners[k];
-                    if wraps && p > 2.0 {
-                        p -= 4.0;
-                    }
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
-                (
-                    heading_bin(lo - ANGLE_MARGIN),
-                    heading_bin(hi + ANGLE_MARGIN),
-                )
-            };
-            for bin in first..=last {
-                let row = &mut highest[bin * HEADINGS..(bin + 1) * HEADINGS];
-                if lo >= 0 && hi < HEADINGS as i64 {
-                    for h in &mut row[lo as usize..=hi as usize] {
-                        *h = h.max(top);
-                    }
-                } else {
-                    for k in lo..=hi.min(lo + HEADINGS as i64 - 1) {
-                        let h = &mut row[k.rem_euclid(HEADINGS as i64) as usize];
-                        *h = h.max(top);
-                    }
+            let margin = DISTANCE_MARGIN;
+            for by in block(oy + lo.1 - margin)..=block(oy + hi.1 + margin) {
+                for bx in block(ox + lo.0 - margin)..=block(ox + hi.0 + margin) {
+                    let Some(top) = view.block_max(bx, by) else {
+                        continue;
+                    };
+                    let (x0, y0) = (bx as f64 * BLOCK_M, by as f64 * BLOCK_M);
+                    let (x1, y1) = ((bx + 1) as f64 * BLOCK_M, (by + 1) as f64 * BLOCK_M);
+                    let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
+                        .map(|(x, y)| pseudo_angle(x - ox, y - oy));
+                    self.raise_block(highest, [x0, y0, x1, y1], top as f32, corners);
                 }
             }
+        }
+    }
+
+    /// Raises to `top` the bins of `highest` that the block `[x0, y0, x1,
+    /// y1]` overlaps: its span of distances from the sensor and of headings
+    /// (`corners`: the pseudo-angles of its four corners, computed from
+    /// these very edges: one on the sensor has no heading).
+    #[inline(always)]
+    fn raise_block(&self, highest: &mut [f32], edges: [f64; 4], top: f32, corners: [f64; 4]) {
+        let (ox, oy) = (self.origin.x, self.origin.y);
+        let [bx0, by0, bx1, by1] = edges;
+        // Distances from the sensor to the block's nearest and farthest point.
+        let near_x = ox.clamp(bx0, bx1) - ox;
+        let near_y = oy.clamp(by0, by1) - oy;
+        let near = (near_x * near_x + near_y * near_y).sqrt() - DISTANCE_MARGIN;
+        if near > self.range_m || top == f32::NEG_INFINITY {
+            return;
+        }
+        let far_x = (bx0 - ox).abs().max((bx1 - ox).abs());
+        let far_y = (by0 - oy).abs().max((by1 - oy).abs());
+        let far = (far_x * far_x + far_y * far_y).sqrt() + DISTANCE_MARGIN;
+        let bins = self.bins;
+        let first = ((near.max(0.0) / BIN_M) as usize).min(bins - 1);
+        let last = ((far / BIN_M) as usize).min(bins - 1);
+        // Headings: all of them around a block holding the sensor; else
+        // the span of its corners, across +x when it straddles it.
+        let holds = bx0 <= ox && ox <= bx1 && by0 <= oy && oy <= by1;
+        let (lo, hi) = if holds {
+            (0, HEADINGS as i64 - 1)
+        } else {
+            let wraps = by0 <= oy && oy <= by1 && bx0 > ox;
+            let mut lo = f64::INFINITY;
+            let mut hi = f64::NEG_INFINITY;
+            for mut p in corners {
+                if wraps && p > 2.0 {
+                    p -= 4.0;
+                }
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+            (
+                heading_bin(lo - ANGLE_MARGIN),
+                heading_bin(hi + ANGLE_MARGIN),
+            )
+        };
+        let width = self.headings.width;
+        for bin in first..=last {
+            self.headings
+                .raise(&mut highest[bin * width..(bin + 1) * width], lo, hi, top);
         }
     }
 }
@@ -317,7 +525,7 @@ impl PolarView<'_> {
     /// ray dips to. `hint` is where a neighbouring ray's search started (0:
     /// none); it is set to where this one's started.
     fn cast_from(&self, d: &Vector3<f64>, max_range: f64, hint: &mut usize) -> Option<f64> {
-        match Aimed::new(d) {
+        match Aimed::new(d, self.headings) {
             Some(ray) => self.cast_aimed(&ray, max_range, hint),
             None => self.view.cast(&self.origin, d, max_range),
         }
@@ -327,7 +535,8 @@ impl PolarView<'_> {
     fn cast_aimed(&self, ray: &Aimed, max_range: f64, hint: &mut usize) -> Option<f64> {
         let origin = &self.origin;
         let d = &ray.d;
-        let heading = ray.heading;
+        let column = ray.column;
+        let width = self.headings.width;
         let rise = ray.rise;
         // The ray's lowest height over a bin (a group of bins) starting at
         // `near`: at its near edge when it rises, at its far edge when it
@@ -343,7 +552,7 @@ impl PolarView<'_> {
         let last = ((max_range / ray.per_across * (1.0 / BIN_M)) as usize + 1).min(self.bins - 1);
         // A ray rising faster than every bin of its heading needs clears
         // them all (most rays above the horizon).
-        if rise - RISE_MARGIN > f64::from(self.clears[(self.bins - 1) * HEADINGS + heading]) {
+        if rise - RISE_MARGIN > f64::from(self.clears[(self.bins - 1) * width + column]) {
             return None;
         }
         // Start where the neighbour's search did when every bin before is
@@ -351,7 +560,7 @@ impl PolarView<'_> {
         let mut bin = match *hint {
             h if h > 0
                 && h <= last
-                && rise - RISE_MARGIN > f64::from(self.clears[(h - 1) * HEADINGS + heading]) =>
+                && rise - RISE_MARGIN > f64::from(self.clears[(h - 1) * width + column]) =>
             {
                 h
             }
@@ -363,12 +572,12 @@ impl PolarView<'_> {
             let near = f64::from(bin as u32) * BIN_M;
             let above = base + rise * near;
             if bin % GROUP == 0
-                && above + group_drop > f64::from(self.coarse[bin / GROUP * HEADINGS + heading])
+                && above + group_drop > f64::from(self.coarse[bin / GROUP * width + column])
             {
                 bin += GROUP;
                 continue;
             }
-            let top = f64::from(self.highest[bin * HEADINGS + heading]);
+            let top = f64::from(self.highest[bin * width + column]);
             bin += 1;
             if above + bin_drop > top {
                 continue;
@@ -408,21 +617,28 @@ struct Aimed {
     /// Along the ray per horizontal metre.
     per_across: f64,
     rise: f64,
-    heading: usize,
+    /// The table's column of its heading.
+    column: usize,
 }
 
 impl Aimed {
-    /// None for a ray (nearly) straight up or down: it has no heading.
-    fn new(d: &Vector3<f64>) -> Option<Self> {
+    /// None for a ray (nearly) straight up or down (it has no heading) or
+    /// one along a heading outside `headings`: neither is cast through the
+    /// table.
+    fn new(d: &Vector3<f64>, headings: Headings) -> Option<Self> {
         let across = (d.x * d.x + d.y * d.y).sqrt();
-        (across >= 1e-9).then(|| {
+        let heading = heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize;
+        // Both tests at once, without a branch between: a row is aimed
+        // in one pass.
+        let column = headings.offset(heading);
+        ((across >= 1e-9) & (column < headings.width)).then(|| {
             let per_across = 1.0 / across;
             Self {
                 d: *d,
                 inverse: Vector3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z),
                 per_across,
                 rise: d.z * per_across,
-                heading: heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize,
+                column,
             }
         })
     }
@@ -451,7 +667,7 @@ impl RayCast for PolarView<'_> {
         let mut hint = 0;
         for (directions, out) in directions.chunks(AIM_BATCH).zip(out.chunks_mut(AIM_BATCH)) {
             for (ray, d) in aimed.iter_mut().zip(directions) {
-                *ray = Aimed::new(d);
+                *ray = Aimed::new(d, self.headings);
             }
             for ((ray, d), value) in aimed.iter().zip(directions).zip(out) {
                 let hit = match ray {
@@ -472,6 +688,21 @@ mod tests {
     use crate::tiles::TileCache;
     use crate::world::World;
 
+    /// The table's answer is the walk's (within a rounding of the last
+    /// cell's dip).
+    fn assert_same_hit(
+        binned: Option<f64>,
+        full: Option<f64>,
+        ray: (&Point3<f64>, &Vector3<f64>, f64),
+    ) {
+        let (origin, d, reach) = ray;
+        match (binned, full) {
+            (Some(a), Some(b)) => assert!((a - b).abs() < 1e-6, "{origin} {d}: {a} vs {b}"),
+            (None, None) => {}
+            _ => panic!("{origin} {d} to {reach} m: {binned:?} vs {full:?}"),
+        }
+    }
+
     #[test]
     fn the_pseudo_angle_turns_with_the_heading() {
         let turns: Vec<f64> = (0..64)
@@ -482,6 +713,68 @@ mod tests {
             .collect();
         assert!(turns.windows(2).all(|w| w[0] < w[1]), "{turns:?}");
         assert!(turns[0] == 0.0 && turns[63] < 4.0);
+    }
+
+    #[test]
+    fn the_direction_at_a_pseudo_angle_has_that_pseudo_angle() {
+        for k in 0..400 {
+            let p = f64::from(k) / 100.0;
+            let (x, y) = direction_at(p);
+            assert!((x.hypot(y) - 1.0).abs() < 1e-12);
+            assert!((pseudo_angle(x, y) - p).abs() < 1e-12, "{p}");
+        }
+    }
+
+    #[test]
+    fn a_wedge_holds_the_headings_it_was_found_from_and_no_more() {
+        let at = |degrees: f64| {
+            let a = degrees.to_radians();
+            Vector3::new(a.cos(), a.sin(), -0.1)
+        };
+        let holds = |h: Headings, d: Vector3<f64>| {
+            h.column(heading_bin(pseudo_angle(d.x, d.y)) as usize)
+                .is_some()
+        };
+        // Across +x, where the bins wrap round: the short way, not the
+        // rest of the turn.
+        let across = Headings::around([at(-1.5), at(1.4), at(0.2)]).unwrap();
+        // 2.9° near an axis, where the pseudo-angle turns fastest.
+        assert!(across.width < 40, "{across:?}");
+        for degrees in [-1.5, -0.7, 0.0, 1.4] {
+            assert!(holds(across, at(degrees)), "{degrees}°");
+        }
+        for degrees in [-3.0, 3.0, 180.0] {
+            assert!(!holds(across, at(degrees)), "{degrees}°");
+        }
+        // One heading: its bin and two either side.
+        let one = Headings::around([at(100.0)]).unwrap();
+        assert_eq!(one.width, 5);
+        // A quarter turn or more, or straight down: none.
+        assert!(Headings::around([at(10.0), at(110.0)]).is_none());
+        assert!(Headings::around([at(10.0), Vector3::new(0.0, 0.0, -1.0)]).is_none());
+        assert!(Headings::around([]).is_none());
+    }
+
+    #[test]
+    fn a_wedge_raises_only_the_columns_it_holds_round_the_wrap() {
+        let wedge = Headings {
+            first: HEADINGS - 3,
+            width: 6,
+        };
+        let mut row = [0.0f32; 6];
+        // Bins −5..=1 (wrapping): columns 0..=4 (bins 2045-2047, 0, 1).
+        wedge.raise(&mut row, -5, 1, 2.0);
+        assert_eq!(row, [2.0, 2.0, 2.0, 2.0, 2.0, 0.0]);
+        // Bins far from the wedge: nothing.
+        wedge.raise(&mut row, 100, 900, 5.0);
+        assert_eq!(row, [2.0, 2.0, 2.0, 2.0, 2.0, 0.0]);
+        // The whole turn: all.
+        wedge.raise(&mut row, 0, HEADINGS as i64 - 1, 3.0);
+        assert_eq!(row, [3.0; 6]);
+        let mut all = vec![0.0f32; HEADINGS];
+        Headings::ALL.raise(&mut all, HEADINGS as i64 - 2, HEADINGS as i64 + 1, 1.0);
+        let raised: Vec<usize> = (0..HEADINGS).filter(|&k| all[k] > 0.0).collect();
+        assert_eq!(raised, [0, 1, HEADINGS - 2, HEADINGS - 1]);
     }
 
     #[test]
@@ -523,13 +816,7 @@ mod tests {
                     let reach = 5.0 + 55.0 * rng.unit();
                     let binned = polar.cast(&origin, &d, reach);
                     let full = view.cast(&origin, &d, reach);
-                    match (binned, full) {
-                        (Some(a), Some(b)) => {
-                            assert!((a - b).abs() < 1e-6, "{origin} {d}: {a} vs {b}");
-                        }
-                        (None, None) => {}
-                        _ => panic!("{origin} {d} to {reach} m: {binned:?} vs {full:?}"),
-                    }
+                    assert_same_hit(binned, full, (&origin, &d, reach));
                     hits += usize::from(full.is_some());
                     rays += 1;
                 }
@@ -558,5 +845,49 @@ mod tests {
             polar.cast(&origin, &flat, 80.0),
             view.cast(&origin, &flat, 80.0)
         );
+    }
+
+    #[test]
+    fn rays_of_a_wedge_meet_what_the_full_walk_meets_and_others_are_cast_in_the_view() {
+        let world = Arc::new(World::embedded("paper_loop").unwrap().unwrap());
+        let mut cache = TileCache::new(Arc::clone(&world), 64, 2);
+        let mut rng = crate::rng::Rng::stream(12, 5);
+        let range = 60.0;
+        let (mut inside, mut outside, mut hits) = (0, 0, 0);
+        // From off the cell grid and from a block's corner; wedges across
+        // +x (where the bins wrap) and along the diagonals.
+        for &(x, y, dz) in &[(60.013, 35.029, 0.3), (12.8, 25.6, 1.0), (-20.0, 80.0, 3.5)] {
+            let view = cache.view(x, y, range + 1.0);
+            let origin = Point3::new(x, y, world.height(x, y) + dz);
+            for centre in [0.0f64, 45.0, 135.0, 200.0, 315.0] {
+                let aim = |degrees: f64, elevation: f64| {
+                    let (a, e) = (degrees.to_radians(), elevation.to_radians());
+                    Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin())
+                };
+                let headings =
+                    Headings::around([aim(centre - 3.0, -10.0), aim(centre + 3.0, -10.0)]).unwrap();
+                let wedge = PolarView::wedge(&view, origin, range, headings);
+                for _ in 0..1500 {
+                    // Mostly within the wedge, some beyond it either side.
+                    let d = aim(centre + rng.unit() * 10.0 - 5.0, rng.unit() * 55.0 - 45.0);
+                    let reach = 5.0 + 55.0 * rng.unit();
+                    let binned = wedge.cast(&origin, &d, reach);
+                    let full = view.cast(&origin, &d, reach);
+                    assert_same_hit(binned, full, (&origin, &d, reach));
+                    let column = headings.column(heading_bin(pseudo_angle(d.x, d.y)) as usize);
+                    *if column.is_some() {
+                        &mut inside
+                    } else {
+                        &mut outside
+                    } += 1;
+                    hits += usize::from(full.is_some());
+                }
+            }
+        }
+        assert!(
+            inside > outside && outside > 1000,
+            "{inside} in, {outside} out"
+        );
+        assert!(hits > 1000 && hits < inside + outside - 1000, "{hits} hits");
     }
 }

@@ -252,7 +252,7 @@ impl TileView {
     }
 
     /// Max height of the block at block coordinates (bx, by), if loaded.
-    fn block_max(&self, bx: i64, by: i64) -> Option<f64> {
+    pub(crate) fn block_max(&self, bx: i64, by: i64) -> Option<f64> {
         let per_tile = BLOCKS as i64;
         let tile = self.tile(bx.div_euclid(per_tile), by.div_euclid(per_tile))?;
         let (i, j) = (
