@@ -436,6 +436,7 @@ impl Table {
         let e1 = direction_at((first + width) as f64 * per_bin + ANGLE_MARGIN);
         let cos_half = ((1.0 + e0.0 * e1.0 + e0.1 * e1.1) / 2.0).max(0.0).sqrt();
         let block = |v: f64| floor(v / BLOCK_M);
+        let mut corners = Vec::new();
         for band in (0..self.bins).step_by(GROUP) {
             let r_a = (band as f64 * BIN_M - DISTANCE_MARGIN).max(0.0);
             let r_b = ((band + GROUP).min(self.bins) as f64 * BIN_M + DISTANCE_MARGIN) / cos_half;
@@ -449,16 +450,31 @@ impl Table {
                 hi = (hi.0.max(x), hi.1.max(y));
             }
             let margin = DISTANCE_MARGIN;
-            for by in block(oy + lo.1 - margin)..=block(oy + hi.1 + margin) {
-                for bx in block(ox + lo.0 - margin)..=block(ox + hi.0 + margin) {
+            let (bx0, bx1) = (block(ox + lo.0 - margin), block(ox + hi.0 + margin));
+            let (by0, by1) = (block(oy + lo.1 - margin), block(oy + hi.1 + margin));
+            // The pseudo-angle of every block corner, computed once for the
+            // four blocks that share it.
+            let side = (bx1 - bx0 + 2) as usize;
+            corners.clear();
+            for cy in by0..=by1 + 1 {
+                let y = cy as f64 * BLOCK_M - oy;
+                corners.extend((bx0..=bx1 + 1).map(|cx| pseudo_angle(cx as f64 * BLOCK_M - ox, y)));
+            }
+            for (j, by) in (by0..=by1).enumerate() {
+                for (i, bx) in (bx0..=bx1).enumerate() {
                     let Some(top) = view.block_max(bx, by) else {
                         continue;
                     };
+                    let at = |i: usize, j: usize| corners[j * side + i];
+                    // The edges as the corners' pseudo-angles were computed.
                     let (x0, y0) = (bx as f64 * BLOCK_M, by as f64 * BLOCK_M);
                     let (x1, y1) = ((bx + 1) as f64 * BLOCK_M, (by + 1) as f64 * BLOCK_M);
-                    let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
-                        .map(|(x, y)| pseudo_angle(x - ox, y - oy));
-                    self.raise_block(highest, [x0, y0, x1, y1], top as f32, corners);
+                    self.raise_block(
+                        highest,
+                        [x0, y0, x1, y1],
+                        top as f32,
+                        [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)],
+                    );
                 }
             }
         }
