@@ -87,8 +87,9 @@ impl Headings {
 
     /// The narrowest wedge holding the headings of `directions`, widened by
     /// two bins each side against rounding; `None` when it spans more than
-    /// a quarter turn (binning it would cost about what it saves) or a
-    /// direction is (nearly) vertical.
+    /// a quarter turn (a slice of the ERIM's rows spans 128°: it is walked
+    /// in the view, as before; wedges wider than that were not measured)
+    /// or a direction is (nearly) vertical.
     pub fn around(directions: impl IntoIterator<Item = Vector3<f64>>) -> Option<Self> {
         const WIDEN: usize = 2;
         let mut bins = Vec::new();
