@@ -188,8 +188,9 @@ impl<'a> PolarView<'a> {
         // (highest wins) and derives the coarse bins and the clearing rises.
         let bin_part = |part: usize| {
             let mut highest = vec![f32::NEG_INFINITY; bins * HEADINGS];
-            view.for_each_tile(part, parts, |x0, y0, block_max| {
-                table.bin_tile(&mut highest, (x0, y0), block_max);
+            let mut corners = Vec::new();
+            view.for_each_tile(part, parts, |first, block_max| {
+                table.bin_tile(&mut highest, &mut corners, first, block_max);
             });
             highest
         };
@@ -385,41 +386,28 @@ struct Table {
 }
 
 impl Table {
-    /// Raises the bins of `highest` that the blocks of one tile (lower-left
-    /// corner `corner`, highest cells `block_max`) overlap.
-    fn bin_tile(&self, highest: &mut [f32], corner: (f64, f64), block_max: &[f32]) {
+    /// Raises the bins of `highest` that the blocks of one tile (its
+    /// lower-left block `first`, highest cells `block_max`) overlap.
+    fn bin_tile(
+        &self,
+        highest: &mut [f32],
+        corners: &mut Vec<f64>,
+        first: (i64, i64),
+        block_max: &[f32],
+    ) {
         let (ox, oy) = (self.origin.x, self.origin.y);
-        let (x0, y0) = corner;
         let side = BLOCKS as f64 * BLOCK_M;
-        let nearest = |lo: f64, o: f64| o.clamp(lo, lo + side) - o;
-        let (nx, ny) = (nearest(x0, ox), nearest(y0, oy));
+        let nearest = |lo: i64, o: f64| {
+            let lo = lo as f64 * BLOCK_M;
+            o.clamp(lo, lo + side) - o
+        };
+        let (nx, ny) = (nearest(first.0, ox), nearest(first.1, oy));
         if (nx * nx + ny * ny).sqrt() - DISTANCE_MARGIN > self.range_m {
             return;
         }
-        // The pseudo-angle of every block corner, computed once for the four
-        // blocks that share it.
-        const SIDE: usize = BLOCKS + 1;
-        let mut corners = [0.0f64; SIDE * SIDE];
-        for j in 0..SIDE {
-            let y = y0 + j as f64 * BLOCK_M - oy;
-            for i in 0..SIDE {
-                corners[j * SIDE + i] = pseudo_angle(x0 + i as f64 * BLOCK_M - ox, y);
-            }
-        }
-        for j in 0..BLOCKS {
-            for i in 0..BLOCKS {
-                let at = |i: usize, j: usize| corners[j * SIDE + i];
-                // The edges as the corners' pseudo-angles were computed:
-                // a corner on the sensor is then always seen to hold it.
-                let edge = |lo: f64, k: usize| lo + k as f64 * BLOCK_M;
-                self.raise_block(
-                    highest,
-                    [edge(x0, i), edge(y0, j), edge(x0, i + 1), edge(y0, j + 1)],
-                    block_max[j * BLOCKS + i],
-                    [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)],
-                );
-            }
-        }
+        self.bin_blocks(highest, corners, first, (BLOCKS, BLOCKS), |i, j| {
+            Some(block_max[j * BLOCKS + i])
+        });
     }
 
     /// Raises the bins of `highest` that the blocks of `view` in the wedge
@@ -453,30 +441,53 @@ impl Table {
             let margin = DISTANCE_MARGIN;
             let (bx0, bx1) = (block(ox + lo.0 - margin), block(ox + hi.0 + margin));
             let (by0, by1) = (block(oy + lo.1 - margin), block(oy + hi.1 + margin));
-            // The pseudo-angle of every block corner, computed once for the
-            // four blocks that share it.
-            let side = (bx1 - bx0 + 2) as usize;
-            corners.clear();
-            for cy in by0..=by1 + 1 {
-                let y = cy as f64 * BLOCK_M - oy;
-                corners.extend((bx0..=bx1 + 1).map(|cx| pseudo_angle(cx as f64 * BLOCK_M - ox, y)));
-            }
-            for (j, by) in (by0..=by1).enumerate() {
-                for (i, bx) in (bx0..=bx1).enumerate() {
-                    let Some(top) = view.block_max(bx, by) else {
-                        continue;
-                    };
-                    let at = |i: usize, j: usize| corners[j * side + i];
-                    // The edges as the corners' pseudo-angles were computed.
-                    let (x0, y0) = (bx as f64 * BLOCK_M, by as f64 * BLOCK_M);
-                    let (x1, y1) = ((bx + 1) as f64 * BLOCK_M, (by + 1) as f64 * BLOCK_M);
-                    self.raise_block(
-                        highest,
-                        [x0, y0, x1, y1],
-                        top as f32,
-                        [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)],
-                    );
-                }
+            let count = ((bx1 - bx0 + 1) as usize, (by1 - by0 + 1) as usize);
+            self.bin_blocks(highest, &mut corners, (bx0, by0), count, |i, j| {
+                view.block_max(bx0 + i as i64, by0 + j as i64)
+                    .map(|top| top as f32)
+            });
+        }
+    }
+
+    /// Raises the bins of `highest` that blocks `first.0 .. first.0 +
+    /// count.0` by `first.1 .. first.1 + count.1` (block coordinates)
+    /// overlap, `top(i, j)` the highest cell of the block `(i, j)` from the
+    /// first (none: not loaded). A block's edges are its coordinates times
+    /// `BLOCK_M`, and each corner's pseudo-angle is computed once, from
+    /// those very edges, for the four blocks that share it: a corner on
+    /// the sensor (which has no heading) is then always seen to hold it.
+    #[inline(always)]
+    fn bin_blocks(
+        &self,
+        highest: &mut [f32],
+        corners: &mut Vec<f64>,
+        first: (i64, i64),
+        count: (usize, usize),
+        top: impl Fn(usize, usize) -> Option<f32>,
+    ) {
+        let (ox, oy) = (self.origin.x, self.origin.y);
+        let ((bx0, by0), (nx, ny)) = (first, count);
+        let edge = |k: i64| k as f64 * BLOCK_M;
+        let side = nx + 1;
+        corners.clear();
+        for cy in by0..=by0 + ny as i64 {
+            let y = edge(cy) - oy;
+            corners.extend((bx0..=bx0 + nx as i64).map(|cx| pseudo_angle(edge(cx) - ox, y)));
+        }
+        let at = |i: usize, j: usize| corners[j * side + i];
+        for j in 0..ny {
+            let by = by0 + j as i64;
+            for i in 0..nx {
+                let Some(top) = top(i, j) else {
+                    continue;
+                };
+                let bx = bx0 + i as i64;
+                self.raise_block(
+                    highest,
+                    [edge(bx), edge(by), edge(bx + 1), edge(by + 1)],
+                    top,
+                    [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)],
+                );
             }
         }
     }

@@ -273,15 +273,16 @@ impl TileView {
         Some(f64::from(tile.heights[cell_index(i, j)]))
     }
 
-    /// Calls `visit(x0, y0, block_max)` for every `parts`-th loaded tile,
-    /// from the `part`-th: its lower-left corner and the height of the
-    /// highest cell of each of its blocks (`BLOCKS` rows of `BLOCKS`, each
+    /// Calls `visit((bx, by), block_max)` for every `parts`-th loaded tile,
+    /// from the `part`-th: its lower-left block (in block coordinates, as
+    /// [`TileView::block_max`] takes them) and the height of the highest
+    /// cell of each of its blocks (`BLOCKS` rows of `BLOCKS`, each
     /// `BLOCK_M` square).
     pub(crate) fn for_each_tile(
         &self,
         part: usize,
         parts: usize,
-        mut visit: impl FnMut(f64, f64, &[f32]),
+        mut visit: impl FnMut((i64, i64), &[f32]),
     ) {
         for (k, tile) in self
             .tiles
@@ -293,7 +294,8 @@ impl TileView {
             let Some(tile) = tile else { continue };
             let tx = self.tx0 + (k % self.width) as i64;
             let ty = self.ty0 + (k / self.width) as i64;
-            visit(tx as f64 * TILE_M, ty as f64 * TILE_M, &tile.block_max);
+            let per_tile = BLOCKS as i64;
+            visit((tx * per_tile, ty * per_tile), &tile.block_max);
         }
     }
 
