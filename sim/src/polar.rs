@@ -58,6 +58,12 @@ fn heading_bin(p: f64) -> i64 {
     floor(p * HEADINGS as f64 / 4.0)
 }
 
+/// The heading bin of a direction with horizontal part (x, y).
+#[inline]
+fn heading_of(x: f64, y: f64) -> usize {
+    heading_bin(pseudo_angle(x, y)).clamp(0, HEADINGS as i64 - 1) as usize
+}
+
 /// The unit direction at pseudo-angle `p` (the inverse of [`pseudo_angle`]).
 fn direction_at(p: f64) -> (f64, f64) {
     let p = p.rem_euclid(4.0);
@@ -97,7 +103,7 @@ impl Headings {
             if (d.x * d.x + d.y * d.y).sqrt() < 1e-9 {
                 return None;
             }
-            bins.push(heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize);
+            bins.push(heading_of(d.x, d.y));
         }
         bins.sort_unstable();
         bins.dedup();
@@ -655,7 +661,7 @@ impl Aimed {
     /// table.
     fn new(d: &Vector3<f64>, headings: Headings) -> Option<Self> {
         let across = (d.x * d.x + d.y * d.y).sqrt();
-        let heading = heading_bin(pseudo_angle(d.x, d.y)).clamp(0, HEADINGS as i64 - 1) as usize;
+        let heading = heading_of(d.x, d.y);
         // Both tests at once, without a branch between: a row is aimed
         // in one pass.
         let column = headings.offset(heading);
@@ -759,10 +765,7 @@ mod tests {
             let a = degrees.to_radians();
             Vector3::new(a.cos(), a.sin(), -0.1)
         };
-        let holds = |h: Headings, d: Vector3<f64>| {
-            h.column(heading_bin(pseudo_angle(d.x, d.y)) as usize)
-                .is_some()
-        };
+        let holds = |h: Headings, d: Vector3<f64>| h.column(heading_of(d.x, d.y)).is_some();
         // Across +x, where the bins wrap round: the short way, not the
         // rest of the turn.
         let across = Headings::around([at(-1.5), at(1.4), at(0.2)]).unwrap();
@@ -902,7 +905,7 @@ mod tests {
                     let binned = wedge.cast(&origin, &d, reach);
                     let full = view.cast(&origin, &d, reach);
                     assert_same_hit(binned, full, (&origin, &d, reach));
-                    let column = headings.column(heading_bin(pseudo_angle(d.x, d.y)) as usize);
+                    let column = headings.column(heading_of(d.x, d.y));
                     *if column.is_some() {
                         &mut inside
                     } else {
