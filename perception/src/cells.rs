@@ -812,7 +812,12 @@ impl Projection<'_> {
             };
             let returned = range > 0.0 && range < f32::INFINITY;
             let why = if returned { OUT_OF_RANGE } else { NO_RETURN };
-            let cell_index = (iy as u32) * stride as u32 + ix as u32;
+            // Wrapping: exact for a pixel in the grid (the only one whose
+            // index is used), and no overflow check to stop the loop
+            // vectorising in a checked build (the tests').
+            let cell_index = (iy as u32)
+                .wrapping_mul(stride as u32)
+                .wrapping_add(ix as u32);
             index[k] = if !in_range {
                 why
             } else if in_grid {

@@ -227,7 +227,9 @@ impl HeightSampler {
                         (0, 0)
                     };
                     *cell = if inside {
-                        cj * cols as u32 + ci
+                        // Exact (a cell of the grid); wrapping, so that a
+                        // checked build vectorises the loop too.
+                        cj.wrapping_mul(cols as u32).wrapping_add(ci)
                     } else {
                         u32::MAX
                     };
