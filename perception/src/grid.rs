@@ -139,6 +139,13 @@ pub(crate) struct Projector {
     row_points: RowPoints,
 }
 
+/// What [`Projector::project_row`] needs of an image beyond its rows: the
+/// sensor's position in the level frame, and the sensor's vertical there.
+pub(crate) struct RowStart {
+    translation: [f32; 3],
+    vertical: [f32; 3],
+}
+
 /// One row of an image projected into the level frame, by column.
 #[derive(Debug, Default)]
 pub(crate) struct RowPoints {
@@ -212,50 +219,75 @@ impl Projector {
     /// image one rotated 3-vector per column and the elevation's cosine and
     /// sine per row are computed: a point costs six multiplications, with
     /// no branch (it vectorises, for a caller whose own work on a row does
-    /// too).
+    /// too). A caller whose work on a row is to run with AVX2 loops over
+    /// the rows itself ([`Projector::start`], [`Projector::project_row`]):
+    /// a closure's body may be left out of line, without the features.
     pub(crate) fn for_each_row(
         &mut self,
         image: &RangeImage,
         ranges: &[f32],
         level_from_sensor: &Isometry,
-        (min_range, max_range): (f32, f32),
+        kept: (f32, f32),
         stats: &mut ImageStats,
         mut each_row: impl FnMut(usize, &RowPoints),
     ) {
-        let ([tx, ty, tz], vertical) = self.prepare(image, level_from_sensor);
+        let start = self.start(image, level_from_sensor);
         let cols = image.cols();
         let mut points = std::mem::take(&mut self.row_points);
-        points.resize(cols);
-        let (mut no_return, mut out_of_range) = (0u32, 0u32);
-        for (row, (&ce, &se)) in self.cos_el.iter().zip(&self.sin_el).enumerate() {
+        for row in 0..self.cos_el.len() {
             let line = &ranges[row * cols..(row + 1) * cols];
-            let (vx, vy, vz) = (se * vertical[0], se * vertical[1], se * vertical[2]);
-            let beams = self.cos_az.iter().zip(&self.sin_az).zip(&self.up);
-            let RowPoints { x, y, z, used } = &mut points;
-            for (((((&range, ((&ca, &sa), &up)), x), y), z), used) in line
-                .iter()
-                .zip(beams)
-                .zip(x.iter_mut())
-                .zip(y.iter_mut())
-                .zip(z.iter_mut())
-                .zip(used.iter_mut())
-            {
-                let (returned, in_range, point) = beam_point(
-                    range,
-                    (min_range, max_range),
-                    ce,
-                    (ca, sa, up),
-                    [vx, vy, vz],
-                    [tx, ty, tz],
-                );
-                no_return += u32::from(!returned);
-                out_of_range += u32::from(returned && !in_range);
-                [*x, *y, *z] = point;
-                *used = returned && in_range;
-            }
+            self.project_row(&start, row, line, kept, &mut points, stats);
             each_row(row, &points);
         }
         self.row_points = points;
+    }
+
+    /// Readies [`Projector::project_row`] for `image` seen from
+    /// `level_from_sensor`: the sensor's position and the rotated vertical.
+    pub(crate) fn start(&mut self, image: &RangeImage, level_from_sensor: &Isometry) -> RowStart {
+        let (translation, vertical) = self.prepare(image, level_from_sensor);
+        RowStart {
+            translation,
+            vertical,
+        }
+    }
+
+    /// Row `row` of the image [`Projector::start`] readied, its ranges
+    /// `line`, projected into `points` (see [`Projector::for_each_row`]),
+    /// counting the returns it skips in `stats`.
+    #[inline(always)]
+    pub(crate) fn project_row(
+        &self,
+        &RowStart {
+            translation: t,
+            vertical,
+        }: &RowStart,
+        row: usize,
+        line: &[f32],
+        kept: (f32, f32),
+        points: &mut RowPoints,
+        stats: &mut ImageStats,
+    ) {
+        let (ce, se) = (self.cos_el[row], self.sin_el[row]);
+        let v = [se * vertical[0], se * vertical[1], se * vertical[2]];
+        points.resize(line.len());
+        let (mut no_return, mut out_of_range) = (0u32, 0u32);
+        let beams = self.cos_az.iter().zip(&self.sin_az).zip(&self.up);
+        let RowPoints { x, y, z, used } = points;
+        for (((((&range, ((&ca, &sa), &up)), x), y), z), used) in line
+            .iter()
+            .zip(beams)
+            .zip(x.iter_mut())
+            .zip(y.iter_mut())
+            .zip(z.iter_mut())
+            .zip(used.iter_mut())
+        {
+            let (returned, in_range, point) = beam_point(range, kept, ce, (ca, sa, up), v, t);
+            no_return += u32::from(!returned);
+            out_of_range += u32::from(returned && !in_range);
+            [*x, *y, *z] = point;
+            *used = returned && in_range;
+        }
         stats.no_return += no_return;
         stats.out_of_range += out_of_range;
     }

@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::RegionConfig;
 use crate::evaluator::{ImageStats, ObstacleReport};
-use crate::grid::{Projector, level_frames};
+use crate::grid::{Projector, RowPoints, level_frames};
 use crate::image::RangeImage;
 use arcnav_vehicle::config::{ConfigError, positive};
 
@@ -119,6 +119,11 @@ pub struct HeightSampler {
     touched: Vec<u64>,
     /// A row's cells by column (u32::MAX: none).
     row_cells: Vec<u32>,
+    /// A row's points.
+    points: RowPoints,
+    /// Bins without AVX2 whatever the processor has: the tests compare.
+    #[cfg(test)]
+    portable_only: bool,
 }
 
 impl HeightSampler {
@@ -188,68 +193,20 @@ impl HeightSampler {
             self.touched.resize(words, 0);
         }
         // Points are binned relative to the grid's corner in f32.
-        let (ox, oy) = (
-            (t.x - i0 as f64 * cell) as f32,
-            (t.y - j0 as f64 * cell) as f32,
-        );
-        let (sin, cos, inverse) = (sin as f32, cos as f32, (1.0 / cell) as f32);
-        let (ahead, behind, half) = (r.ahead_m as f32, r.behind_m as f32, r.half_width_m as f32);
-        let tz = t.z as f32;
-        let ranges = &image.range;
-        let image_cols = image.cols();
-        let (bins, cells) = (&mut self.bins, &mut self.row_cells);
-        let touched = &mut self.touched[..words];
-        let mut stats = ImageStats::default();
-        self.projector.for_each_row(
-            image,
-            ranges,
-            &level_from_sensor,
-            (self.min_range, self.max_range),
-            &mut stats,
-            |row, points| {
-                // Each column's cell (u32::MAX: none) with no branch, so it
-                // vectorises; then the bins, return by return.
-                cells.resize(points.x.len(), u32::MAX);
-                let columns = points.x.iter().zip(&points.y).zip(&points.used);
-                for (((&x, &y), &used), cell) in columns.zip(cells.iter_mut()) {
-                    let inside = used && x <= ahead && x >= -behind && y.abs() <= half;
-                    let (gx, gy) = (
-                        (ox + cos * x - sin * y) * inverse,
-                        (oy + sin * x + cos * y) * inverse,
-                    );
-                    // In the grid: whole cells below its size (at most a
-                    // few thousand), so the conversions are exact.
-                    let inside =
-                        inside && gx >= 0.0 && gy >= 0.0 && gx < cols as f32 && gy < rows as f32;
-                    let (ci, cj) = if inside {
-                        (gx as u32, gy as u32)
-                    } else {
-                        (0, 0)
-                    };
-                    *cell = if inside {
-                        // Exact (a cell of the grid); wrapping, so that a
-                        // checked build vectorises the loop too.
-                        cj.wrapping_mul(cols as u32).wrapping_add(ci)
-                    } else {
-                        u32::MAX
-                    };
-                }
-                let line = &ranges[row * image_cols..(row + 1) * image_cols];
-                for ((&index, &z), &range) in cells.iter().zip(&points.z).zip(line) {
-                    if index == u32::MAX {
-                        continue;
-                    }
-                    let bin = &mut bins[index as usize];
-                    if bin.z == f32::NEG_INFINITY {
-                        touched[index as usize / 64] |= 1 << (index % 64);
-                    }
-                    let z = z + tz;
-                    if z > bin.z {
-                        *bin = Bin { z, range };
-                    }
-                }
-            },
-        );
+        let grid = HeightGrid {
+            corner: [
+                (t.x - i0 as f64 * cell) as f32,
+                (t.y - j0 as f64 * cell) as f32,
+            ],
+            sin_cos: [sin as f32, cos as f32],
+            inverse: (1.0 / cell) as f32,
+            region: [r.ahead_m as f32, r.behind_m as f32, r.half_width_m as f32],
+            tz: t.z as f32,
+            cols,
+            rows,
+        };
+        self.bin(image, &level_from_sensor, &grid, words);
+        let (bins, touched) = (&mut self.bins, &mut self.touched[..words]);
         out.reserve(touched.iter().map(|w| w.count_ones() as usize).sum());
         for (w, word) in touched.iter_mut().enumerate() {
             let mut bits = std::mem::take(word);
@@ -266,6 +223,130 @@ impl HeightSampler {
             }
         }
     }
+
+    /// Raises each bin of `grid` to the highest return of `image` in it
+    /// (with that return's range), marking the bins first raised in the
+    /// `words` words of `self.touched`. With AVX2 where the processor has
+    /// it (as [`crate::cells`] bins): the same arithmetic (no fused
+    /// multiply-add), so the same bins.
+    fn bin(
+        &mut self,
+        image: &RangeImage,
+        level_from_sensor: &Isometry,
+        grid: &HeightGrid,
+        words: usize,
+    ) {
+        #[cfg(test)]
+        let avx2_allowed = !self.portable_only;
+        #[cfg(not(test))]
+        let avx2_allowed = true;
+        #[cfg(target_arch = "x86_64")]
+        if avx2_allowed && std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            return unsafe { self.bin_avx2(image, level_from_sensor, grid, words) };
+        }
+        let _ = avx2_allowed;
+        self.bin_portable(image, level_from_sensor, grid, words);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn bin_avx2(
+        &mut self,
+        image: &RangeImage,
+        level_from_sensor: &Isometry,
+        grid: &HeightGrid,
+        words: usize,
+    ) {
+        self.bin_portable(image, level_from_sensor, grid, words);
+    }
+
+    #[inline(always)]
+    fn bin_portable(
+        &mut self,
+        image: &RangeImage,
+        level_from_sensor: &Isometry,
+        grid: &HeightGrid,
+        words: usize,
+    ) {
+        let &HeightGrid {
+            corner: [ox, oy],
+            sin_cos: [sin, cos],
+            inverse,
+            region: [ahead, behind, half],
+            tz,
+            cols,
+            rows,
+        } = grid;
+        let start = self.projector.start(image, level_from_sensor);
+        let kept = (self.min_range, self.max_range);
+        let image_cols = image.cols();
+        let (bins, cells, points) = (&mut self.bins, &mut self.row_cells, &mut self.points);
+        let touched = &mut self.touched[..words];
+        // The counts of returns skipped are perception's to give, not ours.
+        let mut stats = ImageStats::default();
+        for row in 0..image.beams.elevation.len() {
+            let line = &image.range[row * image_cols..(row + 1) * image_cols];
+            self.projector
+                .project_row(&start, row, line, kept, points, &mut stats);
+            // Each column's cell (u32::MAX: none) with no branch, so it
+            // vectorises; then the bins, return by return.
+            cells.resize(points.x.len(), u32::MAX);
+            let columns = points.x.iter().zip(&points.y).zip(&points.used);
+            for (((&x, &y), &used), cell) in columns.zip(cells.iter_mut()) {
+                let inside = used && x <= ahead && x >= -behind && y.abs() <= half;
+                let (gx, gy) = (
+                    (ox + cos * x - sin * y) * inverse,
+                    (oy + sin * x + cos * y) * inverse,
+                );
+                // In the grid: whole cells below its size (at most a
+                // few thousand), so the conversions are exact.
+                let inside =
+                    inside && gx >= 0.0 && gy >= 0.0 && gx < cols as f32 && gy < rows as f32;
+                let (ci, cj) = if inside {
+                    (gx as u32, gy as u32)
+                } else {
+                    (0, 0)
+                };
+                *cell = if inside {
+                    // Exact (a cell of the grid); wrapping, so that a
+                    // checked build vectorises the loop too.
+                    cj.wrapping_mul(cols as u32).wrapping_add(ci)
+                } else {
+                    u32::MAX
+                };
+            }
+            for ((&index, &z), &range) in cells.iter().zip(&points.z).zip(line) {
+                if index == u32::MAX {
+                    continue;
+                }
+                let bin = &mut bins[index as usize];
+                if bin.z == f32::NEG_INFINITY {
+                    touched[index as usize / 64] |= 1 << (index % 64);
+                }
+                let z = z + tz;
+                if z > bin.z {
+                    *bin = Bin { z, range };
+                }
+            }
+        }
+    }
+}
+
+/// Where [`HeightSampler::sample`] bins an image's returns: a grid of
+/// `cols` × `rows` world-aligned cells, its corner at `corner` from the
+/// level frame's origin (metres, world axes), the level frame turned by
+/// the heading whose sine and cosine are `sin_cos`, `inverse` cells a
+/// metre; returns count only within the region (`[ahead, behind,
+/// half_width]` metres of the level frame), at their height plus `tz`.
+struct HeightGrid {
+    corner: [f32; 2],
+    sin_cos: [f32; 2],
+    inverse: f32,
+    region: [f32; 3],
+    tz: f32,
+    cols: usize,
+    rows: usize,
 }
 
 #[cfg(test)]
@@ -299,5 +380,32 @@ mod tests {
         let mut again = ObstacleReport::default();
         sampler.sample(&image, &pose, &mut again);
         assert_eq!(again.heights, out);
+    }
+
+    /// The AVX2 binning and the portable one give the same samples, bit
+    /// for bit, on rough ground seen from a turned, tilted vehicle (with
+    /// returns beyond the region, outside the ranges kept and missing).
+    #[test]
+    fn binning_with_avx2_gives_the_samples_binning_without_it_gives() {
+        let model = crate::SensorModel::erim();
+        let pose =
+            arcnav_vehicle::frames::isometry_from_xyz_rpy([3.7, -2.2, 0.3], 0.08, -0.05, 2.4);
+        let scene = HeightFunction::with_step(crate::scene::rough_ground, 0.1);
+        let image = model.render(0, &pose, &scene);
+        let sample = |portable_only: bool| {
+            let mut sampler = HeightSampler::new(
+                &HeightsConfig::default(),
+                &RegionConfig::default(),
+                4.0,
+                18.0,
+            );
+            sampler.portable_only = portable_only;
+            let mut report = ObstacleReport::default();
+            sampler.sample(&image, &pose, &mut report);
+            report.heights
+        };
+        let (portable, dispatched) = (sample(true), sample(false));
+        assert!(portable.len() > 500, "{} samples", portable.len());
+        assert_eq!(portable, dispatched);
     }
 }
