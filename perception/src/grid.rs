@@ -220,7 +220,7 @@ impl Projector {
     /// sine per row are computed: a point costs six multiplications, with
     /// no branch (it vectorises, for a caller whose own work on a row does
     /// too). A caller whose work on a row is to run with AVX2 loops over
-    /// the rows itself ([`Projector::start`], [`Projector::project_row`]):
+    /// the rows itself ([`Projector::prepare`], [`Projector::project_row`]):
     /// a closure's body may be left out of line, without the features.
     pub(crate) fn for_each_row(
         &mut self,
@@ -231,7 +231,7 @@ impl Projector {
         stats: &mut ImageStats,
         mut each_row: impl FnMut(usize, &RowPoints),
     ) {
-        let start = self.start(image, level_from_sensor);
+        let start = self.prepare(image, level_from_sensor);
         let cols = image.cols();
         let mut points = std::mem::take(&mut self.row_points);
         for row in 0..self.cos_el.len() {
@@ -242,17 +242,7 @@ impl Projector {
         self.row_points = points;
     }
 
-    /// Readies [`Projector::project_row`] for `image` seen from
-    /// `level_from_sensor`: the sensor's position and the rotated vertical.
-    pub(crate) fn start(&mut self, image: &RangeImage, level_from_sensor: &Isometry) -> RowStart {
-        let (translation, vertical) = self.prepare(image, level_from_sensor);
-        RowStart {
-            translation,
-            vertical,
-        }
-    }
-
-    /// Row `row` of the image [`Projector::start`] readied, its ranges
+    /// Row `row` of the image [`Projector::prepare`] readied, its ranges
     /// `line`, projected into `points` (see [`Projector::for_each_row`]),
     /// counting the returns it skips in `stats`.
     #[inline(always)]
@@ -344,7 +334,10 @@ impl Projector {
         stats: &mut ImageStats,
         mut each: impl FnMut(usize, f32, f32),
     ) {
-        let ([tx, ty, tz], vertical) = self.prepare(image, level_from_sensor);
+        let RowStart {
+            translation: [tx, ty, tz],
+            vertical,
+        } = self.prepare(image, level_from_sensor);
         let cols = image.cols();
         let m = grid.margin as f32;
         let (x_end, y_end) = (
@@ -404,14 +397,11 @@ impl Projector {
         stats.out_of_range += out_of_range;
     }
 
-    /// Per row the elevation's cosine and sine, per column the rotated
-    /// horizontal direction; the sensor's position and the rotated
-    /// vertical.
-    fn prepare(
-        &mut self,
-        image: &RangeImage,
-        level_from_sensor: &Isometry,
-    ) -> ([f32; 3], [f32; 3]) {
+    /// Readies [`Projector::project_row`] for `image` seen from
+    /// `level_from_sensor`: per row the elevation's cosine and sine, per
+    /// column the rotated horizontal direction; the sensor's position and
+    /// the rotated vertical.
+    pub(crate) fn prepare(&mut self, image: &RangeImage, level_from_sensor: &Isometry) -> RowStart {
         let beams = &image.beams;
         let m = level_from_sensor.rotation.to_rotation_matrix();
         let m = m.matrix();
@@ -436,7 +426,10 @@ impl Projector {
         }
         let vertical = [r(0, 2), r(1, 2), r(2, 2)];
         let t = level_from_sensor.translation.vector;
-        ([t.x as f32, t.y as f32, t.z as f32], vertical)
+        RowStart {
+            translation: [t.x as f32, t.y as f32, t.z as f32],
+            vertical,
+        }
     }
 }
 

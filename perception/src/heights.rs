@@ -278,7 +278,7 @@ impl HeightSampler {
             cols,
             rows,
         } = grid;
-        let start = self.projector.start(image, level_from_sensor);
+        let start = self.projector.prepare(image, level_from_sensor);
         let kept = (self.min_range, self.max_range);
         let image_cols = image.cols();
         let (bins, cells, points) = (&mut self.bins, &mut self.row_cells, &mut self.points);
