@@ -23,7 +23,7 @@ use arcnav::replay::{ReplayOptions, replay};
 use arcnav_behaviours::Registry;
 use arcnav_bus::auth::{AuthPolicy, GroupKey, Signer, TRAILER_LEN};
 use arcnav_bus::codec::Message as _;
-use arcnav_bus::lcmtypes::steering_command_t;
+use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::channels;
 use arcnav_bus::transport::{Lcm, wall_clock_utime};
@@ -314,11 +314,15 @@ fn the_watchdog_stops_on_the_executors_own_clock() {
     // The first 3 s of the log, the clock following the log's time.
     let mut log = LogReader::open(sim_log(SensorPreset::Erim)).unwrap();
     let mut t0 = None;
+    let mut last_pose = 0;
     while let Some(event) = log.next_event().unwrap() {
         let t = event.timestamp;
         let t0 = *t0.get_or_insert(t);
         if t - t0 > 3_000_000 {
             break;
+        }
+        if event.channel == channels::POSE {
+            last_pose = pose_t::decode(&event.data).unwrap().utime;
         }
         if channels::is_input(&event.channel) {
             clock.set(1_000_000_000_000 + (t - t0));
@@ -341,6 +345,14 @@ fn the_watchdog_stops_on_the_executors_own_clock() {
     assert!(
         wait_for(&|d| !d.command.is_stop()).is_some(),
         "the vehicle drove while poses and images were fresh"
+    );
+    // The last cycle decided (the command rate is 10 Hz): every pose is in,
+    // however far a loaded host had let the executor fall behind the feed.
+    let period = (1e6 / config.pipeline.command_rate_hz) as i64;
+    assert!(
+        wait_for(&|d| !matches!(d.why, Why::Watchdog(_)) && d.command.utime > last_pose - period)
+            .is_some(),
+        "no decision for the last cycle fed"
     );
     while taken.try_recv().is_ok() {}
     // No more poses: 0.4 s later on the clock, still fresh; 0.6 s, stop.

@@ -398,24 +398,22 @@ fn arbiter_worker(
     let mut ticker = Ticker::new(status_period_s, clock.now_us());
     let mut out = Vec::new();
     loop {
-        let message = inputs.recv_timeout(tick);
-        let now = clock.now_us();
-        match message {
-            Ok(ToArbiter::Pose(utime, wall)) => arbiter.on_pose(utime, wall),
-            Ok(ToArbiter::Perceived(utime, wall)) => arbiter.on_perceived(utime, wall),
-            Ok(ToArbiter::Votes { votes, images }) => {
-                let started = Instant::now();
-                for (i, v) in votes.iter().enumerate() {
-                    let images = if i == 0 { &images[..] } else { &[] };
-                    if let Err(e) = arbiter.on_votes(v, images, now, &mut out) {
-                        tracing::warn!(%e, "votes refused by the arbiter");
-                    }
-                }
-                if !out.is_empty() {
-                    busy.add(started.elapsed().as_secs_f64() * 1e3);
+        let now;
+        match inputs.recv_timeout(tick) {
+            Ok(message) => {
+                now = clock.now_us();
+                take(&mut arbiter, message, now, &mut out, &mut busy);
+                // What else is queued too, before the watchdog judges the
+                // inputs' age: behind a backlog, a newer pose may be waiting
+                // behind the one just taken. Only what is queued now, so
+                // that inputs coming faster than they are taken still let
+                // it tick.
+                let queued = inputs.len();
+                for message in inputs.try_iter().take(queued) {
+                    take(&mut arbiter, message, clock.now_us(), &mut out, &mut busy);
                 }
             }
-            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Timeout) => now = clock.now_us(),
             Err(RecvTimeoutError::Disconnected) => break,
         }
         arbiter.on_tick(clock.now_us(), &mut out);
@@ -431,6 +429,33 @@ fn arbiter_worker(
     arbiter_status(&arbiter, &mut status);
     status.busy_ms = busy.summary();
     (status, arbiter)
+}
+
+/// One input of the arbiter's thread, taken at `now` (the executor's clock).
+fn take(
+    arbiter: &mut ArbiterNode,
+    message: ToArbiter,
+    now: i64,
+    out: &mut Vec<Decided>,
+    busy: &mut Samples,
+) {
+    match message {
+        ToArbiter::Pose(utime, wall) => arbiter.on_pose(utime, wall),
+        ToArbiter::Perceived(utime, wall) => arbiter.on_perceived(utime, wall),
+        ToArbiter::Votes { votes, images } => {
+            let started = Instant::now();
+            let before = out.len();
+            for (i, v) in votes.iter().enumerate() {
+                let images = if i == 0 { &images[..] } else { &[] };
+                if let Err(e) = arbiter.on_votes(v, images, now, out) {
+                    tracing::warn!(%e, "votes refused by the arbiter");
+                }
+            }
+            if out.len() > before {
+                busy.add(started.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+    }
 }
 
 /// `arcnav run` on an in-process LCM (`memq://`) that the caller feeds
@@ -540,5 +565,52 @@ mod tests {
         voter.catch_up();
         assert!(voter.commands.is_empty());
         assert_eq!(voter.behaviours.last_command().map(|c| c.utime), Some(6));
+    }
+
+    /// Behind a backlog the arbiter takes every queued input before its
+    /// watchdog judges their age: a pose 0.7 s old on the executor's clock
+    /// (`live.pose_timeout_s` 0.5 s) queued in front of one 0.1 s old is no
+    /// reason to stop. It used to tick after each input, and stopped for
+    /// the stale pose while the fresh one waited behind it.
+    #[test]
+    fn a_fresh_pose_queued_behind_a_stale_one_stops_nothing() {
+        use arcnav_pipeline::{Hazard, Why};
+
+        use crate::live::clock::ManualClock;
+
+        let config = Config::default();
+        let start = 1_000_000_000_000;
+        let clock = ManualClock::starting_at(start);
+        let arbiter = ArbiterNode::new(
+            config.arbiter().unwrap(),
+            config.expected_behaviours(),
+            &config.live,
+            &config.pipeline,
+            start,
+        );
+        let (inputs, queue) = crossbeam_channel::unbounded();
+        inputs.send(ToArbiter::Pose(5_000_000, start)).unwrap();
+        inputs
+            .send(ToArbiter::Pose(5_600_000, start + 600_000))
+            .unwrap();
+        drop(inputs);
+        clock.set(start + 700_000);
+        let mut published = Vec::new();
+        arbiter_worker(arbiter, queue, &clock, Duration::from_millis(1), 0.0, |d| {
+            published.push(d.why.clone())
+        });
+        assert!(
+            !published
+                .iter()
+                .any(|why| matches!(why, Why::Watchdog(Hazard::PoseStale { .. }))),
+            "{published:?}"
+        );
+        // What it did judge: fresh poses, and no image yet.
+        assert!(
+            published
+                .iter()
+                .any(|why| matches!(why, Why::Watchdog(Hazard::NoImage))),
+            "{published:?}"
+        );
     }
 }
