@@ -31,6 +31,7 @@ use arcnav_perception::SensorPreset;
 use arcnav_pipeline::{Decided, Hazard, Why};
 use arcnav_sim::World;
 use arcnav_testkit::{LcmReference, NetNs, temp_dir};
+use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{CommandWatchdog, SteeringCommand, Utime};
 
 /// One live test at a time.
@@ -348,7 +349,7 @@ fn the_watchdog_stops_on_the_executors_own_clock() {
     );
     // The last cycle decided (the command rate is 10 Hz): every pose is in,
     // however far a loaded host had let the executor fall behind the feed.
-    let period = (1e6 / config.pipeline.command_rate_hz) as i64;
+    let period = seconds_to_micros(1.0 / config.pipeline.command_rate_hz);
     assert!(
         wait_for(&|d| !matches!(d.why, Why::Watchdog(_)) && d.command.utime > last_pose - period)
             .is_some(),
