@@ -752,15 +752,13 @@ fn a_pose_at_the_end_of_time_skips_cycles_instead_of_running_them() {
         }
     }
     drop(writer);
-    let started = std::time::Instant::now();
+    // Counted, not timed: the cycles run are those of the log without the
+    // absurd pose (below), the ~10^12 in the gap are counted as skipped.
+    // A wall-clock bound here (60 s, for two whole replays: 14 s on an
+    // idle host) only measured the host, and a hang never reached it.
     let (a, b) = (
         replay_with_defaults(sim_log()),
         replay_with_defaults(&jumped),
-    );
-    assert!(
-        started.elapsed().as_secs() < 60,
-        "took {:?}",
-        started.elapsed()
     );
     assert!(
         b.problems.skipped_cycles > 1_000_000,
