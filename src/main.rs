@@ -191,7 +191,7 @@ struct SweepArgs {
     /// Carry on an interrupted sweep in --out (the same worlds and settings).
     #[arg(long)]
     resume: bool,
-    /// Runs at a time (default: one per core).
+    /// Runs at a time, 1 to 1024 (default: one per core; never more than there are runs).
     #[arg(long, value_name = "N")]
     jobs: Option<usize>,
 }

@@ -60,6 +60,18 @@ fn config_check_names_the_bad_key_and_fails() {
 }
 
 #[test]
+fn more_rendering_threads_than_a_process_can_start_are_refused() {
+    // 100 000 aborted `arcnav sim` (no memory for their stacks).
+    let (_dir, file) = temp_file("threads.toml", "[sim]\nthreads = 100000\n");
+    let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("`sim.threads`: is 100000, must be 0 (all cores) to 1024"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn config_check_without_a_file_is_a_usage_error() {
     let (code, _, stderr) = arcnav(&["config", "--check"]);
     assert_eq!(code, 2);

@@ -224,7 +224,7 @@ fn bad_settings_and_worlds_are_refused_before_any_run_by_name() {
         no_keys.to_str().unwrap(),
         broken_world.to_str().unwrap(),
     );
-    let cases: [(&[&str], &str); 8] = [
+    let cases: [(&[&str], &str); 10] = [
         (
             &["--world", "short_course", "--set", "arbiter.cruise_speed=3"],
             "`arbiter.cruise_speed`: no such key",
@@ -261,6 +261,16 @@ fn bad_settings_and_worlds_are_refused_before_any_run_by_name() {
             "no embedded world named \"no_such_world\"",
         ),
         (&["--set", "arbiter.cruise_speed_mps=3"], "no worlds"),
+        (
+            &["--world", "short_course", "--jobs", "0"],
+            "--jobs 0: at least one run",
+        ),
+        // It had started 9 500 threads for one run after 50 s, and did
+        // not stop for SIGTERM.
+        (
+            &["--world", "short_course", "--jobs", "100000"],
+            "--jobs 100000: at most 1024 runs at a time",
+        ),
     ];
     for (args, expect) in cases {
         let out = temp_dir("sweep-bad");

@@ -3,6 +3,10 @@
 use arcnav_vehicle::config::{self, ConfigError};
 use serde::{Deserialize, Serialize};
 
+/// `threads` at most: every frame starts this many (100 000 aborted the
+/// process, out of memory for their stacks).
+const MAX_THREADS: usize = 1024;
+
 /// What a collision does to the mission.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -95,6 +99,15 @@ impl SimConfig {
         config::positive("stuck_after_s", self.stuck_after_s)?;
         config::positive("stuck_radius_m", self.stuck_radius_m)?;
         config::non_negative("render_margin_m", self.render_margin_m)?;
+        if self.threads > MAX_THREADS {
+            return Err(ConfigError::new(
+                "threads",
+                format!(
+                    "is {}, must be 0 (all cores) to {MAX_THREADS}",
+                    self.threads
+                ),
+            ));
+        }
         Ok(())
     }
 
