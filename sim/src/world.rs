@@ -101,27 +101,39 @@ impl WaypointSpec {
 }
 
 /// The dotted key of the first number in `spec` that is NaN or infinite.
-fn first_non_finite(spec: &WorldSpec) -> Option<String> {
-    fn walk(value: &toml::Value, key: &str) -> Option<String> {
+/// The first number of `spec` (its key, dotted, and value) for which
+/// `refuse` holds.
+fn first_number(spec: &WorldSpec, refuse: impl Fn(f64) -> bool) -> Option<(String, f64)> {
+    fn walk(value: &toml::Value, key: &str, refuse: &dyn Fn(f64) -> bool) -> Option<(String, f64)> {
         match value {
-            toml::Value::Float(f) if !f.is_finite() => Some(key.to_owned()),
+            toml::Value::Float(f) if refuse(*f) => Some((key.to_owned(), *f)),
             toml::Value::Table(t) => t.iter().find_map(|(k, v)| {
                 let key = if key.is_empty() {
                     k.clone()
                 } else {
                     format!("{key}.{k}")
                 };
-                walk(v, &key)
+                walk(v, &key, refuse)
             }),
             toml::Value::Array(a) => a
                 .iter()
                 .enumerate()
-                .find_map(|(i, v)| walk(v, &format!("{key}[{i}]"))),
+                .find_map(|(i, v)| walk(v, &format!("{key}[{i}]"), refuse)),
             _ => None,
         }
     }
-    walk(&toml::Value::try_from(spec).ok()?, "")
+    walk(&toml::Value::try_from(spec).ok()?, "", &refuse)
 }
+
+/// Every number of a world file (metres, degrees, a height file's scale)
+/// lies within this of 0: heights are kept as `f32` cells, and `1e300`
+/// turned them infinite.
+const MAX_MAGNITUDE: f64 = 100_000.0;
+
+/// Terrain wavelengths are at least this, m: `1e-300` made every height
+/// NaN (and the vehicle "stuck" with no image placed). The height field's
+/// cells are 0.1 m, so anything below 0.2 m is aliased noise already.
+const MIN_WAVELENGTH_M: f64 = 0.01;
 
 /// A round feature rising from the ground: boulder, tree trunk or bush.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -598,8 +610,13 @@ impl World {
             origin: origin.to_owned(),
             message,
         };
-        if let Some(key) = first_non_finite(&spec) {
+        if let Some((key, _)) = first_number(&spec, |v| !v.is_finite()) {
             return Err(invalid(format!("{key} is not a finite number")));
+        }
+        if let Some((key, value)) = first_number(&spec, |v| v.abs() > MAX_MAGNITUDE) {
+            return Err(invalid(format!(
+                "{key} is {value:?}: numbers in a world lie within ±{MAX_MAGNITUDE}"
+            )));
         }
         let t = &spec.terrain;
         if !(t.size_m[0] > 0.0
@@ -618,8 +635,16 @@ impl World {
                 t.size_m
             )));
         }
-        if !(t.hills_wavelength_m > 0.0 && t.roughness_wavelength_m > 0.0) {
-            return Err(invalid("terrain wavelengths must be positive".into()));
+        for (key, wavelength) in [
+            ("hills_wavelength_m", t.hills_wavelength_m),
+            ("roughness_wavelength_m", t.roughness_wavelength_m),
+        ] {
+            if wavelength < MIN_WAVELENGTH_M {
+                return Err(invalid(format!(
+                    "terrain.{key} is {wavelength:?}: terrain wavelengths are at least \
+                     {MIN_WAVELENGTH_M} m (the height field's cells are 0.1 m)"
+                )));
+            }
         }
         let bounds = [
             t.origin_m[0],

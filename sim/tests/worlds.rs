@@ -188,6 +188,49 @@ fn numbers_that_are_not_finite_are_refused_naming_their_key() {
 }
 
 #[test]
+fn numbers_that_would_make_the_heights_infinite_or_nan_are_refused_naming_their_key() {
+    // Each had built a world whose heights were NaN or infinite: the
+    // mission ran, placed no image and reported the vehicle stuck.
+    let wp = "[[waypoints]]\nposition_m = [30.0, 0.0]\n";
+    for (terrain, expect) in [
+        (
+            "hills_wavelength_m = 1e-300\n",
+            "terrain.hills_wavelength_m is 1e-300: terrain wavelengths are at least 0.01 m",
+        ),
+        (
+            "roughness_wavelength_m = 0.0\n",
+            "terrain.roughness_wavelength_m is 0.0: terrain wavelengths are at least 0.01 m",
+        ),
+        (
+            "hills_amplitude_m = 1e300\n",
+            "terrain.hills_amplitude_m is 1e300: numbers in a world lie within ±100000",
+        ),
+    ] {
+        let text = format!(
+            "{}{wp}",
+            BASE.replace("[start]", &format!("{terrain}[start]"))
+        );
+        let err = error_of(&text);
+        assert!(err.contains(expect), "{terrain}: {err}");
+    }
+    let err = error_of(&format!(
+        "{BASE}{wp}[[boulders]]\nposition_m = [10.0, 0.0]\nradius_m = 1.0\nheight_m = -2e5\n"
+    ));
+    assert!(
+        err.contains("boulders[0].height_m is -200000.0: numbers in a world lie within ±100000"),
+        "{err}"
+    );
+    // The same from a height file.
+    let dir = arcnav_testkit::scratch_dir("arcnav-worlds-huge");
+    let asc = "ncols 2\nnrows 2\nxllcorner -50\nyllcorner -50\ncellsize 100\n0 0\n0 1e30\n";
+    std::fs::write(dir.join("dem.asc"), asc).unwrap();
+    let text = "name = \"dem\"\n[terrain]\norigin_m = [-50.0, -50.0]\nsize_m = [100.0, 100.0]\nheightmap = \"dem.asc\"\n[start]\nposition_m = [-45.0, -45.0]\n[[waypoints]]\nposition_m = [0.0, 0.0]\n";
+    std::fs::write(dir.join("w.toml"), text).unwrap();
+    let err = World::load(&dir.join("w.toml")).unwrap_err().to_string();
+    assert!(err.contains("heights lie within ±100000 m"), "{err}");
+}
+
+#[test]
 fn a_height_file_covering_a_sliver_of_the_world_is_refused() {
     let dir = arcnav_testkit::scratch_dir("arcnav-worlds-sliver");
     // 150 nm across for a 100 m world: the resolution is in the wrong unit.
