@@ -283,6 +283,13 @@ impl PerceptionConfig {
         }
         let c = &self.cells;
         config::in_range("cells.cell_size_m", c.cell_size_m, 0.02, 2.0)?;
+        // Before the grid, which the window widens.
+        if c.slope_window_cells.is_multiple_of(2) || c.slope_window_cells > 9 {
+            return Err(ConfigError::new(
+                "cells.slope_window_cells",
+                format!("is {}, must be 1, 3, 5, 7 or 9", c.slope_window_cells),
+            ));
+        }
         // The classifier's grid holds 4 bytes a cell in each of its two parts.
         let grid = self.grid();
         let cells = grid.cols as f64 * grid.rows as f64;
@@ -302,19 +309,13 @@ impl PerceptionConfig {
         if !(1..=1_000_000).contains(&c.min_points) {
             return Err(ConfigError::new(
                 "cells.min_points",
-                format!("is {}, must be at least 1", c.min_points),
+                format!("is {}, must be 1 to 1000000", c.min_points),
             ));
         }
         config::positive("cells.max_height_variation_m", c.max_height_variation_m)?;
         config::in_range("cells.max_slope_deg", c.max_slope_deg, 0.1, 89.0)?;
         config::positive("cells.max_discontinuity_m", c.max_discontinuity_m)?;
         config::non_negative("cells.min_plane_spread_m", c.min_plane_spread_m)?;
-        if c.slope_window_cells.is_multiple_of(2) || c.slope_window_cells > 9 {
-            return Err(ConfigError::new(
-                "cells.slope_window_cells",
-                format!("is {}, must be 1, 3, 5, 7 or 9", c.slope_window_cells),
-            ));
-        }
         let d = &self.drop_off;
         config::positive("drop_off.max_gap_m", d.max_gap_m)?;
         config::positive("drop_off.min_depth_m", d.min_depth_m)?;
@@ -431,6 +432,21 @@ mod tests {
             err.reason.contains("need a 50002 x 50002 grid (19075 MiB)"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn counts_out_of_range_are_refused_by_their_own_key() {
+        // A huge slope window had been reported as a grid too large for
+        // `cells.cell_size_m`, which the user had not touched.
+        let mut p = PerceptionConfig::default();
+        p.cells.slope_window_cells = u32::MAX;
+        let err = p.validate_for(&VehicleConfig::default()).unwrap_err();
+        assert_eq!(err.key, "cells.slope_window_cells");
+        let mut p = PerceptionConfig::default();
+        p.cells.min_points = u32::MAX;
+        let err = p.validate_for(&VehicleConfig::default()).unwrap_err();
+        assert_eq!(err.key, "cells.min_points");
+        assert!(err.reason.contains("must be 1 to 1000000"), "{err}");
     }
 
     #[test]
