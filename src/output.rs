@@ -7,15 +7,21 @@ use std::fs::File;
 use std::io;
 use std::path::{Path, PathBuf};
 
-/// An output that would overwrite an input.
+/// An output that would overwrite an input, or another output.
 #[derive(Debug, thiserror::Error)]
-#[error(
-    "refusing to write {output}: it is {what} {input}, which this run reads; choose another file"
-)]
-pub struct OverwritesInput {
-    pub output: PathBuf,
-    pub what: String,
-    pub input: PathBuf,
+pub enum OverwritesInput {
+    #[error(
+        "refusing to write {output}: it is {what} {input}, which this run reads; choose another file"
+    )]
+    Input {
+        output: PathBuf,
+        what: String,
+        input: PathBuf,
+    },
+    #[error(
+        "refusing to write {output}: the run writes {other} already, the same file; choose another file"
+    )]
+    Twice { output: PathBuf, other: PathBuf },
 }
 
 /// True when `a` and `b` name the same existing file (through links too).
@@ -33,7 +39,7 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[(&str, &Path)]) -> Result<(), 
     for (i, &output) in outputs.iter().enumerate() {
         for &(what, input) in inputs {
             if same_file(output, input) {
-                return Err(OverwritesInput {
+                return Err(OverwritesInput::Input {
                     output: output.to_owned(),
                     what: what.to_owned(),
                     input: input.to_owned(),
@@ -44,10 +50,9 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[(&str, &Path)]) -> Result<(), 
             .iter()
             .find(|o| **o == output || same_file(o, output))
         {
-            return Err(OverwritesInput {
+            return Err(OverwritesInput::Twice {
                 output: output.to_owned(),
-                what: "also the output".to_owned(),
-                input: other.to_path_buf(),
+                other: other.to_path_buf(),
             });
         }
     }
@@ -130,7 +135,11 @@ mod tests {
         assert!(check_outputs(&[&d.join("out.lcm")], &[("the log", &log)]).is_ok());
         // Two outputs on one file.
         let out = d.join("out.json");
-        assert!(check_outputs(&[&out, &out], &[]).is_err());
+        let err = check_outputs(&[&out, &out], &[]).unwrap_err();
+        assert!(
+            err.to_string().contains("the run writes") && !err.to_string().contains("reads"),
+            "{err}"
+        );
     }
 
     #[test]

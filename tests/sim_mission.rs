@@ -447,6 +447,63 @@ fn bad_worlds_fail_with_a_message_naming_the_problem() {
     );
 }
 
+/// Refused before the mission runs, what the run reads left as it was:
+/// `--save-world` onto the world file given had rewritten it without its
+/// comments, and onto any file of the run's (`map.png`) had been
+/// overwritten by it; a run's `config.toml` given back as `--config` was
+/// rewritten by the run.
+#[test]
+fn a_mission_never_writes_over_the_world_or_configuration_it_reads() {
+    let dir = out_dir("inputs-kept");
+    let world = dir.join("my_world.toml");
+    let text = std::fs::read_to_string(format!(
+        "{}/tests/worlds/forest.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    std::fs::write(&world, &text).unwrap();
+    let config = dir.join("config.toml");
+    let config_text = "# mine\n[sim]\nseed = 2\n";
+    std::fs::write(&config, config_text).unwrap();
+    let (w, c, d) = (
+        world.to_str().unwrap(),
+        config.to_str().unwrap(),
+        dir.to_str().unwrap(),
+    );
+    let map = dir.join("map.png");
+    for (args, expect) in [
+        (
+            vec!["--world", w, "--save-world", w],
+            "it is the world".to_owned(),
+        ),
+        (
+            vec!["--config", c, "--out", d],
+            "it is the configuration".to_owned(),
+        ),
+        (
+            vec![
+                "--world",
+                "short_course",
+                "--out",
+                d,
+                "--save-world",
+                map.to_str().unwrap(),
+            ],
+            format!("the run writes {} already", map.display()),
+        ),
+    ] {
+        let mut all = vec!["sim", "--no-images"];
+        all.extend(args.iter().copied());
+        let (code, stdout, stderr) = arcnav(&all);
+        assert_eq!(code, 1, "{args:?}: {stdout}{stderr}");
+        assert!(stderr.contains(&expect), "{args:?}: {stderr}");
+        assert!(!stdout.contains("mission "), "{args:?}: it ran:\n{stdout}");
+    }
+    assert_eq!(std::fs::read_to_string(&world).unwrap(), text);
+    assert_eq!(std::fs::read_to_string(&config).unwrap(), config_text);
+    assert!(!map.exists());
+}
+
 #[test]
 fn a_generated_world_can_be_saved_and_run_again() {
     let dir = out_dir("generated");

@@ -67,16 +67,40 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
             World::embedded("paper_loop").context("the default world is compiled in")??
         }
     };
-    if let Some(path) = &args.save_world {
-        let text = toml::to_string(&world.spec).context("serialising the world")?;
-        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
-        println!("world saved to {}", path.display());
-    }
     let name = world.spec.name.clone();
     let out = args
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&name));
+    // No output may overwrite what the run reads: `--save-world` onto the
+    // world file given had rewritten it without its comments, and a run's
+    // config.toml passed back as --config was rewritten by the run.
+    let written: Vec<PathBuf> = ["mission.lcm", "report.json", "map.png", "config.toml"]
+        .iter()
+        .map(|f| out.join(f))
+        .chain(args.save_world.iter().cloned())
+        .chain(args.mcap.iter().cloned())
+        .collect();
+    let mut inputs: Vec<(&str, &Path)> = Vec::new();
+    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
+    inputs.extend(
+        args.world
+            .as_deref()
+            .filter(|_| args.seed.is_none())
+            .map(Path::new)
+            .filter(|w| w.is_file())
+            .map(|w| ("the world", w)),
+    );
+    arcnav::output::check_outputs(
+        &written.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
+        &inputs,
+    )?;
+    if let Some(path) = &args.save_world {
+        let text = toml::to_string(&world.spec).context("serialising the world")?;
+        arcnav::output::write_file(path, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("world saved to {}", path.display());
+    }
     std::fs::create_dir_all(&out)
         .with_context(|| format!("cannot create the output directory {}", out.display()))?;
     let snapshot_dir = out.join("snapshots");
@@ -162,14 +186,17 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     )?;
     bar.finish_and_clear();
     let config_path = out.join("config.toml");
-    std::fs::write(
+    arcnav::output::write_file(
         &config_path,
-        format!("# the configuration of this run: replay with `arcnav replay mission.lcm --config config.toml`\n{}", config.to_toml()),
+        format!("# the configuration of this run: replay with `arcnav replay mission.lcm --config config.toml`\n{}", config.to_toml()).as_bytes(),
     )
     .with_context(|| format!("cannot write {}", config_path.display()))?;
     let report_path = out.join("report.json");
-    std::fs::write(&report_path, serde_json::to_string_pretty(&run.report)?)
-        .with_context(|| format!("cannot write {}", report_path.display()))?;
+    arcnav::output::write_file(
+        &report_path,
+        serde_json::to_string_pretty(&run.report)?.as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", report_path.display()))?;
     let map_path = out.join("map.png");
     arcnav::render::mission_picture(&map_path, &world, &run)?;
     print_summary(&run.report, &out, &run.snapshots);
