@@ -47,7 +47,7 @@ fn finish(args: &LiveArgs, report: &LiveReport) -> anyhow::Result<ExitCode> {
         print!("{}", report.table());
     }
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(report)?)
+        arcnav::output::write_file(path, serde_json::to_string_pretty(report)?.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(ExitCode::SUCCESS)
@@ -80,6 +80,14 @@ fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
         .and_then(std::path::Path::parent)
         .unwrap_or(std::path::Path::new("."));
     let auth = &config.bus.auth;
+    // The figures written at exit must not replace what the run reads.
+    if let Some(json) = &args.json {
+        let key = auth.enabled().then(|| auth.key_path(base));
+        let mut inputs: Vec<(&str, &std::path::Path)> = Vec::new();
+        inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
+        inputs.extend(key.as_deref().map(|k| ("the key file", k)));
+        arcnav::output::check_outputs(&[json], &inputs)?;
+    }
     let policy = auth.policy(base).with_context(|| {
         format!(
             "authentication is configured ([bus.auth] key_file = {:?}) but its key cannot be used",
