@@ -860,6 +860,14 @@ fn an_empty_log_or_one_without_poses_is_never_a_success() {
     // The images are all counted: unplaced ones are said.
     let result = replay_with_defaults(&no_poses);
     assert!(result.problems.images_unplaced + result.problems.images_without_pose > 0);
+    // A window past the log's end: its poses lie outside, it holds them.
+    let (code, stdout, _) = arcnav(&["replay", sim_log().to_str().unwrap(), "--from", "1e6"]);
+    assert_eq!(code, 3, "{stdout}");
+    assert!(
+        stdout.contains("no POSE between --from and --to ("),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("the log holds no POSE"), "{stdout}");
 }
 
 #[test]

@@ -286,6 +286,7 @@ pub fn replay(
             {
                 skipped_mission = Some((t, event.channel.clone(), msg.clone()));
             }
+            problems.outside_window += 1;
             continue;
         }
         if let Some((at, channel, msg)) = skipped_mission.take() {
@@ -301,6 +302,7 @@ pub fn replay(
         if options.to_s.is_some_and(|to| since > to) {
             // Past the end: one event alone may be a damaged time (a flipped
             // bit); two in a row end the replay.
+            problems.outside_window += 1;
             if past_to {
                 break;
             }

@@ -59,8 +59,11 @@ pub struct InputProblems {
     /// OBSTACLE_CELLS in a log with no range image, replayed without
     /// `--recorded-cells`: nothing was perceived.
     pub cells_unused: u64,
-    /// The log holds no pose: nothing could be placed or decided.
+    /// The log holds no pose (within `--from`/`--to` when given): nothing
+    /// could be placed or decided.
     pub no_poses: bool,
+    /// Events before `--from` or after `--to`, as asked: not replayed.
+    pub outside_window: u64,
     /// Images still waiting for the pose at their capture time when the log
     /// ended or started over (the pose stream stops before them).
     pub images_unplaced: u64,
@@ -148,6 +151,12 @@ impl InputProblems {
             lines.push(format!(
                 "no LCM event could be read from the log ({} bytes skipped as damaged): is it an LCM log?",
                 self.log.skipped_bytes + self.log.truncated_tail_bytes
+            ));
+        } else if self.no_poses && self.outside_window > 0 {
+            lines.push(format!(
+                "no POSE between --from and --to ({} event(s) of the log lie outside them): \
+                 nothing could be placed or decided",
+                self.outside_window
             ));
         } else if self.no_poses {
             lines.push("the log holds no POSE: nothing could be placed or decided".into());
