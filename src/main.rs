@@ -309,7 +309,8 @@ struct VehicleArgs {
     #[arg(long, value_name = "HZ", default_value_t = 50.0)]
     rate: f64,
     /// Stop when the newest accepted command was received longer ago than
-    /// this, s (default: three command periods, 3 / pipeline.command_rate_hz).
+    /// this, s, at most 60 (default: three command periods, 3 /
+    /// pipeline.command_rate_hz).
     #[arg(long, value_name = "S")]
     timeout: Option<f64>,
     /// Print what to execute on stdout, one JSON line per tick: wall_us,

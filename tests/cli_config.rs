@@ -216,6 +216,23 @@ fn the_vehicle_bridge_refuses_to_follow_unsigned_commands_or_itself() {
     let (code, _, stderr) = arcnav(&["vehicle", "--lcm", "memq://", "--rate", "0"]);
     assert_eq!(code, 1, "{stderr}");
     assert!(stderr.contains("--rate 0"), "{stderr}");
+    // A stop timeout that never comes (1e300 s had been taken).
+    for timeout in ["1e300", "61", "0"] {
+        let (code, _, stderr) = arcnav(&[
+            "vehicle",
+            "--lcm",
+            "memq://",
+            "--timeout",
+            timeout,
+            "--duration",
+            "0.1",
+        ]);
+        assert_eq!(code, 1, "{timeout}: {stderr}");
+        assert!(
+            stderr.contains("must be more than 0 and at most 60 s"),
+            "{timeout}: {stderr}"
+        );
+    }
 }
 
 /// With authentication off the bridge still runs (off is the default), says

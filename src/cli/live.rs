@@ -141,14 +141,23 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
     if !(args.rate > 0.0 && args.rate <= 1000.0) {
         anyhow::bail!("--rate {}: must be in (0, 1000] Hz", args.rate);
     }
+    // The vehicle keeps executing its last command this long when commands
+    // stop: a watchdog, bounded as [live] pose_timeout_s is (1e300 had
+    // been taken, and the vehicle would never have stopped).
+    const MAX_TIMEOUT_S: f64 = 60.0;
+    if let Some(timeout_s) = args.timeout
+        && !(timeout_s > 0.0 && timeout_s <= MAX_TIMEOUT_S)
+    {
+        anyhow::bail!(
+            "--timeout {timeout_s}: must be more than 0 and at most {MAX_TIMEOUT_S} s (the \
+             vehicle executes its last command this long when commands stop)"
+        );
+    }
     let registry = Registry::builtin();
     let Started { config, lcm, stop } = start(live, &registry)?;
     let timeout_s = args
         .timeout
         .unwrap_or(3.0 / config.pipeline.command_rate_hz);
-    if !(timeout_s > 0.0 && timeout_s.is_finite()) {
-        anyhow::bail!("--timeout {timeout_s}: must be a positive number of seconds");
-    }
     if lcm.auth_stats().is_none() {
         tracing::warn!(
             lcm = %live.lcm,
