@@ -13,7 +13,7 @@ use arcnav_perception::{
     BeamTable, FovPolygon, HeightSample, ObstacleCell, ObstacleReport, RangeImage, RangeSlice,
     Reasons, Region, Shadow, Shadows, SliceAxis,
 };
-use arcnav_vehicle::frames::{FrameError, isometry_from_parts, rotation_to_wxyz};
+use arcnav_vehicle::frames::{FrameError, MAX_COORDINATE_M, isometry_from_parts, rotation_to_wxyz};
 use arcnav_vehicle::{ArcSet, Isometry, Pose, Utime};
 use nalgebra::{Point2, Vector3};
 
@@ -418,7 +418,8 @@ pub fn mission_from_wire(msg: &waypoints_t) -> Result<Mission, WireError> {
         .iter()
         .zip(&msg.radius)
         .map(|(p, &r)| {
-            if p.iter().all(|v| v.is_finite()) && r.is_finite() {
+            let near = p.iter().all(|v| v.abs() <= MAX_COORDINATE_M);
+            if p.iter().all(|v| v.is_finite()) && r.is_finite() && near {
                 Ok(Waypoint {
                     x: p[0],
                     y: p[1],
@@ -427,7 +428,11 @@ pub fn mission_from_wire(msg: &waypoints_t) -> Result<Mission, WireError> {
             } else {
                 Err(WireError::Invalid {
                     what: "waypoints",
-                    reason: format!("waypoint ({}, {}) radius {r} is not finite", p[0], p[1]),
+                    reason: format!(
+                        "waypoint ({}, {}) radius {r} is not finite or lies farther than \
+                         {MAX_COORDINATE_M} m from the origin",
+                        p[0], p[1]
+                    ),
                 })
             }
         })

@@ -59,16 +59,30 @@ fn config_check_names_the_bad_key_and_fails() {
     );
 }
 
+/// Values that aborted or hung `arcnav sim` (found by setting every number
+/// of config/default.toml to ±1e300 in turn), refused by their key.
 #[test]
-fn more_rendering_threads_than_a_process_can_start_are_refused() {
-    // 100 000 aborted `arcnav sim` (no memory for their stacks).
-    let (_dir, file) = temp_file("threads.toml", "[sim]\nthreads = 100000\n");
-    let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
-    assert_eq!(code, 1);
-    assert!(
-        stderr.contains("`sim.threads`: is 100000, must be 0 (all cores) to 1024"),
-        "{stderr}"
-    );
+fn values_that_aborted_or_hung_a_run_are_refused_by_key() {
+    for (text, expect) in [
+        // Aborted: no memory for 100 000 threads' stacks.
+        (
+            "[sim]\nthreads = 100000\n",
+            "`sim.threads`: is 100000, must be 0 (all cores) to 1024",
+        ),
+        // Poses 1e300 m out: the elevation layer's indices overflowed.
+        ("[sim]\npose_noise_m = 1e300\n", "`sim.pose_noise_m`"),
+        ("[sim]\ndrift_per_m = 1e300\n", "`sim.drift_per_m`"),
+        // Hung the first vote: the footprint widened by 1e300 m.
+        (
+            "[behaviours.obstacle_avoidance]\nnear_miss_m = 1e300\n",
+            "`behaviours.obstacle_avoidance.near_miss_m`",
+        ),
+    ] {
+        let (_dir, file) = temp_file("bad.toml", text);
+        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+        assert_eq!(code, 1, "{text}: {stderr}");
+        assert!(stderr.contains(expect), "{text}: {stderr}");
+    }
 }
 
 #[test]

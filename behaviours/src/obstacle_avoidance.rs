@@ -1362,7 +1362,9 @@ impl Plugin for ObstacleAvoidance {
                 format!("is {} m, at most 100 m", c.max_distance_m),
             ));
         }
-        config::positive("near_miss_m", c.near_miss_m)?;
+        // The footprint is widened by it over the grid of every arc: 1e300
+        // had hung the first vote.
+        config::in_range("near_miss_m", c.near_miss_m, 0.01, 10.0)?;
         config::in_range("near_miss_penalty", c.near_miss_penalty, 0.0, 2.0)?;
         if !(1..=16).contains(&c.near_miss_bands) {
             return Err(ConfigError::new(

@@ -344,6 +344,13 @@ mod tests {
             ..msg
         };
         assert!(Pose::try_from(&bad).is_err());
+        // Finite, but 10^19 m out: it had aborted replay (the local map's
+        // cell indices overflowed); now an invalid pose, counted.
+        let far = pose_t {
+            position: [1e19, 2.0, 3.0],
+            ..msg
+        };
+        assert!(Pose::try_from(&far).is_err());
     }
 
     #[test]

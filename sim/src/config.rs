@@ -92,9 +92,11 @@ impl SimConfig {
         config::in_range("pose_rate_hz", self.pose_rate_hz, 1.0, 1000.0)?;
         config::non_negative("range_noise_m", self.range_noise_m)?;
         config::in_range("dropout_probability", self.dropout_probability, 0.0, 1.0)?;
-        config::non_negative("pose_noise_m", self.pose_noise_m)?;
-        config::non_negative("heading_noise_deg", self.heading_noise_deg)?;
-        config::non_negative("drift_per_m", self.drift_per_m)?;
+        // Noise beyond these put reported poses kilometres (1e300 m) away:
+        // the elevation layer's window overflowed its cell indices.
+        config::in_range("pose_noise_m", self.pose_noise_m, 0.0, 100.0)?;
+        config::in_range("heading_noise_deg", self.heading_noise_deg, 0.0, 180.0)?;
+        config::in_range("drift_per_m", self.drift_per_m, 0.0, 1.0)?;
         config::positive("time_limit_s", self.time_limit_s)?;
         config::positive("stuck_after_s", self.stuck_after_s)?;
         config::positive("stuck_radius_m", self.stuck_radius_m)?;

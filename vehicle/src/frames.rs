@@ -24,7 +24,18 @@ pub enum FrameError {
     InvalidQuaternion([f64; 4]),
     #[error("position {0:?} is not finite")]
     NonFinitePosition([f64; 3]),
+    #[error(
+        "position {0:?} lies farther than {MAX_COORDINATE_M} m from the frame's origin on an axis"
+    )]
+    PositionTooFar([f64; 3]),
 }
+
+/// Positions (a pose, a sensor mount) lie within this of their frame's
+/// origin on every axis, m: 10 000 km holds a UTM grid (northings up to
+/// 10⁷ m) and the Earth-centred frame. Poses 10¹⁹ m out had overflowed the
+/// local map's cell indices and aborted the process (a replayed log, a
+/// pose from the network); 10⁸ m out the map refused reports.
+pub const MAX_COORDINATE_M: f64 = 1e7;
 
 /// A `[w, x, y, z]` quaternion as a rotation; normalised, refused if not
 /// finite or of (near) zero length.
@@ -49,6 +60,9 @@ pub fn rotation_to_wxyz(rotation: &UnitQuaternion<f64>) -> [f64; 4] {
 pub fn isometry_from_parts(position: [f64; 3], wxyz: [f64; 4]) -> Result<Isometry, FrameError> {
     if position.iter().any(|v| !v.is_finite()) {
         return Err(FrameError::NonFinitePosition(position));
+    }
+    if position.iter().any(|v| v.abs() > MAX_COORDINATE_M) {
+        return Err(FrameError::PositionTooFar(position));
     }
     let rotation = rotation_from_wxyz(wxyz)?;
     Ok(Isometry::from_parts(
@@ -201,6 +215,11 @@ mod tests {
         assert!(rotation_from_wxyz([0.0; 4]).is_err());
         assert!(rotation_from_wxyz([f64::NAN, 0.0, 0.0, 1.0]).is_err());
         assert!(isometry_from_parts([f64::INFINITY, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]).is_err());
+        // Finite but beyond any frame a vehicle drives in.
+        let far = isometry_from_parts([1e19, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
+        assert!(matches!(far, Err(FrameError::PositionTooFar(_))), "{far:?}");
+        let utm = [500_000.0, 9_999_999.0, 120.0];
+        assert!(isometry_from_parts(utm, [1.0, 0.0, 0.0, 0.0]).is_ok());
     }
 
     #[test]
