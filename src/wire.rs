@@ -418,8 +418,9 @@ pub fn mission_from_wire(msg: &waypoints_t) -> Result<Mission, WireError> {
         .iter()
         .zip(&msg.radius)
         .map(|(p, &r)| {
+            // Also false for a NaN or infinite coordinate.
             let near = p.iter().all(|v| v.abs() <= MAX_COORDINATE_M);
-            if p.iter().all(|v| v.is_finite()) && r.is_finite() && near {
+            if near && r.is_finite() {
                 Ok(Waypoint {
                     x: p[0],
                     y: p[1],

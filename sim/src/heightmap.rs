@@ -127,10 +127,10 @@ impl HeightGrid {
         }
         // Within the world file's bound on its numbers (scale included,
         // the heights stay finite as f32 cells).
-        const MAX_HEIGHT_M: f32 = 100_000.0;
-        if let Some(v) = grid.values.iter().find(|v| v.abs() > MAX_HEIGHT_M) {
+        let max = crate::world::MAX_MAGNITUDE;
+        if let Some(v) = grid.values.iter().find(|v| f64::from(v.abs()) > max) {
             return Err(fail(format!(
-                "holds a height of {v} m: heights lie within ±{MAX_HEIGHT_M} m"
+                "holds a height of {v} m: heights lie within ±{max} m"
             )));
         }
         Ok(grid)

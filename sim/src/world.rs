@@ -100,7 +100,6 @@ impl WaypointSpec {
     }
 }
 
-/// The dotted key of the first number in `spec` that is NaN or infinite.
 /// The first number of `spec` (its key, dotted, and value) for which
 /// `refuse` holds.
 fn first_number(spec: &WorldSpec, refuse: impl Fn(f64) -> bool) -> Option<(String, f64)> {
@@ -128,7 +127,7 @@ fn first_number(spec: &WorldSpec, refuse: impl Fn(f64) -> bool) -> Option<(Strin
 /// Every number of a world file (metres, degrees, a height file's scale)
 /// lies within this of 0: heights are kept as `f32` cells, and `1e300`
 /// turned them infinite.
-const MAX_MAGNITUDE: f64 = 100_000.0;
+pub(crate) const MAX_MAGNITUDE: f64 = 100_000.0;
 
 /// Terrain wavelengths are at least this, m: `1e-300` made every height
 /// NaN (and the vehicle "stuck" with no image placed). The height field's

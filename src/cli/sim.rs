@@ -75,9 +75,11 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     // No output may overwrite what the run reads: `--save-world` onto the
     // world file given had rewritten it without its comments, and a run's
     // config.toml passed back as --config was rewritten by the run.
-    let written: Vec<PathBuf> = ["mission.lcm", "report.json", "map.png", "config.toml"]
+    let files = ["mission.lcm", "report.json", "map.png", "config.toml"].map(|f| out.join(f));
+    let [log_path, report_path, map_path, config_path] = &files;
+    let written: Vec<PathBuf> = files
         .iter()
-        .map(|f| out.join(f))
+        .cloned()
         .chain(args.save_world.iter().cloned())
         .chain(args.mcap.iter().cloned())
         .collect();
@@ -114,7 +116,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
             .with_context(|| format!("cannot create {}", snapshot_dir.display()))?;
     }
     let options = MissionOptions {
-        log: Some(out.join("mission.lcm")),
+        log: Some(log_path.clone()),
         log_mode: if args.no_images {
             LogMode::NoImages
         } else {
@@ -185,23 +187,20 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         },
     )?;
     bar.finish_and_clear();
-    let config_path = out.join("config.toml");
     arcnav::output::write_file(
-        &config_path,
+        config_path,
         format!("# the configuration of this run: replay with `arcnav replay mission.lcm --config config.toml`\n{}", config.to_toml()).as_bytes(),
     )
     .with_context(|| format!("cannot write {}", config_path.display()))?;
-    let report_path = out.join("report.json");
     arcnav::output::write_file(
-        &report_path,
+        report_path,
         serde_json::to_string_pretty(&run.report)?.as_bytes(),
     )
     .with_context(|| format!("cannot write {}", report_path.display()))?;
-    let map_path = out.join("map.png");
-    arcnav::render::mission_picture(&map_path, &world, &run)?;
+    arcnav::render::mission_picture(map_path, &world, &run)?;
     print_summary(&run.report, &out, &run.snapshots);
     if let Some(mcap) = &args.mcap {
-        super::render::write_mcap(&out.join("mission.lcm"), mcap, &config)?;
+        super::render::write_mcap(log_path, mcap, &config)?;
     }
     Ok(if run.report.success {
         ExitCode::SUCCESS
