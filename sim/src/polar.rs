@@ -159,8 +159,10 @@ impl Headings {
 /// rays from that position are cast through the table, any other ray
 /// through the view itself.
 #[derive(Debug)]
-pub struct PolarView<'a> {
-    view: &'a TileView,
+pub struct PolarView {
+    /// The view's tiles (shared with it: a table outlives the view it was
+    /// made from when threads other than its maker's cast through it).
+    view: TileView,
     origin: Point3<f64>,
     range_m: f64,
     bins: usize,
@@ -176,10 +178,10 @@ pub struct PolarView<'a> {
     clears: Vec<f32>,
 }
 
-impl<'a> PolarView<'a> {
+impl PolarView {
     /// Bins the ground of `view` within `range_m` of `origin` (horizontally),
     /// on up to `threads` threads.
-    pub fn new(view: &'a TileView, origin: Point3<f64>, range_m: f64, threads: usize) -> Self {
+    pub fn new(view: &TileView, origin: Point3<f64>, range_m: f64, threads: usize) -> Self {
         let range_m = Self::binned_range(range_m);
         let bins = ((range_m / BIN_M).ceil() as usize).max(1);
         let parts = threads.max(1);
@@ -253,7 +255,7 @@ impl<'a> PolarView<'a> {
             }
         });
         Self {
-            view,
+            view: view.clone(),
             origin,
             range_m,
             bins,
@@ -268,12 +270,7 @@ impl<'a> PolarView<'a> {
     /// `headings` only (on this thread): a slice's rays from there are cast
     /// through the table, any other ray through the view. The blocks
     /// binned are those in the wedge, found band by band of distance.
-    pub fn wedge(
-        view: &'a TileView,
-        origin: Point3<f64>,
-        range_m: f64,
-        headings: Headings,
-    ) -> Self {
+    pub fn wedge(view: &TileView, origin: Point3<f64>, range_m: f64, headings: Headings) -> Self {
         let range_m = Self::binned_range(range_m);
         let bins = ((range_m / BIN_M).ceil() as usize).max(1);
         let width = headings.width;
@@ -295,7 +292,7 @@ impl<'a> PolarView<'a> {
             origin.z,
         );
         Self {
-            view,
+            view: view.clone(),
             origin,
             range_m,
             bins,
@@ -548,7 +545,7 @@ impl Table {
     }
 }
 
-impl PolarView<'_> {
+impl PolarView {
     /// Whether rays from `origin` to `max_range` may be cast through the
     /// table (else they are cast in the view).
     fn binned(&self, origin: &Point3<f64>, max_range: f64) -> bool {
@@ -678,7 +675,7 @@ impl Aimed {
     }
 }
 
-impl RayCast for PolarView<'_> {
+impl RayCast for PolarView {
     fn cast(&self, origin: &Point3<f64>, d: &Vector3<f64>, max_range: f64) -> Option<f64> {
         if !self.binned(origin, max_range) {
             return self.view.cast(origin, d, max_range);

@@ -3,10 +3,12 @@
 //! rendered in parallel; noise comes from a generator seeded per image and
 //! per row, so an image is the same whatever the thread count.
 
-use std::sync::Mutex;
+use std::ops::Range;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::time::{Duration, Instant};
 
-use arcnav_perception::{RangeImage, RangeSlice, SensorModel, SliceAxis};
+use arcnav_perception::{PosedBeams, RangeImage, RangeSlice, RayCast, SensorModel, SliceAxis};
 use arcnav_vehicle::{Isometry, Utime};
 use nalgebra::{Point3, Vector3};
 
@@ -24,7 +26,15 @@ const POLAR_MIN_RAYS: usize = 16_384;
 /// 2026-11-28), so a wedge pays from about 140 rays.
 const WEDGE_MIN_RAYS: usize = 256;
 
-/// Renders one image of `view` from `world_from_vehicle`.
+/// Bands of rows an image is cut into (at least; eight a thread with more
+/// than four threads). Small, so that a thread that comes to help late
+/// (the one that needs a frame rendered ahead) waits little for the last
+/// band another thread took; a band of a few rows costs no more to take
+/// than a large one.
+const BANDS: usize = 32;
+
+/// Renders one image of `view` from `world_from_vehicle` on `threads`
+/// threads (this one and `threads - 1` more).
 pub fn render(
     sensor: &SensorModel,
     view: &TileView,
@@ -34,53 +44,250 @@ pub fn render(
     seed: (u64, u64),
     threads: usize,
 ) -> RangeImage {
-    let mut image = sensor.blank_image(utime);
-    let (rows, cols) = (sensor.beams.rows(), sensor.beams.cols());
-    // Rows differ in cost (a lidar's upper rows reach far, its lower ones
-    // hit the ground near), so threads take small bands from a queue
-    // rather than one half each.
-    let threads = threads.max(1);
-    let per_band = rows.div_ceil(threads * 8).max(1);
-    let (sigma, dropout) = noise;
-    let beams = sensor.posed_beams(world_from_vehicle);
-    // A frame of many rays is cast through the ground binned around the
-    // sensor (built once, read by every thread); a few rays, in the view.
-    let polar = table(sensor, view, world_from_vehicle, beams.origin(), threads);
-    let bands = Mutex::new(image.range.chunks_mut(per_band * cols).enumerate());
-    // The lock is held only to take a band.
-    let next_band = || bands.lock().ok().and_then(|mut queue| queue.next());
-    let work = || {
-        while let Some((band, chunk)) = next_band() {
-            let first = band * per_band;
-            let rows_here = chunk.len() / cols;
-            let band = first..first + rows_here;
-            match &polar {
-                Some(polar) => sensor.render_rows_posed(&beams, polar, band, chunk),
-                None => sensor.render_rows_posed(&beams, view, band, chunk),
-            }
-            for (r, row) in chunk.chunks_mut(cols).enumerate() {
-                let mut rng = Rng::stream(
-                    seed.0,
-                    seed.1.wrapping_mul(65_536).wrapping_add((first + r) as u64),
-                );
-                for value in row {
-                    if dropout > 0.0 && rng.unit() < dropout {
-                        *value = f32::NAN;
-                    } else if value.is_finite() && sigma > 0.0 {
-                        *value =
-                            (f64::from(*value) + sigma * rng.ziggurat_normal()).max(0.01) as f32;
-                    }
-                }
-            }
-        }
-    };
+    if threads <= 1 {
+        // Straight into the image: a streamed lidar's slices are rendered
+        // so, 128 a frame, and sharing would cost them a tenth more.
+        let mut image = sensor.blank_image(utime);
+        let beams = sensor.posed_beams(world_from_vehicle);
+        let polar = table(sensor, view, world_from_vehicle, beams.origin(), 1);
+        let rows = 0..sensor.beams.rows();
+        let scene: &dyn RayCast = match &polar {
+            Some(polar) => polar,
+            None => view,
+        };
+        render_rows(sensor, &beams, scene, rows, &mut image.range, noise, seed);
+        return image;
+    }
+    let frame = SharedFrame::new(
+        Arc::new(sensor.clone()),
+        view,
+        world_from_vehicle,
+        utime,
+        noise,
+        seed,
+        threads,
+    );
     std::thread::scope(|scope| {
-        for _ in 1..threads.min(rows) {
-            scope.spawn(work);
+        for _ in 1..threads.min(frame.bands) {
+            scope.spawn(|| frame.help());
         }
-        work();
-    });
-    image
+        frame.finish().0
+    })
+}
+
+/// One image being rendered, band of rows by band, by whichever threads
+/// help: those started for it ([`render`]), or a thread that started it
+/// ahead of time and the one that needs it, which renders what is left
+/// when it gets there rather than waiting ([`SharedFrame::finish`]).
+///
+/// Rows differ in cost (a lidar's upper rows reach far, its lower ones hit
+/// the ground near), so helpers take small bands from a counter rather
+/// than a share each. Noise comes from a generator seeded per image and
+/// per row, so the image is the same whatever the threads and whichever
+/// renders which band.
+pub struct SharedFrame {
+    sensor: Arc<SensorModel>,
+    view: TileView,
+    /// The ground binned around the sensor, for a frame of many rays.
+    polar: Option<PolarView>,
+    beams: PosedBeams,
+    utime: Utime,
+    /// Range noise σ (m) and dropout probability.
+    noise: (f64, f64),
+    seed: (u64, u64),
+    rows_per_band: usize,
+    bands: usize,
+    /// The next band not yet taken.
+    next: AtomicUsize,
+    state: Mutex<Bands>,
+    /// Signalled when a band is rendered or abandoned.
+    changed: Condvar,
+    started: Instant,
+}
+
+/// What has been rendered of a [`SharedFrame`].
+struct Bands {
+    ranges: Vec<Option<Vec<f32>>>,
+    rendered: usize,
+    /// Bands whose thread panicked while rendering them: taken again.
+    abandoned: Vec<usize>,
+    /// When the last band was rendered.
+    last: Option<Instant>,
+}
+
+impl SharedFrame {
+    /// Prepares the image `sensor` takes of `view` from
+    /// `world_from_vehicle` (binning the ground on up to `threads` threads
+    /// when the frame has many rays), in bands small enough for `threads`
+    /// threads and a late helper to share. No band is rendered yet.
+    pub fn new(
+        sensor: Arc<SensorModel>,
+        view: &TileView,
+        world_from_vehicle: &Isometry,
+        utime: Utime,
+        noise: (f64, f64),
+        seed: (u64, u64),
+        threads: usize,
+    ) -> Self {
+        let started = Instant::now();
+        let threads = threads.max(1);
+        let rows = sensor.beams.rows();
+        let rows_per_band = rows.div_ceil(BANDS.max(threads * 8)).max(1);
+        let bands = rows.div_ceil(rows_per_band);
+        let beams = sensor.posed_beams(world_from_vehicle);
+        let polar = table(&sensor, view, world_from_vehicle, beams.origin(), threads);
+        Self {
+            view: view.clone(),
+            polar,
+            beams,
+            utime,
+            noise,
+            seed,
+            rows_per_band,
+            bands,
+            next: AtomicUsize::new(0),
+            state: Mutex::new(Bands {
+                ranges: vec![None; bands],
+                rendered: 0,
+                abandoned: Vec::new(),
+                last: None,
+            }),
+            changed: Condvar::new(),
+            started,
+            sensor,
+        }
+    }
+
+    /// Renders bands until none is left to take.
+    pub fn help(&self) {
+        while let Some(band) = self.take() {
+            self.render_band(band);
+        }
+    }
+
+    /// The image, once every band is rendered: this thread renders those
+    /// not yet taken (and any whose thread panicked) and waits for those
+    /// other threads are rendering. With it, the time from
+    /// [`SharedFrame::new`] to the last band rendered. Call once: the
+    /// bands are moved out.
+    pub fn finish(&self) -> (RangeImage, Duration) {
+        self.help();
+        let mut state = self.lock();
+        while state.rendered < self.bands {
+            if let Some(band) = state.abandoned.pop() {
+                drop(state);
+                self.render_band(band);
+                state = self.lock();
+                continue;
+            }
+            state = self
+                .changed
+                .wait(state)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+        let took = state.last.unwrap_or(self.started) - self.started;
+        let mut image = self.sensor.blank_image(self.utime);
+        let cols = self.sensor.beams.cols();
+        for (band, ranges) in state.ranges.iter_mut().enumerate() {
+            let first = band * self.rows_per_band * cols;
+            if let Some(ranges) = ranges.take() {
+                image.range[first..first + ranges.len()].copy_from_slice(&ranges);
+            }
+        }
+        (image, took)
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Bands> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// A band no thread has taken: the next from the counter, else one
+    /// abandoned.
+    fn take(&self) -> Option<usize> {
+        let band = self.next.fetch_add(1, Ordering::Relaxed);
+        if band < self.bands {
+            return Some(band);
+        }
+        self.lock().abandoned.pop()
+    }
+
+    fn render_band(&self, band: usize) {
+        // Should the casting panic, the band is handed back for another
+        // thread to take, not waited for.
+        let mut taken = Taken {
+            frame: self,
+            band: Some(band),
+        };
+        let (rows, cols) = (self.sensor.beams.rows(), self.sensor.beams.cols());
+        let first = band * self.rows_per_band;
+        let band_rows = first..(first + self.rows_per_band).min(rows);
+        let mut ranges = vec![f32::NAN; band_rows.len() * cols];
+        let scene: &dyn RayCast = match &self.polar {
+            Some(polar) => polar,
+            None => &self.view,
+        };
+        let (sensor, noise, seed) = (&*self.sensor, self.noise, self.seed);
+        render_rows(
+            sensor,
+            &self.beams,
+            scene,
+            band_rows,
+            &mut ranges,
+            noise,
+            seed,
+        );
+        taken.band = None;
+        let mut state = self.lock();
+        state.ranges[band] = Some(ranges);
+        state.rendered += 1;
+        state.last = Some(Instant::now());
+        drop(state);
+        self.changed.notify_all();
+    }
+}
+
+/// Renders `rows` of `sensor`'s image into `out` (theirs only), with range
+/// noise σ and dropouts `noise`: row `r` draws from stream `r` of the
+/// image's `seed`, so a row is the same whichever thread renders it.
+fn render_rows(
+    sensor: &SensorModel,
+    beams: &PosedBeams,
+    scene: &dyn RayCast,
+    rows: Range<usize>,
+    out: &mut [f32],
+    (sigma, dropout): (f64, f64),
+    seed: (u64, u64),
+) {
+    let first = rows.start;
+    sensor.render_rows_posed(beams, &scene, rows, out);
+    for (r, row) in out.chunks_mut(sensor.beams.cols()).enumerate() {
+        let mut rng = Rng::stream(
+            seed.0,
+            seed.1.wrapping_mul(65_536).wrapping_add((first + r) as u64),
+        );
+        for value in row {
+            if dropout > 0.0 && rng.unit() < dropout {
+                *value = f32::NAN;
+            } else if value.is_finite() && sigma > 0.0 {
+                *value = (f64::from(*value) + sigma * rng.ziggurat_normal()).max(0.01) as f32;
+            }
+        }
+    }
+}
+
+/// A band being rendered; handed back if its thread unwinds.
+struct Taken<'a> {
+    frame: &'a SharedFrame,
+    band: Option<usize>,
+}
+
+impl Drop for Taken<'_> {
+    fn drop(&mut self) {
+        if let Some(band) = self.band {
+            self.frame.lock().abandoned.push(band);
+            self.frame.changed.notify_all();
+        }
+    }
 }
 
 /// The binned ground an image of `sensor` is cast through, if any: the
@@ -88,13 +295,13 @@ pub fn render(
 /// a smaller one (found from the rays at its extreme elevations and
 /// azimuths: along a row, and along a column, a ray's heading turns one
 /// way; a ray outside the wedge is cast in the view).
-fn table<'a>(
+fn table(
     sensor: &SensorModel,
-    view: &'a TileView,
+    view: &TileView,
     world_from_vehicle: &Isometry,
     origin: Point3<f64>,
     threads: usize,
-) -> Option<PolarView<'a>> {
+) -> Option<PolarView> {
     let rays = sensor.beams.rows() * sensor.beams.cols();
     if rays >= POLAR_MIN_RAYS {
         return Some(PolarView::new(view, origin, sensor.max_range_m, threads));
@@ -348,6 +555,43 @@ mod tests {
             let bits = |i: &RangeImage| i.range.iter().map(|r| r.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&one), bits(&other), "{threads} threads");
         }
+    }
+
+    /// A frame started on one thread and finished on another (which takes
+    /// what is left, and waits for what the first is rendering) is the
+    /// frame rendered at once; a band whose thread gave up on it (it
+    /// panicked) is rendered by the thread that finishes.
+    #[test]
+    fn a_shared_frame_is_the_frame_whoever_renders_its_bands() {
+        let world = Arc::new(World::embedded("paper_loop").unwrap().unwrap());
+        let mut tiles = TileCache::new(Arc::clone(&world), 64, 2);
+        let sensor = Arc::new(SensorModel::lidar64());
+        let pose = isometry_from_xyz_rpy([5.0, 2.0, world.height(5.0, 2.0)], 0.04, -0.02, 0.7);
+        let view = tiles.view(5.0, 2.0, sensor.max_range_m + 1.0);
+        let (noise, seed) = ((0.02, 0.01), (4, 11));
+        let bits = |i: &RangeImage| i.range.iter().map(|r| r.to_bits()).collect::<Vec<_>>();
+        let at_once = render(&sensor, &view, &pose, 9, noise, seed, 1);
+        let shared = || SharedFrame::new(Arc::clone(&sensor), &view, &pose, 9, noise, seed, 1);
+        // Another thread helps from the start; this one finishes.
+        let frame = shared();
+        let (image, _) = std::thread::scope(|scope| {
+            scope.spawn(|| frame.help());
+            frame.finish()
+        });
+        assert_eq!(bits(&image), bits(&at_once));
+        // A band taken and given up, and one taken by no one yet.
+        let frame = shared();
+        let taken = frame.take().expect("a band");
+        drop(Taken {
+            frame: &frame,
+            band: Some(taken),
+        });
+        assert_eq!(frame.lock().abandoned, [taken]);
+        let (image, took) = frame.finish();
+        assert_eq!(bits(&image), bits(&at_once));
+        assert!(took > Duration::ZERO);
+        let returns = image.range.iter().filter(|r| r.is_finite()).count();
+        assert!(returns > image.range.len() / 2, "{returns} returns");
     }
 
     /// Slices rendered side by side are those rendered one by one, in the

@@ -20,6 +20,7 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 
 use arcnav_perception::{RangeImage, SensorModel};
+use arcnav_sim::sensor::SharedFrame;
 use arcnav_sim::tiles::{TileCache, TileView};
 use arcnav_vehicle::{Isometry, Utime};
 
@@ -49,13 +50,14 @@ pub(super) struct Frames {
     pub wasted: u64,
 }
 
-/// A thread that renders the frames it is sent, one at a time. It lives as
-/// long as the mission: a thread started for each frame waits a millisecond
-/// or two before a core takes it up, which is most of what overlapping
-/// saves.
+/// A thread that starts rendering each frame it is sent: it bins the
+/// ground, hands the frame over and renders bands of it until none is left
+/// to take. It lives as long as the mission: a thread started for each
+/// frame waits a millisecond or two before a core takes it up, which is
+/// most of what overlapping saves.
 struct Worker {
     jobs: mpsc::Sender<(FrameRequest, TileView)>,
-    done: mpsc::Receiver<(RangeImage, f64)>,
+    started: mpsc::Receiver<Arc<SharedFrame>>,
     thread: JoinHandle<()>,
 }
 
@@ -126,9 +128,23 @@ impl Frames {
 
     /// Waits for the frame being rendered ahead, if one is: what it was
     /// rendered from, and the frame (none from a worker that panicked).
+    ///
+    /// The mission's thread renders what the worker has not yet taken of
+    /// it: while the pipeline works, the worker renders on the other
+    /// core, and when the pipeline is done the two cores finish the frame
+    /// together. (A worker rendering on as many threads as there are cores
+    /// took half a core from the pipeline while it worked, then left that
+    /// core idle while the pipeline finished alone.)
     fn finish_ahead(&mut self) -> Option<(FrameRequest, Option<(RangeImage, f64)>)> {
         let ahead = self.ahead.take()?;
-        let frame = self.worker.as_ref().and_then(|w| w.done.recv().ok());
+        let frame = self
+            .worker
+            .as_ref()
+            .and_then(|w| w.started.recv().ok())
+            .map(|frame| {
+                let (image, took) = frame.finish();
+                (image, took.as_secs_f64() * 1e3)
+            });
         if frame.is_none() {
             self.worker = None;
         }
@@ -137,38 +153,59 @@ impl Frames {
 
     fn start_worker(&self) -> Option<Worker> {
         let (jobs, queue) = mpsc::channel::<(FrameRequest, TileView)>();
-        let (rendered, done) = mpsc::channel();
-        // One thread more than the cores: the mission's thread holds a core
-        // for part of each frame, and with a thread more the bands of rows
-        // keep both cores busy (paper_loop, lidar64: 37.5 s → 36.0 s; the
-        // pipeline's stage times, wall clock, grow with it: perception 2.7 →
-        // 4.3 ms).
-        let (sensor, noise, seed, threads) = (
+        let (handed, started) = mpsc::channel();
+        // The mission's thread holds a core while the pipeline works: the
+        // worker renders on the others (with helpers on a machine of more
+        // than two), and the mission's thread helps once it is free.
+        let (sensor, noise, seed, helpers) = (
             Arc::clone(&self.sensor),
             self.noise,
             self.seed,
-            self.threads + 1,
+            self.threads.saturating_sub(1).max(1),
         );
         let thread = std::thread::Builder::new()
             .name("render-ahead".into())
             .spawn(move || {
                 while let Ok((request, view)) = queue.recv() {
-                    let frame = render_timed(&sensor, &view, &request, noise, seed, threads);
-                    if rendered.send(frame).is_err() {
+                    let frame = Arc::new(SharedFrame::new(
+                        Arc::clone(&sensor),
+                        &view,
+                        &request.world_from_vehicle,
+                        request.utime,
+                        noise,
+                        (seed, request.stream),
+                        helpers,
+                    ));
+                    if handed.send(Arc::clone(&frame)).is_err() {
                         break;
                     }
+                    std::thread::scope(|scope| {
+                        for _ in 1..helpers {
+                            scope.spawn(|| frame.help());
+                        }
+                        frame.help();
+                    });
                 }
             })
             .ok()?;
-        Some(Worker { jobs, done, thread })
+        Some(Worker {
+            jobs,
+            started,
+            thread,
+        })
     }
 }
 
 impl Drop for Frames {
     /// The worker is told there is no more and waited for, not left running.
     fn drop(&mut self) {
-        if let Some(Worker { jobs, done, thread }) = self.worker.take() {
-            drop((jobs, done));
+        if let Some(Worker {
+            jobs,
+            started,
+            thread,
+        }) = self.worker.take()
+        {
+            drop((jobs, started));
             let _ = thread.join();
         }
     }
