@@ -14,8 +14,8 @@
 //! time per frame of its slices, rendered side by side as a mission does.
 //! Target (020 item 4, not met): a 64×2048 frame ≥ 10× faster than the
 //! ~31 ms measured in missions (≤ 3.2 ms), so lidar missions run ≥ 20× real
-//! time; 5.1 ms on two threads with the range noise on 2026-11-28 (an
-//! AMD EPYC host; the Intel hosts of that afternoon gave 11-20 ms). See
+//! time; 3.6-3.9 ms on two threads with the range noise on 2026-11-29 (an
+//! AMD EPYC host; the Intel hosts of 2026-11-28 gave 11-20 ms). See
 //! docs/simulator.md for what has been measured and tried.
 //! Run with `cargo bench -p arcnav-sim --bench render`, or `… -- lidar64`
 //! for one sensor.
