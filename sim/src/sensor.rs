@@ -197,6 +197,14 @@ impl SharedFrame {
         (image, took)
     }
 
+    /// Leaves the bands no thread has taken unrendered: a frame no one
+    /// will finish (helpers stop once their band is done; it must not be
+    /// [finished](SharedFrame::finish) after this).
+    pub fn cancel(&self) {
+        self.next.fetch_max(self.bands, Ordering::Relaxed);
+        self.lock().abandoned.clear();
+    }
+
     fn lock(&self) -> MutexGuard<'_, Bands> {
         self.state.lock().unwrap_or_else(PoisonError::into_inner)
     }
@@ -590,6 +598,13 @@ mod tests {
         let (image, took) = frame.finish();
         assert_eq!(bits(&image), bits(&at_once));
         assert!(took > Duration::ZERO);
+        // A frame thrown away: a band taken before renders, the rest not.
+        let frame = shared();
+        let taken = frame.take().expect("a band");
+        frame.cancel();
+        frame.help();
+        frame.render_band(taken);
+        assert_eq!(frame.lock().rendered, 1);
         let returns = image.range.iter().filter(|r| r.is_finite()).count();
         assert!(returns > image.range.len() / 2, "{returns} returns");
     }

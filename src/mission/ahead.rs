@@ -4,9 +4,11 @@
 //! frame has been rendered, the commands that will move the vehicle until
 //! the next frame are therefore already decided, as long as the latency is
 //! at least the frame period: where the vehicle will be when the next frame
-//! is due is known. The mission renders that frame on other threads while
+//! is due is known. The mission starts that frame on the other cores while
 //! perception, the local map, the behaviours and the arbiter work on this
-//! one on the mission's thread, and a lidar mission's two halves overlap.
+//! one on the mission's thread, which renders what is left of it when it
+//! gets there: a lidar mission's two halves overlap and both cores stay
+//! busy.
 //!
 //! A frame rendered ahead is used only when what it was rendered from (the
 //! time, the vehicle's pose bit for bit, the noise stream) is what the
@@ -87,12 +89,19 @@ impl Frames {
         tiles: &mut TileCache,
         request: &FrameRequest,
     ) -> (RangeImage, f64) {
-        match self.finish_ahead() {
+        // The mission's thread renders what the worker has not yet taken
+        // of the frame: while the pipeline worked, the worker rendered on
+        // the other core; now the two cores finish it together. (A worker
+        // rendering on as many threads as there are cores took half a core
+        // from the pipeline while it worked, then left that core idle
+        // while the pipeline finished alone.)
+        match self.take_ahead() {
             Some((ahead, Some(frame))) if ahead == *request => {
                 self.used += 1;
-                return frame;
+                let (image, took) = frame.finish();
+                return (image, took.as_secs_f64() * 1e3);
             }
-            Some(_) => self.wasted += 1,
+            Some((_, frame)) => self.throw_away(frame),
             None => {}
         }
         let view = view_for(&self.sensor, tiles, &request.world_from_vehicle);
@@ -109,8 +118,8 @@ impl Frames {
     /// Starts rendering the frame `request` asks for on other threads.
     pub(super) fn render_ahead(&mut self, tiles: &mut TileCache, request: FrameRequest) {
         // One not taken is thrown away.
-        if self.finish_ahead().is_some() {
-            self.wasted += 1;
+        if let Some((_, frame)) = self.take_ahead() {
+            self.throw_away(frame);
         }
         if self.worker.is_none() {
             self.worker = self.start_worker();
@@ -126,29 +135,25 @@ impl Frames {
         }
     }
 
-    /// Waits for the frame being rendered ahead, if one is: what it was
-    /// rendered from, and the frame (none from a worker that panicked).
-    ///
-    /// The mission's thread renders what the worker has not yet taken of
-    /// it: while the pipeline works, the worker renders on the other
-    /// core, and when the pipeline is done the two cores finish the frame
-    /// together. (A worker rendering on as many threads as there are cores
-    /// took half a core from the pipeline while it worked, then left that
-    /// core idle while the pipeline finished alone.)
-    fn finish_ahead(&mut self) -> Option<(FrameRequest, Option<(RangeImage, f64)>)> {
+    /// The frame being rendered ahead, if one is: what it was rendered
+    /// from, and the frame (none from a worker that panicked), once the
+    /// worker has binned its ground and handed it over.
+    fn take_ahead(&mut self) -> Option<(FrameRequest, Option<Arc<SharedFrame>>)> {
         let ahead = self.ahead.take()?;
-        let frame = self
-            .worker
-            .as_ref()
-            .and_then(|w| w.started.recv().ok())
-            .map(|frame| {
-                let (image, took) = frame.finish();
-                (image, took.as_secs_f64() * 1e3)
-            });
+        let frame = self.worker.as_ref().and_then(|w| w.started.recv().ok());
         if frame.is_none() {
             self.worker = None;
         }
         Some((ahead, frame))
+    }
+
+    /// A frame rendered ahead that is not the one asked for: counted, and
+    /// its bands not yet taken left unrendered.
+    fn throw_away(&mut self, frame: Option<Arc<SharedFrame>>) {
+        if let Some(frame) = frame {
+            frame.cancel();
+        }
+        self.wasted += 1;
     }
 
     fn start_worker(&self) -> Option<Worker> {
