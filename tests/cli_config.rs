@@ -162,36 +162,31 @@ fn live_figures_never_replace_the_configuration_or_the_key() {
     let (dir, config, key_path) = keyed_config("json", Some((GOOD_KEY, 0o600)), "");
     let before = std::fs::read_to_string(&config).unwrap();
     let json = dir.path().join("figures.json");
+    // `command` on the bus for 0.1 s, its figures written to `out`.
+    let live = |command: &[&str], out: &std::path::Path| {
+        let args: Vec<&str> = command
+            .iter()
+            .copied()
+            .chain(["--lcm", "memq://", "--config", config.to_str().unwrap()])
+            .chain(["--duration", "0.1", "--json", out.to_str().unwrap()])
+            .collect();
+        let (code, _, stderr) = arcnav(&args);
+        (code, format!("{args:?}"), stderr)
+    };
     for (out, expect) in [
         (&config, "it is the configuration"),
         (&key_path, "it is the key file"),
     ] {
         for command in [&["run"][..], &["node", "arbiter"]] {
-            let args: Vec<&str> = command
-                .iter()
-                .copied()
-                .chain(["--lcm", "memq://", "--config", config.to_str().unwrap()])
-                .chain(["--duration", "0.1", "--json", out.to_str().unwrap()])
-                .collect();
-            let (code, _, stderr) = arcnav(&args);
-            assert_eq!(code, 1, "{args:?}: {stderr}");
-            assert!(stderr.contains(expect), "{args:?}: {stderr}");
+            let (code, args, stderr) = live(command, out);
+            assert_eq!(code, 1, "{args}: {stderr}");
+            assert!(stderr.contains(expect), "{args}: {stderr}");
         }
     }
     assert_eq!(std::fs::read_to_string(&config).unwrap(), before);
     assert_eq!(std::fs::read_to_string(&key_path).unwrap(), GOOD_KEY);
-    let (code, _, stderr) = arcnav(&[
-        "run",
-        "--lcm",
-        "memq://",
-        "--config",
-        config.to_str().unwrap(),
-        "--duration",
-        "0.1",
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{stderr}");
+    let (code, args, stderr) = live(&["run"], &json);
+    assert_eq!(code, 0, "{args}: {stderr}");
     let figures: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert!(figures.is_object(), "{figures}");

@@ -51,10 +51,7 @@ pub fn render(
         let beams = sensor.posed_beams(world_from_vehicle);
         let polar = table(sensor, view, world_from_vehicle, beams.origin(), 1);
         let rows = 0..sensor.beams.rows();
-        let scene: &dyn RayCast = match &polar {
-            Some(polar) => polar,
-            None => view,
-        };
+        let scene = scene(polar.as_ref(), view);
         render_rows(sensor, &beams, scene, rows, &mut image.range, noise, seed);
         return image;
     }
@@ -230,10 +227,7 @@ impl SharedFrame {
         let first = band * self.rows_per_band;
         let band_rows = first..(first + self.rows_per_band).min(rows);
         let mut ranges = vec![f32::NAN; band_rows.len() * cols];
-        let scene: &dyn RayCast = match &self.polar {
-            Some(polar) => polar,
-            None => &self.view,
-        };
+        let scene = scene(self.polar.as_ref(), &self.view);
         let (sensor, noise, seed) = (&*self.sensor, self.noise, self.seed);
         render_rows(
             sensor,
@@ -251,6 +245,15 @@ impl SharedFrame {
         state.last = Some(Instant::now());
         drop(state);
         self.changed.notify_all();
+    }
+}
+
+/// What an image's rays are cast in: the ground binned around the sensor
+/// when there is a table, else the view itself.
+fn scene<'a>(polar: Option<&'a PolarView>, view: &'a TileView) -> &'a dyn RayCast {
+    match polar {
+        Some(polar) => polar,
+        None => view,
     }
 }
 

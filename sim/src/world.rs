@@ -100,28 +100,30 @@ impl WaypointSpec {
     }
 }
 
-/// The first number of `spec` (its key, dotted, and value) for which
-/// `refuse` holds.
-fn first_number(spec: &WorldSpec, refuse: impl Fn(f64) -> bool) -> Option<(String, f64)> {
-    fn walk(value: &toml::Value, key: &str, refuse: &dyn Fn(f64) -> bool) -> Option<(String, f64)> {
+/// The first number of `spec` (its key, dotted, and value) that is not
+/// finite or lies beyond [`MAX_MAGNITUDE`].
+fn first_out_of_bounds(spec: &WorldSpec) -> Option<(String, f64)> {
+    fn walk(value: &toml::Value, key: &str) -> Option<(String, f64)> {
         match value {
-            toml::Value::Float(f) if refuse(*f) => Some((key.to_owned(), *f)),
+            toml::Value::Float(f) if !f.is_finite() || f.abs() > MAX_MAGNITUDE => {
+                Some((key.to_owned(), *f))
+            }
             toml::Value::Table(t) => t.iter().find_map(|(k, v)| {
                 let key = if key.is_empty() {
                     k.clone()
                 } else {
                     format!("{key}.{k}")
                 };
-                walk(v, &key, refuse)
+                walk(v, &key)
             }),
             toml::Value::Array(a) => a
                 .iter()
                 .enumerate()
-                .find_map(|(i, v)| walk(v, &format!("{key}[{i}]"), refuse)),
+                .find_map(|(i, v)| walk(v, &format!("{key}[{i}]"))),
             _ => None,
         }
     }
-    walk(&toml::Value::try_from(spec).ok()?, "", &refuse)
+    walk(&toml::Value::try_from(spec).ok()?, "")
 }
 
 /// Every number of a world file (metres, degrees, a height file's scale)
@@ -609,13 +611,12 @@ impl World {
             origin: origin.to_owned(),
             message,
         };
-        if let Some((key, _)) = first_number(&spec, |v| !v.is_finite()) {
-            return Err(invalid(format!("{key} is not a finite number")));
-        }
-        if let Some((key, value)) = first_number(&spec, |v| v.abs() > MAX_MAGNITUDE) {
-            return Err(invalid(format!(
-                "{key} is {value:?}: numbers in a world lie within ±{MAX_MAGNITUDE}"
-            )));
+        if let Some((key, value)) = first_out_of_bounds(&spec) {
+            return Err(invalid(if value.is_finite() {
+                format!("{key} is {value:?}: numbers in a world lie within ±{MAX_MAGNITUDE}")
+            } else {
+                format!("{key} is not a finite number")
+            }));
         }
         let t = &spec.terrain;
         if !(t.size_m[0] > 0.0

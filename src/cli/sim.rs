@@ -77,11 +77,11 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     // config.toml passed back as --config was rewritten by the run.
     let files = ["mission.lcm", "report.json", "map.png", "config.toml"].map(|f| out.join(f));
     let [log_path, report_path, map_path, config_path] = &files;
-    let written: Vec<PathBuf> = files
+    let written: Vec<&Path> = files
         .iter()
-        .cloned()
-        .chain(args.save_world.iter().cloned())
-        .chain(args.mcap.iter().cloned())
+        .map(PathBuf::as_path)
+        .chain(args.save_world.as_deref())
+        .chain(args.mcap.as_deref())
         .collect();
     let mut inputs: Vec<(&str, &Path)> = Vec::new();
     inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
@@ -93,10 +93,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
             .filter(|w| w.is_file())
             .map(|w| ("the world", w)),
     );
-    arcnav::output::check_outputs(
-        &written.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
-        &inputs,
-    )?;
+    arcnav::output::check_outputs(&written, &inputs)?;
     if let Some(path) = &args.save_world {
         let text = toml::to_string(&world.spec).context("serialising the world")?;
         arcnav::output::write_file(path, text.as_bytes())
