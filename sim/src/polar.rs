@@ -563,6 +563,7 @@ impl PolarView {
     }
 
     /// [`cast_from`](Self::cast_from) for a ray already aimed.
+    #[inline(always)]
     fn cast_aimed(&self, ray: &Aimed, max_range: f64, hint: &mut usize) -> Option<f64> {
         let origin = &self.origin;
         let d = &ray.d;
@@ -656,6 +657,7 @@ impl Aimed {
     /// None for a ray (nearly) straight up or down (it has no heading) or
     /// one along a heading outside `headings`: neither is cast through the
     /// table.
+    #[inline(always)]
     fn new(d: &Vector3<f64>, headings: Headings) -> Option<Self> {
         let across = (d.x * d.x + d.y * d.y).sqrt();
         let heading = heading_of(d.x, d.y);
@@ -693,6 +695,42 @@ impl RayCast for PolarView {
         if !self.binned(origin, max_range) {
             return self.view.cast_each(origin, directions, max_range, out);
         }
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            return unsafe { self.cast_binned_avx2(origin, directions, max_range, out) };
+        }
+        self.cast_binned(origin, directions, max_range, out);
+    }
+}
+
+impl PolarView {
+    /// [`cast_binned`](Self::cast_binned) compiled for AVX2: the same
+    /// operations (no fused multiply-add), so the same ranges, in the
+    /// three-operand encodings (fewer register copies) and with wider
+    /// lanes for the aiming. About 5 % of a frame (docs/simulator.md).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn cast_binned_avx2(
+        &self,
+        origin: &Point3<f64>,
+        directions: &[Vector3<f64>],
+        max_range: f64,
+        out: &mut [f32],
+    ) {
+        self.cast_binned(origin, directions, max_range, out);
+    }
+
+    /// Rays from the table's origin cast through the table, a batch at a
+    /// time aimed before any is cast.
+    #[inline(always)]
+    fn cast_binned(
+        &self,
+        origin: &Point3<f64>,
+        directions: &[Vector3<f64>],
+        max_range: f64,
+        out: &mut [f32],
+    ) {
         // Aimed a batch at a time, on the stack.
         let mut aimed = [None; AIM_BATCH];
         let mut hint = 0;
@@ -917,5 +955,47 @@ mod tests {
             "{inside} in, {outside} out"
         );
         assert!(hits > 1000 && hits < inside + outside - 1000, "{hits} hits");
+    }
+    #[test]
+    fn rays_cast_with_avx2_meet_what_the_portable_cast_meets_bit_for_bit() {
+        #[cfg(target_arch = "x86_64")]
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            arcnav_testkit::missing("AVX2 (the cast compiled for it)");
+            return;
+        }
+        let world = Arc::new(World::embedded("paper_loop").unwrap().unwrap());
+        let mut cache = TileCache::new(Arc::clone(&world), 64, 2);
+        let range = 45.0;
+        let mut hits = 0;
+        // A 64-beam lidar's rows from 2.4 m up, level and on a slope
+        // (a tilted sensor's rows are not cones round the vertical).
+        for &(x, y, tilt) in &[(0.013, 0.029, 0.0), (60.0, 35.0, 0.2), (12.8, 25.6, -0.15)] {
+            let view = cache.view(x, y, range + 1.0);
+            let origin = Point3::new(x, y, world.height(x, y) + 2.4);
+            let polar = PolarView::new(&view, origin, range, 2);
+            for row in 0..64 {
+                let elevation = (2.0 - 0.5 * f64::from(row)).to_radians();
+                let directions: Vec<Vector3<f64>> = (0..2048)
+                    .map(|col| {
+                        let azimuth = f64::from(col) / 2048.0 * std::f64::consts::TAU;
+                        let (a, e) = (azimuth, elevation + tilt * azimuth.cos());
+                        Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin())
+                    })
+                    .collect();
+                let mut dispatched = vec![0.0f32; directions.len()];
+                let mut portable = vec![0.0f32; directions.len()];
+                polar.cast_each(&origin, &directions, range, &mut dispatched);
+                polar.cast_binned(&origin, &directions, range, &mut portable);
+                for (col, (a, b)) in dispatched.iter().zip(&portable).enumerate() {
+                    assert!(
+                        a.to_bits() == b.to_bits(),
+                        "from {origin}, row {row}, column {col}: {a} vs {b}"
+                    );
+                }
+                hits += portable.iter().filter(|r| r.is_finite()).count();
+            }
+        }
+        // Most rays below the horizon met the ground.
+        assert!(hits > 3 * 2048 * 40, "{hits} hits");
     }
 }

@@ -304,6 +304,7 @@ impl TileView {
     /// face or its top. The cells `walk` visits, with the tile found once
     /// and again only where the walk leaves it (the hot loop of a frame
     /// cast through [`crate::polar::PolarView`]).
+    #[inline(always)]
     pub(crate) fn cast_cells(
         &self,
         origin: &Point3<f64>,
