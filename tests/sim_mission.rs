@@ -803,6 +803,14 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
 /// comes back to the ditch after its first turn, loses the ditch's cells
 /// from the map while turning in place, turns for 12 legs and then once
 /// more before going round (2026-11-28): not fixed, hence "all but one".
+///
+/// Since 2026-11-29 a drop-off is suspected wherever the gap to the return
+/// beyond may hide a hole wider than the wheels bridge (not only where the
+/// ray alone ran that far below the edge): the ditch's edge straight ahead
+/// is suspected in most frames, not in patches, and kept. Without the
+/// trust factor (`drop_off_trust_factor = 0`), which had got stuck with
+/// seed 1, the vehicle now completes with every seed too (measured, six
+/// seeds, one recovery each); that control is no longer asserted.
 #[test]
 fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
     let world = format!(
@@ -823,19 +831,6 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
         turned_once.len() + 1 >= runs[0].len(),
         "one turn towards the near end only with {turned_once:?}"
     );
-    let (_, stuck) = first_seed_showing(
-        "ditch-ends",
-        (
-            "as-before",
-            "lidar64",
-            "[localmap]\ndrop_off_trust_factor = 0\n",
-        ),
-        &args,
-        // Stuck with seed 1 of 1-6 (2026-11-28).
-        [1, 2, 3, 4, 5, 6],
-        |report| report["outcome"] == "stuck",
-    );
-    assert!(stuck, "as before, never stuck");
 }
 
 /// `tests/worlds/ledge.toml` with the 64-beam lidar at the default speed:

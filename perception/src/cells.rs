@@ -411,20 +411,27 @@ impl DropOffRule<'_> {
 
     /// Whether the return (`d`, `z`) of column `col` is the near edge of a
     /// *suspected* drop-off, its gap to the column's previous return
-    /// (`previous`, the far side) being longer than `max_gap` and dipping
-    /// under it by `v` = `z − z_f`, less than δ. From a sensor `H` above
-    /// the edge at horizontal distance `d`, the ray falls `s = H/d` per
-    /// metre, so it ran `v/s` (horizontally) below the edge's height before
-    /// it met the far side: a hole at least that wide, of a depth the image
+    /// (`previous`, the far side, at `d_f`) being longer than `max_gap` and
+    /// dipping under it by `v` = `z − z_f`, less than δ. From a sensor `H`
+    /// above the edge at horizontal distance `d`, the ray falls `s = H/d`
+    /// per metre, so it ran `v/s` (horizontally) below the edge's height
+    /// before it met the far side; between the edge's return and where that
+    /// ray would have met level ground (a row's spacing) nothing was seen.
+    /// So a hole anywhere from `v/s` to `d_f − d` wide, of a depth the image
     /// cannot tell (000 §4.2: "Larger gaps are problematic because they may
     /// contain dangerous negative obstacles").
     ///
     /// It is suspected when
     /// - `v > noise + Δ·d` (not range noise),
-    /// - `v/s · |cos φ| > max_gap`, `φ` the column's bearing from the
-    ///   vehicle's heading: the width along the heading exceeds what the
-    ///   wheels bridge (a slot across the way, seen by a column 50° off,
-    ///   is crossed 1.6 times its width along the ray), and
+    /// - `(d_f − d) · |cos φ| > max_gap`, `φ` the column's bearing from the
+    ///   vehicle's heading: the hole may be wider along the heading than
+    ///   the wheels bridge (a slot across the way, seen by a column 50°
+    ///   off, is crossed 1.6 times its width along the ray). Asking that
+    ///   the ray's run `v/s` alone exceed it, a ditch little wider than
+    ///   `max_gap` was suspected only where a row happened to land within
+    ///   `w − max_gap` of its edge: straight ahead, where a band of
+    ///   columns lands alike, none did, and the ERIM drove into a 0.9 m
+    ///   ditch through that gap (2026-11-29); and
     /// - the return beyond the far side lies at least `v/2` above it: the
     ///   ground rises back (a crest falling away does not).
     #[cold]
@@ -444,7 +451,7 @@ impl DropOffRule<'_> {
         }
         let [x, y, _] = projection.direction(self.order[position] as usize, col);
         let along_heading = x.abs() / x.hypot(y).max(f32::MIN_POSITIVE);
-        v / fall * along_heading > self.max_gap
+        (previous.d - d) * along_heading > self.max_gap
             && previous.beyond_d < f32::INFINITY
             && previous.beyond_z - previous.z > 0.5 * v
     }

@@ -92,10 +92,9 @@ pub struct DropOffConfig {
     pub noise_m: f64,
     /// Cost of a *suspected* drop-off (0: none are reported). From afar a
     /// hole shows only `w·H/R` of its far side, less than δ; a near edge
-    /// whose gap dips at least `noise_m + Δ·r` under it, by a depth that
-    /// puts the ray at least `max_gap_m` (along the vehicle's heading)
-    /// below the edge before it meets the far side, with the return beyond
-    /// rising back at least halfway, may be a hole and is reported as
+    /// whose gap, longer than `max_gap_m` along the vehicle's heading, dips
+    /// at least `noise_m + Δ·r` under it, with the return beyond rising
+    /// back at least halfway, may be a hole and is reported as
     /// graded ground of this cost with the reason drop-off. Obstacle
     /// avoidance slows for it to the speed at which a hole there will be
     /// flagged in time.

@@ -789,9 +789,14 @@ impl SeenGround {
             .shadows
             .sectors
             .clone_from(&self.report.shadows.sectors);
+        // What the grid evaluator counts again when it writes its cells
+        // (the drop-offs, suspected ones graded, among them): zero here,
+        // or they were counted twice.
         Ok(ImageStats {
             cells_evaluated: 0,
             untraversable: 0,
+            graded: 0,
+            suspected: 0,
             by_reason: [0; Reasons::ALL.len()],
             regions: 0,
             ..stats
