@@ -956,6 +956,7 @@ mod tests {
         );
         assert!(hits > 1000 && hits < inside + outside - 1000, "{hits} hits");
     }
+
     #[test]
     fn rays_cast_with_avx2_meet_what_the_portable_cast_meets_bit_for_bit() {
         #[cfg(target_arch = "x86_64")]
