@@ -237,6 +237,32 @@ impl DStarLite {
         self.rhs[cell].min(self.g[cell])
     }
 
+    /// What driving along `cells` costs at today's `costs`: the sum of the
+    /// edges between consecutive cells, as the plan counts them (∞ where
+    /// one is impassable, a diagonal cuts an impassable corner, or two
+    /// cells are not neighbours).
+    pub fn path_cost(&self, costs: &[f32], cells: &[usize]) -> f32 {
+        cells
+            .windows(2)
+            .map(|pair| {
+                let ((ux, uy), (vx, vy)) = (self.xy(pair[0]), self.xy(pair[1]));
+                if (ux - vx).abs().max((uy - vy).abs()) == 1 {
+                    self.edge(costs, pair[0], pair[1])
+                } else {
+                    INF
+                }
+            })
+            .sum()
+    }
+
+    /// Octile distance between two cells, in cells (what crossing from one
+    /// to the other costs at the least, on free ground).
+    pub fn octile(&self, u: usize, v: usize) -> f32 {
+        let ((ux, uy), (vx, vy)) = (self.xy(u), self.xy(v));
+        let (dx, dy) = ((ux - vx).abs() as f32, (uy - vy).abs() as f32);
+        dx.max(dy) + (SQRT_2 - 1.0) * dx.min(dy)
+    }
+
     /// The cells of the plan from the start, at most `max_cells` of them
     /// after the start, into `path` (cleared first).
     pub fn path(&self, costs: &[f32], max_cells: usize, path: &mut Vec<usize>) {
@@ -315,10 +341,7 @@ impl DStarLite {
 
     /// Octile distance times the lowest cell cost.
     fn heuristic(&self, a: usize, b: usize) -> f32 {
-        let ((ax, ay), (bx, by)) = (self.xy(a), self.xy(b));
-        let (dx, dy) = ((ax - bx).unsigned_abs(), (ay - by).unsigned_abs());
-        let (long, short) = (dx.max(dy) as f32, dx.min(dy) as f32);
-        (long + (SQRT_2 - 1.0) * short) * self.min_cost
+        self.octile(a, b) * self.min_cost
     }
 
     fn neighbours(&self, u: usize) -> impl Iterator<Item = usize> + use<> {

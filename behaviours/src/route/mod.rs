@@ -48,6 +48,14 @@
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
 //!   waypoint outside the memory is sought where the line to it leaves it.
+//! - **Holding to a way**: the path followed is kept, all of it to the
+//!   goal, while following it from the vehicle costs at most
+//!   `hold_fraction` more than the plan (and it stays passable); else the
+//!   plan's is followed from then on. Each image shows a little more, and
+//!   the plan alone flips between ways of about the same cost (the two
+//!   ends of a ditch across the way, each farther than it looked as more
+//!   of the ditch is seen): a vehicle turning to each in turn goes
+//!   neither way.
 //! - **Votes**: for the arcs that head for the point of the path
 //!   `lookahead_m` from the vehicle (`lookahead_s` of driving at the cruise
 //!   speed, if farther) or, with `sight_line`, for the farthest point of
@@ -122,6 +130,10 @@ pub struct RouteConfig {
     pub pass_radius_factor: f64,
     /// Vertices a cycle's planning may expand at most (it carries on next cycle).
     pub max_expansions: u64,
+    /// The path being followed is kept while it costs at most this
+    /// fraction more than the best plan (0: always the best plan). See
+    /// `Route::hold_or_switch`.
+    pub hold_fraction: f64,
 }
 
 impl Default for RouteConfig {
@@ -142,6 +154,7 @@ impl Default for RouteConfig {
             arrival_radius_m: 5.0,
             pass_radius_factor: 2.0,
             max_expansions: 200_000,
+            hold_fraction: 0.25,
         }
     }
 }
@@ -230,6 +243,12 @@ pub struct RouteStats {
     pub shut_cells: u64,
     /// Shut cells opened again because they left no way, in all.
     pub reopened_cells: u64,
+    /// Cycles the path being followed was kept though the plan found a
+    /// cheaper one (within `hold_fraction`).
+    pub held_cycles: u64,
+    /// Times the path being followed was left for the plan's: it became
+    /// impassable, or cost more than `hold_fraction` over the plan's.
+    pub path_switches: u64,
 }
 
 /// The route behaviour.
@@ -273,6 +292,11 @@ pub struct Route {
     /// World point the last vote steered for, and whether it lay on a
     /// planned path (else the waypoint, with no path).
     aimed_at: Option<([f64; 2], bool)>,
+    /// The path being followed, all the way to the goal cell (empty: none
+    /// yet, or the goal or the memory moved).
+    held: Vec<usize>,
+    /// Index in `held` of its cell nearest the vehicle.
+    held_at: usize,
 }
 
 impl Route {
@@ -302,6 +326,8 @@ impl Route {
             backing: false,
             flood: Vec::new(),
             aimed_at: None,
+            held: Vec::new(),
+            held_at: 0,
             config,
         }
     }
@@ -324,7 +350,7 @@ impl Route {
         // state, costs, hits, graded; the planner's g, rhs, queued key, marks.
         n * (1 + 4 + 4 + std::mem::size_of::<(u32, u8)>())
             + n * (4 + 4 + 12 + 4)
-            + (self.path.capacity() + self.flood.capacity()) * 8
+            + (self.path.capacity() + self.flood.capacity() + self.held.capacity()) * 8
     }
 
     /// Memory cell of world point (x, y), if inside.
@@ -488,6 +514,76 @@ impl Route {
             _ => 1.0,
         };
         base * factor as f32
+    }
+
+    /// Sets `path` to the cells the vehicle follows next (as many as the
+    /// lookahead needs, after its own): those of the path being followed
+    /// while it costs no more than `hold_fraction` over the best plan
+    /// (from the vehicle), else the plan's, which becomes the path
+    /// followed. A plan alone flips between ways of about the same cost as
+    /// each image shows a little more: the two ends of a ditch across the
+    /// way, each farther than it looked as more of the ditch is seen, or a
+    /// detour and a crossing of suspected ground; the vehicle, turning to
+    /// each in turn, went neither way (`ditch_across` at 5.3 m/s: 78 s of
+    /// turning on the spot, stuck). A driver keeps to the side chosen
+    /// until the other is clearly better, or this one is shut, as bug
+    /// algorithms keep to a wall.
+    fn hold_or_switch(&mut self, start: usize) {
+        let steps = (2.0 * self.aim_m / self.config.cell_m).ceil() as usize + 2;
+        let best = self.planner.cost_to_goal(start);
+        let limit = best * (1.0 + self.config.hold_fraction as f32);
+        let held = self.held_cost(start, steps);
+        match held {
+            Some((at, cost)) if cost <= limit => {
+                self.held_at = at;
+                if cost > best * (1.0 + 1e-4) {
+                    self.stats.held_cycles += 1;
+                }
+            }
+            _ => {
+                if !self.held.is_empty() {
+                    self.stats.path_switches += 1;
+                    tracing::debug!(
+                        held = held.map_or(f32::INFINITY, |(_, cost)| cost),
+                        plan = best,
+                        "route: the path followed left for the plan's"
+                    );
+                }
+                self.planner
+                    .path(&self.costs, self.state.len(), &mut self.path);
+                self.held.clear();
+                self.held.push(start);
+                self.held.extend_from_slice(&self.path);
+                self.held_at = 0;
+            }
+        }
+        let next = (self.held_at + 1).min(self.held.len());
+        self.path.clear();
+        self.path
+            .extend(self.held[next..].iter().take(steps).copied());
+    }
+
+    /// Where the vehicle in cell `start` is on the path being followed
+    /// (the index of its nearest cell near where it was last cycle,
+    /// `steps` on at most) and what following it to the goal costs from
+    /// there: the octile distance to that cell at free ground's cost, then
+    /// the path's edges at today's costs. None when there is no such path,
+    /// the vehicle is farther from it than the lookahead, or it is no
+    /// longer passable.
+    fn held_cost(&self, start: usize, steps: usize) -> Option<(usize, f32)> {
+        if self.config.hold_fraction <= 0.0 || self.held.is_empty() {
+            return None;
+        }
+        let back = (self.aim_m / self.config.cell_m).ceil() as usize;
+        let window = self.held_at.saturating_sub(back)..(self.held_at + steps).min(self.held.len());
+        let (at, off) = window
+            .map(|k| (k, self.planner.octile(start, self.held[k])))
+            .min_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))?;
+        if f64::from(off) * self.config.cell_m > self.aim_m {
+            return None;
+        }
+        let cost = off + self.planner.path_cost(&self.costs, &self.held[at..]);
+        cost.is_finite().then_some((at, cost))
     }
 
     /// The farthest point of the planned path that the vehicle at `here`
@@ -894,6 +990,7 @@ impl Behaviour for Route {
         if moved || self.goal != Some((index, goal)) {
             self.goal = Some((index, goal));
             self.planner.reset(start, goal);
+            self.held.clear();
         } else {
             self.planner.move_start(start);
             self.planner.cells_changed(&self.costs, &self.changed);
@@ -918,14 +1015,14 @@ impl Behaviour for Route {
                 );
             }
             self.has_path = false;
+            self.held.clear();
             self.aimed_at = Some((target, false));
             vote_towards(ctx, &self.response, target, reach, votes);
             return;
         }
         self.has_path = true;
+        self.hold_or_switch(start);
         // The point of the path `reach` from the vehicle.
-        let steps = (2.0 * reach / self.config.cell_m).ceil() as usize + 2;
-        self.planner.path(&self.costs, steps, &mut self.path);
         let carrot = if self
             .goal
             .is_some_and(|(_, c)| self.cell_at(target[0], target[1]) == Some(c))
@@ -967,14 +1064,13 @@ impl Behaviour for Route {
             [cos * dx + sin * dy, -sin * dx + cos * dy]
         };
         if self.has_path {
-            let mut path = Vec::new();
             let cells = (OVERLAY_PATH_M / self.config.cell_m).ceil() as usize;
-            self.planner.path(&self.costs, cells, &mut path);
             let from = self.planner.start();
+            let followed = self.held.iter().skip(self.held_at).take(cells);
             overlay.lines.push(OverlayLine {
                 label: "route: planned path".to_owned(),
                 points: std::iter::once(from)
-                    .chain(path)
+                    .chain(followed.copied().filter(|&c| c != from))
                     .map(|c| local(self.centre(c)))
                     .collect(),
             });
@@ -1012,6 +1108,7 @@ impl Behaviour for Route {
 
     fn reset(&mut self) {
         self.aimed_at = None;
+        self.held.clear();
         self.tracker.reset();
         self.origin = None;
         self.goal = None;
@@ -1034,6 +1131,8 @@ impl Behaviour for Route {
             ("no_path_cycles", self.stats.no_path_cycles),
             ("shut_cells", self.stats.shut_cells),
             ("reopened_cells", self.stats.reopened_cells),
+            ("held_cycles", self.stats.held_cycles),
+            ("path_switches", self.stats.path_switches),
         ]
     }
 }
@@ -1063,6 +1162,7 @@ impl Plugin for Route {
         config::in_range("suspect_cost", c.suspect_cost, 0.0, 1000.0)?;
         config::in_range("shut_unseen_m", c.shut_unseen_m, 0.0, 100.0)?;
         config::in_range("shut_along_m", c.shut_along_m, 0.0, 200.0)?;
+        config::in_range("hold_fraction", c.hold_fraction, 0.0, 10.0)?;
         if c.suspect_cost > 0.0 && c.suspect_cost < 1.0 {
             // Cheaper than free ground, it would break the planner's
             // heuristic (a cell costs at least 1).
