@@ -28,20 +28,22 @@
 //!   `vehicle.max_speed_mps`.
 //!
 //! A hole is seen differently (016: "no data is not free ground"). Its
-//! near edge is flagged a drop-off when the ray that grazed it meets the
+//! near edge is flagged a drop-off when a ray that passed it meets the
 //! far side more than `δ = δ0 + Δ·R` below the edge
 //! (`[perception.drop_off]`, 000 §4.2's gap rule). From a sensor `H` above
 //! the ground a ray falls `H/R` per metre at range `R`, so across a hole
-//! `w` wide it shows `w·H/R` of the far side, whatever the hole's depth.
-//! A hole the wheels do not bridge (`w = max_gap_m`) is therefore certain
-//! to be flagged only within the `R` that solves `Δ·R² + δ0·R = w·H`, and
-//! only where the rows of returns are closer than `w` on the ground
-//! (`R²·δθ/H ≤ w`). `hole_range_m` is the smaller, within the sensor's
-//! range and the window, and `hole_bound_mps` the same stop-or-swerve
-//! bound over it: 8.4 m and 4.0 m/s for the 64-beam lidar 2.4 m up, where
-//! steps allow 10 m/s (but see below: the ray grazing the edge is the
-//! best case). A hole across the whole way cannot be swerved
-//! round; the swerve counts for one narrower than the way.
+//! `w` wide the ray grazing its edge shows `w·H/R` of the far side,
+//! whatever the hole's depth: for a hole the wheels do not bridge
+//! (`w = max_gap_m`) that is more than `δ` within the `R` that solves
+//! `Δ·R² + δ0·R = w·H`, where rows of returns lie closer than `w` on the
+//! ground (`R²·δθ/H ≤ w`): `hole_grazed_m`, 8.4 m for the 64-beam lidar
+//! 2.4 m up. But no ray need graze the edge (below), and counted as the
+//! suspicion is, the hole is certain to be flagged only within
+//! `(Δ + δθ)·R² + δ0·R = w·H`: `hole_range_m`, 6.9 m for that lidar, and
+//! `hole_bound_mps` the stop-or-swerve bound over it, 3.2 m/s. (Until
+//! 2026-11-29 the report gave the grazing range as certain.) A hole
+//! across the whole way cannot be swerved round; the swerve counts for
+//! one narrower than the way.
 //!
 //! From farther, such a hole is at least *suspected*: its near edge is
 //! reported as a suspected drop-off when the dip exceeds `noise_m + Δ·R`
@@ -67,14 +69,11 @@
 //! the 128-beam one, 10.3 m and 4.19 m/s for the ERIM.
 //! `[lookahead] hole_speed_cap` holds the cruise speed to it.
 //!
-//! `hole_range_m` above is still the range at which the ray grazing the
-//! edge flags the hole, on rows closer than `w`, what the local map's
-//! `hole_range_m` and obstacle avoidance's `hole_seen_within_m` were
-//! tuned with; counted the same way as the suspicion, `(Δ + δθ)·R² +
-//! δ0·R = w·H`, it is 6.9 m for the 64-beam lidar. Moving those two
-//! settings to it changed how long holes are remembered, and
-//! `short_course` at 10 m/s then met a hole while backing beside it with
-//! one noise seed of six (2026-11-29); left for a change of its own.
+//! The local map's `hole_range_m` and obstacle avoidance's
+//! `hole_seen_within_m` are set from `hole_grazed_m`, what they were tuned
+//! with: moved to the certain 6.9 m, the local map remembered holes
+//! differently and `short_course` at 10 m/s met a hole while backing
+//! beside it with one noise seed of six (2026-11-29).
 
 use serde::Serialize;
 
@@ -98,13 +97,18 @@ pub struct SpeedBound {
     /// The sensor's vertical angle between adjacent beams, degrees.
     pub beam_spacing_deg: f64,
     /// Range within which a hole the wheels do not bridge is certain to be
-    /// flagged, and the stop-or-swerve speed over it, m and m/s (none when
-    /// `[perception.drop_off]` is off).
+    /// flagged, whichever row lands first past its edge
+    /// (`(Δ + δθ)·R² + δ0·R = w·H`), and the stop-or-swerve speed over
+    /// it, m and m/s (none when `[perception.drop_off]` is off).
     pub hole_range_m: Option<f64>,
     pub hole_bound_mps: Option<f64>,
-    /// How far the front is from such a hole when it is flagged, m
-    /// (`hole_range_m` less the sensor's setback from the front): what
-    /// obstacle avoidance's `hole_seen_within_m` is set to.
+    /// Range within which the ray grazing such a hole's edge flags it, on
+    /// rows closer than the hole is wide (`Δ·R² + δ0·R = w·H`), m: the best
+    /// case, what the local map's `hole_range_m` is set to.
+    pub hole_grazed_m: Option<f64>,
+    /// How far the front is from such a hole when the grazing ray flags
+    /// it, m (`hole_grazed_m` less the sensor's setback from the front):
+    /// what obstacle avoidance's `hole_seen_within_m` is set to.
     pub hole_seen_within_m: Option<f64>,
     /// Range within which such a hole is certain to be at least
     /// *suspected*, whichever row lands first past its edge (its dip
@@ -243,7 +247,8 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel, window: 
     let grazed_within = |step: f64| reach(solve(per_m, step).min(rows));
     let certain_within = |step: f64| reach(solve(per_m + spacing, step));
     let holes = drop_off.enabled && height > 0.0;
-    let hole_range = holes.then(|| grazed_within(drop_off.min_depth_m));
+    let hole_grazed = holes.then(|| grazed_within(drop_off.min_depth_m));
+    let hole_range = holes.then(|| certain_within(drop_off.min_depth_m));
     let hole_bound = hole_range.map(|range| {
         let (stop, swerve) = manoeuvres(free_within(range));
         stop.max(swerve).min(v.max_speed_mps)
@@ -260,7 +265,8 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel, window: 
         beam_spacing_deg: spacing.to_degrees(),
         hole_range_m: hole_range,
         hole_bound_mps: hole_bound,
-        hole_seen_within_m: hole_range.map(free_within),
+        hole_grazed_m: hole_grazed,
+        hole_seen_within_m: hole_grazed.map(free_within),
         suspect_range_m: suspect_range,
         suspect_bound_mps: suspect_range
             .map(|range| stopping(free_within(range)).min(v.max_speed_mps)),
@@ -311,10 +317,12 @@ mod tests {
     }
 
     /// 016's holes: the 64-beam lidar 2.4 m up shows a 0.77 m hole's far
-    /// side 0.2 m + 0.0025·R down only within 8.4 m (`Δ·R² + δ0·R = w·H`),
-    /// well inside the 27 m at which it resolves a 20 cm step, so holes
-    /// hold the speed far lower; mounted higher it sees them farther; with
-    /// drop-off detection off there is no such bound.
+    /// side 0.2 m + 0.0025·R down to the ray grazing its edge only within
+    /// 8.4 m (`Δ·R² + δ0·R = w·H`), and to whichever row lands first past
+    /// it only within 6.9 m (`(Δ + δθ)·R² + δ0·R = w·H`), well inside the
+    /// 27 m at which it resolves a 20 cm step, so holes hold the speed far
+    /// lower; mounted higher it sees them farther; with drop-off detection
+    /// off there is no such bound.
     #[test]
     fn holes_are_seen_nearer_than_steps_and_a_higher_mount_sees_them_farther() {
         let mut lidar = Config::default();
@@ -324,26 +332,40 @@ mod tests {
         // would reach 25 m).
         lidar.lookahead.hole_speed_cap = false;
         let b = speed_bound(&lidar).unwrap();
-        let range = b.hole_range_m.unwrap();
         let d = &lidar.perception.drop_off;
-        let shown = d.max_gap_m * 2.4 / range;
+        let grazed = b.hole_grazed_m.unwrap();
+        let shown = d.max_gap_m * 2.4 / grazed;
+        assert!(
+            (shown - (d.min_depth_m + d.depth_per_m * grazed)).abs() < 1e-9,
+            "{b:?}"
+        );
+        assert!((8.0..9.0).contains(&grazed), "{b:?}");
+        let range = b.hole_range_m.unwrap();
+        let spacing = range * range * b.beam_spacing_deg.to_radians() / 2.4;
+        let shown = (d.max_gap_m - spacing) * 2.4 / range;
         assert!(
             (shown - (d.min_depth_m + d.depth_per_m * range)).abs() < 1e-9,
             "{b:?}"
         );
-        assert!((8.0..9.0).contains(&range), "{b:?}");
+        assert!((6.5..7.5).contains(&range), "{b:?}");
         assert!(b.detection_range_m > 25.0, "{b:?}");
         let hole = b.hole_bound_mps.unwrap();
         assert!(hole < 0.5 * b.bound_mps, "{b:?}");
         let mut higher = lidar.clone();
         higher.sensor.mount_position_m = Some([1.2, 0.0, 3.6]);
         let h = speed_bound(&higher).unwrap();
-        assert!(h.hole_range_m.unwrap() > 1.4 * range, "{h:?}");
+        // Half as high again: the grazing ray's range 1.44 times, the
+        // certain one 1.37 (the rows' spacing grows with R² as the dip).
+        assert!(h.hole_grazed_m.unwrap() > 1.4 * grazed, "{h:?}");
+        assert!(h.hole_range_m.unwrap() > 1.3 * range, "{h:?}");
         assert!(h.hole_bound_mps.unwrap() > hole);
         let mut off = lidar.clone();
         off.perception.drop_off.enabled = false;
         let o = speed_bound(&off).unwrap();
-        assert_eq!((o.hole_range_m, o.hole_bound_mps), (None, None));
+        assert_eq!(
+            (o.hole_range_m, o.hole_bound_mps, o.hole_grazed_m),
+            (None, None, None)
+        );
         assert_eq!(o.bound_mps, b.bound_mps);
     }
 
@@ -396,7 +418,7 @@ mod tests {
         let rows = (d.max_gap_m * 2.4 / b.beam_spacing_deg.to_radians()).sqrt();
         assert!(range < rows && d.max_gap_m * 2.4 / range > d.noise_m + d.depth_per_m * range);
         assert!(range > b.hole_range_m.unwrap() && bound > b.hole_bound_mps.unwrap());
-        let setback = b.hole_range_m.unwrap() - b.hole_seen_within_m.unwrap();
+        let setback = b.hole_grazed_m.unwrap() - b.hole_seen_within_m.unwrap();
         let (t, a) = (b.reaction_s, lidar.vehicle.max_deceleration_mps2);
         let stopped_in = bound * t + bound * bound / (2.0 * a);
         assert!((stopped_in - (range - setback)).abs() < 1e-9, "{b:?}");

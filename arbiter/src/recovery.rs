@@ -32,8 +32,12 @@
 //! ahead again, for a second: a route's path can swing for a cycle as it
 //! re-plans; a wish for the other side's hardest arc, the way still
 //! behind, does not end it), after `turn_max_legs` legs, or when no leg is
-//! clear. One turn counts as one recovery; a turn left unfinished is taken
-//! up towards the same side by the next one (until `progress_m` of driving).
+//! clear. When the way comes to lie ahead on the other side (that side's
+//! hardest arc wished for with a vote of 0 or more, for a second: a route
+//! that found one end of a ditch shut goes round the other), the turn goes
+//! that way, the short way to it. One turn counts as one recovery; a turn
+//! left unfinished is taken up towards the same side by the next one
+//! (until `progress_m` of driving).
 //!
 //! **Backing out the way it came.** When no manoeuvre can start (no
 //! backward arc is clear) or a turn round ends with no leg clear (a lane
@@ -216,6 +220,9 @@ pub struct RecoveryStats {
     pub turn_legs: u64,
     /// Heading turned by them (estimated from the commands), degrees.
     pub turned_deg: f64,
+    /// Turns that went the other way when the way came to lie ahead on
+    /// that side.
+    pub turns_reversed: u64,
     /// Of the recoveries, retraces of the vehicle's own path.
     pub retraces: u64,
     /// Metres retraced (estimated from the commands), m.
@@ -359,6 +366,8 @@ pub(crate) struct Recovery {
     model: Option<MotionModel>,
     /// Turning round: since when the way has lain ahead.
     wish_ahead_since: Option<Utime>,
+    /// Since when the way has lain ahead on the other side of a turn.
+    other_side_since: Option<Utime>,
     /// The side of a turn that ended with no leg clear, until the vehicle
     /// has made progress or a turn has finished.
     unfinished_turn: Option<f64>,
@@ -397,6 +406,7 @@ impl Recovery {
             forward_since_recovery_m: 0.0,
             model: None,
             wish_ahead_since: None,
+            other_side_since: None,
             unfinished_turn: None,
             turn_deg: 0.0,
             cramped: false,
@@ -523,6 +533,34 @@ impl Recovery {
                     tracing::info!(t_s = micros_to_seconds(now), legs, "turned round");
                     self.unfinished_turn = None;
                     return self.end(now, blocked);
+                }
+                // The way lies ahead on the other side (that side's hardest
+                // arc wished for, with a vote of 0 or more: a route that
+                // found this side shut and goes round the other end), for a
+                // second: turn that way, the shorter way to it. A way behind
+                // (every vote below 0, as at the end of a cul-de-sac) does
+                // not turn the turn: it passes from side to side as the
+                // heading swings past it.
+                let other = behind
+                    .wished()
+                    .is_some_and(|wish| wish.turn * side <= -1.0 + 1e-9 && wish.vote >= 0.0);
+                let other_since = other.then(|| self.other_side_since.unwrap_or(now));
+                self.other_side_since = other_since;
+                if other_since.is_some_and(|since| now - since >= seconds_to_micros(WISH_HELD_S))
+                    && let Some(next) = self
+                        .choose_leg(-side, false, behind)
+                        .or_else(|| self.choose_leg(-side, true, behind))
+                {
+                    tracing::info!(
+                        t_s = micros_to_seconds(now),
+                        legs,
+                        side = -side,
+                        "turning round: the way lies ahead on the other side, turning that way"
+                    );
+                    self.stats.turns_reversed += 1;
+                    self.other_side_since = None;
+                    self.start_turn_leg(-side, next, legs + 1);
+                    return self.step(now, blocked, safe, behind);
                 }
                 if let Some(command) = self.drive(now, &leg, behind) {
                     return Outcome::Drive(command);
@@ -832,6 +870,7 @@ impl Recovery {
         self.stats.turn_legs += 1;
         if legs == 1 {
             self.wish_ahead_since = None;
+            self.other_side_since = None;
             self.stalled_since = None;
         }
         tracing::info!(

@@ -313,6 +313,56 @@ fn the_turn_ends_once_the_way_has_lain_ahead_for_a_second() {
     assert!(!a.is_backing_up());
 }
 
+/// The way lies ahead to the right: the hardest right arc is wished for,
+/// and it leads towards the way (a vote of 0 or more).
+fn ahead_right(arc: usize) -> f32 {
+    0.4 - 0.8 * arc as f32 / 38.0
+}
+
+/// The way lies behind and to the right: every arc leads away, the hard
+/// right one least.
+fn behind_right(arc: usize) -> f32 {
+    -0.4 - 0.5 * arc as f32 / 38.0
+}
+
+/// Turning left for a way behind on the left, the way comes to lie ahead
+/// on the right (a route that found the left end of a ditch shut and now
+/// goes round the right one): a second later the legs turn the heading
+/// right, the short way to it, not the 270° on. A way behind on the right
+/// (every vote below 0) does not turn the turn: the heading swinging past
+/// a way behind the vehicle moves it from side to side.
+#[test]
+fn a_turn_goes_the_other_way_once_the_way_lies_ahead_on_that_side() {
+    let rate = |c: &SteeringCommand| c.curvature * c.speed_mps;
+    let after = |wish: fn(usize) -> f32| {
+        let mut a = arbiter();
+        let commands = drive(&mut a, 0, 14.0, |t| {
+            if t >= 6 * SECOND {
+                cornered(t, true, 3.0, wish)
+            } else {
+                cornered(t, true, 3.0, behind_left)
+            }
+        });
+        let moving = |range: std::ops::Range<usize>| -> Vec<SteeringCommand> {
+            commands[range]
+                .iter()
+                .filter(|c| !c.is_stop())
+                .copied()
+                .collect()
+        };
+        let (before, later) = (moving(0..60), moving(75..140));
+        assert!(!before.is_empty() && !later.is_empty());
+        assert!(before.iter().all(|c| rate(c) > 0.0), "{before:?}");
+        (later, *a.recovery_stats())
+    };
+    let (later, stats) = after(ahead_right);
+    assert!(later.iter().all(|c| rate(c) < 0.0), "{later:?}");
+    assert_eq!((stats.turns, stats.turns_reversed), (1, 1), "{stats:?}");
+    let (later, stats) = after(behind_right);
+    assert!(later.iter().all(|c| rate(c) > 0.0), "{later:?}");
+    assert_eq!((stats.turns, stats.turns_reversed), (1, 0), "{stats:?}");
+}
+
 #[test]
 fn forward_legs_need_creeping_room_and_turning_round_can_be_switched_off() {
     // 1.2 m of room ahead is less than min_distance_m (1 m) + margin_m

@@ -94,11 +94,11 @@ pub struct ObstacleAvoidanceConfig {
     /// What ground no image has seen is: slow (drive only as fast as the
     /// vehicle can stop within seen ground), obstacle, or free.
     pub unseen_ground: UnseenGround,
-    /// How far the front is from a hole when perception is certain to flag
+    /// How far the front is from a hole when the ray grazing its edge flags
     /// it, m: a suspected drop-off (graded ground with the reason
     /// drop-off) slows an arc only to the speed at which the vehicle stops
     /// within this of it (0: stop short of it; the pipeline sets it from
-    /// the sensor, `speed_bound.hole_range_m` less the sensor's setback).
+    /// the sensor, `speed_bound.hole_grazed_m` less the sensor's setback).
     pub hole_seen_within_m: f64,
     /// Backward arcs are checked this far, m (0: no opinion on backing up,
     /// so the arbiter never backs up).

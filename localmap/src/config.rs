@@ -52,12 +52,12 @@ pub struct LocalMapConfig {
     pub miss_range_factor: f64,
     /// A suspected drop-off (graded, reason drop-off), and a flagged one
     /// reported from within `drop_off_trust_factor` times this, count a
-    /// miss only from an image taken within this distance of them, where a
-    /// hole would have been flagged for certain: images from farther,
+    /// miss only from an image taken within this distance of them, where
+    /// the ray grazing a hole's edge flags it: images from farther,
     /// which flag a ditch's edge in one frame and not in the next, must
     /// not erase them
     /// (0: from any distance; the pipeline sets it from the sensor,
-    /// `speed_bound.hole_range_m`), m.
+    /// `speed_bound.hole_grazed_m`), m.
     pub hole_range_m: f64,
     /// A drop-off flagged from within this many times `hole_range_m` is
     /// kept like a suspected one (see there); flagged only from farther,

@@ -148,13 +148,22 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
                 config.arbiter.cruise_speed_mps
             );
         }
-        if let (Some(range), Some(holes)) = (bound.hole_range_m, bound.hole_bound_mps)
-            && cruise > holes
+        // The vehicle slows for what it suspects: with suspicion on, a
+        // hole is learnt of in time up to the suspect bound; without, only
+        // up to the bound of where it is flagged for certain.
+        let in_time = (bound.suspect_range_m.zip(bound.suspect_bound_mps))
+            .map(|(range, speed)| (range, speed, "suspects"))
+            .or(bound
+                .hole_range_m
+                .zip(bound.hole_bound_mps)
+                .map(|(range, speed)| (range, speed, "flags")));
+        if let Some((range, speed, how)) = in_time
+            && cruise > speed + 1e-6
         {
             eprintln!(
-                "note: {cruise:.1} m/s is faster than {holes:.2} m/s, at which a hole the wheels do \
-                 not bridge is certain to be seen in time: the sensor flags one only within \
-                 {range:.1} m (report.json speed_bound; a higher mount sees farther)"
+                "note: {cruise:.1} m/s is faster than {speed:.2} m/s, at which a hole the wheels do \
+                 not bridge is certain to be seen in time: the sensor {how} one for certain only \
+                 within {range:.1} m (report.json speed_bound; a higher mount sees farther)"
             );
         }
     }
@@ -238,7 +247,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     );
     if let (Some(range), Some(bound)) = (b.hole_range_m, b.hole_bound_mps) {
         println!(
-            "              holes the wheels do not bridge are flagged within {range:.1} m: {bound:.2} m/s \
+            "              holes the wheels do not bridge are flagged for certain within {range:.1} m: {bound:.2} m/s \
              (the average is {:.0} % of it)",
             100.0 * r.average_speed_mps / bound.max(1e-9)
         );
@@ -340,12 +349,13 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     }
     let rec = &r.recovery;
     println!(
-        "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned; {} retraces over {:.1} m; blocked with no way back {} decisions, out of recoveries {})",
+        "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned, {} turned the other way; {} retraces over {:.1} m; blocked with no way back {} decisions, out of recoveries {})",
         rec.recoveries,
         rec.backed_m,
         rec.turns,
         rec.turn_legs,
         rec.turned_deg,
+        rec.turns_reversed,
         rec.retraces,
         rec.retraced_m,
         rec.no_way_back,

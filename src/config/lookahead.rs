@@ -201,12 +201,13 @@ impl Config {
         let look = self.lookahead();
         let mut config = self.clone();
         config.arbiter.cruise_speed_mps = look.cruise_mps;
-        // Where the sensor flags a hole for certain: a suspected drop-off
-        // is missed only from within it, and slows the vehicle only until
-        // then (0: not configured).
+        // Where the ray grazing a hole's edge flags it (what these were
+        // tuned with; see `speed_bound`): a suspected drop-off is missed
+        // only from within it, and slows the vehicle only until then (0:
+        // not configured).
         let bound = crate::speed_bound::speed_bound(self).ok();
         if config.localmap.hole_range_m == 0.0
-            && let Some(range) = bound.as_ref().and_then(|b| b.hole_range_m)
+            && let Some(range) = bound.as_ref().and_then(|b| b.hole_grazed_m)
         {
             config.localmap.hole_range_m = range;
         }
@@ -266,13 +267,13 @@ mod tests {
             let config = at(2.5, sensor);
             let bound = crate::speed_bound::speed_bound(&config).unwrap();
             let effective = config.effective();
-            assert_eq!(Some(effective.localmap.hole_range_m), bound.hole_range_m);
+            assert_eq!(Some(effective.localmap.hole_range_m), bound.hole_grazed_m);
             assert_eq!(
                 Some(effective.obstacle_avoidance().hole_seen_within_m),
                 bound.hole_seen_within_m
             );
             // The front is the sensor's setback nearer.
-            assert!(bound.hole_seen_within_m < bound.hole_range_m, "{bound:?}");
+            assert!(bound.hole_seen_within_m < bound.hole_grazed_m, "{bound:?}");
             let configured = holes_configured(config);
             assert_eq!(configured.effective(), configured);
         }

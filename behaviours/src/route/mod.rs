@@ -1046,6 +1046,14 @@ impl Behaviour for Route {
                 .unwrap_or(target)
         };
         self.aimed_at = Some((carrot, true));
+        tracing::trace!(
+            x = here[0],
+            y = here[1],
+            yaw_deg = ctx.pose.yaw().to_degrees(),
+            aim_x = carrot[0],
+            aim_y = carrot[1],
+            "route: steering for the path's point"
+        );
         vote_towards(ctx, &self.response, carrot, reach, votes);
     }
 
