@@ -48,14 +48,15 @@
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
 //!   waypoint outside the memory is sought where the line to it leaves it.
-//! - **Holding to a way**: the path followed is kept, all of it to the
-//!   goal, while following it from the vehicle costs at most
+//! - **Holding to a way**: near where the vehicle last stood or backed
+//!   up (within two lookaheads), the path followed is kept, all of it to
+//!   the goal, while following it from the vehicle costs at most
 //!   `hold_fraction` more than the plan (and it stays passable); else the
 //!   plan's is followed from then on. Each image shows a little more, and
 //!   the plan alone flips between ways of about the same cost (the two
 //!   ends of a ditch across the way, each farther than it looked as more
-//!   of the ditch is seen): a vehicle turning to each in turn goes
-//!   neither way.
+//!   of the ditch is seen): a vehicle standing before it, turning to each
+//!   in turn, goes neither way. Driving on, the route follows the plan.
 //! - **Votes**: for the arcs that head for the point of the path
 //!   `lookahead_m` from the vehicle (`lookahead_s` of driving at the cruise
 //!   speed, if farther) or, with `sight_line`, for the farthest point of
@@ -178,6 +179,11 @@ const SHUT: u8 = SUSPECT + 1;
 /// The planned path is drawn this far along ([`Behaviour::overlay`]), m.
 const OVERLAY_PATH_M: f64 = 60.0;
 
+/// The path followed is held (`hold_fraction`) within this many
+/// lookaheads of where the vehicle last stood or backed up; farther on,
+/// driving, it follows the best plan.
+const HOLD_AFTER_STANDING: f64 = 2.0;
+
 /// Half the angle ahead of the vehicle's heading in which unseen ground is
 /// shut when it starts to back up (`shut_unseen_m`).
 const SHUT_HALF_ANGLE_DEG: f64 = 60.0;
@@ -297,6 +303,9 @@ pub struct Route {
     held: Vec<usize>,
     /// Index in `held` of its cell nearest the vehicle.
     held_at: usize,
+    /// Where the vehicle last stood or backed up (the arbiter's last
+    /// command no faster than 0).
+    stood_at: Option<[f64; 2]>,
 }
 
 impl Route {
@@ -328,6 +337,7 @@ impl Route {
             aimed_at: None,
             held: Vec::new(),
             held_at: 0,
+            stood_at: None,
             config,
         }
     }
@@ -517,22 +527,28 @@ impl Route {
     }
 
     /// Sets `path` to the cells the vehicle follows next (as many as the
-    /// lookahead needs, after its own): those of the path being followed
-    /// while it costs no more than `hold_fraction` over the best plan
-    /// (from the vehicle), else the plan's, which becomes the path
-    /// followed. A plan alone flips between ways of about the same cost as
+    /// lookahead needs, after its own): near where the vehicle last stood
+    /// or backed up ([`HOLD_AFTER_STANDING`]), those of the path being
+    /// followed while it costs no more than `hold_fraction` over the best
+    /// plan (from the vehicle `here`, in cell `start`), else the plan's,
+    /// which becomes the path followed. A plan alone flips between ways of about the same cost as
     /// each image shows a little more: the two ends of a ditch across the
     /// way, each farther than it looked as more of the ditch is seen, or a
     /// detour and a crossing of suspected ground; the vehicle, turning to
     /// each in turn, went neither way (`ditch_across` at 5.3 m/s: 78 s of
     /// turning on the spot, stuck). A driver keeps to the side chosen
     /// until the other is clearly better, or this one is shut, as bug
-    /// algorithms keep to a wall.
-    fn hold_or_switch(&mut self, start: usize) {
+    /// algorithms keep to a wall. Driving on, a better line is taken at
+    /// once: held to it everywhere, the ERIM wandered up `hillside_steep`
+    /// round cells that came and went (477 m for 255).
+    fn hold_or_switch(&mut self, start: usize, here: [f64; 2]) {
         let steps = (2.0 * self.aim_m / self.config.cell_m).ceil() as usize + 2;
         let best = self.planner.cost_to_goal(start);
         let limit = best * (1.0 + self.config.hold_fraction as f32);
-        let held = self.held_cost(start, steps);
+        let near_stand = self.stood_at.is_some_and(|at| {
+            (at[0] - here[0]).hypot(at[1] - here[1]) <= HOLD_AFTER_STANDING * self.aim_m
+        });
+        let held = near_stand.then(|| self.held_cost(start, steps)).flatten();
         match held {
             Some((at, cost)) if cost <= limit => {
                 self.held_at = at;
@@ -541,7 +557,7 @@ impl Route {
                 }
             }
             _ => {
-                if !self.held.is_empty() {
+                if near_stand && !self.held.is_empty() {
                     self.stats.path_switches += 1;
                     tracing::debug!(
                         held = held.map_or(f32::INFINITY, |(_, cost)| cost),
@@ -972,6 +988,9 @@ impl Behaviour for Route {
         self.changed.clear();
         self.integrate(ctx.map);
         let backing = ctx.last_command.is_some_and(|c| c.speed_mps < 0.0);
+        if ctx.last_command.is_some_and(|c| c.speed_mps <= 0.0) {
+            self.stood_at = Some(here);
+        }
         if backing && !self.backing {
             self.shut_unseen_ahead(ctx.map, here, ctx.pose.yaw());
         }
@@ -1021,7 +1040,7 @@ impl Behaviour for Route {
             return;
         }
         self.has_path = true;
-        self.hold_or_switch(start);
+        self.hold_or_switch(start, here);
         // The point of the path `reach` from the vehicle.
         let carrot = if self
             .goal
@@ -1117,6 +1136,7 @@ impl Behaviour for Route {
     fn reset(&mut self) {
         self.aimed_at = None;
         self.held.clear();
+        self.stood_at = None;
         self.tracker.reset();
         self.origin = None;
         self.goal = None;
