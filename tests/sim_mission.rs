@@ -949,7 +949,7 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
 /// towards each in turn (one turn round of 12 legs, 344°), the vehicle
 /// went neither way and was stuck after 107 s. Near where it stood, the
 /// route now holds to the path it follows while that costs at most
-/// `hold_fraction` more than the plan: one short turn (2 legs, 44°) and
+/// `hold_fraction` more than the plan: one short turn (2 legs, 50°) and
 /// round the near end. With `hold_fraction = 0` the turn goes the other
 /// way when the way comes to lie ahead there, and the vehicle still gets
 /// round, but only after turning on the spot through 468° in 16 legs.

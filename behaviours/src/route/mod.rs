@@ -50,9 +50,9 @@
 //!   waypoint outside the memory is sought where the line to it leaves it.
 //! - **Holding to a way**: near where the vehicle last stood or backed
 //!   up (within two lookaheads), the path followed is kept, all of it to
-//!   the goal, while following it from the vehicle costs at most
-//!   `hold_fraction` more than the plan (and it stays passable); else the
-//!   plan's is followed from then on. Each image shows a little more, and
+//!   the goal, while the vehicle is within 2 m of it, it stays passable
+//!   and following it from the vehicle costs at most `hold_fraction`
+//!   more than the plan; else the plan's is followed from then on. Each image shows a little more, and
 //!   the plan alone flips between ways of about the same cost (the two
 //!   ends of a ditch across the way, each farther than it looked as more
 //!   of the ditch is seen): a vehicle standing before it, turning to each
@@ -183,6 +183,12 @@ const OVERLAY_PATH_M: f64 = 60.0;
 /// lookaheads of where the vehicle last stood or backed up; farther on,
 /// driving, it follows the best plan.
 const HOLD_AFTER_STANDING: f64 = 2.0;
+
+/// ... and only while the vehicle is within this distance of it, m:
+/// farther off, its point a lookahead on may lie behind the vehicle (held
+/// to a path up to 8 m off, the ERIM wandered up `hillside_steep` after
+/// a stop, 477 m for 255).
+const HOLD_OFF_PATH_M: f64 = 2.0;
 
 /// Half the angle ahead of the vehicle's heading in which unseen ground is
 /// shut when it starts to back up (`shut_unseen_m`).
@@ -529,9 +535,10 @@ impl Route {
     /// Sets `path` to the cells the vehicle follows next (as many as the
     /// lookahead needs, after its own): near where the vehicle last stood
     /// or backed up ([`HOLD_AFTER_STANDING`]), those of the path being
-    /// followed while it costs no more than `hold_fraction` over the best
-    /// plan (from the vehicle `here`, in cell `start`), else the plan's,
-    /// which becomes the path followed. A plan alone flips between ways of about the same cost as
+    /// followed while the vehicle is on it ([`HOLD_OFF_PATH_M`]) and it
+    /// costs no more than `hold_fraction` over the best plan (from the
+    /// vehicle `here`, in cell `start`), else the plan's, which becomes
+    /// the path followed. A plan alone flips between ways of about the same cost as
     /// each image shows a little more: the two ends of a ditch across the
     /// way, each farther than it looked as more of the ditch is seen, or a
     /// detour and a crossing of suspected ground; the vehicle, turning to
@@ -584,8 +591,8 @@ impl Route {
     /// `steps` on at most) and what following it to the goal costs from
     /// there: the octile distance to that cell at free ground's cost, then
     /// the path's edges at today's costs. None when there is no such path,
-    /// the vehicle is farther from it than the lookahead, or it is no
-    /// longer passable.
+    /// the vehicle is farther from it than [`HOLD_OFF_PATH_M`], or it is
+    /// no longer passable.
     fn held_cost(&self, start: usize, steps: usize) -> Option<(usize, f32)> {
         if self.config.hold_fraction <= 0.0 || self.held.is_empty() {
             return None;
@@ -595,7 +602,7 @@ impl Route {
         let (at, off) = window
             .map(|k| (k, self.planner.octile(start, self.held[k])))
             .min_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))?;
-        if f64::from(off) * self.config.cell_m > self.aim_m {
+        if f64::from(off) * self.config.cell_m > HOLD_OFF_PATH_M {
             return None;
         }
         let cost = off + self.planner.path_cost(&self.costs, &self.held[at..]);
