@@ -547,6 +547,7 @@ impl Recovery {
                 let other_since = other.then(|| self.other_side_since.unwrap_or(now));
                 self.other_side_since = other_since;
                 if other_since.is_some_and(|since| now - since >= seconds_to_micros(WISH_HELD_S))
+                    && legs < self.config.turn_max_legs
                     && let Some(next) = self
                         .choose_leg(-side, false, behind)
                         .or_else(|| self.choose_leg(-side, true, behind))

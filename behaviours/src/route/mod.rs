@@ -52,11 +52,12 @@
 //!   up (within two lookaheads), the path followed is kept, all of it to
 //!   the goal, while the vehicle is within 2 m of it, it stays passable
 //!   and following it from the vehicle costs at most `hold_fraction`
-//!   more than the plan; else the plan's is followed from then on. Each image shows a little more, and
-//!   the plan alone flips between ways of about the same cost (the two
-//!   ends of a ditch across the way, each farther than it looked as more
-//!   of the ditch is seen): a vehicle standing before it, turning to each
-//!   in turn, goes neither way. Driving on, the route follows the plan.
+//!   more than the plan; else the plan's is followed from then on. Each
+//!   image shows a little more, and the plan alone flips between ways of
+//!   about the same cost (the two ends of a ditch across the way, each
+//!   farther than it looked as more of the ditch is seen): a vehicle
+//!   standing before it, turning to each in turn, goes neither way.
+//!   Driving on, the route follows the plan.
 //! - **Votes**: for the arcs that head for the point of the path
 //!   `lookahead_m` from the vehicle (`lookahead_s` of driving at the cruise
 //!   speed, if farther) or, with `sight_line`, for the farthest point of
@@ -131,9 +132,10 @@ pub struct RouteConfig {
     pub pass_radius_factor: f64,
     /// Vertices a cycle's planning may expand at most (it carries on next cycle).
     pub max_expansions: u64,
-    /// The path being followed is kept while it costs at most this
-    /// fraction more than the best plan (0: always the best plan). See
-    /// `Route::hold_or_switch`.
+    /// Near where the vehicle last stood or backed up, the path being
+    /// followed is kept while the vehicle is on it and it costs at most
+    /// this fraction more than the best plan (0: always the best plan).
+    /// See `Route::hold_or_switch`.
     pub hold_fraction: f64,
 }
 
@@ -538,16 +540,16 @@ impl Route {
     /// followed while the vehicle is on it ([`HOLD_OFF_PATH_M`]) and it
     /// costs no more than `hold_fraction` over the best plan (from the
     /// vehicle `here`, in cell `start`), else the plan's, which becomes
-    /// the path followed. A plan alone flips between ways of about the same cost as
-    /// each image shows a little more: the two ends of a ditch across the
-    /// way, each farther than it looked as more of the ditch is seen, or a
-    /// detour and a crossing of suspected ground; the vehicle, turning to
-    /// each in turn, went neither way (`ditch_across` at 5.3 m/s: 78 s of
-    /// turning on the spot, stuck). A driver keeps to the side chosen
-    /// until the other is clearly better, or this one is shut, as bug
-    /// algorithms keep to a wall. Driving on, a better line is taken at
-    /// once: held to it everywhere, the ERIM wandered up `hillside_steep`
-    /// round cells that came and went (477 m for 255).
+    /// the path followed. A plan alone flips between ways of about the
+    /// same cost as each image shows a little more: the two ends of a
+    /// ditch across the way, each farther than it looked as more of the
+    /// ditch is seen, or a detour and a crossing of suspected ground; the
+    /// vehicle, turning to each in turn, went neither way (`ditch_across`
+    /// at 5.3 m/s: 78 s of turning on the spot, stuck). A driver keeps to
+    /// the side chosen until the other is clearly better, or this one is
+    /// shut, as bug algorithms keep to a wall. Driving on, a better line
+    /// is taken at once: held to it everywhere, the ERIM wandered up
+    /// `hillside_steep` round cells that came and went (477 m for 255).
     fn hold_or_switch(&mut self, start: usize, here: [f64; 2]) {
         let steps = (2.0 * self.aim_m / self.config.cell_m).ceil() as usize + 2;
         let best = self.planner.cost_to_goal(start);
