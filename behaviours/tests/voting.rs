@@ -1093,19 +1093,33 @@ fn snapshot_with_shadow(near: f64, far: f64) -> MapSnapshot {
 
 /// The route's best arc, its counters and its overlay, after one vote on
 /// `map` per entry of `commands` (the last command sent before each), for
-/// a waypoint at `goal` (vehicle at the origin heading east).
+/// a waypoint at `goal` (vehicle standing at the origin heading east).
 fn route_after(
     maps: &[&MapSnapshot],
     commands: &[Option<f64>],
     goal: [f64; 2],
     table: &str,
 ) -> (usize, Vec<(&'static str, u64)>, Overlay) {
+    route_after_at(maps, commands, goal, table, 0.0)
+}
+
+/// ... the vehicle driving east at `speed` m/s.
+fn route_after_at(
+    maps: &[&MapSnapshot],
+    commands: &[Option<f64>],
+    goal: [f64; 2],
+    table: &str,
+    speed: f64,
+) -> (usize, Vec<(&'static str, u64)>, Overlay) {
     let arcs = arcs();
     let vehicle = VehicleConfig::default();
     let setup = setup(&arcs, &vehicle);
     let table: toml::Table = toml::from_str(table).unwrap();
     let mut behaviour = Registry::builtin().build("route", &table, &setup).unwrap();
-    let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+    let pose = Pose {
+        velocity: nalgebra::Vector3::new(speed, 0.0, 0.0),
+        ..Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0))
+    };
     let mission = mission_to(goal);
     let mut best = 0;
     for (map, speed) in maps.iter().zip(commands) {
@@ -1197,15 +1211,12 @@ fn standing_the_route_holds_to_the_way_it_chose_until_the_other_is_clearly_bette
     );
     assert!(counter(&counters, "held_cycles") >= 1, "{counters:?}");
     assert_eq!(counter(&counters, "path_switches"), 0, "{counters:?}");
-    for (commands, table) in [
-        ([standing, standing], "hold_fraction = 0.0"),
-        ([forward, forward], ""),
-    ] {
-        let (_, counters, overlay) = route_after(&both, &commands, goal, table);
+    for (speed, table) in [(0.0, "hold_fraction = 0.0"), (2.0, "")] {
+        let (_, counters, overlay) = route_after_at(&both, &[forward, forward], goal, table, speed);
         assert_eq!(
             side_at(&planned_path(&overlay), 10.0),
             -side,
-            "{commands:?} {table}: the plan alone flips to the other end: {:?}",
+            "at {speed} m/s {table}: the plan alone flips to the other end: {:?}",
             planned_path(&overlay)
         );
         assert_eq!(counter(&counters, "held_cycles"), 0, "{counters:?}");

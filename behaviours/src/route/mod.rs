@@ -186,6 +186,9 @@ const OVERLAY_PATH_M: f64 = 60.0;
 /// driving, it follows the best plan.
 const HOLD_AFTER_STANDING: f64 = 2.0;
 
+/// The vehicle stands when slower than this, m/s.
+const STANDING_MPS: f64 = 0.1;
+
 /// ... and only while the vehicle is within this distance of it, m:
 /// farther off, its point a lookahead on may lie behind the vehicle (held
 /// to a path up to 8 m off, the ERIM wandered up `hillside_steep` after
@@ -311,8 +314,7 @@ pub struct Route {
     held: Vec<usize>,
     /// Index in `held` of its cell nearest the vehicle.
     held_at: usize,
-    /// Where the vehicle last stood or backed up (the arbiter's last
-    /// command no faster than 0).
+    /// Where the vehicle last stood (slower than [`STANDING_MPS`]).
     stood_at: Option<[f64; 2]>,
 }
 
@@ -997,7 +999,10 @@ impl Behaviour for Route {
         self.changed.clear();
         self.integrate(ctx.map);
         let backing = ctx.last_command.is_some_and(|c| c.speed_mps < 0.0);
-        if ctx.last_command.is_some_and(|c| c.speed_mps <= 0.0) {
+        // From the pose, not the last command: every executor votes on the
+        // same poses, while when a command reaches the behaviours depends
+        // on the executor (backing up starts from standing).
+        if ctx.pose.velocity.norm() < STANDING_MPS {
             self.stood_at = Some(here);
         }
         if backing && !self.backing {
