@@ -139,37 +139,6 @@ fn seeded(
     (format!("{tag}-seed{seed}"), run)
 }
 
-/// The control `tag` (`sensor`, `toml` merged over the defaults, `args`
-/// added) run with each of the noise seeds `seeds` (1-6, those that showed
-/// the defect last first) one at a time, until one mission's report
-/// satisfies `shows`: the missions run, in the order of `seeds`, the last
-/// of them the first that shows it (none shows it when no seed does). A
-/// control is stuck, or collides, only with some seeds, and a stuck
-/// mission runs to the stuck timeout: trying first, and alone, the seed
-/// that showed it spares a CI run the others (the other tests keep the
-/// other core busy meanwhile).
-fn first_seed_showing(
-    prefix: &str,
-    (tag, sensor, toml): (&str, &str, &str),
-    args: &[&str],
-    seeds: [u64; 6],
-    shows: impl Fn(&Value) -> bool,
-) -> (Vec<(String, Value, String)>, bool) {
-    let configs = out_dir(&format!("{prefix}-configs"));
-    let mut ran = Vec::new();
-    for seed in seeds {
-        let run = [seeded(&configs, (tag, sensor, toml), args, seed)];
-        for (tag, report, stdout) in missions(prefix, &run) {
-            let shown = shows(&report);
-            ran.push((tag.to_owned(), report, stdout));
-            if shown {
-                return (ran, true);
-            }
-        }
-    }
-    (ran, false)
-}
-
 /// Two missions in parallel with `args`: with the defaults ("now") and
 /// with `as_before` (TOML merged over them: the setting that turns the
 /// change off). Their reports, in that order.
@@ -745,7 +714,11 @@ fn narrow_cul_de_sacs_are_left_by_turning_round() {
 /// until seen from within the hole range, suspected or flagged from near,
 /// also see it through). Whether the vehicle happens to catch the ditch
 /// again hangs on the noise, so both are asked over several seeds (as 002:
-/// stuck with 2 of the 6, 2026-11-28).
+/// stuck with 2 of the 6, 2026-11-28). Since the route holds to one end
+/// near a stop and a turn round goes the short way to the way ahead
+/// (2026-11-29), the vehicle with 002's map gets round too (seeds 5, 6, 1
+/// completed, with `hold_fraction = 0` as well): the control now checks
+/// only that such a map counts every miss.
 #[test]
 fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
     let world = format!(
@@ -774,18 +747,22 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
             "{tag}: {lidar}"
         );
     }
-    // Every overlapping image counting a miss, the same vehicle is stuck
-    // (with seeds 5 and 6 of 1-6, 2026-11-28: they are tried first).
-    let (as_002, stuck) = first_seed_showing(
-        "ditch",
+    // Every overlapping image counting a miss (seed 5 was stuck so,
+    // 2026-11-28).
+    let configs = out_dir("ditch-as-002-configs");
+    let run = [seeded(
+        &configs,
         ("lidar64-as-002", "lidar64", as_002),
         &args,
-        [5, 6, 1, 2, 3, 4],
-        |report| report["outcome"] == "stuck",
-    );
-    assert!(stuck, "as 002 never stuck");
-    for (tag, report, _) in &as_002 {
+        5,
+    )];
+    for (tag, report, stdout) in &missions("ditch", &run) {
         assert_eq!(report["localmap"]["seen_from_afar"], 0, "{tag}");
+        assert_eq!(
+            report["collisions"].as_array().unwrap().len(),
+            0,
+            "{tag}:\n{stdout}"
+        );
     }
 }
 
