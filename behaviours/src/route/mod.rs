@@ -48,8 +48,8 @@
 //!   vehicle, repaired incrementally as cells change and as the vehicle
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
 //!   waypoint outside the memory is sought where the line to it leaves it.
-//! - **Holding to a way**: near where the vehicle last stood or backed
-//!   up (within two lookaheads), the path followed is kept, all of it to
+//! - **Holding to a way**: near where the vehicle last stood (slower than
+//!   0.1 m/s, as before backing up; within two lookaheads), the path followed is kept, all of it to
 //!   the goal, while the vehicle is within 2 m of it, it stays passable
 //!   and following it from the vehicle costs at most `hold_fraction`
 //!   more than the plan; else the plan's is followed from then on. Each
@@ -132,7 +132,7 @@ pub struct RouteConfig {
     pub pass_radius_factor: f64,
     /// Vertices a cycle's planning may expand at most (it carries on next cycle).
     pub max_expansions: u64,
-    /// Near where the vehicle last stood or backed up, the path being
+    /// Near where the vehicle last stood (as before backing up), the path being
     /// followed is kept while the vehicle is on it and it costs at most
     /// this fraction more than the best plan (0: always the best plan).
     /// See `Route::hold_or_switch`.
@@ -182,7 +182,8 @@ const SHUT: u8 = SUSPECT + 1;
 const OVERLAY_PATH_M: f64 = 60.0;
 
 /// The path followed is held (`hold_fraction`) within this many
-/// lookaheads of where the vehicle last stood or backed up; farther on,
+/// lookaheads of where the vehicle last stood (as it does before backing
+/// up); farther on,
 /// driving, it follows the best plan.
 const HOLD_AFTER_STANDING: f64 = 2.0;
 
@@ -538,7 +539,7 @@ impl Route {
 
     /// Sets `path` to the cells the vehicle follows next (as many as the
     /// lookahead needs, after its own): near where the vehicle last stood
-    /// or backed up ([`HOLD_AFTER_STANDING`]), those of the path being
+    /// ([`HOLD_AFTER_STANDING`]), those of the path being
     /// followed while the vehicle is on it ([`HOLD_OFF_PATH_M`]) and it
     /// costs no more than `hold_fraction` over the best plan (from the
     /// vehicle `here`, in cell `start`), else the plan's, which becomes
