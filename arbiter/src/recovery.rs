@@ -32,11 +32,11 @@
 //! ahead again, for a second: a route's path can swing for a cycle as it
 //! re-plans; a wish for the other side's hardest arc, the way still
 //! behind, does not end it), after `turn_max_legs` legs, or when no leg is
-//! clear. When the way comes to lie ahead on the other side (that side's
-//! hardest arc wished for with a vote of 0 or more, for a second: a route
-//! that found one end of a ditch shut goes round the other), the turn goes
-//! that way, the short way to it. One turn counts as one recovery; a turn
-//! left unfinished is taken up towards the same side by the next one
+//! clear. When the way comes to lie well ahead on the other side (that
+//! side's hardest arc wished for with a vote of 0.3 or more, for a second:
+//! a route that found one end of a ditch shut goes round the other), the
+//! turn goes that way, the short way to it. One turn counts as one
+//! recovery; a turn left unfinished is taken up towards the same side by the next one
 //! (until `progress_m` of driving).
 //!
 //! **Backing out the way it came.** When no manoeuvre can start (no
@@ -203,6 +203,18 @@ const RETRACE_ROOM_M: f64 = 0.5;
 /// path can swing for a cycle as it re-plans.
 const WISH_HELD_S: f64 = 1.0;
 
+/// A turn round goes the other way when the way lies ahead on that side
+/// with at least this vote for that side's hardest arc. The vote is the
+/// cosine of the angle between the heading that arc leaves and the way;
+/// with the hardest arc turning the heading about 57° over the 8 m
+/// lookahead, 0.3 (73°) puts the way within about 130° of the heading on
+/// that side (a vote of 0: within 147°). A way just beside (a vote near 0,
+/// where a route's plan swinging between the two ends of a ditch puts it
+/// for a few seconds) does not reverse the turn: reversed for it, the turn
+/// went on the long way when the plan swung back (`ledge_north`, the ERIM
+/// at the default speed, noise seed 3: stuck after turning 342°).
+const AHEAD_VOTE: f32 = 0.3;
+
 /// What recoveries did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct RecoveryStats {
@@ -304,6 +316,13 @@ impl Wish {
         } else {
             None
         }
+    }
+
+    /// Whether the way lies ahead on the side `-side` (opposite the
+    /// turn's): that side's hardest arc is wished for, with a vote of at
+    /// least [`AHEAD_VOTE`].
+    fn ahead_on_the_other_side(&self, side: f64) -> bool {
+        self.turn * side <= -1.0 + 1e-9 && self.vote >= AHEAD_VOTE
     }
 }
 
@@ -534,16 +553,15 @@ impl Recovery {
                     self.unfinished_turn = None;
                     return self.end(now, blocked);
                 }
-                // The way lies ahead on the other side (that side's hardest
-                // arc wished for, with a vote of 0 or more: a route that
-                // found this side shut and goes round the other end), for a
-                // second: turn that way, the shorter way to it. A way behind
-                // (every vote below 0, as at the end of a cul-de-sac) does
-                // not turn the turn: it passes from side to side as the
-                // heading swings past it.
+                // The way lies ahead on the other side (a route that found
+                // this side shut and goes round the other end), for a
+                // second: turn that way, the shorter way to it. A way
+                // behind (every vote below 0, as at the end of a
+                // cul-de-sac) does not turn the turn: it passes from side
+                // to side as the heading swings past it.
                 let other = behind
                     .wished()
-                    .is_some_and(|wish| wish.turn * side <= -1.0 + 1e-9 && wish.vote >= 0.0);
+                    .is_some_and(|wish| wish.ahead_on_the_other_side(side));
                 let other_since = other.then(|| self.other_side_since.unwrap_or(now));
                 self.other_side_since = other_since;
                 if other_since.is_some_and(|since| now - since >= seconds_to_micros(WISH_HELD_S))
