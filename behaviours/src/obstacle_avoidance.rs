@@ -354,10 +354,10 @@ impl Raster {
         }
     }
 
-    /// The map cell behind a hit entry of the blocked layer, vehicle
-    /// frame (none for unseen ground).
-    fn cause(&self, entry: &Entry, ctx: &VoteContext<'_>) -> Option<[f32; 2]> {
-        let (row, column) = self.grid.first_cell(entry, self.blocked());
+    /// The map cell behind a hit entry of `layer` (the blocked layer, or
+    /// one cleared of cells), vehicle frame (none for unseen ground).
+    fn cause(&self, entry: &Entry, layer: &[u64], ctx: &VoteContext<'_>) -> Option<[f32; 2]> {
+        let (row, column) = self.grid.first_cell(entry, layer);
         self.cause_at(row, column, ctx)
     }
 
@@ -443,6 +443,94 @@ impl Raster {
     }
 }
 
+/// Cells under the footprint where the vehicle stands (s = 0). The local
+/// map clears patches whose centres lie under the body grown by half a
+/// patch; rasterised to this behaviour's grid, a patch just beyond that
+/// can land in a grid cell inside the footprint, where every arc's sweep
+/// meets it at once: all arcs vetoed, forwards and backing, though the
+/// patch only touches the body's flank (`short_ditch_09`, a ditch's edge
+/// beside the rear overhang after a turn round: stuck for 90 s). Such a
+/// cell stops an arc only if driving it takes the footprint deeper over
+/// the cell; an arc that slides past it or turns away is free of it.
+#[derive(Debug, Clone, Default)]
+struct UnderStart {
+    /// The cells: bitmap word, bit, centre (the raster's frame).
+    cells: Vec<(usize, u64, Point2<f64>)>,
+    /// Scratch: an arc's blocked layer with the cells it leaves cleared.
+    blocked: Vec<u64>,
+}
+
+impl UnderStart {
+    /// Finds the cells of `raster` (not unseen ground) under `footprint`.
+    fn find(&mut self, raster: &Raster, footprint: &Footprint) {
+        self.cells.clear();
+        let grid = &raster.grid;
+        let index = |v: f64, v0: f64, n: usize| {
+            (((v - v0) * grid.per_m).floor().max(0.0) as usize).min(n.saturating_sub(1))
+        };
+        let rows =
+            index(footprint.x_min, grid.x0, grid.rows)..=index(footprint.x_max, grid.x0, grid.rows);
+        let columns = index(-footprint.half_width, grid.y0, grid.columns)
+            ..=index(footprint.half_width, grid.y0, grid.columns);
+        if grid.rows == 0 || grid.columns == 0 {
+            return;
+        }
+        for row in rows {
+            for column in columns.clone() {
+                let centre = grid.centre(row, column);
+                let word = row * grid.words_per_row + column / 64;
+                let bit = 1u64 << (column % 64);
+                let unseen_too = raster.unseen_blocks && raster.unseen[word] & bit != 0;
+                if footprint.contains(centre) && raster.bitmap[word] & bit != 0 && !unseen_too {
+                    self.cells.push((word, bit, centre));
+                }
+            }
+        }
+    }
+
+    /// `blocked` as arc `arc` meets it: the cells under the start that
+    /// driving the arc does not take `footprint` deeper over cleared;
+    /// `None` when there are none (use `blocked` itself).
+    fn for_arc(
+        &mut self,
+        blocked: &[u64],
+        arc: Arc,
+        footprint: &Footprint,
+        step: f64,
+    ) -> Option<&[u64]> {
+        if self.cells.is_empty() {
+            return None;
+        }
+        self.blocked.clear();
+        self.blocked.extend_from_slice(blocked);
+        for &(word, bit, centre) in &self.cells {
+            if !deepens(arc, footprint, centre, step) {
+                self.blocked[word] &= !bit;
+            }
+        }
+        Some(&self.blocked)
+    }
+}
+
+/// Whether driving `arc` takes `footprint` deeper over the point `p` (the
+/// arc's start frame, inside the footprint there) within the footprint's
+/// own length and width: the point's depth inside the rectangle, sampled
+/// every `step` along the arc, grows.
+fn deepens(arc: Arc, footprint: &Footprint, p: Point2<f64>, step: f64) -> bool {
+    let depth = |q: Point2<f64>| {
+        (footprint.x_max - q.x)
+            .min(q.x - footprint.x_min)
+            .min(footprint.half_width - q.y.abs())
+    };
+    let start = depth(p);
+    let length = (footprint.x_max - footprint.x_min).hypot(2.0 * footprint.half_width) + step;
+    let steps = (length / step).ceil() as usize;
+    (1..=steps).any(|i| {
+        let q = Rigid::of(&arc.pose_at(i as f64 * step)).invert(p);
+        depth(q) > start + 1e-6
+    })
+}
+
 /// The backward sweeps: one band per arc over a mirrored raster.
 #[derive(Debug, Clone)]
 struct Reverse {
@@ -453,6 +541,10 @@ struct Reverse {
     blocked: Vec<u64>,
     /// Per arc: the terrain's verdict backing up along it.
     verdicts: Vec<ArcTerrain>,
+    /// The mirrored body the bands sweep.
+    footprint: Footprint,
+    /// Cells under it where the vehicle stands.
+    under_start: UnderStart,
 }
 
 /// The grid covering every outline of `footprint` swept `reach` along
@@ -527,6 +619,8 @@ pub struct ObstacleAvoidance {
     /// the poses of the path before it does.
     shifted: Raster,
     lead_poses: Vec<(f64, ArcPose)>,
+    /// Cells under the footprint where the vehicle stands.
+    under_start: UnderStart,
     /// Scratch: the map patches a path's arc may reach this cycle.
     near: Vec<u32>,
     /// This cycle: distance from the rear axle to the nearest cell of each
@@ -677,6 +771,8 @@ impl ObstacleAvoidance {
                 raster,
                 verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
                 bands,
+                footprint: mirrored,
+                under_start: UnderStart::default(),
             }
         });
         let mut terrain = TerrainCheck::new(
@@ -706,6 +802,7 @@ impl ObstacleAvoidance {
                 .collect(),
             shifted,
             lead_poses: Vec::new(),
+            under_start: UnderStart::default(),
             near: Vec::new(),
             nearest: [f64::INFINITY; 4],
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
@@ -777,11 +874,26 @@ impl ObstacleAvoidance {
             &self.shifted
         };
         let rest = rest as f32;
-        let blocked = raster.blocked();
+        // Standing, the arc starts where the vehicle is: the cells under
+        // its footprint there count only if the arc drives deeper over
+        // them ([`UnderStart`]).
+        let blocked = if at_once {
+            let step = raster.grid.resolution;
+            self.under_start
+                .for_arc(
+                    raster.blocked(),
+                    Arc::new(ctx.arcs.curvature(arc).unwrap_or(0.0)),
+                    &self.footprint,
+                    step,
+                )
+                .unwrap_or(raster.blocked())
+        } else {
+            raster.blocked()
+        };
         let mut part = Met::default();
         if first_in(blocked, &template.bands[widest], rest).is_some() {
             part.collision = first_in(blocked, &template.bands[0], rest)
-                .map(|hit| (f64::from(hit.s) + lead, raster.cause(hit, ctx)));
+                .map(|hit| (f64::from(hit.s) + lead, raster.cause(hit, blocked, ctx)));
             part.grazed =
                 (1..=widest).find(|&b| first_in(blocked, &template.bands[b], rest).is_some());
             part.crawled = first_in(blocked, &template.bands[self.crawl_band], rest)
@@ -926,12 +1038,28 @@ impl ObstacleAvoidance {
         {
             *blocked = cell | unseen;
         }
+        reverse
+            .under_start
+            .find(&reverse.raster, &reverse.footprint);
+        let step = reverse.raster.grid.resolution;
         for (arc, [body, margin]) in reverse.bands.iter().enumerate().take(votes.len()) {
             // The body may not meet a cell or unseen ground; the margin
             // beside it may not close on a cell. Cells already inside the
             // margin where the vehicle stands (s = 0: a trunk beside the
-            // flank) are left to the body's band.
-            let body_hit = first_in(&reverse.blocked, body, reach as f32).map(|hit| hit.s);
+            // flank) are left to the body's band; cells inside the body's
+            // band there, to the arc's direction ([`UnderStart`]; mirrored,
+            // the backward sweep is the forward arc's).
+            let curvature = ctx.arcs.curvature(arc).unwrap_or(0.0);
+            let blocked = reverse
+                .under_start
+                .for_arc(
+                    &reverse.blocked,
+                    Arc::new(curvature),
+                    &reverse.footprint,
+                    step,
+                )
+                .unwrap_or(&reverse.blocked);
+            let body_hit = first_in(blocked, body, reach as f32).map(|hit| hit.s);
             let moving = margin.partition_point(|e| e.s <= 0.0);
             let margin_hit =
                 first_in(&reverse.raster.bitmap, &margin[moving..], reach as f32).map(|hit| hit.s);
@@ -1185,6 +1313,7 @@ impl Behaviour for ObstacleAvoidance {
             self.ahead.rasterise_unseen(ctx);
         }
         self.ahead.block(policy);
+        self.under_start.find(&self.ahead, &self.footprint);
         let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
         // The ground ahead at the vehicle's scale: the speed horizon is
         // where the vehicle gets to while it reacts and brakes from cruise.

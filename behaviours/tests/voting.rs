@@ -1463,3 +1463,62 @@ fn shut_ground_that_leaves_no_way_is_opened_again() {
         "straight for the waypoint, not {best}"
     );
 }
+
+/// The vehicle standing 8 cm right of the patch lattice, a cell in the
+/// patch beside its right flank just behind the rear axle: the local map
+/// keeps it (its centre, 1.32 m right of the centre line, lies outside the
+/// body grown by half a patch, 1.30 m), but rasterised to obstacle
+/// avoidance's 0.2 m grid it lands inside the footprint, where every arc's
+/// sweep met it at once: all 39 arcs were vetoed, though driving straight
+/// on or turning right takes the flank along or away from it
+/// (`short_ditch_09` at `--speed 10`, a ditch's edge beside the rear
+/// overhang: stuck for 90 s). Turning left swings the tail right, over it.
+#[test]
+fn a_cell_touching_the_flank_where_the_vehicle_stands_stops_only_the_arcs_that_drive_over_it() {
+    let pose = Pose::at_rest(0, planar_isometry(0.0, -0.08, 0.0));
+    let mut map = LocalMap::new(
+        &LocalMapConfig {
+            assume_seen_m: 0.0,
+            ..LocalMapConfig::default()
+        },
+        &VehicleConfig::default(),
+    );
+    map.update(&pose);
+    let cell = ObstacleCell {
+        x: -0.2,
+        y: -1.4,
+        z_min: 0.0,
+        z_max: 0.6,
+        reasons: Reasons::HEIGHT_VARIATION,
+        region: 0,
+        cost: 1.0,
+    };
+    let seen = [(-40.0, -40.0), (40.0, -40.0), (40.0, 40.0), (-40.0, 40.0)];
+    map.insert(&ObstacleReport {
+        utime: 0,
+        sensor: "test".into(),
+        cell_size_m: 0.2,
+        cells: vec![cell],
+        fov: FovPolygon::new(seen.iter().map(|&(x, y)| Point2::new(x, y)).collect()),
+        ..ObstacleReport::default()
+    })
+    .unwrap();
+    let snapshot = map.snapshot();
+    let kept: Vec<(f32, f32)> = snapshot.patches.iter().map(|p| (p.x, p.y)).collect();
+    assert_eq!(kept.len(), 1, "{kept:?}");
+    assert!((kept[0].1 + 1.32).abs() < 1e-3, "{kept:?}");
+    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let mut behaviour =
+        ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, &vehicle));
+    let mission = Mission::default();
+    let ctx = VoteContext::new(0, &pose, &snapshot, &mission, &arcs);
+    let mut votes = Votes::new(arcs.len());
+    behaviour.vote(&ctx, &mut votes);
+    let vetoed: Vec<usize> = (0..39).filter(|&arc| votes.is_vetoed(arc)).collect();
+    assert_eq!(vetoed, (20..39).collect::<Vec<_>>(), "left arcs only");
+    assert!(
+        votes.values()[..20].iter().all(|&v| v > 0.0),
+        "{:?}",
+        votes.values()
+    );
+}
