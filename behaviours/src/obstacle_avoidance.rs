@@ -16,6 +16,10 @@
 //! cells are rasterised into a small bitmap and each arc walks its masks in
 //! distance order: most arcs are decided by one pass over the widest band.
 //! Map patches are squares, so the footprint is grown by half a patch.
+//! Standing, a cell the raster puts under the footprint already (the
+//! local map clears those whose centres are; grid rounding moves one just
+//! beyond inside) stops only the arcs that take the footprint deeper over
+//! it, not every arc (`UnderStart`).
 //!
 //! Graded ground (map patches of cost below 1: perception's graded cells,
 //! e.g. 000's D̃ short of an obstacle) is no collision: a clear arc loses
