@@ -52,19 +52,21 @@ fn snapshot_seeing(cells: &[(f64, f64)], reach: f64) -> MapSnapshot {
 /// ... that saw the ground from `near` to `reach` ahead of the vehicle
 /// origin, within `reach` to each side.
 fn snapshot_seeing_from(cells: &[(f64, f64)], near: f64, reach: f64) -> MapSnapshot {
-    let cells = cells
-        .iter()
-        .map(|&(x, y)| ObstacleCell {
-            x,
-            y,
-            z_min: 0.0,
-            z_max: 0.6,
-            reasons: Reasons::HEIGHT_VARIATION,
-            region: 0,
-            cost: 1.0,
-        })
-        .collect();
+    let cells = cells.iter().map(|&(x, y)| rock(x, y)).collect();
     snapshot_of(cells, near, reach)
+}
+
+/// A 0.6 m rock at (x, y).
+fn rock(x: f64, y: f64) -> ObstacleCell {
+    ObstacleCell {
+        x,
+        y,
+        z_min: 0.0,
+        z_max: 0.6,
+        reasons: Reasons::HEIGHT_VARIATION,
+        region: 0,
+        cost: 1.0,
+    }
 }
 
 /// The near edge of a drop-off across the way at `x`, from `-half_width`
@@ -106,6 +108,11 @@ fn snapshot_after(images: Vec<(Vec<ObstacleCell>, [f64; 3])>) -> MapSnapshot {
 
 /// ... each image seeing the rectangle [x0, x1] × [y0, y1].
 fn snapshot_after_rectangles(images: Vec<(Vec<ObstacleCell>, [f64; 4])>) -> MapSnapshot {
+    snapshot_at(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)), images)
+}
+
+/// ... the vehicle at `pose` (cells and rectangles in the world frame).
+fn snapshot_at(pose: &Pose, images: Vec<(Vec<ObstacleCell>, [f64; 4])>) -> MapSnapshot {
     let mut map = LocalMap::new(
         &LocalMapConfig {
             assume_seen_m: 0.0,
@@ -113,7 +120,7 @@ fn snapshot_after_rectangles(images: Vec<(Vec<ObstacleCell>, [f64; 4])>) -> MapS
         },
         &VehicleConfig::default(),
     );
-    map.update(&Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0)));
+    map.update(pose);
     for (cells, [near, far, left, right]) in images {
         let report = ObstacleReport {
             utime: 0,
@@ -145,12 +152,17 @@ fn avoidance_votes_on(map: &MapSnapshot, config: ObstacleAvoidanceConfig) -> Vot
 
 /// ... with the vehicle driving straight ahead at `speed` m/s.
 fn avoidance_votes_moving(map: &MapSnapshot, config: ObstacleAvoidanceConfig, speed: f64) -> Votes {
-    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
-    let mut behaviour = ObstacleAvoidance::new(config, &setup(&arcs, &vehicle));
     let mut pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
     pose.velocity.x = speed;
+    avoidance_votes_at(map, config, &pose)
+}
+
+/// ... with the vehicle at `pose`.
+fn avoidance_votes_at(map: &MapSnapshot, config: ObstacleAvoidanceConfig, pose: &Pose) -> Votes {
+    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
+    let mut behaviour = ObstacleAvoidance::new(config, &setup(&arcs, &vehicle));
     let mission = Mission::default();
-    let ctx = VoteContext::new(0, &pose, map, &mission, &arcs);
+    let ctx = VoteContext::new(0, pose, map, &mission, &arcs);
     let mut votes = Votes::new(arcs.len());
     behaviour.vote(&ctx, &mut votes);
     votes
@@ -1476,44 +1488,14 @@ fn shut_ground_that_leaves_no_way_is_opened_again() {
 #[test]
 fn a_cell_touching_the_flank_where_the_vehicle_stands_stops_only_the_arcs_that_drive_over_it() {
     let pose = Pose::at_rest(0, planar_isometry(0.0, -0.08, 0.0));
-    let mut map = LocalMap::new(
-        &LocalMapConfig {
-            assume_seen_m: 0.0,
-            ..LocalMapConfig::default()
-        },
-        &VehicleConfig::default(),
+    let snapshot = snapshot_at(
+        &pose,
+        vec![(vec![rock(-0.2, -1.4)], [-40.0, 40.0, -40.0, 40.0])],
     );
-    map.update(&pose);
-    let cell = ObstacleCell {
-        x: -0.2,
-        y: -1.4,
-        z_min: 0.0,
-        z_max: 0.6,
-        reasons: Reasons::HEIGHT_VARIATION,
-        region: 0,
-        cost: 1.0,
-    };
-    let seen = [(-40.0, -40.0), (40.0, -40.0), (40.0, 40.0), (-40.0, 40.0)];
-    map.insert(&ObstacleReport {
-        utime: 0,
-        sensor: "test".into(),
-        cell_size_m: 0.2,
-        cells: vec![cell],
-        fov: FovPolygon::new(seen.iter().map(|&(x, y)| Point2::new(x, y)).collect()),
-        ..ObstacleReport::default()
-    })
-    .unwrap();
-    let snapshot = map.snapshot();
     let kept: Vec<(f32, f32)> = snapshot.patches.iter().map(|p| (p.x, p.y)).collect();
     assert_eq!(kept.len(), 1, "{kept:?}");
     assert!((kept[0].1 + 1.32).abs() < 1e-3, "{kept:?}");
-    let (arcs, vehicle) = (arcs(), VehicleConfig::default());
-    let mut behaviour =
-        ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, &vehicle));
-    let mission = Mission::default();
-    let ctx = VoteContext::new(0, &pose, &snapshot, &mission, &arcs);
-    let mut votes = Votes::new(arcs.len());
-    behaviour.vote(&ctx, &mut votes);
+    let votes = avoidance_votes_at(&snapshot, ObstacleAvoidanceConfig::default(), &pose);
     let vetoed: Vec<usize> = (0..39).filter(|&arc| votes.is_vetoed(arc)).collect();
     assert_eq!(vetoed, (20..39).collect::<Vec<_>>(), "left arcs only");
     assert!(
