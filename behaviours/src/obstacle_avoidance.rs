@@ -1318,7 +1318,6 @@ impl Behaviour for ObstacleAvoidance {
             self.ahead.rasterise_unseen(ctx);
         }
         self.ahead.block(policy);
-        self.under_start.find(&self.ahead, &self.footprint);
         let (min, max) = (self.config.min_distance_m, self.config.max_distance_m);
         // The ground ahead at the vehicle's scale: the speed horizon is
         // where the vehicle gets to while it reacts and brakes from cruise.
@@ -1331,6 +1330,13 @@ impl Behaviour for ObstacleAvoidance {
         let arcs = self.templates.len().min(votes.len()).min(ctx.arcs.len());
         for (path, &k) in self.paths.iter_mut().zip(ctx.arcs.curvatures()) {
             *path = DrivenPath::new(&steering, &self.response, k);
+        }
+        // Cells under the footprint count per arc only for arcs taken at
+        // once (`meet`): driving, none are looked for.
+        if self.paths[..arcs].iter().any(DrivenPath::is_arc) {
+            self.under_start.find(&self.ahead, &self.footprint);
+        } else {
+            self.under_start.cells.clear();
         }
         if self.paths[..arcs].iter().all(DrivenPath::is_arc) {
             // Every arc taken at once (standing, or arcs judged as arcs):
