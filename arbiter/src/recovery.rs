@@ -36,8 +36,8 @@
 //! side's hardest arc wished for with a vote of 0.3 or more, for a second:
 //! a route that found one end of a ditch shut goes round the other), the
 //! turn goes that way, the short way to it. One turn counts as one
-//! recovery; a turn left unfinished is taken up towards the same side by the next one
-//! (until `progress_m` of driving).
+//! recovery; a turn left unfinished is taken up towards the same side by
+//! the next one (until `progress_m` of driving).
 //!
 //! **Backing out the way it came.** When no manoeuvre can start (no
 //! backward arc is clear) or a turn round ends with no leg clear (a lane

@@ -1185,9 +1185,9 @@ fn side_at(path: &[[f64; 2]], x: f64) -> f64 {
 /// other end, and again the first as the next image shows a little more
 /// of the other: a vehicle standing before it, turning to each way in
 /// turn, goes neither (`ditch_across` at 5.3 m/s: turned on the spot until
-/// stuck). Near where the vehicle last stood (as before backing up), the route holds
-/// to the path it follows while it costs at most `hold_fraction` more than
-/// the plan's; a way made much costlier (a wall along that side too, the
+/// stuck). Near where the vehicle last stood (as before backing up), the
+/// route holds to the path it follows while it costs at most
+/// `hold_fraction` more than the plan's; a way made much costlier (a wall along that side too, the
 /// way round it through ground never seen) is left. Driving on, never
 /// held up, it follows the plan: a better line is taken at once (held to
 /// it, a vehicle wandered up `hillside_steep` round cells that came and

@@ -49,8 +49,9 @@
 //!   moves; from scratch only for a new waypoint or a re-centred memory. A
 //!   waypoint outside the memory is sought where the line to it leaves it.
 //! - **Holding to a way**: near where the vehicle last stood (slower than
-//!   0.1 m/s, as before backing up; within two lookaheads), the path followed is kept, all of it to
-//!   the goal, while the vehicle is within 2 m of it, it stays passable
+//!   0.1 m/s, as before backing up; within two lookaheads), the path
+//!   followed is kept, all of it to the goal, while the vehicle is within
+//!   2 m of it, it stays passable
 //!   and following it from the vehicle costs at most `hold_fraction`
 //!   more than the plan; else the plan's is followed from then on. Each
 //!   image shows a little more, and the plan alone flips between ways of
@@ -132,10 +133,10 @@ pub struct RouteConfig {
     pub pass_radius_factor: f64,
     /// Vertices a cycle's planning may expand at most (it carries on next cycle).
     pub max_expansions: u64,
-    /// Near where the vehicle last stood (as before backing up), the path being
-    /// followed is kept while the vehicle is on it and it costs at most
-    /// this fraction more than the best plan (0: always the best plan).
-    /// See `Route::hold_or_switch`.
+    /// Near where the vehicle last stood (as before backing up), the path
+    /// being followed is kept while the vehicle is on it and it costs at
+    /// most this fraction more than the best plan (0: always the best
+    /// plan). See `Route::hold_or_switch`.
     pub hold_fraction: f64,
 }
 
@@ -183,8 +184,7 @@ const OVERLAY_PATH_M: f64 = 60.0;
 
 /// The path followed is held (`hold_fraction`) within this many
 /// lookaheads of where the vehicle last stood (as it does before backing
-/// up); farther on,
-/// driving, it follows the best plan.
+/// up); farther on, driving, it follows the best plan.
 const HOLD_AFTER_STANDING: f64 = 2.0;
 
 /// The vehicle stands when slower than this, m/s.
