@@ -470,27 +470,16 @@ impl UnderStart {
     fn find(&mut self, raster: &Raster, footprint: &Footprint) {
         self.cells.clear();
         let grid = &raster.grid;
-        if grid.rows == 0 || grid.columns == 0 {
-            return;
-        }
-        let index = |v: f64, v0: f64, n: usize| {
-            (((v - v0) * grid.per_m).floor().max(0.0) as usize).min(n.saturating_sub(1))
-        };
-        let rows =
-            index(footprint.x_min, grid.x0, grid.rows)..=index(footprint.x_max, grid.x0, grid.rows);
-        let columns = index(-footprint.half_width, grid.y0, grid.columns)
-            ..=index(footprint.half_width, grid.y0, grid.columns);
-        for row in rows {
-            for column in columns.clone() {
-                let centre = grid.centre(row, column);
+        cells_inside(grid, &footprint.corners(), |row, from, to| {
+            for column in from..=to {
                 let word = row * grid.words_per_row + column / 64;
                 let bit = 1u64 << (column % 64);
-                let unseen_too = raster.unseen[word] & bit != 0;
-                if footprint.contains(centre) && raster.bitmap[word] & bit != 0 && !unseen_too {
-                    self.cells.push((word, bit, centre));
+                if raster.bitmap[word] & bit != 0 && raster.unseen[word] & bit == 0 {
+                    self.cells.push((word, bit, grid.centre(row, column)));
                 }
             }
-        }
+            false
+        });
     }
 
     /// `blocked` as arc `arc` meets it: the cells under the start that
