@@ -27,13 +27,12 @@ use std::path::Path;
 
 use arcnav::Config;
 use arcnav::live::threaded::InProcess;
-use arcnav_behaviours::Registry;
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::channels;
 use arcnav_perception::SensorPreset;
 
 fn measure(label: &str, log: &Path, config: &Config, speed: f64, acquisition_ms: f64) {
-    let run = InProcess::start(config, Registry::builtin(), None).expect("arcnav run starts");
+    let run = InProcess::start(&config.resolved().unwrap(), None).expect("arcnav run starts");
     let log = LogReader::open(log).expect("log");
     arcnav_bus::log::play(log, speed, channels::is_input, |e| {
         run.publisher()

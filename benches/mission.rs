@@ -11,7 +11,6 @@ use std::sync::Arc;
 
 use arcnav::Config;
 use arcnav::mission::{LogMode, MissionOptions, run_mission};
-use arcnav_behaviours::Registry;
 use arcnav_perception::SensorPreset;
 use arcnav_sim::World;
 
@@ -29,7 +28,6 @@ fn main() {
             .expect("embedded")
             .expect("valid"),
     );
-    let registry = Registry::builtin();
     println!("paper_loop, {preset:?}, default configuration, no log, two cores:");
     for ahead in [true, false] {
         let mut config = Config::default();
@@ -40,8 +38,7 @@ fn main() {
             ..MissionOptions::default()
         };
         let run = run_mission(
-            &config,
-            &registry,
+            &config.resolved().unwrap(),
             Arc::clone(&world),
             &options,
             &mut |_| {},

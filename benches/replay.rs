@@ -10,11 +10,9 @@ use std::time::Instant;
 
 use arcnav::Config;
 use arcnav::replay::{ReplayOptions, replay};
-use arcnav_behaviours::Registry;
 use arcnav_perception::SensorPreset;
 
 fn measure(label: &str, log: &Path, config: &Config, target: f64) {
-    let registry = Registry::builtin();
     let mut best = f64::INFINITY;
     let mut span = 0.0;
     let mut decisions = 0;
@@ -22,8 +20,7 @@ fn measure(label: &str, log: &Path, config: &Config, target: f64) {
         let started = Instant::now();
         let result = replay(
             log,
-            config,
-            &registry,
+            &config.resolved().unwrap(),
             &ReplayOptions::default(),
             &mut |_| {},
         )

@@ -17,7 +17,7 @@
 
 use std::sync::Arc;
 
-use arcnav::Config;
+use arcnav::Resolved;
 use arcnav::mission::{MissionOptions, run_mission};
 use arcnav_arbiter::Votes;
 use arcnav_behaviours::{Behaviour, Plugin, Registry, Setup, VoteContext};
@@ -107,14 +107,13 @@ fn main() -> anyhow::Result<()> {
             .ok_or_else(|| anyhow::anyhow!("no embedded world {world_name:?}"))??,
     );
     let registry = registry();
-    let with = Config::from_toml_with(CONFIG, "prefer_current example", &registry)?;
+    let with = Resolved::from_toml(CONFIG, "prefer_current example", &registry)?;
     for (label, config) in [
-        ("without prefer_current", Config::default()),
+        ("without prefer_current", Resolved::default()),
         ("with prefer_current", with),
     ] {
         let run = run_mission(
             &config,
-            &registry,
             Arc::clone(&world),
             &MissionOptions::default(),
             &mut |_| {},

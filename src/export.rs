@@ -36,9 +36,9 @@ use foxglove::schemas::{
 use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use serde::Serialize;
 
-use crate::config::Config;
 use crate::output::Staged;
 use crate::wire;
+use arcnav_config::Resolved;
 
 /// An export that could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -216,9 +216,13 @@ const COMMAND_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"
 
 /// Writes `log` as MCAP to `out`; the arc set and the fused votes follow
 /// `config`.
-pub fn export_mcap(log: &Path, out: &Path, config: &Config) -> Result<ExportSummary, ExportError> {
-    let arcs = config.arc_set()?;
-    let mut arbiter: Arbiter = config.arbiter()?;
+pub fn export_mcap(
+    log: &Path,
+    out: &Path,
+    config: &Resolved,
+) -> Result<ExportSummary, ExportError> {
+    let arcs = config.arcs.clone();
+    let mut arbiter: Arbiter = config.arbiter();
     let mut reader = LogReader::open(log).map_err(read_error(log))?;
     let write_error = |reason: String| ExportError::Write {
         path: out.display().to_string(),

@@ -21,7 +21,7 @@ use arcnav_sim::World;
 use arcnav_sim::heightmap::HeightGrid;
 use arcnav_vehicle::VehicleConfig;
 
-use crate::Config;
+use crate::Resolved;
 
 /// A fuzz target: arbitrary bytes in, nothing out.
 pub type Target = fn(&[u8]);
@@ -115,7 +115,8 @@ pub fn udpm_fragments(data: &[u8]) {
 /// perception grid, the local map's ring, the arc set) built.
 pub fn configuration(data: &[u8]) {
     if let Ok(text) = std::str::from_utf8(data)
-        && let Ok(config) = Config::from_toml(text, "fuzz.toml")
+        && let Ok(config) =
+            Resolved::from_toml(text, "fuzz.toml", &arcnav_behaviours::Registry::builtin())
     {
         let _ = config.perception_node();
         let _ = config.decision_cycle::<()>(arcnav_pipeline::Delivery::held(&config.pipeline));

@@ -6,24 +6,21 @@
 //! arbiter fusing the votes into a steering command.
 //!
 //! This crate holds what sits on top of the pipeline library
-//! ([`arcnav_pipeline`]): the composed configuration, the mission runner,
+//! ([`arcnav_pipeline`]) and the configuration ([`arcnav_config`]): the mission runner,
 //! replay, recording, pictures and the live executors' I/O used by the
 //! `arcnav` binary.
 
-pub mod config;
 pub mod detection;
 #[doc(hidden)]
 pub mod export;
 pub mod fuzzing;
 pub mod live;
 pub mod mission;
-pub mod occupancy;
 pub mod output;
 mod recorder;
 pub mod render;
 pub mod replay;
-pub mod speed_bound;
 pub mod sweep;
 pub mod wire;
 
-pub use config::Config;
+pub use arcnav_config::{Config, Resolved};

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context as _;
-use arcnav::Config;
+use arcnav::Resolved;
 use arcnav::live::node::NodeKind;
 use clap::{ArgAction, Parser, Subcommand, ValueEnum};
 
@@ -90,8 +90,9 @@ enum Command {
     /// List the terrain evaluators `perception.evaluator` can name (the
     /// papers they come from; configure each in [perception.NAME])
     Evaluators,
-    /// Print the effective configuration (defaults merged with FILE) as TOML,
-    /// or validate FILE with --check.
+    /// Print the resolved configuration (defaults, FILE over them, and what
+    /// follows from both) as TOML, each key marked with where its value came
+    /// from; or validate FILE with --check.
     Config {
         /// A TOML file holding the keys to change; every other key keeps its
         /// default (see config/default.toml).
@@ -475,34 +476,35 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
         },
         Command::Config { file, check } => {
-            let config = Config::load_or_default(file.as_deref())?;
+            let config = Resolved::load_or_default(
+                file.as_deref(),
+                &arcnav_behaviours::Registry::builtin(),
+            )?;
             if check {
                 let file = file.context("--check needs a FILE")?;
                 println!("{}: valid", file.display());
             } else {
                 match &file {
                     Some(f) => println!(
-                        "# effective configuration: defaults merged with {}",
+                        "# the resolved configuration: the defaults, {} over them, and what \
+                         follows from both; each key says where its value came from",
                         f.display()
                     ),
-                    None => println!("# effective configuration: the defaults"),
+                    None => println!(
+                        "# the resolved configuration: the defaults and what follows from them; \
+                         each key says where its value came from"
+                    ),
                 }
-                let look = config.lookahead();
-                if look.capped {
-                    println!(
-                        "# [lookahead] hole_speed_cap: cruise {} m/s held to {:.2} m/s, from which the vehicle \
-                         stops within the range at which a hole the wheels do not bridge is first suspected",
-                        config.arbiter.cruise_speed_mps, look.cruise_mps
-                    );
-                }
-                if look.moved_m > 0.0 {
-                    println!(
-                        "# [lookahead]: at {:.2} m/s a clear arc allows cruise {:.1} m along, so the \
-                         distances that look ahead are {:.1} m farther than configured",
-                        look.cruise_mps, look.needed_m, look.moved_m
-                    );
-                }
-                print!("{}", config.effective().to_toml());
+                let cruise = &config.cruise;
+                println!(
+                    "# cruise: {:.2} m/s asked (arbiter.cruise_speed_mps), {:.2} m/s driven{}",
+                    cruise.asked_mps,
+                    cruise.mps,
+                    cruise.cap_mps.map_or(String::new(), |cap| format!(
+                        " (lookahead.hole_speed_cap allows {cap:.2} m/s)"
+                    ))
+                );
+                print!("{}", config.to_toml_with_origins());
             }
             Ok(ExitCode::SUCCESS)
         }

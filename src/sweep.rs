@@ -19,8 +19,8 @@ use arcnav_behaviours::Registry;
 use arcnav_sim::World;
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Config, ConfigLoadError};
 use crate::mission::MissionReport;
+use arcnav_config::{Config, ConfigLoadError, Resolved};
 
 /// Settings a sweep may hold (the product of every key's values).
 pub const MAX_SETTINGS: usize = 10_000;
@@ -241,7 +241,7 @@ pub fn axes(
 pub struct Setting {
     /// The value of each axis, as TOML text.
     pub values: Vec<String>,
-    pub config: Config,
+    pub config: Resolved,
 }
 
 impl Setting {
@@ -295,7 +295,7 @@ pub fn settings(
             let label = label(axes, &values);
             // Loading validates the whole configuration.
             let text = toml::to_string(&config).unwrap_or_default();
-            let config = Config::from_toml_with(&text, &label, registry)
+            let config = Resolved::from_toml(&text, &label, registry)
                 .map_err(|source| SweepError::Invalid { label, source })?;
             Ok(Setting { values, config })
         })
@@ -339,7 +339,11 @@ impl Plan {
             worlds: self.worlds.iter().map(|w| w.label.clone()).collect(),
             keys: self.axes.iter().map(|a| a.key.clone()).collect(),
             settings: self.settings.iter().map(|s| s.values.clone()).collect(),
-            configs: self.settings.iter().map(|s| s.config.to_toml()).collect(),
+            configs: self
+                .settings
+                .iter()
+                .map(|s| s.config.given().to_toml())
+                .collect(),
         }
     }
 }

@@ -10,7 +10,6 @@ use std::sync::Arc;
 
 use arcnav::Config;
 use arcnav::mission::{MissionOptions, run_mission};
-use arcnav_behaviours::Registry;
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::AnyMessage;
 use arcnav_sim::World;
@@ -30,7 +29,7 @@ fn an_exported_sim_run_reads_back_in_the_reference_mcap_reader() {
         log: Some(log.clone()),
         ..MissionOptions::default()
     };
-    run_mission(&config, &Registry::builtin(), world, &options, &mut |_| {}).unwrap();
+    run_mission(&config.resolved().unwrap(), world, &options, &mut |_| {}).unwrap();
 
     // What the log holds: messages per channel, and the first image's returns.
     let mut channels: BTreeMap<String, u64> = BTreeMap::new();

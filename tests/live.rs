@@ -20,7 +20,6 @@ use arcnav::live::clock::ManualClock;
 use arcnav::live::threaded::InProcess;
 use arcnav::mission::{MissionOptions, SIM_EPOCH_US, run_mission};
 use arcnav::replay::{ReplayOptions, replay};
-use arcnav_behaviours::Registry;
 use arcnav_bus::auth::{AuthPolicy, GroupKey, Signer, TRAILER_LEN};
 use arcnav_bus::codec::Message as _;
 use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
@@ -91,7 +90,7 @@ fn sim_log_of(config: &Config) -> PathBuf {
                 log: Some(path.clone()),
                 ..MissionOptions::default()
             };
-            run_mission(config, &Registry::builtin(), world, &options, &mut |_| {}).unwrap();
+            run_mission(&config.resolved().unwrap(), world, &options, &mut |_| {}).unwrap();
             path
         })
         .clone()
@@ -101,8 +100,7 @@ fn sim_log_of(config: &Config) -> PathBuf {
 fn lockstep(log: &Path, config: &Config) -> BTreeMap<Utime, SteeringCommand> {
     replay(
         log,
-        config,
-        &Registry::builtin(),
+        &config.resolved().unwrap(),
         &ReplayOptions::default(),
         &mut |_| {},
     )
@@ -209,7 +207,7 @@ fn assert_threaded_gives_lockstep_on(mut config: Config, speed: f64) {
     let log = sim_log_of(&log_config);
     let expected = lockstep(&log, &config);
     let (tap, taken) = crossbeam_channel::unbounded::<Decided>();
-    let run = InProcess::start(&config, Registry::builtin(), Some(tap)).unwrap();
+    let run = InProcess::start(&config.resolved().unwrap(), Some(tap)).unwrap();
     // At most twice real time: perception still delivers long before the
     // modelled 0.3 s latency.
     feed(&log, speed, |channel, data| {
@@ -306,8 +304,7 @@ fn the_watchdog_stops_on_the_executors_own_clock() {
     let clock = ManualClock::starting_at(1_000_000_000_000);
     let (tap, taken) = crossbeam_channel::unbounded::<Decided>();
     let run = InProcess::start_with(
-        &config,
-        Registry::builtin(),
+        &config.resolved().unwrap(),
         Some(tap),
         Some(Arc::new(clock.clone())),
     )
@@ -1196,7 +1193,7 @@ fn flood_log(config: &Config) -> PathBuf {
             log: Some(path.clone()),
             ..MissionOptions::default()
         };
-        run_mission(config, &Registry::builtin(), world, &options, &mut |_| {}).unwrap();
+        run_mission(&config.resolved().unwrap(), world, &options, &mut |_| {}).unwrap();
         path
     })
     .clone()

@@ -7,7 +7,7 @@ mod prefer_current;
 
 use std::sync::Arc;
 
-use arcnav::Config;
+use arcnav::Resolved;
 use arcnav::mission::{MissionOptions, run_mission};
 use arcnav_behaviours::Registry;
 use arcnav_localmap::MapSnapshot;
@@ -21,7 +21,7 @@ static LOCALMAP: std::sync::LazyLock<arcnav_localmap::LocalMapConfig> =
 
 #[test]
 fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() {
-    let err = Config::from_toml(prefer_current::CONFIG, "example")
+    let err = Resolved::from_toml(prefer_current::CONFIG, "example", &Registry::builtin())
         .unwrap_err()
         .to_string();
     assert!(
@@ -31,15 +31,15 @@ fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() 
         "{err}"
     );
     let registry = prefer_current::registry();
-    let config = Config::from_toml_with(prefer_current::CONFIG, "example", &registry).unwrap();
+    let config = Resolved::from_toml(prefer_current::CONFIG, "example", &registry).unwrap();
     assert_eq!(
-        config.behaviours["prefer_current"]["width_arcs"].as_float(),
+        config
+            .behaviour_config::<prefer_current::PreferCurrentConfig>("prefer_current")
+            .map(|c| c.width_arcs),
         Some(4.0)
     );
-    let arcs = config.arc_set().unwrap();
     let names: Vec<String> = config
-        .build_behaviours(&registry, &arcs)
-        .unwrap()
+        .build_behaviours()
         .iter()
         .map(|b| b.name().to_owned())
         .collect();
@@ -53,7 +53,7 @@ fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() 
         ]
     );
     let bad = prefer_current::CONFIG.replace("width_arcs = 4.0", "width_arcs = 0.0");
-    let err = Config::from_toml_with(&bad, "example", &registry)
+    let err = Resolved::from_toml(&bad, "example", &registry)
         .unwrap_err()
         .to_string();
     assert!(
@@ -66,7 +66,7 @@ fn the_builtin_registry_refuses_it_and_the_extended_one_builds_it_from_config() 
 fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
     let registry: Registry = prefer_current::registry();
     let arcs = ArcSet::new(&ArcSetConfig::default()).unwrap();
-    let config = Config::default();
+    let config = arcnav::Config::default();
     let setup = arcnav_behaviours::Setup {
         arcs: &arcs,
         vehicle: &config.vehicle,
@@ -104,11 +104,10 @@ fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
 fn it_damps_the_weaving_on_a_real_mission() {
     let registry = prefer_current::registry();
     let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
-    let with = Config::from_toml_with(prefer_current::CONFIG, "example", &registry).unwrap();
-    let run = |config: &Config| {
+    let with = Resolved::from_toml(prefer_current::CONFIG, "example", &registry).unwrap();
+    let run = |config: &Resolved| {
         run_mission(
             config,
-            &registry,
             Arc::clone(&world),
             &MissionOptions::default(),
             &mut |_| {},
@@ -116,7 +115,7 @@ fn it_damps_the_weaving_on_a_real_mission() {
         .unwrap()
         .report
     };
-    let (plain, damped) = (run(&Config::default()), run(&with));
+    let (plain, damped) = (run(&Resolved::default()), run(&with));
     assert!(plain.success && damped.success);
     assert!(
         damped.steering_activity < 0.8 * plain.steering_activity,

@@ -8,7 +8,6 @@ use std::sync::{Arc, OnceLock};
 use arcnav::Config;
 use arcnav::mission::{MissionOptions, run_mission};
 use arcnav::replay::{ReplayOptions, ReplayResult, compare, replay};
-use arcnav_behaviours::Registry;
 use arcnav_bus::log::{LogReader, LogWriter};
 use arcnav_perception::SensorPreset;
 use arcnav_sim::World;
@@ -28,8 +27,7 @@ fn dir(tag: &str) -> PathBuf {
 fn replay_with_defaults(path: &Path) -> ReplayResult {
     replay(
         path,
-        &Config::default(),
-        &Registry::builtin(),
+        &Config::default().resolved().unwrap(),
         &ReplayOptions::default(),
         &mut |_| {},
     )
@@ -47,8 +45,7 @@ fn sim_log() -> &'static Path {
             ..MissionOptions::default()
         };
         let run = run_mission(
-            &Config::default(),
-            &Registry::builtin(),
+            &Config::default().resolved().unwrap(),
             world,
             &options,
             &mut |_| {},
@@ -406,8 +403,7 @@ fn render_draws_a_log_without_images_from_its_recorded_cells() {
 fn the_kept_decision_carries_the_routes_path() {
     let result = replay(
         sim_log(),
-        &Config::default(),
-        &Registry::builtin(),
+        &Config::default().resolved().unwrap(),
         &ReplayOptions {
             stop_at_s: Some(12.5),
             ..ReplayOptions::default()
@@ -910,8 +906,7 @@ fn a_replay_from_the_middle_keeps_the_mission_sent_before_it() {
     };
     let result = replay(
         sim_log(),
-        &Config::default(),
-        &Registry::builtin(),
+        &Config::default().resolved().unwrap(),
         &options,
         &mut |_| {},
     )
@@ -992,8 +987,7 @@ fn a_flipped_bit_in_one_events_log_time_does_not_end_the_replay_early() {
         };
         replay(
             path,
-            &Config::default(),
-            &Registry::builtin(),
+            &Config::default().resolved().unwrap(),
             &options,
             &mut |_| {},
         )
@@ -1023,7 +1017,7 @@ fn streamed_log(tag: &str, sensor: SensorPreset, lines: usize, seconds: f64) -> 
         log: Some(path.clone()),
         ..MissionOptions::default()
     };
-    run_mission(&config, &Registry::builtin(), world, &options, &mut |_| {}).unwrap();
+    run_mission(&config.resolved().unwrap(), world, &options, &mut |_| {}).unwrap();
     (path, config)
 }
 
@@ -1039,8 +1033,7 @@ fn a_log_of_streamed_slices_replays_to_the_sims_own_commands() {
         let (log, config) = streamed_log(tag, sensor, lines, 12.0);
         let result = replay(
             &log,
-            &config,
-            &Registry::builtin(),
+            &config.resolved().unwrap(),
             &ReplayOptions::default(),
             &mut |_| {},
         )
@@ -1108,8 +1101,7 @@ fn slices_missing_from_a_log_are_counted_as_lost_lines() {
     drop(writer);
     let result = replay(
         &holed,
-        &config,
-        &Registry::builtin(),
+        &config.resolved().unwrap(),
         &ReplayOptions::default(),
         &mut |_| {},
     )

@@ -6,7 +6,6 @@ use std::sync::Arc;
 
 use arcnav::Config;
 use arcnav::mission::{MissionOptions, MissionRun, Outcome, run_mission};
-use arcnav_behaviours::Registry;
 use arcnav_sim::World;
 use arcnav_testkit::workspace_root;
 
@@ -27,8 +26,7 @@ fn drive(world: &str) -> MissionRun {
 /// The mission on `world` with the default configuration.
 fn run(world: World) -> MissionRun {
     run_mission(
-        &Config::default(),
-        &Registry::builtin(),
+        &Config::default().resolved().unwrap(),
         Arc::new(world),
         &MissionOptions::default(),
         &mut |_| {},

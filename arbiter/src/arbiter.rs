@@ -274,6 +274,8 @@ struct Input {
 pub struct Arbiter {
     config: ArbiterConfig,
     arcs: ArcSet,
+    /// The speed driven when nothing asks for less, m/s.
+    cruise_mps: f64,
     max_speed_mps: f64,
     timeout_us: Utime,
     inputs: Vec<Input>,
@@ -315,6 +317,7 @@ impl Arbiter {
         let mut arbiter = Self {
             config: config.clone(),
             arcs,
+            cruise_mps: config.cruise_speed_mps,
             max_speed_mps: vehicle.max_speed_mps,
             timeout_us: seconds_to_micros(config.vote_timeout_s),
             inputs: Vec::new(),
@@ -344,6 +347,18 @@ impl Arbiter {
 
     pub fn config(&self) -> &ArbiterConfig {
         &self.config
+    }
+
+    /// This arbiter driving at `mps` when nothing asks for less, in place of
+    /// the `cruise_speed_mps` asked for (what a cap on it allows).
+    pub fn cruising_at(mut self, mps: f64) -> Self {
+        self.cruise_mps = mps;
+        self
+    }
+
+    /// The speed driven when nothing asks for less, m/s.
+    pub fn cruise_mps(&self) -> f64 {
+        self.cruise_mps
     }
 
     pub fn stats(&self) -> &ArbiterStats {
@@ -677,7 +692,7 @@ impl Arbiter {
             }
         }
         let mut limits = vec![
-            ("cruise".to_owned(), self.config.cruise_speed_mps),
+            ("cruise".to_owned(), self.cruise_mps),
             ("vehicle".to_owned(), self.max_speed_mps),
         ];
         if let Some((behaviour, speed)) = speed_vote {

@@ -10,7 +10,9 @@
 //! to its constructor. Adding a behaviour: implement [`Plugin`] and call
 //! `registry.add::<MyBehaviour>()`.
 
+use std::any::Any;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use arcnav_vehicle::ConfigError;
 use serde::Serialize;
@@ -52,21 +54,65 @@ struct Entry {
 }
 
 /// A behaviour's table, parsed into its typed configuration and validated
-/// (once): what building the behaviour needs, and the table with every
-/// default filled in.
+/// (once): what building the behaviour needs, the typed configuration, and
+/// the table with every default filled in.
 #[derive(Clone)]
 pub struct Prepared {
     table: toml::Table,
+    config: Arc<dyn Any + Send + Sync>,
     build: Constructor,
+    remake: Remaker,
 }
 
 /// Builds a behaviour from a configuration checked once.
-type Constructor = std::sync::Arc<dyn Fn(&Setup<'_>) -> Box<dyn Behaviour> + Send + Sync>;
+type Constructor = Arc<dyn Fn(&Setup<'_>) -> Box<dyn Behaviour> + Send + Sync>;
+
+/// Checks another configuration of the same behaviour and prepares it.
+type Remaker = Arc<
+    dyn Fn(&(dyn Any + Send + Sync), &Setup<'_>) -> Result<Prepared, ConfigError> + Send + Sync,
+>;
 
 impl Prepared {
+    /// `config` of behaviour `P`, checked against `setup`.
+    fn of<P: Plugin>(config: P::Config, setup: &Setup<'_>) -> Result<Self, ConfigError> {
+        P::validate(&config, setup)?;
+        let typed = Arc::new(config);
+        let built = Arc::clone(&typed);
+        Ok(Self {
+            table: table_of(&*typed),
+            config: typed,
+            build: Arc::new(move |setup| {
+                Box::new(P::build((*built).clone(), setup)) as Box<dyn Behaviour>
+            }),
+            remake: Arc::new(|config, setup| match config.downcast_ref::<P::Config>() {
+                Some(config) => Self::of::<P>(config.clone(), setup),
+                None => Err(ConfigError::new(
+                    "",
+                    format!("is not the configuration of behaviour {:?}", P::NAME),
+                )),
+            }),
+        })
+    }
+
     /// The table with every default filled in.
     pub fn table(&self) -> &toml::Table {
         &self.table
+    }
+
+    /// The typed configuration, when it is a `C`.
+    pub fn config<C: 'static>(&self) -> Option<&C> {
+        self.config.downcast_ref::<C>()
+    }
+
+    /// The same behaviour with `config` in place of its own (a
+    /// configuration with derived values set), checked against `setup`
+    /// as a table is. Refused when `config` is not this behaviour's type.
+    pub fn with_config<C: Send + Sync + 'static>(
+        &self,
+        config: C,
+        setup: &Setup<'_>,
+    ) -> Result<Self, ConfigError> {
+        (self.remake)(&config, setup)
     }
 
     /// Builds the behaviour (its configuration was checked when prepared).
@@ -142,16 +188,7 @@ impl Registry {
 
     /// Registers `P` under `P::NAME` (replacing a behaviour of that name).
     pub fn add<P: Plugin>(&mut self) -> &mut Self {
-        let prepare: Preparer = Box::new(|table, setup| {
-            let config: P::Config = parse(table)?;
-            P::validate(&config, setup)?;
-            Ok(Prepared {
-                table: table_of(&config),
-                build: std::sync::Arc::new(move |setup| {
-                    Box::new(P::build(config.clone(), setup)) as Box<dyn Behaviour>
-                }),
-            })
-        });
+        let prepare: Preparer = Box::new(|table, setup| Prepared::of::<P>(parse(table)?, setup));
         self.entries.insert(
             P::NAME,
             Entry {

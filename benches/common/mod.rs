@@ -6,7 +6,6 @@ use std::sync::Arc;
 
 use arcnav::Config;
 use arcnav::mission::{MissionOptions, run_mission};
-use arcnav_behaviours::Registry;
 use arcnav_sim::World;
 
 /// `target/bench-data`, created.
@@ -28,6 +27,6 @@ pub fn make_log(path: &Path, world: &str, config: &Config) {
         log: Some(path.to_owned()),
         ..MissionOptions::default()
     };
-    run_mission(config, &Registry::builtin(), world, &options, &mut |_| {})
+    run_mission(&config.resolved().unwrap(), world, &options, &mut |_| {})
         .expect("the mission runs");
 }

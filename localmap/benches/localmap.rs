@@ -31,22 +31,31 @@ fn config() -> LocalMapConfig {
     }
 }
 
-/// A deterministic spread of `n` distinct cells over the window.
+/// A deterministic spread of `n` distinct cells over the window, none
+/// under the vehicle standing at the origin (the map clears the ground
+/// under its body, so such a cell would not be kept).
 fn cells(n: usize) -> Vec<ObstacleCell> {
     let (columns, rows) = (400usize, 400usize);
-    let stride = (columns * rows / n).max(1);
-    (0..n)
-        .map(|k| {
-            let slot = (k * stride + (k * 7919) % stride.max(1)) % (columns * rows);
-            ObstacleCell {
-                x: -19.9 + (slot % columns) as f64 * 0.2,
-                y: -39.9 + (slot / columns) as f64 * 0.2,
-                z_min: 0.0,
-                z_max: 0.4,
-                reasons: Reasons::HEIGHT_VARIATION,
-                region: 0,
-                cost: 1.0,
-            }
+    let under_body = |x: f64, y: f64| (-3.0..=5.0).contains(&x) && y.abs() <= 2.5;
+    let stride = (columns * rows / (n + n / 50 + 1)).max(1);
+    (0..columns * rows)
+        .map(|k| (k * stride + (k * 7919) % stride) % (columns * rows))
+        .map(|slot| {
+            (
+                -19.9 + (slot % columns) as f64 * 0.2,
+                -39.9 + (slot / columns) as f64 * 0.2,
+            )
+        })
+        .filter(|&(x, y)| !under_body(x, y))
+        .take(n)
+        .map(|(x, y)| ObstacleCell {
+            x,
+            y,
+            z_min: 0.0,
+            z_max: 0.4,
+            reasons: Reasons::HEIGHT_VARIATION,
+            region: 0,
+            cost: 1.0,
         })
         .collect()
 }

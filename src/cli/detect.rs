@@ -1,7 +1,7 @@
 //! `arcnav detect`: paper 000's detection experiment for every evaluator.
 
 use anyhow::Context as _;
-use arcnav::Config;
+use arcnav::Resolved;
 use arcnav::detection::{DetectionOptions, run, table};
 use arcnav::output::write_file;
 use arcnav_perception::{EvaluatorRegistry, SensorPreset};
@@ -9,7 +9,10 @@ use arcnav_perception::{EvaluatorRegistry, SensorPreset};
 use crate::DetectArgs;
 
 pub fn detect(args: DetectArgs) -> anyhow::Result<()> {
-    let config = Config::load_or_default(args.config.as_deref())?;
+    let config = Resolved::load_or_default(
+        args.config.as_deref(),
+        &arcnav_behaviours::Registry::builtin(),
+    )?;
     let registry = EvaluatorRegistry::builtin();
     let evaluators = if args.evaluators.is_empty() {
         registry.names().into_iter().map(String::from).collect()

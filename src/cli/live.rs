@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use crate::{LiveArgs, VehicleArgs};
 use anyhow::Context as _;
-use arcnav::Config;
+use arcnav::Resolved;
 use arcnav::live::LiveReport;
 use arcnav::live::node::NodeKind;
 use arcnav::live::threaded::StopWhen;
@@ -29,8 +29,8 @@ pub fn live(node: Option<NodeKind>, args: LiveArgs) -> anyhow::Result<ExitCode> 
         "starting {what}; Ctrl-C or SIGTERM stops"
     );
     let report = match &node {
-        None => arcnav::live::threaded::run(&config, &registry, lcm, &options)?,
-        Some(kind) => arcnav::live::node::run_node(kind, &config, &registry, lcm, &options)?,
+        None => arcnav::live::threaded::run(&config, lcm, &options)?,
+        Some(kind) => arcnav::live::node::run_node(kind, &config, lcm, &options)?,
     };
     tracing::info!(
         commands = report.commands,
@@ -55,7 +55,7 @@ fn finish(args: &LiveArgs, report: &LiveReport) -> anyhow::Result<ExitCode> {
 
 /// What every live command starts from.
 struct Started {
-    config: Config,
+    config: Resolved,
     /// Authenticating when `[bus.auth]` names a key.
     lcm: Lcm,
     stop: StopWhen,
@@ -64,10 +64,7 @@ struct Started {
 /// Loads the configuration, installs the signal handlers, reads the key
 /// and opens LCM; warns when multicast leaves the host unauthenticated.
 fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
-    let config = match &args.config {
-        Some(p) => Config::load_with(p, registry)?,
-        None => Config::default(),
-    };
+    let config = Resolved::load_or_default(args.config.as_deref(), registry)?;
     let after = match args.duration {
         Some(s) if s > 0.0 && s.is_finite() => Some(std::time::Duration::from_secs_f64(s)),
         Some(s) => anyhow::bail!("--duration {s}: must be a positive number of seconds"),

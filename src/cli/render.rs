@@ -6,7 +6,7 @@ use anyhow::Context as _;
 use std::process::ExitCode;
 
 use crate::{ExportArgs, RenderArgs};
-use arcnav::Config;
+use arcnav::Resolved;
 use arcnav_behaviours::Registry;
 
 /// The configuration to redo a run's decisions with: `--config` if given,
@@ -17,13 +17,13 @@ fn run_config(
     log: &Path,
     given: Option<&Path>,
     registry: &Registry,
-) -> anyhow::Result<(Config, Option<PathBuf>)> {
+) -> anyhow::Result<(Resolved, Option<PathBuf>)> {
     if let Some(path) = given {
-        return Ok((Config::load_with(path, registry)?, Some(path.to_owned())));
+        return Ok((Resolved::load(path, registry)?, Some(path.to_owned())));
     }
     let beside = log.parent().unwrap_or(Path::new(".")).join("config.toml");
     if beside.is_file() {
-        let config = Config::load_with(&beside, registry)
+        let config = Resolved::load(&beside, registry)
             .with_context(|| format!("the run's configuration {}", beside.display()))?;
         eprintln!(
             "using {}, the configuration the run was made with (--config to give another)",
@@ -31,7 +31,7 @@ fn run_config(
         );
         return Ok((config, Some(beside)));
     }
-    Ok((Config::default(), None))
+    Ok((Resolved::load_or_default(None, registry)?, None))
 }
 
 pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
@@ -69,7 +69,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         stop_at_s: Some(args.at),
         ..ReplayOptions::default()
     };
-    let result = run_replay(&args.log, &config, &registry, &options, &mut |_| {})?;
+    let result = run_replay(&args.log, &config, &options, &mut |_| {})?;
     let origin = result.span.map_or(0, |s| s.0);
     let log = &result.problems.log;
     anyhow::ensure!(
@@ -141,7 +141,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<ExitCode> {
 pub(crate) fn write_mcap(
     log: &std::path::Path,
     mcap: &std::path::Path,
-    config: &Config,
+    config: &Resolved,
 ) -> anyhow::Result<()> {
     let summary = arcnav::export::export_mcap(log, mcap, config)?;
     anyhow::ensure!(

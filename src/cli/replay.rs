@@ -5,17 +5,20 @@ use std::process::ExitCode;
 
 use crate::ReplayArgs;
 use anyhow::Context as _;
-use arcnav::Config;
+use arcnav::{Config, Resolved};
 use arcnav_behaviours::Registry;
 
 pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     use arcnav::replay::{ReplayOptions, compare, replay as run_replay};
     let registry = Registry::builtin();
-    let load = |path: &Option<PathBuf>| -> anyhow::Result<Config> {
-        Ok(match path {
-            Some(p) => Config::load_with(p, &registry)?,
-            None => Config::default(),
-        })
+    let load = |path: &Option<PathBuf>| -> anyhow::Result<Resolved> {
+        let config = Config::load_or_default(path.as_deref())?;
+        let origin = path
+            .as_ref()
+            .map_or("the defaults".to_owned(), |p| p.display().to_string());
+        config
+            .resolve(&registry)
+            .with_context(|| format!("{origin}: invalid configuration"))
     };
     if let Some(speed) = args.speed {
         anyhow::ensure!(
@@ -68,7 +71,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         .progress_chars("=> "),
     );
     let mut runs = Vec::new();
-    let configs: Vec<(String, Config, ReplayOptions)> = match &args.compare_config {
+    let configs: Vec<(String, Resolved, ReplayOptions)> = match &args.compare_config {
         Some(pair) => {
             let (a, b) = (&pair[0], &pair[1]);
             vec![
@@ -91,9 +94,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     };
     for (label, config, opts) in &configs {
         bar.set_position(0);
-        let result = run_replay(&args.log, config, &registry, opts, &mut |p| {
-            bar.set_position(p)
-        })?;
+        let result = run_replay(&args.log, config, opts, &mut |p| bar.set_position(p))?;
         runs.push((label.clone(), config.clone(), result));
     }
     bar.finish_and_clear();
@@ -123,7 +124,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             .map(|o| format!(", written to {}", o.display()))
             .unwrap_or_default()
     );
-    let weight_of = |c: &Config| {
+    let weight_of = |c: &Resolved| {
         let c = c.clone();
         move |name: &str| c.arbiter.weight(name)
     };

@@ -23,7 +23,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     }
     let registry = Registry::builtin();
     let mut config = match &args.config {
-        Some(path) => Config::load_with(path, &registry)?,
+        Some(path) => Config::load(path)?,
         None => Config::default(),
     };
     if let Some(speed) = args.speed {
@@ -32,7 +32,11 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
             "--speed {speed}: a speed must be positive"
         );
         config.arbiter.cruise_speed_mps = speed;
-        config.vehicle.max_speed_mps = config.vehicle.max_speed_mps.max(speed);
+        config.set_by("arbiter.cruise_speed_mps", "--speed");
+        if config.vehicle.max_speed_mps < speed {
+            config.vehicle.max_speed_mps = speed;
+            config.set_by("vehicle.max_speed_mps", "--speed");
+        }
     }
     if let Some(sensor) = args.sensor {
         anyhow::ensure!(
@@ -40,9 +44,11 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
             "--sensor: the configuration lists its sensors in [[sensors]]; change them there"
         );
         config.sensor.preset = sensor.into();
+        config.set_by("sensor.preset", "--sensor");
     }
     if let Some(evaluator) = &args.evaluator {
         config.perception.evaluator.clone_from(evaluator);
+        config.set_by("perception.evaluator", "--evaluator");
     }
     if let Some(every) = args.snapshot_every {
         anyhow::ensure!(
@@ -50,8 +56,8 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
             "--snapshot-every {every}: must be a positive number of seconds"
         );
     }
-    config
-        .validate_with(&registry)
+    let config = config
+        .resolve(&registry)
         .context("the configuration with the command-line settings")?;
     let world = match (&args.world, args.seed) {
         (_, Some(seed)) => {
@@ -123,21 +129,21 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         snapshot_dir: Some(snapshot_dir),
         beside_others: false,
     };
-    let sensors: Vec<String> = config.sensor_models()?.into_iter().map(|s| s.id).collect();
+    let sensors: Vec<&str> = config.sensors.iter().map(|s| s.id.as_str()).collect();
     eprintln!(
         "arcnav sim: {name} ({} waypoints) with the {} sensor{} and the {} evaluator at {:.1} m/s cruise",
         world.waypoints.len(),
         sensors.join(" + "),
         if sensors.len() > 1 { "s" } else { "" },
         config.perception.evaluator,
-        config.arbiter.cruise_speed_mps
+        config.cruise.asked_mps
     );
     // Faster than holes can be seen: say so before the run, not only in
     // the report.
-    let look = config.lookahead();
-    if let Ok(bound) = arcnav::speed_bound::speed_bound(&config) {
-        let cruise = look.cruise_mps;
-        if look.capped
+    {
+        let bound = &config.speed_bound;
+        let cruise = config.cruise.mps;
+        if config.cruise.capped()
             && let Some(range) = bound.suspect_range_m
         {
             eprintln!(
@@ -145,7 +151,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
                  suspected within {range:.1} m, and from faster the vehicle could not stop short of \
                  it ([lookahead] hole_speed_cap = false to drive where the ground has no holes at \
                  {:.1} m/s)",
-                config.arbiter.cruise_speed_mps
+                config.cruise.asked_mps
             );
         }
         // The vehicle slows for what it suspects: with suspicion on, a
@@ -154,7 +160,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         let in_time = (bound.suspect_range_m.zip(bound.suspect_bound_mps))
             .map(|(range, speed)| (range, speed, "suspects"))
             .or(bound
-                .hole_range_m
+                .hole_certain_m
                 .zip(bound.hole_bound_mps)
                 .map(|(range, speed)| (range, speed, "flags")));
         if let Some((range, speed, how)) = in_time
@@ -177,7 +183,6 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     let started = std::time::Instant::now();
     let run = run_mission(
         &config,
-        &registry,
         Arc::clone(&world),
         &options,
         &mut |p: &MissionProgress| {
@@ -195,7 +200,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     bar.finish_and_clear();
     arcnav::output::write_file(
         config_path,
-        format!("# the configuration of this run: replay with `arcnav replay mission.lcm --config config.toml`\n{}", config.to_toml()).as_bytes(),
+        format!("# the configuration of this run: replay with `arcnav replay mission.lcm --config config.toml`\n{}", config.given().to_toml()).as_bytes(),
     )
     .with_context(|| format!("cannot write {}", config_path.display()))?;
     arcnav::output::write_file(
@@ -230,10 +235,15 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         r.duration_s,
         r.average_speed_mps,
         r.max_speed_mps,
-        r.cruise_speed_mps,
-        r.cruise_asked_mps.map_or(String::new(), |asked| format!(
-            ", held from {asked:.2} by [lookahead] hole_speed_cap"
-        ))
+        r.cruise_mps,
+        if r.cruise_mps < r.cruise_asked_mps {
+            format!(
+                ", held from {:.2} by [lookahead] hole_speed_cap",
+                r.cruise_asked_mps
+            )
+        } else {
+            String::new()
+        }
     );
     let b = &r.speed_bound;
     println!(
@@ -245,7 +255,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         b.reaction_s,
         100.0 * r.speed_fraction_of_bound
     );
-    if let (Some(range), Some(bound)) = (b.hole_range_m, b.hole_bound_mps) {
+    if let (Some(range), Some(bound)) = (b.hole_certain_m, b.hole_bound_mps) {
         println!(
             "              holes the wheels do not bridge are flagged for certain within {range:.1} m: {bound:.2} m/s \
              (the average is {:.0} % of it)",

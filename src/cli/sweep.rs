@@ -31,8 +31,7 @@ const INTERRUPTED: u8 = 130;
 const MAX_JOBS: usize = 1024;
 
 pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
-    let registry = Arc::new(Registry::builtin());
-    let plan = plan(&args, &registry)?;
+    let plan = plan(&args, &Registry::builtin())?;
     let jobs = match args.jobs {
         Some(0) => anyhow::bail!("--jobs 0: at least one run at a time"),
         Some(n) if n > MAX_JOBS => {
@@ -71,7 +70,7 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
     }
     let interrupted = super::interrupt_flag()?;
     let started = Instant::now();
-    let ran = run_pending(&plan, registry, &pending, jobs, out, &interrupted)?;
+    let ran = run_pending(&plan, &pending, jobs, out, &interrupted)?;
     let elapsed = started.elapsed().as_secs_f64();
     let rows = RowLog::read(out, plan.runs())
         .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?
@@ -104,10 +103,7 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
 
 /// Worlds and settings, every one loaded and validated before any run.
 fn plan(args: &SweepArgs, registry: &Registry) -> anyhow::Result<Plan> {
-    let base = match &args.config {
-        Some(path) => Config::load_with(path, registry)?,
-        None => Config::default(),
-    };
+    let base = Config::load_or_default(args.config.as_deref())?;
     let sets = args
         .sets
         .iter()
@@ -246,7 +242,6 @@ fn difference(a: &PlanIdentity, b: &PlanIdentity) -> String {
 /// without waiting for the runs under way. The rows of this call.
 fn run_pending(
     plan: &Plan,
-    registry: Arc<Registry>,
     pending: &[usize],
     jobs: usize,
     out: &Path,
@@ -280,7 +275,7 @@ fn run_pending(
                 if stop_workers.load(Ordering::Relaxed) {
                     return;
                 }
-                let _ = tx.send(one_run(&plan_ref, &registry, run, jobs > 1));
+                let _ = tx.send(one_run(&plan_ref, run, jobs > 1));
             });
         });
     });
@@ -325,11 +320,10 @@ fn run_pending(
 
 /// One mission; a run that cannot start is a row with outcome `error`.
 /// Run `run` of `plan`; `beside_others` when other runs go at the same time.
-fn one_run(plan: &Plan, registry: &Registry, run: usize, beside_others: bool) -> Row {
+fn one_run(plan: &Plan, run: usize, beside_others: bool) -> Row {
     let (world, s, setting) = plan.run(run);
     match run_mission(
         &setting.config,
-        registry,
         Arc::clone(&world.world),
         &MissionOptions {
             beside_others,

@@ -16,7 +16,6 @@
 
 use std::time::{Duration, Instant};
 
-use arcnav_behaviours::Registry;
 use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_bus::transport::Lcm;
 use arcnav_pipeline::{ArbiterNode, BehaviourSet};
@@ -26,8 +25,8 @@ use super::io::{IoRoutes, Refused, Ticker, auth_status, decode, io_loop, publish
 use super::threaded::{LiveError, LiveOptions};
 use super::workers::{MapStage, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
-use crate::config::Config;
 use crate::wire;
+use arcnav_config::Resolved;
 
 /// Which node to run.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -53,8 +52,7 @@ impl std::fmt::Display for NodeKind {
 /// Runs one node on `lcm` until `options.stop`.
 pub fn run_node(
     kind: &NodeKind,
-    config: &Config,
-    registry: &Registry,
+    config: &Resolved,
     lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
@@ -63,7 +61,7 @@ pub fn run_node(
         NodeKind::Perception => perception(config, lcm, options)?,
         NodeKind::LocalMap => localmap(config, lcm, options)?,
         NodeKind::Arbiter => arbiter(config, lcm, options)?,
-        NodeKind::Behaviour(name) => behaviour(config, registry, name, lcm, options)?,
+        NodeKind::Behaviour(name) => behaviour(config, name, lcm, options)?,
     };
     report.wall_s = started.elapsed().as_secs_f64();
     Ok(report)
@@ -77,7 +75,7 @@ fn report(nodes: Vec<NodeStatus>) -> LiveReport {
 }
 
 fn perception(
-    config: &Config,
+    config: &Resolved,
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
@@ -115,7 +113,11 @@ fn perception(
     Ok(report(vec![io?, perception]))
 }
 
-fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
+fn localmap(
+    config: &Resolved,
+    mut lcm: Lcm,
+    options: &LiveOptions,
+) -> Result<LiveReport, LiveError> {
     let mut stage = MapStage::new(config);
     let mut status = NodeStatus::new("localmap");
     let mut bad = Refused::default();
@@ -167,24 +169,22 @@ fn localmap(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<Live
 }
 
 fn behaviour(
-    config: &Config,
-    registry: &Registry,
+    config: &Resolved,
     name: &str,
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
-    let arcs = config.arc_set()?;
+    let arcs = config.arcs.clone();
     let built = config
-        .build_behaviour(registry, &arcs, name)
+        .build_behaviour(name)
         .ok_or_else(|| LiveError::UnknownBehaviour {
             name: name.to_owned(),
             known: config
-                .behaviours
-                .keys()
-                .cloned()
+                .behaviour_names()
+                .map(str::to_owned)
                 .collect::<Vec<_>>()
                 .join(", "),
-        })??;
+        })?;
     if config.arbiter.weight(name) <= 0.0 {
         tracing::warn!(
             behaviour = name,
@@ -254,15 +254,19 @@ fn behaviour(
     Ok(report(vec![status]))
 }
 
-fn arbiter(config: &Config, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
-    let arcs = config.arc_set()?;
+fn arbiter(
+    config: &Resolved,
+    mut lcm: Lcm,
+    options: &LiveOptions,
+) -> Result<LiveReport, LiveError> {
+    let arcs = config.arcs.clone();
     let expected = config.expected_behaviours();
     tracing::info!(
         ?expected,
         "the arbiter decides when these behaviours have voted"
     );
     let mut stage = ArbiterNode::new(
-        config.arbiter()?,
+        config.arbiter(),
         expected,
         &config.live,
         &config.pipeline,

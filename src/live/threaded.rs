@@ -29,7 +29,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use arcnav_arbiter::BehaviourVotes;
-use arcnav_behaviours::{Mission, Registry};
+use arcnav_behaviours::Mission;
 use arcnav_bus::transport::{Lcm, Publisher, TransportError};
 use arcnav_perception::ObstacleReport;
 use arcnav_pipeline::{ArbiterNode, BehaviourSet, Cycle, Decided};
@@ -42,8 +42,8 @@ use super::handoff::{self, Arrived, Handoff};
 use super::io::{External, IoRoutes, Ticker, io_loop, publish_command};
 use super::workers::{MapStage, map_worker, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
-use crate::config::Config;
 use crate::wire;
+use arcnav_config::Resolved;
 
 /// Range-image slices that may wait for perception: 16 frames of a
 /// 2048-column lidar in 16-column slices. Beyond, slices are dropped
@@ -133,8 +133,7 @@ fn join<T>((node, handle): (&'static str, JoinHandle<T>)) -> Result<T, LiveError
 
 /// Runs every node in this process on `lcm` until `options.stop`.
 pub fn run(
-    config: &Config,
-    registry: &Registry,
+    config: &Resolved,
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
@@ -143,10 +142,10 @@ pub fn run(
     let live = config.live.clone();
     let perception = perception_node(config)?;
     let map = MapStage::new(config);
-    let behaviours = config.behaviour_set(registry)?;
-    let arcs = config.arc_set()?;
+    let behaviours = config.behaviour_set();
+    let arcs = config.arcs.clone();
     let arbiter = ArbiterNode::new(
-        config.arbiter()?,
+        config.arbiter(),
         config.expected_behaviours(),
         &live,
         &config.pipeline,
@@ -469,18 +468,13 @@ pub struct InProcess {
 impl InProcess {
     /// Starts the executor; returns once it receives. Every command is also
     /// sent to `tap` when given.
-    pub fn start(
-        config: &Config,
-        registry: Registry,
-        tap: Option<Sender<Decided>>,
-    ) -> Result<Self, LiveError> {
-        Self::start_with(config, registry, tap, None)
+    pub fn start(config: &Resolved, tap: Option<Sender<Decided>>) -> Result<Self, LiveError> {
+        Self::start_with(config, tap, None)
     }
 
     /// Like [`InProcess::start`], on `clock` (`None`: the wall clock).
     pub fn start_with(
-        config: &Config,
-        registry: Registry,
+        config: &Resolved,
         tap: Option<Sender<Decided>>,
         clock: Option<SharedClock>,
     ) -> Result<Self, LiveError> {
@@ -497,7 +491,7 @@ impl InProcess {
         let config = config.clone();
         let handle = std::thread::Builder::new()
             .name("arcnav-run".into())
-            .spawn(move || run(&config, &registry, lcm, &options))
+            .spawn(move || run(&config, lcm, &options))
             .map_err(|source| LiveError::Spawn {
                 node: "arcnav-run",
                 source,
@@ -546,9 +540,7 @@ mod tests {
         let (commands_tx, commands) = crossbeam_channel::bounded(4);
         let (_waypoints_tx, waypoints) = crossbeam_channel::bounded(1);
         let mut voter = Voter {
-            behaviours: Config::default()
-                .behaviour_set(&Registry::builtin())
-                .unwrap(),
+            behaviours: Resolved::default().behaviour_set(),
             commands,
             waypoints,
             debrief_wait: Some(Duration::from_secs(1)),
@@ -578,11 +570,11 @@ mod tests {
 
         use crate::live::clock::ManualClock;
 
-        let config = Config::default();
+        let config = Resolved::default();
         let start = 1_000_000_000_000;
         let clock = ManualClock::starting_at(start);
         let arbiter = ArbiterNode::new(
-            config.arbiter().unwrap(),
+            config.arbiter(),
             config.expected_behaviours(),
             &config.live,
             &config.pipeline,

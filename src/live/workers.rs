@@ -16,7 +16,7 @@ use super::handoff::{Arrived, Handoff, SensorInputs};
 use super::io::Ticker;
 use super::threaded::LiveError;
 use super::{NodeStatus, Samples};
-use crate::config::Config;
+use arcnav_config::Resolved;
 
 /// A helper thread for perception: the perception thread bins and judges
 /// half of each large image itself and hands the other half to it.
@@ -55,7 +55,7 @@ impl arcnav_perception::Runner for PerceptionHelper {
 /// wake-up (~0.7 ms on a 2-vCPU VM) and make the tail longer than the
 /// half saves (`cargo bench --bench live`, 128×2048: p99 arrival → command
 /// 4.0-5.0 ms alone, 4.4-16.6 ms with the sleeping helper).
-pub(crate) fn perception_node(config: &Config) -> Result<PerceptionNode, LiveError> {
+pub(crate) fn perception_node(config: &Resolved) -> Result<PerceptionNode, LiveError> {
     let mut node = config.perception_node()?;
     if config.live.perception_busy_poll {
         node.set_runner(Box::new(PerceptionHelper::new()?));
@@ -256,7 +256,7 @@ pub(crate) struct MapStage {
 }
 
 impl MapStage {
-    pub fn new(config: &Config) -> Self {
+    pub fn new(config: &Resolved) -> Self {
         Self {
             cycle: config.decision_cycle(config.live_delivery()),
             out: Vec::new(),

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use arcnav_arbiter::{BehaviourVotes, Decision, RecoveryStats};
-use arcnav_behaviours::{Mission, Registry, Waypoint};
+use arcnav_behaviours::{Mission, Waypoint};
 use arcnav_bus::lcmtypes::pose_t;
 use arcnav_bus::messages::channels;
 use arcnav_localmap::MapSnapshot;
@@ -33,13 +33,13 @@ use arcnav_vehicle::{
 use nalgebra::Vector3;
 use serde::Serialize;
 
-use crate::speed_bound::{SpeedBound, speed_bound};
+use arcnav_config::SpeedBound;
 
-use crate::config::Config;
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
 use crate::wire;
 use ahead::{FrameRequest, Frames, view_for};
+use arcnav_config::Resolved;
 use arcnav_pipeline::{Input, Sink, StageTimes};
 
 /// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
@@ -105,12 +105,14 @@ pub struct MissionReport {
     pub duration_s: f64,
     pub average_speed_mps: f64,
     pub max_speed_mps: f64,
-    /// The cruise speed the arbiter drove at: `arbiter.cruise_speed_mps`,
-    /// or less when `[lookahead] hole_speed_cap` held it down (then
-    /// `cruise_asked_mps` is the configured one).
-    pub cruise_speed_mps: f64,
+    /// The cruise speed the arbiter drove at: the one asked for
+    /// (`arbiter.cruise_speed_mps`), held to the hole speed cap, m/s.
+    pub cruise_mps: f64,
+    /// The cruise speed asked for, `arbiter.cruise_speed_mps`, m/s.
+    pub cruise_asked_mps: f64,
+    /// The hole speed cap (`[lookahead] hole_speed_cap`), when it applies, m/s.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub cruise_asked_mps: Option<f64>,
+    pub cruise_cap_mps: Option<f64>,
     pub images: u64,
     pub images_dropped: u64,
     /// Images sent in slices (`sim.slice_lines`): what perception did
@@ -260,7 +262,7 @@ struct MissionSink<'a> {
     seen: SeenPatches,
     snapshot: Option<(f64, &'a Path, Utime)>,
     snapshots: Vec<PathBuf>,
-    config: &'a Config,
+    config: &'a Resolved,
     track: Vec<TrackPoint>,
     /// The behaviours' overlays of the cycle whose snapshot is due.
     overlays: Vec<(String, arcnav_behaviours::Overlay)>,
@@ -403,17 +405,16 @@ pub fn mission_of(world: &World, version: Utime) -> Mission {
 
 /// Runs a mission of `world` to its end.
 pub fn run_mission(
-    config: &Config,
-    registry: &Registry,
+    config: &Resolved,
     world: Arc<World>,
     options: &MissionOptions,
     progress: &mut dyn FnMut(&MissionProgress),
 ) -> Result<MissionRun, MissionError> {
     let wall = Instant::now();
     world.validate_for(&config.vehicle, &world.spec.name)?;
-    let sensors: Vec<SensorModel> = config.sensor_models()?;
+    let sensors: &[SensorModel] = &config.sensors;
     // Returns beyond what perception evaluates are never used: not rendered.
-    let evaluated = config.lookahead().max_range_m + config.sim.render_margin_m;
+    let evaluated = config.perception.max_range_m + config.sim.render_margin_m;
     let rendered: Vec<Arc<SensorModel>> = sensors
         .iter()
         .map(|sensor| {
@@ -423,7 +424,7 @@ pub fn run_mission(
         })
         .collect();
     let sim = &config.sim;
-    let mut pipeline = config.lockstep(registry)?;
+    let mut pipeline = config.lockstep()?;
     pipeline.time_stages(Instant::now);
     pipeline.time_stages(Instant::now);
     pipeline.set_explain(options.snapshot_every_s.is_some());
@@ -728,8 +729,6 @@ pub fn run_mission(
     } else {
         0.0
     };
-    let bound = speed_bound(config)?;
-    let look = config.lookahead();
     let report = MissionReport {
         world: world.spec.name.clone(),
         sensor: sensors
@@ -745,8 +744,9 @@ pub fn run_mission(
         duration_s: duration,
         average_speed_mps: average_speed,
         max_speed_mps: max_speed,
-        cruise_speed_mps: look.cruise_mps,
-        cruise_asked_mps: look.capped.then_some(config.arbiter.cruise_speed_mps),
+        cruise_mps: config.cruise.mps,
+        cruise_asked_mps: config.cruise.asked_mps,
+        cruise_cap_mps: config.cruise.cap_mps,
         images,
         images_dropped: drops.no_pose + drops.invalid + drops.out_of_order,
         slices: (pipeline.perception.slices.received > 0).then_some(pipeline.perception.slices),
@@ -788,8 +788,8 @@ pub fn run_mission(
         } else {
             0.0
         },
-        speed_fraction_of_bound: average_speed / bound.bound_mps.max(1e-9),
-        speed_bound: bound,
+        speed_fraction_of_bound: average_speed / config.speed_bound.bound_mps.max(1e-9),
+        speed_bound: config.speed_bound.clone(),
         speed_limited_by_s: arbiter.moving.seconds().into_iter().collect(),
     };
     sink.log.finish()?;
@@ -810,7 +810,7 @@ pub fn run_mission(
 fn pose_when_due(
     motion: &MotionModel,
     world: &World,
-    config: &Config,
+    config: &Resolved,
     (t0, dt, mut tick): (Utime, Utime, u64),
     due: Utime,
 ) -> (Utime, Isometry) {

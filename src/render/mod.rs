@@ -11,8 +11,8 @@ use arcnav_perception::{Reasons, suspected_drop_off};
 use arcnav_sim::{FeatureKind, World};
 use arcnav_vehicle::{ArcSet, Utime};
 
-use crate::config::Config;
 use crate::mission::MissionRun;
+use arcnav_config::Resolved;
 
 mod canvas;
 pub mod detection;
@@ -323,7 +323,7 @@ fn patch_color(reasons: Reasons, cost: f32, alpha: u8) -> [u8; 4] {
 /// behaviour's votes and the fused votes as bars, hardest left turn first.
 pub fn snapshot_picture(
     path: &Path,
-    config: &Config,
+    config: &Resolved,
     arcs: &ArcSet,
     map: &MapSnapshot,
     decision: Option<&Decision>,
@@ -331,13 +331,11 @@ pub fn snapshot_picture(
     overlays: &[(String, Overlay)],
 ) -> Result<(), RenderError> {
     let ppm = 20.0f32;
-    // The picture reaches 2 m past the map window (farther at speed, see
-    // `Config::lookahead`).
-    let look = config.lookahead();
-    // The map window as the nodes use it.
+    // The picture reaches 2 m past the map window as the nodes use it
+    // (farther at speed: `arcnav_config::Lookahead`).
     let (ahead, side, behind) = (
-        look.map_ahead_m as f32,
-        look.map_half_width_m as f32,
+        config.localmap.ahead_m as f32,
+        config.localmap.half_width_m as f32,
         config.localmap.behind_m as f32,
     );
     let (x_behind, x_ahead, half) = (8.0f32, (ahead + 2.0).max(22.0), (side + 3.0).max(13.0));
@@ -394,7 +392,7 @@ pub fn snapshot_picture(
     // Arcs: fused vote colours, chosen arc blue.
     let chosen = decision.and_then(|d| d.command.arc_index);
     // As far as obstacle avoidance judges them.
-    let reach = look.max_distance_m;
+    let reach = config.lookahead.max_distance_m;
     // An arc is drawn until it leaves the map (at speed, tight arcs judged
     // 40 m along circle the vehicle and would run over the panel).
     let arc_pixels = |arc: &arcnav_vehicle::Arc| -> Vec<(f32, f32)> {
@@ -598,8 +596,8 @@ mod tests {
     /// cells tinted; what lies off the map is left out.
     #[test]
     fn a_snapshot_draws_the_behaviours_overlays_where_they_lie() {
-        let config = Config::default();
-        let arcs = config.arc_set().unwrap();
+        let config = Resolved::default();
+        let arcs = config.arcs.clone();
         let map = MapSnapshot {
             patch_size_m: 0.5,
             ..MapSnapshot::default()
@@ -630,9 +628,8 @@ mod tests {
         let with = picture(&[("b".to_owned(), overlay)], "with.png");
         let without = picture(&[], "without.png");
         // The map panel's vehicle frame, as snapshot_picture lays it out.
-        let look = config.lookahead();
-        let x_ahead = (look.map_ahead_m as f32 + 2.0).max(22.0);
-        let half = (look.map_half_width_m as f32 + 3.0).max(13.0);
+        let x_ahead = (config.localmap.ahead_m as f32 + 2.0).max(22.0);
+        let half = (config.localmap.half_width_m as f32 + 3.0).max(13.0);
         let pixel = |image: &tiny_skia::Pixmap, x: f32, y: f32| {
             let (u, v) = (((half - y) * 20.0) as u32, ((x_ahead - x) * 20.0) as u32);
             let p = image.pixel(u, v).unwrap();

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use arcnav_arbiter::{BehaviourVotes, Decision};
-use arcnav_behaviours::{Mission, Overlay, Registry};
+use arcnav_behaviours::{Mission, Overlay};
 use arcnav_bus::log::{InTimeOrder, LogReader, LogWriteError, ReorderWindow};
 use arcnav_bus::messages::{AnyMessage, TypedEvents};
 use arcnav_localmap::MapSnapshot;
@@ -28,9 +28,9 @@ mod problems;
 pub use compare::{Comparison, Decided, Difference, WeightOf, compare};
 pub use problems::{InputProblems, LogSummary};
 
-use crate::config::Config;
 use crate::recorder::{Recorder, WriteFailed};
 use crate::wire;
+use arcnav_config::Resolved;
 use arcnav_pipeline::{Input, Sink};
 
 /// How to replay.
@@ -226,8 +226,7 @@ const MAX_PACED_STEP_US: Utime = 60_000_000;
 /// Replays the log at `path`.
 pub fn replay(
     path: &Path,
-    config: &Config,
-    registry: &Registry,
+    config: &Resolved,
     options: &ReplayOptions,
     progress: &mut dyn FnMut(u64),
 ) -> Result<ReplayResult, ReplayError> {
@@ -236,7 +235,7 @@ pub fn replay(
         source,
     })?;
     let mut events = TypedEvents::new(InTimeOrder::new(reader, ReorderWindow::default()));
-    let mut pipeline = config.lockstep(registry)?;
+    let mut pipeline = config.lockstep()?;
     pipeline.set_explain(options.stop_at_s.is_some());
     let arcs = pipeline.arcs().clone();
     let out = Recorder::create(options.out.as_deref())

@@ -45,10 +45,11 @@
 use serde::{Deserialize, Serialize};
 
 use arcnav_behaviours::ObstacleAvoidanceConfig;
-use arcnav_vehicle::ConfigError;
+use arcnav_perception::SensorModel;
 use arcnav_vehicle::config;
+use arcnav_vehicle::{ArcSet, ConfigError};
 
-use super::Config;
+use crate::file::Config;
 
 /// Lives in `[lookahead]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -91,12 +92,6 @@ impl LookaheadConfig {
 /// The distances a configuration looks ahead with, m.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Lookahead {
-    /// The cruise speed v_c looked ahead for: `arbiter.cruise_speed_mps`,
-    /// or the hole speed cap when that is lower and `hole_speed_cap` is
-    /// on (the arbiter then drives at most this), m/s.
-    pub cruise_mps: f64,
-    /// Whether the hole speed cap lowered the cruise speed.
-    pub capped: bool,
     /// Arc length at which a clear arc allows the cruise speed: D(v_c).
     pub needed_m: f64,
     /// How far every distance that looks ahead moved out (0: as configured).
@@ -111,43 +106,29 @@ pub struct Lookahead {
     pub region_half_width_m: f64,
 }
 
-impl Config {
-    /// Obstacle avoidance's table, typed (its defaults if it is not
-    /// configured or does not parse: then nothing votes on distances, or
-    /// loading reported it).
-    fn obstacle_avoidance(&self) -> ObstacleAvoidanceConfig {
-        self.behaviours
-            .get("obstacle_avoidance")
-            .and_then(|table| table.clone().try_into().ok())
-            .unwrap_or_default()
-    }
-
-    /// How far this configuration looks ahead (see the module
-    /// documentation).
-    pub fn lookahead(&self) -> Lookahead {
-        let oa = self.obstacle_avoidance();
-        let cap = if self.lookahead.hole_speed_cap {
-            crate::speed_bound::hole_speed_cap(self)
-        } else {
-            None
-        };
-        let configured = self.arbiter.cruise_speed_mps;
-        // Everything follows from the held speed, as if it had been asked
-        // for. Looking as far as the speed asked for needs, while driving
-        // the held one, lidar64 at 10 m/s circled the second waypoint of
-        // `forest` until the time ran out (at 6.9 m/s asked for, it
-        // completes at 4.4 m/s on average).
-        let cruise = cap.map_or(configured, |cap| configured.min(cap));
-        let a = oa.braking_fraction * self.vehicle.max_deceleration_mps2;
+impl Lookahead {
+    /// How far `config` looks ahead driving at `cruise_mps` (see the module
+    /// documentation), with obstacle avoidance's stopping model `oa`, the
+    /// vehicle's `sensors` and its `arcs`.
+    pub fn derive(
+        config: &Config,
+        oa: &ObstacleAvoidanceConfig,
+        sensors: &[SensorModel],
+        arcs: &ArcSet,
+        cruise_mps: f64,
+    ) -> Self {
+        let cruise = cruise_mps;
+        let a = oa.braking_fraction * config.vehicle.max_deceleration_mps2;
         let judged = |v: f64| v * oa.reaction_s + v * v / (2.0 * a) + oa.stop_margin_m;
         let needed = judged(cruise);
-        let (map, region) = (self.localmap.ahead_m, self.perception.region.ahead_m);
-        let reach = self
-            .sensor_models()
-            .map(|models| models.iter().map(|m| m.max_range_m).fold(0.0, f64::max))
-            .unwrap_or(map);
-        let room = (self.lookahead.max_ahead_m.min(reach) - map).max(0.0);
-        let moved = if self.lookahead.from_speed {
+        let (map, region) = (config.localmap.ahead_m, config.perception.region.ahead_m);
+        let reach = if sensors.is_empty() {
+            map
+        } else {
+            sensors.iter().map(|m| m.max_range_m).fold(0.0, f64::max)
+        };
+        let room = (config.lookahead.max_ahead_m.min(reach) - map).max(0.0);
+        let moved = if config.lookahead.from_speed {
             (needed - oa.max_distance_m).clamp(0.0, room)
         } else {
             0.0
@@ -155,82 +136,40 @@ impl Config {
         // The widest sideways reach of an arc within the length it is
         // judged at the speed it can be driven.
         let max_distance = oa.max_distance_m + moved;
-        let sideways = self.arc_set().map_or(0.0, |arcs| {
-            arcs.curvatures()
-                .iter()
-                .map(|&k| {
-                    let k = k.abs();
-                    if k < 1e-9 {
-                        return 0.0;
-                    }
-                    let v = cruise.min((self.arbiter.max_lateral_accel_mps2 / k).sqrt());
-                    let along = judged(v).min(max_distance);
-                    if k * along >= std::f64::consts::PI {
-                        2.0 / k
-                    } else {
-                        (1.0 - (k * along).cos()) / k
-                    }
-                })
-                .fold(0.0, f64::max)
-        });
-        let half = self.localmap.half_width_m;
+        let sideways = arcs
+            .curvatures()
+            .iter()
+            .map(|&k| {
+                let k = k.abs();
+                if k < 1e-9 {
+                    return 0.0;
+                }
+                let v = cruise.min((config.arbiter.max_lateral_accel_mps2 / k).sqrt());
+                let along = judged(v).min(max_distance);
+                if k * along >= std::f64::consts::PI {
+                    2.0 / k
+                } else {
+                    (1.0 - (k * along).cos()) / k
+                }
+            })
+            .fold(0.0, f64::max);
+        let half = config.localmap.half_width_m;
         let widened = if moved > 0.0 {
-            (sideways + 0.5 * self.vehicle.width_m + 1.0 - half).max(0.0)
+            (sideways + 0.5 * config.vehicle.width_m + 1.0 - half).max(0.0)
         } else {
             0.0
         };
-        Lookahead {
-            cruise_mps: cruise,
-            capped: cruise < configured,
+        Self {
             needed_m: needed,
             moved_m: moved,
             max_distance_m: max_distance,
             map_ahead_m: map + moved,
             region_ahead_m: region + moved,
-            max_range_m: self.perception.max_range_m + moved,
+            max_range_m: config.perception.max_range_m + moved,
             widened_m: widened,
             map_half_width_m: half + widened,
-            region_half_width_m: self.perception.region.half_width_m + widened,
+            region_half_width_m: config.perception.region.half_width_m + widened,
         }
-    }
-
-    /// This configuration with the distances that look ahead as
-    /// [`Config::lookahead`] sets them: what the nodes are built from.
-    /// Applying it again changes nothing.
-    pub fn effective(&self) -> Config {
-        let look = self.lookahead();
-        let mut config = self.clone();
-        config.arbiter.cruise_speed_mps = look.cruise_mps;
-        // Where the ray grazing a hole's edge flags it (what these were
-        // tuned with; see `speed_bound`): a suspected drop-off is missed
-        // only from within it, and slows the vehicle only until then (0:
-        // not configured).
-        let bound = crate::speed_bound::speed_bound(self).ok();
-        if config.localmap.hole_range_m == 0.0
-            && let Some(range) = bound.as_ref().and_then(|b| b.hole_grazed_m)
-        {
-            config.localmap.hole_range_m = range;
-        }
-        if self.obstacle_avoidance().hole_seen_within_m == 0.0
-            && let Some(within) = bound.as_ref().and_then(|b| b.hole_seen_within_m)
-            && let Some(table) = config.behaviours.get_mut("obstacle_avoidance")
-        {
-            table.insert("hole_seen_within_m".to_owned(), toml::Value::Float(within));
-        }
-        if look.moved_m > 0.0 {
-            config.localmap.ahead_m = look.map_ahead_m;
-            config.perception.region.ahead_m = look.region_ahead_m;
-            config.perception.max_range_m = look.max_range_m;
-            config.localmap.half_width_m = look.map_half_width_m;
-            config.perception.region.half_width_m = look.region_half_width_m;
-            if let Some(table) = config.behaviours.get_mut("obstacle_avoidance") {
-                table.insert(
-                    "max_distance_m".to_owned(),
-                    toml::Value::Float(look.max_distance_m),
-                );
-            }
-        }
-        config
     }
 }
 
@@ -239,6 +178,8 @@ mod tests {
     use super::*;
 
     use arcnav_perception::SensorPreset;
+
+    use crate::Resolved;
 
     fn at(speed: f64, sensor: SensorPreset) -> Config {
         let mut config = Config::default();
@@ -249,7 +190,26 @@ mod tests {
         config
     }
 
-    /// `config` with where holes show configured, as `effective` would
+    fn resolved(config: &Config) -> Resolved {
+        config.resolved().unwrap()
+    }
+
+    fn avoidance(resolved: &Resolved) -> &ObstacleAvoidanceConfig {
+        resolved
+            .behaviour_config::<ObstacleAvoidanceConfig>("obstacle_avoidance")
+            .unwrap()
+    }
+
+    /// Resolving the effective configuration of `resolved` again changes
+    /// nothing: the derived values are fixed points.
+    fn assert_stable(resolved: &Resolved) {
+        let effective = resolved.effective();
+        let again = effective.resolved().unwrap();
+        assert_eq!(again.effective().to_toml(), effective.to_toml());
+        assert_eq!(again.cruise, resolved.cruise);
+    }
+
+    /// `config` with where holes show configured, as resolving would
     /// otherwise set it from the sensor.
     fn holes_configured(mut config: Config) -> Config {
         config.localmap.hole_range_m = 7.0;
@@ -265,28 +225,36 @@ mod tests {
     fn where_holes_show_comes_from_the_sensor_unless_configured() {
         for sensor in [SensorPreset::Erim, SensorPreset::Lidar64] {
             let config = at(2.5, sensor);
-            let bound = crate::speed_bound::speed_bound(&config).unwrap();
-            let effective = config.effective();
-            assert_eq!(Some(effective.localmap.hole_range_m), bound.hole_grazed_m);
+            let resolved = resolved(&config);
+            let bound = &resolved.speed_bound;
+            assert_eq!(Some(resolved.localmap.hole_range_m), bound.hole_grazed_m);
             assert_eq!(
-                Some(effective.obstacle_avoidance().hole_seen_within_m),
+                Some(avoidance(&resolved).hole_seen_within_m),
                 bound.hole_seen_within_m
             );
             // The front is the sensor's setback nearer.
             assert!(bound.hole_seen_within_m < bound.hole_grazed_m, "{bound:?}");
-            let configured = holes_configured(config);
-            assert_eq!(configured.effective(), configured);
+            let configured = self::resolved(&holes_configured(config));
+            assert_eq!(configured.localmap.hole_range_m, 7.0);
+            assert_eq!(avoidance(&configured).hole_seen_within_m, 5.0);
+            assert!(
+                configured.derivations().is_empty(),
+                "{:?}",
+                configured.derivations()
+            );
+            assert_stable(&resolved);
         }
     }
 
     #[test]
     fn the_default_speed_looks_as_far_as_configured() {
         let config = holes_configured(at(2.5, SensorPreset::Erim));
-        let look = config.lookahead();
+        let resolved = resolved(&config);
+        let look = resolved.lookahead;
         // 2.5·0.75 + 2.5²/(2·1.5) + 2 = 5.96 m: well inside 18 m.
         assert!((look.needed_m - 5.958).abs() < 1e-3, "{look:?}");
         assert_eq!(look.moved_m, 0.0);
-        assert_eq!(config.effective(), config);
+        assert_eq!(resolved.effective().to_toml(), config.to_toml());
     }
 
     /// `config` driving at its cruise speed whatever holes it may meet.
@@ -297,8 +265,8 @@ mod tests {
 
     #[test]
     fn a_faster_vehicle_looks_farther_so_that_a_clear_arc_allows_cruise() {
-        let config = uncapped(at(10.0, SensorPreset::Lidar64));
-        let look = config.lookahead();
+        let resolved = resolved(&uncapped(at(10.0, SensorPreset::Lidar64)));
+        let look = resolved.lookahead;
         // 10·0.75 + 100/3 + 2 = 42.83 m of arc; everything moves out by 24.83 m.
         assert!((look.needed_m - 42.833).abs() < 1e-3, "{look:?}");
         assert!((look.max_distance_m - look.needed_m).abs() < 1e-9);
@@ -309,27 +277,17 @@ mod tests {
         // they are 10.8 m to the side: the window widens to ~12.9 m.
         assert!((12.0..14.0).contains(&look.map_half_width_m), "{look:?}");
         assert_eq!(look.region_half_width_m, look.map_half_width_m + 2.0);
-        let effective = config.effective();
-        assert_eq!(effective.localmap.ahead_m, look.map_ahead_m);
-        assert_eq!(
-            effective.obstacle_avoidance().max_distance_m,
-            look.max_distance_m
-        );
+        assert_eq!(resolved.localmap.ahead_m, look.map_ahead_m);
+        assert_eq!(resolved.perception.region.ahead_m, look.region_ahead_m);
+        assert_eq!(avoidance(&resolved).max_distance_m, look.max_distance_m);
         // A clear arc's stopping-distance speed is the cruise speed.
         let (t, a) = (0.75f64, 1.5f64);
         let room = look.max_distance_m - 2.0;
         let v = -a * t + ((a * t).powi(2) + 2.0 * a * room).sqrt();
         assert!((v - 10.0).abs() < 1e-9, "{v}");
-        effective
-            .validate()
-            .expect("the effective configuration is valid");
-        assert_eq!(
-            effective.effective(),
-            effective,
-            "applying it twice changes nothing"
-        );
+        assert_stable(&resolved);
         // 6 m/s needs 4.5 + 12 + 2 = 18.5 m: a little farther than configured.
-        let look = uncapped(at(6.0, SensorPreset::Lidar64)).lookahead();
+        let look = self::resolved(&uncapped(at(6.0, SensorPreset::Lidar64))).lookahead;
         assert!((look.moved_m - 0.5).abs() < 1e-9, "{look:?}");
         // Counting on all of the braking (braking_fraction = 1): 10·0.75 +
         // 100/6 + 2 = 26.17 m.
@@ -338,22 +296,22 @@ mod tests {
             .get_mut("obstacle_avoidance")
             .unwrap()
             .insert("braking_fraction".into(), toml::Value::Float(1.0));
-        let look = full.lookahead();
+        let look = self::resolved(&full).lookahead;
         assert!((look.needed_m - 26.167).abs() < 1e-3, "{look:?}");
     }
 
     #[test]
     fn the_window_stops_at_the_sensor_and_the_bound_or_when_switched_off() {
         // The ERIM returns nothing beyond 40 m: the window stops there.
-        let look = uncapped(at(10.0, SensorPreset::Erim)).lookahead();
+        let look = resolved(&uncapped(at(10.0, SensorPreset::Erim))).lookahead;
         assert_eq!(look.map_ahead_m, 40.0, "{look:?}");
         let mut config = uncapped(at(10.0, SensorPreset::Lidar64));
         config.lookahead.max_ahead_m = 30.0;
-        assert_eq!(config.lookahead().map_ahead_m, 30.0);
+        assert_eq!(resolved(&config).lookahead.map_ahead_m, 30.0);
         config.lookahead.from_speed = false;
-        assert_eq!(config.lookahead().moved_m, 0.0);
+        assert_eq!(resolved(&config).lookahead.moved_m, 0.0);
         let config = holes_configured(config);
-        assert_eq!(config.effective(), config);
+        assert_eq!(resolved(&config).effective().to_toml(), config.to_toml());
     }
 
     /// However far the window reaches, a hole the wheels do not bridge is
@@ -363,39 +321,44 @@ mod tests {
     #[test]
     fn the_cruise_speed_is_held_to_stopping_where_a_hole_is_first_suspected() {
         let config = at(10.0, SensorPreset::Lidar64);
-        let bound = crate::speed_bound::speed_bound(&config).unwrap();
-        let cap = bound.suspect_bound_mps.unwrap();
-        assert!((5.0..6.0).contains(&cap), "{bound:?}");
-        let look = config.lookahead();
-        assert!(look.capped && look.cruise_mps == cap, "{look:?}");
+        let capped = resolved(&config);
+        let cap = capped.speed_bound.suspect_bound_mps.unwrap();
+        assert!((5.0..6.0).contains(&cap), "{:?}", capped.speed_bound);
+        assert_eq!(capped.cruise.cap_mps, Some(cap));
+        assert!(
+            capped.cruise.capped() && capped.cruise.mps == cap,
+            "{:?}",
+            capped.cruise
+        );
+        assert_eq!(capped.cruise.asked_mps, 10.0);
+        assert_eq!(
+            capped.arbiter.cruise_speed_mps, 10.0,
+            "the key keeps what was asked"
+        );
         // Everything looks as far as the held speed needs: D(v_c) with
         // 0.75 s and 1.5 m/s² of the default obstacle avoidance, 2 m of
         // margin.
+        let look = capped.lookahead;
         let needed = cap * 0.75 + cap * cap / 3.0 + 2.0;
         assert!((look.needed_m - needed).abs() < 1e-9, "{look:?}");
         let mut asked = uncapped(config.clone());
         asked.arbiter.cruise_speed_mps = cap;
-        assert_eq!(asked.lookahead().map_ahead_m, look.map_ahead_m);
-        let effective = config.effective();
-        assert_eq!(effective.arbiter.cruise_speed_mps, cap);
-        assert_eq!(effective.effective(), effective, "applying it twice");
-        assert_eq!(config.arbiter().unwrap().config().cruise_speed_mps, cap);
+        assert_eq!(resolved(&asked).lookahead.map_ahead_m, look.map_ahead_m);
+        assert_stable(&capped);
+        assert_eq!(capped.arbiter().cruise_mps(), cap);
         // Slower than the cap, switched off, or with no drop-off suspected:
         // the cruise speed is the configured one.
-        let slow = at(2.5, SensorPreset::Lidar64).lookahead();
-        assert!(!slow.capped && slow.cruise_mps == 2.5, "{slow:?}");
-        let off = uncapped(config.clone());
-        assert_eq!(off.lookahead().cruise_mps, 10.0);
-        assert_eq!(off.arbiter().unwrap().config().cruise_speed_mps, 10.0);
+        let slow = resolved(&at(2.5, SensorPreset::Lidar64)).cruise;
+        assert!(!slow.capped() && slow.mps == 2.5, "{slow:?}");
+        let off = resolved(&uncapped(config.clone()));
+        assert_eq!(off.cruise.mps, 10.0);
+        assert_eq!(off.arbiter().cruise_mps(), 10.0);
         let mut unsuspected = config.clone();
         unsuspected.perception.drop_off.suspect_cost = 0.0;
-        assert_eq!(unsuspected.lookahead().cruise_mps, 10.0);
+        assert_eq!(resolved(&unsuspected).cruise.mps, 10.0);
         // The ERIM sees holes nearer and reacts later: a lower cap (4.19
         // m/s, so 020's 4.5 m/s is held to it).
-        let erim = at(10.0, SensorPreset::Erim).lookahead();
-        assert!(
-            erim.capped && (4.0..cap).contains(&erim.cruise_mps),
-            "{erim:?}"
-        );
+        let erim = resolved(&at(10.0, SensorPreset::Erim)).cruise;
+        assert!(erim.capped() && (4.0..cap).contains(&erim.mps), "{erim:?}");
     }
 }

@@ -8,13 +8,17 @@
 //! the range images from an analytic scene. Replace both with your vehicle's
 //! pose estimate and your sensor driver.
 //!
+//! It depends on arcnav's library crates only (`arcnav-config` and the
+//! crates of the pipeline), not on the `arcnav` program:
+//!
 //! ```sh
-//! cargo run --release --example embed               # the default configuration
-//! cargo run --release --example embed -- my.toml    # yours
+//! cargo run --release -p arcnav-config --example embed               # the default configuration
+//! cargo run --release -p arcnav-config --example embed -- my.toml    # yours
 //! ```
 
-use arcnav::Config;
+use anyhow::Context as _;
 use arcnav_behaviours::{Mission, Registry, Waypoint};
+use arcnav_config::Resolved;
 use arcnav_perception::scene::HeightFunction;
 use arcnav_pipeline::{Commands, Input};
 use arcnav_vehicle::frames::planar_isometry;
@@ -23,10 +27,12 @@ use nalgebra::Vector3;
 
 fn main() -> anyhow::Result<()> {
     // 1. The configuration: a file of yours, or the defaults.
-    let config = match std::env::args().nth(1) {
-        Some(path) => Config::load(path.as_ref())?,
-        None => Config::default(),
-    };
+    //    Loading parses it, checks it and derives what follows from it, once.
+    let path = std::env::args().nth(1);
+    let config = Resolved::load_or_default(
+        path.as_deref().map(std::path::Path::new),
+        &Registry::builtin(),
+    )?;
     let arrival = drive(&config)?;
     println!(
         "reached the goal after {:.1} s at ({:.1}, {:.1}); came no closer than {:.1} m to the box's centre",
@@ -44,9 +50,13 @@ pub struct Arrival {
 }
 
 /// Drives to the goal with the pipeline `config` describes.
-pub fn drive(config: &Config) -> anyhow::Result<Arrival> {
-    let mut pipeline = config.lockstep(&Registry::builtin())?;
-    let sensor = config.sensor.model()?;
+pub fn drive(config: &Resolved) -> anyhow::Result<Arrival> {
+    let mut pipeline = config.lockstep()?;
+    let sensor = config
+        .sensors
+        .first()
+        .context("the configuration has no sensor")?
+        .clone();
 
     // 2. Your world: flat ground, a 1 m box, the goal at 30 m.
     let field = HeightFunction::new(|x: f64, y: f64| {

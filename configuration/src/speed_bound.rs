@@ -39,7 +39,7 @@
 //! ground (`R²·δθ/H ≤ w`): `hole_grazed_m`, 8.4 m for the 64-beam lidar
 //! 2.4 m up. But no ray need graze the edge (below), and counted as the
 //! suspicion is, the hole is certain to be flagged only within
-//! `(Δ + δθ)·R² + δ0·R = w·H`: `hole_range_m`, 6.9 m for that lidar, and
+//! `(Δ + δθ)·R² + δ0·R = w·H`: `hole_certain_m`, 6.9 m for that lidar, and
 //! `hole_bound_mps` the stop-or-swerve bound over it, 3.2 m/s. (Until
 //! 2026-11-29 the report gave the grazing range as certain.) A hole
 //! across the whole way cannot be swerved round; the swerve counts for
@@ -77,7 +77,9 @@
 
 use serde::Serialize;
 
-use crate::config::Config;
+use arcnav_perception::SensorModel;
+
+use crate::file::Config;
 
 /// What a configuration allows, and why.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -100,7 +102,7 @@ pub struct SpeedBound {
     /// flagged, whichever row lands first past its edge
     /// (`(Δ + δθ)·R² + δ0·R = w·H`), and the stop-or-swerve speed over
     /// it, m and m/s (none when `[perception.drop_off]` is off).
-    pub hole_range_m: Option<f64>,
+    pub hole_certain_m: Option<f64>,
     pub hole_bound_mps: Option<f64>,
     /// Range within which the ray grazing such a hole's edge flags it, on
     /// rows closer than the hole is wide (`Δ·R² + δ0·R = w·H`), m: the best
@@ -123,13 +125,17 @@ pub struct SpeedBound {
     pub suspect_bound_mps: Option<f64>,
 }
 
-/// The bound of `config` (its sensors, vehicle, map window and timing):
+/// The bound of `config` with its `sensors`, the map window reaching
+/// `window` m ahead (as far as the vehicle looks at its cruise speed):
 /// with several sensors, the best of those that look straight ahead (a
 /// rear camera does not see what the vehicle drives into).
-pub fn speed_bound(config: &Config) -> Result<SpeedBound, arcnav_vehicle::ConfigError> {
-    let window = config.lookahead().map_ahead_m;
-    looking_ahead(config)?
-        .iter()
+pub fn speed_bound(
+    config: &Config,
+    sensors: &[SensorModel],
+    window: f64,
+) -> Result<SpeedBound, arcnav_vehicle::ConfigError> {
+    looking_ahead(sensors)
+        .into_iter()
         .map(|sensor| bound_with(config, sensor, window))
         .max_by(|a, b| a.bound_mps.total_cmp(&b.bound_mps))
         .ok_or_else(|| arcnav_vehicle::ConfigError::new("sensors", "the vehicle has no sensor"))
@@ -138,40 +144,36 @@ pub fn speed_bound(config: &Config) -> Result<SpeedBound, arcnav_vehicle::Config
 /// The highest cruise speed at which the vehicle still stops before a
 /// hole the wheels do not bridge once it is *suspected*
 /// ([`SpeedBound::suspect_bound_mps`], from the sensor alone, whatever the
-/// map window), with the best of the sensors that look ahead; `None` when
-/// drop-offs are not suspected or no sensor is configured. What
+/// map window), with the best of the `sensors` that look ahead; `None`
+/// when drop-offs are not suspected or no sensor is configured. What
 /// `[lookahead] hole_speed_cap` holds the cruise speed to.
-pub fn hole_speed_cap(config: &Config) -> Option<f64> {
-    looking_ahead(config)
-        .ok()?
-        .iter()
+pub fn hole_speed_cap(config: &Config, sensors: &[SensorModel]) -> Option<f64> {
+    looking_ahead(sensors)
+        .into_iter()
         .filter_map(|sensor| bound_with(config, sensor, f64::INFINITY).suspect_bound_mps)
         .max_by(f64::total_cmp)
 }
 
 /// The sensors that see what the vehicle drives into: those looking
 /// straight ahead, or all when none does.
-fn looking_ahead(
-    config: &Config,
-) -> Result<Vec<arcnav_perception::SensorModel>, arcnav_vehicle::ConfigError> {
-    let sensors = config.sensor_models()?;
-    let ahead = |s: &arcnav_perception::SensorModel| {
+fn looking_ahead(sensors: &[SensorModel]) -> Vec<&SensorModel> {
+    let ahead = |s: &&SensorModel| {
         let yaw = arcnav_vehicle::frames::yaw_of(&s.vehicle_from_sensor);
         s.beams
             .azimuth
             .iter()
             .any(|&az| arcnav_vehicle::frames::wrap_angle(f64::from(az) + yaw).abs() < 0.1)
     };
-    if sensors.iter().any(ahead) {
-        Ok(sensors.into_iter().filter(ahead).collect())
+    if sensors.iter().any(|s| ahead(&s)) {
+        sensors.iter().filter(ahead).collect()
     } else {
-        Ok(sensors)
+        sensors.iter().collect()
     }
 }
 
 /// The bound of `config` with `sensor` alone, the map window reaching
 /// `window` m ahead.
-fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel, window: f64) -> SpeedBound {
+fn bound_with(config: &Config, sensor: &SensorModel, window: f64) -> SpeedBound {
     let v = &config.vehicle;
     let elevations = &sensor.beams.elevation;
     let span = elevations
@@ -263,7 +265,7 @@ fn bound_with(config: &Config, sensor: &arcnav_perception::SensorModel, window: 
         range_limited_by: limited_by,
         reaction_s: reaction,
         beam_spacing_deg: spacing.to_degrees(),
-        hole_range_m: hole_range,
+        hole_certain_m: hole_range,
         hole_bound_mps: hole_bound,
         hole_grazed_m: hole_grazed,
         hole_seen_within_m: hole_grazed.map(free_within),
@@ -278,10 +280,19 @@ mod tests {
     use super::*;
     use arcnav_perception::SensorPreset;
 
+    /// The speed bound `config` resolves to.
+    fn resolved_bound(config: &Config) -> SpeedBound {
+        config
+            .clone()
+            .resolve(&arcnav_behaviours::Registry::builtin())
+            .unwrap()
+            .speed_bound
+    }
+
     #[test]
     fn the_papers_erim_allows_its_2_to_3_m_s_and_the_map_window_caps_it() {
         let config = Config::default();
-        let b = speed_bound(&config).unwrap();
+        let b = resolved_bound(&config);
         // 0.5° beams resolve 20 cm out to 22.9 m; the 20 m window is shorter.
         assert!((b.beam_spacing_deg - 0.508).abs() < 0.01, "{b:?}");
         assert_eq!(b.range_limited_by, "map window");
@@ -294,26 +305,27 @@ mod tests {
         // resolution then limits it.
         let mut wider = config.clone();
         wider.localmap.ahead_m = 40.0;
-        let w = speed_bound(&wider).unwrap();
+        wider.perception.region.ahead_m = 42.0;
+        let w = resolved_bound(&wider);
         assert_eq!(w.range_limited_by, "resolution");
         assert!(w.bound_mps > b.bound_mps, "{w:?} vs {b:?}");
     }
 
     #[test]
     fn a_faster_sensor_and_a_tolerant_vehicle_allow_more_a_slow_one_less() {
-        let base = speed_bound(&Config::default()).unwrap().bound_mps;
+        let base = resolved_bound(&Config::default()).bound_mps;
         let mut lidar = Config::default();
         lidar.sensor.preset = SensorPreset::Lidar64;
-        let lidar = speed_bound(&lidar).unwrap();
+        let lidar = resolved_bound(&lidar);
         // 0.1 s a frame instead of 0.5 s.
         assert!((lidar.reaction_s - 0.75).abs() < 1e-9, "10 Hz: {lidar:?}");
         assert!(lidar.bound_mps > base, "{} vs {base}", lidar.bound_mps);
         let mut slow = Config::default();
         slow.pipeline.perception_latency_s = 2.0;
-        assert!(speed_bound(&slow).unwrap().bound_mps < base);
+        assert!(resolved_bound(&slow).bound_mps < base);
         let mut brakes = Config::default();
         brakes.vehicle.max_deceleration_mps2 = 6.0;
-        assert!(speed_bound(&brakes).unwrap().bound_mps > base);
+        assert!(resolved_bound(&brakes).bound_mps > base);
     }
 
     /// 016's holes: the 64-beam lidar 2.4 m up shows a 0.77 m hole's far
@@ -331,7 +343,7 @@ mod tests {
         // The window as far as 10 m/s needs (held to the suspect bound, it
         // would reach 25 m).
         lidar.lookahead.hole_speed_cap = false;
-        let b = speed_bound(&lidar).unwrap();
+        let b = resolved_bound(&lidar);
         let d = &lidar.perception.drop_off;
         let grazed = b.hole_grazed_m.unwrap();
         let shown = d.max_gap_m * 2.4 / grazed;
@@ -340,7 +352,7 @@ mod tests {
             "{b:?}"
         );
         assert!((8.0..9.0).contains(&grazed), "{b:?}");
-        let range = b.hole_range_m.unwrap();
+        let range = b.hole_certain_m.unwrap();
         let spacing = range * range * b.beam_spacing_deg.to_radians() / 2.4;
         let shown = (d.max_gap_m - spacing) * 2.4 / range;
         assert!(
@@ -353,17 +365,17 @@ mod tests {
         assert!(hole < 0.5 * b.bound_mps, "{b:?}");
         let mut higher = lidar.clone();
         higher.sensor.mount_position_m = Some([1.2, 0.0, 3.6]);
-        let h = speed_bound(&higher).unwrap();
+        let h = resolved_bound(&higher);
         // Half as high again: the grazing ray's range 1.44 times, the
         // certain one 1.37 (the rows' spacing grows with R² as the dip).
         assert!(h.hole_grazed_m.unwrap() > 1.4 * grazed, "{h:?}");
-        assert!(h.hole_range_m.unwrap() > 1.3 * range, "{h:?}");
+        assert!(h.hole_certain_m.unwrap() > 1.3 * range, "{h:?}");
         assert!(h.hole_bound_mps.unwrap() > hole);
         let mut off = lidar.clone();
         off.perception.drop_off.enabled = false;
-        let o = speed_bound(&off).unwrap();
+        let o = resolved_bound(&off);
         assert_eq!(
-            (o.hole_range_m, o.hole_bound_mps, o.hole_grazed_m),
+            (o.hole_certain_m, o.hole_bound_mps, o.hole_grazed_m),
             (None, None, None)
         );
         assert_eq!(o.bound_mps, b.bound_mps);
@@ -375,7 +387,7 @@ mod tests {
         whole.sensor.preset = SensorPreset::Lidar64;
         let mut sliced = whole.clone();
         sliced.sim.slice_lines = 16;
-        let (w, s) = (speed_bound(&whole).unwrap(), speed_bound(&sliced).unwrap());
+        let (w, s) = (resolved_bound(&whole), resolved_bound(&sliced));
         // 16 of 2048 columns at 10 Hz: 0.78 ms instead of 100 ms.
         assert!(
             (w.reaction_s - s.reaction_s - (0.1 - 0.00078125)).abs() < 1e-6,
@@ -385,10 +397,9 @@ mod tests {
         // The ERIM in blocks of 4 of its 64 rows: 31 ms instead of 500 ms.
         let mut erim = Config::default();
         erim.sim.slice_lines = 4;
-        let e = speed_bound(&erim).unwrap();
+        let e = resolved_bound(&erim);
         assert!(
-            (speed_bound(&Config::default()).unwrap().reaction_s - e.reaction_s - 0.46875).abs()
-                < 1e-6
+            (resolved_bound(&Config::default()).reaction_s - e.reaction_s - 0.46875).abs() < 1e-6
         );
     }
 
@@ -405,7 +416,7 @@ mod tests {
         let mut lidar = Config::default();
         lidar.sensor.preset = SensorPreset::Lidar64;
         lidar.arbiter.cruise_speed_mps = 10.0;
-        let b = speed_bound(&lidar).unwrap();
+        let b = resolved_bound(&lidar);
         let (range, bound) = (b.suspect_range_m.unwrap(), b.suspect_bound_mps.unwrap());
         let d = &lidar.perception.drop_off;
         let spacing = range * range * b.beam_spacing_deg.to_radians() / 2.4;
@@ -417,7 +428,7 @@ mod tests {
         assert!((11.0..12.0).contains(&range), "{b:?}");
         let rows = (d.max_gap_m * 2.4 / b.beam_spacing_deg.to_radians()).sqrt();
         assert!(range < rows && d.max_gap_m * 2.4 / range > d.noise_m + d.depth_per_m * range);
-        assert!(range > b.hole_range_m.unwrap() && bound > b.hole_bound_mps.unwrap());
+        assert!(range > b.hole_certain_m.unwrap() && bound > b.hole_bound_mps.unwrap());
         let setback = b.hole_grazed_m.unwrap() - b.hole_seen_within_m.unwrap();
         let (t, a) = (b.reaction_s, lidar.vehicle.max_deceleration_mps2);
         let stopped_in = bound * t + bound * bound / (2.0 * a);
@@ -425,8 +436,8 @@ mod tests {
         // Suspected drop-offs not reported: no such bound.
         let mut off = lidar.clone();
         off.perception.drop_off.suspect_cost = 0.0;
-        let o = speed_bound(&off).unwrap();
+        let o = resolved_bound(&off);
         assert_eq!((o.suspect_range_m, o.suspect_bound_mps), (None, None));
-        assert_eq!(o.hole_range_m, b.hole_range_m);
+        assert_eq!(o.hole_certain_m, b.hole_certain_m);
     }
 }

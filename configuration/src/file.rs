@@ -1,39 +1,38 @@
-//! The whole configuration: one TOML file with a section per crate.
+//! The configuration as the user gave it: one TOML file with a section per
+//! crate, parsed once into typed sections.
 //!
 //! Every section is owned by its crate (`serde(default, deny_unknown_fields)`,
-//! `Default`, `validate()`); this module composes them, cross-checks values
-//! that span sections, and turns TOML and validation failures into messages
-//! that name the file, the line and the dotted key. Building the
-//! pipeline's nodes from it is in `nodes`.
+//! `Default`, `validate()`); this module composes them, checks each section
+//! and the values that span sections, and turns TOML and validation
+//! failures into messages that name the file, the line and the dotted key.
+//! What follows from these values, and the nodes built from them, is
+//! [`Resolved`](crate::Resolved).
 
-mod bus;
-mod lookahead;
-mod nodes;
-
-pub use bus::{BusAuthConfig, BusConfig};
-pub use lookahead::{Lookahead, LookaheadConfig};
-
+use std::cell::Cell;
+use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use std::collections::BTreeMap;
-use std::sync::Arc;
-
 use arcnav_arbiter::ArbiterConfig;
-use arcnav_behaviours::{Prepared, Registry, RegistryError, Setup};
+use arcnav_behaviours::Registry;
 use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
 use arcnav_pipeline::{LiveConfig, PipelineConfig};
 use arcnav_sim::SimConfig;
 
 use arcnav_vehicle::config::toml_location;
-use arcnav_vehicle::{ArcSet, ArcSetConfig, ConfigError, VehicleConfig};
+use arcnav_vehicle::{ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
+
+use crate::bus::BusConfig;
+use crate::lookahead::LookaheadConfig;
 
 /// The documented defaults, as shipped in `config/default.toml`.
 pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
 
-/// Every parameter of arcnav.
+/// Every parameter of arcnav, as given: the defaults with a file's keys
+/// (and any command-line settings) over them. Nothing here is derived;
+/// [`Config::resolve`] checks it once and derives what follows.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Config {
@@ -60,47 +59,58 @@ pub struct Config {
     /// a table in a file changes only the keys it names.
     #[serde(deserialize_with = "behaviours_with_defaults")]
     pub behaviours: BTreeMap<String, toml::Table>,
-    /// The behaviour tables parsed into their typed configurations and
-    /// checked, once, when the configuration was loaded.
+    /// Where each key that is not a default came from.
     #[serde(skip)]
-    prepared: PreparedBehaviours,
-    /// The static occupancy map `[localmap.occupancy]` names, read once.
-    #[serde(skip)]
-    statics: StaticMapCache,
+    origins: BTreeMap<String, Origin>,
 }
 
-/// The static map read for one `[localmap.occupancy]` and patch size.
-type StaticEntry = (
-    arcnav_localmap::OccupancyConfig,
-    f64,
-    Option<Arc<arcnav_localmap::StaticMap>>,
-);
+/// Where a key's value came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Origin {
+    /// A configuration file (its name).
+    File(String),
+    /// A command-line setting (the option that set it).
+    CommandLine(String),
+}
 
-#[derive(Debug, Clone, Default)]
-struct StaticMapCache(Arc<std::sync::Mutex<Option<StaticEntry>>>);
-
-impl PartialEq for StaticMapCache {
-    /// A cache of what a file holds: configurations compare by its name.
-    fn eq(&self, _: &Self) -> bool {
-        true
+impl fmt::Display for Origin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::File(file) => write!(f, "from {file}"),
+            Self::CommandLine(option) => write!(f, "from {option}"),
+        }
     }
 }
 
-/// Behaviour tables parsed and checked by the registry, by name. Building
-/// a behaviour uses these when its table is still the one prepared.
-#[derive(Debug, Clone, Default)]
-struct PreparedBehaviours(Arc<BTreeMap<String, Prepared>>);
+thread_local! {
+    static COUNTS: Cell<LoadCounts> = const { Cell::new(LoadCounts { parses: 0, validations: 0 }) };
+}
 
-impl PartialEq for PreparedBehaviours {
-    /// A cache of what the tables say: configurations compare by their tables.
-    fn eq(&self, _: &Self) -> bool {
-        true
-    }
+/// How often this thread has parsed configuration text and validated a
+/// configuration: a load parses once and a resolution validates once,
+/// however many nodes are built from it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LoadCounts {
+    pub parses: u64,
+    pub validations: u64,
+}
+
+/// This thread's [`LoadCounts`] so far.
+pub fn load_counts() -> LoadCounts {
+    COUNTS.with(Cell::get)
+}
+
+pub(crate) fn count(f: impl FnOnce(&mut LoadCounts)) {
+    COUNTS.with(|c| {
+        let mut counts = c.get();
+        f(&mut counts);
+        c.set(counts);
+    });
 }
 
 impl Default for Config {
     fn default() -> Self {
-        let mut config = Self {
+        Self {
             vehicle: VehicleConfig::default(),
             arcs: ArcSetConfig::default(),
             sensor: SensorConfig::default(),
@@ -114,14 +124,8 @@ impl Default for Config {
             bus: BusConfig::default(),
             sim: SimConfig::default(),
             behaviours: default_behaviours(),
-            prepared: PreparedBehaviours::default(),
-            statics: StaticMapCache::default(),
-        };
-        // The built-in defaults always prepare.
-        if let Ok(prepared) = config.prepare_behaviours(&Registry::builtin()) {
-            config.prepared = prepared;
+            origins: BTreeMap::new(),
         }
-        config
     }
 }
 
@@ -184,19 +188,15 @@ impl fmt::Display for Location {
 }
 
 impl Config {
-    /// Reads, parses and validates a TOML file; missing keys keep their defaults.
+    /// Reads and parses a TOML file; missing keys keep their defaults.
+    /// Nothing is checked yet: [`Config::resolve`] does that.
     pub fn load(path: &Path) -> Result<Self, ConfigLoadError> {
         let text =
             arcnav_vehicle::files::read_text(path).map_err(|source| ConfigLoadError::Read {
                 path: path.to_owned(),
                 source,
             })?;
-        Self::from_toml_in(
-            &text,
-            &path.display().to_string(),
-            &Registry::builtin(),
-            path.parent(),
-        )
+        Self::parse_in(&text, &path.display().to_string(), path.parent())
     }
 
     /// Loads `path` if given, else the defaults.
@@ -204,30 +204,16 @@ impl Config {
         path.map_or_else(|| Ok(Self::default()), Self::load)
     }
 
-    /// Parses and validates TOML text; `origin` names it in messages.
-    pub fn from_toml(text: &str, origin: &str) -> Result<Self, ConfigLoadError> {
-        Self::from_toml_with(text, origin, &Registry::builtin())
+    /// Parses TOML text; `origin` names it in messages.
+    pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigLoadError> {
+        Self::parse_in(text, origin, None)
     }
 
-    /// Like [`Config::from_toml`], with behaviours from `registry` (for
-    /// programs that add their own).
-    pub fn from_toml_with(
-        text: &str,
-        origin: &str,
-        registry: &Registry,
-    ) -> Result<Self, ConfigLoadError> {
-        Self::from_toml_in(text, origin, registry, None)
-    }
-
-    /// Parses and validates; relative file names in the text are taken
-    /// from `base` (the configuration file's directory), if given.
-    fn from_toml_in(
-        text: &str,
-        origin: &str,
-        registry: &Registry,
-        base: Option<&Path>,
-    ) -> Result<Self, ConfigLoadError> {
-        let mut config: Self = toml::from_str(text).map_err(|err| {
+    /// Parses; relative file names in the text are taken from `base` (the
+    /// configuration file's directory), if given.
+    fn parse_in(text: &str, origin: &str, base: Option<&Path>) -> Result<Self, ConfigLoadError> {
+        count(|c| c.parses += 1);
+        let error = |err: toml::de::Error| {
             let (line, key) = err
                 .span()
                 .map(|span| toml_location(text, span.start))
@@ -240,7 +226,18 @@ impl Config {
                 },
                 message: err.message().to_owned(),
             }
-        })?;
+        };
+        // Parsed once: the document's keys say where each value came from
+        // (for `arcnav config`), then the same document is deserialised.
+        let document = toml::de::DeTable::parse(text).map_err(error)?;
+        let mut keys = Vec::new();
+        leaf_keys("", document.get_ref(), &mut keys);
+        let mut config =
+            Self::deserialize(toml::de::Deserializer::from(document)).map_err(error)?;
+        config.origins = keys
+            .into_iter()
+            .map(|key| (key, Origin::File(origin.to_owned())))
+            .collect();
         let file = &mut config.localmap.occupancy.file;
         if let Some(base) = base
             && !file.is_empty()
@@ -248,76 +245,37 @@ impl Config {
         {
             *file = base.join(&*file).display().to_string();
         }
-        config
-            .validate_sections()
-            .and_then(|()| config.prepare_behaviours(registry))
-            .map(|prepared| {
-                for (name, p) in prepared.0.iter() {
-                    config.behaviours.insert(name.clone(), p.table().clone());
-                }
-                config.prepared = prepared;
-            })
-            .map_err(|source| ConfigLoadError::Invalid {
-                origin: origin.to_owned(),
-                source,
-            })?;
         Ok(config)
     }
 
-    /// Reads, parses and validates a file with behaviours from `registry`.
-    pub fn load_with(path: &Path, registry: &Registry) -> Result<Self, ConfigLoadError> {
-        let text =
-            arcnav_vehicle::files::read_text(path).map_err(|source| ConfigLoadError::Read {
-                path: path.to_owned(),
-                source,
-            })?;
-        Self::from_toml_in(&text, &path.display().to_string(), registry, path.parent())
+    /// Records that `key` (dotted) was set by the command-line `option`.
+    pub fn set_by(&mut self, key: &str, option: &str) {
+        self.origins
+            .insert(key.to_owned(), Origin::CommandLine(option.to_owned()));
     }
 
-    /// The arc set this configuration describes (`driven_paths = "auto"`
-    /// decided at its cruise speed).
-    pub fn arc_set(&self) -> Result<ArcSet, ConfigError> {
-        ArcSet::for_cruise(&self.arcs, self.arbiter.cruise_speed_mps).map_err(|e| e.within("arcs"))
+    /// Where `key` (dotted, as `config/default.toml` spells it) came from:
+    /// `None` for a default.
+    pub fn origin(&self, key: &str) -> Option<&Origin> {
+        self.origins.get(key)
     }
 
-    fn setup<'a>(
-        &'a self,
-        arcs: &'a ArcSet,
-        statics: Option<&'a Arc<arcnav_localmap::StaticMap>>,
-    ) -> Setup<'a> {
-        Setup {
-            arcs,
-            vehicle: &self.vehicle,
-            localmap: &self.localmap,
-            statics,
-            cruise_mps: self.arbiter.cruise_speed_mps,
-        }
+    /// Checks this configuration once and derives what follows from it:
+    /// the configuration every node is built from.
+    pub fn resolve(self, registry: &Registry) -> Result<crate::Resolved, ConfigError> {
+        crate::Resolved::new(self, registry)
     }
 
-    /// Parses and checks every behaviour table with `registry`; checks that
-    /// `[arbiter.weights]` and `arbiter.required` name configured behaviours.
-    fn prepare_behaviours(&self, registry: &Registry) -> Result<PreparedBehaviours, ConfigError> {
-        let arcs = self.arc_set()?;
-        let statics = self.static_map()?;
-        let setup = self.setup(&arcs, statics.as_ref());
-        let prepared = self
-            .behaviours
-            .iter()
-            .map(|(name, table)| {
-                registry
-                    .prepare(name, table, &setup)
-                    .map(|p| (name.clone(), p))
-                    .map_err(|e| behaviour_error(name, e))
-            })
-            .collect::<Result<BTreeMap<_, _>, _>>()?;
-        self.arbiter_names_behaviours()?;
-        Ok(PreparedBehaviours(Arc::new(prepared)))
+    /// [`Config::resolve`] with the built-in behaviours, leaving this
+    /// configuration as it is (for one changed in code).
+    pub fn resolved(&self) -> Result<crate::Resolved, ConfigError> {
+        self.clone().resolve(&Registry::builtin())
     }
 
     /// Every name the arbiter's section gives must be a configured behaviour
     /// (weights may also name `live.external_behaviours`; `required` may
     /// not: `arcnav sim` and `arcnav replay` run without them).
-    fn arbiter_names_behaviours(&self) -> Result<(), ConfigError> {
+    pub(crate) fn arbiter_names_behaviours(&self) -> Result<(), ConfigError> {
         let known = || {
             let mut known = self
                 .behaviours
@@ -368,19 +326,6 @@ impl Config {
         Ok(())
     }
 
-    /// Checks every section and the values that relate sections, with the
-    /// built-in behaviours.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        self.validate_with(&Registry::builtin())
-    }
-
-    /// Checks every section with behaviours from `registry` (a configuration
-    /// built in code; one loaded from TOML was checked when loaded).
-    pub fn validate_with(&self, registry: &Registry) -> Result<(), ConfigError> {
-        self.validate_sections()?;
-        self.prepare_behaviours(registry).map(|_| ())
-    }
-
     /// The vehicle's sensors: each of `[[sensors]]`, or `[sensor]`. Keys
     /// in errors are absolute (`sensors[1].id`).
     pub fn sensor_models(&self) -> Result<Vec<arcnav_perception::SensorModel>, ConfigError> {
@@ -414,7 +359,10 @@ impl Config {
         Ok(models)
     }
 
-    fn validate_sections(&self) -> Result<(), ConfigError> {
+    /// Checks every section and the values that relate sections (the
+    /// behaviours' tables are checked as they are parsed, when resolved).
+    pub(crate) fn validate_sections(&self) -> Result<(), ConfigError> {
+        count(|c| c.validations += 1);
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
         self.arcs
             .validate_for(&self.vehicle)
@@ -457,38 +405,7 @@ impl Config {
         }
         self.bus.validate().map_err(|e| e.within("bus"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
-        self.static_map()?;
         Ok(())
-    }
-
-    /// The static occupancy map `[localmap.occupancy]` names, gathered onto
-    /// the local map's patches (read once per file and patch size).
-    pub fn static_map(&self) -> Result<Option<Arc<arcnav_localmap::StaticMap>>, ConfigError> {
-        let occupancy = &self.localmap.occupancy;
-        let patch = self.localmap.patch_size_m;
-        let mut cache = self
-            .statics
-            .0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some((c, p, map)) = cache.as_ref()
-            && c == occupancy
-            && *p == patch
-        {
-            return Ok(map.clone());
-        }
-        let map = crate::occupancy::load(occupancy)
-            .map_err(|e| ConfigError::new("localmap.occupancy.file", e.to_string()))?
-            .map(|grid| Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, patch)));
-        if let Some(m) = &map {
-            tracing::info!(
-                file = %occupancy.file,
-                patches = m.len(),
-                "static occupancy map merged into the local map"
-            );
-        }
-        *cache = Some((occupancy.clone(), patch, map.clone()));
-        Ok(map)
     }
 
     /// Perception must evaluate all the ground the local map keeps.
@@ -512,24 +429,25 @@ impl Config {
         })
     }
 
-    /// The configuration as TOML.
+    /// The configuration as given, as TOML.
     pub fn to_toml(&self) -> String {
         // Plain structs of numbers, strings and tables always serialise.
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
     }
 }
 
-fn behaviour_error(name: &str, error: RegistryError) -> ConfigError {
-    match error {
-        RegistryError::Config(e) if e.key.is_empty() => {
-            ConfigError::new(format!("behaviours.{name}"), e.reason)
-        }
-        RegistryError::Config(e) => e.within(&format!("behaviours.{name}")),
-        unknown @ RegistryError::Unknown { .. } => {
-            ConfigError::new(format!("behaviours.{name}"), unknown.to_string())
+/// The dotted keys of every value in `table` that is not itself a table
+/// (an array of tables, `[[sensors]]`, is one key).
+fn leaf_keys(prefix: &str, table: &toml::de::DeTable<'_>, out: &mut Vec<String>) {
+    for (k, v) in table {
+        let key = if prefix.is_empty() {
+            k.get_ref().to_string()
+        } else {
+            format!("{prefix}.{}", k.get_ref())
+        };
+        match v.get_ref() {
+            toml::de::DeValue::Table(t) => leaf_keys(&key, t, out),
+            _ => out.push(key),
         }
     }
 }
-
-#[cfg(test)]
-mod tests;

@@ -1,26 +1,37 @@
-//! The configuration's loading, checks and messages.
+//! The configuration's loading, checks, derivations and messages.
 
-use super::*;
+use std::path::Path;
+
+use arcnav_behaviours::{GoalSeekingConfig, Registry};
+use arcnav_vehicle::VehicleConfig;
+
+use crate::*;
+
+/// `text` resolved with the built-in behaviours.
+fn from_toml(text: &str, origin: &str) -> Result<Resolved, ConfigLoadError> {
+    Resolved::from_toml(text, origin, &Registry::builtin())
+}
 
 fn parse_error(text: &str) -> String {
-    Config::from_toml(text, "test.toml")
-        .unwrap_err()
-        .to_string()
+    from_toml(text, "test.toml").unwrap_err().to_string()
 }
 
 #[test]
 fn defaults_round_trip_through_toml() {
     let defaults = Config::default();
     let text = defaults.to_toml();
-    assert_eq!(Config::from_toml(&text, "round-trip").unwrap(), defaults);
+    assert_eq!(Config::parse(&text, "round-trip").unwrap().to_toml(), text);
 }
 
 #[test]
 fn the_shipped_default_toml_parses_and_equals_the_defaults() {
     assert_eq!(
-        Config::from_toml(DEFAULT_TOML, "config/default.toml").unwrap(),
-        Config::default()
+        Config::parse(DEFAULT_TOML, "config/default.toml")
+            .unwrap()
+            .to_toml(),
+        Config::default().to_toml()
     );
+    from_toml(DEFAULT_TOML, "config/default.toml").expect("the shipped defaults resolve");
 }
 
 #[test]
@@ -124,7 +135,7 @@ fn a_perception_region_smaller_than_the_map_window_is_refused() {
         msg.contains("`perception.region.behind_m`: is 5 m, less than localmap.behind_m (20 m)"),
         "{msg}"
     );
-    Config::from_toml(
+    from_toml(
         "[localmap]\nahead_m = 30.0\n[perception.region]\nahead_m = 32.0\n",
         "test.toml",
     )
@@ -171,11 +182,13 @@ fn a_bad_behaviour_key_is_named() {
 
 #[test]
 fn a_behaviour_table_changes_only_its_keys_and_the_others_stay() {
-    let config = Config::from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
-    let goal = &config.behaviours["goal_seeking"];
-    assert_eq!(goal["lookahead_m"].as_float(), Some(14.0));
-    assert_eq!(goal["arrival_radius_m"].as_float(), Some(5.0));
-    assert!(config.behaviours.contains_key("obstacle_avoidance"));
+    let config = from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
+    let goal = config
+        .behaviour_config::<GoalSeekingConfig>("goal_seeking")
+        .unwrap();
+    assert_eq!(goal.lookahead_m, 14.0);
+    assert_eq!(goal.arrival_radius_m, 5.0);
+    assert!(config.behaviour_names().any(|n| n == "obstacle_avoidance"));
 }
 
 #[test]
@@ -195,8 +208,8 @@ fn a_missing_file_is_named() {
 
 #[test]
 fn partial_files_keep_the_other_defaults() {
-    let config = Config::from_toml("[arcs]\ncount = 41\n", "t").unwrap();
-    assert_eq!(config.arcs.count, 41);
+    let config = from_toml("[arcs]\ncount = 41\n", "t").unwrap();
+    assert_eq!(config.arcs.len(), 41);
     assert_eq!(config.vehicle, VehicleConfig::default());
 }
 
@@ -217,7 +230,7 @@ fn a_weight_or_required_name_that_is_no_configured_behaviour_is_refused() {
 
 #[test]
 fn external_behaviours_are_weighted_and_expected_but_never_required_or_doubled() {
-    let config = Config::from_toml(
+    let config = from_toml(
         "[live]\nexternal_behaviours = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.5\n",
         "t",
     )
@@ -227,7 +240,7 @@ fn external_behaviours_are_weighted_and_expected_but_never_required_or_doubled()
             .expected_behaviours()
             .contains(&"heading_hold".to_owned())
     );
-    let unweighted = Config::from_toml(
+    let unweighted = from_toml(
         "[live]\nexternal_behaviours = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.0\n",
         "t",
     )
@@ -263,7 +276,7 @@ fn external_behaviours_are_weighted_and_expected_but_never_required_or_doubled()
 
 #[test]
 fn a_weights_table_changes_only_the_weights_it_names() {
-    let config = Config::from_toml("[arbiter.weights]\ngoal_seeking = 0.8\n", "t").unwrap();
+    let config = from_toml("[arbiter.weights]\ngoal_seeking = 0.8\n", "t").unwrap();
     assert_eq!(config.arbiter.weight("goal_seeking"), 0.8);
     assert_eq!(config.arbiter.weight("obstacle_avoidance"), 1.0);
 }
@@ -278,19 +291,17 @@ fn a_cruise_speed_above_the_vehicles_top_speed_is_refused() {
 }
 
 #[test]
-fn behaviours_are_built_from_the_tables_checked_at_load_and_follow_later_edits() {
-    let mut config =
-        Config::from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
-    let registry = Registry::builtin();
-    let arcs = config.arc_set().unwrap();
-    assert_eq!(config.build_behaviours(&registry, &arcs).unwrap().len(), 3);
-    // A table changed in code is checked when built.
-    config
+fn behaviours_are_built_from_the_tables_checked_once_and_a_table_changed_in_code_is_checked_too() {
+    let config = from_toml("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
+    assert_eq!(config.build_behaviours().len(), 3);
+    // A table changed in code before resolving is checked as a file's is.
+    let mut given = Config::parse("[behaviours.goal_seeking]\nlookahead_m = 14.0\n", "t").unwrap();
+    given
         .behaviours
         .get_mut("goal_seeking")
         .unwrap()
         .insert("lookahed_m".into(), toml::Value::Float(3.0));
-    let err = config.build_behaviours(&registry, &arcs).err().unwrap();
+    let err = given.resolve(&Registry::builtin()).err().unwrap();
     assert_eq!(err.key, "behaviours.goal_seeking.lookahed_m");
 }
 
@@ -316,13 +327,13 @@ fn weights_that_leave_no_behaviour_voting_are_refused() {
 
 #[test]
 fn several_sensors_each_with_its_own_id_mount_and_rate() {
-    let config = Config::from_toml(
+    let config = from_toml(
         "[[sensors]]\npreset = \"lidar64\"\n[[sensors]]\npreset = \"depth_camera\"\nid = \"rear\"\n\
          mount_position_m = [-0.6, 0.0, 2.0]\nmount_rpy_deg = [0.0, 25.0, 180.0]\nrate_hz = 10.0\n",
         "test.toml",
     )
     .unwrap();
-    let models = config.sensor_models().unwrap();
+    let models = &config.sensors;
     assert_eq!(models.len(), 2);
     assert_eq!(models[0], arcnav_perception::SensorModel::lidar64());
     assert_eq!(models[1].id, "rear");
@@ -334,7 +345,7 @@ fn several_sensors_each_with_its_own_id_mount_and_rate() {
         arcnav_perception::SensorModel::depth_camera().beams
     );
     // Without [[sensors]], [sensor] is the one sensor.
-    assert_eq!(Config::default().sensor_models().unwrap().len(), 1);
+    assert_eq!(Resolved::default().sensors.len(), 1);
 }
 
 #[test]
@@ -357,17 +368,15 @@ fn two_sensors_with_one_id_or_sensor_and_sensors_together_are_refused() {
 
 #[test]
 fn driven_paths_reach_the_behaviours_steering_response() {
-    let config = Config::from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
-    let arcs = config.arc_set().unwrap();
-    assert!(arcs.driven_paths());
-    let response = config.setup(&arcs, None).steering_response();
+    let config = from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
+    assert!(config.arcs.driven_paths());
+    let response = config.setup().steering_response();
     assert_eq!(
         response,
         arcnav_vehicle::SteeringResponse::of(&config.vehicle)
     );
-    let defaults = Config::default();
-    let arcs = defaults.arc_set().unwrap();
-    let response = defaults.setup(&arcs, None).steering_response();
+    let defaults = Resolved::default();
+    let response = defaults.setup().steering_response();
     assert_eq!(response, arcnav_vehicle::SteeringResponse::immediate());
 }
 
@@ -379,11 +388,7 @@ fn driven_paths_auto_follows_the_cruise_speed() {
     let at = |driven: &str, cruise: f64| {
         let text =
             format!("[arcs]\ndriven_paths = {driven}\n[arbiter]\ncruise_speed_mps = {cruise}\n");
-        Config::from_toml(&text, "test.toml")
-            .unwrap()
-            .arc_set()
-            .unwrap()
-            .driven_paths()
+        from_toml(&text, "test.toml").unwrap().arcs.driven_paths()
     };
     assert!(!at("\"auto\"", 2.5));
     assert!(!at("\"auto\"", 3.0));
@@ -393,14 +398,10 @@ fn driven_paths_auto_follows_the_cruise_speed() {
     assert!(!at("false", 10.0));
     let cruise = |v: f64| {
         let text = format!("[arbiter]\ncruise_speed_mps = {v}\n");
-        Config::from_toml(&text, "test.toml")
-            .unwrap()
-            .arc_set()
-            .unwrap()
-            .driven_paths()
+        from_toml(&text, "test.toml").unwrap().arcs.driven_paths()
     };
     assert!(!cruise(2.5) && cruise(4.5), "the default is auto");
-    let error = Config::from_toml("[arcs]\ndriven_paths = \"sometimes\"\n", "test.toml")
+    let error = from_toml("[arcs]\ndriven_paths = \"sometimes\"\n", "test.toml")
         .unwrap_err()
         .to_string();
     assert!(
@@ -408,8 +409,8 @@ fn driven_paths_auto_follows_the_cruise_speed() {
         "{error}"
     );
     // The effective configuration prints what was set, and reads back.
-    let effective = Config::default().effective().to_toml();
+    let effective = Resolved::default().effective().to_toml();
     assert!(effective.contains("driven_paths = \"auto\""), "{effective}");
-    let on = Config::from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
+    let on = from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
     assert!(on.effective().to_toml().contains("driven_paths = true"));
 }
