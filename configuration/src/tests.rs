@@ -60,9 +60,15 @@ fn the_shipped_default_toml_documents_every_key() {
         a, b,
         "config/default.toml must hold exactly the configuration's keys"
     );
-    // Every key carries a comment right above it or on its line.
+    // Every key carries a comment right above it or on its line, and no
+    // line is longer than 120 characters.
     let lines: Vec<&str> = DEFAULT_TOML.lines().collect();
     for (i, line) in lines.iter().enumerate() {
+        assert!(
+            line.chars().count() <= 120,
+            "line {} of config/default.toml is longer than 120 characters",
+            i + 1
+        );
         let t = line.trim();
         if t.is_empty() || t.starts_with('#') || t.starts_with('[') {
             continue;
@@ -413,4 +419,116 @@ fn driven_paths_auto_follows_the_cruise_speed() {
     assert!(effective.contains("driven_paths = \"auto\""), "{effective}");
     let on = from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
     assert!(on.effective().to_toml().contains("driven_paths = true"));
+}
+
+/// A load parses its text once and checks it once; building nodes from
+/// the result, however many and however often, parses and checks nothing
+/// again.
+#[test]
+fn a_configuration_is_parsed_and_validated_once_however_many_nodes_are_built() {
+    let before = load_counts();
+    let resolved = from_toml(
+        "[arbiter]\ncruise_speed_mps = 8.0\n[sensor]\npreset = \"lidar64\"\n",
+        "test.toml",
+    )
+    .unwrap();
+    for _ in 0..3 {
+        resolved.lockstep().unwrap();
+    }
+    resolved.perception_node().unwrap();
+    let _ = resolved.arbiter();
+    let _ = resolved.behaviour_set();
+    let _ = resolved.decision_cycle::<()>(arcnav_pipeline::Delivery::held(&resolved.pipeline));
+    let after = load_counts();
+    assert_eq!(after.parses - before.parses, 1, "{before:?} -> {after:?}");
+    assert_eq!(after.validations - before.validations, 1, "{before:?} -> {after:?}");
+    // Resolving a configuration built in code parses nothing.
+    Config::default().resolved().unwrap();
+    let code = load_counts();
+    assert_eq!((code.parses, code.validations), (after.parses, after.validations + 1));
+}
+
+/// Every node of a lock-step build drives at one cruise speed, looks as
+/// far as one lookahead says and votes over one arc set: at 10 m/s with
+/// the 64-beam lidar (the window moved out 25 m), and held to the hole
+/// speed cap.
+#[test]
+fn every_node_of_a_lockstep_build_gets_the_same_cruise_lookahead_and_arcs() {
+    let capped = from_toml(
+        "[arbiter]\ncruise_speed_mps = 10.0\n[sensor]\npreset = \"lidar64\"\n",
+        "test.toml",
+    )
+    .unwrap();
+    assert!(capped.cruise.capped() && capped.cruise.mps < 6.0, "{:?}", capped.cruise);
+    let pipeline = capped.lockstep().unwrap();
+    assert_eq!(pipeline.arbiter.cruise_mps(), capped.cruise.mps);
+    assert_eq!(capped.setup().cruise_mps, capped.cruise.mps);
+    let resolved = from_toml(
+        "[arbiter]\ncruise_speed_mps = 10.0\n[sensor]\npreset = \"lidar64\"\n\
+         [lookahead]\nhole_speed_cap = false\n",
+        "test.toml",
+    )
+    .unwrap();
+    let cruise = resolved.cruise;
+    assert!(!cruise.capped() && cruise.mps == 10.0, "{cruise:?}");
+    let look = resolved.lookahead;
+    assert!(look.moved_m > 0.0, "{look:?}");
+    let pipeline = resolved.lockstep().unwrap();
+    // The arbiter drives at the capped speed over the resolved arcs...
+    assert_eq!(pipeline.arbiter.cruise_mps(), cruise.mps);
+    assert_eq!(pipeline.arbiter.arcs(), &resolved.arcs);
+    // ... the behaviours vote over the same arcs, built with the same speed
+    // and the map window that lookahead set ...
+    assert_eq!(pipeline.behaviours.arcs(), &resolved.arcs);
+    let setup = resolved.setup();
+    assert_eq!(setup.cruise_mps, cruise.mps);
+    assert_eq!(setup.arcs, &resolved.arcs);
+    assert_eq!(setup.localmap.ahead_m, look.map_ahead_m);
+    let avoidance = resolved
+        .behaviour_config::<arcnav_behaviours::ObstacleAvoidanceConfig>("obstacle_avoidance")
+        .unwrap();
+    assert_eq!(avoidance.max_distance_m, look.max_distance_m);
+    // ... the local map keeps that window and perception evaluates it.
+    let map = pipeline.cycle.map.map.config();
+    assert_eq!((map.ahead_m, map.half_width_m), (look.map_ahead_m, look.map_half_width_m));
+    let perception = pipeline.perception.config();
+    assert_eq!(perception.region.ahead_m, look.region_ahead_m);
+    assert_eq!(perception.max_range_m, look.max_range_m);
+    // The arc set decides driven paths at the speed driven (above 3 m/s).
+    assert!(resolved.arcs.driven_paths());
+}
+
+/// `arcnav config` says of each key whether it is a default, came from the
+/// file or the command line, or was derived, and from what.
+#[test]
+fn each_key_says_where_its_value_came_from() {
+    let mut given = Config::parse("[sensor]\npreset = \"lidar64\"\n", "my.toml").unwrap();
+    given.arbiter.cruise_speed_mps = 10.0;
+    given.set_by("arbiter.cruise_speed_mps", "--speed");
+    let resolved = given.resolve(&Registry::builtin()).unwrap();
+    assert_eq!(resolved.origin("sensor.preset"), "from my.toml");
+    assert_eq!(resolved.origin("vehicle.width_m"), "default");
+    assert!(
+        resolved.origin("arbiter.cruise_speed_mps").starts_with("derived: driven at 5.2"),
+        "{}",
+        resolved.origin("arbiter.cruise_speed_mps")
+    );
+    assert!(resolved.origin("localmap.hole_range_m").starts_with("derived: "));
+    let text = resolved.to_toml_with_origins();
+    assert!(text.contains("preset = \"lidar64\"  # from my.toml"), "{text}");
+    assert!(text.contains("width_m = 2.0  # default") || text.contains("# default"), "{text}");
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("hole_seen_within_m = ") && l.contains("# derived: ")),
+        "{text}"
+    );
+    // What it prints reads back to the same configuration.
+    let again = Resolved::from_toml(&text, "printed", &Registry::builtin()).unwrap();
+    assert_eq!(again.effective().to_toml(), resolved.effective().to_toml());
+    // Without the cap, the asked speed is the one driven and says so.
+    let mut uncapped = Config::default();
+    uncapped.arbiter.cruise_speed_mps = 3.0;
+    uncapped.set_by("arbiter.cruise_speed_mps", "--speed");
+    let uncapped = uncapped.resolved().unwrap();
+    assert_eq!(uncapped.origin("arbiter.cruise_speed_mps"), "from --speed");
 }

@@ -154,6 +154,11 @@ impl PerceptionNode {
 
     /// Hands independent parts of each evaluation to `runner` (threads of a
     /// live executor); results are the same as without.
+    /// The configuration it was built from.
+    pub fn config(&self) -> &PerceptionConfig {
+        &self.perception_config
+    }
+
     pub fn set_runner(&mut self, runner: Box<dyn Runner + Send>) {
         self.runner = runner;
     }
