@@ -27,12 +27,16 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Run a simulated mission on a world it has never seen.
+    ///
     /// Run a simulated cross-country mission: the real pipeline (perception,
     /// local map, behaviours, arbiter) drives a simulated vehicle through a
     /// world it has never seen. Writes the LCM log, report.json and map.png
     /// to --out; exit status 0 only when the mission completes without a
     /// collision.
     Sim(SimArgs),
+    /// Run missions over many worlds and settings, on every core.
+    ///
     /// Run missions on many worlds under many settings, on every core: each
     /// world (--world, --seeds) with each combination of the values given to
     /// --set (or in --grid). Writes table.csv/json (one row per run),
@@ -41,17 +45,23 @@ enum Command {
     /// --resume. Exit status 0 when every run was done (whatever its outcome),
     /// 130 when interrupted.
     Sweep(SweepArgs),
+    /// Replay a log through the pipeline and compare the decisions.
+    ///
     /// Replay an LCM log (POSE, RANGE_IMAGE, WAYPOINTS) through perception,
     /// local map, behaviours and arbiter in log time; write the recomputed
     /// decisions to --out and compare them with the ones the log recorded.
     /// Exit status: 0 all input used, 3 some input was lost (listed), 1 error.
     Replay(ReplayArgs),
+    /// Drive live: every node in this process, on LCM.
+    ///
     /// Drive live: every node in this process, a thread each. Takes POSE,
     /// RANGE_IMAGE* and WAYPOINTS from LCM and publishes STEERING_COMMAND at
     /// pipeline.command_rate_hz (and at once on new obstacle cells). Commands
     /// stop when poses, images or obstacle-avoidance votes go stale; Ctrl-C or
     /// SIGTERM publishes a final stop and exits.
     Run(LiveArgs),
+    /// Run one node as its own process on LCM.
+    ///
     /// Run one node as its own process on LCM, like the original system
     /// spread over workstations: perception (RANGE_IMAGE* → OBSTACLE_CELLS),
     /// localmap (→ LOCAL_MAP), behaviour NAME (LOCAL_MAP → ARC_VOTES_NAME) or
@@ -60,6 +70,8 @@ enum Command {
         #[command(subcommand)]
         node: NodeCommand,
     },
+    /// The vehicle's side: verified commands in, what to execute out.
+    ///
     /// The vehicle's side of the command interface, for a controller to run
     /// beside it: takes STEERING_COMMAND from the bus (only commands with a
     /// valid, fresh tag when [bus.auth] is on; forged, tampered, replayed and
@@ -69,17 +81,23 @@ enum Command {
     /// Out as JSON lines (--print) and/or as plain STEERING_COMMAND on the
     /// controller's own LCM link (--forward).
     Vehicle(VehicleArgs),
+    /// Draw one decision of a log: map, arcs by vote, who vetoed what.
+    ///
     /// Picture of one decision of a log: the local map, the vehicle, the arcs
     /// coloured by fused vote, each behaviour's votes and what they rested on
     /// (the route's planned path, the point it steered for, the ground it
     /// remembers as obstacles or shut), and who vetoed what.
     Render(RenderArgs),
+    /// Write an LCM log as MCAP, for Foxglove.
+    ///
     /// Write an LCM log as MCAP, the format Foxglove opens: range images as
     /// point clouds in the vehicle frame, obstacle cells, local map and
     /// waypoints as 3-D scenes, the pose and world → vehicle transforms, the
     /// arcs coloured by fused vote, each behaviour's votes and the command as
     /// plottable series. Every message keeps its log time.
     Export(ExportArgs),
+    /// Run paper 000's detection experiment per evaluator and sensor.
+    ///
     /// The detection experiment of paper 000 (§6, Fig. 5) at this vehicle's
     /// scale: blocks of several heights and a glass block that returns
     /// nothing, straight ahead on flat ground at several distances, many
@@ -87,9 +105,13 @@ enum Command {
     /// that report the block untraversable and the share with a false
     /// alarm. Writes detection.txt, detection.json and detection.png to --out
     Detect(DetectArgs),
+    /// List the terrain evaluators perception.evaluator can name.
+    ///
     /// List the terrain evaluators `perception.evaluator` can name (the
     /// papers they come from; configure each in [perception.NAME])
     Evaluators,
+    /// Print the resolved configuration, or check a file.
+    ///
     /// Print the resolved configuration (defaults, FILE over them, and what
     /// follows from both) as TOML, each key marked with where its value came
     /// from; or validate FILE with --check.

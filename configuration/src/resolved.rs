@@ -168,7 +168,7 @@ impl Resolved {
             localmap.hole_range_m = range;
             derive(
                 "localmap.hole_range_m",
-                "0 in the file: where the sensor's ray grazing a hole's edge flags it \
+                "given as 0: where the sensor's ray grazing a hole's edge flags it \
                  (speed bound's hole_grazed_m)"
                     .into(),
             );
@@ -179,7 +179,7 @@ impl Resolved {
             oa.hole_seen_within_m = within;
             derive(
                 "behaviours.obstacle_avoidance.hole_seen_within_m",
-                "0 in the file: hole_grazed_m less the sensor's setback from the front".into(),
+                "given as 0: hole_grazed_m less the sensor's setback from the front".into(),
             );
         }
         if lookahead.moved_m > 0.0 {
@@ -312,12 +312,13 @@ impl Resolved {
     /// Where `key`'s value came from, in words: a file, a command-line
     /// option, a derivation, or the defaults.
     pub fn origin(&self, key: &str) -> String {
-        if let Some(d) = self.derived.iter().find(|d| d.key == key) {
-            return format!("derived: {}", d.from);
-        }
-        match self.given.origin(key) {
+        let given = match self.given.origin(key) {
             Some(origin @ (Origin::File(_) | Origin::CommandLine(_))) => origin.to_string(),
             None => "default".into(),
+        };
+        match self.derived.iter().find(|d| d.key == key) {
+            Some(d) => format!("{given}; derived: {}", d.from),
+            None => given,
         }
     }
 

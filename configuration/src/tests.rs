@@ -441,11 +441,18 @@ fn a_configuration_is_parsed_and_validated_once_however_many_nodes_are_built() {
     let _ = resolved.decision_cycle::<()>(arcnav_pipeline::Delivery::held(&resolved.pipeline));
     let after = load_counts();
     assert_eq!(after.parses - before.parses, 1, "{before:?} -> {after:?}");
-    assert_eq!(after.validations - before.validations, 1, "{before:?} -> {after:?}");
+    assert_eq!(
+        after.validations - before.validations,
+        1,
+        "{before:?} -> {after:?}"
+    );
     // Resolving a configuration built in code parses nothing.
     Config::default().resolved().unwrap();
     let code = load_counts();
-    assert_eq!((code.parses, code.validations), (after.parses, after.validations + 1));
+    assert_eq!(
+        (code.parses, code.validations),
+        (after.parses, after.validations + 1)
+    );
 }
 
 /// Every node of a lock-step build drives at one cruise speed, looks as
@@ -459,7 +466,11 @@ fn every_node_of_a_lockstep_build_gets_the_same_cruise_lookahead_and_arcs() {
         "test.toml",
     )
     .unwrap();
-    assert!(capped.cruise.capped() && capped.cruise.mps < 6.0, "{:?}", capped.cruise);
+    assert!(
+        capped.cruise.capped() && capped.cruise.mps < 6.0,
+        "{:?}",
+        capped.cruise
+    );
     let pipeline = capped.lockstep().unwrap();
     assert_eq!(pipeline.arbiter.cruise_mps(), capped.cruise.mps);
     assert_eq!(capped.setup().cruise_mps, capped.cruise.mps);
@@ -490,7 +501,10 @@ fn every_node_of_a_lockstep_build_gets_the_same_cruise_lookahead_and_arcs() {
     assert_eq!(avoidance.max_distance_m, look.max_distance_m);
     // ... the local map keeps that window and perception evaluates it.
     let map = pipeline.cycle.map.map.config();
-    assert_eq!((map.ahead_m, map.half_width_m), (look.map_ahead_m, look.map_half_width_m));
+    assert_eq!(
+        (map.ahead_m, map.half_width_m),
+        (look.map_ahead_m, look.map_half_width_m)
+    );
     let perception = pipeline.perception.config();
     assert_eq!(perception.region.ahead_m, look.region_ahead_m);
     assert_eq!(perception.max_range_m, look.max_range_m);
@@ -509,17 +523,29 @@ fn each_key_says_where_its_value_came_from() {
     assert_eq!(resolved.origin("sensor.preset"), "from my.toml");
     assert_eq!(resolved.origin("vehicle.width_m"), "default");
     assert!(
-        resolved.origin("arbiter.cruise_speed_mps").starts_with("derived: driven at 5.2"),
+        resolved
+            .origin("arbiter.cruise_speed_mps")
+            .starts_with("from --speed; derived: driven at 5.2"),
         "{}",
         resolved.origin("arbiter.cruise_speed_mps")
     );
-    assert!(resolved.origin("localmap.hole_range_m").starts_with("derived: "));
+    assert!(
+        resolved
+            .origin("localmap.hole_range_m")
+            .starts_with("default; derived: given as 0")
+    );
     let text = resolved.to_toml_with_origins();
-    assert!(text.contains("preset = \"lidar64\"  # from my.toml"), "{text}");
-    assert!(text.contains("width_m = 2.0  # default") || text.contains("# default"), "{text}");
+    assert!(
+        text.contains("preset = \"lidar64\"  # from my.toml"),
+        "{text}"
+    );
+    assert!(
+        text.contains("width_m = 2.0  # default") || text.contains("# default"),
+        "{text}"
+    );
     assert!(
         text.lines()
-            .any(|l| l.starts_with("hole_seen_within_m = ") && l.contains("# derived: ")),
+            .any(|l| l.starts_with("hole_seen_within_m = ") && l.contains("# default; derived: ")),
         "{text}"
     );
     // What it prints reads back to the same configuration.
