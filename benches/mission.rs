@@ -14,6 +14,10 @@ use arcnav::mission::{LogMode, MissionOptions, run_mission};
 use arcnav_perception::SensorPreset;
 use arcnav_sim::World;
 
+#[path = "common/mod.rs"]
+#[allow(dead_code)]
+mod common;
+
 fn main() {
     let preset = match std::env::args().skip(1).find(|a| !a.starts_with('-')) {
         Some(name) if name == "lidar128" => SensorPreset::Lidar128,
@@ -33,6 +37,9 @@ fn main() {
         let mut config = Config::default();
         config.sensor.preset = preset;
         config.sim.render_ahead = ahead;
+        if common::quick() {
+            config.sim.time_limit_s = 10.0;
+        }
         let options = MissionOptions {
             log_mode: LogMode::NoImages,
             ..MissionOptions::default()

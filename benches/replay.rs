@@ -16,7 +16,7 @@ fn measure(label: &str, log: &Path, config: &Config, target: f64) {
     let mut best = f64::INFINITY;
     let mut span = 0.0;
     let mut decisions = 0;
-    for _ in 0..3 {
+    for _ in 0..if common::quick() { 1 } else { 3 } {
         let started = Instant::now();
         let result = replay(
             log,
@@ -38,13 +38,22 @@ fn measure(label: &str, log: &Path, config: &Config, target: f64) {
 
 fn main() {
     let data = common::data_dir();
-    let erim = Config::default();
-    let erim_log = data.join("paper_loop-erim.lcm");
+    let quick = common::quick();
+    let mut erim = Config::default();
+    let erim_log = if quick {
+        erim.sim.time_limit_s = 20.0;
+        data.join("paper_loop-erim-20s.lcm")
+    } else {
+        data.join("paper_loop-erim.lcm")
+    };
     common::make_log(&erim_log, "paper_loop", &erim);
     let mut lidar = Config::default();
     lidar.sensor.preset = SensorPreset::Lidar128;
-    lidar.sim.time_limit_s = 20.0;
-    let lidar_log = data.join("short_course-lidar128-20s.lcm");
+    lidar.sim.time_limit_s = if quick { 2.0 } else { 20.0 };
+    let lidar_log = data.join(format!(
+        "short_course-lidar128-{}s.lcm",
+        lidar.sim.time_limit_s
+    ));
     common::make_log(&lidar_log, "short_course", &lidar);
     measure("ERIM 64×256, 2 Hz", &erim_log, &erim, 500.0);
     measure("lidar 128×2048, 10 Hz", &lidar_log, &lidar, 20.0);

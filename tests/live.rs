@@ -1672,6 +1672,7 @@ fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
     let builtin_only = {
         let mut c = net.config.clone();
         c.live.external_behaviours.clear();
+        c.arbiter.weights.remove("heading_hold");
         c
     };
     let last = last_cycle(&net.log, &builtin_only);

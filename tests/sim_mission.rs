@@ -86,18 +86,18 @@ fn missions<'a, T: AsRef<str> + Sync>(
 
 /// The range-noise seeds (`sim.seed`) a mission test asks its question
 /// over where the answer hangs on the noise (one seed's outcome may be its
-/// realisation's luck): seeds 1 to N, N from `ARCNAV_TEST_NOISE_SEEDS`,
-/// 2 when it is not set. The figures these tests quote were measured over
-/// seeds 1-6 (`ARCNAV_TEST_NOISE_SEEDS=6 cargo test --test sim_mission`,
-/// about three times as long); "with every noise seed" below means each
-/// seed asked. Two by default since 2026-11-28 (six, then four, before):
-/// the lidar missions of this file took 14-23 minutes of a CI run that is
-/// to stay well under 30. The defect each control shows is looked for over
-/// the six seeds whatever N (see [`first_seed_showing`]).
+/// realisation's luck): seeds 1 to N, N from `ARCNAV_TEST_NOISE_SEEDS`, 1
+/// when it is not set. Every assertion runs with seed 1 in every test run;
+/// the figures these tests quote were measured over seeds 1-6, and a change
+/// to what drives is checked over them before it lands
+/// (`ARCNAV_TEST_NOISE_SEEDS=6 cargo test --release --test sim_mission`,
+/// about six times as long; DEVELOPERS.md). One by default since
+/// 2026-12-02 (two, six, then four before), to keep the whole suite near
+/// ten minutes on two cores.
 fn noise_seeds() -> std::ops::RangeInclusive<u64> {
     const VAR: &str = "ARCNAV_TEST_NOISE_SEEDS";
     match std::env::var(VAR) {
-        Err(_) => 1..=2,
+        Err(_) => 1..=1,
         Ok(text) => match text.trim().parse::<u64>() {
             Ok(n @ 1..=64) => 1..=n,
             _ => panic!("{VAR}={text:?}: give how many noise seeds to ask over, 1 to 64"),
@@ -223,7 +223,7 @@ fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
     // ERIM flags one for certain only within ~6.3 m, so the paper's 2-3
     // m/s.
     let holes = &report["speed_bound"];
-    let hole_range = holes["hole_range_m"].as_f64().unwrap();
+    let hole_range = holes["hole_certain_m"].as_f64().unwrap();
     let hole_bound = holes["hole_bound_mps"].as_f64().unwrap();
     assert!(
         hole_range < holes["detection_range_m"].as_f64().unwrap() && hole_bound < bound,
@@ -1263,8 +1263,9 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
     let cap = looking["speed_bound"]["suspect_bound_mps"]
         .as_f64()
         .unwrap();
-    assert_eq!(looking["cruise_speed_mps"].as_f64(), Some(cap));
+    assert_eq!(looking["cruise_mps"].as_f64(), Some(cap));
     assert_eq!(looking["cruise_asked_mps"].as_f64(), Some(10.0));
+    assert_eq!(looking["cruise_cap_mps"].as_f64(), Some(cap));
     assert!(max(&looking) <= cap + 0.05, "{} > {cap}", max(&looking));
     // Every second driven is put down to the limit that set the speed.
     let limited: f64 = looking["speed_limited_by_s"]

@@ -99,11 +99,19 @@ fn rubble_is_crossed_slower_and_a_smooth_track_beside_it_is_taken() {
     );
 }
 
-/// 018's "as before": the 20 generated moderate worlds (seeds 0-19) are all
-/// completed without a collision with the terrain checks on (and per-cell
-/// slope off), two at a time.
+/// 018's "as before": the generated moderate worlds are all completed
+/// without a collision with the terrain checks on (and per-cell slope off),
+/// two at a time: seeds 0 to N-1, N from `ARCNAV_TEST_WORLDS` (6 when it is
+/// not set; 018 drove 20, as `ARCNAV_TEST_WORLDS=20` does, or `arcnav sweep
+/// --seeds 0..20`).
 #[test]
-fn twenty_generated_moderate_worlds_are_completed() {
+fn generated_moderate_worlds_are_completed() {
+    const VAR: &str = "ARCNAV_TEST_WORLDS";
+    let worlds: u64 = std::env::var(VAR).map_or(6, |text| {
+        text.trim()
+            .parse()
+            .unwrap_or_else(|_| panic!("{VAR}={text:?}: give how many worlds to drive"))
+    });
     let next = std::sync::atomic::AtomicU64::new(0);
     let failures = std::sync::Mutex::new(Vec::new());
     std::thread::scope(|scope| {
@@ -111,7 +119,7 @@ fn twenty_generated_moderate_worlds_are_completed() {
             scope.spawn(|| {
                 loop {
                     let seed = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    if seed >= 20 {
+                    if seed >= worlds {
                         break;
                     }
                     let spec = arcnav_sim::generate(seed, arcnav_sim::Difficulty::Moderate);

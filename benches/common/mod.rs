@@ -8,6 +8,14 @@ use arcnav::Config;
 use arcnav::mission::{MissionOptions, run_mission};
 use arcnav_sim::World;
 
+/// Whether this is a quick run: `cargo test --benches` (as `scripts/test`
+/// does) runs a custom-harness benchmark without `--bench`, to check that
+/// it builds and runs, on shorter inputs and once; `cargo bench` passes
+/// `--bench` and gets the figures.
+pub fn quick() -> bool {
+    !std::env::args().any(|a| a == "--bench")
+}
+
 /// `target/bench-data`, created.
 pub fn data_dir() -> PathBuf {
     let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/bench-data");

@@ -21,6 +21,12 @@ use arcnav_vehicle::{Pose, VehicleConfig};
 /// Images along the drive, 2.5 m apart.
 const IMAGES: i64 = 4;
 
+/// `cargo test --benches` runs this without `--bench`: once, quickly, to
+/// check that it still runs; `cargo bench` passes `--bench` for the figures.
+fn quick() -> bool {
+    !std::env::args().any(|a| a == "--bench")
+}
+
 fn main() {
     let sensor = SensorModel::lidar128();
     let perception = PerceptionConfig::default();
@@ -34,7 +40,7 @@ fn main() {
     let scene = HeightFunction::with_step(rough_ground, 0.1);
     let started = Instant::now();
     let images: Vec<_> = std::thread::scope(|scope| {
-        let renders: Vec<_> = (0..IMAGES)
+        let renders: Vec<_> = (0..if quick() { 1 } else { IMAGES })
             .map(|n| {
                 let (sensor, scene) = (&sensor, &scene);
                 scope.spawn(move || {
@@ -48,12 +54,13 @@ fn main() {
         renders.into_iter().map(|r| r.join().unwrap()).collect()
     });
     println!(
-        "rendered {IMAGES} images in {:.1} s",
+        "rendered {} images in {:.1} s",
+        images.len(),
         started.elapsed().as_secs_f64()
     );
     let mut report = ObstacleReport::default();
     let (mut sample_times, mut fuse_times) = (Vec::new(), Vec::new());
-    for round in 0..25 {
+    for round in 0..if quick() { 2 } else { 25 } {
         for (pose, image) in &images {
             map.update(pose);
             report.clear();

@@ -17,12 +17,21 @@ use arcnav_perception::{
 use arcnav_vehicle::Isometry;
 use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 
+/// `cargo test --benches` runs this without `--bench`: once, quickly, to
+/// check that it still runs; `cargo bench` passes `--bench` for the figures.
+fn quick() -> bool {
+    !std::env::args().any(|a| a == "--bench")
+}
+
 /// Median wall time of `f` over rounds of at least `min_s`, ms.
 fn time_ms(mut f: impl FnMut()) -> f64 {
     f();
     let mut times = Vec::new();
     let started = Instant::now();
-    while times.len() < 15 || (started.elapsed().as_secs_f64() < 2.0 && times.len() < 200) {
+    let rounds = if quick() { 1 } else { 15 };
+    while times.len() < rounds
+        || (!quick() && started.elapsed().as_secs_f64() < 2.0 && times.len() < 200)
+    {
         let t = Instant::now();
         f();
         times.push(t.elapsed().as_secs_f64() * 1e3);
