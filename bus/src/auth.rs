@@ -41,7 +41,7 @@ use std::path::{Path, PathBuf};
 
 use hmac::{Hmac, Mac};
 
-use crate::transport::ChannelFilter;
+use crate::channels::ChannelFilter;
 use sha2::Sha256;
 
 type HmacSha256 = Hmac<Sha256>;

@@ -18,6 +18,7 @@
 //!   forged, replayed and stale messages.
 
 pub mod auth;
+pub mod channels;
 pub mod codec;
 pub mod lcmtypes;
 pub mod log;

@@ -25,7 +25,7 @@ use arcnav_vehicle::{ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::bus::BusConfig;
-use crate::lookahead::LookaheadConfig;
+use crate::lookahead::section::LookaheadConfig;
 
 /// The documented defaults, as shipped in `config/default.toml`.
 pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");

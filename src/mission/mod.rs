@@ -8,13 +8,14 @@
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
 mod ahead;
+pub mod report;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use arcnav_arbiter::{BehaviourVotes, Decision, RecoveryStats};
+use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Waypoint};
 use arcnav_bus::lcmtypes::pose_t;
 use arcnav_bus::messages::channels;
@@ -24,23 +25,23 @@ use arcnav_sim::drape::drape;
 use arcnav_sim::rng::Rng;
 use arcnav_sim::sensor::{SliceRequest, Slicer};
 use arcnav_sim::tiles::{TileCache, TileView};
-use arcnav_sim::{Collision, CollisionPolicy, Truth, World};
+use arcnav_sim::{CollisionPolicy, Truth, World};
 use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
 use arcnav_vehicle::{
     Isometry, MotionLimits, MotionModel, PlanarState, Pose, SteeringCommand, Utime,
 };
 use nalgebra::Vector3;
-use serde::Serialize;
-
-use arcnav_config::SpeedBound;
 
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
 use crate::wire;
 use ahead::{FrameRequest, Frames, view_for};
 use arcnav_config::Resolved;
-use arcnav_pipeline::{Input, Sink, StageTimes};
+use arcnav_pipeline::{Input, Sink};
+pub use report::{
+    MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats, TrackPoint,
+};
 
 /// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
 pub const SIM_EPOCH_US: Utime = 1_767_225_600_000_000;
@@ -68,157 +69,6 @@ pub struct MissionOptions {
     /// are rendered when due, never ahead (`sim.render_ahead` would only add
     /// threads competing for them).
     pub beside_others: bool,
-}
-
-/// How it ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Outcome {
-    Completed,
-    Collision,
-    Timeout,
-    Stuck,
-}
-
-/// Progress, reported about once per simulated second.
-#[derive(Debug, Clone, Copy)]
-pub struct MissionProgress {
-    pub sim_time_s: f64,
-    pub distance_m: f64,
-    pub waypoint: usize,
-    pub waypoints: usize,
-    pub speed_mps: f64,
-    pub time_limit_s: f64,
-}
-
-/// Mission statistics (`report.json`).
-#[derive(Debug, Clone, Serialize)]
-pub struct MissionReport {
-    pub world: String,
-    pub sensor: String,
-    pub outcome: Outcome,
-    /// True only when the mission completed with zero collisions.
-    pub success: bool,
-    pub waypoints_reached: usize,
-    pub waypoints: usize,
-    pub distance_m: f64,
-    pub duration_s: f64,
-    pub average_speed_mps: f64,
-    pub max_speed_mps: f64,
-    /// The cruise speed the arbiter drove at: the one asked for
-    /// (`arbiter.cruise_speed_mps`), held to the hole speed cap, m/s.
-    pub cruise_mps: f64,
-    /// The cruise speed asked for, `arbiter.cruise_speed_mps`, m/s.
-    pub cruise_asked_mps: f64,
-    /// The hole speed cap (`[lookahead] hole_speed_cap`), when it applies, m/s.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub cruise_cap_mps: Option<f64>,
-    pub images: u64,
-    pub images_dropped: u64,
-    /// Images sent in slices (`sim.slice_lines`): what perception did
-    /// with them (slices, steps, lines lost). Absent for whole images.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub slices: Option<arcnav_pipeline::SliceCounts>,
-    /// Untraversable cells perception reported, summed over the images,
-    /// per reason (a cell with two reasons counts in both).
-    pub untraversable_cells: BTreeMap<&'static str, u64>,
-    /// Graded cells (cost below 1) perception reported, summed over the images.
-    pub graded_cells: u64,
-    /// Of those, suspected drop-offs (`[perception.drop_off] suspect_cost`).
-    pub suspected_drop_offs: u64,
-    pub collisions: Vec<Collision>,
-    /// Smallest gap between the footprint and a true hazard, m.
-    pub closest_approach_m: Option<f64>,
-    /// When (s from the start), where and to what that gap was: `arcnav
-    /// render mission.lcm --at S` draws the decision of that moment.
-    pub closest_approach: Option<NearMissReport>,
-    pub stops: StopStats,
-    /// What the ground did to the vehicle (ground truth): peak roll and
-    /// pitch, vertical acceleration of the body.
-    pub ride: arcnav_sim::RideReport,
-    /// Backing up when blocked.
-    pub recovery: RecoveryStats,
-    /// Counters behaviours keep (the route planner's plans and re-plans),
-    /// by behaviour.
-    pub behaviour_counters: BTreeMap<String, BTreeMap<&'static str, u64>>,
-    /// Mean |change of curvature| between consecutive commands, 1/m: how
-    /// much the vehicle weaves.
-    pub steering_activity: f64,
-    pub map_resets: u64,
-    /// What the local map did with the reports: patches made, confirmed,
-    /// pruned by newer images, misses not counted because the image looked
-    /// from too far (`miss_range_factor`), cleared under the vehicle.
-    pub localmap: arcnav_localmap::MapStats,
-    pub stage_times: StageTimes,
-    /// Rendering range images (simulator, not pipeline), ms per image.
-    pub render_ms_mean: f64,
-    /// Images rendered ahead, while the pipeline worked on the one before
-    /// (see `mission::ahead`), and those rendered ahead in vain (the vehicle
-    /// was elsewhere when they were due) and rendered again.
-    pub images_rendered_ahead: u64,
-    pub images_rendered_again: u64,
-    pub wall_time_s: f64,
-    pub realtime_factor: f64,
-    /// The speed this configuration allows (002 §7: sensor rate and
-    /// resolution, latency, braking, turning radius; see
-    /// [`crate::speed_bound`]), and the average speed as a fraction of it.
-    pub speed_bound: SpeedBound,
-    pub speed_fraction_of_bound: f64,
-    /// Seconds driving, by the limit that set the speed (cruise, vehicle,
-    /// speed vote, lateral, weak vote, reverse): what held the average down.
-    pub speed_limited_by_s: BTreeMap<&'static str, f64>,
-}
-
-/// The moment of the closest approach.
-#[derive(Debug, Clone, Serialize)]
-pub struct NearMissReport {
-    /// Seconds from the mission's start.
-    pub at_s: f64,
-    /// Vehicle origin, world frame, m.
-    pub position: [f64; 2],
-    pub hazard: String,
-}
-
-/// Stop commands during the mission.
-#[derive(Debug, Clone, Default, Serialize)]
-pub struct StopStats {
-    pub stop_commands: u64,
-    /// Runs of consecutive stop commands.
-    pub episodes: u64,
-    pub no_votes: u64,
-    pub required_stale: u64,
-    pub all_arcs_forbidden: u64,
-    pub no_acceptable_arc: u64,
-    /// Stops after recoveries were used up.
-    pub stuck: u64,
-    /// Seconds standing, by why.
-    pub stopped_s: BTreeMap<&'static str, f64>,
-}
-
-/// A point of the driven path.
-#[derive(Debug, Clone, Copy, Serialize)]
-pub struct TrackPoint {
-    pub utime: Utime,
-    pub x: f64,
-    pub y: f64,
-    pub speed_mps: f64,
-}
-
-/// Everything a mission produced.
-#[derive(Debug, Clone)]
-pub struct MissionRun {
-    pub report: MissionReport,
-    pub track: Vec<TrackPoint>,
-    /// Where images were taken.
-    pub image_positions: Vec<[f64; 2]>,
-    /// World patches that were ever in the local map (i, j), with the
-    /// union of their reasons, and the patch size.
-    /// ... and the highest cost they had (below 1: graded ground).
-    pub obstacle_patches: BTreeMap<(i64, i64), (Reasons, f32)>,
-    /// World patches whose ground some image observed during the mission.
-    pub seen_patches: BTreeSet<(i64, i64)>,
-    pub patch_size_m: f64,
-    pub snapshots: Vec<PathBuf>,
 }
 
 impl From<WriteFailed> for MissionError {

@@ -11,7 +11,7 @@ use arcnav_perception::{Reasons, suspected_drop_off};
 use arcnav_sim::{FeatureKind, World};
 use arcnav_vehicle::{ArcSet, Utime};
 
-use crate::mission::MissionRun;
+use crate::mission::report::MissionRun;
 use arcnav_config::Resolved;
 
 mod canvas;

@@ -30,6 +30,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use socket2::{Domain, Protocol, Socket, Type};
 
 use crate::auth::{AuthPolicy, AuthStats, Refusal, Signer, Verifier};
+pub use crate::channels::ChannelFilter;
 use crate::codec::{EncodeError, Message};
 use udpm::{MAX_CHANNEL_LEN, MAX_MESSAGE_SIZE, Reassembler, ReassemblyStats};
 pub use url::{DEFAULT_URL, LcmUrl, UdpmUrl, UrlError};
@@ -67,29 +68,6 @@ pub struct ReceivedMessage {
     pub data: Vec<u8>,
     /// Wall-clock time of reception, µs since the Unix epoch.
     pub recv_utime: i64,
-}
-
-/// Which channels a subscription takes.
-#[derive(Debug, Clone)]
-pub enum ChannelFilter {
-    Exact(String),
-    /// Anchored: the whole channel name must match, as in the reference.
-    Regex(regex::Regex),
-}
-
-impl ChannelFilter {
-    /// A filter matching channel names that `pattern` matches as a whole
-    /// (`ARC_VOTES_.*`), as the reference's subscriptions do.
-    pub fn pattern(pattern: &str) -> Result<Self, regex::Error> {
-        regex::Regex::new(&format!("^(?:{pattern})$")).map(Self::Regex)
-    }
-
-    pub fn matches(&self, channel: &str) -> bool {
-        match self {
-            Self::Exact(name) => name == channel,
-            Self::Regex(re) => re.is_match(channel),
-        }
-    }
 }
 
 /// Identifies a subscription, to remove it.
