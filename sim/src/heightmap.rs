@@ -127,7 +127,7 @@ impl HeightGrid {
         }
         // Within the world file's bound on its numbers (scale included,
         // the heights stay finite as f32 cells).
-        let max = crate::world::MAX_MAGNITUDE;
+        let max = crate::numbers::MAX_MAGNITUDE;
         if let Some(v) = grid.values.iter().find(|v| f64::from(v.abs()) > max) {
             return Err(fail(format!(
                 "holds a height of {v} m: heights lie within ±{max} m"

@@ -17,6 +17,7 @@ pub mod drape;
 pub mod generate;
 pub mod heightmap;
 pub mod noise;
+mod numbers;
 pub mod polar;
 pub mod ride;
 pub mod rng;

@@ -1,8 +1,8 @@
 //! 2-D gradient noise (Perlin) and fractal sums of it, for procedural hills
 //! and ground roughness. Deterministic from a seed.
 
+use crate::numbers::floor;
 use crate::rng::Rng;
-use crate::tiles::floor;
 
 /// Gradient noise with values in about [-1, 1].
 #[derive(Debug, Clone)]

@@ -37,13 +37,7 @@ pub(crate) const TILE_M: f64 = TILE as f64 * CELL_M;
 pub(crate) const BLOCK_M: f64 = BLOCK as f64 * CELL_M;
 const SUPER_M: f64 = SUPER as f64 * CELL_M;
 
-/// `x.floor() as i64` without the library call `floor` is on x86-64's
-/// baseline (no SSE4.1): a few percent of a frame. Exact for |x| < 2⁶³.
-#[inline]
-pub(crate) fn floor(x: f64) -> i64 {
-    let i = x as i64;
-    if (i as f64) > x { i - 1 } else { i }
-}
+pub(crate) use crate::numbers::floor;
 
 /// Cells per side of the squares whose heights lie together in memory (a
 /// 64-byte cache line): a ray's walk and its neighbours' stay in few lines.

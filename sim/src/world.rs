@@ -126,10 +126,7 @@ fn first_out_of_bounds(spec: &WorldSpec) -> Option<(String, f64)> {
     walk(&toml::Value::try_from(spec).ok()?, "")
 }
 
-/// Every number of a world file (metres, degrees, a height file's scale)
-/// lies within this of 0: heights are kept as `f32` cells, and `1e300`
-/// turned them infinite.
-pub(crate) const MAX_MAGNITUDE: f64 = 100_000.0;
+pub(crate) use crate::numbers::MAX_MAGNITUDE;
 
 /// Terrain wavelengths are at least this, m: `1e-300` made every height
 /// NaN (and the vehicle "stuck" with no image placed). The height field's
