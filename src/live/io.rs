@@ -15,7 +15,7 @@ use crossbeam_channel::Sender;
 
 use super::NodeStatus;
 use super::handoff::{Arrived, SensorFeed, offer};
-use super::threaded::{LiveError, LiveOptions, ToArbiter};
+use super::options::{LiveError, LiveOptions, ToArbiter};
 use crate::wire;
 
 /// Fires every `period` of wall clock (never when the period is zero).

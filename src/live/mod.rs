@@ -17,6 +17,7 @@ pub mod clock;
 pub mod handoff;
 pub mod io;
 pub mod node;
+pub mod options;
 pub mod threaded;
 pub mod vehicle;
 mod workers;

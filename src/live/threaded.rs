@@ -28,18 +28,18 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use arcnav_arbiter::BehaviourVotes;
 use arcnav_behaviours::Mission;
-use arcnav_bus::transport::{Lcm, Publisher, TransportError};
+use arcnav_bus::transport::{Lcm, Publisher};
 use arcnav_perception::ObstacleReport;
 use arcnav_pipeline::{ArbiterNode, BehaviourSet, Cycle, Decided};
-use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::{Pose, SteeringCommand, Utime};
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, select};
 
-use super::clock::{Clock, SharedClock, WallClock};
+use super::clock::{Clock, SharedClock};
 use super::handoff::{self, Arrived, Handoff};
 use super::io::{External, IoRoutes, Ticker, io_loop, publish_command};
+pub(crate) use super::options::ToArbiter;
+pub use super::options::{LiveError, LiveOptions, StopWhen};
 use super::workers::{MapStage, map_worker, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
 use crate::wire;
@@ -50,71 +50,6 @@ use arcnav_config::Resolved;
 /// (counted by the io node as a full queue; their lines count as lost).
 pub(crate) const SLICE_QUEUE: usize = 2048;
 use arcnav_bus::messages::channels;
-
-/// A live executor that cannot run.
-#[derive(Debug, thiserror::Error)]
-pub enum LiveError {
-    #[error("invalid configuration: {0}")]
-    Config(#[from] ConfigError),
-    #[error(transparent)]
-    Transport(#[from] TransportError),
-    #[error("LCM receive keeps failing: {0}")]
-    Receive(TransportError),
-    #[error("cannot start the {node} thread: {source}")]
-    Spawn {
-        node: &'static str,
-        source: std::io::Error,
-    },
-    #[error("the {0} thread panicked (see the message above)")]
-    Panicked(&'static str),
-    #[error("no behaviour named {name:?} in the configuration (configured: {known})")]
-    UnknownBehaviour { name: String, known: String },
-}
-
-/// When a live executor stops.
-#[derive(Clone, Default)]
-pub struct StopWhen {
-    /// Set by SIGINT/SIGTERM (or a test).
-    pub flag: Arc<AtomicBool>,
-    /// After this much wall-clock time.
-    pub after: Option<Duration>,
-}
-
-impl LiveOptions {
-    /// The executor's clock.
-    pub fn clock(&self) -> SharedClock {
-        self.clock.clone().unwrap_or_else(|| Arc::new(WallClock))
-    }
-}
-
-impl StopWhen {
-    pub(crate) fn deadline(&self) -> Option<Instant> {
-        self.after.map(|d| Instant::now() + d)
-    }
-}
-
-/// How a live executor runs.
-#[derive(Clone, Default)]
-pub struct LiveOptions {
-    /// The clock every watchdog, deadline and arrival time reads (default:
-    /// the wall clock).
-    pub clock: Option<SharedClock>,
-    pub stop: StopWhen,
-    /// Every published command, with why, is also sent here (tests, tools).
-    pub command_tap: Option<Sender<Decided>>,
-    /// Told once the executor receives (every node built and subscribed).
-    pub ready: Option<Sender<()>>,
-}
-
-/// What the arbiter thread receives.
-pub(crate) enum ToArbiter {
-    Pose(Utime, i64),
-    Perceived(Utime, i64),
-    Votes {
-        votes: Vec<BehaviourVotes>,
-        images: Vec<(Utime, i64)>,
-    },
-}
 
 fn spawn<T: Send + 'static>(
     node: &'static str,

@@ -14,7 +14,7 @@ use crossbeam_channel::{Receiver, select};
 use super::clock::{Clock, SharedClock};
 use super::handoff::{Arrived, Handoff, SensorInputs};
 use super::io::Ticker;
-use super::threaded::LiveError;
+use super::options::LiveError;
 use super::{NodeStatus, Samples};
 use arcnav_config::Resolved;
 
