@@ -360,15 +360,18 @@ impl Config {
     }
 
     /// Checks every section and the values that relate sections (the
-    /// behaviours' tables are checked as they are parsed, when resolved).
-    pub(crate) fn validate_sections(&self) -> Result<(), ConfigError> {
+    /// behaviours' tables are checked as they are parsed, when resolved);
+    /// the vehicle's sensors, which the check builds.
+    pub(crate) fn validate_sections(
+        &self,
+    ) -> Result<Vec<arcnav_perception::SensorModel>, ConfigError> {
         count(|c| c.validations += 1);
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
         self.arcs
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("arcs"))?;
         self.sensor.validate().map_err(|e| e.within("sensor"))?;
-        self.sensor_models()?;
+        let sensors = self.sensor_models()?;
         self.perception
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("perception"))?;
@@ -405,7 +408,7 @@ impl Config {
         }
         self.bus.validate().map_err(|e| e.within("bus"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
-        Ok(())
+        Ok(sensors)
     }
 
     /// Perception must evaluate all the ground the local map keeps.

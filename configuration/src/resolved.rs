@@ -97,8 +97,7 @@ impl Resolved {
     /// Checks `given` once and derives what follows from it (the module
     /// documentation says what, in which order).
     pub(crate) fn new(given: Config, registry: &Registry) -> Result<Self, ConfigError> {
-        given.validate_sections()?;
-        let sensors = given.sensor_models()?;
+        let sensors = given.validate_sections()?;
         let statics = static_map(&given)?;
         let cap = if given.lookahead.hole_speed_cap {
             speed_bound::hole_speed_cap(&given, &sensors)
@@ -140,78 +139,12 @@ impl Resolved {
         let lookahead = Lookahead::derive(&given, &avoidance, &sensors, &arcs, cruise.mps);
         let speed_bound = speed_bound::speed_bound(&given, &sensors, lookahead.map_ahead_m)?;
 
-        let mut derived = Vec::new();
-        let mut derive = |key: &str, from: String| {
-            derived.push(Derivation {
-                key: key.to_owned(),
-                from,
-            })
-        };
-        if cruise.capped() {
-            derive(
-                "arbiter.cruise_speed_mps",
-                format!(
-                    "driven at {:.2} m/s: lookahead.hole_speed_cap holds it to the speed from \
-                     which the vehicle stops within {:.1} m, where a hole the wheels do not \
-                     bridge is first suspected",
-                    cruise.mps,
-                    speed_bound.suspect_range_m.unwrap_or_default()
-                ),
-            );
-        }
-        let mut localmap = given.localmap.clone();
-        let mut perception = given.perception.clone();
-        let mut oa = avoidance.clone();
-        if localmap.hole_range_m == 0.0
-            && let Some(range) = speed_bound.hole_grazed_m
-        {
-            localmap.hole_range_m = range;
-            derive(
-                "localmap.hole_range_m",
-                "given as 0: where the sensor's ray grazing a hole's edge flags it \
-                 (speed bound's hole_grazed_m)"
-                    .into(),
-            );
-        }
-        if oa.hole_seen_within_m == 0.0
-            && let Some(within) = speed_bound.hole_seen_within_m
-        {
-            oa.hole_seen_within_m = within;
-            derive(
-                "behaviours.obstacle_avoidance.hole_seen_within_m",
-                "given as 0: hole_grazed_m less the sensor's setback from the front".into(),
-            );
-        }
-        if lookahead.moved_m > 0.0 {
-            let why = format!(
-                "{:.1} m farther than given: at {:.2} m/s a clear arc allows cruise {:.1} m along \
-                 (lookahead.from_speed)",
-                lookahead.moved_m, cruise.mps, lookahead.needed_m
-            );
-            localmap.ahead_m = lookahead.map_ahead_m;
-            perception.region.ahead_m = lookahead.region_ahead_m;
-            perception.max_range_m = lookahead.max_range_m;
-            oa.max_distance_m = lookahead.max_distance_m;
-            for key in [
-                "localmap.ahead_m",
-                "perception.region.ahead_m",
-                "perception.max_range_m",
-                "behaviours.obstacle_avoidance.max_distance_m",
-            ] {
-                derive(key, why.clone());
-            }
-            if lookahead.widened_m > 0.0 {
-                let why = format!(
-                    "{:.1} m wider than given: the widest arc's reach at the speed it is driven",
-                    lookahead.widened_m
-                );
-                localmap.half_width_m = lookahead.map_half_width_m;
-                perception.region.half_width_m = lookahead.region_half_width_m;
-                for key in ["localmap.half_width_m", "perception.region.half_width_m"] {
-                    derive(key, why.clone());
-                }
-            }
-        }
+        let InPlace {
+            localmap,
+            perception,
+            avoidance: oa,
+            derived,
+        } = in_place(&given, &avoidance, &cruise, &lookahead, &speed_bound);
         // The derived values are checked as the keys they stand in for.
         let as_derived =
             |e: ConfigError| ConfigError::new(e.key, format!("(derived) {}", e.reason));
@@ -259,10 +192,7 @@ impl Resolved {
     /// Loads, parses and resolves a TOML file (missing keys keep their
     /// defaults); errors name the file.
     pub fn load(path: &Path, registry: &Registry) -> Result<Self, ConfigLoadError> {
-        let origin = path.display().to_string();
-        Config::load(path)?
-            .resolve(registry)
-            .map_err(|source| ConfigLoadError::Invalid { origin, source })
+        resolved_as(Config::load(path)?, registry, &path.display().to_string())
     }
 
     /// Loads `path` if given, else resolves the defaults.
@@ -272,14 +202,7 @@ impl Resolved {
     ) -> Result<Self, ConfigLoadError> {
         match path {
             Some(path) => Self::load(path, registry),
-            None => {
-                Config::default()
-                    .resolve(registry)
-                    .map_err(|source| ConfigLoadError::Invalid {
-                        origin: "the defaults".into(),
-                        source,
-                    })
-            }
+            None => resolved_as(Config::default(), registry, "the defaults"),
         }
     }
 
@@ -289,12 +212,7 @@ impl Resolved {
         origin: &str,
         registry: &Registry,
     ) -> Result<Self, ConfigLoadError> {
-        Config::parse(text, origin)?
-            .resolve(registry)
-            .map_err(|source| ConfigLoadError::Invalid {
-                origin: origin.to_owned(),
-                source,
-            })
+        resolved_as(Config::parse(text, origin)?, registry, origin)
     }
 
     /// The configuration as given (defaults, file, command line): what a
@@ -443,6 +361,119 @@ impl Default for Resolved {
             .resolve(&Registry::builtin())
             .expect("the built-in defaults resolve")
     }
+}
+
+/// The sections as they are built: the given local map, perception and
+/// obstacle avoidance with the derived values in place, and what derived
+/// each.
+struct InPlace {
+    localmap: LocalMapConfig,
+    perception: PerceptionConfig,
+    avoidance: ObstacleAvoidanceConfig,
+    derived: Vec<Derivation>,
+}
+
+/// Puts what `cruise`, `lookahead` and the speed `bound` derive in place of
+/// the given values (the module documentation says which).
+fn in_place(
+    given: &Config,
+    avoidance: &ObstacleAvoidanceConfig,
+    cruise: &Cruise,
+    lookahead: &Lookahead,
+    bound: &SpeedBound,
+) -> InPlace {
+    let mut derived = Vec::new();
+    let mut derive = |key: &str, from: String| {
+        derived.push(Derivation {
+            key: key.to_owned(),
+            from,
+        })
+    };
+    if cruise.capped() {
+        derive(
+            "arbiter.cruise_speed_mps",
+            format!(
+                "driven at {:.2} m/s: lookahead.hole_speed_cap holds it to the speed from \
+                 which the vehicle stops within {:.1} m, where a hole the wheels do not \
+                 bridge is first suspected",
+                cruise.mps,
+                bound.suspect_range_m.unwrap_or_default()
+            ),
+        );
+    }
+    let mut localmap = given.localmap.clone();
+    let mut perception = given.perception.clone();
+    let mut oa = avoidance.clone();
+    if localmap.hole_range_m == 0.0
+        && let Some(range) = bound.hole_grazed_m
+    {
+        localmap.hole_range_m = range;
+        derive(
+            "localmap.hole_range_m",
+            "given as 0: where the sensor's ray grazing a hole's edge flags it \
+             (speed bound's hole_grazed_m)"
+                .into(),
+        );
+    }
+    if oa.hole_seen_within_m == 0.0
+        && let Some(within) = bound.hole_seen_within_m
+    {
+        oa.hole_seen_within_m = within;
+        derive(
+            "behaviours.obstacle_avoidance.hole_seen_within_m",
+            "given as 0: hole_grazed_m less the sensor's setback from the front".into(),
+        );
+    }
+    if lookahead.moved_m > 0.0 {
+        let why = format!(
+            "{:.1} m farther than given: at {:.2} m/s a clear arc allows cruise {:.1} m along \
+             (lookahead.from_speed)",
+            lookahead.moved_m, cruise.mps, lookahead.needed_m
+        );
+        localmap.ahead_m = lookahead.map_ahead_m;
+        perception.region.ahead_m = lookahead.region_ahead_m;
+        perception.max_range_m = lookahead.max_range_m;
+        oa.max_distance_m = lookahead.max_distance_m;
+        for key in [
+            "localmap.ahead_m",
+            "perception.region.ahead_m",
+            "perception.max_range_m",
+            "behaviours.obstacle_avoidance.max_distance_m",
+        ] {
+            derive(key, why.clone());
+        }
+        if lookahead.widened_m > 0.0 {
+            let why = format!(
+                "{:.1} m wider than given: the widest arc's reach at the speed it is driven",
+                lookahead.widened_m
+            );
+            localmap.half_width_m = lookahead.map_half_width_m;
+            perception.region.half_width_m = lookahead.region_half_width_m;
+            for key in ["localmap.half_width_m", "perception.region.half_width_m"] {
+                derive(key, why.clone());
+            }
+        }
+    }
+    InPlace {
+        localmap,
+        perception,
+        avoidance: oa,
+        derived,
+    }
+}
+
+/// `config` resolved, its errors naming `origin`.
+fn resolved_as(
+    config: Config,
+    registry: &Registry,
+    origin: &str,
+) -> Result<Resolved, ConfigLoadError> {
+    config
+        .resolve(registry)
+        .map_err(|source| ConfigLoadError::Invalid {
+            origin: origin.to_owned(),
+            source,
+        })
 }
 
 /// What behaviours are prepared and built with.

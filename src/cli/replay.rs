@@ -5,20 +5,14 @@ use std::process::ExitCode;
 
 use crate::ReplayArgs;
 use anyhow::Context as _;
-use arcnav::{Config, Resolved};
+use arcnav::Resolved;
 use arcnav_behaviours::Registry;
 
 pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     use arcnav::replay::{ReplayOptions, compare, replay as run_replay};
     let registry = Registry::builtin();
     let load = |path: &Option<PathBuf>| -> anyhow::Result<Resolved> {
-        let config = Config::load_or_default(path.as_deref())?;
-        let origin = path
-            .as_ref()
-            .map_or("the defaults".to_owned(), |p| p.display().to_string());
-        config
-            .resolve(&registry)
-            .with_context(|| format!("{origin}: invalid configuration"))
+        Ok(Resolved::load_or_default(path.as_deref(), &registry)?)
     };
     if let Some(speed) = args.speed {
         anyhow::ensure!(
