@@ -5,22 +5,16 @@
 //! map of untraversable cells, behaviours voting over steering arcs and a DAMN
 //! arbiter fusing the votes into a steering command.
 //!
-//! This crate holds what sits on top of the pipeline library
-//! ([`arcnav_pipeline`]) and the configuration ([`arcnav_config`]): the mission runner,
-//! replay, recording, pictures and the live executors' I/O used by the
-//! `arcnav` binary.
-
-pub mod detection;
-#[doc(hidden)]
-pub mod export;
-pub mod fuzzing;
-pub mod live;
-pub mod mission;
-pub mod output;
-mod recorder;
-pub mod render;
-pub mod replay;
-pub mod sweep;
-pub mod wire;
+//! This package is the `arcnav` command line. What it runs lives in library
+//! crates, re-exported here under the names the command uses:
+//! the configuration ([`arcnav_config`]), the offline executors and their
+//! pictures ([`arcnav_run`]: [`mission`], [`replay`], [`export`], [`sweep`],
+//! [`detection`], [`render`]), the live executors ([`live`], from
+//! [`arcnav_live`]) and the wire conversions ([`wire`], from [`arcnav_wire`]).
 
 pub use arcnav_config::{Config, Resolved};
+pub use arcnav_live as live;
+#[doc(hidden)]
+pub use arcnav_run::export;
+pub use arcnav_run::{detection, fuzzing, mission, output, render, replay, sweep};
+pub use arcnav_wire as wire;

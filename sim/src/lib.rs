@@ -10,8 +10,12 @@
 //!   and [`polar`], the same answers faster for a frame's rays from one point;
 //! - [`sensor`]: range images with noise and dropouts;
 //! - [`drape`]: the vehicle standing on the ground;
-//! - [`truth`]: collisions of the footprint with the true hazards.
+//! - [`truth`]: collisions of the footprint with the true hazards;
+//! - [`simulator`]: all of it stepping itself, one pose tick at a time: the
+//!   motion, the measured pose, the sensors' timing, slices and frames
+//!   (rendered ahead where the vehicle's path is already decided).
 
+mod ahead;
 pub mod config;
 pub mod drape;
 pub mod generate;
@@ -22,6 +26,7 @@ pub mod polar;
 pub mod ride;
 pub mod rng;
 pub mod sensor;
+pub mod simulator;
 pub mod tiles;
 pub mod truth;
 pub mod world;
@@ -29,5 +34,6 @@ pub mod world;
 pub use config::{CollisionPolicy, SimConfig};
 pub use generate::{Difficulty, generate};
 pub use ride::{Ride, RideReport};
+pub use simulator::{Simulator, Step, Stepped};
 pub use truth::{Collision, NearMiss, Truth};
 pub use world::{Feature, FeatureKind, World, WorldError, WorldSpec};

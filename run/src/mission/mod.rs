@@ -7,7 +7,6 @@
 //! and, at the sensor's rate, a range image ray-cast from the true pose. The
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
-mod ahead;
 pub mod report;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -21,24 +20,16 @@ use arcnav_bus::lcmtypes::pose_t;
 use arcnav_bus::messages::channels;
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, Reasons, SensorModel};
-use arcnav_sim::drape::drape;
-use arcnav_sim::rng::Rng;
-use arcnav_sim::sensor::{SliceRequest, Slicer};
-use arcnav_sim::tiles::{TileCache, TileView};
-use arcnav_sim::{CollisionPolicy, Truth, World};
-use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+use arcnav_sim::World;
+use arcnav_sim::simulator::{self, Simulator, Stepped};
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
-use arcnav_vehicle::{
-    Isometry, MotionLimits, MotionModel, PlanarState, Pose, SteeringCommand, Utime,
-};
-use nalgebra::Vector3;
+use arcnav_vehicle::{SteeringCommand, Utime};
 
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
-use crate::wire;
-use ahead::{FrameRequest, Frames, view_for};
 use arcnav_config::Resolved;
 use arcnav_pipeline::{Input, Sink};
+use arcnav_wire as wire;
 pub use report::{
     MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats, TrackPoint,
 };
@@ -261,40 +252,23 @@ pub fn run_mission(
     progress: &mut dyn FnMut(&MissionProgress),
 ) -> Result<MissionRun, MissionError> {
     let wall = Instant::now();
-    world.validate_for(&config.vehicle, &world.spec.name)?;
     let sensors: &[SensorModel] = &config.sensors;
-    // Returns beyond what perception evaluates are never used: not rendered.
-    let evaluated = config.perception.max_range_m + config.sim.render_margin_m;
-    let rendered: Vec<Arc<SensorModel>> = sensors
-        .iter()
-        .map(|sensor| {
-            let mut rendered = sensor.clone();
-            rendered.max_range_m = sensor.max_range_m.min(evaluated);
-            Arc::new(rendered)
-        })
-        .collect();
     let sim = &config.sim;
+    let t0 = SIM_EPOCH_US;
+    let mut simulator = Simulator::new(
+        Arc::clone(&world),
+        simulator::Setup {
+            vehicle: &config.vehicle,
+            sim,
+            sensors,
+            evaluated_range_m: config.perception.max_range_m,
+            exclusive: !options.beside_others,
+            start: t0,
+        },
+    )?;
     let mut pipeline = config.lockstep()?;
     pipeline.time_stages(Instant::now);
-    pipeline.time_stages(Instant::now);
     pipeline.set_explain(options.snapshot_every_s.is_some());
-    let threads = sim.thread_count();
-    let dt = seconds_to_micros(1.0 / sim.pose_rate_hz);
-    let t0 = SIM_EPOCH_US;
-    let (start, heading) = world.start;
-    let mut motion = MotionModel::new(
-        MotionLimits::from_vehicle(&config.vehicle),
-        PlanarState {
-            x: start[0],
-            y: start[1],
-            yaw: heading,
-            ..PlanarState::default()
-        },
-        t0,
-    );
-    let mut tiles = TileCache::new(Arc::clone(&world), 128, threads);
-    let mut truth = Truth::new(&world, &config.vehicle);
-    let mut pose_rng = Rng::stream(sim.seed, 0x0b5e_55ed);
     let log = Recorder::create(options.log.as_deref())
         .map_err(|(path, source)| MissionError::CreateLog { path, source })?;
     let mut sink = MissionSink {
@@ -321,49 +295,22 @@ pub fn run_mission(
         .message(t0, channels::WAYPOINTS, &wire::mission_to_wire(&mission));
     pipeline.input(Input::Waypoints(mission), &mut sink);
 
-    // Each sensor images at its own rate, the first image of each at t0.
-    let mut next_images: Vec<Utime> = vec![t0; sensors.len()];
-    // Sensors that send their images in slices: each one's slicer, and the
-    // next slice of the frame under way.
-    let slicers: Vec<Option<Slicer>> = rendered
-        .iter()
-        .map(|sensor| (sim.slice_lines > 0).then(|| Slicer::new(sensor, sim.slice_lines)))
-        .collect();
-    let mut next_slices: Vec<usize> = vec![0; sensors.len()];
-    // Whole frames of one sensor are rendered ahead when the vehicle's path
-    // until the next is fixed by then (see `ahead`).
-    let mut frames: Vec<Frames> = rendered
-        .iter()
-        .map(|sensor| {
-            let noise = (sim.range_noise_m, sim.dropout_probability);
-            Frames::new(Arc::clone(sensor), noise, sim.seed, threads)
-        })
-        .collect();
-    let render_ahead = sim.render_ahead
-        && !options.beside_others
-        && sensors.len() == 1
-        && sim.slice_lines == 0
-        && seconds_to_micros(config.vehicle.command_latency_s) >= sensors[0].period_us();
-    let mut previous_stance: Option<(Utime, Isometry)> = None;
     let time_limit = t0 + seconds_to_micros(sim.time_limit_s);
-    let (mut images, mut image_positions) = (0u64, Vec::new());
-    let (mut distance, mut max_speed, mut drift) = (0.0f64, 0.0f64, [0.0f64; 2]);
-    let (mut render_ms, mut next_progress) = (0.0f64, t0);
+    let mut next_progress = t0;
     let mut stuck = StuckWatch::new(sim.stuck_after_s, sim.stuck_radius_m);
-    let mut previous = *motion.state();
-    let mut ride = arcnav_sim::Ride::new(t0, config.vehicle.max_slope_deg);
     let outcome;
-    let mut t = t0;
-    let mut tick: u64 = 0;
+    let mut t;
     loop {
-        let state = motion.advance_to(t);
-        let stepped = (state.x - previous.x).hypot(state.y - previous.y);
-        distance += stepped;
-        previous = state;
-        max_speed = max_speed.max(state.speed_mps);
-        let stance = drape(&world, &config.vehicle, &state);
-        ride.observe(t, &stance);
-        if tick.is_multiple_of(5) {
+        t = simulator.time();
+        let step = match simulator.step() {
+            Stepped::Sensed(step) => step,
+            Stepped::Collided { .. } => {
+                outcome = Outcome::Collision;
+                break;
+            }
+        };
+        let state = step.state;
+        if step.tick.is_multiple_of(5) {
             sink.track.push(TrackPoint {
                 utime: t,
                 x: state.x,
@@ -371,156 +318,32 @@ pub fn run_mission(
                 speed_mps: state.speed_mps,
             });
         }
-        let collided = !truth.check(&world, t, &stance).is_empty();
-        if collided && sim.on_collision == CollisionPolicy::Stop {
-            outcome = Outcome::Collision;
-            break;
-        }
-        // What the pipeline is told: the pose, with noise and drift if configured.
-        if sim.drift_per_m > 0.0 {
-            drift[0] += stepped * sim.drift_per_m * pose_rng.normal();
-            drift[1] += stepped * sim.drift_per_m * pose_rng.normal();
-        }
-        let (noise_x, noise_y, noise_yaw) = if sim.pose_noise_m > 0.0 || sim.heading_noise_deg > 0.0
-        {
-            (
-                sim.pose_noise_m * pose_rng.normal(),
-                sim.pose_noise_m * pose_rng.normal(),
-                sim.heading_noise_deg.to_radians() * pose_rng.normal(),
-            )
-        } else {
-            (0.0, 0.0, 0.0)
-        };
-        let true_position = stance.world_from_vehicle.translation.vector;
-        let measured = Pose {
-            utime: t,
-            world_from_vehicle: isometry_from_xyz_rpy(
-                [
-                    true_position.x + drift[0] + noise_x,
-                    true_position.y + drift[1] + noise_y,
-                    true_position.z,
-                ],
-                stance.roll,
-                stance.pitch,
-                state.yaw + noise_yaw,
-            ),
-            velocity: Vector3::new(
-                state.speed_mps * state.yaw.cos(),
-                state.speed_mps * state.yaw.sin(),
-                0.0,
-            ),
-            yaw_rate: state.speed_mps * state.curvature,
-        };
-        // Slices acquired since the last step come before this step's pose
-        // (they wait in perception for the pose after them). Each is
-        // rendered where the vehicle was at its middle line; those of one
-        // step side by side, then handed over in order.
-        for (i, slicer) in slicers.iter().enumerate() {
-            let Some(slicer) = slicer else { continue };
-            let mut due: Vec<(usize, Utime, Utime, Isometry, u64)> = Vec::new();
-            loop {
-                let frame = next_images[i];
-                let k = next_slices[i];
-                let (done, middle) = slicer.times(frame, k);
-                if done > t {
-                    break;
-                }
-                let at = match previous_stance {
-                    Some((before, ref from)) if t > before => {
-                        let f = ((middle - before) as f64 / (t - before) as f64).clamp(0.0, 1.0);
-                        from.lerp_slerp(&stance.world_from_vehicle, f)
-                    }
-                    _ => stance.world_from_vehicle,
-                };
-                let stream = images.wrapping_mul(65_536).wrapping_add(k as u64);
-                due.push((k, frame, done, at, stream));
-                next_slices[i] = k + 1;
-                if next_slices[i] == slicer.len() {
-                    next_slices[i] = 0;
-                    next_images[i] += sensors[i].period_us();
-                    images += 1;
-                    image_positions.push([state.x, state.y]);
-                }
+        for (i, done, slice) in step.slices {
+            if options.log_mode == LogMode::All {
+                sink.log.message(
+                    done,
+                    &channels::range_image(&sensors[i].id),
+                    &wire::range_slice_to_wire(&slice),
+                );
             }
-            if due.is_empty() {
-                continue;
-            }
-            let started = Instant::now();
-            let views: Vec<TileView> = due
-                .iter()
-                .map(|(_, _, _, at, _)| view_for(&rendered[i], &mut tiles, at))
-                .collect();
-            let requests: Vec<SliceRequest<'_>> = due
-                .iter()
-                .zip(&views)
-                .map(|(&(k, frame, _, at, stream), view)| SliceRequest {
-                    k,
-                    frame,
-                    view,
-                    world_from_vehicle: at,
-                    stream,
-                })
-                .collect();
-            let noise = (sim.range_noise_m, sim.dropout_probability);
-            let slices = slicer.render_all(&requests, noise, sim.seed, threads);
-            render_ms += started.elapsed().as_secs_f64() * 1e3;
-            for ((_, _, done, _, _), slice) in due.iter().zip(slices) {
-                if options.log_mode == LogMode::All {
-                    sink.log.message(
-                        *done,
-                        &channels::range_image(&sensors[i].id),
-                        &wire::range_slice_to_wire(&slice),
-                    );
-                }
-                pipeline.input(Input::Slice(slice), &mut sink);
-            }
+            pipeline.input(Input::Slice(slice), &mut sink);
         }
-        previous_stance = Some((t, stance.world_from_vehicle));
         sink.log
-            .message(t, channels::POSE, &pose_t::from(&measured));
-        pipeline.input(Input::Pose(measured), &mut sink);
-        for (((sensor, frames), next_image), slicer) in sensors
-            .iter()
-            .zip(&mut frames)
-            .zip(&mut next_images)
-            .zip(&slicers)
-        {
-            if slicer.is_some() || t < *next_image {
-                continue;
-            }
-            let request = FrameRequest {
-                utime: t,
-                world_from_vehicle: stance.world_from_vehicle,
-                stream: images,
-            };
-            let (image, ms) = frames.render(&mut tiles, &request);
-            render_ms += ms;
-            *next_image += sensor.period_us();
-            // The next frame, rendered while perception works on this one.
-            if render_ahead {
-                let (utime, world_from_vehicle) =
-                    pose_when_due(&motion, &world, config, (t0, dt, tick), *next_image);
-                let request = FrameRequest {
-                    utime,
-                    world_from_vehicle,
-                    stream: images + 1,
-                };
-                frames.render_ahead(&mut tiles, request);
-            }
+            .message(t, channels::POSE, &pose_t::from(&step.pose));
+        pipeline.input(Input::Pose(step.pose), &mut sink);
+        for (i, image) in step.images {
             if options.log_mode == LogMode::All {
                 sink.log.message(
                     t,
-                    &channels::range_image(&sensor.id),
+                    &channels::range_image(&sensors[i].id),
                     &wire::range_image_to_wire(&image),
                 );
             }
             pipeline.input(Input::Image(image), &mut sink);
-            images += 1;
-            image_positions.push([state.x, state.y]);
         }
         pipeline.run_until(t, &mut sink);
         for command in sink.commands.drain(..) {
-            motion.command(command);
+            simulator.command(command);
         }
         if let Some(e) = sink.log.error.take() {
             return Err(e);
@@ -545,15 +368,13 @@ pub fn run_mission(
             next_progress = t + 1_000_000;
             progress(&MissionProgress {
                 sim_time_s: micros_to_seconds(t - t0),
-                distance_m: distance,
+                distance_m: simulator.distance_m(),
                 waypoint: status.map_or(0, |p| p.current),
                 waypoints: world.waypoints.len(),
                 speed_mps: state.speed_mps,
                 time_limit_s: sim.time_limit_s,
             });
         }
-        tick += 1;
-        t = t0 + tick as i64 * dt;
     }
     let duration = micros_to_seconds(t - t0);
     let arbiter = pipeline.arbiter.stats();
@@ -575,7 +396,7 @@ pub fn run_mission(
     let drops = pipeline.perception.drops;
     let wall_time = wall.elapsed().as_secs_f64();
     let average_speed = if duration > 0.0 {
-        distance / duration
+        simulator.distance_m() / duration
     } else {
         0.0
     };
@@ -586,18 +407,18 @@ pub fn run_mission(
             .map(|s| s.id.as_str())
             .collect::<Vec<_>>()
             .join("+"),
-        success: outcome == Outcome::Completed && truth.collisions.is_empty(),
+        success: outcome == Outcome::Completed && simulator.truth().collisions.is_empty(),
         outcome,
         waypoints_reached: reached,
         waypoints: world.waypoints.len(),
-        distance_m: distance,
+        distance_m: simulator.distance_m(),
         duration_s: duration,
         average_speed_mps: average_speed,
-        max_speed_mps: max_speed,
+        max_speed_mps: simulator.max_speed_mps(),
         cruise_mps: config.cruise.mps,
         cruise_asked_mps: config.cruise.asked_mps,
         cruise_cap_mps: config.cruise.cap_mps,
-        images,
+        images: simulator.images(),
         images_dropped: drops.no_pose + drops.invalid + drops.out_of_order,
         slices: (pipeline.perception.slices.received > 0).then_some(pipeline.perception.slices),
         untraversable_cells: Reasons::ALL
@@ -607,28 +428,33 @@ pub fn run_mission(
             .collect(),
         graded_cells: u64::from(pipeline.perception.totals.graded),
         suspected_drop_offs: u64::from(pipeline.perception.totals.suspected),
-        collisions: truth.collisions.clone(),
-        closest_approach_m: truth
+        collisions: simulator.truth().collisions.clone(),
+        closest_approach_m: simulator
+            .truth()
             .closest_approach_m
             .is_finite()
-            .then_some(truth.closest_approach_m),
-        closest_approach: truth.closest_at.as_ref().map(|m| NearMissReport {
-            at_s: micros_to_seconds(m.utime - t0),
-            position: m.position,
-            hazard: m.hazard.clone(),
-        }),
+            .then_some(simulator.truth().closest_approach_m),
+        closest_approach: simulator
+            .truth()
+            .closest_at
+            .as_ref()
+            .map(|m| NearMissReport {
+                at_s: micros_to_seconds(m.utime - t0),
+                position: m.position,
+                hazard: m.hazard.clone(),
+            }),
         stops,
-        ride: ride.report(),
+        ride: simulator.ride().report(),
         recovery,
         behaviour_counters,
         steering_activity: sink.curvature_change.0 / sink.curvature_change.1.max(1) as f64,
         map_resets: pipeline.cycle.counts().map_resets,
         localmap: *pipeline.cycle.map.map.stats(),
         stage_times: pipeline.times,
-        images_rendered_ahead: frames.iter().map(|f| f.used).sum(),
-        images_rendered_again: frames.iter().map(|f| f.wasted).sum(),
-        render_ms_mean: if images > 0 {
-            render_ms / images as f64
+        images_rendered_ahead: simulator.frames_rendered_ahead().0,
+        images_rendered_again: simulator.frames_rendered_ahead().1,
+        render_ms_mean: if simulator.images() > 0 {
+            simulator.render_ms() / simulator.images() as f64
         } else {
             0.0
         },
@@ -646,35 +472,12 @@ pub fn run_mission(
     Ok(MissionRun {
         report,
         track: sink.track,
-        image_positions,
+        image_positions: simulator.image_positions().to_vec(),
         obstacle_patches: sink.patches,
         seen_patches: sink.seen.patches(),
         patch_size_m: config.localmap.patch_size_m,
         snapshots: sink.snapshots,
     })
-}
-
-/// Where the vehicle will be at the first pose tick at or after `due`, and
-/// that tick's time, under the commands `motion` holds now: the mission
-/// loop's steps (`(t0, dt, tick)`, the tick it is at) taken on a copy.
-fn pose_when_due(
-    motion: &MotionModel,
-    world: &World,
-    config: &Resolved,
-    (t0, dt, mut tick): (Utime, Utime, u64),
-    due: Utime,
-) -> (Utime, Isometry) {
-    let mut motion = motion.clone();
-    let mut t = t0 + tick as i64 * dt;
-    while t < due {
-        tick += 1;
-        t = t0 + tick as i64 * dt;
-        motion.advance_to(t);
-    }
-    (
-        t,
-        drape(world, &config.vehicle, motion.state()).world_from_vehicle,
-    )
 }
 
 /// When a simulated mission is stuck: for `after` no nearer to its

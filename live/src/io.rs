@@ -16,7 +16,7 @@ use crossbeam_channel::Sender;
 use super::NodeStatus;
 use super::handoff::{Arrived, SensorFeed, offer};
 use super::options::{LiveError, LiveOptions, ToArbiter};
-use crate::wire;
+use arcnav_wire as wire;
 
 /// Fires every `period` of wall clock (never when the period is zero).
 pub(crate) struct Ticker {

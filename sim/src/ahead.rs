@@ -21,14 +21,14 @@ use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::Instant;
 
+use crate::sensor::SharedFrame;
+use crate::tiles::{TileCache, TileView};
 use arcnav_perception::{RangeImage, SensorModel};
-use arcnav_sim::sensor::SharedFrame;
-use arcnav_sim::tiles::{TileCache, TileView};
 use arcnav_vehicle::{Isometry, Utime};
 
 /// What a whole frame is rendered from.
 #[derive(Debug, Clone, PartialEq)]
-pub(super) struct FrameRequest {
+pub(crate) struct FrameRequest {
     pub utime: Utime,
     pub world_from_vehicle: Isometry,
     /// The frame's noise stream (the mission's image count).
@@ -37,7 +37,7 @@ pub(super) struct FrameRequest {
 
 /// One sensor's whole frames, each either rendered when due or taken from
 /// the one rendered ahead.
-pub(super) struct Frames {
+pub(crate) struct Frames {
     sensor: Arc<SensorModel>,
     /// Range noise σ (m) and dropout probability.
     noise: (f64, f64),
@@ -64,7 +64,7 @@ struct Worker {
 }
 
 impl Frames {
-    pub(super) fn new(
+    pub(crate) fn new(
         sensor: Arc<SensorModel>,
         noise: (f64, f64),
         seed: u64,
@@ -84,7 +84,7 @@ impl Frames {
 
     /// The frame `request` asks for, and the milliseconds spent rendering
     /// it (on whichever thread did).
-    pub(super) fn render(
+    pub(crate) fn render(
         &mut self,
         tiles: &mut TileCache,
         request: &FrameRequest,
@@ -116,7 +116,7 @@ impl Frames {
     }
 
     /// Starts rendering the frame `request` asks for on other threads.
-    pub(super) fn render_ahead(&mut self, tiles: &mut TileCache, request: FrameRequest) {
+    pub(crate) fn render_ahead(&mut self, tiles: &mut TileCache, request: FrameRequest) {
         // One not taken is thrown away.
         if let Some((_, frame)) = self.take_ahead() {
             self.throw_away(frame);
@@ -217,7 +217,7 @@ impl Drop for Frames {
 }
 
 /// The tiles `sensor` on the vehicle at `world_from_vehicle` sees.
-pub(super) fn view_for(
+pub(crate) fn view_for(
     sensor: &SensorModel,
     tiles: &mut TileCache,
     world_from_vehicle: &Isometry,
@@ -237,7 +237,7 @@ fn render_timed(
     threads: usize,
 ) -> (RangeImage, f64) {
     let started = Instant::now();
-    let image = arcnav_sim::sensor::render(
+    let image = crate::sensor::render(
         sensor,
         view,
         &request.world_from_vehicle,
@@ -252,7 +252,7 @@ fn render_timed(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use arcnav_sim::World;
+    use crate::World;
     use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 
     fn request(x: f64, stream: u64) -> FrameRequest {

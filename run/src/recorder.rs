@@ -13,7 +13,7 @@ use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::{ArcSet, SteeringCommand, Utime};
 
 use crate::output::Staged;
-use crate::wire;
+use arcnav_wire as wire;
 
 /// A write to the output log failed.
 #[derive(Debug)]

@@ -42,8 +42,8 @@ pub(crate) use super::options::ToArbiter;
 pub use super::options::{LiveError, LiveOptions, StopWhen};
 use super::workers::{MapStage, map_worker, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
-use crate::wire;
 use arcnav_config::Resolved;
+use arcnav_wire as wire;
 
 /// Range-image slices that may wait for perception: 16 frames of a
 /// 2048-column lidar in 16-column slices. Beyond, slices are dropped
@@ -503,7 +503,7 @@ mod tests {
     fn a_fresh_pose_queued_behind_a_stale_one_stops_nothing() {
         use arcnav_pipeline::{Hazard, Why};
 
-        use crate::live::clock::ManualClock;
+        use crate::clock::ManualClock;
 
         let config = Resolved::default();
         let start = 1_000_000_000_000;

@@ -166,7 +166,7 @@ pub fn run_bridge(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::live::threaded::StopWhen;
+    use crate::threaded::StopWhen;
 
     /// Stops before the first command, the command while it is fresh, stops
     /// once it is stale, and a stop last: in that order, and only that.

@@ -37,8 +37,8 @@ use foxglove::{Channel, Context, PartialMetadata, RawChannel, Schema};
 use serde::Serialize;
 
 use crate::output::Staged;
-use crate::wire;
 use arcnav_config::Resolved;
+use arcnav_wire as wire;
 
 /// An export that could not be made.
 #[derive(Debug, thiserror::Error)]

@@ -21,7 +21,7 @@ use arcnav_sim::World;
 use arcnav_sim::heightmap::HeightGrid;
 use arcnav_vehicle::VehicleConfig;
 
-use crate::Resolved;
+use arcnav_config::Resolved;
 
 /// A fuzz target: arbitrary bytes in, nothing out.
 pub type Target = fn(&[u8]);
@@ -44,11 +44,11 @@ pub fn lcm_messages(data: &[u8]) {
         let _ = message.on_its_channel("POSE");
         match message {
             AnyMessage::Pose(m) => drop(arcnav_vehicle::Pose::try_from(&m)),
-            AnyMessage::RangeImage(m) => drop(crate::wire::range_image_from_wire(m)),
-            AnyMessage::RangeSlice(m) => drop(crate::wire::range_slice_from_wire(m)),
-            AnyMessage::ObstacleCells(m) => drop(crate::wire::obstacles_from_wire(m)),
-            AnyMessage::Waypoints(m) => drop(crate::wire::mission_from_wire(&m)),
-            AnyMessage::LocalMap(m) => drop(crate::wire::map_from_wire(&m)),
+            AnyMessage::RangeImage(m) => drop(arcnav_wire::range_image_from_wire(m)),
+            AnyMessage::RangeSlice(m) => drop(arcnav_wire::range_slice_from_wire(m)),
+            AnyMessage::ObstacleCells(m) => drop(arcnav_wire::obstacles_from_wire(m)),
+            AnyMessage::Waypoints(m) => drop(arcnav_wire::mission_from_wire(&m)),
+            AnyMessage::LocalMap(m) => drop(arcnav_wire::map_from_wire(&m)),
             AnyMessage::SteeringCommand(m) => {
                 let _ = arcnav_vehicle::SteeringCommand::from(&m);
             }

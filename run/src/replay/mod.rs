@@ -29,9 +29,9 @@ pub use compare::{Comparison, Decided, Difference, WeightOf, compare};
 pub use problems::{InputProblems, LogSummary};
 
 use crate::recorder::{Recorder, WriteFailed};
-use crate::wire;
 use arcnav_config::Resolved;
 use arcnav_pipeline::{Input, Sink};
+use arcnav_wire as wire;
 
 /// How to replay.
 #[derive(Debug, Clone, Default)]

@@ -25,8 +25,8 @@ use super::io::{IoRoutes, Refused, Ticker, auth_status, decode, io_loop, publish
 use super::threaded::{LiveError, LiveOptions};
 use super::workers::{MapStage, perception_node, perception_worker};
 use super::{LiveReport, NodeStatus, Samples, arbiter_status};
-use crate::wire;
 use arcnav_config::Resolved;
+use arcnav_wire as wire;
 
 /// Which node to run.
 #[derive(Debug, Clone, PartialEq, Eq)]
