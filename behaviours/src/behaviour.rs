@@ -1,10 +1,13 @@
-//! The behaviour trait and what a behaviour sees.
+//! The behaviour trait, what a behaviour sees, and the trait that lets the
+//! registry build one from its configuration.
 
 use arcnav_arbiter::Votes;
 use arcnav_localmap::{LocalMapConfig, MapSnapshot};
 use arcnav_vehicle::{
-    ArcSet, Pose, Steering, SteeringCommand, SteeringResponse, Utime, VehicleConfig,
+    ArcSet, ConfigError, Pose, Steering, SteeringCommand, SteeringResponse, Utime, VehicleConfig,
 };
+use serde::Serialize;
+use serde::de::DeserializeOwned;
 
 /// A point to reach, world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -213,4 +216,20 @@ impl std::fmt::Debug for dyn Behaviour {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Behaviour({})", self.name())
     }
+}
+
+/// A behaviour the registry can build from configuration.
+pub trait Plugin: Behaviour + Sized + 'static {
+    /// Its name in the configuration (`[behaviours.NAME]`).
+    const NAME: &'static str;
+    /// Its configuration, with the documented defaults in `Default`.
+    type Config: Serialize + DeserializeOwned + Default + Clone + Send + Sync + 'static;
+
+    /// Checks the configuration (keys relative to its table).
+    fn validate(_config: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
+        Ok(())
+    }
+
+    /// Builds the behaviour from its (validated) configuration.
+    fn build(config: Self::Config, setup: &Setup<'_>) -> Self;
 }

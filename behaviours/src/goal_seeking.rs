@@ -16,8 +16,8 @@ use arcnav_vehicle::frames::wrap_angle;
 use arcnav_vehicle::{DrivenPath, SteeringResponse};
 use serde::{Deserialize, Serialize};
 
+use crate::behaviour::Plugin;
 use crate::behaviour::{Behaviour, Mission, Progress, Setup, VoteContext, Waypoint};
-use crate::registry::Plugin;
 
 /// Lives in `[behaviours.goal_seeking]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

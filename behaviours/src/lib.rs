@@ -18,11 +18,11 @@ pub mod route;
 pub mod terrain;
 
 pub use behaviour::{
-    Behaviour, Mission, Overlay, OverlayCells, OverlayLine, OverlayPoint, Progress, Setup,
+    Behaviour, Mission, Overlay, OverlayCells, OverlayLine, OverlayPoint, Plugin, Progress, Setup,
     VoteContext, Waypoint,
 };
 pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
 pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig, UnseenGround};
-pub use registry::{Plugin, Prepared, Registry, RegistryError};
+pub use registry::{Prepared, Registry, RegistryError};
 pub use route::{Route, RouteConfig, RouteStats};
 pub use terrain::{ArcTerrain, Judgement, Stance, TerrainCheck, TerrainConfig};

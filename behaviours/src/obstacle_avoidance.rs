@@ -67,8 +67,8 @@ use arcnav_vehicle::{Arc, ArcPose, DrivenPath, Footprint, SteeringResponse, Swep
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
+use crate::behaviour::Plugin;
 use crate::behaviour::{Behaviour, Setup, VoteContext};
-use crate::registry::Plugin;
 use crate::terrain::{ArcTerrain, TerrainCheck, TerrainConfig};
 
 /// Lives in `[behaviours.obstacle_avoidance]`.

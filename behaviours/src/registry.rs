@@ -15,26 +15,11 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use arcnav_vehicle::ConfigError;
+
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use crate::behaviour::{Behaviour, Setup};
-
-/// A behaviour the registry can build from configuration.
-pub trait Plugin: Behaviour + Sized + 'static {
-    /// Its name in the configuration (`[behaviours.NAME]`).
-    const NAME: &'static str;
-    /// Its configuration, with the documented defaults in `Default`.
-    type Config: Serialize + DeserializeOwned + Default + Clone + Send + Sync + 'static;
-
-    /// Checks the configuration (keys relative to its table).
-    fn validate(_config: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
-        Ok(())
-    }
-
-    /// Builds the behaviour from its (validated) configuration.
-    fn build(config: Self::Config, setup: &Setup<'_>) -> Self;
-}
+use crate::behaviour::{Behaviour, Plugin, Setup};
 
 /// A behaviour that cannot be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

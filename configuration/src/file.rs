@@ -260,18 +260,6 @@ impl Config {
         self.origins.get(key)
     }
 
-    /// Checks this configuration once and derives what follows from it:
-    /// the configuration every node is built from.
-    pub fn resolve(self, registry: &Registry) -> Result<crate::Resolved, ConfigError> {
-        crate::Resolved::new(self, registry)
-    }
-
-    /// [`Config::resolve`] with the built-in behaviours, leaving this
-    /// configuration as it is (for one changed in code).
-    pub fn resolved(&self) -> Result<crate::Resolved, ConfigError> {
-        self.clone().resolve(&Registry::builtin())
-    }
-
     /// Every name the arbiter's section gives must be a configured behaviour
     /// (weights may also name `live.external_behaviours`; `required` may
     /// not: `arcnav sim` and `arcnav replay` run without them).

@@ -353,6 +353,22 @@ impl Resolved {
     }
 }
 
+/// Resolving, on the file's value (defined here, beside what it builds, so
+/// that the file's module does not import the resolved one).
+impl Config {
+    /// Checks this configuration once and derives what follows from it:
+    /// the configuration every node is built from.
+    pub fn resolve(self, registry: &Registry) -> Result<Resolved, ConfigError> {
+        Resolved::new(self, registry)
+    }
+
+    /// [`Config::resolve`] with the built-in behaviours, leaving this
+    /// configuration as it is (for one changed in code).
+    pub fn resolved(&self) -> Result<Resolved, ConfigError> {
+        self.clone().resolve(&Registry::builtin())
+    }
+}
+
 impl Default for Resolved {
     /// The built-in defaults with the built-in behaviours, resolved. They
     /// always resolve (a test holds that `config/default.toml` does).

@@ -1275,7 +1275,7 @@ impl CellClassifier {
     }
 }
 
-impl crate::registry::EvaluatorPlugin for CellClassifier {
+impl crate::plugin::EvaluatorPlugin for CellClassifier {
     const NAME: &'static str = "cells";
     const ABOUT: &'static str =
         "per-cell height variation, slope and discontinuity (002, Langer, Rosenblatt & Hebert)";

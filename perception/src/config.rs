@@ -6,18 +6,15 @@ use serde::{Deserialize, Serialize};
 
 use std::collections::BTreeMap;
 
-use crate::evaluator::TerrainEvaluator;
-use crate::height_diff::HeightDiffConfig;
-use crate::heights::HeightsConfig;
-use crate::pca::PcaConfig;
-use crate::registry::EvaluatorRegistry;
+use crate::height_diff::config::HeightDiffConfig;
+use crate::pca::config::PcaConfig;
 
 /// Lives in `[perception]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PerceptionConfig {
     /// Which terrain evaluator classifies images, by its name in the
-    /// [`EvaluatorRegistry`] (built in: `cells`, `height_diff`, `pca`).
+    /// [`crate::EvaluatorRegistry`] (built in: `cells`, `height_diff`, `pca`).
     pub evaluator: String,
     /// Returns closer than this are ignored (the vehicle's own body), m.
     pub min_range_m: f64,
@@ -41,7 +38,7 @@ pub struct PerceptionConfig {
     pub heights: HeightsConfig,
     /// Range images arriving in slices (`range_slice_t`), judged as they
     /// arrive (002 §7's integrated mode).
-    pub streaming: crate::stream::StreamingConfig,
+    pub streaming: StreamingConfig,
     /// Tables of evaluators added to the registry by a program,
     /// `[perception.plugins.NAME]`.
     pub plugins: BTreeMap<String, toml::Table>,
@@ -60,9 +57,82 @@ impl Default for PerceptionConfig {
             height_diff: HeightDiffConfig::default(),
             pca: PcaConfig::default(),
             heights: HeightsConfig::default(),
-            streaming: crate::stream::StreamingConfig::default(),
+            streaming: StreamingConfig::default(),
             plugins: BTreeMap::new(),
         }
+    }
+}
+
+/// Lives in `[perception.heights]`: the measurements of the elevation layer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HeightsConfig {
+    /// Measure heights at all (false: the elevation layer stays empty and
+    /// the `terrain` behaviour judges nothing).
+    pub enabled: bool,
+    /// World-aligned cell, m (the elevation layer's, see
+    /// `[localmap.elevation]`).
+    pub cell_size_m: f64,
+    /// σ_r: the sensor's range noise, standard deviation, m.
+    pub range_noise_m: f64,
+    /// σ_θ: the error of the pose's roll and pitch, standard deviation,
+    /// degrees.
+    pub attitude_noise_deg: f64,
+}
+
+impl Default for HeightsConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            cell_size_m: 0.2,
+            range_noise_m: 0.02,
+            attitude_noise_deg: 0.1,
+        }
+    }
+}
+
+impl HeightsConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        config::positive("cell_size_m", self.cell_size_m)?;
+        if self.cell_size_m < 0.05 {
+            return Err(ConfigError::new(
+                "cell_size_m",
+                format!("is {}, must be at least 0.05 m", self.cell_size_m),
+            ));
+        }
+        config::positive("range_noise_m", self.range_noise_m)?;
+        config::non_negative("attitude_noise_deg", self.attitude_noise_deg)
+    }
+
+    /// σ_t² of a return at `range_m`.
+    pub fn variance(&self, range_m: f32) -> f32 {
+        let sigma_theta = self.attitude_noise_deg.to_radians() as f32;
+        let r = self.range_noise_m as f32;
+        r * r + (range_m * sigma_theta).powi(2)
+    }
+}
+
+/// `[perception.streaming]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StreamingConfig {
+    /// Blocks of columns: cells nearer than this wait for the frame's last
+    /// slice; farther ones are reported as their columns arrive. Smaller
+    /// costs more (every step evaluates `2·asin(R / near_m)` of sweep
+    /// again), m.
+    pub near_m: f64,
+}
+
+impl Default for StreamingConfig {
+    fn default() -> Self {
+        Self { near_m: 8.0 }
+    }
+}
+
+impl StreamingConfig {
+    /// Keys relative to `[perception.streaming]`.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        config::in_range("near_m", self.near_m, 1.0, 1000.0)
     }
 }
 
@@ -211,21 +281,12 @@ impl PerceptionConfig {
         GridShape::over(&self.region, self.cells.cell_size_m, margin)
     }
 
-    /// Checks the values and that no threshold lets pass terrain the vehicle
-    /// cannot drive. Keys are relative to `[perception]`, except those of
-    /// the vehicle named in messages.
-    pub fn validate_for(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
-        self.validate_with(&EvaluatorRegistry::builtin(), vehicle)
-    }
-
-    /// [`PerceptionConfig::validate_for`], with the evaluators of `registry`
-    /// (for programs that add their own).
-    pub fn validate_with(
-        &self,
-        registry: &EvaluatorRegistry,
-        vehicle: &VehicleConfig,
-    ) -> Result<(), ConfigError> {
-        registry.check_known(&self.evaluator)?;
+    /// Checks the keys every evaluator shares (the evaluator's own are
+    /// checked by the registry, see [`PerceptionConfig::validate_for`]) and
+    /// that no threshold lets pass terrain the vehicle cannot drive. Keys
+    /// are relative to `[perception]`, except those of the vehicle named in
+    /// messages.
+    pub(crate) fn validate_shared(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
         config::non_negative("min_range_m", self.min_range_m)?;
         config::positive("max_range_m", self.max_range_m)?;
         if self.min_range_m >= self.max_range_m {
@@ -363,13 +424,7 @@ impl PerceptionConfig {
                 vehicle.tolerated_step_m,
             ),
         ];
-        checks.into_iter().flatten().next().map_or(Ok(()), Err)?;
-        registry.validate(self, vehicle)
-    }
-
-    /// Builds the configured evaluator (call `validate_for` first).
-    pub fn build_evaluator(&self) -> Result<Box<dyn TerrainEvaluator>, ConfigError> {
-        EvaluatorRegistry::builtin().build(self)
+        checks.into_iter().flatten().next().map_or(Ok(()), Err)
     }
 }
 

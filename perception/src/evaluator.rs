@@ -13,7 +13,6 @@ use arcnav_vehicle::{Isometry, Utime};
 use crate::fov::FovPolygon;
 use crate::image::{ImageError, RangeImage};
 use crate::shadow::Shadows;
-use crate::stream::Support;
 
 /// Why a cell is untraversable (a bit set; evaluators may combine reasons).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, PartialOrd, Ord)]
@@ -165,7 +164,7 @@ pub struct ObstacleReport {
     /// Height measurements for the local map's elevation layer (004 §III),
     /// one per world-aligned cell the image hit; filled after the
     /// evaluator by the perception node (see [`crate::HeightSampler`]).
-    pub heights: Vec<crate::heights::HeightSample>,
+    pub heights: Vec<HeightSample>,
     /// The side of the world-aligned cells `heights` index, m.
     pub heights_cell_m: f64,
 }
@@ -324,4 +323,28 @@ impl ObstacleReport {
             self.acquired
         }
     }
+}
+
+/// How far from a cell's centre the returns that decide its verdict may
+/// lie: within `metres` horizontally, and beyond that the reach of an
+/// image-space filter (000's median, 001's scan-line roughness), `pixels`
+/// plus `radians` of beam angle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Support {
+    pub metres: f64,
+    pub pixels: u32,
+    pub radians: f64,
+}
+
+/// One height measurement: the highest return of one image in one
+/// world-aligned cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeightSample {
+    /// World cell index: the cell spans [i·s, (i+1)·s) × [j·s, (j+1)·s).
+    pub i: i64,
+    pub j: i64,
+    /// h_t, world z, m.
+    pub z: f32,
+    /// σ_t², m².
+    pub variance: f32,
 }

@@ -23,75 +23,11 @@
 //! measurements without resampling.
 
 use arcnav_vehicle::Isometry;
-use serde::{Deserialize, Serialize};
 
-use crate::config::RegionConfig;
-use crate::evaluator::{ImageStats, ObstacleReport};
+use crate::config::{HeightsConfig, RegionConfig};
+use crate::evaluator::{HeightSample, ImageStats, ObstacleReport};
 use crate::grid::{Projector, RowPoints, level_frames};
 use crate::image::RangeImage;
-use arcnav_vehicle::config::{ConfigError, positive};
-
-/// Lives in `[perception.heights]`: the measurements of the elevation layer.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct HeightsConfig {
-    /// Measure heights at all (false: the elevation layer stays empty and
-    /// the `terrain` behaviour judges nothing).
-    pub enabled: bool,
-    /// World-aligned cell, m (the elevation layer's, see
-    /// `[localmap.elevation]`).
-    pub cell_size_m: f64,
-    /// σ_r: the sensor's range noise, standard deviation, m.
-    pub range_noise_m: f64,
-    /// σ_θ: the error of the pose's roll and pitch, standard deviation,
-    /// degrees.
-    pub attitude_noise_deg: f64,
-}
-
-impl Default for HeightsConfig {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            cell_size_m: 0.2,
-            range_noise_m: 0.02,
-            attitude_noise_deg: 0.1,
-        }
-    }
-}
-
-impl HeightsConfig {
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        positive("cell_size_m", self.cell_size_m)?;
-        if self.cell_size_m < 0.05 {
-            return Err(ConfigError::new(
-                "cell_size_m",
-                format!("is {}, must be at least 0.05 m", self.cell_size_m),
-            ));
-        }
-        positive("range_noise_m", self.range_noise_m)?;
-        arcnav_vehicle::config::non_negative("attitude_noise_deg", self.attitude_noise_deg)
-    }
-
-    /// σ_t² of a return at `range_m`.
-    pub fn variance(&self, range_m: f32) -> f32 {
-        let sigma_theta = self.attitude_noise_deg.to_radians() as f32;
-        let r = self.range_noise_m as f32;
-        r * r + (range_m * sigma_theta).powi(2)
-    }
-}
-
-/// One height measurement: the highest return of one image in one
-/// world-aligned cell.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HeightSample {
-    /// World cell index: the cell spans [i·s, (i+1)·s) × [j·s, (j+1)·s).
-    pub i: i64,
-    pub j: i64,
-    /// h_t, world z, m.
-    pub z: f32,
-    /// σ_t², m².
-    pub variance: f32,
-}
 
 #[derive(Debug, Clone, Copy)]
 struct Bin {

@@ -31,6 +31,7 @@ pub mod heights;
 pub mod image;
 pub mod median;
 pub mod pca;
+pub mod plugin;
 pub mod raycast;
 pub mod registry;
 pub mod scene;
@@ -40,23 +41,24 @@ pub mod stream;
 mod window;
 
 pub use cells::CellClassifier;
-pub use config::{CellsConfig, DropOffConfig, PerceptionConfig, RegionConfig};
+pub use config::{
+    CellsConfig, DropOffConfig, HeightsConfig, PerceptionConfig, RegionConfig, StreamingConfig,
+};
 pub use evaluator::{
-    ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner,
-    TerrainEvaluator, suspected_drop_off,
+    HeightSample, ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons,
+    Region, Runner, Support, TerrainEvaluator, suspected_drop_off,
 };
 pub use fov::FovPolygon;
 pub use height_diff::{HeightDiff, HeightDiffConfig, HeightDiffMaps};
-pub use heights::{HeightSample, HeightSampler, HeightsConfig};
+pub use heights::HeightSampler;
 pub use image::{BeamTable, ImageError, RangeImage};
 pub use pca::{HierarchicalPca, PcaConfig, PcaMaps};
+pub use plugin::EvaluatorPlugin;
 pub use raycast::RayCast;
-pub use registry::{EvaluatorPlugin, EvaluatorRegistry};
+pub use registry::EvaluatorRegistry;
 pub use sensor::{PosedBeams, SensorConfig, SensorModel, SensorPreset};
 pub use shadow::{Shadow, ShadowIndex, Shadows};
-pub use stream::{
-    FrameStream, RangeSlice, SliceAxis, SliceError, StreamCounts, StreamingConfig, Support,
-};
+pub use stream::{FrameStream, RangeSlice, SliceAxis, SliceError, StreamCounts};
 
 /// Whether this processor can run the AVX2 paths a test compares with the
 /// portable ones. Under `CI=true` a processor without AVX2 fails the test

@@ -20,47 +20,10 @@
 use std::collections::BTreeMap;
 
 use arcnav_vehicle::{ConfigError, VehicleConfig};
-use serde::Serialize;
-use serde::de::DeserializeOwned;
 
 use crate::config::PerceptionConfig;
 use crate::evaluator::TerrainEvaluator;
-
-/// A terrain evaluator the registry can build from configuration.
-pub trait EvaluatorPlugin: TerrainEvaluator + Sized + 'static {
-    /// Its name in `perception.evaluator`.
-    const NAME: &'static str;
-    /// One line for `--help` and error messages: what it does, whose it is.
-    const ABOUT: &'static str;
-    /// Its configuration, with the documented defaults in `Default`.
-    type Config: Serialize + DeserializeOwned + Default + Clone;
-
-    /// Its table, typed: `[perception.plugins.NAME]` (the built-ins read
-    /// their own `[perception.NAME]`). Errors name keys relative to
-    /// `[perception]`.
-    fn config(perception: &PerceptionConfig) -> Result<Self::Config, ConfigError> {
-        let key = format!("plugins.{}", Self::NAME);
-        match perception.plugins.get(Self::NAME) {
-            None => Ok(Self::Config::default()),
-            Some(table) => toml::Value::Table(table.clone())
-                .try_into()
-                .map_err(|e: toml::de::Error| ConfigError::new(key, e.message().to_owned())),
-        }
-    }
-
-    /// Checks the configuration against the vehicle (keys relative to
-    /// `[perception]`).
-    fn validate(
-        _config: &Self::Config,
-        _perception: &PerceptionConfig,
-        _vehicle: &VehicleConfig,
-    ) -> Result<(), ConfigError> {
-        Ok(())
-    }
-
-    /// Builds the evaluator from its (validated) configuration.
-    fn build(config: Self::Config, perception: &PerceptionConfig) -> Self;
-}
+use crate::plugin::EvaluatorPlugin;
 
 type Validator =
     Box<dyn Fn(&PerceptionConfig, &VehicleConfig) -> Result<(), ConfigError> + Send + Sync>;
@@ -183,5 +146,34 @@ impl EvaluatorRegistry {
         perception: &PerceptionConfig,
     ) -> Result<Box<dyn TerrainEvaluator>, ConfigError> {
         (self.entry(&perception.evaluator)?.build)(perception)
+    }
+}
+
+/// Validating and building, on the configuration's value (defined here,
+/// beside the registry they consult, so that the configuration's module
+/// imports no evaluator).
+impl PerceptionConfig {
+    /// Checks the values and that no threshold lets pass terrain the vehicle
+    /// cannot drive. Keys are relative to `[perception]`, except those of
+    /// the vehicle named in messages.
+    pub fn validate_for(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
+        self.validate_with(&EvaluatorRegistry::builtin(), vehicle)
+    }
+
+    /// [`PerceptionConfig::validate_for`], with the evaluators of `registry`
+    /// (for programs that add their own).
+    pub fn validate_with(
+        &self,
+        registry: &EvaluatorRegistry,
+        vehicle: &VehicleConfig,
+    ) -> Result<(), ConfigError> {
+        registry.check_known(&self.evaluator)?;
+        self.validate_shared(vehicle)?;
+        registry.validate(self, vehicle)
+    }
+
+    /// Builds the configured evaluator (call `validate_for` first).
+    pub fn build_evaluator(&self) -> Result<Box<dyn TerrainEvaluator>, ConfigError> {
+        EvaluatorRegistry::builtin().build(self)
     }
 }

@@ -59,8 +59,9 @@
 use arcnav_vehicle::{Isometry, Utime};
 use nalgebra::{Point3, Vector3};
 
+use crate::config::StreamingConfig;
 use crate::evaluator::{
-    ImageStats, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner,
+    ImageStats, ObstacleCell, ObstacleReport, PerceptionError, Reasons, Region, Runner, Support,
     TerrainEvaluator,
 };
 use crate::fov::FovBuilder;
@@ -282,41 +283,6 @@ impl RangeSlice {
                 }
             })
             .collect()
-    }
-}
-
-/// How far from a cell's centre the returns that decide its verdict may
-/// lie: within `metres` horizontally, and beyond that the reach of an
-/// image-space filter (000's median, 001's scan-line roughness), `pixels`
-/// plus `radians` of beam angle.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Support {
-    pub metres: f64,
-    pub pixels: u32,
-    pub radians: f64,
-}
-
-/// `[perception.streaming]`.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct StreamingConfig {
-    /// Blocks of columns: cells nearer than this wait for the frame's last
-    /// slice; farther ones are reported as their columns arrive. Smaller
-    /// costs more (every step evaluates `2·asin(R / near_m)` of sweep
-    /// again), m.
-    pub near_m: f64,
-}
-
-impl Default for StreamingConfig {
-    fn default() -> Self {
-        Self { near_m: 8.0 }
-    }
-}
-
-impl StreamingConfig {
-    /// Keys relative to `[perception.streaming]`.
-    pub fn validate(&self) -> Result<(), arcnav_vehicle::config::ConfigError> {
-        arcnav_vehicle::config::in_range("near_m", self.near_m, 1.0, 1000.0)
     }
 }
 

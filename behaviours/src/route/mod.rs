@@ -78,11 +78,11 @@ use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::yaw_of;
 use serde::{Deserialize, Serialize};
 
+use crate::behaviour::Plugin;
 use crate::behaviour::{
     Behaviour, Overlay, OverlayCells, OverlayLine, OverlayPoint, Progress, Setup, VoteContext,
 };
 use crate::goal_seeking::{WaypointTracker, lookahead, vote_towards};
-use crate::registry::Plugin;
 use dstar::{DStarLite, PlannerStats};
 
 /// Lives in `[behaviours.route]`.
