@@ -1,0 +1,588 @@
+//! The vehicle-frame bitmap the local map is rasterised into, and each
+//! arc's swept bands over it: which cells an arc's footprint meets, and
+//! how far along the arc.
+
+use std::collections::HashMap;
+
+use arcnav_vehicle::{Arc, ArcPose, Footprint, SweptFootprint};
+use nalgebra::Point2;
+
+use super::config::UnseenGround;
+use crate::behaviour::VoteContext;
+
+/// One group of grid cells of an arc's swept band.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Entry {
+    /// Distance along the arc at which the footprint first touches the group.
+    pub(super) s: f32,
+    /// Word of the bitmap.
+    pub(super) word: u32,
+    pub(super) mask: u64,
+}
+
+/// The swept bands of one arc, each a list of entries in distance order.
+#[derive(Debug, Clone)]
+pub(super) struct Template {
+    pub(super) bands: Vec<Vec<Entry>>,
+    /// The body's band (band 0) cell by cell: the distance at which the
+    /// footprint first touches the cell, and its centre, by distance.
+    pub(super) body: Vec<(f32, [f32; 2])>,
+}
+
+/// The vehicle-frame grid the map is rasterised into.
+#[derive(Debug, Clone)]
+pub(super) struct Grid {
+    pub(super) x0: f64,
+    pub(super) y0: f64,
+    pub(super) resolution: f64,
+    /// 1 / resolution.
+    pub(super) per_m: f64,
+    pub(super) rows: usize,
+    pub(super) columns: usize,
+    pub(super) words_per_row: usize,
+}
+
+impl Grid {
+    pub(super) fn cell(&self, x: f64, y: f64) -> Option<(usize, usize)> {
+        let (fx, fy) = ((x - self.x0) * self.per_m, (y - self.y0) * self.per_m);
+        (fx >= 0.0 && fy >= 0.0 && fx < self.rows as f64 && fy < self.columns as f64)
+            .then_some((fx as usize, fy as usize))
+    }
+
+    /// The first cell of `bitmap` that `entry` holds (it must hold one).
+    pub(super) fn first_cell(&self, entry: &Entry, bitmap: &[u64]) -> (usize, usize) {
+        let hits = bitmap[entry.word as usize] & entry.mask;
+        let row = entry.word as usize / self.words_per_row;
+        let column =
+            (entry.word as usize % self.words_per_row) * 64 + hits.trailing_zeros() as usize;
+        (row, column)
+    }
+
+    /// The bitmap word holding cell `cell` (`row · columns + column`).
+    pub(super) fn word_of(&self, cell: u32) -> usize {
+        let (row, column) = (cell as usize / self.columns, cell as usize % self.columns);
+        row * self.words_per_row + column / 64
+    }
+
+    pub(super) fn centre(&self, row: usize, column: usize) -> Point2<f64> {
+        Point2::new(
+            self.x0 + (row as f64 + 0.5) * self.resolution,
+            self.y0 + (column as f64 + 0.5) * self.resolution,
+        )
+    }
+}
+
+/// The map rasterised into a vehicle-frame grid: its cells, the ground no
+/// image has seen, and which map patch set each cell. With `mirror` -1 the
+/// grid holds the ground behind the vehicle with x negated (backing up).
+#[derive(Debug, Clone)]
+pub(super) struct Raster {
+    pub(super) grid: Grid,
+    /// 1 for the ground ahead, -1 for the mirrored ground behind.
+    pub(super) mirror: f64,
+    pub(super) bitmap: Vec<u64>,
+    /// Cells whose ground no image has seen (same layout as `bitmap`).
+    pub(super) unseen: Vec<u64>,
+    /// Cells the vehicle stands on: never unseen.
+    pub(super) standing: Vec<u64>,
+    /// Map patch index per grid cell that holds one (u32::MAX otherwise).
+    pub(super) causes: Vec<u32>,
+    pub(super) set_cells: Vec<u32>,
+    /// Cells holding graded ground (patches of cost below 1), same layout
+    /// as `bitmap`, and the highest cost per grid cell.
+    pub(super) graded: Vec<u64>,
+    pub(super) graded_cost: Vec<f32>,
+    pub(super) graded_cells: Vec<u32>,
+    /// Cells holding a suspected drop-off (graded patches with the reason
+    /// drop-off), same layout as `bitmap`, and which they are.
+    pub(super) suspect: Vec<u64>,
+    pub(super) suspect_cells: Vec<u32>,
+    /// Cells and unseen ground together, when unseen ground is an
+    /// obstacle (`unseen_blocks`).
+    pub(super) blocked: Vec<u64>,
+    pub(super) unseen_blocks: bool,
+}
+
+impl Raster {
+    /// A raster over `grid`; `standing(p)` tells the vehicle-frame points
+    /// the vehicle stands on.
+    pub(super) fn new(grid: Grid, mirror: f64, standing: impl Fn(Point2<f64>) -> bool) -> Self {
+        let words = grid.rows * grid.words_per_row;
+        let mut mask = vec![0; words];
+        for row in 0..grid.rows {
+            for column in 0..grid.columns {
+                let p = grid.centre(row, column);
+                if standing(Point2::new(mirror * p.x, p.y)) {
+                    mask[row * grid.words_per_row + column / 64] |= 1 << (column % 64);
+                }
+            }
+        }
+        Self {
+            bitmap: vec![0; words],
+            unseen: vec![0; words],
+            standing: mask,
+            causes: vec![u32::MAX; grid.rows * grid.columns],
+            set_cells: Vec::new(),
+            graded: vec![0; words],
+            graded_cost: vec![0.0; grid.rows * grid.columns],
+            graded_cells: Vec::new(),
+            suspect: vec![0; words],
+            suspect_cells: Vec::new(),
+            blocked: vec![0; words],
+            unseen_blocks: false,
+            mirror,
+            grid,
+        }
+    }
+
+    /// Rasterises the map's cells (clearing the last cycle's).
+    pub(super) fn rasterise(&mut self, ctx: &VoteContext<'_>) {
+        let mirror = self.mirror;
+        self.rasterise_with(ctx, 0..ctx.map.patches.len(), |x, y| (mirror * x, y));
+    }
+
+    /// Rasterises the map's patches of index `patches` placed by `to_grid`
+    /// (vehicle frame to this raster's frame), clearing the last ones.
+    pub(super) fn rasterise_with(
+        &mut self,
+        ctx: &VoteContext<'_>,
+        patches: impl Iterator<Item = usize>,
+        to_grid: impl Fn(f64, f64) -> (f64, f64),
+    ) {
+        for &cell in &self.set_cells {
+            self.bitmap[self.grid.word_of(cell)] = 0;
+            self.causes[cell as usize] = u32::MAX;
+        }
+        self.set_cells.clear();
+        for &cell in &self.graded_cells {
+            self.graded[self.grid.word_of(cell)] = 0;
+            self.graded_cost[cell as usize] = 0.0;
+        }
+        self.graded_cells.clear();
+        for &cell in &self.suspect_cells {
+            self.suspect[self.grid.word_of(cell)] = 0;
+        }
+        self.suspect_cells.clear();
+        for index in patches {
+            let Some(patch) = ctx.map.patches.get(index) else {
+                continue;
+            };
+            let (x, y) = to_grid(f64::from(patch.x), f64::from(patch.y));
+            let Some((row, column)) = self.grid.cell(x, y) else {
+                continue;
+            };
+            let cell = row * self.grid.columns + column;
+            let bit = 1 << (column % 64);
+            if patch.is_suspected_drop_off() {
+                // A suspected drop-off: it only slows the vehicle.
+                let word = &mut self.suspect[row * self.grid.words_per_row + column / 64];
+                if *word & bit == 0 {
+                    self.suspect_cells.push(cell as u32);
+                }
+                *word |= bit;
+                continue;
+            }
+            if !patch.is_obstacle() {
+                // Graded ground: no collision, a price (highest per cell).
+                self.graded[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
+                if self.graded_cost[cell] == 0.0 {
+                    self.graded_cells.push(cell as u32);
+                }
+                self.graded_cost[cell] = self.graded_cost[cell].max(patch.cost);
+                continue;
+            }
+            self.bitmap[row * self.grid.words_per_row + column / 64] |= 1 << (column % 64);
+            if self.causes[cell] == u32::MAX {
+                self.causes[cell] = index as u32;
+                self.set_cells.push(cell as u32);
+            }
+        }
+    }
+
+    /// Marks the cells whose ground no image has seen.
+    pub(super) fn rasterise_unseen(&mut self, ctx: &VoteContext<'_>) {
+        let seen = ctx.map.seen_lookup();
+        let grid = &self.grid;
+        for row in 0..grid.rows {
+            let words = &mut self.unseen[row * grid.words_per_row..][..grid.words_per_row];
+            words.fill(0);
+            for column in 0..grid.columns {
+                let p = grid.centre(row, column);
+                if !seen(self.mirror * p.x, p.y) {
+                    words[column / 64] |= 1 << (column % 64);
+                }
+            }
+            let standing = &self.standing[row * grid.words_per_row..][..grid.words_per_row];
+            for (word, standing) in words.iter_mut().zip(standing) {
+                *word &= !standing;
+            }
+        }
+    }
+
+    /// The map cell behind a hit entry of `layer` (the blocked layer, or
+    /// one cleared of cells), vehicle frame (none for unseen ground).
+    pub(super) fn cause(
+        &self,
+        entry: &Entry,
+        layer: &[u64],
+        ctx: &VoteContext<'_>,
+    ) -> Option<[f32; 2]> {
+        let (row, column) = self.grid.first_cell(entry, layer);
+        self.cause_at(row, column, ctx)
+    }
+
+    /// The map patch behind grid cell (row, column), vehicle frame.
+    pub(super) fn cause_at(
+        &self,
+        row: usize,
+        column: usize,
+        ctx: &VoteContext<'_>,
+    ) -> Option<[f32; 2]> {
+        let patch = self.causes.get(row * self.grid.columns + column)?;
+        let patch = ctx.map.patches.get(*patch as usize)?;
+        Some([patch.x, patch.y])
+    }
+
+    /// Whether the ground at `p` (this raster's frame) is unseen, if `p`
+    /// lies on the grid.
+    pub(super) fn unseen_at(&self, p: Point2<f64>) -> Option<bool> {
+        let (row, column) = self.grid.cell(p.x, p.y)?;
+        Some(self.unseen[row * self.grid.words_per_row + column / 64] & (1 << (column % 64)) != 0)
+    }
+
+    /// What collisions are tested against: the map's cells, and unseen
+    /// ground when it is an obstacle (see [`Raster::block`]).
+    pub(super) fn blocked(&self) -> &[u64] {
+        if self.unseen_blocks {
+            &self.blocked
+        } else {
+            &self.bitmap
+        }
+    }
+
+    /// Makes unseen ground block (`obstacle`) or not.
+    pub(super) fn block(&mut self, policy: UnseenGround) {
+        self.unseen_blocks = policy == UnseenGround::Obstacle;
+        if self.unseen_blocks {
+            for ((blocked, cell), unseen) in
+                self.blocked.iter_mut().zip(&self.bitmap).zip(&self.unseen)
+            {
+                *blocked = cell | unseen;
+            }
+        }
+    }
+
+    /// Marks as unseen the cells of `band` within `reach` (this raster's
+    /// frame) that `unseen` says no image has seen; the rest of the layer
+    /// is cleared.
+    pub(super) fn unseen_over(
+        &mut self,
+        band: &[Entry],
+        reach: f32,
+        unseen: impl Fn(Point2<f64>) -> bool,
+    ) {
+        self.unseen.fill(0);
+        for entry in band.iter().take_while(|e| e.s <= reach) {
+            let row = entry.word as usize / self.grid.words_per_row;
+            let base = (entry.word as usize % self.grid.words_per_row) * 64;
+            let mut bits = entry.mask;
+            while bits != 0 {
+                let bit = bits.trailing_zeros();
+                bits &= bits - 1;
+                if unseen(self.grid.centre(row, base + bit as usize)) {
+                    self.unseen[entry.word as usize] |= 1 << bit;
+                }
+            }
+        }
+    }
+}
+
+impl Raster {
+    /// The highest graded cost the band crosses within `reach`, and within
+    /// `near` (the speed horizon).
+    pub(super) fn graded_crossed(&self, band: &[Entry], reach: f32, near: f32) -> (f32, f32) {
+        let (mut all, mut close) = (0.0f32, 0.0f32);
+        if self.graded_cells.is_empty() {
+            return (all, close);
+        }
+        for entry in band.iter().take_while(|e| e.s <= reach) {
+            let mut hits = self.graded[entry.word as usize] & entry.mask;
+            let row = entry.word as usize / self.grid.words_per_row;
+            let base = (entry.word as usize % self.grid.words_per_row) * 64;
+            while hits != 0 {
+                let column = base + hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                let cost = self.graded_cost[row * self.grid.columns + column];
+                all = all.max(cost);
+                if entry.s <= near {
+                    close = close.max(cost);
+                }
+            }
+        }
+        (all, close)
+    }
+}
+
+/// The grid covering every outline of `footprint` swept `reach` along
+/// every arc.
+pub(super) fn grid_around(
+    arcs: &arcnav_vehicle::ArcSet,
+    footprint: Footprint,
+    reach: f64,
+    r: f64,
+) -> Grid {
+    let (mut lo, mut hi) = (
+        Point2::new(f64::MAX, f64::MAX),
+        Point2::new(f64::MIN, f64::MIN),
+    );
+    for arc in arcs.iter() {
+        for outline in arc.swept(footprint, reach).outlines(0.25) {
+            for corner in outline {
+                lo = lo.inf(&corner);
+                hi = hi.sup(&corner);
+            }
+        }
+    }
+    let rows = ((hi.x - lo.x) / r).ceil() as usize + 1;
+    let columns = ((hi.y - lo.y) / r).ceil() as usize + 1;
+    Grid {
+        x0: lo.x,
+        y0: lo.y,
+        resolution: r,
+        per_m: 1.0 / r,
+        rows,
+        columns,
+        words_per_row: columns.div_ceil(64),
+    }
+}
+
+/// The first entry of `band` within `reach` that holds a cell of `bitmap`.
+pub(super) fn first_in<'t>(bitmap: &[u64], band: &'t [Entry], reach: f32) -> Option<&'t Entry> {
+    band.iter()
+        .take_while(|e| e.s <= reach)
+        .find(|e| bitmap[e.word as usize] & e.mask != 0)
+}
+
+/// Visits, row by row, the cells of `grid` whose centres lie inside the
+/// convex quadrilateral `corners` (grid frame) as runs `(row, first
+/// column, last column)`; stops when `visit` returns true, and says
+/// whether it did.
+pub(super) fn cells_inside(
+    grid: &Grid,
+    corners: &[Point2<f64>; 4],
+    mut visit: impl FnMut(usize, usize, usize) -> bool,
+) -> bool {
+    let r = grid.resolution;
+    let (lo_x, hi_x) = corners
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+            (lo.min(c.x), hi.max(c.x))
+        });
+    // Rows whose centre x lies within the corners' span.
+    let first = ceil((lo_x - grid.x0) / r - 0.5).max(0.0);
+    let last = floor((hi_x - grid.x0) / r - 0.5);
+    if first.is_nan() || last.is_nan() || first > last || first >= grid.rows as f64 {
+        return false;
+    }
+    let last = (last as usize).min(grid.rows - 1);
+    // Each edge: its ends and its slope dy/dx (none when it runs along y).
+    let edges: [(Point2<f64>, Point2<f64>, Option<f64>); 4] = std::array::from_fn(|i| {
+        let (a, b) = (corners[i], corners[(i + 1) % 4]);
+        (a, b, (a.x != b.x).then(|| (b.y - a.y) / (b.x - a.x)))
+    });
+    for row in first as usize..=last {
+        let x = grid.x0 + (row as f64 + 0.5) * r;
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &(a, b, slope) in &edges {
+            if (a.x - x) * (b.x - x) > 0.0 {
+                continue;
+            }
+            let (y0, y1) = match slope {
+                Some(slope) => {
+                    let y = a.y + (x - a.x) * slope;
+                    (y, y)
+                }
+                None => (a.y, b.y),
+            };
+            lo = lo.min(y0).min(y1);
+            hi = hi.max(y0).max(y1);
+        }
+        let from = ceil((lo - grid.y0) / r - 0.5).max(0.0);
+        let to = floor((hi - grid.y0) / r - 0.5);
+        if from.is_nan() || to.is_nan() || from > to || from >= grid.columns as f64 {
+            continue;
+        }
+        if visit(row, from as usize, (to as usize).min(grid.columns - 1)) {
+            return true;
+        }
+    }
+    false
+}
+
+/// `x.floor()` without the library call the baseline x86-64 target makes
+/// of it (no SSE4.1); NaN stays NaN, and beyond ±2⁵³ x is whole already.
+pub(super) fn floor(x: f64) -> f64 {
+    if x.is_nan() || x.abs() >= 9.0e15 {
+        return x;
+    }
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
+/// `x.ceil()`, as [`floor`].
+pub(super) fn ceil(x: f64) -> f64 {
+    -floor(-x)
+}
+
+/// A pose's rotation and translation, its sine and cosine taken once.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Rigid {
+    pub(super) cos: f64,
+    pub(super) sin: f64,
+    pub(super) x: f64,
+    pub(super) y: f64,
+}
+
+impl Rigid {
+    pub(super) fn of(pose: &ArcPose) -> Self {
+        let (sin, cos) = pose.heading.sin_cos();
+        Self {
+            cos,
+            sin,
+            x: pose.position.x,
+            y: pose.position.y,
+        }
+    }
+
+    /// `p`, given in the pose's frame, in the frame the pose is given in.
+    pub(super) fn apply(&self, p: Point2<f64>) -> Point2<f64> {
+        Point2::new(
+            self.x + self.cos * p.x - self.sin * p.y,
+            self.y + self.sin * p.x + self.cos * p.y,
+        )
+    }
+
+    /// `p`, given in the frame the pose is given in, in the pose's frame.
+    pub(super) fn invert(&self, p: Point2<f64>) -> Point2<f64> {
+        let (dx, dy) = (p.x - self.x, p.y - self.y);
+        Point2::new(
+            self.cos * dx + self.sin * dy,
+            -self.sin * dx + self.cos * dy,
+        )
+    }
+}
+
+/// Distance from the origin to the nearest cell centre set in `layer`, m.
+pub(super) fn nearest_set(layer: &[u64], grid: &Grid) -> f64 {
+    let mut nearest = f64::INFINITY;
+    for (word, &bits) in layer.iter().enumerate() {
+        let mut bits = bits;
+        let row = word / grid.words_per_row;
+        let base = (word % grid.words_per_row) * 64;
+        while bits != 0 {
+            let column = base + bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let c = grid.centre(row, column);
+            nearest = nearest.min(c.x.hypot(c.y));
+        }
+    }
+    nearest
+}
+
+/// The first column in `from..=to` of `row` set in `layer`.
+pub(super) fn first_set(
+    layer: &[u64],
+    grid: &Grid,
+    row: usize,
+    from: usize,
+    to: usize,
+) -> Option<usize> {
+    let base = row * grid.words_per_row;
+    for word in from / 64..=to / 64 {
+        let low = if word == from / 64 { from % 64 } else { 0 };
+        let high = if word == to / 64 { to % 64 } else { 63 };
+        let mask = (u64::MAX << low) & (u64::MAX >> (63 - high));
+        let hits = layer[base + word] & mask;
+        if hits != 0 {
+            return Some(word * 64 + hits.trailing_zeros() as usize);
+        }
+    }
+    None
+}
+
+pub(super) fn build_template(
+    arc: Arc,
+    footprint: &Footprint,
+    margins: &[f64],
+    grid: &Grid,
+    reach: f64,
+) -> Template {
+    let widest = arc.swept(footprint.widened(margins[margins.len() - 1]), reach);
+    // Bounds of this arc's widest band, in grid cells.
+    let (mut lo, mut hi) = (
+        Point2::new(f64::MAX, f64::MAX),
+        Point2::new(f64::MIN, f64::MIN),
+    );
+    for outline in widest.outlines(0.25) {
+        for corner in outline {
+            lo = lo.inf(&corner);
+            hi = hi.sup(&corner);
+        }
+    }
+    let to_row =
+        |x: f64| (((x - grid.x0) / grid.resolution).floor().max(0.0) as usize).min(grid.rows - 1);
+    let to_column = |y: f64| {
+        (((y - grid.y0) / grid.resolution).floor().max(0.0) as usize).min(grid.columns - 1)
+    };
+    let mut cells: Vec<Vec<(f32, usize, usize)>> = vec![Vec::new(); margins.len()];
+    for row in to_row(lo.x)..=to_row(hi.x) {
+        for column in to_column(lo.y)..=to_column(hi.y) {
+            let p = grid.centre(row, column);
+            if widest.first_contact(p).is_none() {
+                continue;
+            }
+            for (band, &margin) in margins.iter().enumerate() {
+                let swept = SweptFootprint {
+                    arc,
+                    footprint: footprint.widened(margin),
+                    length_m: reach,
+                };
+                if let Some(s) = swept.first_contact(p) {
+                    cells[band].push((s as f32, row, column));
+                }
+            }
+        }
+    }
+    let mut body: Vec<(f32, [f32; 2])> = cells[0]
+        .iter()
+        .map(|&(s, row, column)| {
+            let c = grid.centre(row, column);
+            (s, [c.x as f32, c.y as f32])
+        })
+        .collect();
+    body.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let bin = grid.resolution as f32;
+    let bands = cells
+        .into_iter()
+        .map(|mut band| {
+            band.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            // Group by (distance bin, word), keeping the group's first distance.
+            let mut entries: Vec<Entry> = Vec::new();
+            let mut groups: HashMap<(i64, u32), usize> = HashMap::new();
+            for (s, row, column) in band {
+                let word = (row * grid.words_per_row + column / 64) as u32;
+                let bit = 1u64 << (column % 64);
+                let index = *groups
+                    .entry(((s / bin).floor() as i64, word))
+                    .or_insert_with(|| {
+                        entries.push(Entry { s, word, mask: 0 });
+                        entries.len() - 1
+                    });
+                entries[index].mask |= bit;
+            }
+            entries.sort_by(|a, b| a.s.total_cmp(&b.s));
+            entries
+        })
+        .collect();
+    Template { bands, body }
+}
