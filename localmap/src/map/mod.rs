@@ -55,7 +55,7 @@ use std::sync::Arc;
 
 use nalgebra::Point2;
 
-use arcnav_perception::{ObstacleReport, Reasons, ShadowIndex, suspected_drop_off};
+use arcnav_perception::{ObstacleReport, Reasons, ShadowIndex};
 use arcnav_vehicle::frames::yaw_of;
 use arcnav_vehicle::time::micros_to_seconds;
 use arcnav_vehicle::{Footprint, Isometry, Pose, Utime, VehicleConfig};
@@ -65,126 +65,19 @@ use crate::driven::DrivenGround;
 use crate::elevation::{ElevationGrid, ElevationLayer};
 use crate::raster::Coverage;
 
+mod outcome;
+mod patch;
+mod seen;
+mod snapshot;
+
+pub use outcome::{
+    InsertError, InsertOutcome, JumpReason, MAX_COORDINATE_M, MAX_SENSORS, MapStats, PoseUpdate,
+};
+pub use patch::Patch;
+pub use seen::SeenGround;
+pub use snapshot::MapSnapshot;
+
 const EMPTY: u32 = u32::MAX;
-/// Sensors are tracked in a 32-bit set.
-pub const MAX_SENSORS: usize = 32;
-
-/// One map patch.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Patch {
-    /// World patch index: the patch spans [i·s, (i+1)·s) × [j·s, (j+1)·s).
-    pub i: i64,
-    pub j: i64,
-    /// Centre in the vehicle frame of the last update, m.
-    pub x: f32,
-    pub y: f32,
-    /// Capture time of the first and of the latest image reporting it.
-    pub first_seen: Utime,
-    pub last_seen: Utime,
-    /// Images that reported it.
-    pub confirmations: u32,
-    /// Newer overlapping images that did not report it since its last confirmation.
-    pub misses: u32,
-    pub reasons: Reasons,
-    /// Set of sensor indices (see [`LocalMap::sensor_name`]) that reported it.
-    pub sensors: u32,
-    /// Lowest and highest point of its cells, world z, m.
-    pub z_min: f32,
-    pub z_max: f32,
-    /// Highest cost of its cells: 1 untraversable, below 1 graded ground
-    /// (see `arcnav_perception::ObstacleCell::cost`).
-    pub cost: f32,
-    /// Nearest horizontal distance from which an image reported it, m
-    /// (infinite: not known; any overlapping image may miss it).
-    pub nearest_m: f32,
-    /// Last report that touched it.
-    stamp: u64,
-}
-
-impl Patch {
-    /// Whether the vehicle cannot drive here (cost 1); graded ground
-    /// otherwise.
-    pub fn is_obstacle(&self) -> bool {
-        self.cost >= 1.0
-    }
-
-    /// Whether this is a suspected drop-off (see
-    /// [`arcnav_perception::suspected_drop_off`]).
-    pub fn is_suspected_drop_off(&self) -> bool {
-        suspected_drop_off(self.cost, self.reasons)
-    }
-
-    /// An empty patch at world index (`i`, `j`), to fill in field by field
-    /// (a map snapshot rebuilt from a message, a test).
-    pub fn at(i: i64, j: i64) -> Self {
-        Self {
-            i,
-            j,
-            x: 0.0,
-            y: 0.0,
-            first_seen: 0,
-            last_seen: 0,
-            confirmations: 0,
-            misses: 0,
-            reasons: Reasons::NONE,
-            sensors: 0,
-            z_min: 0.0,
-            z_max: 0.0,
-            cost: 1.0,
-            nearest_m: f32::INFINITY,
-            stamp: 0,
-        }
-    }
-}
-
-/// What a pose update did.
-#[derive(Debug, Clone, PartialEq)]
-pub enum PoseUpdate {
-    Accepted,
-    /// The map was cleared; reports captured before the new pose are refused.
-    Reset(JumpReason),
-    /// The pose was ignored.
-    Rejected(JumpReason),
-}
-
-/// Why a pose was not taken as it came.
-#[derive(Debug, Clone, PartialEq)]
-pub enum JumpReason {
-    TimeBackwards { from: Utime, to: Utime },
-    Jump { distance_m: f64, allowed_m: f64 },
-}
-
-impl std::fmt::Display for JumpReason {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            JumpReason::TimeBackwards { from, to } => {
-                write!(f, "time went backwards from {from} µs to {to} µs")
-            }
-            JumpReason::Jump {
-                distance_m,
-                allowed_m,
-            } => write!(
-                f,
-                "the pose jumped {distance_m:.2} m where at most {allowed_m:.2} m is plausible"
-            ),
-        }
-    }
-}
-
-/// A report the map did not take.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum InsertError {
-    #[error("report captured at {utime} µs predates the map reset at {reset} µs")]
-    BeforeReset { utime: Utime, reset: Utime },
-    #[error("sensor {sensor:?} would be the {}th; the map tracks at most {MAX_SENSORS}", MAX_SENSORS + 1)]
-    TooManySensors { sensor: String },
-    #[error("report holds a cell at ({x}, {y}), which is not a finite position")]
-    BadCell { x: f64, y: f64 },
-    #[error(
-        "report's field-of-view footprint has a vertex at ({x}, {y}), not a place within {MAX_COORDINATE_M} m of the origin"
-    )]
-    BadFootprint { x: f64, y: f64 },
-}
 
 /// Where the report's sensor stood (its ground position at capture), when
 /// the report says so plausibly: on or within [`VIEWPOINT_SLACK_M`] of the
@@ -209,162 +102,6 @@ fn viewpoint(report: &ObstacleReport) -> Option<Point2<f64>> {
 /// How far outside its footprint's box a report's sensor may stand, m (a
 /// sensor looking ahead sees no ground right before the bumper).
 const VIEWPOINT_SLACK_M: f64 = 10.0;
-
-/// The farthest a footprint vertex may be from the world origin, m: no
-/// local frame on Earth reaches further (a larger value is damage).
-pub const MAX_COORDINATE_M: f64 = 1e8;
-
-/// What one insertion did.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct InsertOutcome {
-    pub new_patches: u32,
-    pub confirmed_patches: u32,
-    /// Cells outside the window at insertion (not stored).
-    pub outside_window: u32,
-    /// Patches dropped because this image did not report them again.
-    pub pruned: u32,
-}
-
-/// Counters over the map's life.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
-pub struct MapStats {
-    pub reports: u64,
-    pub reports_refused: u64,
-    pub new_patches: u64,
-    pub confirmations: u64,
-    pub pruned_inconsistent: u64,
-    pub dropped_outside_window: u64,
-    pub resets: u64,
-    pub rejected_poses: u64,
-    /// Patches removed because the vehicle's body stands on them.
-    pub cleared_under_vehicle: u64,
-    /// Perception cells on patches the static map already holds (not
-    /// stored twice, 001 eq. 6).
-    pub already_in_static_map: u64,
-    /// Static-map patches that entered the window.
-    pub static_patches_added: u64,
-    /// Times an image's footprint covered a patch it did not report, from
-    /// farther than `miss_range_factor` times the nearest distance the
-    /// patch was reported from: no miss.
-    pub seen_from_afar: u64,
-    /// Reports whose sensor position (`shadows.origin`) was not plausible:
-    /// their misses count whatever the distance.
-    pub reports_without_viewpoint: u64,
-}
-
-/// Which patches of a square of the world some image observed: patch
-/// (`i0 + c`, `j0 + r`) is bit `r·side + c` of `words`.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct SeenGround {
-    pub i0: i64,
-    pub j0: i64,
-    pub side: u32,
-    pub words: Vec<u64>,
-}
-
-impl SeenGround {
-    /// A square of `side` patches from (`i0`, `j0`), nothing seen.
-    pub fn new(i0: i64, j0: i64, side: u32) -> Self {
-        Self {
-            i0,
-            j0,
-            side,
-            words: vec![0; Self::words_for(side)],
-        }
-    }
-
-    /// The words a square of `side` patches takes.
-    pub fn words_for(side: u32) -> usize {
-        (side as usize).pow(2).div_ceil(64)
-    }
-
-    /// The patches seen, as world indices (i, j).
-    pub fn iter(&self) -> impl Iterator<Item = (i64, i64)> + '_ {
-        let side = i64::from(self.side);
-        self.words.iter().enumerate().flat_map(move |(w, &word)| {
-            std::iter::successors((word != 0).then_some(word), |&bits| {
-                let rest = bits & (bits - 1);
-                (rest != 0).then_some(rest)
-            })
-            .map(move |bits| {
-                let b = w as i64 * 64 + i64::from(bits.trailing_zeros());
-                (self.i0 + b % side, self.j0 + b / side)
-            })
-        })
-    }
-
-    fn bit(&self, i: i64, j: i64) -> Option<usize> {
-        let (c, r) = (i.checked_sub(self.i0)?, j.checked_sub(self.j0)?);
-        let side = i64::from(self.side);
-        ((0..side).contains(&c) && (0..side).contains(&r)).then(|| (r * side + c) as usize)
-    }
-
-    /// Whether world patch (`i`, `j`) was seen (outside the square: no).
-    pub fn contains(&self, i: i64, j: i64) -> bool {
-        self.bit(i, j).is_some_and(|b| {
-            self.words
-                .get(b / 64)
-                .is_some_and(|w| w & (1 << (b % 64)) != 0)
-        })
-    }
-
-    pub fn insert(&mut self, i: i64, j: i64) {
-        if let Some(b) = self.bit(i, j)
-            && let Some(word) = self.words.get_mut(b / 64)
-        {
-            *word |= 1 << (b % 64);
-        }
-    }
-
-    /// Patches seen.
-    pub fn count(&self) -> u32 {
-        self.words.iter().map(|w| w.count_ones()).sum()
-    }
-}
-
-/// An immutable view of the map in the vehicle frame, cheap to share.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct MapSnapshot {
-    /// Time of the pose the snapshot is expressed in.
-    pub utime: Utime,
-    /// That pose.
-    pub world_from_vehicle: Isometry,
-    pub patch_size_m: f64,
-    pub patches: Vec<Patch>,
-    /// The ground observed around the vehicle (the window's square).
-    pub seen: SeenGround,
-    /// The elevation layer around the vehicle (004 §III), world-aligned
-    /// (shared between snapshots while the layer does not change).
-    pub elevation: Arc<ElevationGrid>,
-}
-
-impl MapSnapshot {
-    /// Whether the ground at vehicle-frame (`x`, `y`) has been seen.
-    pub fn is_seen(&self, x: f64, y: f64) -> bool {
-        self.seen_lookup()(x, y)
-    }
-
-    /// [`MapSnapshot::is_seen`] with the pose's trigonometry done once, for
-    /// many lookups.
-    pub fn seen_lookup(&self) -> impl Fn(f64, f64) -> bool + '_ {
-        let t = self.world_from_vehicle.translation.vector;
-        let (sin, cos) = yaw_of(&self.world_from_vehicle).sin_cos();
-        let inverse = 1.0 / self.patch_size_m;
-        move |x, y| {
-            let (wx, wy) = (t.x + cos * x - sin * y, t.y + sin * x + cos * y);
-            self.seen
-                .contains((wx * inverse).floor() as i64, (wy * inverse).floor() as i64)
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        self.patches.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.patches.is_empty()
-    }
-}
 
 /// The local map.
 #[derive(Debug)]
