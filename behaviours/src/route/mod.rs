@@ -74,9 +74,8 @@ pub mod dstar;
 use arcnav_arbiter::Votes;
 use arcnav_localmap::{LocalMapConfig, MapSnapshot};
 use arcnav_vehicle::SteeringResponse;
-use arcnav_vehicle::config::{self, ConfigError};
+use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::frames::yaw_of;
-use serde::{Deserialize, Serialize};
 
 use crate::behaviour::Plugin;
 use crate::behaviour::{
@@ -85,99 +84,15 @@ use crate::behaviour::{
 use crate::goal_seeking::{WaypointTracker, lookahead, vote_towards};
 use dstar::{DStarLite, PlannerStats};
 
-/// Lives in `[behaviours.route]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RouteConfig {
-    /// Side of the square of world remembered around the vehicle, m.
-    pub size_m: f64,
-    /// Side of a memory cell, m (≤ 1 m).
-    pub cell_m: f64,
-    /// Arcs head for the point of the path this far from the vehicle, m ...
-    pub lookahead_m: f64,
-    /// ... or this many seconds ahead at the cruise speed, if farther, s
-    /// (see [`crate::goal_seeking::lookahead`]).
-    pub lookahead_s: f64,
-    /// Head for the farthest point of the path in a straight line over
-    /// ground no costlier than the path's (`Route::farthest_in_sight`)
-    /// when it is at least the lookahead away, rather than for the
-    /// path's point the lookahead along.
-    pub sight_line: bool,
-    /// Cost of crossing ground no image has seen, relative to seen free ground.
-    pub unseen_cost: f64,
-    /// Extra cost of ground next to an obstacle (half a vehicle width away).
-    pub clearance_cost: f64,
-    /// Extra cost of the roughest seen ground, relative to smooth ground:
-    /// the planner takes a smooth track beside rubble when both lead there.
-    pub rough_cost: f64,
-    /// Mean |second difference| of the elevation layer's heights in a cell
-    /// at which ground starts to count as rough, and at which it is the
-    /// roughest, m.
-    pub rough_m: [f64; 2],
-    /// Cost of crossing a cell with a suspected drop-off in it, relative to
-    /// seen free ground: a detour shorter than about this many cells is
-    /// taken rather than a crossing (0, the default: as costly as its
-    /// graded cost says, like rough ground).
-    pub suspect_cost: f64,
-    /// When the vehicle starts to back up, ground no image has seen within
-    /// this distance of its front (and 60° of its heading) is shut until
-    /// seen, m (0: never).
-    pub shut_unseen_m: f64,
-    /// ... and from there the unseen cells with seen ground on both sides
-    /// (a shadow) within this distance of its front, m (at least
-    /// `shut_unseen_m`).
-    pub shut_along_m: f64,
-    /// A waypoint is reached within this distance (unless it has its own), m.
-    pub arrival_radius_m: f64,
-    /// A waypoint behind the vehicle and within this many arrival radii is passed.
-    pub pass_radius_factor: f64,
-    /// Vertices a cycle's planning may expand at most (it carries on next cycle).
-    pub max_expansions: u64,
-    /// Near where the vehicle last stood (as before backing up), the path
-    /// being followed is kept while the vehicle is on it and it costs at
-    /// most this fraction more than the best plan (0: always the best
-    /// plan). See `Route::hold_or_switch`.
-    pub hold_fraction: f64,
-}
+mod cells;
+pub mod config;
 
-impl Default for RouteConfig {
-    fn default() -> Self {
-        Self {
-            size_m: 200.0,
-            cell_m: 1.0,
-            lookahead_m: 8.0,
-            lookahead_s: 0.0,
-            sight_line: false,
-            unseen_cost: 2.0,
-            clearance_cost: 4.0,
-            rough_cost: 4.0,
-            rough_m: [0.04, 0.15],
-            suspect_cost: 0.0,
-            shut_unseen_m: 8.0,
-            shut_along_m: 25.0,
-            arrival_radius_m: 5.0,
-            pass_radius_factor: 2.0,
-            max_expansions: 200_000,
-            hold_fraction: 0.25,
-        }
-    }
-}
-
-const UNKNOWN: u8 = 0;
-const FREE: u8 = 1;
-const OBSTACLE: u8 = 2;
-/// Seen free ground of roughness level 1 to [`ROUGH_LEVELS`]: `ROUGH + level - 1`.
-const ROUGH: u8 = 3;
-const ROUGH_LEVELS: u8 = 4;
-/// Seen ground with a suspected drop-off in it (graded, reason drop-off:
-/// a hole's edge seen from too far to show its depth).
-const SUSPECT: u8 = ROUGH + ROUGH_LEVELS;
-/// The graded level that stands for a suspected drop-off in
-/// [`Route::graded`] (above every roughness level).
-const SUSPECTED_LEVEL: u8 = u8::MAX;
-/// Ground never seen that the vehicle was held short of: planned round
-/// like an obstacle until an image sees it.
-const SHUT: u8 = SUSPECT + 1;
+use cells::{
+    AXES, FREE, GAP_CELLS, Layout, NEIGHBOURS, OBSTACLE, ROUGH, ROUGH_LEVELS, SHADOW_CELLS, SHUT,
+    SHUT_HALF_ANGLE_DEG, SHUT_IN_VIEW_M, SUSPECT, SUSPECTED_LEVEL, UNKNOWN, roughness_level,
+    wholly_seen,
+};
+pub use config::RouteConfig;
 
 /// The planned path is drawn this far along ([`Behaviour::overlay`]), m.
 const OVERLAY_PATH_M: f64 = 60.0;
@@ -195,57 +110,6 @@ const STANDING_MPS: f64 = 0.1;
 /// to a path up to 8 m off, the ERIM wandered up `hillside_steep` after
 /// a stop, 477 m for 255).
 const HOLD_OFF_PATH_M: f64 = 2.0;
-
-/// Half the angle ahead of the vehicle's heading in which unseen ground is
-/// shut when it starts to back up (`shut_unseen_m`).
-const SHUT_HALF_ANGLE_DEG: f64 = 60.0;
-/// Shutting spreads only through cells at least this far inside the local
-/// map's window (at the pose the vehicle backed up from), m: ground that
-/// close to the vehicle and still unseen lay in view and out of sight (a
-/// shadow), where the edge of the ground ever seen runs along the edge of
-/// the window.
-const SHUT_IN_VIEW_M: f64 = 2.0;
-/// Shutting spreads through unseen cells with seen ground this many cells
-/// away on both sides (see `Route::between_seen`).
-const SHADOW_CELLS: i64 = 8;
-
-/// Whether every local-map patch that overlaps the memory cell `cell` m
-/// square centred on world (x, y) was seen.
-fn wholly_seen(map: &MapSnapshot, x: f64, y: f64, cell: f64) -> bool {
-    let s = map.patch_size_m;
-    let half = cell / 2.0;
-    // Patches from the one holding the cell's low edge to the one holding
-    // its high edge (a hair inside, so a patch that only touches it is out).
-    let span = |c: f64| {
-        (
-            ((c - half) / s).floor() as i64,
-            ((c + half) / s - 1e-9).ceil() as i64,
-        )
-    };
-    let ((i0, i1), (j0, j1)) = (span(x), span(y));
-    (j0..j1).all(|j| (i0..i1).all(|i| map.seen.contains(i, j)))
-}
-
-/// A cell seen in part only is shut when backing up if shut cells lie this
-/// many cells away on both sides (a gap in the shut band along an edge no
-/// wider than the vehicle; see `Route::shut_unseen_ahead`).
-const GAP_CELLS: i64 = 2;
-
-/// A row, a column and the two diagonals through a memory cell, each as
-/// one of its two directions.
-const AXES: [(i64, i64); 4] = [(1, 0), (0, 1), (1, 1), (1, -1)];
-
-/// A memory cell's eight neighbours.
-const NEIGHBOURS: [(i64, i64); 8] = [
-    (-1, -1),
-    (0, -1),
-    (1, -1),
-    (-1, 0),
-    (1, 0),
-    (-1, 1),
-    (0, 1),
-    (1, 1),
-];
 
 /// What the route behaviour did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -276,9 +140,8 @@ pub struct Route {
     tracker: WaypointTracker,
     /// The local map's window (cells wholly inside it follow the map).
     window: LocalMapConfig,
-    side: usize,
-    /// World cell index of memory cell (0, 0); `None` before the first cycle.
-    origin: Option<(i64, i64)>,
+    /// Where the memory cells lie in the world.
+    layout: Layout,
     state: Vec<u8>,
     costs: Vec<f32>,
     planner: DStarLite,
@@ -326,8 +189,11 @@ impl Route {
         Self {
             tracker: WaypointTracker::new(config.arrival_radius_m, config.pass_radius_factor),
             window: setup.localmap.clone(),
-            side,
-            origin: None,
+            layout: Layout {
+                side,
+                origin: None,
+                cell_m: config.cell_m,
+            },
             state: vec![UNKNOWN; n],
             costs: vec![0.0; n],
             planner: DStarLite::new(side, 1.0),
@@ -367,39 +233,11 @@ impl Route {
 
     /// Bytes the memory and the planner hold.
     pub fn memory_bytes(&self) -> usize {
-        let n = self.side * self.side;
+        let n = self.layout.side * self.layout.side;
         // state, costs, hits, graded; the planner's g, rhs, queued key, marks.
         n * (1 + 4 + 4 + std::mem::size_of::<(u32, u8)>())
             + n * (4 + 4 + 12 + 4)
             + (self.path.capacity() + self.flood.capacity() + self.held.capacity()) * 8
-    }
-
-    /// Memory cell of world point (x, y), if inside.
-    fn cell_at(&self, x: f64, y: f64) -> Option<usize> {
-        let (i0, j0) = self.origin?;
-        let (i, j) = (
-            (x / self.config.cell_m).floor() as i64 - i0,
-            (y / self.config.cell_m).floor() as i64 - j0,
-        );
-        let side = self.side as i64;
-        ((0..side).contains(&i) && (0..side).contains(&j)).then(|| (j * side + i) as usize)
-    }
-
-    /// Memory cell (`x`, `y`) by its column and row, if inside.
-    fn index(&self, x: i64, y: i64) -> Option<usize> {
-        let side = self.side as i64;
-        ((0..side).contains(&x) && (0..side).contains(&y)).then(|| (y * side + x) as usize)
-    }
-
-    /// How far inside the window a memory cell's centre must lie for all
-    /// of the cell to: half its diagonal.
-    fn whole_cell_margin(&self) -> f64 {
-        self.config.cell_m * std::f64::consts::FRAC_1_SQRT_2
-    }
-
-    /// Column and row of memory cell `c`.
-    fn column_row(&self, c: usize) -> (i64, i64) {
-        ((c % self.side) as i64, (c / self.side) as i64)
     }
 
     /// Whether world point `p` lies at least `margin` inside the local
@@ -420,33 +258,22 @@ impl Route {
             && vy.abs() <= w.half_width_m - margin
     }
 
-    /// World centre of memory cell `c`.
-    fn centre(&self, c: usize) -> [f64; 2] {
-        let (i0, j0) = self.origin.unwrap_or((0, 0));
-        let (i, j) = self.column_row(c);
-        let (i, j) = (i + i0, j + j0);
-        [
-            (i as f64 + 0.5) * self.config.cell_m,
-            (j as f64 + 0.5) * self.config.cell_m,
-        ]
-    }
-
     /// Centres the memory on (x, y) when the vehicle has left the middle
     /// half of it (keeping the cells that overlap); true when it moved.
     fn recentre(&mut self, x: f64, y: f64) -> bool {
         let cell = self.config.cell_m;
-        let half = (self.side / 2) as i64;
+        let half = (self.layout.side / 2) as i64;
         let wanted = (
             (x / cell).floor() as i64 - half,
             (y / cell).floor() as i64 - half,
         );
-        if let Some((i0, j0)) = self.origin {
-            let quarter = (self.side / 4) as i64;
+        if let Some((i0, j0)) = self.layout.origin {
+            let quarter = (self.layout.side / 4) as i64;
             if (wanted.0 - i0).abs() < quarter && (wanted.1 - j0).abs() < quarter {
                 return false;
             }
             let mut state = vec![UNKNOWN; self.state.len()];
-            let side = self.side as i64;
+            let side = self.layout.side as i64;
             for (c, slot) in state.iter_mut().enumerate() {
                 let (i, j) = (
                     (c as i64 % side) + wanted.0 - i0,
@@ -459,7 +286,7 @@ impl Route {
             self.state = state;
             self.stats.recentres += 1;
         }
-        self.origin = Some(wanted);
+        self.layout.origin = Some(wanted);
         self.mark_statics();
         for c in 0..self.costs.len() {
             self.costs[c] = self.cost_of(c);
@@ -476,7 +303,7 @@ impl Route {
         let patch = self.window.patch_size_m;
         let cell = self.config.cell_m;
         for c in 0..self.state.len() {
-            let [x, y] = self.centre(c);
+            let [x, y] = self.layout.centre(c);
             let (lo_i, hi_i) = (
                 ((x - cell / 2.0) / patch).floor() as i64,
                 ((x + cell / 2.0) / patch).ceil() as i64 - 1,
@@ -504,12 +331,12 @@ impl Route {
                 (1.0 + self.config.rough_cost * level) as f32
             }
         };
-        let (x, y) = self.column_row(c);
+        let (x, y) = self.layout.column_row(c);
         // A cell between shut ground on both sides (or shut ground and an
         // obstacle): a gap in a ledge's shut band one cell wide, through
         // which an image happened to see. Obstacle avoidance holds the
         // vehicle short of the unseen ground on either side of it.
-        let beside = |dx: i64, dy: i64| self.index(x + dx, y + dy).map(|n| self.state[n]);
+        let beside = |dx: i64, dy: i64| self.layout.index(x + dx, y + dy).map(|n| self.state[n]);
         if AXES.into_iter().any(|(dx, dy)| {
             matches!(
                 (beside(dx, dy), beside(-dx, -dy)),
@@ -522,6 +349,7 @@ impl Route {
         for dy in -2..=2i64 {
             for dx in -2..=2i64 {
                 if self
+                    .layout
                     .index(x + dx, y + dy)
                     .is_some_and(|n| matches!(self.state[n], OBSTACLE | SHUT))
                 {
@@ -627,6 +455,7 @@ impl Route {
     fn farthest_in_sight(&self, here: [f64; 2]) -> Option<[f64; 2]> {
         let step = 0.25 * self.config.cell_m;
         let mut limit = self
+            .layout
             .cell_at(here[0], here[1])
             .map_or(1.0, |c| self.costs[c]);
         let mut sighted = None;
@@ -635,12 +464,13 @@ impl Route {
             if !limit.is_finite() {
                 break;
             }
-            let point = self.centre(cell);
+            let point = self.layout.centre(cell);
             let (dx, dy) = (point[0] - here[0], point[1] - here[1]);
             let samples = (dx.hypot(dy) / step).ceil().max(1.0) as usize;
             let clear = (1..samples).all(|k| {
                 let f = k as f64 / samples as f64;
-                self.cell_at(here[0] + f * dx, here[1] + f * dy)
+                self.layout
+                    .cell_at(here[0] + f * dx, here[1] + f * dy)
                     .is_some_and(|c| self.costs[c] <= limit * (1.0 + 1e-6))
             });
             if !clear {
@@ -658,10 +488,10 @@ impl Route {
         }
         self.state[c] = state;
         self.stats.cell_changes += 1;
-        let (x, y) = self.column_row(c);
+        let (x, y) = self.layout.column_row(c);
         for dy in -2..=2i64 {
             for dx in -2..=2i64 {
-                if let Some(n) = self.index(x + dx, y + dy) {
+                if let Some(n) = self.layout.index(x + dx, y + dy) {
                     let cost = self.cost_of(n);
                     if cost != self.costs[n] {
                         self.costs[n] = cost;
@@ -683,7 +513,7 @@ impl Route {
         let s = map.patch_size_m;
         for patch in &map.patches {
             let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
-            if let Some(c) = self.cell_at(x, y) {
+            if let Some(c) = self.layout.cell_at(x, y) {
                 if patch.is_obstacle() {
                     self.hits[c] = self.stamp;
                 } else {
@@ -711,7 +541,7 @@ impl Route {
         let yaw = yaw_of(&map.world_from_vehicle).sin_cos();
         let cell = self.config.cell_m;
         // A cell follows the map only when wholly inside its window.
-        let margin = self.whole_cell_margin();
+        let margin = self.layout.whole_cell_margin();
         let reach = self.window.radius_m();
         let (lo_x, hi_x) = (
             ((t.x - reach) / cell).floor(),
@@ -724,7 +554,7 @@ impl Route {
         for j in lo_y as i64..=hi_y as i64 {
             for i in lo_x as i64..=hi_x as i64 {
                 let (x, y) = ((i as f64 + 0.5) * cell, (j as f64 + 0.5) * cell);
-                let Some(c) = self.cell_at(x, y) else {
+                let Some(c) = self.layout.cell_at(x, y) else {
                     continue;
                 };
                 let hit = self.hits[c] == self.stamp;
@@ -746,7 +576,7 @@ impl Route {
                         let state = if graded == SUSPECTED_LEVEL {
                             SUSPECT
                         } else {
-                            match self.roughness_level(map, x, y).max(graded) {
+                            match roughness_level(&self.config, map, x, y).max(graded) {
                                 0 => FREE,
                                 level => ROUGH + level - 1,
                             }
@@ -758,54 +588,6 @@ impl Route {
                 }
             }
         }
-    }
-
-    /// How rough the memory cell centred on world (x, y) is, from the map's
-    /// elevation layer: 0 (smooth or unmeasured) to [`ROUGH_LEVELS`]. The
-    /// measure is the mean |second difference| of the layer's heights
-    /// along x and y over the cell (`2·z(i) − z(i−1) − z(i+1)`): a plane
-    /// of any slope has none, stones and ruts smaller than the cell have
-    /// about twice their height. It rises from `rough_m[0]` (level 0) to
-    /// `rough_m[1]` (the top level).
-    fn roughness_level(&self, map: &MapSnapshot, x: f64, y: f64) -> u8 {
-        let grid = &map.elevation;
-        if grid.side < 3 {
-            return 0;
-        }
-        let s = grid.cell_size_m;
-        let half = self.config.cell_m / 2.0;
-        let side = i64::from(grid.side);
-        let (lo_i, hi_i) = (
-            ((x - half) / s).floor() as i64 - grid.origin.0,
-            ((x + half) / s).ceil() as i64 - 1 - grid.origin.0,
-        );
-        let (lo_j, hi_j) = (
-            ((y - half) / s).floor() as i64 - grid.origin.1,
-            ((y + half) / s).ceil() as i64 - 1 - grid.origin.1,
-        );
-        let z = |i: i64, j: i64| grid.cells[(j * side + i) as usize][0];
-        let (mut sum, mut count) = (0.0f32, 0u32);
-        for j in lo_j.max(1)..=hi_j.min(side - 2) {
-            for i in lo_i.max(1)..=hi_i.min(side - 2) {
-                let centre = 2.0 * z(i, j);
-                for d in [
-                    centre - z(i - 1, j) - z(i + 1, j),
-                    centre - z(i, j - 1) - z(i, j + 1),
-                ] {
-                    if d.is_finite() {
-                        sum += d.abs();
-                        count += 1;
-                    }
-                }
-            }
-        }
-        if count < 4 {
-            return 0;
-        }
-        let [smooth, rough] = self.config.rough_m;
-        let severity =
-            ((f64::from(sum / count as f32) - smooth) / (rough - smooth)).clamp(0.0, 1.0);
-        (severity * f64::from(ROUGH_LEVELS)).round() as u8
     }
 
     /// Shuts the cells no image has seen within `shut_unseen_m` of the
@@ -822,7 +604,7 @@ impl Route {
         if reach <= 0.0 {
             return;
         }
-        let margin = self.whole_cell_margin();
+        let margin = self.layout.whole_cell_margin();
         let (sin, cos) = yaw.sin_cos();
         let front = [
             position[0] + self.front_m * cos,
@@ -850,7 +632,7 @@ impl Route {
                 if distance > reach || dx * cos + dy * sin < distance * min_cos {
                     continue;
                 }
-                let Some(c) = self.cell_at(x, y) else {
+                let Some(c) = self.layout.cell_at(x, y) else {
                     continue;
                 };
                 if self.state[c] == UNKNOWN {
@@ -867,12 +649,12 @@ impl Route {
         // Through the shadow, within `shut_along_m`.
         let along = self.config.shut_along_m.max(reach);
         while let Some(c) = frontier.pop() {
-            let (x, y) = self.column_row(c);
+            let (x, y) = self.layout.column_row(c);
             for (dx, dy) in NEIGHBOURS {
-                let Some(n) = self.index(x + dx, y + dy) else {
+                let Some(n) = self.layout.index(x + dx, y + dy) else {
                     continue;
                 };
-                let [cx, cy] = self.centre(n);
+                let [cx, cy] = self.layout.centre(n);
                 if self.state[n] == UNKNOWN
                     && self.in_window(position, (sin, cos), [cx, cy], SHUT_IN_VIEW_M)
                     && (cx - front[0]).hypot(cy - front[1]) <= along
@@ -926,10 +708,11 @@ impl Route {
     /// Whether cell `c` has cells whose state is `wanted` within `cells`
     /// on both sides of it along a row, a column or a diagonal.
     fn between(&self, c: usize, cells: i64, wanted: impl Fn(u8) -> bool) -> bool {
-        let (x, y) = self.column_row(c);
+        let (x, y) = self.layout.column_row(c);
         let towards = |dx: i64, dy: i64| {
             (1..=cells).any(|k| {
-                self.index(x + k * dx, y + k * dy)
+                self.layout
+                    .index(x + k * dx, y + k * dy)
                     .is_some_and(|n| wanted(self.state[n]))
             })
         };
@@ -957,16 +740,16 @@ impl Route {
     /// The memory cell to plan to for waypoint (x, y): its own, or where
     /// the line from the vehicle to it leaves the memory.
     fn goal_cell(&self, from: [f64; 2], to: [f64; 2]) -> Option<usize> {
-        if let Some(c) = self.cell_at(to[0], to[1]) {
+        if let Some(c) = self.layout.cell_at(to[0], to[1]) {
             return Some(c);
         }
-        let (i0, j0) = self.origin?;
+        let (i0, j0) = self.layout.origin?;
         let cell = self.config.cell_m;
         // The memory shrunk by a cell, in world metres.
         let lo = [(i0 as f64 + 1.0) * cell, (j0 as f64 + 1.0) * cell];
         let hi = [
-            (i0 as f64 + self.side as f64 - 1.0) * cell,
-            (j0 as f64 + self.side as f64 - 1.0) * cell,
+            (i0 as f64 + self.layout.side as f64 - 1.0) * cell,
+            (j0 as f64 + self.layout.side as f64 - 1.0) * cell,
         ];
         let d = [to[0] - from[0], to[1] - from[1]];
         let mut t = 1.0f64;
@@ -977,7 +760,7 @@ impl Route {
                 t = t.min((lo[axis] - from[axis]) / d[axis]);
             }
         }
-        self.cell_at(from[0] + t * d[0], from[1] + t * d[1])
+        self.layout.cell_at(from[0] + t * d[0], from[1] + t * d[1])
     }
 }
 
@@ -1011,7 +794,7 @@ impl Behaviour for Route {
         }
         self.backing = backing;
         let (Some(start), Some(goal)) = (
-            self.cell_at(here[0], here[1]),
+            self.layout.cell_at(here[0], here[1]),
             match self.goal {
                 Some((i, c)) if i == index && !moved => Some(c),
                 _ => self.goal_cell(here, target),
@@ -1059,7 +842,7 @@ impl Behaviour for Route {
         // The point of the path `reach` from the vehicle.
         let carrot = if self
             .goal
-            .is_some_and(|(_, c)| self.cell_at(target[0], target[1]) == Some(c))
+            .is_some_and(|(_, c)| self.layout.cell_at(target[0], target[1]) == Some(c))
             && (target[0] - here[0]).hypot(target[1] - here[1]) <= reach
         {
             target
@@ -1074,9 +857,9 @@ impl Behaviour for Route {
         } else {
             self.path
                 .iter()
-                .map(|&c| self.centre(c))
+                .map(|&c| self.layout.centre(c))
                 .find(|p| (p[0] - here[0]).hypot(p[1] - here[1]) >= reach)
-                .or_else(|| self.path.last().map(|&c| self.centre(c)))
+                .or_else(|| self.path.last().map(|&c| self.layout.centre(c)))
                 .unwrap_or(target)
         };
         self.aimed_at = Some((carrot, true));
@@ -1095,7 +878,7 @@ impl Behaviour for Route {
     /// steered for, and the memory's obstacles and shut ground.
     fn overlay(&self, pose: &arcnav_vehicle::Pose) -> Overlay {
         let mut overlay = Overlay::default();
-        if self.origin.is_none() {
+        if self.layout.origin.is_none() {
             return overlay;
         }
         let p = pose.position();
@@ -1113,7 +896,7 @@ impl Behaviour for Route {
                 label: "route: planned path".to_owned(),
                 points: std::iter::once(from)
                     .chain(followed.copied().filter(|&c| c != from))
-                    .map(|c| local(self.centre(c)))
+                    .map(|c| local(self.layout.centre(c)))
                     .collect(),
             });
         }
@@ -1134,7 +917,7 @@ impl Behaviour for Route {
         ] {
             let centres: Vec<[f64; 2]> = (0..self.state.len())
                 .filter(|&c| self.state[c] == state)
-                .map(|c| local(self.centre(c)))
+                .map(|c| local(self.layout.centre(c)))
                 .collect();
             if !centres.is_empty() {
                 overlay.cells.push(OverlayCells {
@@ -1153,7 +936,7 @@ impl Behaviour for Route {
         self.held.clear();
         self.stood_at = None;
         self.tracker.reset();
-        self.origin = None;
+        self.layout.origin = None;
         self.goal = None;
         self.state.fill(UNKNOWN);
         self.has_path = false;
@@ -1185,55 +968,7 @@ impl Plugin for Route {
     type Config = RouteConfig;
 
     fn validate(c: &Self::Config, _setup: &Setup<'_>) -> Result<(), ConfigError> {
-        config::in_range("cell_m", c.cell_m, 0.1, 1.0)?;
-        config::in_range("size_m", c.size_m, 10.0, 2000.0)?;
-        let cells = (c.size_m / c.cell_m).round();
-        if cells > 4000.0 {
-            return Err(ConfigError::new(
-                "size_m",
-                format!(
-                    "is {} m: {cells} cells of {} m across, more than 4000 (use larger cells or a smaller area)",
-                    c.size_m, c.cell_m
-                ),
-            ));
-        }
-        config::positive("lookahead_m", c.lookahead_m)?;
-        config::in_range("lookahead_s", c.lookahead_s, 0.0, 10.0)?;
-        config::in_range("unseen_cost", c.unseen_cost, 1.0, 100.0)?;
-        config::in_range("clearance_cost", c.clearance_cost, 0.0, 100.0)?;
-        config::in_range("rough_cost", c.rough_cost, 0.0, 100.0)?;
-        config::in_range("suspect_cost", c.suspect_cost, 0.0, 1000.0)?;
-        config::in_range("shut_unseen_m", c.shut_unseen_m, 0.0, 100.0)?;
-        config::in_range("shut_along_m", c.shut_along_m, 0.0, 200.0)?;
-        config::in_range("hold_fraction", c.hold_fraction, 0.0, 10.0)?;
-        if c.suspect_cost > 0.0 && c.suspect_cost < 1.0 {
-            // Cheaper than free ground, it would break the planner's
-            // heuristic (a cell costs at least 1).
-            return Err(ConfigError::new(
-                "suspect_cost",
-                format!(
-                    "is {}, must be 0 (rough ground) or at least 1 (free ground's cost)",
-                    c.suspect_cost
-                ),
-            ));
-        }
-        let [smooth, rough] = c.rough_m;
-        config::non_negative("rough_m", smooth)?;
-        if !(rough > smooth && rough.is_finite()) {
-            return Err(ConfigError::new(
-                "rough_m",
-                format!("is [{smooth}, {rough}], the second value must exceed the first"),
-            ));
-        }
-        config::positive("arrival_radius_m", c.arrival_radius_m)?;
-        config::non_negative("pass_radius_factor", c.pass_radius_factor)?;
-        if c.max_expansions == 0 {
-            return Err(ConfigError::new(
-                "max_expansions",
-                "is 0, must be at least 1",
-            ));
-        }
-        Ok(())
+        c.validate()
     }
 
     fn build(config: Self::Config, setup: &Setup<'_>) -> Self {
