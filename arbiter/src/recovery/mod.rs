@@ -70,7 +70,6 @@
 //! behind at every decision; backing ends at once if its arc is no longer
 //! clear enough to stop on.
 
-use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::wrap_angle;
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
 use arcnav_vehicle::{
@@ -78,103 +77,14 @@ use arcnav_vehicle::{
 };
 
 use crate::trail::{Pursuit, Trail};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
-/// Lives in `[arbiter.recovery]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RecoveryConfig {
-    /// Back up when blocked (false: stop and wait, as 002's vehicle did).
-    pub enabled: bool,
-    /// Blocked this long with the vehicle standing before backing up, s.
-    pub wait_s: f64,
-    /// Backing-up speed, m/s.
-    pub speed_mps: f64,
-    /// Distance backed per recovery, m.
-    pub distance_m: f64,
-    /// A backward arc must be clear this much further than the distance, m.
-    pub margin_m: f64,
-    /// Back up only along an arc clear for at least this much (when none is
-    /// clear for `distance_m`), m.
-    pub min_distance_m: f64,
-    /// Recoveries in a row without `progress_m` of forward driving between
-    /// them; then the vehicle stops.
-    pub max_attempts: u32,
-    /// Forward driving that shows a recovery worked, m.
-    pub progress_m: f64,
-    /// Commands slower than this count as standing (blocked when the arcs'
-    /// limits force it), m/s.
-    pub creep_mps: f64,
-    /// Turn round with a K-point turn when blocked with the way to the side
-    /// or behind (false: back up once, as for any block).
-    pub turn_round: bool,
-    /// Legs (backing and forward) in one turn at most.
-    pub turn_max_legs: u32,
-    /// The turn ends when the wished-for arc curves less than this fraction
-    /// of the hardest arc towards the turn's side.
-    pub turn_exit_fraction: f64,
-    /// Back out the way the vehicle came when no manoeuvre can start or a
-    /// turn round found no leg clear.
-    pub retrace: bool,
-    /// The vehicle's own motions are remembered this far back, and one
-    /// retrace goes at most this far, m.
-    pub retrace_max_m: f64,
-    /// Retracing towards a turn ends where an arc curving towards the way
-    /// is clear this far ahead, m.
-    pub retrace_room_m: f64,
-    /// A turn round that found no leg clear before turning this far was in
-    /// a lane too narrow to turn in: the next recovery retraces, degrees.
-    pub retrace_below_deg: f64,
-}
+mod behind;
+mod config;
 
-impl Default for RecoveryConfig {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            wait_s: 1.5,
-            speed_mps: 1.0,
-            distance_m: 4.0,
-            margin_m: 0.5,
-            min_distance_m: 1.0,
-            max_attempts: 8,
-            progress_m: 8.0,
-            creep_mps: 0.1,
-            turn_round: true,
-            turn_max_legs: 12,
-            turn_exit_fraction: 0.5,
-            retrace: true,
-            retrace_max_m: 50.0,
-            retrace_room_m: 8.0,
-            retrace_below_deg: 45.0,
-        }
-    }
-}
-
-impl RecoveryConfig {
-    /// Keys relative to `[arbiter.recovery]`.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        config::in_range("wait_s", self.wait_s, 0.0, 60.0)?;
-        config::in_range("speed_mps", self.speed_mps, 0.05, 5.0)?;
-        config::in_range("distance_m", self.distance_m, 0.1, 50.0)?;
-        config::in_range("min_distance_m", self.min_distance_m, 0.0, self.distance_m)?;
-        config::non_negative("margin_m", self.margin_m)?;
-        config::non_negative("progress_m", self.progress_m)?;
-        config::in_range("creep_mps", self.creep_mps, 0.0, 1.0)?;
-        config::in_range("turn_exit_fraction", self.turn_exit_fraction, 0.0, 1.0)?;
-        config::in_range("retrace_max_m", self.retrace_max_m, 0.0, 1000.0)?;
-        config::in_range("retrace_room_m", self.retrace_room_m, 0.0, 100.0)?;
-        config::in_range("retrace_below_deg", self.retrace_below_deg, 0.0, 360.0)?;
-        for (key, value) in [
-            ("max_attempts", self.max_attempts),
-            ("turn_max_legs", self.turn_max_legs),
-        ] {
-            if value > 1000 {
-                return Err(ConfigError::new(key, format!("is {value}, at most 1000")));
-            }
-        }
-        Ok(())
-    }
-}
+pub(crate) use behind::Behind;
+use behind::Leg;
+pub use config::RecoveryConfig;
 
 /// A leg starts moving once the steering is this near its curvature, 1/m
 /// (0.13 s of the default steering rate).
@@ -203,18 +113,6 @@ const RETRACE_ROOM_M: f64 = 0.5;
 /// path can swing for a cycle as it re-plans.
 const WISH_HELD_S: f64 = 1.0;
 
-/// A turn round goes the other way when the way lies ahead on that side
-/// with at least this vote for that side's hardest arc. The vote is the
-/// cosine of the angle between the heading that arc leaves and the way;
-/// with the hardest arc turning the heading about 57° over the 8 m
-/// lookahead, 0.3 (73°) puts the way within about 130° of the heading on
-/// that side (a vote of 0: within 147°). A way just beside (a vote near 0,
-/// where a route's plan swinging between the two ends of a ditch puts it
-/// for a few seconds) does not reverse the turn: reversed for it, the turn
-/// went on the long way when the plan swung back (`ledge_north`, the ERIM
-/// at the default speed, noise seed 3: stuck after turning 342°).
-const AHEAD_VOTE: f32 = 0.3;
-
 /// What recoveries did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct RecoveryStats {
@@ -239,115 +137,6 @@ pub struct RecoveryStats {
     pub retraces: u64,
     /// Metres retraced (estimated from the commands), m.
     pub retraced_m: f64,
-}
-
-/// What the arbiter knows of the ground and the behaviours' wishes at one
-/// decision.
-pub(crate) struct Behind<'a> {
-    /// Per arc: the least backing-up clearance any fresh behaviour gave
-    /// (`None`: nobody had an opinion).
-    pub clearance: &'a [Option<f64>],
-    /// Per arc: the least forward (creeping) clearance any fresh behaviour
-    /// gave.
-    pub forward: &'a [Option<f64>],
-    /// Per arc: the fused vote before vetoes.
-    pub preference: &'a [f32],
-    /// Per arc: the weighted mean vote of the fresh behaviours that judge
-    /// no ground (give no clearance): where the vehicle wants to go (`None`:
-    /// no such behaviour voted).
-    pub wish: Option<&'a [f32]>,
-    pub curvatures: &'a [f64],
-}
-
-impl Behind<'_> {
-    /// The clearance along `arc` driven forwards or backing up.
-    fn clear(&self, arc: usize, reverse: bool) -> Option<f64> {
-        let side = if reverse {
-            self.clearance
-        } else {
-            self.forward
-        };
-        side.get(arc).copied().flatten()
-    }
-
-    /// What the vehicle wants: the wished-for arc's curvature as a
-    /// fraction of the hardest arc's (-1 hard right .. 1 hard left; ties go
-    /// to the straighter arc), and its wish vote.
-    fn wished(&self) -> Option<Wish> {
-        let wish = self.wish?;
-        let n = wish.len().min(self.curvatures.len());
-        let straight = n / 2;
-        let best = (0..n).max_by(|&a, &b| {
-            wish[a]
-                .total_cmp(&wish[b])
-                .then(b.abs_diff(straight).cmp(&a.abs_diff(straight)))
-                .then(b.cmp(&a))
-        })?;
-        let hardest = self.curvatures.iter().fold(0.0f64, |m, k| m.max(k.abs()));
-        let left: f32 = wish[straight + 1..n].iter().sum();
-        let right: f32 = wish[..straight].iter().sum();
-        (hardest > 0.0).then(|| Wish {
-            turn: self.curvatures[best] / hardest,
-            vote: wish[best],
-            better_side: if left >= right { 1.0 } else { -1.0 },
-        })
-    }
-}
-
-/// Where the behaviours that judge no ground want the vehicle to go.
-#[derive(Debug, Clone, Copy)]
-struct Wish {
-    /// The wished-for arc's curvature over the hardest arc's.
-    turn: f64,
-    /// Its vote: below 0 every arc leads away (the way lies behind).
-    vote: f32,
-    /// +1 when the left arcs are liked better than the right ones, else -1.
-    better_side: f64,
-}
-
-impl Wish {
-    /// The side to turn round towards, when the way lies beyond the arcs:
-    /// the hardest arc is wished for, or every arc leads away.
-    fn beyond_the_arcs(&self) -> Option<f64> {
-        if self.turn.abs() >= 1.0 - 1e-9 {
-            Some(self.turn.signum())
-        } else if self.vote < 0.0 {
-            Some(self.better_side)
-        } else {
-            None
-        }
-    }
-
-    /// Whether the way lies ahead on the side `-side` (opposite the
-    /// turn's): that side's hardest arc is wished for, with a vote of at
-    /// least [`AHEAD_VOTE`].
-    fn ahead_on_the_other_side(&self, side: f64) -> bool {
-        self.turn * side <= -1.0 + 1e-9 && self.vote >= AHEAD_VOTE
-    }
-}
-
-/// One leg of a manoeuvre along an arc at a crawl.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Leg {
-    arc: usize,
-    curvature: f64,
-    reverse: bool,
-    /// Distance to drive, m.
-    goal_m: f64,
-    done_m: f64,
-}
-
-impl Leg {
-    /// A leg of `goal_m` along `arc`, backing up when `reverse`.
-    fn along(arc: usize, behind: &Behind<'_>, reverse: bool, goal_m: f64) -> Self {
-        Self {
-            arc,
-            curvature: behind.curvatures[arc],
-            reverse,
-            goal_m,
-            done_m: 0.0,
-        }
-    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
