@@ -21,14 +21,14 @@ use arcnav_bus::messages::channels;
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, Reasons, SensorModel};
 use arcnav_sim::World;
-use arcnav_sim::simulator::{self, Simulator, Stepped};
+use arcnav_sim::simulator::{self, Simulator, Step, Stepped};
 use arcnav_vehicle::time::{micros_to_seconds, seconds_to_micros};
 use arcnav_vehicle::{SteeringCommand, Utime};
 
 use crate::recorder::{Recorder, WriteFailed};
 use crate::render;
 use arcnav_config::Resolved;
-use arcnav_pipeline::{Input, Sink};
+use arcnav_pipeline::{Input, Pipeline, Sink};
 use arcnav_wire as wire;
 pub use report::{
     MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats, TrackPoint,
@@ -318,29 +318,7 @@ pub fn run_mission(
                 speed_mps: state.speed_mps,
             });
         }
-        for (i, done, slice) in step.slices {
-            if options.log_mode == LogMode::All {
-                sink.log.message(
-                    done,
-                    &channels::range_image(&sensors[i].id),
-                    &wire::range_slice_to_wire(&slice),
-                );
-            }
-            pipeline.input(Input::Slice(slice), &mut sink);
-        }
-        sink.log
-            .message(t, channels::POSE, &pose_t::from(&step.pose));
-        pipeline.input(Input::Pose(step.pose), &mut sink);
-        for (i, image) in step.images {
-            if options.log_mode == LogMode::All {
-                sink.log.message(
-                    t,
-                    &channels::range_image(&sensors[i].id),
-                    &wire::range_image_to_wire(&image),
-                );
-            }
-            pipeline.input(Input::Image(image), &mut sink);
-        }
+        feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
         pipeline.run_until(t, &mut sink);
         for command in sink.commands.drain(..) {
             simulator.command(command);
@@ -376,9 +354,96 @@ pub fn run_mission(
             });
         }
     }
-    let duration = micros_to_seconds(t - t0);
+    let report = mission_report(&Ended {
+        config,
+        world: &world,
+        simulator: &simulator,
+        pipeline: &pipeline,
+        sink: &sink,
+        outcome,
+        duration_s: micros_to_seconds(t - t0),
+        wall_time_s: wall.elapsed().as_secs_f64(),
+    });
+    sink.log.finish()?;
+    Ok(MissionRun {
+        report,
+        track: sink.track,
+        image_positions: simulator.image_positions().to_vec(),
+        obstacle_patches: sink.patches,
+        seen_patches: sink.seen.patches(),
+        patch_size_m: config.localmap.patch_size_m,
+        snapshots: sink.snapshots,
+    })
+}
+
+/// One step's inputs, logged (range data only with [`LogMode::All`]) and
+/// given to the pipeline: the slices that completed, the pose, the whole
+/// images.
+fn feed(
+    Step {
+        slices,
+        pose,
+        images,
+        ..
+    }: Step,
+    t: Utime,
+    log_mode: LogMode,
+    sensors: &[SensorModel],
+    pipeline: &mut Pipeline,
+    sink: &mut MissionSink<'_>,
+) {
+    for (i, done, slice) in slices {
+        if log_mode == LogMode::All {
+            sink.log.message(
+                done,
+                &channels::range_image(&sensors[i].id),
+                &wire::range_slice_to_wire(&slice),
+            );
+        }
+        pipeline.input(Input::Slice(slice), sink);
+    }
+    sink.log.message(t, channels::POSE, &pose_t::from(&pose));
+    pipeline.input(Input::Pose(pose), sink);
+    for (i, image) in images {
+        if log_mode == LogMode::All {
+            sink.log.message(
+                t,
+                &channels::range_image(&sensors[i].id),
+                &wire::range_image_to_wire(&image),
+            );
+        }
+        pipeline.input(Input::Image(image), sink);
+    }
+}
+
+/// What a mission's report is made from, at its end.
+struct Ended<'e, 'a> {
+    config: &'e Resolved,
+    world: &'e World,
+    simulator: &'e Simulator,
+    pipeline: &'e Pipeline,
+    sink: &'e MissionSink<'a>,
+    outcome: Outcome,
+    duration_s: f64,
+    wall_time_s: f64,
+}
+
+/// The report of a mission that has ended.
+fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
+    let Ended {
+        config,
+        world,
+        simulator,
+        pipeline,
+        sink,
+        outcome,
+        duration_s: duration,
+        wall_time_s: wall_time,
+    } = *ended;
+    let t0 = SIM_EPOCH_US;
+    let sensors: &[SensorModel] = &config.sensors;
     let arbiter = pipeline.arbiter.stats();
-    let mut stops = sink.stops;
+    let mut stops = sink.stops.clone();
     stops.no_votes = arbiter.stops_no_votes;
     stops.required_stale = arbiter.stops_required_stale;
     stops.all_arcs_forbidden = arbiter.stops_all_forbidden;
@@ -394,13 +459,12 @@ pub fn run_mission(
         .collect();
     let reached = pipeline.behaviours.progress().map_or(0, |p| p.current);
     let drops = pipeline.perception.drops;
-    let wall_time = wall.elapsed().as_secs_f64();
     let average_speed = if duration > 0.0 {
         simulator.distance_m() / duration
     } else {
         0.0
     };
-    let report = MissionReport {
+    MissionReport {
         world: world.spec.name.clone(),
         sensor: sensors
             .iter()
@@ -467,17 +531,7 @@ pub fn run_mission(
         speed_fraction_of_bound: average_speed / config.speed_bound.bound_mps.max(1e-9),
         speed_bound: config.speed_bound.clone(),
         speed_limited_by_s: arbiter.moving.seconds().into_iter().collect(),
-    };
-    sink.log.finish()?;
-    Ok(MissionRun {
-        report,
-        track: sink.track,
-        image_positions: simulator.image_positions().to_vec(),
-        obstacle_patches: sink.patches,
-        seen_patches: sink.seen.patches(),
-        patch_size_m: config.localmap.patch_size_m,
-        snapshots: sink.snapshots,
-    })
+    }
 }
 
 /// When a simulated mission is stuck: for `after` no nearer to its
