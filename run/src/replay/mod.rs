@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 
 use arcnav_arbiter::{BehaviourVotes, Decision};
 use arcnav_behaviours::{Mission, Overlay};
-use arcnav_bus::log::{InTimeOrder, LogReader, LogWriteError, ReorderWindow};
-use arcnav_bus::messages::{AnyMessage, TypedEvents};
+use arcnav_bus::log::{EventSource, InTimeOrder, LogReader, LogWriteError, ReorderWindow};
+use arcnav_bus::messages::{AnyMessage, TypedEvent, TypedEvents};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::{ArcSet, ConfigError, Pose, SteeringCommand, Utime};
@@ -30,7 +30,7 @@ pub use problems::{InputProblems, LogSummary};
 
 use crate::recorder::{Recorder, WriteFailed};
 use arcnav_config::Resolved;
-use arcnav_pipeline::{Input, Sink};
+use arcnav_pipeline::{Input, Pipeline, Sink};
 use arcnav_wire as wire;
 
 /// How to replay.
@@ -223,6 +223,178 @@ pub fn parse_waypoints(text: &str) -> Result<Mission, WaypointsError> {
 /// The longest step of log time `--speed` waits out, µs.
 const MAX_PACED_STEP_US: Utime = 60_000_000;
 
+/// What a replay takes from its log, besides the decisions it makes.
+#[derive(Default)]
+struct Fed {
+    inputs: InputCounts,
+    problems: InputProblems,
+    /// The log's own decisions, by their cycle's time.
+    recorded: BTreeMap<Utime, Cycle>,
+    /// Recorded votes whose command has not been read yet.
+    recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>>,
+    /// Recorded obstacle cells (recomputed, unless replayed as they were).
+    recorded_cells: u64,
+}
+
+/// How a replay takes its events.
+struct Taking<'a> {
+    /// The log's recorded obstacle cells are fed instead of its range data.
+    recorded_cells: bool,
+    /// Waypoints were given: the log's own are not fed.
+    waypoints_given: bool,
+    arcs: &'a ArcSet,
+}
+
+/// One event of the log within the replay's window: fed to the pipeline
+/// (and copied to the output log), kept as a recorded decision, or counted
+/// as a problem.
+fn take(
+    event: TypedEvent,
+    how: Taking<'_>,
+    pipeline: &mut Pipeline,
+    sink: &mut ReplaySink<'_>,
+    fed: &mut Fed,
+) {
+    let t = event.timestamp;
+    let channel = event.channel.as_str();
+    if !event.message.on_its_channel(channel) {
+        *fed.problems.foreign.entry(event.channel).or_default() += 1;
+        return;
+    }
+    match event.message {
+        AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
+            Ok(pose) => {
+                fed.inputs.poses += 1;
+                sink.out.message(t, channel, &msg);
+                pipeline.input(Input::Pose(pose), sink);
+            }
+            Err(e) => {
+                tracing::debug!(%e, "invalid pose skipped");
+                fed.problems.invalid_poses += 1;
+            }
+        },
+        AnyMessage::RangeImage(msg) if !how.recorded_cells => {
+            let encoded = arcnav_bus::Message::encode(&msg).unwrap_or_default();
+            match wire::range_image_from_wire(msg) {
+                Ok(image) => {
+                    fed.inputs.images += 1;
+                    sink.out.event(t, channel, &encoded);
+                    pipeline.input(Input::Image(image), sink);
+                }
+                Err(e) => {
+                    tracing::debug!(%e, "invalid range image skipped");
+                    fed.problems.invalid_images += 1;
+                }
+            }
+        }
+        AnyMessage::RangeSlice(msg) if !how.recorded_cells => {
+            let encoded = arcnav_bus::Message::encode(&msg).unwrap_or_default();
+            match wire::range_slice_from_wire(msg) {
+                Ok(slice) => {
+                    fed.inputs.slices += 1;
+                    sink.out.event(t, channel, &encoded);
+                    pipeline.input(Input::Slice(slice), sink);
+                }
+                Err(e) => {
+                    tracing::debug!(%e, "invalid range slice skipped");
+                    fed.problems.invalid_slices += 1;
+                }
+            }
+        }
+        AnyMessage::ObstacleCells(msg) if how.recorded_cells => {
+            match wire::obstacles_from_wire(msg) {
+                Ok(report) => {
+                    fed.inputs.recorded_cells += 1;
+                    sink.on_obstacles(t, &report);
+                    pipeline.input(Input::Obstacles(report), sink);
+                }
+                Err(_) => *fed.problems.undecodable.entry(event.channel).or_default() += 1,
+            }
+        }
+        AnyMessage::Waypoints(msg) if !how.waypoints_given => match wire::mission_from_wire(&msg) {
+            Ok(mission) => {
+                fed.inputs.waypoints += 1;
+                sink.out.message(t, channel, &msg);
+                pipeline.input(Input::Waypoints(mission), sink);
+            }
+            Err(_) => *fed.problems.undecodable.entry(event.channel).or_default() += 1,
+        },
+        // Decisions are keyed by their cycle's time (the message's own
+        // utime), as the replayed ones are: a logger stamps events when
+        // it receives them, later than the cycle.
+        AnyMessage::SteeringCommand(msg) => {
+            fed.recorded.insert(
+                msg.utime,
+                Cycle {
+                    command: SteeringCommand::from(&msg),
+                    votes: fed.recorded_votes.remove(&msg.utime).unwrap_or_default(),
+                },
+            );
+        }
+        AnyMessage::ArcVotes(msg) => {
+            if let Ok(votes) = wire::votes_from_wire(&msg, how.arcs) {
+                fed.recorded_votes
+                    .entry(votes.utime)
+                    .or_default()
+                    .push(votes);
+            }
+        }
+        // Recomputed by the replay: the recorded ones are replaced.
+        AnyMessage::ObstacleCells(_) => fed.recorded_cells += 1,
+        AnyMessage::RangeImage(_)
+        | AnyMessage::RangeSlice(_)
+        | AnyMessage::Waypoints(_)
+        | AnyMessage::LocalMap(_) => {
+            *fed.problems.ignored.entry(event.channel).or_default() += 1;
+        }
+    }
+}
+
+/// The problems the pipeline and the log reader counted, added to those
+/// the replay met.
+fn tally<S: EventSource>(
+    fed: &mut Fed,
+    pipeline: &Pipeline,
+    events: &TypedEvents<InTimeOrder<S>>,
+    recorded_cells: bool,
+) {
+    let Fed {
+        inputs,
+        problems,
+        recorded_cells: cells,
+        ..
+    } = fed;
+    let drops = pipeline.perception.drops;
+    problems.images_without_pose = drops.no_pose;
+    problems.images_out_of_order = drops.out_of_order;
+    problems.invalid_images += drops.invalid;
+    let slices = pipeline.perception.slices;
+    problems.invalid_slices += slices.invalid;
+    problems.slices_out_of_order = slices.stream.out_of_order + slices.stream.inconsistent;
+    problems.lost_slice_lines = slices.stream.lost_lines;
+    let counts = pipeline.cycle.counts();
+    problems.map_resets = counts.map_resets;
+    problems.skipped_cycles = counts.skipped_cycles;
+    problems.clock_restarts = counts.restarts;
+    problems.reports_refused = pipeline.cycle.map.map.stats().reports_refused;
+    problems.log = events.log_stats().into();
+    problems.no_poses = inputs.poses == 0;
+    problems.images_unplaced =
+        pipeline.perception.waiting() as u64 + pipeline.perception.drops.clock_restart;
+    let order = *events.source().order();
+    problems.reordered = order.reordered;
+    problems.max_reorder_lag_s = order.max_lag_us as f64 * 1e-6;
+    problems.fed_late = order.beyond_window;
+    problems.log_restarts = order.restarts;
+    if inputs.images == 0 && inputs.slices == 0 && !recorded_cells {
+        problems.cells_unused = *cells;
+    }
+    problems.unknown_channels = events.stats().unknown.clone();
+    for (channel, n) in &events.stats().undecodable {
+        *problems.undecodable.entry(channel.clone()).or_default() += n;
+    }
+}
+
 /// Replays the log at `path`.
 pub fn replay(
     path: &Path,
@@ -249,18 +421,15 @@ pub fn replay(
         kept: None,
         overlays: Vec::new(),
     };
-    let mut recorded: BTreeMap<Utime, Cycle> = BTreeMap::new();
-    let mut recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>> = BTreeMap::new();
-    let (mut inputs, mut problems) = (InputCounts::default(), InputProblems::default());
+    let mut fed = Fed::default();
     let mut span: Option<(Utime, Utime)> = None;
     let mut waypoints_given = false;
-    let mut recorded_cells = 0u64;
     let mut skipped_mission = None;
     let mut past_to = false;
     if let Some(mission) = &options.waypoints {
         pipeline.input(Input::Waypoints(mission.clone()), &mut sink);
         waypoints_given = true;
-        inputs.waypoints += 1;
+        fed.inputs.waypoints += 1;
     }
     let (wall_start, mut first_time) = (Instant::now(), None::<Utime>);
     let mut last_progress = 0;
@@ -285,23 +454,23 @@ pub fn replay(
             {
                 skipped_mission = Some((t, event.channel.clone(), msg.clone()));
             }
-            problems.outside_window += 1;
+            fed.problems.outside_window += 1;
             continue;
         }
         if let Some((at, channel, msg)) = skipped_mission.take() {
             match wire::mission_from_wire(&msg) {
                 Ok(mission) => {
-                    inputs.waypoints += 1;
+                    fed.inputs.waypoints += 1;
                     sink.out.message(at, &channel, &msg);
                     pipeline.input(Input::Waypoints(mission), &mut sink);
                 }
-                Err(_) => *problems.undecodable.entry(channel).or_default() += 1,
+                Err(_) => *fed.problems.undecodable.entry(channel).or_default() += 1,
             }
         }
         if options.to_s.is_some_and(|to| since > to) {
             // Past the end: one event alone may be a damaged time (a flipped
             // bit); two in a row end the replay.
-            problems.outside_window += 1;
+            fed.problems.outside_window += 1;
             if past_to {
                 break;
             }
@@ -337,95 +506,17 @@ pub fn replay(
             last_progress = position;
             progress(position);
         }
-        let channel = event.channel.as_str();
-        if !event.message.on_its_channel(channel) {
-            *problems.foreign.entry(event.channel).or_default() += 1;
-            continue;
-        }
-        match event.message {
-            AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
-                Ok(pose) => {
-                    inputs.poses += 1;
-                    sink.out.message(t, channel, &msg);
-                    pipeline.input(Input::Pose(pose), &mut sink);
-                }
-                Err(e) => {
-                    tracing::debug!(%e, "invalid pose skipped");
-                    problems.invalid_poses += 1;
-                }
+        take(
+            event,
+            Taking {
+                recorded_cells: options.recorded_cells,
+                waypoints_given,
+                arcs: &arcs,
             },
-            AnyMessage::RangeImage(msg) if !options.recorded_cells => {
-                let encoded = arcnav_bus::Message::encode(&msg).unwrap_or_default();
-                match wire::range_image_from_wire(msg) {
-                    Ok(image) => {
-                        inputs.images += 1;
-                        sink.out.event(t, channel, &encoded);
-                        pipeline.input(Input::Image(image), &mut sink);
-                    }
-                    Err(e) => {
-                        tracing::debug!(%e, "invalid range image skipped");
-                        problems.invalid_images += 1;
-                    }
-                }
-            }
-            AnyMessage::RangeSlice(msg) if !options.recorded_cells => {
-                let encoded = arcnav_bus::Message::encode(&msg).unwrap_or_default();
-                match wire::range_slice_from_wire(msg) {
-                    Ok(slice) => {
-                        inputs.slices += 1;
-                        sink.out.event(t, channel, &encoded);
-                        pipeline.input(Input::Slice(slice), &mut sink);
-                    }
-                    Err(e) => {
-                        tracing::debug!(%e, "invalid range slice skipped");
-                        problems.invalid_slices += 1;
-                    }
-                }
-            }
-            AnyMessage::ObstacleCells(msg) if options.recorded_cells => {
-                match wire::obstacles_from_wire(msg) {
-                    Ok(report) => {
-                        inputs.recorded_cells += 1;
-                        sink.on_obstacles(t, &report);
-                        pipeline.input(Input::Obstacles(report), &mut sink);
-                    }
-                    Err(_) => *problems.undecodable.entry(event.channel).or_default() += 1,
-                }
-            }
-            AnyMessage::Waypoints(msg) if !waypoints_given => match wire::mission_from_wire(&msg) {
-                Ok(mission) => {
-                    inputs.waypoints += 1;
-                    sink.out.message(t, channel, &msg);
-                    pipeline.input(Input::Waypoints(mission), &mut sink);
-                }
-                Err(_) => *problems.undecodable.entry(event.channel).or_default() += 1,
-            },
-            // Decisions are keyed by their cycle's time (the message's own
-            // utime), as the replayed ones are: a logger stamps events when
-            // it receives them, later than the cycle.
-            AnyMessage::SteeringCommand(msg) => {
-                recorded.insert(
-                    msg.utime,
-                    Cycle {
-                        command: SteeringCommand::from(&msg),
-                        votes: recorded_votes.remove(&msg.utime).unwrap_or_default(),
-                    },
-                );
-            }
-            AnyMessage::ArcVotes(msg) => {
-                if let Ok(votes) = wire::votes_from_wire(&msg, &arcs) {
-                    recorded_votes.entry(votes.utime).or_default().push(votes);
-                }
-            }
-            // Recomputed by the replay: the recorded ones are replaced.
-            AnyMessage::ObstacleCells(_) => recorded_cells += 1,
-            AnyMessage::RangeImage(_)
-            | AnyMessage::RangeSlice(_)
-            | AnyMessage::Waypoints(_)
-            | AnyMessage::LocalMap(_) => {
-                *problems.ignored.entry(event.channel).or_default() += 1;
-            }
-        }
+            &mut pipeline,
+            &mut sink,
+            &mut fed,
+        );
         if let Some(e) = sink.out.error.take() {
             return Err(e);
         }
@@ -438,40 +529,12 @@ pub fn replay(
         pipeline.run_until(newest, &mut sink);
     }
     sink.out.finish()?;
-    let drops = pipeline.perception.drops;
-    problems.images_without_pose = drops.no_pose;
-    problems.images_out_of_order = drops.out_of_order;
-    problems.invalid_images += drops.invalid;
-    let slices = pipeline.perception.slices;
-    problems.invalid_slices += slices.invalid;
-    problems.slices_out_of_order = slices.stream.out_of_order + slices.stream.inconsistent;
-    problems.lost_slice_lines = slices.stream.lost_lines;
-    let counts = pipeline.cycle.counts();
-    problems.map_resets = counts.map_resets;
-    problems.skipped_cycles = counts.skipped_cycles;
-    problems.clock_restarts = counts.restarts;
-    problems.reports_refused = pipeline.cycle.map.map.stats().reports_refused;
-    problems.log = events.log_stats().into();
-    problems.no_poses = inputs.poses == 0;
-    problems.images_unplaced =
-        pipeline.perception.waiting() as u64 + pipeline.perception.drops.clock_restart;
-    let order = *events.source().order();
-    problems.reordered = order.reordered;
-    problems.max_reorder_lag_s = order.max_lag_us as f64 * 1e-6;
-    problems.fed_late = order.beyond_window;
-    problems.log_restarts = order.restarts;
-    if inputs.images == 0 && inputs.slices == 0 && !options.recorded_cells {
-        problems.cells_unused = recorded_cells;
-    }
-    problems.unknown_channels = events.stats().unknown.clone();
-    for (channel, n) in &events.stats().undecodable {
-        *problems.undecodable.entry(channel.clone()).or_default() += n;
-    }
+    tally(&mut fed, &pipeline, &events, options.recorded_cells);
     Ok(ReplayResult {
         cycles: sink.cycles,
-        recorded,
-        inputs,
-        problems,
+        recorded: fed.recorded,
+        inputs: fed.inputs,
+        problems: fed.problems,
         span,
         kept: sink.kept,
         arcs,
