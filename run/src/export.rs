@@ -23,7 +23,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use arcnav_arbiter::Arbiter;
-use arcnav_bus::lcmtypes::local_map_t;
+use arcnav_bus::lcmtypes::{local_map_t, obstacle_cells_t, pose_t, waypoints_t};
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_pipeline::Delivery;
@@ -211,6 +211,102 @@ impl Topics {
     }
 }
 
+/// The scenes and transforms of one message each.
+impl Topics {
+    /// A pose as the vehicle's transform (`/tf`) and as `/pose`.
+    fn pose(&mut self, msg: &pose_t, time: PartialMetadata) {
+        let [w, x, y, z] = msg.orientation;
+        let [px, py, pz] = msg.position;
+        let rotation = Some(Quaternion { x, y, z, w });
+        let translation = Some(Vector3 {
+            x: px,
+            y: py,
+            z: pz,
+        });
+        let transforms = self
+            .transforms
+            .get_or_insert_with(|| self.ctx.channel_builder("/tf").build());
+        transforms.log_with_meta(
+            &FrameTransforms {
+                transforms: vec![FrameTransform {
+                    timestamp: Some(timestamp(msg.utime)),
+                    parent_frame_id: "world".into(),
+                    child_frame_id: "vehicle".into(),
+                    translation,
+                    rotation,
+                }],
+            },
+            time,
+        );
+        let poses = self
+            .poses
+            .get_or_insert_with(|| self.ctx.channel_builder("/pose").build());
+        poses.log_with_meta(
+            &PoseInFrame {
+                timestamp: Some(timestamp(msg.utime)),
+                frame_id: "world".into(),
+                pose: Some(Pose {
+                    position: translation,
+                    orientation: rotation,
+                }),
+            },
+            time,
+        );
+    }
+
+    /// Obstacle cells as cubes (`/obstacle_cells`): obstacles red, graded
+    /// ground purple by cost.
+    fn obstacle_cells(&mut self, msg: &obstacle_cells_t, time: PartialMetadata) {
+        let cubes = msg
+            .cells
+            .iter()
+            .map(|c| {
+                cell_cube(
+                    c.x,
+                    c.y,
+                    msg.cell_size,
+                    [c.z_min, c.z_max],
+                    // Obstacles red, graded ground purple by cost.
+                    if c.cost >= 1.0 {
+                        [0.85, 0.15, 0.1, 0.8]
+                    } else {
+                        [0.5, 0.15, 0.6, 0.2 + 0.6 * f64::from(c.cost)]
+                    },
+                )
+            })
+            .collect();
+        let entity = SceneEntity {
+            id: format!("cells {}", msg.sensor),
+            cubes,
+            ..SceneEntity::default()
+        };
+        self.scene("/obstacle_cells", msg.utime, "world", entity, time);
+    }
+
+    /// Waypoints as spheres of their radius (`/waypoints`).
+    fn waypoints(&mut self, msg: &waypoints_t, time: PartialMetadata) {
+        let spheres = msg
+            .position
+            .iter()
+            .zip(&msg.radius)
+            .map(|(p, &r)| {
+                let d = 2.0 * f64::from(r).max(1.0);
+                SpherePrimitive {
+                    pose: at(p[0], p[1], 0.0),
+                    size: Some(Vector3 { x: d, y: d, z: 0.5 }),
+                    color: Some(rgba([0.1, 0.4, 0.9, 0.5])),
+                }
+            })
+            .collect();
+        let entity = SceneEntity {
+            id: "waypoints".into(),
+            spheres,
+            ..SceneEntity::default()
+        };
+        self.scene("/waypoints", msg.utime, "world", entity, time);
+    }
+}
+
 const VOTES_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"behaviour":{"type":"string"},"curvature":{"type":"array","items":{"type":"number"}},"votes":{"type":"array","items":{"type":"number"}},"vetoed":{"type":"array","items":{"type":"boolean"}},"speed_vote":{"type":["number","null"]}}}"#;
 const COMMAND_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"curvature":{"type":"number"},"speed_mps":{"type":"number"},"arc_index":{"type":"integer"},"vote":{"type":"number"}}}"#;
 
@@ -290,44 +386,8 @@ pub fn export_mcap(
                     cycle.on_pose(pose, out);
                     cycle.advance(pose.utime, true, out);
                 }
-                let [w, x, y, z] = msg.orientation;
-                let [px, py, pz] = msg.position;
-                let rotation = Some(Quaternion { x, y, z, w });
-                let translation = Some(Vector3 {
-                    x: px,
-                    y: py,
-                    z: pz,
-                });
-                let transforms = topics
-                    .transforms
-                    .get_or_insert_with(|| ctx.channel_builder("/tf").build());
-                transforms.log_with_meta(
-                    &FrameTransforms {
-                        transforms: vec![FrameTransform {
-                            timestamp: Some(timestamp(msg.utime)),
-                            parent_frame_id: "world".into(),
-                            child_frame_id: "vehicle".into(),
-                            translation,
-                            rotation,
-                        }],
-                    },
-                    time,
-                );
+                topics.pose(&msg, time);
                 wrote("/tf");
-                let poses = topics
-                    .poses
-                    .get_or_insert_with(|| ctx.channel_builder("/pose").build());
-                poses.log_with_meta(
-                    &PoseInFrame {
-                        timestamp: Some(timestamp(msg.utime)),
-                        frame_id: "world".into(),
-                        pose: Some(Pose {
-                            position: translation,
-                            orientation: rotation,
-                        }),
-                    },
-                    time,
-                );
                 wrote("/pose");
             }
             AnyMessage::RangeImage(msg) => {
@@ -357,30 +417,7 @@ pub fn export_mcap(
                 {
                     cycle.on_report(report, (), out);
                 }
-                let cubes = msg
-                    .cells
-                    .iter()
-                    .map(|c| {
-                        cell_cube(
-                            c.x,
-                            c.y,
-                            msg.cell_size,
-                            [c.z_min, c.z_max],
-                            // Obstacles red, graded ground purple by cost.
-                            if c.cost >= 1.0 {
-                                [0.85, 0.15, 0.1, 0.8]
-                            } else {
-                                [0.5, 0.15, 0.6, 0.2 + 0.6 * f64::from(c.cost)]
-                            },
-                        )
-                    })
-                    .collect();
-                let entity = SceneEntity {
-                    id: format!("cells {}", msg.sensor),
-                    cubes,
-                    ..SceneEntity::default()
-                };
-                topics.scene("/obstacle_cells", msg.utime, "world", entity, time);
+                topics.obstacle_cells(&msg, time);
                 wrote("/obstacle_cells");
             }
             AnyMessage::LocalMap(msg) => {
@@ -388,25 +425,7 @@ pub fn export_mcap(
                 wrote("/local_map");
             }
             AnyMessage::Waypoints(msg) => {
-                let spheres = msg
-                    .position
-                    .iter()
-                    .zip(&msg.radius)
-                    .map(|(p, &r)| {
-                        let d = 2.0 * f64::from(r).max(1.0);
-                        SpherePrimitive {
-                            pose: at(p[0], p[1], 0.0),
-                            size: Some(Vector3 { x: d, y: d, z: 0.5 }),
-                            color: Some(rgba([0.1, 0.4, 0.9, 0.5])),
-                        }
-                    })
-                    .collect();
-                let entity = SceneEntity {
-                    id: "waypoints".into(),
-                    spheres,
-                    ..SceneEntity::default()
-                };
-                topics.scene("/waypoints", msg.utime, "world", entity, time);
+                topics.waypoints(&msg, time);
                 wrote("/waypoints");
             }
             AnyMessage::ArcVotes(msg) => {
