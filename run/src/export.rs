@@ -23,7 +23,9 @@ use std::path::Path;
 use std::sync::Arc;
 
 use arcnav_arbiter::Arbiter;
-use arcnav_bus::lcmtypes::{local_map_t, obstacle_cells_t, pose_t, waypoints_t};
+use arcnav_bus::lcmtypes::{
+    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, steering_command_t, waypoints_t,
+};
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_pipeline::Delivery;
@@ -211,6 +213,31 @@ impl Topics {
     }
 }
 
+impl ExportSummary {
+    /// The arcnav message an event holds, on arcnav's channel for it; else
+    /// none, the event counted as skipped with why.
+    fn decoded(&mut self, channel: &str, data: &[u8]) -> Option<AnyMessage> {
+        match AnyMessage::decode(data) {
+            Ok(Some(m)) if m.on_its_channel(channel) => Some(m),
+            Ok(Some(m)) => {
+                self.skip(
+                    channel,
+                    format!("a {} on a channel not arcnav's for it", m.type_name()),
+                );
+                None
+            }
+            Ok(None) => {
+                self.skip(channel, "not an arcnav message type");
+                None
+            }
+            Err(e) => {
+                self.skip(channel, format!("does not decode: {e}"));
+                None
+            }
+        }
+    }
+}
+
 /// The scenes and transforms of one message each.
 impl Topics {
     /// A pose as the vehicle's transform (`/tf`) and as `/pose`.
@@ -305,6 +332,61 @@ impl Topics {
         };
         self.scene("/waypoints", msg.utime, "world", entity, time);
     }
+    /// An arc-votes message as JSON on `topic`; false when the writer
+    /// refused the topic.
+    fn votes_json(&mut self, topic: &str, msg: &arc_votes_t, time: PartialMetadata) -> bool {
+        let json = serde_json::json!({
+            "utime": msg.utime,
+            "behaviour": msg.behaviour,
+            "curvature": msg.curvature,
+            "votes": msg.votes,
+            "vetoed": msg.vetoed,
+            "speed_vote": msg.has_speed_vote.then_some(msg.speed_vote),
+        });
+        let Some(channel) = self.json(topic, "arcnav.ArcVotes", VOTES_SCHEMA) else {
+            return false;
+        };
+        channel.log_with_meta(json.to_string().as_bytes(), time);
+        true
+    }
+
+    /// A steering command as JSON (`/steering_command`); false when the
+    /// writer refused the topic.
+    fn command_json(&mut self, msg: &steering_command_t, time: PartialMetadata) -> bool {
+        let json = serde_json::json!({
+            "utime": msg.utime,
+            "curvature": msg.curvature,
+            "speed_mps": msg.speed,
+            "arc_index": msg.arc_index,
+            "vote": msg.vote,
+        });
+        let Some(channel) = self.json(
+            "/steering_command",
+            "arcnav.SteeringCommand",
+            COMMAND_SCHEMA,
+        ) else {
+            return false;
+        };
+        channel.log_with_meta(json.to_string().as_bytes(), time);
+        true
+    }
+
+    /// The arcs by their fused vote, the commanded one marked (`/arcs`).
+    fn arcs(
+        &mut self,
+        arcs: &ArcSet,
+        fused: &[f32],
+        msg: &steering_command_t,
+        time: PartialMetadata,
+    ) {
+        let chosen = usize::try_from(msg.arc_index).ok();
+        let entity = SceneEntity {
+            id: "arcs".into(),
+            lines: arc_lines(arcs, fused, chosen),
+            ..SceneEntity::default()
+        };
+        self.scene("/arcs", msg.utime, "vehicle", entity, time);
+    }
 }
 
 const VOTES_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"behaviour":{"type":"string"},"curvature":{"type":"array","items":{"type":"number"}},"votes":{"type":"array","items":{"type":"number"}},"vetoed":{"type":"array","items":{"type":"boolean"}},"speed_vote":{"type":["number","null"]}}}"#;
@@ -359,23 +441,8 @@ pub fn export_mcap(
         };
         summary.events += 1;
         let time = PartialMetadata::with_log_time(nanos(event.timestamp));
-        let message = match AnyMessage::decode(&event.data) {
-            Ok(Some(m)) if m.on_its_channel(&event.channel) => m,
-            Ok(Some(m)) => {
-                summary.skip(
-                    &event.channel,
-                    format!("a {} on a channel not arcnav's for it", m.type_name()),
-                );
-                continue;
-            }
-            Ok(None) => {
-                summary.skip(&event.channel, "not an arcnav message type");
-                continue;
-            }
-            Err(e) => {
-                summary.skip(&event.channel, format!("does not decode: {e}"));
-                continue;
-            }
+        let Some(message) = summary.decoded(&event.channel, &event.data) else {
+            continue;
         };
         let mut wrote = |topic: &str| *summary.topics.entry(topic.to_owned()).or_default() += 1;
         match message {
@@ -434,53 +501,19 @@ pub fn export_mcap(
                     // Votes over another arc set are drawn but not fused.
                     let _ = arbiter.on_votes(&votes);
                 }
-                let json = serde_json::json!({
-                    "utime": msg.utime,
-                    "behaviour": msg.behaviour,
-                    "curvature": msg.curvature,
-                    "votes": msg.votes,
-                    "vetoed": msg.vetoed,
-                    "speed_vote": msg.has_speed_vote.then_some(msg.speed_vote),
-                });
-                match topics.json(&topic, "arcnav.ArcVotes", VOTES_SCHEMA) {
-                    Some(channel) => {
-                        channel.log_with_meta(json.to_string().as_bytes(), time);
-                        wrote(&topic);
-                    }
-                    None => refused_topics += 1,
+                match topics.votes_json(&topic, &msg, time) {
+                    true => wrote(&topic),
+                    false => refused_topics += 1,
                 }
             }
             AnyMessage::SteeringCommand(msg) => {
-                let json = serde_json::json!({
-                    "utime": msg.utime,
-                    "curvature": msg.curvature,
-                    "speed_mps": msg.speed,
-                    "arc_index": msg.arc_index,
-                    "vote": msg.vote,
-                });
-                match topics.json(
-                    "/steering_command",
-                    "arcnav.SteeringCommand",
-                    COMMAND_SCHEMA,
-                ) {
-                    Some(channel) => {
-                        channel.log_with_meta(json.to_string().as_bytes(), time);
-                        wrote("/steering_command");
-                    }
-                    None => refused_topics += 1,
+                match topics.command_json(&msg, time) {
+                    true => wrote("/steering_command"),
+                    false => refused_topics += 1,
                 }
                 arbiter.decide(msg.utime);
-                let fused = arbiter
-                    .decision()
-                    .map(|d| d.fused.clone())
-                    .unwrap_or_default();
-                let chosen = usize::try_from(msg.arc_index).ok();
-                let entity = SceneEntity {
-                    id: "arcs".into(),
-                    lines: arc_lines(&arcs, &fused, chosen),
-                    ..SceneEntity::default()
-                };
-                topics.scene("/arcs", msg.utime, "vehicle", entity, time);
+                let fused = arbiter.decision().map(|d| d.fused.as_slice());
+                topics.arcs(&arcs, fused.unwrap_or_default(), &msg, time);
                 wrote("/arcs");
             }
         }
