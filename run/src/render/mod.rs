@@ -148,64 +148,9 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         )
     };
 
-    // Terrain: elevation tint with hill shading.
-    let (gw, gh) = (w as usize, (h as usize).saturating_sub(header as usize));
-    let step = 1.0 / scale;
-    let heights: Vec<f64> = (0..gh)
-        .flat_map(|r| (0..gw).map(move |c| (c, r)))
-        .map(|(c, r)| {
-            world.terrain_height(
-                min_x + (c as f64 + 0.5) * step,
-                max_y - (r as f64 + 0.5) * step,
-            )
-        })
-        .collect();
-    let (lo, hi) = heights
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    let pixels = canvas.pixmap.pixels_mut();
-    for r in 0..gh {
-        for c in 0..gw {
-            let at = |cc: usize, rr: usize| heights[rr.min(gh - 1) * gw + cc.min(gw - 1)];
-            let dzdx = (at(c + 1, r) - at(c.saturating_sub(1), r)) / (2.0 * step);
-            let dzdy = (at(c, r.saturating_sub(1)) - at(c, r + 1)) / (2.0 * step);
-            let shade = ((-dzdx * 0.6 + dzdy * 0.6 + 1.0)
-                / (dzdx * dzdx + dzdy * dzdy + 1.0).sqrt())
-            .clamp(0.3, 1.3)
-                / 1.3;
-            let t = (heights[r * gw + c] - lo) / (hi - lo).max(0.1);
-            let base = [150.0 + 60.0 * t, 175.0 + 30.0 * t, 120.0 + 50.0 * t];
-            let rgb = base.map(|v| (v * (0.55 + 0.45 * shade)).clamp(0.0, 255.0) as u8);
-            if let Some(p) = tiny_skia::PremultipliedColorU8::from_rgba(rgb[0], rgb[1], rgb[2], 255)
-            {
-                pixels[(r + header as usize) * gw + c] = p;
-            }
-        }
-    }
-    // Features: dark when the vehicle cannot drive over them.
-    let vehicle = arcnav_vehicle::VehicleConfig::default();
-    for f in &world.features {
-        let hazard = f.hazard(&vehicle).is_some();
-        let c: Rgba = match (f.kind, hazard) {
-            (FeatureKind::Boulder, true) => [95, 95, 95, 255],
-            (FeatureKind::Tree, _) => [20, 90, 30, 255],
-            (FeatureKind::Bush, _) => [60, 140, 50, 255],
-            (FeatureKind::Hole | FeatureKind::Ditch, true) => [40, 60, 120, 255],
-            (FeatureKind::Bank, _) => [140, 100, 60, 255],
-            (FeatureKind::Rubble, _) => [150, 130, 110, 255],
-            _ => [170, 170, 160, 255],
-        };
-        let (ax, ay) = to_px(f.a[0], f.a[1]);
-        let (bx, by) = to_px(f.b[0], f.b[1]);
-        let r = (f.radius * scale) as f32;
-        if f.a == f.b {
-            canvas.circle(ax, ay, r.max(1.5), Some(c), None);
-        } else {
-            canvas.polyline(&[(ax, ay), (bx, by)], c, (2.0 * r).max(2.0), false);
-        }
-    }
+    // Terrain: elevation tint with hill shading; features over it.
+    shade_terrain(&mut canvas, world, header as usize, (min_x, max_y), scale);
+    draw_features(&mut canvas, world, &to_px, scale);
     // The ground the images observed, lighter.
     let s = run.patch_size_m;
     let side = (s * scale) as f32;
@@ -291,6 +236,86 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         &format!("black: cells in the local map · orange: drop-offs (pale: suspected) · purple: graded ground · light: ground seen · white: images · circles: waypoints ({} reached) · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
     );
     canvas.save(path)
+}
+
+/// The mission picture's terrain below `header` pixel rows: an elevation
+/// tint with hill shading, `scale` pixels a metre from world (`min_x`,
+/// `max_y`) at the top left.
+fn shade_terrain(
+    canvas: &mut Canvas,
+    world: &World,
+    header: usize,
+    (min_x, max_y): (f64, f64),
+    scale: f64,
+) {
+    let (gw, gh) = (
+        canvas.pixmap.width() as usize,
+        (canvas.pixmap.height() as usize).saturating_sub(header),
+    );
+    let step = 1.0 / scale;
+    let heights: Vec<f64> = (0..gh)
+        .flat_map(|r| (0..gw).map(move |c| (c, r)))
+        .map(|(c, r)| {
+            world.terrain_height(
+                min_x + (c as f64 + 0.5) * step,
+                max_y - (r as f64 + 0.5) * step,
+            )
+        })
+        .collect();
+    let (lo, hi) = heights
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let pixels = canvas.pixmap.pixels_mut();
+    for r in 0..gh {
+        for c in 0..gw {
+            let at = |cc: usize, rr: usize| heights[rr.min(gh - 1) * gw + cc.min(gw - 1)];
+            let dzdx = (at(c + 1, r) - at(c.saturating_sub(1), r)) / (2.0 * step);
+            let dzdy = (at(c, r.saturating_sub(1)) - at(c, r + 1)) / (2.0 * step);
+            let shade = ((-dzdx * 0.6 + dzdy * 0.6 + 1.0)
+                / (dzdx * dzdx + dzdy * dzdy + 1.0).sqrt())
+            .clamp(0.3, 1.3)
+                / 1.3;
+            let t = (heights[r * gw + c] - lo) / (hi - lo).max(0.1);
+            let base = [150.0 + 60.0 * t, 175.0 + 30.0 * t, 120.0 + 50.0 * t];
+            let rgb = base.map(|v| (v * (0.55 + 0.45 * shade)).clamp(0.0, 255.0) as u8);
+            if let Some(p) = tiny_skia::PremultipliedColorU8::from_rgba(rgb[0], rgb[1], rgb[2], 255)
+            {
+                pixels[(r + header) * gw + c] = p;
+            }
+        }
+    }
+}
+
+/// The world's features, dark where the vehicle cannot drive over them.
+fn draw_features(
+    canvas: &mut Canvas,
+    world: &World,
+    to_px: &impl Fn(f64, f64) -> (f32, f32),
+    scale: f64,
+) {
+    let vehicle = arcnav_vehicle::VehicleConfig::default();
+    for f in &world.features {
+        let hazard = f.hazard(&vehicle).is_some();
+        let c: Rgba = match (f.kind, hazard) {
+            (FeatureKind::Boulder, true) => [95, 95, 95, 255],
+            (FeatureKind::Tree, _) => [20, 90, 30, 255],
+            (FeatureKind::Bush, _) => [60, 140, 50, 255],
+            (FeatureKind::Hole | FeatureKind::Ditch, true) => [40, 60, 120, 255],
+            (FeatureKind::Bank, _) => [140, 100, 60, 255],
+            (FeatureKind::Rubble, _) => [150, 130, 110, 255],
+            _ => [170, 170, 160, 255],
+        };
+        let (ax, ay) = to_px(f.a[0], f.a[1]);
+        let (bx, by) = to_px(f.b[0], f.b[1]);
+        let r = (f.radius * scale) as f32;
+        if f.a == f.b {
+            canvas.circle(ax, ay, r.max(1.5), Some(c), None);
+        } else {
+            canvas.polyline(&[(ax, ay), (bx, by)], c, (2.0 * r).max(2.0), false);
+        }
+    }
 }
 
 /// Ground observed by some image (mission picture: a light veil).
@@ -448,9 +473,33 @@ pub fn snapshot_picture(
     ];
     canvas.polygon(&body, Some([70, 110, 200, 180]), Some((BLACK, 1.5)));
 
-    // Vote bars.
-    let x0 = map_w as f32 + 20.0;
-    let bar_w = ((panel as f32 - 40.0) / arcs.len() as f32).max(1.0);
+    // Vote bars, the key and the decision, right of the map.
+    vote_panel(
+        &mut canvas,
+        map_w as f32 + 20.0,
+        panel as f32,
+        arcs,
+        decision,
+        elapsed_us,
+        &legend,
+    );
+    canvas.save(path)
+}
+
+/// The panel right of a snapshot's map, from `x0`, `panel` wide: each
+/// behaviour's votes and the fused ones as bars, the map's key, the
+/// command and who vetoed what.
+fn vote_panel(
+    canvas: &mut Canvas,
+    x0: f32,
+    panel: f32,
+    arcs: &ArcSet,
+    decision: Option<&Decision>,
+    elapsed_us: Utime,
+    legend: &[(String, Rgba)],
+) {
+    let chosen = decision.and_then(|d| d.command.arc_index);
+    let bar_w = ((panel - 40.0) / arcs.len() as f32).max(1.0);
     let mut rows: Vec<(String, Vec<f32>, Vec<bool>)> = Vec::new();
     if let Some(d) = decision {
         for input in &d.inputs {
@@ -518,7 +567,7 @@ pub fn snapshot_picture(
         "bars: hard left ... straight ... hard right; dark red: vetoed",
     );
     y += 20.0;
-    for (label, colour) in &legend {
+    for (label, colour) in legend {
         canvas.fill_rect(x0, y - 9.0, 14.0, 10.0, *colour);
         canvas.text(x0 + 20.0, y, 12.0, BLACK, label);
         y += 16.0;
@@ -583,7 +632,6 @@ pub fn snapshot_picture(
             );
         }
     }
-    canvas.save(path)
 }
 
 #[cfg(test)]
