@@ -6,8 +6,8 @@ use std::sync::Arc;
 
 use crate::SimArgs;
 use anyhow::Context as _;
-use arcnav::Config;
 use arcnav::mission::{LogMode, MissionOptions, MissionProgress, run_mission};
+use arcnav::{Config, Resolved};
 use arcnav_behaviours::Registry;
 use arcnav_sim::world::EMBEDDED;
 use arcnav_sim::{Difficulty, World};
@@ -21,58 +21,8 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         println!("or --world FILE.toml, or --seed N [--difficulty easy|moderate|hard]");
         return Ok(ExitCode::SUCCESS);
     }
-    let registry = Registry::builtin();
-    let mut config = match &args.config {
-        Some(path) => Config::load(path)?,
-        None => Config::default(),
-    };
-    if let Some(speed) = args.speed {
-        anyhow::ensure!(
-            speed > 0.0 && speed.is_finite(),
-            "--speed {speed}: a speed must be positive"
-        );
-        config.arbiter.cruise_speed_mps = speed;
-        config.set_by("arbiter.cruise_speed_mps", "--speed");
-        if config.vehicle.max_speed_mps < speed {
-            config.vehicle.max_speed_mps = speed;
-            config.set_by("vehicle.max_speed_mps", "--speed");
-        }
-    }
-    if let Some(sensor) = args.sensor {
-        anyhow::ensure!(
-            config.sensors.is_empty(),
-            "--sensor: the configuration lists its sensors in [[sensors]]; change them there"
-        );
-        config.sensor.preset = sensor.into();
-        config.set_by("sensor.preset", "--sensor");
-    }
-    if let Some(evaluator) = &args.evaluator {
-        config.perception.evaluator.clone_from(evaluator);
-        config.set_by("perception.evaluator", "--evaluator");
-    }
-    if let Some(every) = args.snapshot_every {
-        anyhow::ensure!(
-            every.is_finite() && every > 0.0,
-            "--snapshot-every {every}: must be a positive number of seconds"
-        );
-    }
-    let config = config
-        .resolve(&registry)
-        .context("the configuration with the command-line settings")?;
-    let world = match (&args.world, args.seed) {
-        (_, Some(seed)) => {
-            let difficulty: Difficulty = args.difficulty.into();
-            World::build(
-                arcnav_sim::generate(seed, difficulty),
-                "generated world",
-                None,
-            )?
-        }
-        (Some(name), None) => named_world(name)?,
-        (None, None) => {
-            World::embedded("paper_loop").context("the default world is compiled in")??
-        }
-    };
+    let config = configuration(&args)?;
+    let world = world_of(&args)?;
     let name = world.spec.name.clone();
     let out = args
         .out
@@ -140,39 +90,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     );
     // Faster than holes can be seen: say so before the run, not only in
     // the report.
-    {
-        let bound = &config.speed_bound;
-        let cruise = config.cruise.mps;
-        if config.cruise.capped()
-            && let Some(range) = bound.suspect_range_m
-        {
-            eprintln!(
-                "note: cruise held to {cruise:.1} m/s: a hole the wheels do not bridge is first \
-                 suspected within {range:.1} m, and from faster the vehicle could not stop short of \
-                 it ([lookahead] hole_speed_cap = false to drive where the ground has no holes at \
-                 {:.1} m/s)",
-                config.cruise.asked_mps
-            );
-        }
-        // The vehicle slows for what it suspects: with suspicion on, a
-        // hole is learnt of in time up to the suspect bound; without, only
-        // up to the bound of where it is flagged for certain.
-        let in_time = (bound.suspect_range_m.zip(bound.suspect_bound_mps))
-            .map(|(range, speed)| (range, speed, "suspects"))
-            .or(bound
-                .hole_certain_m
-                .zip(bound.hole_bound_mps)
-                .map(|(range, speed)| (range, speed, "flags")));
-        if let Some((range, speed, how)) = in_time
-            && cruise > speed + 1e-6
-        {
-            eprintln!(
-                "note: {cruise:.1} m/s is faster than {speed:.2} m/s, at which a hole the wheels do \
-                 not bridge is certain to be seen in time: the sensor {how} one for certain only \
-                 within {range:.1} m (report.json speed_bound; a higher mount sees farther)"
-            );
-        }
-    }
+    speed_notes(&config);
     let bar = indicatif::ProgressBar::new(world.waypoints.len() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("{spinner} [{bar:30}] waypoint {pos}/{len} {msg}")
@@ -220,6 +138,104 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     })
 }
 
+/// The configuration of `--config` (or the defaults) with the command
+/// line's settings, resolved.
+fn configuration(args: &SimArgs) -> anyhow::Result<Resolved> {
+    let registry = Registry::builtin();
+    let mut config = match &args.config {
+        Some(path) => Config::load(path)?,
+        None => Config::default(),
+    };
+    if let Some(speed) = args.speed {
+        anyhow::ensure!(
+            speed > 0.0 && speed.is_finite(),
+            "--speed {speed}: a speed must be positive"
+        );
+        config.arbiter.cruise_speed_mps = speed;
+        config.set_by("arbiter.cruise_speed_mps", "--speed");
+        if config.vehicle.max_speed_mps < speed {
+            config.vehicle.max_speed_mps = speed;
+            config.set_by("vehicle.max_speed_mps", "--speed");
+        }
+    }
+    if let Some(sensor) = args.sensor {
+        anyhow::ensure!(
+            config.sensors.is_empty(),
+            "--sensor: the configuration lists its sensors in [[sensors]]; change them there"
+        );
+        config.sensor.preset = sensor.into();
+        config.set_by("sensor.preset", "--sensor");
+    }
+    if let Some(evaluator) = &args.evaluator {
+        config.perception.evaluator.clone_from(evaluator);
+        config.set_by("perception.evaluator", "--evaluator");
+    }
+    if let Some(every) = args.snapshot_every {
+        anyhow::ensure!(
+            every.is_finite() && every > 0.0,
+            "--snapshot-every {every}: must be a positive number of seconds"
+        );
+    }
+    config
+        .resolve(&registry)
+        .context("the configuration with the command-line settings")
+}
+
+/// The world `--world` names or `--seed` generates (the paper's loop by
+/// default).
+fn world_of(args: &SimArgs) -> anyhow::Result<World> {
+    Ok(match (&args.world, args.seed) {
+        (_, Some(seed)) => {
+            let difficulty: Difficulty = args.difficulty.into();
+            World::build(
+                arcnav_sim::generate(seed, difficulty),
+                "generated world",
+                None,
+            )?
+        }
+        (Some(name), None) => named_world(name)?,
+        (None, None) => {
+            World::embedded("paper_loop").context("the default world is compiled in")??
+        }
+    })
+}
+
+/// Says before the run when the cruise is held below what was asked, and
+/// when it is faster than a hole is certain to be seen in time.
+fn speed_notes(config: &Resolved) {
+    let bound = &config.speed_bound;
+    let cruise = config.cruise.mps;
+    if config.cruise.capped()
+        && let Some(range) = bound.suspect_range_m
+    {
+        eprintln!(
+            "note: cruise held to {cruise:.1} m/s: a hole the wheels do not bridge is first \
+             suspected within {range:.1} m, and from faster the vehicle could not stop short of \
+             it ([lookahead] hole_speed_cap = false to drive where the ground has no holes at \
+             {:.1} m/s)",
+            config.cruise.asked_mps
+        );
+    }
+    // The vehicle slows for what it suspects: with suspicion on, a
+    // hole is learnt of in time up to the suspect bound; without, only
+    // up to the bound of where it is flagged for certain.
+    let in_time = (bound.suspect_range_m.zip(bound.suspect_bound_mps))
+        .map(|(range, speed)| (range, speed, "suspects"))
+        .or(bound
+            .hole_certain_m
+            .zip(bound.hole_bound_mps)
+            .map(|(range, speed)| (range, speed, "flags")));
+    if let Some((range, speed, how)) = in_time
+        && cruise > speed + 1e-6
+    {
+        eprintln!(
+            "note: {cruise:.1} m/s is faster than {speed:.2} m/s, at which a hole the wheels do \
+             not bridge is certain to be seen in time: the sensor {how} one for certain only \
+             within {range:.1} m (report.json speed_bound; a higher mount sees farther)"
+        );
+    }
+}
+
 fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[PathBuf]) {
     let outcome = match r.outcome {
         arcnav::mission::Outcome::Completed => "completed",
@@ -245,32 +261,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
             String::new()
         }
     );
-    let b = &r.speed_bound;
-    println!(
-        "speed bound   {:.2} m/s (002 §7): a {:.1} m reach set by the {}, {:.2} s from image to \
-         effect; the average is {:.0} % of it",
-        b.bound_mps,
-        b.detection_range_m,
-        b.range_limited_by,
-        b.reaction_s,
-        100.0 * r.speed_fraction_of_bound
-    );
-    if let (Some(range), Some(bound)) = (b.hole_certain_m, b.hole_bound_mps) {
-        println!(
-            "              holes the wheels do not bridge are flagged for certain within {range:.1} m: {bound:.2} m/s \
-             (the average is {:.0} % of it)",
-            100.0 * r.average_speed_mps / bound.max(1e-9)
-        );
-    }
-    if let (Some(range), Some(bound)) = (b.suspect_range_m, b.suspect_bound_mps) {
-        println!(
-            "              ... and first suspected within {range:.1} m: stopping short of one from \
-             there allows {bound:.2} m/s"
-        );
-    }
-    if !r.speed_limited_by_s.is_empty() {
-        println!("speed set by  {}", seconds_list(&r.speed_limited_by_s));
-    }
+    print_speed_bound(r);
     println!(
         "images        {} processed, {} dropped",
         r.images, r.images_dropped
@@ -332,6 +323,79 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
             None => println!("closest       {gap:.2} m between the vehicle and a hazard"),
         }
     }
+    print_ride_stops_and_recoveries(r);
+    for (behaviour, counters) in &r.behaviour_counters {
+        let counts: Vec<String> = counters.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        println!("{:<13} {}", behaviour, counts.join(", "));
+    }
+    let t = &r.stage_times;
+    println!(
+        "stage time    perception {:.2} ms/image, local map {:.3} ms, behaviours {:.3} ms, arbiter {:.3} ms (mean per call{})",
+        t.perception.mean_ms(),
+        t.localmap.mean_ms(),
+        t.behaviours.mean_ms(),
+        t.arbiter.mean_ms(),
+        if r.images_rendered_ahead > 0 {
+            ", wall clock, sharing the cores with the rendering"
+        } else {
+            ""
+        }
+    );
+    let ahead = if r.images_rendered_ahead > 0 {
+        format!(
+            " ({} of {} rendered ahead, beside the pipeline; {} rendered twice)",
+            r.images_rendered_ahead, r.images, r.images_rendered_again
+        )
+    } else {
+        String::new()
+    };
+    println!(
+        "simulation    {:.0} s simulated in {:.1} s ({:.0}× real time), rendering {:.1} ms/image{ahead}",
+        r.duration_s, r.wall_time_s, r.realtime_factor, r.render_ms_mean
+    );
+    println!(
+        "outputs       {}/mission.lcm, report.json, map.png, config.toml{}",
+        out.display(),
+        if snapshots.is_empty() {
+            String::new()
+        } else {
+            format!(", {} snapshots in snapshots/", snapshots.len())
+        }
+    );
+}
+
+/// The summary's lines on the speed bound (002 §7) and what set the speed.
+fn print_speed_bound(r: &arcnav::mission::MissionReport) {
+    let b = &r.speed_bound;
+    println!(
+        "speed bound   {:.2} m/s (002 §7): a {:.1} m reach set by the {}, {:.2} s from image to \
+         effect; the average is {:.0} % of it",
+        b.bound_mps,
+        b.detection_range_m,
+        b.range_limited_by,
+        b.reaction_s,
+        100.0 * r.speed_fraction_of_bound
+    );
+    if let (Some(range), Some(bound)) = (b.hole_certain_m, b.hole_bound_mps) {
+        println!(
+            "              holes the wheels do not bridge are flagged for certain within {range:.1} m: {bound:.2} m/s \
+             (the average is {:.0} % of it)",
+            100.0 * r.average_speed_mps / bound.max(1e-9)
+        );
+    }
+    if let (Some(range), Some(bound)) = (b.suspect_range_m, b.suspect_bound_mps) {
+        println!(
+            "              ... and first suspected within {range:.1} m: stopping short of one from \
+             there allows {bound:.2} m/s"
+        );
+    }
+    if !r.speed_limited_by_s.is_empty() {
+        println!("speed set by  {}", seconds_list(&r.speed_limited_by_s));
+    }
+}
+
+/// The summary's lines on the ride, the stops and the recoveries.
+fn print_ride_stops_and_recoveries(r: &arcnav::mission::MissionReport) {
     let ride = &r.ride;
     println!(
         "ride          peak roll {:.1}° at {:.1} s, peak pitch {:.1}° at {:.1} s (limit {:.0}°); vertical acceleration {:.1} m/s² peak at {:.1} s, {:.2} m/s² rms",
@@ -370,44 +434,6 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         rec.retraced_m,
         rec.no_way_back,
         rec.exhausted
-    );
-    for (behaviour, counters) in &r.behaviour_counters {
-        let counts: Vec<String> = counters.iter().map(|(k, v)| format!("{k} {v}")).collect();
-        println!("{:<13} {}", behaviour, counts.join(", "));
-    }
-    let t = &r.stage_times;
-    println!(
-        "stage time    perception {:.2} ms/image, local map {:.3} ms, behaviours {:.3} ms, arbiter {:.3} ms (mean per call{})",
-        t.perception.mean_ms(),
-        t.localmap.mean_ms(),
-        t.behaviours.mean_ms(),
-        t.arbiter.mean_ms(),
-        if r.images_rendered_ahead > 0 {
-            ", wall clock, sharing the cores with the rendering"
-        } else {
-            ""
-        }
-    );
-    let ahead = if r.images_rendered_ahead > 0 {
-        format!(
-            " ({} of {} rendered ahead, beside the pipeline; {} rendered twice)",
-            r.images_rendered_ahead, r.images, r.images_rendered_again
-        )
-    } else {
-        String::new()
-    };
-    println!(
-        "simulation    {:.0} s simulated in {:.1} s ({:.0}× real time), rendering {:.1} ms/image{ahead}",
-        r.duration_s, r.wall_time_s, r.realtime_factor, r.render_ms_mean
-    );
-    println!(
-        "outputs       {}/mission.lcm, report.json, map.png, config.toml{}",
-        out.display(),
-        if snapshots.is_empty() {
-            String::new()
-        } else {
-            format!(", {} snapshots in snapshots/", snapshots.len())
-        }
     );
 }
 
