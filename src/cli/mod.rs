@@ -29,3 +29,13 @@ fn interrupt_flag() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBo
     }
     Ok(flag)
 }
+
+/// A progress bar of `len` steps drawn with `template` (indicatif's
+/// syntax), `=>` filling its bar.
+fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
+    indicatif::ProgressBar::new(len).with_style(
+        indicatif::ProgressStyle::with_template(template)
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    )
+}

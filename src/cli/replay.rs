@@ -14,23 +14,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let load = |path: &Option<PathBuf>| -> anyhow::Result<Resolved> {
         Ok(Resolved::load_or_default(path.as_deref(), &registry)?)
     };
-    if let Some(speed) = args.speed {
-        anyhow::ensure!(
-            speed.is_finite() && (1e-3..=1e6).contains(&speed),
-            "--speed {speed}: must be 0.001 to 1000000 (times real time)"
-        );
-    }
-    for (flag, value) in [("--from", args.from), ("--to", args.to)] {
-        if let Some(s) = value {
-            anyhow::ensure!(
-                s.is_finite() && s >= 0.0,
-                "{flag} {s}: must be a number of seconds from the log's start, 0 or more"
-            );
-        }
-    }
-    if let (Some(from), Some(to)) = (args.from, args.to) {
-        anyhow::ensure!(from < to, "--from {from} --to {to}: the range is empty");
-    }
+    check_pace_and_window(&args)?;
     let mut inputs = vec![("the log", args.log.as_path())];
     inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
     inputs.extend(args.waypoints.as_deref().map(|w| ("the waypoints file", w)));
@@ -56,13 +40,9 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let size = std::fs::metadata(&args.log)
         .with_context(|| format!("cannot read the log {}", args.log.display()))?
         .len();
-    let bar = indicatif::ProgressBar::new(size);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} replaying [{bar:30}] {bytes}/{total_bytes} ({eta})",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-        .progress_chars("=> "),
+    let bar = super::progress_bar(
+        size,
+        "{spinner} replaying [{bar:30}] {bytes}/{total_bytes} ({eta})",
     );
     let mut runs = Vec::new();
     let configs: Vec<(String, Resolved, ReplayOptions)> = match &args.compare_config {
@@ -145,52 +125,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         println!("comparison    the log holds no STEERING_COMMAND to compare with");
     }
     for c in &comparisons {
-        let Some(percent) = c.agreement_percent else {
-            println!(
-                "comparison    {} vs {}: nothing to compare: no decision of one is at the time of a decision of the other",
-                c.a, c.b
-            );
-            continue;
-        };
-        println!(
-            "comparison    {} vs {}: {} decisions compared, {} agree ({percent:.2}%)",
-            c.a, c.b, c.compared, c.agreeing
-        );
-        if let Some(d) = &c.first_divergence {
-            println!("              first divergence at {:.2} s", d.time_s);
-        }
-        if let Some(d) = &c.largest_curvature_difference {
-            println!(
-                "              largest curvature difference {:.4} 1/m at {:.2} s",
-                (d.a.curvature - d.b.curvature).abs(),
-                d.time_s
-            );
-        }
-        for d in c.differences.iter().take(args.show) {
-            let arc = |x: &arcnav::replay::Decided| {
-                x.arc.map_or("stop".to_owned(), |a| format!("arc {a}"))
-            };
-            println!(
-                "              {:>8.2} s  {}: {} at {:.2} m/s  {}: {} at {:.2} m/s{}",
-                d.time_s,
-                c.a,
-                arc(&d.a),
-                d.a.speed_mps,
-                c.b,
-                arc(&d.b),
-                d.b.speed_mps,
-                d.moved_by
-                    .as_ref()
-                    .map(|b| format!("  (moved by {b})"))
-                    .unwrap_or_default()
-            );
-        }
-        if c.differences.len() > args.show {
-            println!(
-                "              ... {} differences in all (--show N, --json FILE)",
-                c.differences.len()
-            );
-        }
+        print_comparison(c, args.show);
     }
     let problems = &last.problems;
     let lines = problems.lines();
@@ -219,6 +154,79 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// `--speed`, `--from` and `--to` make sense.
+fn check_pace_and_window(args: &ReplayArgs) -> anyhow::Result<()> {
+    if let Some(speed) = args.speed {
+        anyhow::ensure!(
+            speed.is_finite() && (1e-3..=1e6).contains(&speed),
+            "--speed {speed}: must be 0.001 to 1000000 (times real time)"
+        );
+    }
+    for (flag, value) in [("--from", args.from), ("--to", args.to)] {
+        if let Some(s) = value {
+            anyhow::ensure!(
+                s.is_finite() && s >= 0.0,
+                "{flag} {s}: must be a number of seconds from the log's start, 0 or more"
+            );
+        }
+    }
+    if let (Some(from), Some(to)) = (args.from, args.to) {
+        anyhow::ensure!(from < to, "--from {from} --to {to}: the range is empty");
+    }
+    Ok(())
+}
+
+/// One comparison's lines: how many decisions agree, the first
+/// divergence, the largest curvature difference, and up to `show` of the
+/// differences.
+fn print_comparison(c: &arcnav::replay::Comparison, show: usize) {
+    let Some(percent) = c.agreement_percent else {
+        println!(
+            "comparison    {} vs {}: nothing to compare: no decision of one is at the time of a decision of the other",
+            c.a, c.b
+        );
+        return;
+    };
+    println!(
+        "comparison    {} vs {}: {} decisions compared, {} agree ({percent:.2}%)",
+        c.a, c.b, c.compared, c.agreeing
+    );
+    if let Some(d) = &c.first_divergence {
+        println!("              first divergence at {:.2} s", d.time_s);
+    }
+    if let Some(d) = &c.largest_curvature_difference {
+        println!(
+            "              largest curvature difference {:.4} 1/m at {:.2} s",
+            (d.a.curvature - d.b.curvature).abs(),
+            d.time_s
+        );
+    }
+    for d in c.differences.iter().take(show) {
+        let arc =
+            |x: &arcnav::replay::Decided| x.arc.map_or("stop".to_owned(), |a| format!("arc {a}"));
+        println!(
+            "              {:>8.2} s  {}: {} at {:.2} m/s  {}: {} at {:.2} m/s{}",
+            d.time_s,
+            c.a,
+            arc(&d.a),
+            d.a.speed_mps,
+            c.b,
+            arc(&d.b),
+            d.b.speed_mps,
+            d.moved_by
+                .as_ref()
+                .map(|b| format!("  (moved by {b})"))
+                .unwrap_or_default()
+        );
+    }
+    if c.differences.len() > show {
+        println!(
+            "              ... {} differences in all (--show N, --json FILE)",
+            c.differences.len()
+        );
+    }
 }
 
 /// Waypoints from a TOML file with [[waypoints]] entries (a world file works).

@@ -91,11 +91,9 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     // Faster than holes can be seen: say so before the run, not only in
     // the report.
     speed_notes(&config);
-    let bar = indicatif::ProgressBar::new(world.waypoints.len() as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} [{bar:30}] waypoint {pos}/{len} {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = super::progress_bar(
+        world.waypoints.len() as u64,
+        "{spinner} [{bar:30}] waypoint {pos}/{len} {msg}",
     );
     let world = Arc::new(world);
     let started = std::time::Instant::now();

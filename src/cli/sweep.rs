@@ -249,15 +249,11 @@ fn run_pending(
 ) -> anyhow::Result<Vec<Row>> {
     let mut log = RowLog::append(out)
         .with_context(|| format!("cannot write {}", out.join(RowLog::FILE).display()))?;
-    let bar = indicatif::ProgressBar::new(plan.runs() as u64);
-    bar.set_position((plan.runs() - pending.len()) as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} [{bar:30}] {pos}/{len} runs · {elapsed} · {eta} left · {msg}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-        .progress_chars("=> "),
+    let bar = super::progress_bar(
+        plan.runs() as u64,
+        "{spinner} [{bar:30}] {pos}/{len} runs · {elapsed} · {eta} left · {msg}",
     );
+    bar.set_position((plan.runs() - pending.len()) as u64);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs)
         .thread_name(|i| format!("sweep-{i}"))
