@@ -27,6 +27,7 @@ pub mod ride;
 pub mod rng;
 pub mod sensor;
 pub mod simulator;
+pub mod spec;
 pub mod tiles;
 pub mod truth;
 pub mod world;
