@@ -219,6 +219,19 @@ fn generate_struct(out: &mut String, def: &StructDef, fingerprint: u64) {
         let _ = writeln!(out, "}}\n");
     }
 
+    generate_wire_impl(out, def);
+
+    let _ = writeln!(
+        out,
+        "impl Message for {name} {{\n    const TYPE_NAME: &'static str = {:?};\n    const FINGERPRINT: u64 = {fingerprint:#018x};\n}}\n",
+        def.full_name()
+    );
+}
+
+/// `impl Wire` of an LCM struct: its least encoded size, and how it is
+/// written, read (every size checked) and checked before it is written.
+fn generate_wire_impl(out: &mut String, def: &StructDef) {
+    let name = &def.name;
     let _ = writeln!(out, "impl Wire for {name} {{");
     let min_sizes: Vec<String> = def
         .members
@@ -334,10 +347,4 @@ fn generate_struct(out: &mut String, def: &StructDef, fingerprint: u64) {
         }
     }
     let _ = writeln!(out, "        Ok(())\n    }}\n}}\n");
-
-    let _ = writeln!(
-        out,
-        "impl Message for {name} {{\n    const TYPE_NAME: &'static str = {:?};\n    const FINGERPRINT: u64 = {fingerprint:#018x};\n}}\n",
-        def.full_name()
-    );
 }

@@ -46,40 +46,47 @@ struct Recipe {
     spacing: f64,
 }
 
+impl Recipe {
+    /// How much of each a world of `difficulty` holds.
+    fn of(difficulty: Difficulty) -> Self {
+        match difficulty {
+            Difficulty::Easy => Recipe {
+                hills: 1.5,
+                boulders: 30,
+                trees: 15,
+                bushes: 10,
+                holes: 5,
+                ditches: 1,
+                banks: 0,
+                spacing: 12.0,
+            },
+            Difficulty::Moderate => Recipe {
+                hills: 2.5,
+                boulders: 70,
+                trees: 35,
+                bushes: 25,
+                holes: 12,
+                ditches: 3,
+                banks: 1,
+                spacing: 10.0,
+            },
+            Difficulty::Hard => Recipe {
+                hills: 3.5,
+                boulders: 130,
+                trees: 60,
+                bushes: 45,
+                holes: 20,
+                ditches: 5,
+                banks: 2,
+                spacing: 8.0,
+            },
+        }
+    }
+}
+
 /// A world generated from `seed`.
 pub fn generate(seed: u64, difficulty: Difficulty) -> WorldSpec {
-    let recipe = match difficulty {
-        Difficulty::Easy => Recipe {
-            hills: 1.5,
-            boulders: 30,
-            trees: 15,
-            bushes: 10,
-            holes: 5,
-            ditches: 1,
-            banks: 0,
-            spacing: 12.0,
-        },
-        Difficulty::Moderate => Recipe {
-            hills: 2.5,
-            boulders: 70,
-            trees: 35,
-            bushes: 25,
-            holes: 12,
-            ditches: 3,
-            banks: 1,
-            spacing: 10.0,
-        },
-        Difficulty::Hard => Recipe {
-            hills: 3.5,
-            boulders: 130,
-            trees: 60,
-            bushes: 45,
-            holes: 20,
-            ditches: 5,
-            banks: 2,
-            spacing: 8.0,
-        },
-    };
+    let recipe = Recipe::of(difficulty);
     let mut rng = Rng::new(seed);
     // A loop of 8 waypoints on a perturbed circle, ~450 m around.
     let n = 8;
