@@ -113,16 +113,38 @@ fn perception(
     Ok(report(vec![io?, perception]))
 }
 
+/// What a node of its own keeps of its work: its status, the messages it
+/// refused, how long its work took, and when it last said so.
+struct Books {
+    status: NodeStatus,
+    bad: Refused,
+    busy: Samples,
+    ticker: Ticker,
+}
+
+impl Books {
+    fn new(node: &str, config: &Resolved, options: &LiveOptions) -> Self {
+        Self {
+            status: NodeStatus::new(node),
+            bad: Refused::default(),
+            busy: Samples::default(),
+            ticker: Ticker::new(config.live.status_period_s, options.clock().now_us()),
+        }
+    }
+}
+
 fn localmap(
     config: &Resolved,
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
     let mut stage = MapStage::new(config);
-    let mut status = NodeStatus::new("localmap");
-    let mut bad = Refused::default();
-    let mut busy = Samples::default();
-    let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
+    let Books {
+        mut status,
+        mut bad,
+        mut busy,
+        mut ticker,
+    } = Books::new("localmap", config, options);
     let period_ms = 1e3 / config.pipeline.command_rate_hz;
     lcm.subscribe(channels::POSE);
     lcm.subscribe(channels::OBSTACLE_CELLS);
@@ -192,10 +214,12 @@ fn behaviour(
         );
     }
     let mut node = BehaviourSet::new(vec![built], arcs.clone());
-    let mut status = NodeStatus::new(&format!("behaviour {name}"));
-    let mut bad = Refused::default();
-    let mut busy = Samples::default();
-    let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
+    let Books {
+        mut status,
+        mut bad,
+        mut busy,
+        mut ticker,
+    } = Books::new(&format!("behaviour {name}"), config, options);
     let period_ms = 1e3 / config.pipeline.command_rate_hz;
     let channel = channels::arc_votes(name);
     lcm.subscribe(channels::LOCAL_MAP);
@@ -274,10 +298,12 @@ fn arbiter(
     );
     let mut out = Vec::new();
     stage.measure_latency_from_cells();
-    let mut status = NodeStatus::new("arbiter");
-    let mut bad = Refused::default();
-    let mut busy = Samples::default();
-    let mut ticker = Ticker::new(config.live.status_period_s, options.clock().now_us());
+    let Books {
+        mut status,
+        mut bad,
+        mut busy,
+        mut ticker,
+    } = Books::new("arbiter", config, options);
     lcm.subscribe_regex(&format!("{}.*", channels::ARC_VOTES_PREFIX))?;
     lcm.subscribe(channels::POSE);
     lcm.subscribe(channels::OBSTACLE_CELLS);

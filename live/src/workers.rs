@@ -36,15 +36,11 @@ impl PerceptionHelper {
     }
 }
 
+/// The first task on the perception thread, the others on the helper
+/// (rayon's pool does it so).
 impl arcnav_perception::Runner for PerceptionHelper {
     fn run(&self, tasks: &mut [&mut (dyn FnMut() + Send)]) {
-        self.0.in_place_scope(|scope| {
-            let (first, rest) = tasks.split_at_mut(1);
-            for task in rest {
-                scope.spawn(move |_| task());
-            }
-            first.iter_mut().for_each(|task| task());
-        });
+        self.0.run(tasks);
     }
 }
 

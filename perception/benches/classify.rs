@@ -84,21 +84,6 @@ fn scene_image(sensor: &SensorModel) -> RangeImage {
     )
 }
 
-/// Runs the first task here and the others on a helper pool.
-struct Helpers(rayon::ThreadPool);
-
-impl Runner for Helpers {
-    fn run(&self, tasks: &mut [&mut (dyn FnMut() + Send)]) {
-        self.0.in_place_scope(|scope| {
-            let (first, rest) = tasks.split_at_mut(1);
-            for task in rest {
-                scope.spawn(move |_| task());
-            }
-            first.iter_mut().for_each(|task| task());
-        });
-    }
-}
-
 fn bench_image(bencher: Bencher, sensor: SensorModel) {
     bench_image_with(bencher, sensor, &InOrder);
 }
@@ -159,7 +144,7 @@ fn lidar_128x2048_two_threads(bencher: Bencher) {
         .num_threads(1)
         .build()
         .unwrap_or_else(|e| panic!("{e}"));
-    bench_image_with(bencher, SensorModel::lidar128(), &Helpers(pool));
+    bench_image_with(bencher, SensorModel::lidar128(), &pool);
 }
 
 fn without_drop_offs() -> PerceptionConfig {

@@ -261,6 +261,20 @@ impl Runner for InOrder {
     }
 }
 
+/// A thread pool runs the first task on the calling thread and the others
+/// on its threads, and returns when all are done.
+impl Runner for rayon::ThreadPool {
+    fn run(&self, tasks: &mut [&mut (dyn FnMut() + Send)]) {
+        self.in_place_scope(|scope| {
+            let (first, rest) = tasks.split_at_mut(1);
+            for task in rest {
+                scope.spawn(move |_| task());
+            }
+            first.iter_mut().for_each(|task| task());
+        });
+    }
+}
+
 /// A per-image terrain evaluator.
 pub trait TerrainEvaluator: Send {
     /// Short name, as in the configuration.

@@ -115,14 +115,20 @@ impl Canvas {
         let Some(path) = PathBuilder::from_circle(x, y, r.max(0.5)) else {
             return;
         };
+        self.fill_and_outline(&path, fill, FillRule::Winding, outline);
+    }
+
+    /// Fills `path` (by `rule`) and strokes its outline, either optional.
+    fn fill_and_outline(
+        &mut self,
+        path: &tiny_skia::Path,
+        fill: Option<Rgba>,
+        rule: FillRule,
+        outline: Option<(Rgba, f32)>,
+    ) {
         if let Some(c) = fill {
-            self.pixmap.fill_path(
-                &path,
-                &paint(c),
-                FillRule::Winding,
-                Transform::identity(),
-                None,
-            );
+            self.pixmap
+                .fill_path(path, &paint(c), rule, Transform::identity(), None);
         }
         if let Some((c, width)) = outline {
             let stroke = Stroke {
@@ -130,7 +136,7 @@ impl Canvas {
                 ..Stroke::default()
             };
             self.pixmap
-                .stroke_path(&path, &paint(c), &stroke, Transform::identity(), None);
+                .stroke_path(path, &paint(c), &stroke, Transform::identity(), None);
         }
     }
 
@@ -142,11 +148,7 @@ impl Canvas {
         if points.len() < 2 || length < 1e-3 {
             return;
         }
-        let mut pb = PathBuilder::new();
-        pb.move_to(points[0].0, points[0].1);
-        for p in &points[1..] {
-            pb.line_to(p.0, p.1);
-        }
+        let pb = through(points);
         let Some(path) = pb.finish() else { return };
         let mut stroke = Stroke {
             width,
@@ -168,30 +170,10 @@ impl Canvas {
         if points.len() < 3 {
             return;
         }
-        let mut pb = PathBuilder::new();
-        pb.move_to(points[0].0, points[0].1);
-        for p in &points[1..] {
-            pb.line_to(p.0, p.1);
-        }
+        let mut pb = through(points);
         pb.close();
         let Some(path) = pb.finish() else { return };
-        if let Some(c) = fill {
-            self.pixmap.fill_path(
-                &path,
-                &paint(c),
-                FillRule::EvenOdd,
-                Transform::identity(),
-                None,
-            );
-        }
-        if let Some((c, width)) = outline {
-            let stroke = Stroke {
-                width,
-                ..Stroke::default()
-            };
-            self.pixmap
-                .stroke_path(&path, &paint(c), &stroke, Transform::identity(), None);
-        }
+        self.fill_and_outline(&path, fill, FillRule::EvenOdd, outline);
     }
 
     /// Text with its baseline at (x, y); returns the width drawn.
@@ -260,4 +242,14 @@ impl Canvas {
             .map_err(|e| failed(e.to_string()))?;
         crate::output::write_file(path, &png).map_err(|e| failed(e.to_string()))
     }
+}
+
+/// A path from the first of `points` (at least one) through the others.
+fn through(points: &[(f32, f32)]) -> PathBuilder {
+    let mut pb = PathBuilder::new();
+    pb.move_to(points[0].0, points[0].1);
+    for p in &points[1..] {
+        pb.line_to(p.0, p.1);
+    }
+    pb
 }
