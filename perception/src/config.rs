@@ -141,7 +141,7 @@ impl StreamingConfig {
 /// untraversable (reason `drop_off`) when the stretch is wider than the
 /// vehicle rolls across and the ground beyond it is a hole's far side, falls
 /// away more steeply than the tolerated slope, or is not seen at all. See
-/// `cells.rs` for the rule.
+/// `cells/projection.rs` for the rule.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DropOffConfig {
