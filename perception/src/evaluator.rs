@@ -281,27 +281,28 @@ pub trait TerrainEvaluator: Send {
     fn name(&self) -> &'static str;
 
     /// Evaluates `image`, taken with the vehicle at `world_from_vehicle` (the
-    /// pose at capture time), into `report` (cleared first). Allocates
-    /// nothing once warmed up to the image size.
-    fn evaluate(
-        &mut self,
-        image: &RangeImage,
-        world_from_vehicle: &Isometry,
-        report: &mut ObstacleReport,
-    ) -> Result<ImageStats, PerceptionError>;
-
-    /// [`TerrainEvaluator::evaluate`], with independent pieces of the work
-    /// handed to `runner` (which may run them at the same time). The result
-    /// is the same as `evaluate`'s.
+    /// pose at capture time), into `report` (cleared first), handing
+    /// independent pieces of the work to `runner` (which may run them at
+    /// the same time; an evaluator that does not split its work ignores
+    /// it). The result does not depend on the runner. Allocates nothing
+    /// once warmed up to the image size.
     fn evaluate_with(
         &mut self,
         image: &RangeImage,
         world_from_vehicle: &Isometry,
         report: &mut ObstacleReport,
         runner: &dyn Runner,
+    ) -> Result<ImageStats, PerceptionError>;
+
+    /// [`TerrainEvaluator::evaluate_with`], every piece of the work done
+    /// here, in order ([`InOrder`]).
+    fn evaluate(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        report: &mut ObstacleReport,
     ) -> Result<ImageStats, PerceptionError> {
-        let _ = runner;
-        self.evaluate(image, world_from_vehicle, report)
+        self.evaluate_with(image, world_from_vehicle, report, &InOrder)
     }
 
     /// Forgets anything carried between images (for evaluators that fuse).

@@ -5,7 +5,7 @@
 use arcnav_perception::scene::HeightFunction;
 use arcnav_perception::{
     EvaluatorPlugin, EvaluatorRegistry, HeightDiff, HierarchicalPca, ImageStats, ObstacleReport,
-    PerceptionConfig, PerceptionError, RangeImage, Reasons, SensorModel, TerrainEvaluator,
+    PerceptionConfig, PerceptionError, RangeImage, Reasons, Runner, SensorModel, TerrainEvaluator,
 };
 use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 use arcnav_vehicle::{Isometry, VehicleConfig};
@@ -677,11 +677,12 @@ impl TerrainEvaluator for TooHigh {
         "too_high"
     }
 
-    fn evaluate(
+    fn evaluate_with(
         &mut self,
         image: &RangeImage,
         _: &Isometry,
         report: &mut ObstacleReport,
+        _: &dyn Runner,
     ) -> Result<ImageStats, PerceptionError> {
         report.clear();
         report.cell_size_m = self.max_height_m;

@@ -519,15 +519,6 @@ impl TerrainEvaluator for CellClassifier {
         }
     }
 
-    fn evaluate(
-        &mut self,
-        image: &RangeImage,
-        world_from_vehicle: &Isometry,
-        report: &mut ObstacleReport,
-    ) -> Result<ImageStats, PerceptionError> {
-        self.evaluate_with(image, world_from_vehicle, report, &InOrder)
-    }
-
     fn evaluate_with(
         &mut self,
         image: &RangeImage,

@@ -59,7 +59,7 @@ use crate::config::{GridShape, PerceptionConfig};
 
 pub mod config;
 use crate::evaluator::{
-    ImageStats, InOrder, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
+    ImageStats, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
 };
 use crate::grid::{self, GridReport, Marked, Projector};
 use crate::image::RangeImage;
@@ -712,15 +712,6 @@ impl TerrainEvaluator for HeightDiff {
             pixels: 1,
             radians: c.median_window_deg.to_radians(),
         }
-    }
-
-    fn evaluate(
-        &mut self,
-        image: &RangeImage,
-        world_from_vehicle: &Isometry,
-        report: &mut ObstacleReport,
-    ) -> Result<ImageStats, PerceptionError> {
-        self.evaluate_with(image, world_from_vehicle, report, &InOrder)
     }
 
     fn evaluate_with(

@@ -65,7 +65,7 @@ use crate::config::{GridShape, PerceptionConfig};
 
 pub mod config;
 use crate::evaluator::{
-    ImageStats, InOrder, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
+    ImageStats, ObstacleReport, PerceptionError, Reasons, Runner, TerrainEvaluator,
 };
 use crate::grid::{self, GridReport, Marked, Point, Projector};
 use crate::image::RangeImage;
@@ -542,15 +542,6 @@ impl TerrainEvaluator for HierarchicalPca {
             pixels: c.roughness_window / 2 + 1,
             radians: 0.0,
         }
-    }
-
-    fn evaluate(
-        &mut self,
-        image: &RangeImage,
-        world_from_vehicle: &Isometry,
-        report: &mut ObstacleReport,
-    ) -> Result<ImageStats, PerceptionError> {
-        self.evaluate_with(image, world_from_vehicle, report, &InOrder)
     }
 
     fn evaluate_with(
