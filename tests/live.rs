@@ -77,23 +77,18 @@ fn sliced(mut config: Config) -> Config {
 }
 
 /// The first `LOG_S` seconds of the short course under `config`, made once
-/// per test run.
+/// for this build of the tests (shared by their processes:
+/// [`arcnav_testkit::shared_file`]).
 fn sim_log_of(config: &Config) -> PathBuf {
-    static LOGS: Mutex<BTreeMap<String, PathBuf>> = Mutex::new(BTreeMap::new());
     let key = format!("{:?}-{}", config.sensor.preset, config.sim.slice_lines);
-    let mut logs = LOGS.lock().unwrap_or_else(|e| e.into_inner());
-    logs.entry(key.clone())
-        .or_insert_with(|| {
-            let path = temp_dir("live-log").join(format!("{key}.lcm"));
-            let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
-            let options = MissionOptions {
-                log: Some(path.clone()),
-                ..MissionOptions::default()
-            };
-            run_mission(&config.resolved().unwrap(), world, &options, &mut |_| {}).unwrap();
-            path
-        })
-        .clone()
+    arcnav_testkit::shared_file(&format!("{key}.lcm"), |path| {
+        let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+        let options = MissionOptions {
+            log: Some(path.to_owned()),
+            ..MissionOptions::default()
+        };
+        run_mission(&config.resolved().unwrap(), world, &options, &mut |_| {}).unwrap();
+    })
 }
 
 /// The lock-step replay's commands, by cycle time.

@@ -34,25 +34,26 @@ fn replay_with_defaults(path: &Path) -> ReplayResult {
     .unwrap()
 }
 
-/// A log of the short course, made once per test run.
+/// A log of the short course, made once for this build of the tests
+/// (shared by their processes: [`arcnav_testkit::shared_file`]).
 fn sim_log() -> &'static Path {
     static LOG: OnceLock<PathBuf> = OnceLock::new();
     LOG.get_or_init(|| {
-        let path = dir("source").join("short_course.lcm");
-        let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
-        let options = MissionOptions {
-            log: Some(path.clone()),
-            ..MissionOptions::default()
-        };
-        let run = run_mission(
-            &Config::default().resolved().unwrap(),
-            world,
-            &options,
-            &mut |_| {},
-        )
-        .unwrap();
-        assert!(run.report.success);
-        path
+        arcnav_testkit::shared_file("short_course.lcm", |path| {
+            let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+            let options = MissionOptions {
+                log: Some(path.to_owned()),
+                ..MissionOptions::default()
+            };
+            let run = run_mission(
+                &Config::default().resolved().unwrap(),
+                world,
+                &options,
+                &mut |_| {},
+            )
+            .unwrap();
+            assert!(run.report.success);
+        })
     })
 }
 

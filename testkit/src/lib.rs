@@ -149,6 +149,51 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// A file that the test processes of one test executable share: made once
+/// by `make` (given the path to write it at) for this build of the
+/// executable, then used by every process of the run and of later runs
+/// until the executable is rebuilt. nextest runs each test in a process of
+/// its own, so a log made "once" per process (`OnceLock`) was made again
+/// for each test. Processes that want it at the same time wait for the
+/// one making it (a lock on a file beside it); what `make` leaves half
+/// written (it panicked) is never used. Under
+/// `target/test-shared/EXE-BUILD/`; the directories of the executable's
+/// earlier builds are removed when a new one is made.
+pub fn shared_file(name: &str, make: impl FnOnce(&Path)) -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable's path");
+    let stem = exe
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("test")
+        .to_owned();
+    let built = std::fs::metadata(&exe)
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos());
+    let root = workspace_root().join("target/test-shared");
+    let dir = root.join(format!("{stem}-{built}"));
+    std::fs::create_dir_all(&dir).expect("create the shared test directory");
+    let lock = std::fs::File::create(dir.join(format!("{name}.lock"))).expect("create a lock file");
+    lock.lock().expect("lock the shared test file");
+    let path = dir.join(name);
+    if !path.exists() {
+        if let Ok(entries) = std::fs::read_dir(&root) {
+            for entry in entries.flatten() {
+                let other = entry.file_name();
+                let other = other.to_string_lossy();
+                if other.starts_with(&format!("{stem}-")) && entry.path() != dir {
+                    let _ = std::fs::remove_dir_all(entry.path());
+                }
+            }
+        }
+        let partial = dir.join(format!("{name}.partial-{}", std::process::id()));
+        make(&partial);
+        std::fs::rename(&partial, &path).expect("put the shared test file in place");
+    }
+    path
+}
+
 /// Removes each `TAG-PID-N` directory in `root` whose process is not
 /// running (no `/proc/PID`). Where there is no `/proc`, removes nothing.
 fn remove_dirs_of_ended_processes(root: &Path) {
