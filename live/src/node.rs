@@ -114,12 +114,15 @@ fn perception(
 }
 
 /// What a node of its own keeps of its work: its status, the messages it
-/// refused, how long its work took, and when it last said so.
+/// refused, how long its work took (against the decision period), and when
+/// it last said so.
 struct Books {
     status: NodeStatus,
     bad: Refused,
     busy: Samples,
     ticker: Ticker,
+    /// One decision cycle, ms (`pipeline.command_rate_hz`).
+    period_ms: f64,
 }
 
 impl Books {
@@ -129,6 +132,7 @@ impl Books {
             bad: Refused::default(),
             busy: Samples::default(),
             ticker: Ticker::new(config.live.status_period_s, options.clock().now_us()),
+            period_ms: 1e3 / config.pipeline.command_rate_hz,
         }
     }
 }
@@ -144,8 +148,8 @@ fn localmap(
         mut bad,
         mut busy,
         mut ticker,
+        period_ms,
     } = Books::new("localmap", config, options);
-    let period_ms = 1e3 / config.pipeline.command_rate_hz;
     lcm.subscribe(channels::POSE);
     lcm.subscribe(channels::OBSTACLE_CELLS);
     let publisher = lcm.publisher();
@@ -219,8 +223,8 @@ fn behaviour(
         mut bad,
         mut busy,
         mut ticker,
+        period_ms,
     } = Books::new(&format!("behaviour {name}"), config, options);
-    let period_ms = 1e3 / config.pipeline.command_rate_hz;
     let channel = channels::arc_votes(name);
     lcm.subscribe(channels::LOCAL_MAP);
     lcm.subscribe(channels::WAYPOINTS);
@@ -303,6 +307,7 @@ fn arbiter(
         mut bad,
         mut busy,
         mut ticker,
+        ..
     } = Books::new("arbiter", config, options);
     lcm.subscribe_regex(&format!("{}.*", channels::ARC_VOTES_PREFIX))?;
     lcm.subscribe(channels::POSE);

@@ -70,7 +70,7 @@ fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
         Some(s) => anyhow::bail!("--duration {s}: must be a positive number of seconds"),
         None => None,
     };
-    let flag = super::interrupt_flag()?;
+    let flag = super::terminal::interrupt_flag()?;
     let base = args
         .config
         .as_deref()

@@ -40,7 +40,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let size = std::fs::metadata(&args.log)
         .with_context(|| format!("cannot read the log {}", args.log.display()))?
         .len();
-    let bar = super::progress_bar(
+    let bar = super::terminal::progress_bar(
         size,
         "{spinner} replaying [{bar:30}] {bytes}/{total_bytes} ({eta})",
     );

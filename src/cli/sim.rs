@@ -91,7 +91,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     // Faster than holes can be seen: say so before the run, not only in
     // the report.
     speed_notes(&config);
-    let bar = super::progress_bar(
+    let bar = super::terminal::progress_bar(
         world.waypoints.len() as u64,
         "{spinner} [{bar:30}] waypoint {pos}/{len} {msg}",
     );

@@ -68,7 +68,7 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
             RowLog::FILE
         );
     }
-    let interrupted = super::interrupt_flag()?;
+    let interrupted = super::terminal::interrupt_flag()?;
     let started = Instant::now();
     let ran = run_pending(&plan, &pending, jobs, out, &interrupted)?;
     let elapsed = started.elapsed().as_secs_f64();
@@ -249,7 +249,7 @@ fn run_pending(
 ) -> anyhow::Result<Vec<Row>> {
     let mut log = RowLog::append(out)
         .with_context(|| format!("cannot write {}", out.join(RowLog::FILE).display()))?;
-    let bar = super::progress_bar(
+    let bar = super::terminal::progress_bar(
         plan.runs() as u64,
         "{spinner} [{bar:30}] {pos}/{len} runs · {elapsed} · {eta} left · {msg}",
     );

@@ -3,10 +3,17 @@
 
 use std::collections::BTreeMap;
 
+use arcnav_arbiter::BehaviourVotes;
 use arcnav_vehicle::{SteeringCommand, Utime};
 use serde::Serialize;
 
-use super::Cycle;
+/// One decision of a replay (or of the log it replays): the command and
+/// the votes it was fused from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cycle {
+    pub command: SteeringCommand,
+    pub votes: Vec<BehaviourVotes>,
+}
 
 /// A behaviour's weight by name, for attributing changes.
 pub type WeightOf<'a> = &'a dyn Fn(&str) -> f64;

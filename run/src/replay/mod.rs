@@ -25,7 +25,7 @@ use serde::Serialize;
 mod compare;
 mod problems;
 
-pub use compare::{Comparison, Decided, Difference, WeightOf, compare};
+pub use compare::{Comparison, Cycle, Decided, Difference, WeightOf, compare};
 pub use problems::{InputProblems, LogSummary};
 
 use crate::recorder::{Recorder, WriteFailed};
@@ -63,13 +63,6 @@ pub struct InputCounts {
     pub slices: u64,
     pub waypoints: u64,
     pub recorded_cells: u64,
-}
-
-/// One decision of a replay.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Cycle {
-    pub command: SteeringCommand,
-    pub votes: Vec<BehaviourVotes>,
 }
 
 /// What a replay produced.
