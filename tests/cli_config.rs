@@ -175,7 +175,7 @@ fn live_figures_never_replace_the_configuration_or_the_key() {
     };
     for (out, expect) in [
         (&config, "it is the configuration"),
-        (&key_path, "it is the key file"),
+        (&key_path, "it is the bus key file"),
     ] {
         for command in [&["run"][..], &["node", "arbiter"]] {
             let (code, args, stderr) = live(command, out);

@@ -612,6 +612,48 @@ fn an_output_that_is_the_input_log_is_refused_and_the_log_stays_whole() {
 }
 
 #[test]
+fn a_sim_log_is_replayed_with_the_configuration_beside_it_and_says_which() {
+    // `arcnav sim` writes config.toml beside mission.lcm; replayed with the
+    // defaults instead, a run made with another evaluator had agreed on
+    // 0.07 % of its decisions.
+    let log = copy_of_log("beside", "mission.lcm");
+    let beside = dir("beside").join("config.toml");
+    let json = dir("beside").join("replay.json");
+    let replayed = |config: &str| {
+        std::fs::write(&beside, config).unwrap();
+        let (code, stdout, stderr) = arcnav(&[
+            "replay",
+            log.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{stdout}{stderr}");
+        assert!(
+            stderr.contains("the configuration the run was made with"),
+            "{stderr}"
+        );
+        let report: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert_eq!(report["configurations"][0], beside.to_str().unwrap());
+        report["comparisons"][0]["agreement_percent"]
+            .as_f64()
+            .unwrap()
+    };
+    // The log was made with the defaults.
+    assert_eq!(replayed("# the defaults\n"), 100.0);
+    assert!(replayed("[arbiter.weights]\ngoal_seeking = 2.0\n") < 100.0);
+    // --config wins over the file beside the log.
+    let (code, stdout, stderr) = arcnav(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--config",
+        dir("beside").join("none.toml").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{stdout}");
+    assert!(stderr.contains("none.toml"), "{stderr}");
+    std::fs::remove_file(&beside).unwrap();
+}
+
+#[test]
 fn a_finished_replay_replaces_the_old_output_and_leaves_no_temporary() {
     // (A run that fails keeps the old file: see arcnav::output's tests.)
     let log = copy_of_log("staged", "mission.lcm");

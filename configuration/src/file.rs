@@ -62,6 +62,9 @@ pub struct Config {
     /// Where each key that is not a default came from.
     #[serde(skip)]
     origins: BTreeMap<String, Origin>,
+    /// The file this configuration was read from, if any.
+    #[serde(skip)]
+    source: Option<PathBuf>,
 }
 
 /// Where a key's value came from.
@@ -125,6 +128,7 @@ impl Default for Config {
             sim: SimConfig::default(),
             behaviours: default_behaviours(),
             origins: BTreeMap::new(),
+            source: None,
         }
     }
 }
@@ -196,7 +200,32 @@ impl Config {
                 path: path.to_owned(),
                 source,
             })?;
-        Self::parse_in(&text, &path.display().to_string(), path.parent())
+        let mut config = Self::parse_in(&text, &path.display().to_string(), path.parent())?;
+        config.source = Some(path.to_owned());
+        Ok(config)
+    }
+
+    /// The file this configuration was read from; `None` for the defaults
+    /// (and text parsed in memory).
+    pub fn source(&self) -> Option<&Path> {
+        self.source.as_deref()
+    }
+
+    /// The files this configuration reads, each named by what it is: the
+    /// file it came from, the occupancy map, the bus key file. (The
+    /// occupancy map's image is named inside it: see
+    /// `Resolved::files_read`.) No output of a run may be one of them.
+    pub fn files_read(&self) -> Vec<(&'static str, PathBuf)> {
+        let mut files = Vec::new();
+        files.extend(self.source.clone().map(|p| ("the configuration", p)));
+        let occupancy = &self.localmap.occupancy.file;
+        if !occupancy.is_empty() {
+            files.push(("the occupancy map", PathBuf::from(occupancy)));
+        }
+        if self.bus.auth.enabled() {
+            files.push(("the bus key file", self.bus.auth.key_file.clone()));
+        }
+        files
     }
 
     /// Loads `path` if given, else the defaults.
@@ -244,6 +273,16 @@ impl Config {
             && Path::new(file.as_str()).is_relative()
         {
             *file = base.join(&*file).display().to_string();
+        }
+        // The key file too, so that every file the configuration names is
+        // where it is read from (`BusAuth::key_path` of a relative name
+        // still joins the base a live run gives).
+        let key = &mut config.bus.auth.key_file;
+        if let Some(base) = base
+            && !key.as_os_str().is_empty()
+            && key.is_relative()
+        {
+            *key = base.join(&*key);
         }
         Ok(config)
     }

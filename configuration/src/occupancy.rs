@@ -40,8 +40,11 @@ fn invalid(path: &Path, message: impl Into<String>) -> OccupancyError {
     }
 }
 
-/// The map `config` names (`None` when it names none).
-pub fn load(config: &OccupancyConfig) -> Result<Option<OccupancyGrid>, OccupancyError> {
+/// The map `config` names (`None` when it names none), with the image file
+/// a `.yaml` names (read too).
+pub fn load(
+    config: &OccupancyConfig,
+) -> Result<Option<(OccupancyGrid, Option<PathBuf>)>, OccupancyError> {
     if config.file.is_empty() {
         return Ok(None);
     }
@@ -51,8 +54,8 @@ pub fn load(config: &OccupancyConfig) -> Result<Option<OccupancyGrid>, Occupancy
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
     match extension.as_deref() {
-        Some("yaml" | "yml") => load_yaml(path).map(Some),
-        Some("npy") => load_npy(path, config).map(Some),
+        Some("yaml" | "yml") => load_yaml(path).map(|(grid, image)| Some((grid, Some(image)))),
+        Some("npy") => load_npy(path, config).map(|grid| Some((grid, None))),
         _ => Err(invalid(
             path,
             "is neither a map_server .yaml nor a .npy array (named by its extension)",
@@ -67,7 +70,7 @@ fn read(path: &Path) -> Result<Vec<u8>, OccupancyError> {
     })
 }
 
-fn load_yaml(path: &Path) -> Result<OccupancyGrid, OccupancyError> {
+fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
     use yaml_rust2::{Yaml, YamlLoader};
     let text = String::from_utf8(read(path)?).map_err(|_| invalid(path, "is not UTF-8 text"))?;
     let docs = YamlLoader::load_from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
@@ -130,13 +133,14 @@ fn load_yaml(path: &Path) -> Result<OccupancyGrid, OccupancyError> {
         let row = rows - 1 - y as usize;
         occupied[row * cols + x as usize] = is;
     }
-    Ok(OccupancyGrid {
+    let grid = OccupancyGrid {
         resolution_m: resolution,
         origin: planar_isometry(origin[0], origin[1], origin[2]),
         cols,
         rows,
         occupied,
-    })
+    };
+    Ok((grid, image_path))
 }
 
 fn read_pgm(path: &Path) -> Result<image::GrayImage, OccupancyError> {
@@ -269,7 +273,7 @@ mod tests {
             "image: map.pgm\nresolution: 0.5\norigin: [-1.0, 2.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n",
         )
         .unwrap();
-        let grid = load(&config(&d.join("map.yaml"))).unwrap().unwrap();
+        let grid = load(&config(&d.join("map.yaml"))).unwrap().unwrap().0;
         assert_eq!((grid.cols, grid.rows, grid.resolution_m), (3, 2, 0.5));
         // Row 0 is the image's bottom row: white, white, black.
         assert_eq!(grid.occupied, [false, false, true, true, false, false]);
@@ -280,7 +284,7 @@ mod tests {
             "image: map.pgm\nresolution: 0.5\norigin: [0, 0, 0]\nnegate: 1\n",
         )
         .unwrap();
-        let grid = load(&config(&d.join("neg.yaml"))).unwrap().unwrap();
+        let grid = load(&config(&d.join("neg.yaml"))).unwrap().unwrap().0;
         assert_eq!(grid.occupied, [true, true, false, false, false, true]);
     }
 
@@ -306,7 +310,7 @@ mod tests {
             origin: [5.0, 0.0, 90.0],
             ..config(&path)
         };
-        let grid = load(&c).unwrap().unwrap();
+        let grid = load(&c).unwrap().unwrap().0;
         assert_eq!((grid.cols, grid.rows), (3, 2));
         assert_eq!(grid.occupied, [false, true, false, true, false, false]);
         let yaw = arcnav_vehicle::frames::yaw_of(&grid.origin);

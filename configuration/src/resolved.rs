@@ -9,7 +9,7 @@
 //! [`Resolved`] value; nothing after it reads TOML or derives again.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arcnav_arbiter::{Arbiter, ArbiterConfig};
@@ -90,6 +90,8 @@ pub struct Resolved {
     pub speed_bound: SpeedBound,
     behaviours: BTreeMap<String, Prepared>,
     statics: Option<Arc<StaticMap>>,
+    /// The image a `.yaml` occupancy map names, if any.
+    occupancy_image: Option<PathBuf>,
     derived: Vec<Derivation>,
 }
 
@@ -98,7 +100,7 @@ impl Resolved {
     /// documentation says what, in which order).
     pub(crate) fn new(given: Config, registry: &Registry) -> Result<Self, ConfigError> {
         let sensors = given.validate_sections()?;
-        let statics = static_map(&given)?;
+        let (statics, occupancy_image) = static_map(&given)?;
         let cap = if given.lookahead.hole_speed_cap {
             speed_bound::hole_speed_cap(&given, &sensors)
         } else {
@@ -184,6 +186,7 @@ impl Resolved {
             speed_bound,
             behaviours,
             statics,
+            occupancy_image,
             derived,
             given,
         })
@@ -220,6 +223,19 @@ impl Resolved {
     /// resolved fields, never from this.
     pub fn given(&self) -> &Config {
         &self.given
+    }
+
+    /// Every file this configuration reads, each named by what it is
+    /// ([`Config::files_read`] and the image a `.yaml` occupancy map
+    /// names): a run refuses to write an output onto any of them.
+    pub fn files_read(&self) -> Vec<(&'static str, PathBuf)> {
+        let mut files = self.given.files_read();
+        files.extend(
+            self.occupancy_image
+                .clone()
+                .map(|p| ("the occupancy map's image", p)),
+        );
+        files
     }
 
     /// The values derivation set, each with what it was derived from.
@@ -511,11 +527,18 @@ fn setup<'a>(
 
 /// The static occupancy map `[localmap.occupancy]` names, gathered onto the
 /// local map's patches.
-fn static_map(config: &Config) -> Result<Option<Arc<StaticMap>>, ConfigError> {
+/// Also the image file a `.yaml` map names.
+fn static_map(config: &Config) -> Result<StaticMapRead, ConfigError> {
     let occupancy = &config.localmap.occupancy;
-    let map = crate::occupancy::load(occupancy)
+    let Some((grid, image)) = crate::occupancy::load(occupancy)
         .map_err(|e| ConfigError::new("localmap.occupancy.file", e.to_string()))?
-        .map(|grid| Arc::new(StaticMap::from_grid(&grid, config.localmap.patch_size_m)));
+    else {
+        return Ok((None, None));
+    };
+    let map = Some(Arc::new(StaticMap::from_grid(
+        &grid,
+        config.localmap.patch_size_m,
+    )));
     if let Some(m) = &map {
         tracing::info!(
             file = %occupancy.file,
@@ -523,8 +546,11 @@ fn static_map(config: &Config) -> Result<Option<Arc<StaticMap>>, ConfigError> {
             "static occupancy map merged into the local map"
         );
     }
-    Ok(map)
+    Ok((map, image))
 }
+
+/// The static map [`static_map`] reads and the image file it names.
+type StaticMapRead = (Option<Arc<StaticMap>>, Option<PathBuf>);
 
 fn behaviour_error(name: &str, error: RegistryError) -> ConfigError {
     match error {

@@ -52,6 +52,10 @@ pub enum ExportError {
     },
     #[error("cannot write {path}: {reason}")]
     Write { path: String, reason: String },
+    #[error(
+        "no LCM event could be read from {path} ({damaged_bytes} bytes skipped as damaged): is it an LCM log?"
+    )]
+    Empty { path: String, damaged_bytes: u64 },
     #[error("invalid configuration: {0}")]
     Config(#[from] arcnav_vehicle::ConfigError),
 }
@@ -534,13 +538,21 @@ pub fn export_mcap(
     }
     let stats = reader.stats();
     summary.damaged_bytes = stats.skipped_bytes + stats.truncated_tail_bytes;
+    // Nothing read is a failure: the staged file is dropped, and any old
+    // file at `out` stays as it was.
+    if summary.events == 0 {
+        return Err(ExportError::Empty {
+            path: log.display().to_string(),
+            damaged_bytes: summary.damaged_bytes,
+        });
+    }
     let file = writer
         .close()
         .map_err(|e| write_error(e.to_string()))?
         .into_inner()
         .map_err(|e| write_error(e.error().to_string()))?;
-    file.sync_all()
-        .and_then(|()| staged.commit())
+    staged
+        .commit(file)
         .map_err(|e| write_error(e.to_string()))?;
     Ok(summary)
 }

@@ -35,13 +35,17 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 
 /// Refuses `output` when it is one of `inputs` (each named by what it is,
 /// e.g. "the log"), or another of the run's `outputs`.
-pub fn check_outputs(outputs: &[&Path], inputs: &[(&str, &Path)]) -> Result<(), OverwritesInput> {
+pub fn check_outputs<P: AsRef<Path>>(
+    outputs: &[&Path],
+    inputs: &[(&str, P)],
+) -> Result<(), OverwritesInput> {
     for (i, &output) in outputs.iter().enumerate() {
-        for &(what, input) in inputs {
+        for (what, input) in inputs {
+            let input = input.as_ref();
             if same_file(output, input) {
                 return Err(OverwritesInput::Input {
                     output: output.to_owned(),
-                    what: what.to_owned(),
+                    what: (*what).to_owned(),
                     input: input.to_owned(),
                 });
             }
@@ -59,48 +63,110 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[(&str, &Path)]) -> Result<(), 
     Ok(())
 }
 
-/// A file being written: a temporary file beside `target`, renamed onto it
-/// by [`Staged::commit`]; dropped uncommitted, it is removed.
+/// A file being written. A regular file (or a new one) is written to a
+/// temporary file beside it, renamed onto it by [`Staged::commit`]; dropped
+/// uncommitted, the temporary is removed and the old file stays. A symlink
+/// is followed: the file it names is the one written, the link stays. A
+/// FIFO, a device or a socket is written to directly and never replaced.
 #[derive(Debug)]
 pub struct Staged {
-    target: PathBuf,
-    temp: PathBuf,
-    committed: bool,
+    /// `(temporary, target)` when written beside the target; `None` when
+    /// written in place.
+    rename: Option<(PathBuf, PathBuf)>,
+}
+
+/// What an output path names now.
+enum Target {
+    /// A regular file, or nothing yet: staged beside it.
+    Regular(PathBuf),
+    /// A FIFO, a character or block device, a socket: written in place.
+    Special(PathBuf),
+}
+
+/// Follows `path` through any symlinks to what it names; refuses a
+/// directory and a link that names nothing.
+fn target_of(path: &Path) -> io::Result<Target> {
+    use std::os::unix::fs::FileTypeExt;
+    let refuse = |why: String| io::Error::new(io::ErrorKind::InvalidInput, why);
+    let link = std::fs::symlink_metadata(path);
+    let resolved = match &link {
+        Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).map_err(|e| {
+            refuse(format!(
+                "{} is a symbolic link to nothing that can be written ({e}); remove it or name another file",
+                path.display()
+            ))
+        })?,
+        _ => path.to_owned(),
+    };
+    match std::fs::metadata(&resolved) {
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(Target::Regular(resolved)),
+        Err(e) => Err(e),
+        Ok(m) if m.is_file() => Ok(Target::Regular(resolved)),
+        Ok(m) if m.is_dir() => Err(refuse(format!(
+            "{} is a directory; name a file",
+            path.display()
+        ))),
+        Ok(m) => {
+            let t = m.file_type();
+            if t.is_fifo() || t.is_char_device() || t.is_block_device() || t.is_socket() {
+                Ok(Target::Special(resolved))
+            } else {
+                Err(refuse(format!("{} is not a file", path.display())))
+            }
+        }
+    }
 }
 
 impl Staged {
-    /// Creates the temporary file for `target`.
+    /// Opens what `target` is written through (see [`Staged`]).
     pub fn create(target: &Path) -> io::Result<(Self, File)> {
-        let name = target
-            .file_name()
-            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "not a file name"))?;
-        let mut temp_name = std::ffi::OsString::from(".");
-        temp_name.push(name);
-        temp_name.push(format!(".{}.partial", std::process::id()));
-        let temp = target.with_file_name(temp_name);
-        let file = File::create(&temp)?;
-        Ok((
-            Self {
-                target: target.to_owned(),
-                temp,
-                committed: false,
-            },
-            file,
-        ))
+        match target_of(target)? {
+            Target::Special(path) => {
+                let file = std::fs::OpenOptions::new().write(true).open(path)?;
+                Ok((Self { rename: None }, file))
+            }
+            Target::Regular(target) => {
+                let name = target.file_name().ok_or_else(|| {
+                    io::Error::new(io::ErrorKind::InvalidInput, "not a file name")
+                })?;
+                let mut temp_name = std::ffi::OsString::from(".");
+                temp_name.push(name);
+                temp_name.push(format!(".{}.partial", std::process::id()));
+                let temp = target.with_file_name(temp_name);
+                let file = File::create(&temp)?;
+                Ok((
+                    Self {
+                        rename: Some((temp, target)),
+                    },
+                    file,
+                ))
+            }
+        }
     }
 
-    /// The file is complete: it takes the target's place.
-    pub fn commit(mut self) -> io::Result<()> {
-        std::fs::rename(&self.temp, &self.target)?;
-        self.committed = true;
-        Ok(())
+    /// The file is complete: synced and put in the target's place (written
+    /// in place, nothing is left to do but flushing it).
+    pub fn commit(mut self, file: File) -> io::Result<()> {
+        match self.rename.take() {
+            Some((temp, target)) => {
+                let synced = file.sync_all().and_then(|()| {
+                    drop(file);
+                    std::fs::rename(&temp, &target)
+                });
+                if synced.is_err() {
+                    let _ = std::fs::remove_file(&temp);
+                }
+                synced
+            }
+            None => Ok(()),
+        }
     }
 }
 
 impl Drop for Staged {
     fn drop(&mut self) {
-        if !self.committed {
-            let _ = std::fs::remove_file(&self.temp);
+        if let Some((temp, _)) = &self.rename {
+            let _ = std::fs::remove_file(temp);
         }
     }
 }
@@ -110,8 +176,7 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> io::Result<()> {
     use std::io::Write as _;
     let (staged, mut file) = Staged::create(path)?;
     file.write_all(bytes)?;
-    file.sync_all()?;
-    staged.commit()
+    staged.commit(file)
 }
 
 #[cfg(test)]
@@ -135,7 +200,7 @@ mod tests {
         assert!(check_outputs(&[&d.join("out.lcm")], &[("the log", &log)]).is_ok());
         // Two outputs on one file.
         let out = d.join("out.json");
-        let err = check_outputs(&[&out, &out], &[]).unwrap_err();
+        let err = check_outputs::<&Path>(&[&out, &out], &[]).unwrap_err();
         assert!(
             err.to_string().contains("the run writes") && !err.to_string().contains("reads"),
             "{err}"
@@ -159,5 +224,56 @@ mod tests {
         );
         write_file(&path, b"new").unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"new");
+    }
+
+    #[test]
+    fn a_link_is_followed_and_kept_and_the_file_it_names_is_written() {
+        let d = dir("follow");
+        let real = d.join("real.json");
+        std::fs::write(&real, b"old").unwrap();
+        let link = d.join("link.json");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        write_file(&link, b"new").unwrap();
+        let meta = std::fs::symlink_metadata(&link).unwrap();
+        assert!(meta.file_type().is_symlink(), "the link was replaced");
+        assert_eq!(std::fs::read(&real).unwrap(), b"new");
+        // A link to nothing is refused, not replaced by a file.
+        let dangling = d.join("dangling.json");
+        let _ = std::fs::remove_file(&dangling);
+        std::os::unix::fs::symlink(d.join("missing/none.json"), &dangling).unwrap();
+        let err = write_file(&dangling, b"x").unwrap_err();
+        assert!(err.to_string().contains("symbolic link"), "{err}");
+        assert!(
+            std::fs::symlink_metadata(&dangling)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+    }
+
+    #[test]
+    fn a_directory_is_refused_and_a_fifo_is_written_in_place() {
+        use std::os::unix::fs::FileTypeExt;
+        let d = dir("special");
+        let err = write_file(&d, b"x").unwrap_err();
+        assert!(err.to_string().contains("is a directory"), "{err}");
+        let fifo = d.join("pipe");
+        let _ = std::fs::remove_file(&fifo);
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("mkfifo (coreutils) runs");
+        assert!(made.success());
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_file(&fifo, b"through the pipe").unwrap();
+        assert_eq!(reader.join().unwrap(), b"through the pipe");
+        let kind = std::fs::symlink_metadata(&fifo).unwrap().file_type();
+        assert!(kind.is_fifo(), "the FIFO was replaced by {kind:?}");
+        let left = std::fs::read_dir(&d).unwrap().count();
+        assert_eq!(left, 1, "a temporary was left beside the FIFO");
     }
 }

@@ -64,8 +64,7 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
             .into_inner()
             .into_inner()
             .map_err(|e| failed(e.into_error()))?;
-        file.sync_all().map_err(failed)?;
-        staged.commit().map_err(failed)
+        staged.commit(file).map_err(failed)
     }
 
     /// Writes `message` on `channel` at `at`.

@@ -304,6 +304,9 @@ pub struct World {
     /// Start position and heading (radians).
     pub start: ([f64; 2], f64),
     pub waypoints: Vec<WorldWaypoint>,
+    /// The files this world was read from (the world file, its height
+    /// file), each named by what it is: no output of a run may be one.
+    pub files_read: Vec<(&'static str, PathBuf)>,
 }
 
 /// The worlds compiled into arcnav: name, description, TOML.
@@ -345,7 +348,11 @@ impl World {
             path: path.to_owned(),
             reason: e.to_string(),
         })?;
-        World::from_toml(&text, &path.display().to_string(), path.parent())
+        let mut world = World::from_toml(&text, &path.display().to_string(), path.parent())?;
+        world
+            .files_read
+            .insert(0, ("the world file", path.to_owned()));
+        Ok(world)
     }
 
     /// Parses and builds a world; `origin` names it in messages.
@@ -420,6 +427,7 @@ impl World {
             t.origin_m[0] + t.size_m[0],
             t.origin_m[1] + t.size_m[1],
         ];
+        let mut files_read = Vec::new();
         let base = match &t.heightmap {
             Some(file) => {
                 let path = match base_dir {
@@ -443,6 +451,7 @@ impl World {
                         t.size_m[1]
                     )));
                 }
+                files_read.push(("the world's height file", path));
                 Base::File {
                     grid,
                     scale: t.heightmap_scale,
@@ -506,6 +515,7 @@ impl World {
             index,
             bounds,
             waypoints,
+            files_read,
         })
     }
 

@@ -79,11 +79,7 @@ fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
     let auth = &config.bus.auth;
     // The figures written at exit must not replace what the run reads.
     if let Some(json) = &args.json {
-        let key = auth.enabled().then(|| auth.key_path(base));
-        let mut inputs: Vec<(&str, &std::path::Path)> = Vec::new();
-        inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
-        inputs.extend(key.as_deref().map(|k| ("the key file", k)));
-        arcnav::output::check_outputs(&[json], &inputs)?;
+        arcnav::output::check_outputs(&[json], &config.files_read())?;
     }
     let policy = auth.policy(base).with_context(|| {
         format!(

@@ -3,6 +3,7 @@
 
 mod detect;
 mod live;
+mod logged;
 mod render;
 mod replay;
 mod sim;

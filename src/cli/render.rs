@@ -2,42 +2,18 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
 use std::process::ExitCode;
 
 use crate::{ExportArgs, RenderArgs};
 use arcnav::Resolved;
 use arcnav_behaviours::Registry;
 
-/// The configuration to redo a run's decisions with: `--config` if given,
-/// else the `config.toml` `arcnav sim` wrote beside the log (said so on
-/// stderr), else the defaults. A run made with another evaluator or other
-/// sensors is redrawn as it was driven.
-fn run_config(
-    log: &Path,
-    given: Option<&Path>,
-    registry: &Registry,
-) -> anyhow::Result<(Resolved, Option<PathBuf>)> {
-    if let Some(path) = given {
-        return Ok((Resolved::load(path, registry)?, Some(path.to_owned())));
-    }
-    let beside = log.parent().unwrap_or(Path::new(".")).join("config.toml");
-    if beside.is_file() {
-        let config = Resolved::load(&beside, registry)
-            .with_context(|| format!("the run's configuration {}", beside.display()))?;
-        eprintln!(
-            "using {}, the configuration the run was made with (--config to give another)",
-            beside.display()
-        );
-        return Ok((config, Some(beside)));
-    }
-    Ok((Resolved::load_or_default(None, registry)?, None))
-}
+use super::logged::{config_of_log, files_read};
 
 pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
     use arcnav::replay::{ReplayOptions, replay as run_replay};
     let registry = Registry::builtin();
-    let (config, config_path) = run_config(&args.log, args.config.as_deref(), &registry)?;
+    let config = config_of_log(&args.log, args.config.as_deref(), &registry)?;
     anyhow::ensure!(
         args.at.is_finite() && (0.0..=1e9).contains(&args.at),
         "--at {}: must be a number of seconds from the log's start, 0 or more",
@@ -47,9 +23,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("decision-{:.1}s.png", args.at)));
-    let mut inputs = vec![("the log", args.log.as_path())];
-    inputs.extend(config_path.as_deref().map(|c| ("the configuration", c)));
-    arcnav::output::check_outputs(&[&out], &inputs)?;
+    arcnav::output::check_outputs(&[&out], &files_read(&args.log, [&config]))?;
     // A log without range images (`arcnav sim --no-images`) perceives
     // nothing: its map would be drawn empty and every arc vetoed. Its
     // recorded cells are what the vehicle drove on.
@@ -129,10 +103,8 @@ fn cells_of_a_log_without_images(log: &Path) -> u64 {
 /// `arcnav export LOG --mcap OUT`.
 pub fn export(args: ExportArgs) -> anyhow::Result<ExitCode> {
     let registry = Registry::builtin();
-    let (config, config_path) = run_config(&args.log, args.config.as_deref(), &registry)?;
-    let mut inputs = vec![("the log", args.log.as_path())];
-    inputs.extend(config_path.as_deref().map(|c| ("the configuration", c)));
-    arcnav::output::check_outputs(&[&args.mcap], &inputs)?;
+    let config = config_of_log(&args.log, args.config.as_deref(), &registry)?;
+    arcnav::output::check_outputs(&[&args.mcap], &files_read(&args.log, [&config]))?;
     write_mcap(&args.log, &args.mcap, &config)?;
     Ok(ExitCode::SUCCESS)
 }
@@ -144,12 +116,6 @@ pub(crate) fn write_mcap(
     config: &Resolved,
 ) -> anyhow::Result<()> {
     let summary = arcnav::export::export_mcap(log, mcap, config)?;
-    anyhow::ensure!(
-        summary.events > 0,
-        "no LCM event could be read from {} ({} bytes skipped as damaged): is it an LCM log?",
-        log.display(),
-        summary.damaged_bytes
-    );
     let written: u64 = summary.topics.values().sum();
     println!(
         "{}: {written} messages on {} topics from {} events of {}",

@@ -8,19 +8,27 @@ use anyhow::Context as _;
 use arcnav::Resolved;
 use arcnav_behaviours::Registry;
 
+use super::logged::{config_of_log, files_read};
+
 pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     use arcnav::replay::{ReplayOptions, compare, replay as run_replay};
     let registry = Registry::builtin();
-    let load = |path: &Option<PathBuf>| -> anyhow::Result<Resolved> {
-        Ok(Resolved::load_or_default(path.as_deref(), &registry)?)
-    };
     check_pace_and_window(&args)?;
-    let mut inputs = vec![("the log", args.log.as_path())];
-    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
-    inputs.extend(args.waypoints.as_deref().map(|w| ("the waypoints file", w)));
-    for c in args.compare_config.iter().flatten() {
-        inputs.push(("a configuration", c.as_path()));
-    }
+    // A log `arcnav sim` wrote is replayed with the configuration beside it
+    // unless told otherwise: replayed with the defaults, a run made with
+    // another evaluator or sensor had agreed on 0.07 % of its decisions.
+    let configs: Vec<(String, Resolved)> = match &args.compare_config {
+        Some(pair) => pair
+            .iter()
+            .map(|c| Ok((c.display().to_string(), Resolved::load(c, &registry)?)))
+            .collect::<anyhow::Result<_>>()?,
+        None => vec![(
+            "replayed".to_owned(),
+            config_of_log(&args.log, args.config.as_deref(), &registry)?,
+        )],
+    };
+    let mut inputs = files_read(&args.log, configs.iter().map(|(_, c)| c));
+    inputs.extend(args.waypoints.clone().map(|w| ("the waypoints file", w)));
     let outputs: Vec<&std::path::Path> = args
         .out
         .iter()
@@ -45,37 +53,35 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         "{spinner} replaying [{bar:30}] {bytes}/{total_bytes} ({eta})",
     );
     let mut runs = Vec::new();
-    let configs: Vec<(String, Resolved, ReplayOptions)> = match &args.compare_config {
-        Some(pair) => {
-            let (a, b) = (&pair[0], &pair[1]);
-            vec![
-                (
-                    a.display().to_string(),
-                    load(&Some(a.clone()))?,
-                    ReplayOptions {
-                        out: None,
-                        ..options.clone()
-                    },
-                ),
-                (
-                    b.display().to_string(),
-                    load(&Some(b.clone()))?,
-                    options.clone(),
-                ),
-            ]
-        }
-        None => vec![("replayed".to_owned(), load(&args.config)?, options.clone())],
-    };
-    for (label, config, opts) in &configs {
+    let n = configs.len();
+    for (i, (label, config)) in configs.into_iter().enumerate() {
+        // Of two configurations compared, the second's replay is the one
+        // `--out` records.
+        let opts = ReplayOptions {
+            out: if i + 1 == n {
+                options.out.clone()
+            } else {
+                None
+            },
+            ..options.clone()
+        };
         bar.set_position(0);
-        let result = run_replay(&args.log, config, opts, &mut |p| bar.set_position(p))?;
-        runs.push((label.clone(), config.clone(), result));
+        let result = run_replay(&args.log, &config, &opts, &mut |p| bar.set_position(p))?;
+        runs.push((label, config, result));
     }
     bar.finish_and_clear();
     let (_, config, last) = &runs[runs.len() - 1];
     let origin = last.span.map_or(0, |s| s.0);
     let i = &last.inputs;
     println!("log           {}", args.log.display());
+    let configurations: Vec<String> = runs
+        .iter()
+        .map(|(_, c, _)| match c.given().source() {
+            Some(path) => path.display().to_string(),
+            None => "the defaults".to_owned(),
+        })
+        .collect();
+    println!("configuration {}", configurations.join(" vs "));
     println!(
         "inputs        {} poses, {} range images, {} waypoint lists{}",
         i.poses,
@@ -140,6 +146,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     if let Some(path) = &args.json {
         let json = serde_json::json!({
             "log": args.log.display().to_string(),
+            "configurations": configurations,
             "inputs": last.inputs,
             "decisions": last.cycles.len(),
             "problems": problems,

@@ -39,23 +39,9 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         .chain(args.save_world.as_deref())
         .chain(args.mcap.as_deref())
         .collect();
-    let mut inputs: Vec<(&str, &Path)> = Vec::new();
-    inputs.extend(args.config.as_deref().map(|c| ("the configuration", c)));
-    inputs.extend(
-        args.world
-            .as_deref()
-            .filter(|_| args.seed.is_none())
-            .map(Path::new)
-            .filter(|w| w.is_file())
-            .map(|w| ("the world", w)),
-    );
+    let mut inputs = config.files_read();
+    inputs.extend(world.files_read.iter().cloned());
     arcnav::output::check_outputs(&written, &inputs)?;
-    if let Some(path) = &args.save_world {
-        let text = toml::to_string(&world.spec).context("serialising the world")?;
-        arcnav::output::write_file(path, text.as_bytes())
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        println!("world saved to {}", path.display());
-    }
     std::fs::create_dir_all(&out)
         .with_context(|| format!("cannot create the output directory {}", out.display()))?;
     let snapshot_dir = out.join("snapshots");
@@ -125,6 +111,14 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     )
     .with_context(|| format!("cannot write {}", report_path.display()))?;
     arcnav::render::mission_picture(map_path, &world, &run)?;
+    // Saved after the run, like every other output: a run that fails
+    // leaves what it would have replaced as it was.
+    if let Some(path) = &args.save_world {
+        let text = toml::to_string(&world.spec).context("serialising the world")?;
+        arcnav::output::write_file(path, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("world saved to {}", path.display());
+    }
     print_summary(&run.report, &out, &run.snapshots);
     if let Some(mcap) = &args.mcap {
         super::render::write_mcap(log_path, mcap, &config)?;

@@ -1,0 +1,46 @@
+//! What a command that reads a log also reads: the configuration the log
+//! was made with, and every file that configuration names.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use arcnav::Resolved;
+use arcnav_behaviours::Registry;
+
+/// The configuration to redo a run's decisions with: `--config` if given,
+/// else the `config.toml` `arcnav sim` wrote beside the log (said so on
+/// stderr), else the defaults. A run made with another evaluator or other
+/// sensors is redone as it was driven.
+pub fn config_of_log(
+    log: &Path,
+    given: Option<&Path>,
+    registry: &Registry,
+) -> anyhow::Result<Resolved> {
+    if let Some(path) = given {
+        return Ok(Resolved::load(path, registry)?);
+    }
+    let beside = log.parent().unwrap_or(Path::new(".")).join("config.toml");
+    if beside.is_file() {
+        let config = Resolved::load(&beside, registry)
+            .with_context(|| format!("the run's configuration {}", beside.display()))?;
+        eprintln!(
+            "using {}, the configuration the run was made with (--config to give another)",
+            beside.display()
+        );
+        return Ok(config);
+    }
+    Ok(Resolved::load_or_default(None, registry)?)
+}
+
+/// The files a command reading `log` with `configs` reads, each named by
+/// what it is: no output of the command may be one of them.
+pub fn files_read<'a>(
+    log: &Path,
+    configs: impl IntoIterator<Item = &'a Resolved>,
+) -> Vec<(&'static str, PathBuf)> {
+    let mut files = vec![("the log", log.to_owned())];
+    for config in configs {
+        files.extend(config.files_read());
+    }
+    files
+}
