@@ -247,12 +247,15 @@ pub enum PoseError {
     Frame { utime: i64, source: FrameError },
     #[error("pose at {utime} µs has a velocity or yaw rate that is not finite")]
     NonFinite { utime: i64 },
+    #[error("pose: {0}")]
+    Time(#[from] arcnav_vehicle::time::ImplausibleTime),
 }
 
 impl TryFrom<&pose_t> for Pose {
     type Error = PoseError;
 
     fn try_from(msg: &pose_t) -> Result<Self, PoseError> {
+        arcnav_vehicle::time::plausible(msg.utime)?;
         let world_from_vehicle: Isometry = isometry_from_parts(msg.position, msg.orientation)
             .map_err(|source| PoseError::Frame {
                 utime: msg.utime,
@@ -351,6 +354,12 @@ mod tests {
             ..msg
         };
         assert!(Pose::try_from(&far).is_err());
+        // A time no clock gives: one such pose had restarted the cycle clock
+        // near i64::MIN and hung the pipeline catching up 10^10 cycles.
+        for utime in [i64::MIN, -1, i64::MAX, (1 << 53) + 1] {
+            let err = Pose::try_from(&pose_t { utime, ..msg }).unwrap_err();
+            assert!(matches!(err, PoseError::Time(_)), "{utime}: {err}");
+        }
     }
 
     #[test]

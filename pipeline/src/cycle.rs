@@ -189,13 +189,18 @@ impl<T> DecisionCycle<T> {
             self.last_cycle = None;
         }
         if let Some(next) = self.next_cycle {
-            let gap = pose.utime.saturating_sub(next);
-            if gap > MAX_CATCH_UP_US {
+            // Exact, whatever the two times: a saturated gap had left the
+            // clock 10¹⁰ cycles behind the pose, caught up one by one.
+            let gap = i128::from(pose.utime) - i128::from(next);
+            if gap > i128::from(MAX_CATCH_UP_US) {
                 // Cycles in the gap would all decide on the stale pose
                 // before it. Reports due in it still reach the map.
-                let skip = gap / self.period_us;
-                self.counts.skipped_cycles += skip as u64;
-                self.next_cycle = Some(next + skip * self.period_us);
+                let skip = gap / i128::from(self.period_us);
+                let resumed = i128::from(next) + skip * i128::from(self.period_us);
+                // `resumed` lies in (pose − period, pose]: it is an i64.
+                self.next_cycle = Some(Utime::try_from(resumed).unwrap_or(pose.utime));
+                let skip = u64::try_from(skip).unwrap_or(u64::MAX);
+                self.counts.skipped_cycles = self.counts.skipped_cycles.saturating_add(skip);
                 tracing::warn!(
                     skipped = skip,
                     gap_s = gap as f64 * 1e-6,
@@ -448,6 +453,26 @@ mod tests {
         assert_eq!(out.len(), 1);
         assert_eq!(out[0].utime, 5_000);
         assert_eq!(c.counts().restarts, 1);
+    }
+
+    #[test]
+    fn a_pose_at_the_far_end_of_time_is_caught_up_in_a_bounded_number_of_cycles() {
+        // The wire refuses such times (`arcnav_vehicle::time::plausible`);
+        // the clock stays bounded without that check too.
+        for first in [Utime::MIN, Utime::MIN + 1, -1_000_000_000_000] {
+            let mut c = held();
+            let mut out = Vec::new();
+            live_pose(&mut c, pose(1_700_000_000_000_000, 0.0), &mut out);
+            live_pose(&mut c, pose(first, 0.0), &mut out);
+            out.clear();
+            live_pose(&mut c, pose(1_700_000_000_100_000, 0.0), &mut out);
+            assert!(out.len() <= 12, "{first}: {} cycles", out.len());
+            assert!(
+                out.iter()
+                    .all(|o| o.utime > 1_700_000_000_000_000 - 100_000)
+            );
+            assert!(c.counts().skipped_cycles > 1_000_000, "{first}");
+        }
     }
 
     #[test]

@@ -145,7 +145,7 @@ impl PoseHistory {
             self.poses.get(after_index),
             after_index.checked_sub(1).and_then(|i| self.poses.get(i)),
         ) && after.utime != utime
-            && after.utime - before.utime > max_gap
+            && after.utime.saturating_sub(before.utime) > max_gap
         {
             return Err(PoseHistoryError::Gap {
                 requested: utime,
@@ -181,7 +181,8 @@ impl PoseHistory {
             return Ok(*after);
         }
         let before = &self.poses[after_index - 1];
-        let t = (utime - before.utime) as f64 / (after.utime - before.utime) as f64;
+        let t = crate::time::seconds_between(before.utime, utime)
+            / crate::time::seconds_between(before.utime, after.utime);
         Ok(interpolate(before, after, t, utime))
     }
 }

@@ -27,6 +27,20 @@ pub enum WireError {
     },
     #[error("{what}: {reason}")]
     Invalid { what: &'static str, reason: String },
+    #[error("{what}: {source}")]
+    Time {
+        what: &'static str,
+        source: arcnav_vehicle::time::ImplausibleTime,
+    },
+}
+
+/// Each of `times` checked with [`arcnav_vehicle::time::plausible`]: a
+/// message's times are on a vehicle's clock before any clock joins them.
+fn plausible(what: &'static str, times: &[Utime]) -> Result<(), WireError> {
+    for &t in times {
+        arcnav_vehicle::time::plausible(t).map_err(|source| WireError::Time { what, source })?;
+    }
+    Ok(())
 }
 
 fn position_and_rotation(iso: &Isometry) -> ([f64; 3], [f64; 4]) {
@@ -52,6 +66,7 @@ pub fn range_image_to_wire(image: &RangeImage) -> range_image_t {
 
 /// A range image from the wire (sizes were checked by the decoder).
 pub fn range_image_from_wire(msg: range_image_t) -> Result<RangeImage, WireError> {
+    plausible("range image", &[msg.utime])?;
     let vehicle_from_sensor = isometry_from_parts(msg.mount_position, msg.mount_orientation)
         .map_err(|source| WireError::Frame {
             what: "range image mount",
@@ -108,6 +123,7 @@ fn saturate_len(n: usize) -> i32 {
 /// the slice's place in its image here (before anything is allocated
 /// from the image's declared size).
 pub fn range_slice_from_wire(msg: range_slice_t) -> Result<RangeSlice, WireError> {
+    plausible("range slice", &[msg.utime, msg.frame_utime])?;
     let invalid = |reason: String| WireError::Invalid {
         what: "range slice",
         reason,
@@ -199,6 +215,7 @@ fn saturate(i: i64) -> i32 {
 
 /// An obstacle report from the wire; regions are rebuilt from the cells.
 pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, WireError> {
+    plausible("obstacle cells", &[msg.utime, msg.acquired_utime])?;
     let invalid = |reason: String| WireError::Invalid {
         what: "obstacle cells",
         reason,
@@ -338,6 +355,7 @@ pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
 
 /// A behaviour's votes from the wire; they must be over `arcs`.
 pub fn votes_from_wire(msg: &arc_votes_t, arcs: &ArcSet) -> Result<BehaviourVotes, WireError> {
+    plausible("arc votes", &[msg.utime])?;
     let invalid = |reason: String| WireError::Invalid {
         what: "arc votes",
         reason,
@@ -512,6 +530,7 @@ pub fn drop_elevation(msg: &mut local_map_t) {
 /// A cycle's map from the wire. Patch indices come back from the world
 /// centres (exact doubles), not from the `float` patch size.
 pub fn map_from_wire(msg: &local_map_t) -> Result<MapMessage, WireError> {
+    plausible("local map", &[msg.utime, msg.cycle_utime])?;
     let invalid = |reason: String| WireError::Invalid {
         what: "local map",
         reason,
@@ -707,6 +726,10 @@ mod tests {
         assert!(refused(&|m| m.mount_orientation = [0.0; 4]).contains("mount"));
         assert!(refused(&|m| m.utime = m.frame_utime - 1).contains("before its frame"));
         assert!(refused(&|m| m.line_utime[3] = i64::MAX).contains("outside its frame"));
+        for t in [i64::MIN, -5, i64::MAX] {
+            assert!(refused(&|m| m.frame_utime = t).contains("not on a vehicle's clock"));
+            assert!(refused(&|m| m.utime = t).contains("not on a vehicle's clock"));
+        }
         assert!(
             refused(&|m| {
                 m.line_utime.pop();

@@ -57,7 +57,7 @@ use nalgebra::Point2;
 
 use arcnav_perception::{ObstacleReport, Reasons, ShadowIndex};
 use arcnav_vehicle::frames::yaw_of;
-use arcnav_vehicle::time::micros_to_seconds;
+use arcnav_vehicle::time::seconds_between;
 use arcnav_vehicle::{Footprint, Isometry, Pose, Utime, VehicleConfig};
 
 use crate::config::{JumpPolicy, LocalMapConfig};
@@ -653,7 +653,7 @@ impl LocalMap {
                     .xy()
                     .norm();
                 let allowed = self.config.max_pose_jump_m
-                    + self.max_speed_mps * micros_to_seconds(pose.utime - previous.utime);
+                    + self.max_speed_mps * seconds_between(previous.utime, pose.utime);
                 (moved > allowed || !moved.is_finite()).then_some(JumpReason::Jump {
                     distance_m: moved,
                     allowed_m: allowed,
