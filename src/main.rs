@@ -328,7 +328,8 @@ struct LiveArgs {
 struct VehicleArgs {
     #[command(flatten)]
     live: LiveArgs,
-    /// Hand over what to execute this often, Hz.
+    /// Hand over what to execute this often, Hz, at most 1000 and at least
+    /// twice per --timeout (a stop is then at most half a timeout late).
     #[arg(long, value_name = "HZ", default_value_t = 50.0)]
     rate: f64,
     /// Stop when the newest accepted command was received longer ago than

@@ -218,13 +218,40 @@ fn the_vehicle_bridge_refuses_to_follow_unsigned_commands_or_itself() {
         "0.1",
     ]);
     assert_eq!(code, 1, "{stderr}");
-    assert!(
-        stderr.contains("is the bus the commands come from"),
-        "{stderr}"
-    );
+    assert!(stderr.contains("no controller hears"), "{stderr}");
     let (code, _, stderr) = arcnav(&["vehicle", "--lcm", "memq://", "--rate", "0"]);
     assert_eq!(code, 1, "{stderr}");
     assert!(stderr.contains("--rate 0"), "{stderr}");
+    // Slower than twice per timeout: the stop would come late (1e-9 Hz and
+    // 0.5 Hz against a 0.3 s timeout had been taken).
+    for rate in ["1e-9", "0.5", "6"] {
+        let args = [
+            "vehicle",
+            "--lcm",
+            "memq://",
+            "--timeout",
+            "0.3",
+            "--rate",
+            rate,
+        ];
+        let (code, _, stderr) = arcnav(&args);
+        assert_eq!(code, 1, "{rate}: {stderr}");
+        assert!(
+            stderr.contains("hand over at least 6.7 Hz"),
+            "{rate}: {stderr}"
+        );
+    }
+    let args = [
+        "vehicle",
+        "--lcm",
+        "memq://",
+        "--timeout",
+        "0.3",
+        "--rate",
+        "7",
+    ];
+    let (code, _, stderr) = arcnav(&[&args[..], &["--duration", "0.1"]].concat());
+    assert_eq!(code, 0, "{stderr}");
     // A stop timeout that never comes (1e300 s had been taken).
     for timeout in ["1e300", "61", "0"] {
         let (code, _, stderr) = arcnav(&[
@@ -240,6 +267,34 @@ fn the_vehicle_bridge_refuses_to_follow_unsigned_commands_or_itself() {
         assert!(
             stderr.contains("must be more than 0 and at most 60 s"),
             "{timeout}: {stderr}"
+        );
+    }
+}
+
+/// The bus the bridge hears, spelt another way, is still that bus: the
+/// bridge had followed its own forwards and never stopped the vehicle.
+/// Inside a network namespace of its own (udpm sockets).
+#[test]
+fn the_vehicle_bridge_refuses_to_forward_onto_its_own_bus_however_spelt() {
+    let Some(ns) = arcnav_testkit::NetNs::require("forward-spelt") else {
+        return;
+    };
+    for forward in [
+        "udpm://",
+        "udpm://239.255.76.67:7667",
+        "udpm://239.255.76.67:7667?ttl=1",
+    ] {
+        let out = ns
+            .command(env!("CARGO_BIN_EXE_arcnav"))
+            .args(["vehicle", "--lcm", "udpm://239.255.76.67:7667?ttl=0"])
+            .args(["--forward", forward, "--duration", "0.1"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{forward}: {stderr}");
+        assert!(
+            stderr.contains("is the bus the commands come from"),
+            "{forward}: {stderr}"
         );
     }
 }

@@ -154,6 +154,7 @@ pub fn run_bridge(
     status.set("ticks_following", following);
     status.set("ticks_stopped", stopped + 1);
     status.set("watchdog_trips", watchdog.trips);
+    status.set("own_datagrams_ignored", lcm.stats().own);
     auth_status(&lcm, &mut status);
     Ok(LiveReport {
         wall_s: started.elapsed().as_secs_f64(),

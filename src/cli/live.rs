@@ -151,6 +151,17 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
     let timeout_s = args
         .timeout
         .unwrap_or(3.0 / config.pipeline.command_rate_hz);
+    // A stop reaches the controller up to one hand-over period after the
+    // watchdog trips: at most half the timeout late (at 0.5 Hz it had come
+    // 2 s after a 0.3 s timeout).
+    let min_rate = 2.0 / timeout_s;
+    anyhow::ensure!(
+        args.rate >= min_rate,
+        "--rate {}: a stop would reach the controller up to {:.3} s after the {timeout_s} s \
+         watchdog timeout; hand over at least {min_rate:.1} Hz (twice per timeout)",
+        args.rate,
+        1.0 / args.rate
+    );
     if lcm.auth_stats().is_none() {
         tracing::warn!(
             lcm = %live.lcm,
@@ -164,16 +175,31 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
             config.bus.auth.channels
         );
     }
+    let mut lcm = lcm;
     let forward = match &args.forward {
-        Some(url) if url == &live.lcm => anyhow::bail!(
-            "--forward {url} is the bus the commands come from: give the controller a link of its \
-             own (e.g. udpm://239.255.76.68:7669?ttl=0)"
-        ),
-        Some(url) => Some(
-            Lcm::new(url)
-                .with_context(|| format!("cannot open LCM at --forward {url}"))?
-                .publisher(),
-        ),
+        Some(url) => {
+            let parsed: arcnav_bus::transport::url::LcmUrl = url.parse()?;
+            // Compared by what the buses are (group and port), not by how
+            // the URLs are spelt: `udpm://` is the default bus too.
+            if parsed.same_bus(lcm.url()) {
+                anyhow::bail!(
+                    "--forward {url} is the bus the commands come from ({}): give the controller \
+                     a link of its own (e.g. udpm://239.255.76.68:7669?ttl=0)",
+                    live.lcm
+                );
+            }
+            anyhow::ensure!(
+                parsed != arcnav_bus::transport::url::LcmUrl::Memq,
+                "--forward {url}: an in-process queue no controller hears; give the controller's \
+                 bus (e.g. udpm://239.255.76.68:7669?ttl=0)"
+            );
+            let to =
+                Lcm::new(url).with_context(|| format!("cannot open LCM at --forward {url}"))?;
+            let publisher = to.publisher();
+            // Whatever route brings the forwards back, they are not commands.
+            lcm.ignore_from(&publisher);
+            Some(publisher)
+        }
         None => None,
     };
     let options = LiveOptions {

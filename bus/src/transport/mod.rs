@@ -148,6 +148,14 @@ impl Publisher {
     ) -> Result<(), TransportError> {
         self.publish(channel, &message.encode()?)
     }
+
+    /// The UDP port this publisher sends from (`None` for `memq://`).
+    pub fn source_port(&self) -> Option<u16> {
+        match &*self.sender {
+            Sender::Udpm { socket, .. } => socket.local_addr().ok().map(|a| a.port()),
+            Sender::Memq(_) => None,
+        }
+    }
 }
 
 enum Receiver {
@@ -171,6 +179,35 @@ pub struct Lcm {
     unsubscribed: u64,
     /// Checks messages on the channels the policy covers.
     verifier: Option<(AuthPolicy, Verifier)>,
+    /// This process's senders whose datagrams are not heard
+    /// ([`Lcm::ignore_from`]), and what was dropped for it.
+    own: OwnSenders,
+}
+
+/// Sending ports of this process, and whether addresses are this host's.
+#[derive(Default)]
+struct OwnSenders {
+    ports: Vec<u16>,
+    local: Vec<(std::net::IpAddr, bool)>,
+    dropped: u64,
+}
+
+impl OwnSenders {
+    /// Whether a datagram from `from` was sent by one of the senders: from
+    /// one of their ports and from an address of this host (one a socket
+    /// can be bound to; no other process holds the port).
+    fn sent(&mut self, from: SocketAddr) -> bool {
+        if !self.ports.contains(&from.port()) {
+            return false;
+        }
+        let ip = from.ip();
+        if let Some(&(_, local)) = self.local.iter().find(|(a, _)| *a == ip) {
+            return local;
+        }
+        let local = UdpSocket::bind((ip, 0)).is_ok();
+        self.local.push((ip, local));
+        local
+    }
 }
 
 impl Lcm {
@@ -206,6 +243,7 @@ impl Lcm {
             next_id: 0,
             unsubscribed: 0,
             verifier: None,
+            own: OwnSenders::default(),
         })
     }
 
@@ -233,6 +271,14 @@ impl Lcm {
         self.verifier
             .as_ref()
             .is_some_and(|(policy, _)| policy.covers(channel))
+    }
+
+    /// Never delivers what `publisher` (of this process, on any bus) sends:
+    /// a bridge forwarding onto a bus it also hears, however the two URLs
+    /// are spelt, must not follow its own forwards. Dropped datagrams are
+    /// counted in [`TransportStats::own`].
+    pub fn ignore_from(&mut self, publisher: &Publisher) {
+        self.own.ports.extend(publisher.source_port());
     }
 
     pub fn url(&self) -> &LcmUrl {
@@ -328,6 +374,7 @@ impl Lcm {
     }
 
     fn recv_any(&mut self, deadline: Instant) -> Result<Option<(String, Vec<u8>)>, TransportError> {
+        let own = &mut self.own;
         match &mut self.receiver {
             Receiver::None => {
                 std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
@@ -362,6 +409,7 @@ impl Lcm {
                     .set_read_timeout(Some(wait))
                     .map_err(io_error("cannot set the receive timeout"))?;
                 match socket.recv_from(buffer) {
+                    Ok((_, from)) if own.sent(from) => own.dropped += 1,
                     Ok((len, from)) => {
                         if let Some(message) =
                             reassembler.on_datagram(from, &buffer[..len], Instant::now())
@@ -395,6 +443,7 @@ impl Lcm {
                 _ => ReassemblyStats::default(),
             },
             unsubscribed: self.unsubscribed,
+            own: self.own.dropped,
         }
     }
 }
@@ -422,6 +471,8 @@ pub struct TransportStats {
     pub reassembly: ReassemblyStats,
     /// Complete messages on channels nobody subscribed to.
     pub unsubscribed: u64,
+    /// Datagrams this process sent itself, not heard ([`Lcm::ignore_from`]).
+    pub own: u64,
 }
 
 fn udpm_sender(settings: &UdpmUrl) -> Result<Sender, TransportError> {
@@ -520,6 +571,55 @@ pub fn wall_clock_utime() -> i64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn one_bus_spelt_two_ways_is_one_bus() {
+        let parse = |u: &str| u.parse::<LcmUrl>().unwrap();
+        let default = parse("udpm://239.255.76.67:7667?ttl=0");
+        for same in [
+            "udpm://",
+            "",
+            "udpm://239.255.76.67:7667",
+            "udpm://239.255.76.67:7667?ttl=1&recv_buf_size=65536",
+        ] {
+            assert!(parse(same).same_bus(&default), "{same}");
+        }
+        for other in [
+            "udpm://239.255.76.68:7667",
+            "udpm://239.255.76.67:7668",
+            "memq://",
+        ] {
+            assert!(!parse(other).same_bus(&default), "{other}");
+        }
+        assert!(!parse("memq://").same_bus(&parse("memq://")));
+    }
+
+    /// Inside a network namespace of its own: a bridge forwarding onto the
+    /// bus it hears (here through a second URL for it) hears none of its
+    /// forwards, counts them, and still hears everyone else.
+    #[test]
+    fn what_a_process_forwards_onto_the_bus_it_hears_is_not_heard() {
+        let Some(ns) = arcnav_testkit::NetNs::require("own-forwards") else {
+            return;
+        };
+        ns.run(|| {
+            let mut heard = Lcm::new("udpm://239.255.76.67:7667?ttl=0").unwrap();
+            heard.subscribe("STEERING_COMMAND");
+            let forward = Lcm::new("udpm://").unwrap().publisher();
+            heard.ignore_from(&forward);
+            let other = Lcm::new("udpm://239.255.76.67:7667").unwrap();
+            for _ in 0..3 {
+                forward.publish("STEERING_COMMAND", b"own").unwrap();
+            }
+            other.publish("STEERING_COMMAND", b"theirs").unwrap();
+            let wait = Duration::from_millis(300);
+            let got: Vec<Vec<u8>> = std::iter::from_fn(|| heard.recv_timeout(wait).unwrap())
+                .map(|m| m.data)
+                .collect();
+            assert_eq!(got, [b"theirs".to_vec()]);
+            assert_eq!(heard.stats().own, 3);
+        });
+    }
 
     #[test]
     fn memq_delivers_to_matching_subscriptions_only() {

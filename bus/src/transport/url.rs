@@ -18,6 +18,19 @@ pub enum LcmUrl {
     Memq,
 }
 
+impl LcmUrl {
+    /// Whether `self` and `other` are one bus, however spelt: the same
+    /// multicast group and port (TTL, buffer size and transmit-only are how
+    /// a process uses a bus, not which bus it is). Two `memq://` instances
+    /// are two queues, never one bus.
+    pub fn same_bus(&self, other: &LcmUrl) -> bool {
+        match (self, other) {
+            (LcmUrl::Udpm(a), LcmUrl::Udpm(b)) => a.group == b.group && a.port == b.port,
+            _ => false,
+        }
+    }
+}
+
 /// UDP multicast settings.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct UdpmUrl {
