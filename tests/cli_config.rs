@@ -85,6 +85,28 @@ fn values_that_aborted_or_hung_a_run_are_refused_by_key() {
     }
 }
 
+/// An occupancy map whose cells are huge against the local map's patches
+/// (`resolution: 100000`, one pixel) had aborted `config --check`: "memory
+/// allocation of 4294967296 bytes failed", exit 134.
+#[test]
+fn an_occupancy_map_too_large_for_the_patches_is_refused_by_key() {
+    let (dir, file) = temp_file("huge.toml", "[localmap.occupancy]\nfile = \"huge.yaml\"\n");
+    let folder = file.parent().unwrap();
+    std::fs::write(folder.join("one.pgm"), b"P5\n1 1\n255\n\0").unwrap();
+    std::fs::write(
+        folder.join("huge.yaml"),
+        "image: one.pgm\nresolution: 100000\norigin: [0, 0, 0]\n",
+    )
+    .unwrap();
+    let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains("localmap.occupancy.file") && stderr.contains("is its resolution right?"),
+        "{stderr}"
+    );
+    drop(dir);
+}
+
 #[test]
 fn config_check_without_a_file_is_a_usage_error() {
     let (code, _, stderr) = arcnav(&["config", "--check"]);

@@ -957,7 +957,7 @@ fn the_route_plans_around_a_wall_the_static_map_knows_before_any_image_shows_it(
         rows: 200,
         occupied: vec![true; 400],
     };
-    let statics = std::sync::Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, 0.4));
+    let statics = std::sync::Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, 0.4).unwrap());
     let without = best_arc(&route_votes(80.0, None));
     let with = best_arc(&route_votes(80.0, Some(&statics)));
     assert!(

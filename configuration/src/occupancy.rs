@@ -63,16 +63,90 @@ pub fn load(
     }
 }
 
-fn read(path: &Path) -> Result<Vec<u8>, OccupancyError> {
-    std::fs::read(path).map_err(|source| OccupancyError::Read {
+/// The largest map_server YAML read: 1 MiB (they are a few lines).
+pub const MAX_YAML_BYTES: u64 = 1 << 20;
+
+/// The most nodes a YAML document may expand to, aliases expanded: a
+/// 900-byte document of nested aliases had expanded to 3 GB.
+pub const MAX_YAML_NODES: u64 = 10_000;
+
+fn read_error(path: &Path) -> impl FnOnce(std::io::Error) -> OccupancyError + '_ {
+    move |source| OccupancyError::Read {
         path: path.to_owned(),
         source,
-    })
+    }
+}
+
+/// `path` opened to be read at most `max_bytes` of: a decoder reads what
+/// its header says, and a device (`/dev/zero`) or a file far larger than
+/// a map ends in a decoding error, never in memory running out.
+fn open_bounded(path: &Path, max_bytes: u64) -> Result<impl std::io::BufRead, OccupancyError> {
+    use std::io::Read as _;
+    let file = std::fs::File::open(path).map_err(read_error(path))?;
+    Ok(std::io::BufReader::new(file.take(max_bytes)))
+}
+
+/// The number of nodes `text` holds with every alias expanded (saturating).
+fn expanded_nodes(text: &str) -> Result<u64, String> {
+    use yaml_rust2::parser::{Event, EventReceiver, Parser};
+    #[derive(Default)]
+    struct Count {
+        total: u64,
+        /// Expanded size of each anchor, by anchor id.
+        anchors: std::collections::BTreeMap<usize, u64>,
+        /// Open collections: anchor id and the total when opened.
+        open: Vec<(usize, u64)>,
+    }
+    impl EventReceiver for Count {
+        fn on_event(&mut self, event: Event) {
+            match event {
+                Event::Scalar(_, _, anchor, _) => {
+                    self.total = self.total.saturating_add(1);
+                    if anchor > 0 {
+                        self.anchors.insert(anchor, 1);
+                    }
+                }
+                Event::SequenceStart(anchor, _) | Event::MappingStart(anchor, _) => {
+                    self.total = self.total.saturating_add(1);
+                    self.open.push((anchor, self.total));
+                }
+                Event::SequenceEnd | Event::MappingEnd => {
+                    if let Some((anchor, from)) = self.open.pop()
+                        && anchor > 0
+                    {
+                        self.anchors.insert(anchor, self.total - from + 1);
+                    }
+                }
+                Event::Alias(anchor) => {
+                    let size = self.anchors.get(&anchor).copied().unwrap_or(1);
+                    self.total = self.total.saturating_add(size);
+                }
+                _ => {}
+            }
+        }
+    }
+    let mut count = Count::default();
+    Parser::new_from_str(text)
+        .load(&mut count, true)
+        .map_err(|e| e.to_string())?;
+    Ok(count.total)
 }
 
 fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
     use yaml_rust2::{Yaml, YamlLoader};
-    let text = String::from_utf8(read(path)?).map_err(|_| invalid(path, "is not UTF-8 text"))?;
+    let bytes =
+        arcnav_vehicle::files::read_bounded(path, MAX_YAML_BYTES).map_err(read_error(path))?;
+    let text = String::from_utf8(bytes).map_err(|_| invalid(path, "is not UTF-8 text"))?;
+    let nodes = expanded_nodes(&text).map_err(|e| invalid(path, e))?;
+    if nodes > MAX_YAML_NODES {
+        return Err(invalid(
+            path,
+            format!(
+                "expands to {nodes} YAML nodes (its aliases expanded), more than \
+                 {MAX_YAML_NODES}: a map_server map is a few keys"
+            ),
+        ));
+    }
     let docs = YamlLoader::load_from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
     let doc = docs
         .first()
@@ -144,25 +218,27 @@ fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
 }
 
 fn read_pgm(path: &Path) -> Result<image::GrayImage, OccupancyError> {
-    let bytes = read(path)?;
-    let mut reader =
-        image::ImageReader::with_format(std::io::Cursor::new(bytes), image::ImageFormat::Pnm);
-    let mut limits = image::Limits::default();
-    limits.max_alloc = Some(2 * MAX_CELLS);
-    reader.limits(limits);
-    let decoded = reader
-        .decode()
-        .map_err(|e| invalid(path, format!("is not a readable PGM image: {e}")))?;
-    if u64::from(decoded.width()) * u64::from(decoded.height()) > MAX_CELLS {
+    use image::ImageDecoder as _;
+    let unreadable =
+        |e: image::ImageError| invalid(path, format!("is not a readable PGM image: {e}"));
+    // Two bytes a pixel at most (16-bit PGM), and the header.
+    let file = open_bounded(path, 2 * MAX_CELLS + 4096)?;
+    let mut decoder = image::codecs::pnm::PnmDecoder::new(file).map_err(unreadable)?;
+    let (width, height) = decoder.dimensions();
+    if u64::from(width) * u64::from(height) > MAX_CELLS {
         return Err(invalid(path, "holds more than 400 million pixels"));
     }
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(2 * MAX_CELLS);
+    decoder.set_limits(limits).map_err(unreadable)?;
+    let decoded = image::DynamicImage::from_decoder(decoder).map_err(unreadable)?;
     Ok(decoded.to_luma8())
 }
 
 fn load_npy(path: &Path, config: &OccupancyConfig) -> Result<OccupancyGrid, OccupancyError> {
     use npyz::{DType, TypeChar};
-    let bytes = read(path)?;
-    let npy = npyz::NpyFile::new(&bytes[..])
+    // Eight bytes a value at most, and the header.
+    let npy = npyz::NpyFile::new(open_bounded(path, 8 * MAX_CELLS + (1 << 16))?)
         .map_err(|e| invalid(path, format!("is not a .npy array: {e}")))?;
     let shape = npy.shape().to_vec();
     let [rows, cols] = shape[..] else {
@@ -356,5 +432,46 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("cannot read the occupancy map"), "{e}");
+    }
+
+    #[test]
+    fn devices_and_alias_bombs_are_refused_without_reading_them_whole() {
+        let d = dir("unbounded");
+        // `image: /dev/zero` had been read until memory ran out; a `.npy`
+        // naming a device the same.
+        let yaml = d.join("zero.yaml");
+        std::fs::write(
+            &yaml,
+            "image: /dev/zero\nresolution: 0.1\norigin: [0, 0, 0]\n",
+        )
+        .unwrap();
+        let e = load(&config(&yaml)).unwrap_err().to_string();
+        assert!(e.contains("not a readable PGM image"), "{e}");
+        let npy = d.join("zero.npy");
+        let _ = std::fs::remove_file(&npy);
+        std::os::unix::fs::symlink("/dev/zero", &npy).unwrap();
+        let e = load(&config(&npy)).unwrap_err().to_string();
+        assert!(e.contains("not a .npy array"), "{e}");
+        // A YAML of /dev/zero itself, and one of nested aliases (900 bytes
+        // had expanded to 3 GB).
+        let endless = d.join("endless.yaml");
+        let _ = std::fs::remove_file(&endless);
+        std::os::unix::fs::symlink("/dev/zero", &endless).unwrap();
+        let e = load(&config(&endless)).unwrap_err().to_string();
+        assert!(e.contains("larger than 1 MiB"), "{e}");
+        let mut bomb = String::from("a: &a [x, x, x, x, x, x, x, x, x, x]\n");
+        let names = ["a", "b", "c", "d", "e", "f", "g", "h", "i"];
+        for pair in names.windows(2) {
+            let refs = vec![format!("*{}", pair[0]); 10].join(", ");
+            bomb.push_str(&format!("{0}: &{0} [{refs}]\n", pair[1]));
+        }
+        bomb.push_str("image: map.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n");
+        assert!(bomb.len() < 1000);
+        let bombed = d.join("bomb.yaml");
+        std::fs::write(&bombed, &bomb).unwrap();
+        let e = load(&config(&bombed)).unwrap_err().to_string();
+        assert!(e.contains("YAML nodes (its aliases expanded)"), "{e}");
+        // A few aliases are fine.
+        assert!(expanded_nodes("a: &a [1, 2]\nb: *a\n").unwrap() < 20);
     }
 }

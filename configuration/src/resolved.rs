@@ -535,10 +535,13 @@ fn static_map(config: &Config) -> Result<StaticMapRead, ConfigError> {
     else {
         return Ok((None, None));
     };
-    let map = Some(Arc::new(StaticMap::from_grid(
-        &grid,
-        config.localmap.patch_size_m,
-    )));
+    let map = StaticMap::from_grid(&grid, config.localmap.patch_size_m).map_err(|e| {
+        ConfigError::new(
+            "localmap.occupancy.file",
+            format!("occupancy map {}: {e}", occupancy.file),
+        )
+    })?;
+    let map = Some(Arc::new(map));
     if let Some(m) = &map {
         tracing::info!(
             file = %occupancy.file,

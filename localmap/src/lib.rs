@@ -20,4 +20,4 @@ pub use map::{
     InsertError, InsertOutcome, JumpReason, LocalMap, MapSnapshot, MapStats, Patch, PoseUpdate,
     SeenGround,
 };
-pub use static_map::{OccupancyGrid, StaticMap};
+pub use static_map::{OccupancyGrid, StaticMap, StaticMapError};

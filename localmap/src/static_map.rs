@@ -40,56 +40,104 @@ pub struct StaticMap {
     count: usize,
 }
 
+/// The most patches a static map's extent may span: 2²⁶ (a 1.6 km square
+/// of 0.2 m patches), one byte each.
+pub const MAX_PATCHES: u64 = 1 << 26;
+
+/// The most points sampled to gather a grid onto patches: 2²⁸.
+pub const MAX_SAMPLES: u64 = 1 << 28;
+
+/// A grid too large to gather onto the local map's patches.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StaticMapError {
+    #[error(
+        "its occupied cells span {patches} patches of {patch_size_m} m, more than {MAX_PATCHES}: \
+         is its resolution ({resolution_m} m per cell) right?"
+    )]
+    Extent {
+        patches: u64,
+        patch_size_m: f64,
+        resolution_m: f64,
+    },
+    #[error(
+        "its {cells} occupied cells of {resolution_m} m are {samples} samples at the {patch_size_m} m \
+         patch size, more than {MAX_SAMPLES}: is its resolution right?"
+    )]
+    Samples {
+        cells: u64,
+        samples: f64,
+        patch_size_m: f64,
+        resolution_m: f64,
+    },
+}
+
 impl StaticMap {
-    /// The patches of `patch_size_m` that `grid` occupies.
-    pub fn from_grid(grid: &OccupancyGrid, patch_size_m: f64) -> Self {
-        // Points sampled per cell so every patch a cell covers is hit.
-        let samples = (grid.resolution_m / patch_size_m).ceil().max(1.0) as usize;
-        let step = grid.resolution_m / samples as f64;
-        let mut patches: Vec<(i64, i64)> = Vec::new();
-        for row in 0..grid.rows {
-            for col in 0..grid.cols {
-                if !grid.occupied[row * grid.cols + col] {
-                    continue;
-                }
-                for a in 0..samples {
-                    for b in 0..samples {
+    /// The patches of `patch_size_m` that `grid` occupies. Nothing is
+    /// allocated or sampled before the work is known to be bounded: a
+    /// 1-pixel map of 100 km cells had asked for 4 GB.
+    pub fn from_grid(grid: &OccupancyGrid, patch_size_m: f64) -> Result<Self, StaticMapError> {
+        let cells = grid.occupied.iter().filter(|&&o| o).count() as u64;
+        // Points sampled per cell side so every patch a cell covers is hit.
+        let per_side = (grid.resolution_m / patch_size_m).ceil().max(1.0);
+        let samples = per_side * per_side * cells as f64;
+        if !(samples <= MAX_SAMPLES as f64) {
+            return Err(StaticMapError::Samples {
+                cells,
+                samples,
+                patch_size_m,
+                resolution_m: grid.resolution_m,
+            });
+        }
+        let per_side = per_side as usize;
+        let step = grid.resolution_m / per_side as f64;
+        let each_patch = |f: &mut dyn FnMut(i64, i64)| {
+            for (k, _) in grid.occupied.iter().enumerate().filter(|(_, o)| **o) {
+                let (row, col) = (k / grid.cols, k % grid.cols);
+                for a in 0..per_side {
+                    for b in 0..per_side {
                         let local = nalgebra::Point3::new(
                             col as f64 * grid.resolution_m + (a as f64 + 0.5) * step,
                             row as f64 * grid.resolution_m + (b as f64 + 0.5) * step,
                             0.0,
                         );
                         let p = grid.origin * local;
-                        patches.push((
+                        f(
                             (p.x / patch_size_m).floor() as i64,
                             (p.y / patch_size_m).floor() as i64,
-                        ));
+                        );
                     }
                 }
             }
-        }
-        let Some(((i0, j0), (i1, j1))) = patches.iter().fold(None, |b, &(i, j)| {
-            Some(match b {
-                None => ((i, j), (i, j)),
-                Some(((a, c), (d, e))) => ((i.min(a), j.min(c)), (i.max(d), j.max(e))),
-            })
-        }) else {
-            return Self::default();
         };
-        let (cols, rows) = ((i1 - i0 + 1) as usize, (j1 - j0 + 1) as usize);
-        let mut occupied = vec![false; cols * rows];
-        for (i, j) in patches {
-            occupied[(j - j0) as usize * cols + (i - i0) as usize] = true;
+        let mut bounds: Option<[i64; 4]> = None;
+        each_patch(&mut |i, j| {
+            let b = bounds.get_or_insert([i, j, i, j]);
+            *b = [b[0].min(i), b[1].min(j), b[2].max(i), b[3].max(j)];
+        });
+        let Some([i0, j0, i1, j1]) = bounds else {
+            return Ok(Self::default());
+        };
+        let span = |lo: i64, hi: i64| (i128::from(hi) - i128::from(lo) + 1) as u128;
+        let patches = span(i0, i1).saturating_mul(span(j0, j1));
+        if patches > u128::from(MAX_PATCHES) {
+            return Err(StaticMapError::Extent {
+                patches: u64::try_from(patches).unwrap_or(u64::MAX),
+                patch_size_m,
+                resolution_m: grid.resolution_m,
+            });
         }
+        let (cols, rows) = (span(i0, i1) as usize, span(j0, j1) as usize);
+        let mut occupied = vec![false; cols * rows];
+        each_patch(&mut |i, j| occupied[(j - j0) as usize * cols + (i - i0) as usize] = true);
         let count = occupied.iter().filter(|&&o| o).count();
-        Self {
+        Ok(Self {
             i0,
             j0,
             cols,
             rows,
             occupied,
             count,
-        }
+        })
     }
 
     /// Whether world patch (`i`, `j`) is occupied.
@@ -129,7 +177,7 @@ mod tests {
             occupied: vec![false; 1600],
         };
         grid.occupied[3 * 40 + 17] = true; // centre (10.875, -1.825)
-        let map = StaticMap::from_grid(&grid, 0.4);
+        let map = StaticMap::from_grid(&grid, 0.4).unwrap();
         assert_eq!(map.len(), 1);
         assert!(map.contains(27, -5));
         assert!(!map.contains(27, -4) && !map.contains(26, -5));
@@ -141,7 +189,7 @@ mod tests {
             rows: 1,
             occupied: vec![true],
         };
-        let map = StaticMap::from_grid(&coarse, 0.4);
+        let map = StaticMap::from_grid(&coarse, 0.4).unwrap();
         assert!(map.contains(0, 0) && map.contains(2, 2) && map.contains(1, 2));
         assert!(!map.contains(3, 0));
     }
@@ -157,8 +205,47 @@ mod tests {
             occupied: vec![false; 10],
         };
         grid.occupied[9] = true; // local (3.8, 0.2) → world (-0.2, 3.8)
-        let map = StaticMap::from_grid(&grid, 0.4);
+        let map = StaticMap::from_grid(&grid, 0.4).unwrap();
         assert!(map.contains(-1, 9), "{map:?}");
         assert_eq!(map.len(), 1);
+    }
+
+    #[test]
+    fn a_grid_too_large_for_the_patches_is_refused_before_anything_is_allocated() {
+        // One 100 km cell (resolution: 100000 and a 1×1 image): it had
+        // asked for 4 GB and aborted.
+        let huge = OccupancyGrid {
+            resolution_m: 100_000.0,
+            origin: planar_isometry(0.0, 0.0, 0.0),
+            cols: 1,
+            rows: 1,
+            occupied: vec![true],
+        };
+        let e = StaticMap::from_grid(&huge, 0.2).unwrap_err();
+        assert!(matches!(e, StaticMapError::Samples { .. }), "{e}");
+        // Two small cells 5 km apart on a diagonal: few samples, an extent
+        // too large (3.5 km square).
+        let diagonal = planar_isometry(0.0, 0.0, std::f64::consts::FRAC_PI_4);
+        let line = |cols: usize| {
+            let mut grid = OccupancyGrid {
+                resolution_m: 0.2,
+                origin: diagonal,
+                cols,
+                rows: 1,
+                occupied: vec![false; cols],
+            };
+            grid.occupied[0] = true;
+            grid.occupied[cols - 1] = true;
+            grid
+        };
+        let e = StaticMap::from_grid(&line(25_000), 0.2).err().unwrap();
+        assert!(matches!(e, StaticMapError::Extent { .. }), "{e}");
+        assert!(
+            e.to_string()
+                .contains("is its resolution (0.2 m per cell) right?")
+        );
+        // 1.5 km along the diagonal (a 1.06 km square) is within the bound.
+        let within = StaticMap::from_grid(&line(7_500), 0.2).ok().unwrap();
+        assert_eq!(within.len(), 2);
     }
 }

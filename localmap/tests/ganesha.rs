@@ -920,7 +920,7 @@ fn wall() -> std::sync::Arc<arcnav_localmap::StaticMap> {
         rows: 40,
         occupied: vec![true; 160],
     };
-    std::sync::Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, 0.4))
+    std::sync::Arc::new(arcnav_localmap::StaticMap::from_grid(&grid, 0.4).unwrap())
 }
 
 #[test]
