@@ -80,7 +80,7 @@ impl StaticMap {
         // Points sampled per cell side so every patch a cell covers is hit.
         let per_side = (grid.resolution_m / patch_size_m).ceil().max(1.0);
         let samples = per_side * per_side * cells as f64;
-        if !(samples <= MAX_SAMPLES as f64) {
+        if samples.is_nan() || samples > MAX_SAMPLES as f64 {
             return Err(StaticMapError::Samples {
                 cells,
                 samples,
