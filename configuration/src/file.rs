@@ -366,6 +366,19 @@ impl Config {
                  (move [sensor] into [[sensors]])",
             ));
         }
+        let max = arcnav_localmap::MAX_SENSORS;
+        if self.sensors.len() > max {
+            // Past the limit every report had been refused while the run
+            // said "completed, 0 dropped".
+            return Err(ConfigError::new(
+                "sensors",
+                format!(
+                    "lists {} sensors; the local map tracks at most {max} (one bit each in its \
+                     cells' sensor set)",
+                    self.sensors.len()
+                ),
+            ));
+        }
         let mut models: Vec<arcnav_perception::SensorModel> = Vec::new();
         for (i, sensor) in self.sensors.iter().enumerate() {
             let model = sensor

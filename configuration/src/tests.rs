@@ -373,6 +373,21 @@ fn two_sensors_with_one_id_or_sensor_and_sensors_together_are_refused() {
 }
 
 #[test]
+fn more_sensors_than_the_local_map_tracks_are_refused() {
+    let sensors = |n: usize| -> String {
+        (0..n)
+            .map(|i| format!("[[sensors]]\npreset = \"erim\"\nid = \"s{i}\"\n"))
+            .collect()
+    };
+    assert!(from_toml(&sensors(32), "32.toml").is_ok());
+    let msg = parse_error(&sensors(33));
+    assert!(
+        msg.contains("`sensors`: lists 33 sensors; the local map tracks at most 32"),
+        "{msg}"
+    );
+}
+
+#[test]
 fn driven_paths_reach_the_behaviours_steering_response() {
     let config = from_toml("[arcs]\ndriven_paths = true\n", "test.toml").unwrap();
     assert!(config.arcs.driven_paths());

@@ -99,16 +99,13 @@ pub(crate) fn perception_worker(
             "range images replaced by newer ones before evaluation",
         );
         status.queue(node.waiting());
-        status.dropped = replaced
-            + node.drops.no_pose
-            + node.drops.invalid
-            + node.drops.out_of_order
-            + node.drops.clock_restart;
+        status.dropped = replaced + node.drops.total();
         status.set("replaced_by_newer", replaced);
         status.set("no_pose", node.drops.no_pose);
         status.set("invalid", node.drops.invalid);
         status.set("out_of_order", node.drops.out_of_order);
         status.set("clock_restart", node.drops.clock_restart);
+        status.set("too_many_sensors", node.drops.too_many_sensors);
         status.set("late", node.late);
         let s = node.slices;
         status.dropped += s.invalid + s.stream.out_of_order + s.stream.inconsistent;

@@ -17,7 +17,7 @@ pub mod static_map;
 pub use config::{JumpPolicy, LocalMapConfig, OccupancyConfig};
 pub use elevation::{ElevationConfig, ElevationGrid, ElevationLayer, ElevationStats};
 pub use map::{
-    InsertError, InsertOutcome, JumpReason, LocalMap, MapSnapshot, MapStats, Patch, PoseUpdate,
-    SeenGround,
+    InsertError, InsertOutcome, JumpReason, LocalMap, MAX_SENSORS, MapSnapshot, MapStats, Patch,
+    PoseUpdate, SeenGround,
 };
 pub use static_map::{OccupancyGrid, StaticMap, StaticMapError};

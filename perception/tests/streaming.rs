@@ -264,6 +264,11 @@ fn repeated_lost_and_stale_slices_are_counted() {
     assert_eq!(stream.counts.out_of_order, 2);
     assert_eq!(stream.counts.frames, 1);
     assert_eq!(stream.counts.lost_lines, 64);
+    // The frame's last slice again, after the frame ended: late, not a
+    // phantom frame of that time whose lines would all be lost.
+    feed(&mut stream, slices.last().unwrap());
+    assert_eq!(stream.counts.out_of_order, 3);
+    assert_eq!(stream.frame_utime(), None, "a frame was opened");
     // A slice of the frame before: stale.
     let shifted = |slice: &RangeSlice, dt: Utime| {
         let mut s = slice.clone();
@@ -276,7 +281,7 @@ fn repeated_lost_and_stale_slices_are_counted() {
     let next = shifted(&slices[0], 100_000);
     feed(&mut stream, &next);
     feed(&mut stream, &older);
-    assert_eq!(stream.counts.out_of_order, 3);
+    assert_eq!(stream.counts.out_of_order, 4);
     // A newer frame's slice ends the unfinished one.
     feed(&mut stream, &shifted(&slices[0], 200_000));
     assert_eq!(stream.counts.incomplete_frames, 1);
@@ -326,6 +331,19 @@ fn malformed_slices_are_refused() {
         assert!(!error.to_string().is_empty());
     }
     assert_eq!(stream.counts.slices, 0);
+    // Columns of a 64-beam lidar declaring a 64 × 262 144 frame: 68 kB of
+    // such slices had taken replay to 2.9 GB.
+    let lidar = image(&SensorModel::lidar64(), &pose);
+    let mut wide =
+        RangeSlice::cut(&lidar, SliceAxis::Columns, 16, |i| 1_000_000 + i as Utime).remove(0);
+    wide.frame_cols = 262_144;
+    let error = stream
+        .on_slice(&wide, &|_| Some(pose), ev.as_mut(), &InOrder, &mut |_| {})
+        .expect_err("refused");
+    assert!(
+        error.to_string().contains("more than 2097152 pixels"),
+        "{error}"
+    );
 }
 
 /// Posts standing around the vehicle, each 0.3 m across and 2.5 m tall.

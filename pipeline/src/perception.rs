@@ -32,7 +32,21 @@ pub struct PerceptionDrops {
     /// Waiting for their pose when the pose clock went backwards (a log
     /// that starts over): their poses will never come.
     pub clock_restart: u64,
+    /// From a sensor past the first [`MAX_SENSORS`] ids seen (the local
+    /// map tracks at most that many): each sensor's frames and capture
+    /// times are kept, so their number is bounded.
+    pub too_many_sensors: u64,
 }
+
+impl PerceptionDrops {
+    /// Every image and slice dropped, whatever the reason.
+    pub fn total(&self) -> u64 {
+        self.no_pose + self.invalid + self.out_of_order + self.clock_restart + self.too_many_sensors
+    }
+}
+
+/// The most sensors perception keeps state for: the local map's limit.
+pub use arcnav_localmap::MAX_SENSORS;
 
 /// A range image or a slice of one, waiting for its pose.
 #[derive(Debug)]
@@ -74,6 +88,8 @@ pub struct PerceptionNode {
     perception_config: PerceptionConfig,
     /// One assembler per sensor streaming slices.
     streams: Vec<(String, FrameStream)>,
+    /// The sensor ids seen, at most [`MAX_SENSORS`].
+    sensors: Vec<String>,
     /// Heights sampled from slices not yet sent with a report.
     pending_heights: ObstacleReport,
     pub slices: SliceCounts,
@@ -118,6 +134,7 @@ impl PerceptionNode {
             streaming: perception.streaming,
             perception_config: perception.clone(),
             streams: Vec::new(),
+            sensors: Vec::new(),
             pending_heights: ObstacleReport::default(),
             slices: SliceCounts::default(),
             max_waiting: timing.max_waiting_images,
@@ -146,6 +163,7 @@ impl PerceptionNode {
                 self.waiting.clear();
                 self.newest_capture.clear();
                 self.streams.clear();
+                self.sensors.clear();
                 let _ = self.poses.push(*pose);
             }
         }
@@ -329,7 +347,31 @@ impl PerceptionNode {
         }
     }
 
+    /// Whether `sensor` is one of the first [`MAX_SENSORS`] seen (counted
+    /// in `drops.too_many_sensors` when not).
+    fn admit(&mut self, sensor: &str) -> bool {
+        if self.sensors.iter().any(|s| s == sensor) {
+            return true;
+        }
+        if self.sensors.len() < MAX_SENSORS {
+            self.sensors.push(sensor.to_owned());
+            return true;
+        }
+        if self.drops.too_many_sensors.is_power_of_two() || self.drops.too_many_sensors == 0 {
+            tracing::warn!(
+                sensor,
+                max = MAX_SENSORS,
+                "range data from more sensors than the local map tracks: dropped"
+            );
+        }
+        self.drops.too_many_sensors += 1;
+        false
+    }
+
     fn evaluate_slice(&mut self, slice: RangeSlice, out: &mut dyn FnMut(ObstacleReport)) {
+        if !self.admit(&slice.sensor) {
+            return;
+        }
         let newest = self.poses.newest().copied();
         let Some(pose) = Self::pose_at(&self.poses, newest, self.max_gap_us, slice.utime) else {
             tracing::debug!(
@@ -381,6 +423,9 @@ impl PerceptionNode {
     }
 
     fn evaluate(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
+        if !self.admit(&image.sensor) {
+            return;
+        }
         let pose = match self.poses.at_within(image.utime, self.max_gap_us) {
             Ok(pose) => pose,
             Err(e) => {
@@ -457,5 +502,30 @@ mod tests {
         // One of 2.5 s is on time.
         node.on_image(sensor.blank_image(2_500_000), &mut |_| reports += 1);
         assert_eq!((node.late, reports), (1, 2));
+    }
+
+    #[test]
+    fn range_data_from_more_sensors_than_the_map_tracks_is_dropped_and_counted() {
+        let mut node =
+            PerceptionNode::new(&PerceptionConfig::default(), &PipelineConfig::default()).unwrap();
+        let mut reports = 0;
+        for k in 0..=150 {
+            let pose = Pose::at_rest(k * 20_000, planar_isometry(0.0, 0.0, 0.0));
+            node.on_pose(&pose, &mut |_| reports += 1);
+        }
+        let sensor = SensorModel::erim();
+        for i in 0..MAX_SENSORS + 3 {
+            let mut image = sensor.blank_image(2_000_000);
+            image.sensor = format!("s{i}");
+            node.on_image(image, &mut |_| reports += 1);
+        }
+        assert_eq!(reports, MAX_SENSORS);
+        assert_eq!(node.drops.too_many_sensors, 3);
+        assert_eq!(node.drops.total(), 3);
+        // A sensor already seen still is.
+        let mut again = sensor.blank_image(2_500_000);
+        again.sensor = "s0".into();
+        node.on_image(again, &mut |_| reports += 1);
+        assert_eq!(reports, MAX_SENSORS + 1);
     }
 }

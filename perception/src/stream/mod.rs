@@ -108,6 +108,9 @@ pub struct FrameStream {
     max_range: f64,
     fov_max_vertices: usize,
     frame: Option<Frame>,
+    /// The capture time of the last frame ended: a slice of it or of an
+    /// older frame is late (a repeated packet), never a new frame.
+    ended: Option<Utime>,
     sub: RangeImage,
     scratch: ObstacleReport,
     fov: FovBuilder,
@@ -133,6 +136,7 @@ impl FrameStream {
             max_range: perception.max_range_m,
             fov_max_vertices: perception.fov_max_vertices,
             frame: None,
+            ended: None,
             sub: RangeImage {
                 utime: 0,
                 sensor: String::new(),
@@ -178,6 +182,12 @@ impl FrameStream {
     ) -> Result<ImageStats, SliceError> {
         slice.validate()?;
         let mut stats = ImageStats::default();
+        // A repeat of a frame's last slice had opened a phantom frame of
+        // that time, never completed: every line "lost".
+        if self.frame.is_none() && self.ended.is_some_and(|t| slice.frame_utime <= t) {
+            self.counts.out_of_order += 1;
+            return Ok(stats);
+        }
         if let Some(frame) = &self.frame {
             if slice.frame_utime < frame.utime {
                 self.counts.out_of_order += 1;
@@ -276,6 +286,7 @@ impl FrameStream {
         let Some(mut frame) = self.frame.take() else {
             return Ok(ImageStats::default());
         };
+        self.ended = Some(frame.utime);
         let Some(newest) = frame.pose else {
             return Ok(ImageStats::default());
         };

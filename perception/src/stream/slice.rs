@@ -6,9 +6,12 @@ use arcnav_vehicle::{Isometry, Utime};
 
 use crate::image::{BeamTable, ImageError, RangeImage};
 
-/// The most pixels a streamed frame may declare (a 128 × 131 072 image):
-/// the frame buffer is allocated from the slice's word.
-pub const MAX_FRAME_PIXELS: usize = 1 << 24;
+/// The most pixels a streamed frame may declare: 2²¹ (a 128 × 16 384
+/// image, eight times the densest spinning lidar's 128 × 2048). The frame
+/// buffer is allocated, and each frame evaluated whole, from the slice's
+/// word: at 2²⁴, 68 kB of slices declaring 64 × 262 144 frames had taken
+/// replay to 2.9 GB.
+pub const MAX_FRAME_PIXELS: usize = 1 << 21;
 
 /// Which lines of its image a slice carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -483,7 +483,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         cruise_asked_mps: config.cruise.asked_mps,
         cruise_cap_mps: config.cruise.cap_mps,
         images: simulator.images(),
-        images_dropped: drops.no_pose + drops.invalid + drops.out_of_order,
+        images_dropped: drops.total(),
         slices: (pipeline.perception.slices.received > 0).then_some(pipeline.perception.slices),
         untraversable_cells: Reasons::ALL
             .iter()

@@ -360,7 +360,9 @@ fn tally<S: EventSource>(
     let drops = pipeline.perception.drops;
     problems.images_without_pose = drops.no_pose;
     problems.images_out_of_order = drops.out_of_order;
-    problems.invalid_images += drops.invalid;
+    // Past the sensors the local map tracks: refused like an invalid image
+    // (said on stderr with the sensor's name).
+    problems.invalid_images += drops.invalid + drops.too_many_sensors;
     let slices = pipeline.perception.slices;
     problems.invalid_slices += slices.invalid;
     problems.slices_out_of_order = slices.stream.out_of_order + slices.stream.inconsistent;
