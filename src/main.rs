@@ -505,6 +505,13 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             )?;
             if check {
                 let file = file.context("--check needs a FILE")?;
+                // What `run` would refuse at start is not valid either: the
+                // key file is read and checked as the live commands do.
+                let base = file.parent().unwrap_or(std::path::Path::new("."));
+                let auth = &config.bus.auth;
+                auth.policy(base).with_context(|| {
+                    format!("`bus.auth.key_file` ({})", auth.key_file.display())
+                })?;
                 println!("{}: valid", file.display());
             } else {
                 match &file {

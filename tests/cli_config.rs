@@ -152,10 +152,28 @@ fn live_commands_refuse_a_key_they_cannot_use_and_name_the_file() {
         ("group", Some((GOOD_KEY, 0o640)), "readable by its group"),
         ("short", Some(("0011223344556677\n", 0o600)), "8-byte key"),
         ("not-hex", Some(("arcnav\n", 0o600)), "not a hex digit"),
+        ("empty", Some(("", 0o600)), "0-byte key"),
+        (
+            "odd",
+            Some(("0011223\n", 0o600)),
+            "odd number of hex digits",
+        ),
+        (
+            "zero",
+            Some((&"00".repeat(32), 0o600)),
+            "repeated: not a secret",
+        ),
     ];
     for (tag, key, expect) in cases {
         let (_dir, config, key_path) = keyed_config(tag, key, "");
         let config = config.to_str().unwrap();
+        // `config --check` says so too (it had said "valid").
+        let (code, stdout, stderr) = arcnav(&["config", "--check", config]);
+        assert_eq!(code, 1, "{tag}: {stdout}");
+        assert!(
+            stderr.contains(expect) && stderr.contains("bus.auth.key_file"),
+            "{tag}: {stderr}"
+        );
         for command in [
             &["run"][..],
             &["node", "arbiter"],

@@ -146,6 +146,13 @@ impl GroupKey {
             .chunks(2)
             .map(|pair| (hex_value(pair[0]) << 4) | hex_value(pair[1]))
             .collect();
+        if bytes.len() > 1 && bytes.iter().all(|&b| b == bytes[0]) {
+            return Err(malformed(format!(
+                "holds one byte ({:#04x}) repeated: not a secret; make a key with \
+                 `head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \\n' > KEYFILE`",
+                bytes[0]
+            )));
+        }
         Self::new(&bytes).ok_or_else(|| {
             malformed(format!(
                 "holds a {}-byte key; at least {MIN_KEY_BYTES} bytes ({} hex digits) are needed",
