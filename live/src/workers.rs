@@ -282,6 +282,12 @@ impl MapStage {
         status.set("clock_restarts", counts.restarts);
         status.set("resets", counts.map_resets);
         status.set("patches", self.cycle.map.map.len() as u64);
+        // Reports the map refused (off the map, sensors past its limit,
+        // cells out of range): had been logged at DEBUG only.
+        status.set(
+            "reports_refused",
+            self.cycle.map.map.stats().reports_refused,
+        );
     }
 }
 
@@ -340,6 +346,31 @@ pub(crate) fn map_worker(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Reports the map refuses are counted where a user sees them (the
+    /// live node had shown "refused 0", the refusals at DEBUG only).
+    #[test]
+    fn the_map_stage_counts_the_reports_its_map_refuses() {
+        let config = Resolved::default();
+        let mut stage = MapStage::new(&config);
+        stage.on_pose(Pose::at_rest(
+            1_000_000,
+            arcnav_vehicle::frames::planar_isometry(0.0, 0.0, 0.0),
+        ));
+        for i in 0..34 {
+            let report = ObstacleReport {
+                utime: 1_000_000,
+                sensor: format!("s{i}"),
+                cell_size_m: 0.2,
+                ..ObstacleReport::default()
+            };
+            stage.on_report(report, 0);
+        }
+        let mut status = NodeStatus::new("localmap");
+        stage.fill(&mut status);
+        let refused = status.counters.iter().find(|(k, _)| k == "reports_refused");
+        assert_eq!(refused.map(|(_, v)| *v), Some(2), "{:?}", status.counters);
+    }
 
     #[test]
     fn next_brings_any_input_then_idle_then_closed_sleeping_or_polling() {

@@ -56,7 +56,14 @@ impl LocalMapNode {
 
     pub fn on_obstacles(&mut self, report: &ObstacleReport) {
         if let Err(e) = self.map.insert(report) {
-            tracing::debug!(%e, "obstacle report refused by the local map");
+            // Counted in the map's stats; said at the first of each power of
+            // two so that a flood does not flood the log.
+            let refused = self.map.stats().reports_refused;
+            if refused.is_power_of_two() {
+                tracing::warn!(%e, refused, "obstacle report refused by the local map");
+            } else {
+                tracing::debug!(%e, "obstacle report refused by the local map");
+            }
         }
     }
 
