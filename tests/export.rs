@@ -73,6 +73,34 @@ fn an_exported_sim_run_reads_back_in_the_reference_mcap_reader() {
         .output()
         .unwrap();
     assert_eq!(refused.status.code(), Some(1));
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("another arc set"),
+        "the log's own arc set"
+    );
+    // Another arc set than the log's: its indices would mark the wrong
+    // arcs; not drawn, and said (it had drawn them silently).
+    let other = dir.join("arcs25.toml");
+    std::fs::write(&other, "[arcs]\ncount = 25\n").unwrap();
+    let other_mcap = dir.join("other.mcap");
+    let mismatch = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args(["export", log.to_str().unwrap(), "--mcap"])
+        .args([
+            other_mcap.to_str().unwrap(),
+            "--config",
+            other.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&mismatch.stderr);
+    assert!(mismatch.status.success(), "{said}");
+    assert!(
+        said.contains("STEERING_COMMAND (/arcs)") && said.contains("another arc set"),
+        "{said}"
+    );
+    assert!(
+        said.contains("voted over 39 arcs, this arc set has 25"),
+        "{said}"
+    );
 
     let read = reference
         .python()

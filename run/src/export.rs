@@ -449,6 +449,8 @@ pub fn export_mcap(
             continue;
         };
         let mut wrote = |topic: &str| *summary.topics.entry(topic.to_owned()).or_default() += 1;
+        // Said in the summary once the message is handled.
+        let mut not_drawn: Option<(String, String)> = None;
         match message {
             AnyMessage::Pose(msg) => {
                 if let (Some((cycle, out)), Ok(pose)) =
@@ -501,9 +503,19 @@ pub fn export_mcap(
             }
             AnyMessage::ArcVotes(msg) => {
                 let topic = topic(&event.channel);
-                if let Ok(votes) = wire::votes_from_wire(&msg, &arcs) {
-                    // Votes over another arc set are drawn but not fused.
-                    let _ = arbiter.on_votes(&votes);
+                match wire::votes_from_wire(&msg, &arcs) {
+                    Ok(votes) => {
+                        let _ = arbiter.on_votes(&votes);
+                    }
+                    // Written to their topic, not fused into `/arcs`.
+                    Err(e) => {
+                        not_drawn = Some((
+                            format!("{} (fused)", event.channel),
+                            format!(
+                                "not fused into /arcs: {e} (give the log's configuration with --config)"
+                            ),
+                        ));
+                    }
                 }
                 match topics.votes_json(&topic, &msg, time) {
                     true => wrote(&topic),
@@ -516,10 +528,27 @@ pub fn export_mcap(
                     false => refused_topics += 1,
                 }
                 arbiter.decide(msg.utime);
-                let fused = arbiter.decision().map(|d| d.fused.as_slice());
-                topics.arcs(&arcs, fused.unwrap_or_default(), &msg, time);
-                wrote("/arcs");
+                // A command whose arc is not this arc set's was decided over
+                // another: drawn here, its index would mark the wrong arc.
+                if commanded_arc_is_in(&arcs, &msg) {
+                    let fused = arbiter.decision().map(|d| d.fused.as_slice());
+                    topics.arcs(&arcs, fused.unwrap_or_default(), &msg, time);
+                    wrote("/arcs");
+                } else {
+                    not_drawn = Some((
+                        "STEERING_COMMAND (/arcs)".to_owned(),
+                        format!(
+                            "its arc_index names an arc of another curvature among this \
+                             configuration's {} arcs: the log was made with another arc set \
+                             (give its configuration with --config)",
+                            arcs.len()
+                        ),
+                    ));
+                }
             }
+        }
+        if let Some((channel, why)) = not_drawn {
+            summary.skip(&channel, why);
         }
         if let Some((_, out)) = &mut rebuilt {
             for cycle in out.drain(..) {
@@ -555,6 +584,17 @@ pub fn export_mcap(
         .commit(file)
         .map_err(|e| write_error(e.to_string()))?;
     Ok(summary)
+}
+
+/// Whether `msg`'s arc index names an arc of `arcs` with its curvature (a
+/// stop, index -1, is in every set).
+fn commanded_arc_is_in(arcs: &ArcSet, msg: &steering_command_t) -> bool {
+    let Ok(index) = usize::try_from(msg.arc_index) else {
+        return true;
+    };
+    arcs.curvatures()
+        .get(index)
+        .is_some_and(|&k| (k - msg.curvature).abs() <= 1e-9_f64.max(1e-6 * k.abs()))
 }
 
 /// The error of reading `log`.
