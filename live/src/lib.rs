@@ -117,6 +117,7 @@ pub(crate) fn arbiter_status(node: &ArbiterNode, status: &mut NodeStatus) {
     status.handled = counts.commands;
     status.set("stops", counts.stops);
     status.set("watchdog_stops", counts.watchdog_stops);
+    status.set("held_commands", counts.held);
     status.set("deadline_decisions", counts.deadline_decisions);
     status.set("late_votes", counts.late_votes);
     status.set("ignored_votes", counts.ignored_votes);

@@ -57,6 +57,12 @@ pub enum Why {
     Deadline { missing: Vec<String> },
     /// The watchdog overrode the votes or the pipeline is silent.
     Watchdog(Hazard),
+    /// No decision came for one and a half command periods while the
+    /// inputs are still fresh (a pose or a decision late, not yet stale):
+    /// the last command again, restamped, so that commands keep coming at
+    /// the command rate on the wall clock. Once the inputs are stale the
+    /// watchdog's stop takes its place.
+    Held,
     /// The executor is shutting down.
     Final,
 }
@@ -75,7 +81,9 @@ pub struct Decided {
 /// a cycle is decided when every expected behaviour has voted for it, or at
 /// its deadline, and cycles are decided in order, each once. Its watchdog
 /// commands stop when poses, evaluated images or decisions stop coming;
-/// while that lasts it repeats stop at the command rate.
+/// while that lasts it repeats stop at the command rate. Until the inputs
+/// are stale a late decision is covered by the last command, held
+/// ([`Why::Held`]): something is published every command period.
 ///
 /// Wall-clock times (µs since the Unix epoch) arrive as arguments: it reads
 /// no clock.
@@ -97,6 +105,10 @@ pub struct ArbiterNode {
     last_image: Option<i64>,
     last_decision: Option<i64>,
     last_publish: Option<i64>,
+    /// The last command decided on votes, to hold while a decision is late.
+    last_command: Option<SteeringCommand>,
+    /// The last command published was a held one.
+    holding: bool,
     hazard: Option<Hazard>,
     /// Images new in the decisions since the last one: capture, arrival
     /// (`None`: known only from OBSTACLE_CELLS, in a distributed system).
@@ -136,6 +148,9 @@ pub struct ArbiterCounts {
     /// Votes stamped more than [`FUTURE_TOLERANCE_US`] after the sensor
     /// clock: refused (they would never go stale).
     pub future_votes: u64,
+    /// The last command published again while a decision was late
+    /// ([`Why::Held`]).
+    pub held: u64,
 }
 
 /// How far ahead of the sensor clock (the newest pose, extrapolated on the
@@ -174,6 +189,8 @@ impl ArbiterNode {
             last_image: None,
             last_decision: None,
             last_publish: None,
+            last_command: None,
+            holding: false,
             hazard: None,
             images: Vec::new(),
             latency_from_cells: false,
@@ -295,7 +312,26 @@ impl ArbiterNode {
             })
         });
         self.note_hazard(hazard.clone());
-        let Some(hazard) = hazard else { return };
+        let Some(hazard) = hazard else {
+            // Inputs fresh, but no command for one and a half periods (a
+            // decision late), then every period while none comes.
+            let wait = if self.holding {
+                self.period_us
+            } else {
+                self.period_us + self.period_us / 2
+            };
+            let late = self.last_publish.is_some_and(|last| now - last >= wait);
+            if late && let Some(last) = self.last_command {
+                self.counts.held += 1;
+                let held = SteeringCommand {
+                    utime: self.sensor_time(now),
+                    ..last
+                };
+                out.push(self.publish(held, Why::Held, now));
+                self.holding = true;
+            }
+            return;
+        };
         if self
             .last_publish
             .is_some_and(|last| now - last < self.period_us)
@@ -389,7 +425,11 @@ impl ArbiterNode {
                 self.counts.watchdog_stops += 1;
                 (SteeringCommand::stop(cycle), Why::Watchdog(h))
             }
-            None => (self.arbiter.decide(cycle), why),
+            None => {
+                let command = self.arbiter.decide(cycle);
+                self.last_command = Some(command);
+                (command, why)
+            }
         };
         if !matches!(why, Why::Watchdog(_)) {
             // Capture times map onto the wall clock through the newest pose.
@@ -418,6 +458,11 @@ impl ArbiterNode {
 
     fn publish(&mut self, command: SteeringCommand, why: Why, now: i64) -> Decided {
         self.last_publish = Some(now);
+        self.holding = false;
+        if matches!(why, Why::Watchdog(_) | Why::Final) {
+            // After a stop only a new decision moves the vehicle again.
+            self.last_command = None;
+        }
         self.counts.commands += 1;
         if command.is_stop() {
             self.counts.stops += 1;

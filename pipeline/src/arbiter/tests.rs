@@ -299,3 +299,63 @@ fn reproducing_lockstep_a_cycle_waits_for_its_votes_up_to_the_vote_timeout() {
     assert_eq!(out.len(), 1);
     assert_eq!(out[0].why, Why::Complete);
 }
+
+/// When poses stop, commands keep coming at the command rate on the wall
+/// clock: the last decision held until the poses are stale, then the
+/// watchdog's stop. Nothing had been published for 0.58 s.
+#[test]
+fn a_late_decision_is_covered_by_the_last_command_until_the_inputs_are_stale() {
+    let t0 = 1_000_000_000;
+    let (mut stage, n) = arbiter_stage(t0);
+    stage.on_pose(9_000_000, t0);
+    stage.on_perceived(9_000_000, t0);
+    let mut decided = None;
+    for name in ["goal_seeking", "obstacle_avoidance"] {
+        if let Some(d) = one(|o| {
+            stage
+                .on_votes(&votes(name, 9_000_000, n), &[], t0, o)
+                .unwrap()
+        }) {
+            decided = Some(d);
+        }
+    }
+    let decided = decided.expect("decided once every behaviour voted");
+    assert!(!decided.command.is_stop());
+    // Poses stop. Ticks every 10 ms: every command period (100 ms) on the
+    // wall clock something is published, the first 150 ms after the last
+    // decision (a decision may be late by half a period).
+    let mut published = Vec::new();
+    let mut times = vec![t0];
+    for k in 1..=100 {
+        let now = t0 + k * 10_000;
+        let before = published.len();
+        stage.on_tick(now, &mut published);
+        if published.len() > before {
+            times.push(now);
+        }
+    }
+    let gaps: Vec<i64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    assert_eq!(gaps[0], 150_000, "{gaps:?}");
+    assert!(gaps[1..].iter().all(|&g| g <= 100_000), "{gaps:?}");
+    let held: Vec<_> = published.iter().filter(|d| d.why == Why::Held).collect();
+    assert!(!held.is_empty());
+    for d in &held {
+        assert_eq!(d.command.curvature, decided.command.curvature);
+        assert!(d.command.utime > decided.command.utime, "restamped");
+    }
+    // Past the pose timeout (0.5 s): stops, and no held command after one.
+    let first_stop = published
+        .iter()
+        .position(|d| matches!(d.why, Why::Watchdog(Hazard::PoseStale { .. })))
+        .expect("a stop once the poses are stale");
+    assert!(published[first_stop..].iter().all(|d| d.command.is_stop()));
+    assert_eq!(stage.counts().held as usize, held.len());
+    // Poses and images back, but no new decision: the old command is not
+    // held again (only a decision moves the vehicle after a stop).
+    let t1 = t0 + 1_100_000;
+    stage.on_pose(10_100_000, t1);
+    stage.on_perceived(10_100_000, t1);
+    let mut after = Vec::new();
+    stage.on_tick(t1 + 200_000, &mut after);
+    assert!(after.iter().all(|d| d.why != Why::Held), "{after:?}");
+}
