@@ -128,37 +128,48 @@ impl GroupKey {
                 metadata.len()
             )));
         }
-        let text = std::fs::read_to_string(path).map_err(unreadable)?;
-        let digits: Vec<u8> = text.bytes().filter(|b| !b.is_ascii_whitespace()).collect();
+        let text = std::fs::read(path).map_err(unreadable)?;
+        Self::parse(&text).map_err(malformed)
+    }
+
+    /// A key from a key file's text: hex digits (whitespace between them
+    /// ignored), at least [`MIN_KEY_BYTES`] bytes, not one byte repeated.
+    /// The error says what is wrong with it.
+    pub fn parse(text: &[u8]) -> Result<Self, String> {
+        let digits: Vec<u8> = text
+            .iter()
+            .copied()
+            .filter(|b| !b.is_ascii_whitespace())
+            .collect();
         if let Some(bad) = digits.iter().find(|b| !b.is_ascii_hexdigit()) {
-            return Err(malformed(format!(
+            return Err(format!(
                 "holds '{}', not a hex digit (the key is written in hex)",
                 char::from(*bad).escape_default()
-            )));
+            ));
         }
         if !digits.len().is_multiple_of(2) {
-            return Err(malformed(format!(
+            return Err(format!(
                 "holds an odd number of hex digits ({})",
                 digits.len()
-            )));
+            ));
         }
         let bytes: Vec<u8> = digits
             .chunks(2)
             .map(|pair| (hex_value(pair[0]) << 4) | hex_value(pair[1]))
             .collect();
         if bytes.len() > 1 && bytes.iter().all(|&b| b == bytes[0]) {
-            return Err(malformed(format!(
+            return Err(format!(
                 "holds one byte ({:#04x}) repeated: not a secret; make a key with \
                  `head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \\n' > KEYFILE`",
                 bytes[0]
-            )));
+            ));
         }
         Self::new(&bytes).ok_or_else(|| {
-            malformed(format!(
+            format!(
                 "holds a {}-byte key; at least {MIN_KEY_BYTES} bytes ({} hex digits) are needed",
                 bytes.len(),
                 2 * MIN_KEY_BYTES
-            ))
+            )
         })
     }
 

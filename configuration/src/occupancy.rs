@@ -10,8 +10,9 @@
 //! is at the origin, as in a ROS `OccupancyGrid`; its resolution, origin
 //! and threshold come from the configuration.
 //!
-//! Nothing is allocated from a size a file states before it is checked: at
-//! most [`MAX_CELLS`] cells.
+//! Map files are regular files read with a bound; nothing is allocated
+//! from a size a file states before it is checked against what the file
+//! holds, and at most [`MAX_CELLS`] cells.
 
 use std::path::{Path, PathBuf};
 
@@ -77,13 +78,16 @@ fn read_error(path: &Path) -> impl FnOnce(std::io::Error) -> OccupancyError + '_
     }
 }
 
-/// `path` opened to be read at most `max_bytes` of: a decoder reads what
-/// its header says, and a device (`/dev/zero`) or a file far larger than
-/// a map ends in a decoding error, never in memory running out.
-fn open_bounded(path: &Path, max_bytes: u64) -> Result<impl std::io::BufRead, OccupancyError> {
-    use std::io::Read as _;
-    let file = std::fs::File::open(path).map_err(read_error(path))?;
-    Ok(std::io::BufReader::new(file.take(max_bytes)))
+/// The bytes of the map file `path`: a regular file of at most
+/// `max_bytes` (a device such as `/dev/zero` had been read until memory
+/// ran out). Sizes a file's header states are then checked against what
+/// it holds before anything is allocated from them.
+fn read_map_file(path: &Path, max_bytes: u64) -> Result<Vec<u8>, OccupancyError> {
+    let meta = std::fs::metadata(path).map_err(read_error(path))?;
+    if !meta.is_file() {
+        return Err(invalid(path, "is not a regular file"));
+    }
+    arcnav_vehicle::files::read_bounded(path, max_bytes).map_err(read_error(path))
 }
 
 /// The number of nodes `text` holds with every alias expanded (saturating).
@@ -133,11 +137,26 @@ fn expanded_nodes(text: &str) -> Result<u64, String> {
 }
 
 fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
+    let text = read_map_file(path, MAX_YAML_BYTES)?;
+    let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
+    let mut image_path = PathBuf::new();
+    let grid = parse_yaml(path, &text, |image| {
+        image_path = dir.join(image);
+        read_map_file(&image_path, 2 * MAX_CELLS + 4096)
+    })?;
+    Ok((grid, image_path))
+}
+
+/// A map_server YAML (`text`, named `path` in messages) and the image it
+/// names, whose bytes `image_bytes` gives.
+pub fn parse_yaml(
+    path: &Path,
+    text: &[u8],
+    image_bytes: impl FnOnce(&str) -> Result<Vec<u8>, OccupancyError>,
+) -> Result<OccupancyGrid, OccupancyError> {
     use yaml_rust2::{Yaml, YamlLoader};
-    let bytes =
-        arcnav_vehicle::files::read_bounded(path, MAX_YAML_BYTES).map_err(read_error(path))?;
-    let text = String::from_utf8(bytes).map_err(|_| invalid(path, "is not UTF-8 text"))?;
-    let nodes = expanded_nodes(&text).map_err(|e| invalid(path, e))?;
+    let text = std::str::from_utf8(text).map_err(|_| invalid(path, "is not UTF-8 text"))?;
+    let nodes = expanded_nodes(text).map_err(|e| invalid(path, e))?;
     if nodes > MAX_YAML_NODES {
         return Err(invalid(
             path,
@@ -147,7 +166,7 @@ fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
             ),
         ));
     }
-    let docs = YamlLoader::load_from_str(&text).map_err(|e| invalid(path, e.to_string()))?;
+    let docs = YamlLoader::load_from_str(text).map_err(|e| invalid(path, e.to_string()))?;
     let doc = docs
         .first()
         .ok_or_else(|| invalid(path, "holds no YAML document"))?;
@@ -187,8 +206,8 @@ fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
         return Err(invalid(path, "`occupied_thresh` must be 0 to 1"));
     }
     let raw = doc["mode"].as_str() == Some("raw");
-    let image_path = path.parent().unwrap_or(Path::new(".")).join(image);
-    let pixels = read_pgm(&image_path)?;
+    let image_name = Path::new(image);
+    let pixels = parse_pgm(image_name, &image_bytes(image)?)?;
     let (cols, rows) = (pixels.width() as usize, pixels.height() as usize);
     let mut occupied = vec![false; cols * rows];
     for (x, y, v) in pixels.enumerate_pixels() {
@@ -214,19 +233,30 @@ fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
         rows,
         occupied,
     };
-    Ok((grid, image_path))
+    Ok(grid)
 }
 
-fn read_pgm(path: &Path) -> Result<image::GrayImage, OccupancyError> {
+/// A PGM image's bytes (`path` names it in messages): its header's size
+/// is checked against the bytes before the pixels are allocated.
+fn parse_pgm(path: &Path, bytes: &[u8]) -> Result<image::GrayImage, OccupancyError> {
     use image::ImageDecoder as _;
     let unreadable =
         |e: image::ImageError| invalid(path, format!("is not a readable PGM image: {e}"));
-    // Two bytes a pixel at most (16-bit PGM), and the header.
-    let file = open_bounded(path, 2 * MAX_CELLS + 4096)?;
-    let mut decoder = image::codecs::pnm::PnmDecoder::new(file).map_err(unreadable)?;
+    let mut decoder =
+        image::codecs::pnm::PnmDecoder::new(std::io::Cursor::new(bytes)).map_err(unreadable)?;
     let (width, height) = decoder.dimensions();
-    if u64::from(width) * u64::from(height) > MAX_CELLS {
+    let pixels = u64::from(width) * u64::from(height);
+    if pixels > MAX_CELLS {
         return Err(invalid(path, "holds more than 400 million pixels"));
+    }
+    if decoder.total_bytes() > bytes.len() as u64 {
+        return Err(invalid(
+            path,
+            format!(
+                "its header says {width} × {height} pixels, more than its {} bytes hold",
+                bytes.len()
+            ),
+        ));
     }
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(2 * MAX_CELLS);
@@ -236,9 +266,21 @@ fn read_pgm(path: &Path) -> Result<image::GrayImage, OccupancyError> {
 }
 
 fn load_npy(path: &Path, config: &OccupancyConfig) -> Result<OccupancyGrid, OccupancyError> {
-    use npyz::{DType, TypeChar};
     // Eight bytes a value at most, and the header.
-    let npy = npyz::NpyFile::new(open_bounded(path, 8 * MAX_CELLS + (1 << 16))?)
+    let bytes = read_map_file(path, 8 * MAX_CELLS + (1 << 16))?;
+    parse_npy(path, &bytes, config)
+}
+
+/// A `.npy` array's bytes (`path` names it in messages), placed as
+/// `config` says: its shape is checked against the bytes before the
+/// values are allocated.
+pub fn parse_npy(
+    path: &Path,
+    bytes: &[u8],
+    config: &OccupancyConfig,
+) -> Result<OccupancyGrid, OccupancyError> {
+    use npyz::{DType, TypeChar};
+    let npy = npyz::NpyFile::new(bytes)
         .map_err(|e| invalid(path, format!("is not a .npy array: {e}")))?;
     let shape = npy.shape().to_vec();
     let [rows, cols] = shape[..] else {
@@ -260,6 +302,18 @@ fn load_npy(path: &Path, config: &OccupancyConfig) -> Result<OccupancyGrid, Occu
     let DType::Plain(ty) = npy.dtype() else {
         return Err(invalid(path, "holds records, not numbers"));
     };
+    // The values the shape states must be in the file: a header alone had
+    // been allocated for (8 bytes a value of 400 million).
+    let held = bytes.len() as u64 / ty.size_field().max(1);
+    if rows.saturating_mul(cols) > held {
+        return Err(invalid(
+            path,
+            format!(
+                "its header says {rows} × {cols} values, more than its {} bytes hold",
+                bytes.len()
+            ),
+        ));
+    }
     let values: Vec<f64> = match (ty.type_char(), ty.size_field()) {
         (TypeChar::Bool, 1) => to_f64(npy.into_vec::<bool>(), path, |v| f64::from(u8::from(v)))?,
         (TypeChar::Uint, 1) => to_f64(npy.into_vec::<u8>(), path, f64::from)?,
@@ -446,19 +500,39 @@ mod tests {
         )
         .unwrap();
         let e = load(&config(&yaml)).unwrap_err().to_string();
-        assert!(e.contains("not a readable PGM image"), "{e}");
+        assert!(e.contains("/dev/zero: is not a regular file"), "{e}");
         let npy = d.join("zero.npy");
         let _ = std::fs::remove_file(&npy);
         std::os::unix::fs::symlink("/dev/zero", &npy).unwrap();
         let e = load(&config(&npy)).unwrap_err().to_string();
-        assert!(e.contains("not a .npy array"), "{e}");
+        assert!(e.contains("is not a regular file"), "{e}");
+        // Headers that state more than the file holds: refused before the
+        // pixels or values are allocated (a 400-million-value header alone
+        // had been allocated for).
+        let e = parse_pgm(Path::new("big.pgm"), b"P5\n20000 20000\n255\n\0\0").unwrap_err();
+        assert!(e.to_string().contains("more than its 21 bytes hold"), "{e}");
+        let mut header = b"\x93NUMPY\x01\x00".to_vec();
+        let dict = b"{'descr': '<f8', 'fortran_order': False, 'shape': (20000, 20000), }";
+        let mut text = dict.to_vec();
+        while !(10 + text.len() + 1).is_multiple_of(64) {
+            text.push(b' ');
+        }
+        text.push(b'\n');
+        header.extend_from_slice(&(text.len() as u16).to_le_bytes());
+        header.extend_from_slice(&text);
+        header.extend_from_slice(&[0; 64]);
+        let e = parse_npy(Path::new("big.npy"), &header, &OccupancyConfig::default()).unwrap_err();
+        assert!(
+            e.to_string().contains("20000 × 20000 values, more than"),
+            "{e}"
+        );
         // A YAML of /dev/zero itself, and one of nested aliases (900 bytes
         // had expanded to 3 GB).
         let endless = d.join("endless.yaml");
         let _ = std::fs::remove_file(&endless);
         std::os::unix::fs::symlink("/dev/zero", &endless).unwrap();
         let e = load(&config(&endless)).unwrap_err().to_string();
-        assert!(e.contains("larger than 1 MiB"), "{e}");
+        assert!(e.contains("is not a regular file"), "{e}");
         let mut bomb = String::from("a: &a [x, x, x, x, x, x, x, x, x, x]\n");
         let names = ["a", "b", "c", "d", "e", "f", "g", "h", "i"];
         for pair in names.windows(2) {

@@ -35,6 +35,9 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("world", world),
     ("height_file", height_file),
     ("waypoints", waypoints),
+    ("occupancy_map", occupancy_map),
+    ("key_file", key_file),
+    ("range_slices", range_slices),
 ];
 
 /// LCM message decoding: by fingerprint, and as each type whatever the
@@ -162,4 +165,68 @@ pub fn waypoints(data: &[u8]) {
                 .all(|w| w.x.is_finite() && w.y.is_finite())
         );
     }
+}
+
+/// Static occupancy maps: the first byte picks a `.npy` array (even) or a
+/// map_server YAML (odd), whose image is the bytes after the YAML's first
+/// NUL. What parses is gathered onto 0.4 m patches.
+pub fn occupancy_map(data: &[u8]) {
+    use arcnav_config::occupancy::{parse_npy, parse_yaml};
+    let Some((first, bytes)) = data.split_first() else {
+        return;
+    };
+    let config = arcnav_localmap::OccupancyConfig::default();
+    let grid = if first % 2 == 0 {
+        parse_npy(Path::new("fuzz.npy"), bytes, &config)
+    } else {
+        let (yaml, image) = match bytes.iter().position(|&b| b == 0) {
+            Some(i) => (&bytes[..i], &bytes[i + 1..]),
+            None => (bytes, &[][..]),
+        };
+        parse_yaml(Path::new("fuzz.yaml"), yaml, |_| Ok(image.to_vec()))
+    };
+    if let Ok(grid) = grid {
+        assert_eq!(grid.occupied.len(), grid.rows * grid.cols);
+        let _ = arcnav_localmap::StaticMap::from_grid(&grid, 0.4);
+    }
+}
+
+/// `[bus.auth]` key files' text.
+pub fn key_file(data: &[u8]) {
+    if let Ok(key) = arcnav_bus::auth::GroupKey::parse(data) {
+        // A key that parses signs.
+        let mut signer = arcnav_bus::auth::Signer::new(key);
+        let signed = signer.sign("STEERING_COMMAND", data, 1);
+        assert!(signed.len() > data.len());
+    }
+}
+
+/// Streamed range slices: `data` is a series of `range_slice_t` messages,
+/// each a 2-byte big-endian length and its bytes, fed to one frame
+/// assembler (with the default evaluator) as perception feeds them, then
+/// the input ends.
+pub fn range_slices(data: &[u8]) {
+    use arcnav_perception::{FrameStream, InOrder, PerceptionConfig, StreamingConfig};
+    let perception = PerceptionConfig::default();
+    let Ok(mut evaluator) = perception.build_evaluator() else {
+        return;
+    };
+    let mut stream = FrameStream::new(StreamingConfig::default(), evaluator.support(), &perception);
+    let pose = arcnav_vehicle::Isometry::identity();
+    let poses = |_: arcnav_vehicle::Utime| Some(pose);
+    let mut rest = data;
+    while let [a, b, tail @ ..] = rest {
+        let len = usize::from(u16::from_be_bytes([*a, *b])).min(tail.len());
+        let (bytes, next) = tail.split_at(len);
+        rest = next;
+        let Ok(msg) = range_slice_t::decode(bytes) else {
+            continue;
+        };
+        if let Ok(slice) = arcnav_wire::range_slice_from_wire(msg) {
+            let _ = stream.on_slice(&slice, &poses, evaluator.as_mut(), &InOrder, &mut |_| {});
+        }
+    }
+    let _ = stream.flush(&poses, evaluator.as_mut(), &InOrder, &mut |_| {});
+    let c = stream.counts;
+    assert!(c.slices <= data.len() as u64);
 }
