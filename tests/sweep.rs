@@ -210,6 +210,53 @@ fn an_interrupted_sweep_resumed_gives_the_table_of_an_uninterrupted_one() {
     assert!(text(&refused.stderr).contains("holds another sweep"));
 }
 
+/// `--resume` carries on this plan's runs only: a row edited to another
+/// world or value is not tabulated but run again, and a world file
+/// changed since the sweep started makes it another sweep (both had been
+/// mixed in under one label).
+#[test]
+fn a_resumed_sweep_takes_only_rows_of_its_own_plan_and_worlds() {
+    let dir = temp_dir("sweep-own");
+    let world = dir.join("ditch.toml");
+    let source = arcnav_testkit::workspace_root().join("tests/worlds/short_ditch.toml");
+    std::fs::write(&world, std::fs::read_to_string(source).unwrap()).unwrap();
+    let out = dir.join("out");
+    let plan = [
+        "--world",
+        world.to_str().unwrap(),
+        "--set",
+        "arbiter.cruise_speed_mps=2.5",
+        "--set",
+        "sim.time_limit_s=4",
+    ];
+    let first = run(&plan, &out);
+    assert_eq!(first.status.code(), Some(0), "{}", text(&first.stderr));
+    let table = table_without_wall_time(&out);
+    // A row edited to another value.
+    let rows = out.join("rows.jsonl");
+    let edited = std::fs::read_to_string(&rows)
+        .unwrap()
+        .replace("\"2.5\"", "\"9\"");
+    std::fs::write(&rows, edited).unwrap();
+    let resumed = run(&[&plan[..], &["--resume"]].concat(), &out);
+    let stderr = text(&resumed.stderr);
+    assert_eq!(resumed.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("1 rows of") && stderr.contains("not runs of this plan"),
+        "{stderr}"
+    );
+    assert_eq!(table_without_wall_time(&out), table);
+    // The world changed: another sweep.
+    let changed = std::fs::read_to_string(&world)
+        .unwrap()
+        .replace("seed = 31", "seed = 32");
+    std::fs::write(&world, changed).unwrap();
+    let refused = run(&[&plan[..], &["--resume"]].concat(), &out);
+    let stderr = text(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("changed since it started"), "{stderr}");
+}
+
 #[test]
 fn bad_settings_and_worlds_are_refused_before_any_run_by_name() {
     let grid_dir = temp_dir("sweep-grid");

@@ -280,6 +280,26 @@ pub fn parse_npy(
     config: &OccupancyConfig,
 ) -> Result<OccupancyGrid, OccupancyError> {
     use npyz::{DType, TypeChar};
+    // The header's length field, checked before npyz allocates it (a
+    // version-3 header may state 4 GB; the fuzzer found one of 660 MB).
+    let header_len = match bytes {
+        [0x93, b'N', b'U', b'M', b'P', b'Y', 1, _, a, b, ..] => {
+            u64::from(u16::from_le_bytes([*a, *b]))
+        }
+        [0x93, b'N', b'U', b'M', b'P', b'Y', 2 | 3, _, a, b, c, d, ..] => {
+            u64::from(u32::from_le_bytes([*a, *b, *c, *d]))
+        }
+        _ => 0,
+    };
+    if header_len > bytes.len() as u64 {
+        return Err(invalid(
+            path,
+            format!(
+                "is not a .npy array: its header says {header_len} bytes, more than its {} bytes hold",
+                bytes.len()
+            ),
+        ));
+    }
     let npy = npyz::NpyFile::new(bytes)
         .map_err(|e| invalid(path, format!("is not a .npy array: {e}")))?;
     let shape = npy.shape().to_vec();
@@ -524,6 +544,15 @@ mod tests {
         let e = parse_npy(Path::new("big.npy"), &header, &OccupancyConfig::default()).unwrap_err();
         assert!(
             e.to_string().contains("20000 × 20000 values, more than"),
+            "{e}"
+        );
+        // A version-3 header stating 4 GB of itself (the fuzzer found one).
+        let mut v3 = b"\x93NUMPY\x03\x00".to_vec();
+        v3.extend_from_slice(&u32::MAX.to_le_bytes());
+        v3.extend_from_slice(b"{'descr': '<f8'");
+        let e = parse_npy(Path::new("v3.npy"), &v3, &OccupancyConfig::default()).unwrap_err();
+        assert!(
+            e.to_string().contains("its header says 4294967295 bytes"),
             "{e}"
         );
         // A YAML of /dev/zero itself, and one of nested aliases (900 bytes

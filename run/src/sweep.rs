@@ -337,6 +337,7 @@ impl Plan {
     pub fn identity(&self) -> PlanIdentity {
         PlanIdentity {
             worlds: self.worlds.iter().map(|w| w.label.clone()).collect(),
+            world_digests: self.worlds.iter().map(|w| world_digest(&w.world)).collect(),
             keys: self.axes.iter().map(|a| a.key.clone()).collect(),
             settings: self.settings.iter().map(|s| s.values.clone()).collect(),
             configs: self
@@ -348,10 +349,33 @@ impl Plan {
     }
 }
 
+/// The digest [`PlanIdentity::world_digests`] holds, hex.
+fn world_digest(world: &World) -> String {
+    use sha2::{Digest, Sha256};
+    let mut hash = Sha256::new();
+    hash.update(toml::to_string(&world.spec).unwrap_or_default().as_bytes());
+    for (what, path) in &world.files_read {
+        if *what == "the world file" {
+            continue;
+        }
+        hash.update(path.display().to_string().as_bytes());
+        match arcnav_vehicle::files::read_bounded(path, 1 << 30) {
+            Ok(bytes) => hash.update(&bytes),
+            Err(e) => hash.update(e.to_string().as_bytes()),
+        }
+    }
+    hash.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// Written as `sweep.json`: what a resumed sweep is checked against.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PlanIdentity {
     pub worlds: Vec<String>,
+    /// SHA-256 of each world as built (its spec, scatter expanded) and of
+    /// the height file it reads: a world file changed between the runs of
+    /// a sweep is another sweep, not one label over two worlds.
+    #[serde(default)]
+    pub world_digests: Vec<String>,
     pub keys: Vec<String>,
     pub settings: Vec<Vec<String>>,
     pub configs: Vec<String>,
@@ -620,6 +644,23 @@ pub struct Finished {
     /// Lines that are not a whole row (a run cut off while its row was
     /// being written), ignored: the run is done again.
     pub unreadable: usize,
+}
+
+impl Finished {
+    /// Keeps the rows that are runs of `plan` (their world and setting
+    /// values are the plan's for their run index); the others — a row
+    /// edited, or from another sweep's file — are dropped and their runs
+    /// done again. How many were dropped.
+    pub fn keep_runs_of(&mut self, plan: &Plan) -> usize {
+        let before = self.rows.len();
+        self.rows.retain(|row| {
+            row.run < plan.runs() && {
+                let (world, s, setting) = plan.run(row.run);
+                row.world == world.label && row.setting == s && row.values == setting.values
+            }
+        });
+        before - self.rows.len()
+    }
 }
 
 impl RowLog {

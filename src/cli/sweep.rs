@@ -197,8 +197,17 @@ fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
         _ => {}
     }
     let finished = if earlier.is_some() {
-        RowLog::read(out, plan.runs())
-            .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?
+        let mut rows = RowLog::read(out, plan.runs())
+            .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?;
+        let foreign = rows.keep_runs_of(plan);
+        if foreign > 0 {
+            eprintln!(
+                "note: {foreign} rows of {} are not runs of this plan (their world or values \
+                 differ from the plan's for their run): not resumed, those runs are done again",
+                out.join(RowLog::FILE).display()
+            );
+        }
+        rows
     } else if out.join(RowLog::FILE).exists() {
         anyhow::bail!(
             "{} holds a {} but no {PLAN_FILE}: not a sweep this version can carry on; give \
@@ -230,6 +239,15 @@ fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
 fn difference(a: &PlanIdentity, b: &PlanIdentity) -> String {
     if a.worlds != b.worlds {
         format!("worlds {:?}, not {:?}", a.worlds, b.worlds)
+    } else if a.world_digests != b.world_digests {
+        let changed: Vec<&str> = a
+            .worlds
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| a.world_digests.get(*i) != b.world_digests.get(*i))
+            .map(|(_, w)| w.as_str())
+            .collect();
+        format!("the worlds {changed:?} changed since it started")
     } else if a.keys != b.keys || a.settings != b.settings {
         format!("settings of {:?}, not {:?}", a.keys, b.keys)
     } else {
