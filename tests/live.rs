@@ -102,7 +102,7 @@ fn lockstep(log: &Path, config: &Config) -> BTreeMap<Utime, SteeringCommand> {
     .unwrap()
     .cycles
     .into_iter()
-    .map(|(t, c)| (t, c.command))
+    .map(|((_, t), c)| (t, c.command))
     .collect()
 }
 

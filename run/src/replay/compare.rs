@@ -15,6 +15,11 @@ pub struct Cycle {
     pub votes: Vec<BehaviourVotes>,
 }
 
+/// Decisions by the run of the log they belong to (0, and one more each
+/// time the log starts over: logs concatenated) and their cycle's time.
+/// Keyed by time alone, a second run's decisions had replaced the first's.
+pub type Decisions = BTreeMap<(u32, Utime), Cycle>;
+
 /// A behaviour's weight by name, for attributing changes.
 pub type WeightOf<'a> = &'a dyn Fn(&str) -> f64;
 
@@ -67,8 +72,8 @@ pub struct Comparison {
 /// `weights_a`/`weights_b` give each behaviour's weight, to attribute changes.
 pub fn compare(
     labels: (&str, &str),
-    a: &BTreeMap<Utime, Cycle>,
-    b: &BTreeMap<Utime, Cycle>,
+    a: &Decisions,
+    b: &Decisions,
     weights: (WeightOf<'_>, WeightOf<'_>),
     origin: Utime,
 ) -> Comparison {
@@ -84,8 +89,8 @@ pub fn compare(
             continue;
         }
         differences.push(Difference {
-            time_s: (*t - origin) as f64 * 1e-6,
-            utime: *t,
+            time_s: (t.1 - origin) as f64 * 1e-6,
+            utime: t.1,
             a: Decided::from(&ca.command),
             b: Decided::from(&cb.command),
             moved_by: attribute(ca, cb, weights),

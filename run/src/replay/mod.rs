@@ -25,7 +25,7 @@ use serde::Serialize;
 mod compare;
 mod problems;
 
-pub use compare::{Comparison, Cycle, Decided, Difference, WeightOf, compare};
+pub use compare::{Comparison, Cycle, Decided, Decisions, Difference, WeightOf, compare};
 pub use problems::{InputProblems, LogSummary};
 
 use crate::recorder::{Recorder, WriteFailed};
@@ -68,10 +68,11 @@ pub struct InputCounts {
 /// What a replay produced.
 #[derive(Debug, Clone)]
 pub struct ReplayResult {
-    /// Recomputed decisions by time.
-    pub cycles: BTreeMap<Utime, Cycle>,
-    /// The log's own decisions by time (STEERING_COMMAND and ARC_VOTES_*).
-    pub recorded: BTreeMap<Utime, Cycle>,
+    /// Recomputed decisions by run and time.
+    pub cycles: Decisions,
+    /// The log's own decisions by run and time (STEERING_COMMAND and
+    /// ARC_VOTES_*).
+    pub recorded: Decisions,
     pub inputs: InputCounts,
     pub problems: InputProblems,
     /// First and last message time of the log, µs.
@@ -124,7 +125,9 @@ struct ReplaySink<'a> {
     /// The output log, and the first error of the replay.
     out: Recorder<'a, ReplayError>,
     arcs: ArcSet,
-    cycles: BTreeMap<Utime, Cycle>,
+    cycles: Decisions,
+    /// The run of the log being replayed (see [`Decisions`]).
+    run: u32,
     pending_votes: Vec<BehaviourVotes>,
     keep_at: Option<Utime>,
     kept: Option<KeptDecision>,
@@ -159,7 +162,7 @@ impl Sink for ReplaySink<'_> {
     ) {
         self.out.command(at, command);
         self.cycles.insert(
-            at,
+            (self.run, at),
             Cycle {
                 command: *command,
                 votes: std::mem::take(&mut self.pending_votes),
@@ -222,7 +225,9 @@ struct Fed {
     inputs: InputCounts,
     problems: InputProblems,
     /// The log's own decisions, by their cycle's time.
-    recorded: BTreeMap<Utime, Cycle>,
+    recorded: Decisions,
+    /// The run of the log being read (see [`Decisions`]).
+    run: u32,
     /// Recorded votes whose command has not been read yet.
     recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>>,
     /// Recorded obstacle cells (recomputed, unless replayed as they were).
@@ -317,7 +322,7 @@ fn take(
         // it receives them, later than the cycle.
         AnyMessage::SteeringCommand(msg) => {
             fed.recorded.insert(
-                msg.utime,
+                (fed.run, msg.utime),
                 Cycle {
                     command: SteeringCommand::from(&msg),
                     votes: fed.recorded_votes.remove(&msg.utime).unwrap_or_default(),
@@ -384,7 +389,18 @@ fn tally<S: EventSource>(
     if inputs.images == 0 && inputs.slices == 0 && !recorded_cells {
         problems.cells_unused = *cells;
     }
-    problems.unknown_channels = events.stats().unknown.clone();
+    // On a channel the replay takes its input from (POSE, RANGE_IMAGE*,
+    // WAYPOINTS) a message of no arcnav type is damaged input (a POSE
+    // whose fingerprint was damaged had been skipped as "unknown"): lost.
+    for (channel, n) in &events.stats().unknown {
+        let lost = arcnav_bus::messages::channels::is_input(channel);
+        let counts = if lost {
+            &mut problems.undecodable
+        } else {
+            &mut problems.unknown_channels
+        };
+        *counts.entry(channel.clone()).or_default() += n;
+    }
     for (channel, n) in &events.stats().undecodable {
         *problems.undecodable.entry(channel.clone()).or_default() += n;
     }
@@ -410,7 +426,8 @@ pub fn replay(
     let mut sink = ReplaySink {
         out,
         arcs: arcs.clone(),
-        cycles: BTreeMap::new(),
+        cycles: Decisions::new(),
+        run: 0,
         pending_votes: Vec::new(),
         keep_at: None,
         kept: None,
@@ -435,6 +452,16 @@ pub fn replay(
             source,
         })?;
         let t = event.timestamp;
+        // Each time the log starts over, a new run of it (logs concatenated).
+        let run = u32::try_from(events.source().order().restarts).unwrap_or(u32::MAX);
+        if run != fed.run {
+            // The last run's cycles due by its newest pose are its own.
+            if let Some(newest) = pipeline.pose().map(|p| p.utime) {
+                pipeline.run_until(newest, &mut sink);
+            }
+            fed.recorded_votes.clear();
+        }
+        (sink.run, fed.run) = (run, run);
         let origin = *first_time.get_or_insert(t);
         // The pace's origin, shifted past jumps, and the newest time paced.
         let paced = paced.get_or_insert((t, t));
