@@ -654,6 +654,21 @@ fn a_sim_log_is_replayed_with_the_configuration_beside_it_and_says_which() {
 }
 
 #[test]
+fn a_window_past_the_logs_end_says_so_and_not_that_the_log_has_no_commands() {
+    let (code, stdout, stderr) = arcnav(&["replay", sim_log().to_str().unwrap(), "--from", "1000"]);
+    assert_eq!(code, 3, "{stdout}{stderr}");
+    assert!(
+        stdout.contains("no POSE between --from and --to"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("no STEERING_COMMAND between --from and --to")
+            && !stdout.contains("the log holds no STEERING_COMMAND"),
+        "{stdout}"
+    );
+}
+
+#[test]
 fn a_finished_replay_replaces_the_old_output_and_leaves_no_temporary() {
     // (A run that fails keeps the old file: see arcnav::output's tests.)
     let log = copy_of_log("staged", "mission.lcm");

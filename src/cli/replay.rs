@@ -128,7 +128,12 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             origin,
         ));
     } else {
-        println!("comparison    the log holds no STEERING_COMMAND to compare with");
+        if last.problems.outside_window > 0 {
+            // `--from` past the end: the log may well hold commands.
+            println!("comparison    no STEERING_COMMAND between --from and --to to compare with");
+        } else {
+            println!("comparison    the log holds no STEERING_COMMAND to compare with");
+        }
     }
     for c in &comparisons {
         print_comparison(c, args.show);
