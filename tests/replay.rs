@@ -658,7 +658,7 @@ fn a_window_past_the_logs_end_says_so_and_not_that_the_log_has_no_commands() {
     let (code, stdout, stderr) = arcnav(&["replay", sim_log().to_str().unwrap(), "--from", "1000"]);
     assert_eq!(code, 3, "{stdout}{stderr}");
     assert!(
-        stdout.contains("no POSE between --from and --to"),
+        stdout.contains("no decision between --from and --to"),
         "{stdout}"
     );
     assert!(
@@ -666,6 +666,41 @@ fn a_window_past_the_logs_end_says_so_and_not_that_the_log_has_no_commands() {
             && !stdout.contains("the log holds no STEERING_COMMAND"),
         "{stdout}"
     );
+}
+
+/// `--from S` decides from S as the whole replay does there: the log
+/// before S brings the map, the progress along the waypoints and each
+/// behaviour's memory to S (skipped, the vehicle had steered back to the
+/// first waypoint behind it: 0 of 319 decisions agreed).
+#[test]
+fn a_replay_from_a_time_decides_there_as_the_whole_replay_does() {
+    let whole = replay_with_defaults(sim_log());
+    let from = replay(
+        sim_log(),
+        &Config::default().resolved().unwrap(),
+        &ReplayOptions {
+            from_s: Some(8.0),
+            ..ReplayOptions::default()
+        },
+        &mut |_| {},
+    )
+    .unwrap();
+    let origin = whole.span.unwrap().0;
+    let after = |r: &ReplayResult| -> Vec<_> {
+        r.cycles
+            .iter()
+            .filter(|((_, t), _)| *t >= origin + 8_200_000)
+            .map(|(k, c)| (*k, c.command))
+            .collect()
+    };
+    assert!(after(&whole).len() > 50);
+    assert!(
+        after(&from) == after(&whole),
+        "decided otherwise after --from"
+    );
+    assert!(from.cycles.keys().all(|(_, t)| *t >= origin + 7_900_000));
+    assert!(from.problems.before_window > 0);
+    assert!(!from.problems.lost_input(), "{:?}", from.problems.lines());
 }
 
 #[test]
@@ -959,7 +994,7 @@ fn an_empty_log_or_one_without_poses_is_never_a_success() {
     let (code, stdout, _) = arcnav(&["replay", sim_log().to_str().unwrap(), "--from", "1e6"]);
     assert_eq!(code, 3, "{stdout}");
     assert!(
-        stdout.contains("no POSE between --from and --to ("),
+        stdout.contains("no decision between --from and --to: all"),
         "{stdout}"
     );
     assert!(!stdout.contains("the log holds no POSE"), "{stdout}");

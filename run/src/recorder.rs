@@ -27,6 +27,8 @@ pub(crate) struct WriteFailed {
 pub(crate) struct Recorder<'a, E> {
     out: Option<(&'a Path, LogWriter<BufWriter<File>>, Staged)>,
     pub error: Option<E>,
+    /// Nothing is written while set (a replay's warm-up before `--from`).
+    pub paused: bool,
 }
 
 impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
@@ -41,7 +43,11 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
             }
             None => None,
         };
-        Ok(Self { out, error: None })
+        Ok(Self {
+            out,
+            error: None,
+            paused: false,
+        })
     }
 
     /// Completes the log: flushed, synced and renamed into place, unless an
@@ -107,6 +113,9 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
         &mut self,
         write: impl FnOnce(&mut LogWriter<BufWriter<File>>) -> Result<(), LogWriteError>,
     ) {
+        if self.paused {
+            return;
+        }
         if let Some((path, writer, _)) = &mut self.out
             && self.error.is_none()
             && let Err(source) = write(writer)

@@ -128,7 +128,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             origin,
         ));
     } else {
-        if last.problems.outside_window > 0 {
+        if last.problems.outside_window > 0 || last.problems.before_window > 0 {
             // `--from` past the end: the log may well hold commands.
             println!("comparison    no STEERING_COMMAND between --from and --to to compare with");
         } else {

@@ -128,6 +128,8 @@ struct ReplaySink<'a> {
     cycles: Decisions,
     /// The run of the log being replayed (see [`Decisions`]).
     run: u32,
+    /// Before `--from`: decisions are not kept.
+    warming: bool,
     pending_votes: Vec<BehaviourVotes>,
     keep_at: Option<Utime>,
     kept: Option<KeptDecision>,
@@ -161,6 +163,9 @@ impl Sink for ReplaySink<'_> {
         map: &MapSnapshot,
     ) {
         self.out.command(at, command);
+        if self.warming {
+            return;
+        }
         self.cycles.insert(
             (self.run, at),
             Cycle {
@@ -228,6 +233,8 @@ struct Fed {
     recorded: Decisions,
     /// The run of the log being read (see [`Decisions`]).
     run: u32,
+    /// Before `--from`: the log's own decisions are not kept.
+    warming: bool,
     /// Recorded votes whose command has not been read yet.
     recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>>,
     /// Recorded obstacle cells (recomputed, unless replayed as they were).
@@ -320,6 +327,8 @@ fn take(
         // Decisions are keyed by their cycle's time (the message's own
         // utime), as the replayed ones are: a logger stamps events when
         // it receives them, later than the cycle.
+        AnyMessage::SteeringCommand(_) if fed.warming => {}
+        AnyMessage::ArcVotes(_) if fed.warming => {}
         AnyMessage::SteeringCommand(msg) => {
             fed.recorded.insert(
                 (fed.run, msg.utime),
@@ -428,6 +437,7 @@ pub fn replay(
         arcs: arcs.clone(),
         cycles: Decisions::new(),
         run: 0,
+        warming: false,
         pending_votes: Vec::new(),
         keep_at: None,
         kept: None,
@@ -436,7 +446,6 @@ pub fn replay(
     let mut fed = Fed::default();
     let mut span: Option<(Utime, Utime)> = None;
     let mut waypoints_given = false;
-    let mut skipped_mission = None;
     let mut past_to = false;
     if let Some(mission) = &options.waypoints {
         pipeline.input(Input::Waypoints(mission.clone()), &mut sink);
@@ -467,28 +476,13 @@ pub fn replay(
         let paced = paced.get_or_insert((t, t));
         span = Some(span.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
         let since = (t - origin) as f64 * 1e-6;
-        if options.from_s.is_some_and(|from| since < from) {
-            // The mission in force at --from still holds there: the newest
-            // waypoints before it are fed when the replay starts.
-            if let AnyMessage::Waypoints(msg) = &event.message
-                && !waypoints_given
-                && event.message.on_its_channel(&event.channel)
-            {
-                skipped_mission = Some((t, event.channel.clone(), msg.clone()));
-            }
-            fed.problems.outside_window += 1;
-            continue;
-        }
-        if let Some((at, channel, msg)) = skipped_mission.take() {
-            match wire::mission_from_wire(&msg) {
-                Ok(mission) => {
-                    fed.inputs.waypoints += 1;
-                    sink.out.message(at, &channel, &msg);
-                    pipeline.input(Input::Waypoints(mission), &mut sink);
-                }
-                Err(_) => *fed.problems.undecodable.entry(channel).or_default() += 1,
-            }
-        }
+        // Before --from the log brings the pipeline to its state at --from
+        // (the map, the progress along the waypoints, each behaviour's
+        // memory); its decisions are not kept nor written. Skipped, the
+        // vehicle had steered back to the first waypoint, behind it.
+        let warming = options.from_s.is_some_and(|from| since < from);
+        fed.problems.before_window += u64::from(warming);
+        (sink.warming, fed.warming, sink.out.paused) = (warming, warming, warming);
         if options.to_s.is_some_and(|to| since > to) {
             // Past the end: one event alone may be a damaged time (a flipped
             // bit); two in a row end the replay.
@@ -506,7 +500,7 @@ pub fn replay(
                 break;
             }
         }
-        if let Some(speed) = options.speed {
+        if let Some(speed) = options.speed.filter(|_| !warming) {
             // Log time jumping ahead by more than a minute (a gap, a corrupt
             // time) is not waited out: the pace carries on from there.
             let step = t - paced.1;
@@ -550,8 +544,10 @@ pub fn replay(
     if let Some(newest) = pipeline.pose().map(|p| p.utime) {
         pipeline.run_until(newest, &mut sink);
     }
+    sink.out.paused = false;
     sink.out.finish()?;
     tally(&mut fed, &pipeline, &events, options.recorded_cells);
+    fed.problems.window_empty = fed.problems.before_window > 0 && sink.cycles.is_empty();
     Ok(ReplayResult {
         cycles: sink.cycles,
         recorded: fed.recorded,

@@ -62,8 +62,13 @@ pub struct InputProblems {
     /// The log holds no pose (within `--from`/`--to` when given): nothing
     /// could be placed or decided.
     pub no_poses: bool,
-    /// Events before `--from` or after `--to`, as asked: not replayed.
+    /// Events after `--to`, as asked: not replayed.
     pub outside_window: u64,
+    /// Events before `--from`: replayed to bring the pipeline to its state
+    /// at `--from`, their decisions not kept.
+    pub before_window: u64,
+    /// `--from` (and `--to`) hold no decision: the log ends before `--from`.
+    pub window_empty: bool,
     /// Images still waiting for the pose at their capture time when the log
     /// ended or started over (the pose stream stops before them).
     pub images_unplaced: u64,
@@ -107,6 +112,7 @@ impl InputProblems {
             || self.reports_refused > 0
             || self.cells_unused > 0
             || self.no_poses
+            || self.window_empty
             || self.images_unplaced > 0
     }
 
@@ -160,6 +166,12 @@ impl InputProblems {
             ));
         } else if self.no_poses {
             lines.push("the log holds no POSE: nothing could be placed or decided".into());
+        } else if self.window_empty {
+            lines.push(format!(
+                "no decision between --from and --to: all {} event(s) of the log lie before \
+                 --from (past its end?)",
+                self.before_window
+            ));
         }
         if self.cells_unused > 0 {
             lines.push(format!(
