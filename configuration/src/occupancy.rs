@@ -282,14 +282,14 @@ pub fn parse_npy(
     use npyz::{DType, TypeChar};
     // The header's length field, checked before npyz allocates it (a
     // version-3 header may state 4 GB; the fuzzer found one of 660 MB).
-    let header_len = match bytes {
+    let (header_at, header_len) = match bytes {
         [0x93, b'N', b'U', b'M', b'P', b'Y', 1, _, a, b, ..] => {
-            u64::from(u16::from_le_bytes([*a, *b]))
+            (10, u64::from(u16::from_le_bytes([*a, *b])))
         }
         [0x93, b'N', b'U', b'M', b'P', b'Y', 2 | 3, _, a, b, c, d, ..] => {
-            u64::from(u32::from_le_bytes([*a, *b, *c, *d]))
+            (12, u64::from(u32::from_le_bytes([*a, *b, *c, *d])))
         }
-        _ => 0,
+        _ => (0, 0),
     };
     if header_len > bytes.len() as u64 {
         return Err(invalid(
@@ -299,6 +299,27 @@ pub fn parse_npy(
                 bytes.len()
             ),
         ));
+    }
+    // The header is a flat dict holding a tuple: deeper nesting is no .npy
+    // (npyz's parser takes exponential time over nested braces; the
+    // fuzzer found 30 of them taking seconds).
+    let header = bytes
+        .get(header_at..)
+        .and_then(|rest| rest.get(..usize::try_from(header_len).ok()?))
+        .unwrap_or_default();
+    let mut depth = 0usize;
+    for &c in header {
+        match c {
+            b'{' | b'(' | b'[' => depth += 1,
+            b'}' | b')' | b']' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+        if depth > 2 {
+            return Err(invalid(
+                path,
+                "is not a .npy array: its header nests deeper than a dict holding a tuple",
+            ));
+        }
     }
     let npy = npyz::NpyFile::new(bytes)
         .map_err(|e| invalid(path, format!("is not a .npy array: {e}")))?;
@@ -546,6 +567,13 @@ mod tests {
             e.to_string().contains("20000 × 20000 values, more than"),
             "{e}"
         );
+        // Braces nested 30 deep in the header (npyz's parser took seconds).
+        let mut nested = b"\x93NUMPY\x01\x00".to_vec();
+        let dict = format!("{{'descr': '|b1', 'shape': {}(2, 2), }}", "{".repeat(30));
+        nested.extend_from_slice(&(dict.len() as u16).to_le_bytes());
+        nested.extend_from_slice(dict.as_bytes());
+        let e = parse_npy(Path::new("deep.npy"), &nested, &OccupancyConfig::default()).unwrap_err();
+        assert!(e.to_string().contains("nests deeper"), "{e}");
         // A version-3 header stating 4 GB of itself (the fuzzer found one).
         let mut v3 = b"\x93NUMPY\x03\x00".to_vec();
         v3.extend_from_slice(&u32::MAX.to_le_bytes());
