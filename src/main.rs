@@ -261,7 +261,9 @@ struct ReplayArgs {
     /// Write the inputs and the recomputed outputs to this log.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Start this many seconds into the log (the local map starts empty there).
+    /// Keep and write the decisions from this many seconds into the log on
+    /// (the log before it is replayed to bring the map, the waypoint
+    /// progress and the behaviours to their state there).
     #[arg(long, value_name = "S")]
     from: Option<f64>,
     /// Stop this many seconds into the log.
