@@ -28,7 +28,7 @@ fn command(k: i32) -> Vec<u8> {
 #[test]
 fn the_python_verifier_accepts_arcnavs_commands_and_refuses_a_tampered_one() {
     let dir = arcnav_testkit::scratch_dir("arcnav-auth-python");
-    let key_hex = "3f".repeat(32);
+    let key_hex: String = (0..32u8).map(|i| format!("{:02x}", 0x3f ^ i)).collect();
     let key_path = dir.join("group.key");
     std::fs::write(&key_path, format!("{key_hex}\n")).unwrap();
     std::fs::set_permissions(&key_path, std::fs::Permissions::from_mode(0o600)).unwrap();

@@ -321,6 +321,12 @@ pub fn parse_npy(
             ));
         }
     }
+    if !shape_fits(header) {
+        return Err(invalid(
+            path,
+            "is not a .npy array: its shape is not decimal sizes whose product a 64-bit count holds",
+        ));
+    }
     let npy = npyz::NpyFile::new(bytes)
         .map_err(|e| invalid(path, format!("is not a .npy array: {e}")))?;
     let shape = npy.shape().to_vec();
@@ -404,6 +410,40 @@ pub fn parse_npy(
         rows,
         occupied,
     })
+}
+
+/// Whether the `shape` tuple of a .npy header is decimal sizes (as numpy
+/// writes them) whose product fits in a u64: npyz multiplies them
+/// unchecked (the fuzzer found a shape whose product overflowed, a panic
+/// with overflow checks on). A header without a shape is left to npyz.
+fn shape_fits(header: &[u8]) -> bool {
+    let text = String::from_utf8_lossy(header);
+    let Some(tuple) = text
+        .find("'shape'")
+        .or_else(|| text.find("\"shape\""))
+        .map(|at| &text[at..])
+        .and_then(|rest| Some(&rest[rest.find('(')? + 1..rest.find(')')?]))
+    else {
+        return true;
+    };
+    if !tuple
+        .chars()
+        .all(|c| c.is_ascii_digit() || c == ',' || c == ' ')
+    {
+        return false;
+    }
+    let mut product: u64 = 1;
+    for size in tuple.split([',', ' ']).filter(|p| !p.is_empty()) {
+        let Some(p) = size
+            .parse::<u64>()
+            .ok()
+            .and_then(|v| product.checked_mul(v.max(1)))
+        else {
+            return false;
+        };
+        product = p;
+    }
+    true
 }
 
 fn to_f64<T>(
@@ -574,6 +614,20 @@ mod tests {
         nested.extend_from_slice(dict.as_bytes());
         let e = parse_npy(Path::new("deep.npy"), &nested, &OccupancyConfig::default()).unwrap_err();
         assert!(e.to_string().contains("nests deeper"), "{e}");
+        // A shape whose product overflows (npyz multiplied it unchecked: a
+        // panic the fuzzer found), and one not in decimal.
+        for shape in ["(4294967296, 4294967296)", "(0x10, 2)"] {
+            let mut header = b"\x93NUMPY\x01\x00".to_vec();
+            let dict = format!("{{'descr': '|b1', 'fortran_order': False, 'shape': {shape}, }}");
+            header.extend_from_slice(&(dict.len() as u16).to_le_bytes());
+            header.extend_from_slice(dict.as_bytes());
+            let e =
+                parse_npy(Path::new("wide.npy"), &header, &OccupancyConfig::default()).unwrap_err();
+            assert!(
+                e.to_string().contains("its shape is not decimal sizes"),
+                "{shape}: {e}"
+            );
+        }
         // A version-3 header stating 4 GB of itself (the fuzzer found one).
         let mut v3 = b"\x93NUMPY\x03\x00".to_vec();
         v3.extend_from_slice(&u32::MAX.to_le_bytes());

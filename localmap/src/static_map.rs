@@ -44,8 +44,11 @@ pub struct StaticMap {
 /// of 0.2 m patches), one byte each.
 pub const MAX_PATCHES: u64 = 1 << 26;
 
-/// The most points sampled to gather a grid onto patches: 2²⁸.
-pub const MAX_SAMPLES: u64 = 1 << 28;
+/// The most points sampled to gather a grid of cells coarser than the
+/// patches onto them: 2²⁴, or the grid's own number of cells if larger
+/// (each cell is sampled once at least, so the work is bounded by the
+/// map's size or by this).
+pub const MAX_SAMPLES: u64 = 1 << 24;
 
 /// A grid too large to gather onto the local map's patches.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -61,7 +64,7 @@ pub enum StaticMapError {
     },
     #[error(
         "its {cells} occupied cells of {resolution_m} m are {samples} samples at the {patch_size_m} m \
-         patch size, more than {MAX_SAMPLES}: is its resolution right?"
+         patch size, more than {MAX_SAMPLES} or its cells: is its resolution right?"
     )]
     Samples {
         cells: u64,
@@ -80,7 +83,8 @@ impl StaticMap {
         // Points sampled per cell side so every patch a cell covers is hit.
         let per_side = (grid.resolution_m / patch_size_m).ceil().max(1.0);
         let samples = per_side * per_side * cells as f64;
-        if samples.is_nan() || samples > MAX_SAMPLES as f64 {
+        let budget = MAX_SAMPLES.max(grid.occupied.len() as u64) as f64;
+        if samples.is_nan() || samples > budget {
             return Err(StaticMapError::Samples {
                 cells,
                 samples,
