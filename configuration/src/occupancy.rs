@@ -422,7 +422,11 @@ fn shape_fits(header: &[u8]) -> bool {
         .find("'shape'")
         .or_else(|| text.find("\"shape\""))
         .map(|at| &text[at..])
-        .and_then(|rest| Some(&rest[rest.find('(')? + 1..rest.find(')')?]))
+        .and_then(|rest| {
+            let open = rest.find('(')? + 1;
+            let close = open + rest[open..].find(')')?;
+            Some(&rest[open..close])
+        })
     else {
         return true;
     };
@@ -628,6 +632,12 @@ mod tests {
                 "{shape}: {e}"
             );
         }
+        // A `)` before the `(` (shape_fits itself had panicked on it).
+        let mut header = b"\x93NUMPY\x01\x00".to_vec();
+        let dict = "{'descr': '<i4', 'fortran_order': False, 'shape': 1, 1)( }";
+        header.extend_from_slice(&(dict.len() as u16).to_le_bytes());
+        header.extend_from_slice(dict.as_bytes());
+        assert!(parse_npy(Path::new("odd.npy"), &header, &OccupancyConfig::default()).is_err());
         // A version-3 header stating 4 GB of itself (the fuzzer found one).
         let mut v3 = b"\x93NUMPY\x03\x00".to_vec();
         v3.extend_from_slice(&u32::MAX.to_le_bytes());
