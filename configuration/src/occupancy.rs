@@ -90,50 +90,59 @@ fn read_map_file(path: &Path, max_bytes: u64) -> Result<Vec<u8>, OccupancyError>
     arcnav_vehicle::files::read_bounded(path, max_bytes).map_err(read_error(path))
 }
 
-/// The number of nodes `text` holds with every alias expanded (saturating).
+/// The deepest a map_server YAML may nest collections: its one level of
+/// keys and the `origin` list need two. The parser recurses once a level,
+/// and a 4 kB document of nested `- - - …` had overflowed the stack (found
+/// by the occupancy_map fuzzer).
+pub const MAX_YAML_DEPTH: usize = 32;
+
+/// The number of nodes `text` holds with every alias expanded (saturating),
+/// read event by event (no recursion) so that neither an alias bomb nor a
+/// deep nesting reaches the loader: deeper than [`MAX_YAML_DEPTH`] is an
+/// error.
 fn expanded_nodes(text: &str) -> Result<u64, String> {
-    use yaml_rust2::parser::{Event, EventReceiver, Parser};
-    #[derive(Default)]
-    struct Count {
-        total: u64,
-        /// Expanded size of each anchor, by anchor id.
-        anchors: std::collections::BTreeMap<usize, u64>,
-        /// Open collections: anchor id and the total when opened.
-        open: Vec<(usize, u64)>,
-    }
-    impl EventReceiver for Count {
-        fn on_event(&mut self, event: Event) {
-            match event {
-                Event::Scalar(_, _, anchor, _) => {
-                    self.total = self.total.saturating_add(1);
-                    if anchor > 0 {
-                        self.anchors.insert(anchor, 1);
-                    }
+    use yaml_rust2::parser::{Event, Parser};
+    let mut total: u64 = 0;
+    // Expanded size of each anchor, by anchor id.
+    let mut anchors = std::collections::BTreeMap::<usize, u64>::new();
+    // Open collections: anchor id and the total when opened.
+    let mut open: Vec<(usize, u64)> = Vec::new();
+    let mut parser = Parser::new_from_str(text);
+    loop {
+        let (event, mark) = parser.next_token().map_err(|e| e.to_string())?;
+        match event {
+            Event::StreamEnd => return Ok(total),
+            Event::Scalar(_, _, anchor, _) => {
+                total = total.saturating_add(1);
+                if anchor > 0 {
+                    anchors.insert(anchor, 1);
                 }
-                Event::SequenceStart(anchor, _) | Event::MappingStart(anchor, _) => {
-                    self.total = self.total.saturating_add(1);
-                    self.open.push((anchor, self.total));
-                }
-                Event::SequenceEnd | Event::MappingEnd => {
-                    if let Some((anchor, from)) = self.open.pop()
-                        && anchor > 0
-                    {
-                        self.anchors.insert(anchor, self.total - from + 1);
-                    }
-                }
-                Event::Alias(anchor) => {
-                    let size = self.anchors.get(&anchor).copied().unwrap_or(1);
-                    self.total = self.total.saturating_add(size);
-                }
-                _ => {}
             }
+            Event::SequenceStart(anchor, _) | Event::MappingStart(anchor, _) => {
+                total = total.saturating_add(1);
+                open.push((anchor, total));
+                if open.len() > MAX_YAML_DEPTH {
+                    return Err(format!(
+                        "nests collections more than {MAX_YAML_DEPTH} deep (line {}): \
+                         a map_server map is a few keys",
+                        mark.line()
+                    ));
+                }
+            }
+            Event::SequenceEnd | Event::MappingEnd => {
+                if let Some((anchor, from)) = open.pop()
+                    && anchor > 0
+                {
+                    anchors.insert(anchor, total - from + 1);
+                }
+            }
+            Event::Alias(anchor) => {
+                let size = anchors.get(&anchor).copied().unwrap_or(1);
+                total = total.saturating_add(size);
+            }
+            _ => {}
         }
     }
-    let mut count = Count::default();
-    Parser::new_from_str(text)
-        .load(&mut count, true)
-        .map_err(|e| e.to_string())?;
-    Ok(count.total)
 }
 
 fn load_yaml(path: &Path) -> Result<(OccupancyGrid, PathBuf), OccupancyError> {
@@ -668,5 +677,19 @@ mod tests {
         assert!(e.contains("YAML nodes (its aliases expanded)"), "{e}");
         // A few aliases are fine.
         assert!(expanded_nodes("a: &a [1, 2]\nb: *a\n").unwrap() < 20);
+        // Collections nested thousands deep, in block and in flow style:
+        // refused before the recursive loader (4 kB of `- - - …` had
+        // overflowed the stack; the occupancy_map fuzzer found it).
+        // (yaml-rust2's scanner itself stops flow nesting at 255.)
+        for (deep, says) in [
+            ("- ".repeat(2000), "nests collections more than 32 deep"),
+            ("a:\n".to_owned() + &"- ".repeat(40), "nests collections more than 32 deep"),
+            ("[".repeat(2000), "recursion limit exceeded"),
+        ] {
+            let e = parse_yaml(Path::new("deep.yaml"), deep.as_bytes(), |_| Ok(Vec::new()))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(says), "{e}");
+        }
     }
 }
