@@ -77,7 +77,7 @@ fn main() {
     let seconds: f64 = std::env::args()
         .skip(1)
         .find_map(|a| a.parse().ok())
-        .unwrap_or(if common::quick() { 2.0 } else { 30.0 });
+        .unwrap_or(if common::quick() { 1.0 } else { 30.0 });
     let data = common::data_dir();
     for (label, preset) in [
         ("ERIM", SensorPreset::Erim),

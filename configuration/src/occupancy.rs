@@ -683,7 +683,10 @@ mod tests {
         // (yaml-rust2's scanner itself stops flow nesting at 255.)
         for (deep, says) in [
             ("- ".repeat(2000), "nests collections more than 32 deep"),
-            ("a:\n".to_owned() + &"- ".repeat(40), "nests collections more than 32 deep"),
+            (
+                "a:\n".to_owned() + &"- ".repeat(40),
+                "nests collections more than 32 deep",
+            ),
             ("[".repeat(2000), "recursion limit exceeded"),
         ] {
             let e = parse_yaml(Path::new("deep.yaml"), deep.as_bytes(), |_| Ok(Vec::new()))

@@ -50,7 +50,9 @@ fn main() {
         .filter(|a| !a.starts_with('-'))
         .collect();
     let run = |part: &str| parts.is_empty() || parts.iter().any(|p| p == part);
-    let scene: Scene = HeightFunction::with_step(arcnav_perception::scene::rough_ground, 0.1);
+    // Quick mode marches 0.5 m steps: it checks that the parts run.
+    let step = if quick() { 0.5 } else { 0.1 };
+    let scene: Scene = HeightFunction::with_step(arcnav_perception::scene::rough_ground, step);
     if run("lidar") {
         lidar_image(&scene);
     }
