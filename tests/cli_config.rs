@@ -4,15 +4,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 fn arcnav(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
-        .args(args)
-        .output()
-        .expect("the arcnav binary runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    arcnav_testkit::output_of(env!("CARGO_BIN_EXE_arcnav"), args)
 }
 
 /// `text` written to `name` in a directory removed when the guard drops.

@@ -4,20 +4,11 @@
 //! file, a link is written through and kept.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use arcnav_testkit::temp_dir;
 
 fn arcnav(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    arcnav_testkit::output_of(env!("CARGO_BIN_EXE_arcnav"), args)
 }
 
 fn s(p: &Path) -> &str {

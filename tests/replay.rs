@@ -2,7 +2,6 @@
 //! comparison, and damaged input.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::{Arc, OnceLock};
 
 use arcnav::Config;
@@ -58,15 +57,7 @@ fn sim_log() -> &'static Path {
 }
 
 fn arcnav(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    arcnav_testkit::output_of(env!("CARGO_BIN_EXE_arcnav"), args)
 }
 
 /// Rewrites a log, keeping the events `keep` accepts.

@@ -2,7 +2,6 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Command;
 
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::{AnyMessage, TypedEvents};
@@ -10,15 +9,7 @@ use arcnav_testkit::ScratchDir;
 use serde_json::Value;
 
 fn arcnav(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
-        .args(args)
-        .output()
-        .expect("the arcnav binary runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    arcnav_testkit::output_of(env!("CARGO_BIN_EXE_arcnav"), args)
 }
 
 fn out_dir(tag: &str) -> ScratchDir {

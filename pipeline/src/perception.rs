@@ -484,16 +484,23 @@ mod tests {
     use arcnav_perception::SensorModel;
     use arcnav_vehicle::frames::planar_isometry;
 
+    /// A node with the defaults that has had poses at rest every 20 ms for
+    /// 3 s (no image yet, so no report).
+    fn at_rest_for_3_s() -> PerceptionNode {
+        let mut node =
+            PerceptionNode::new(&PerceptionConfig::default(), &PipelineConfig::default()).unwrap();
+        for k in 0..=150 {
+            let pose = Pose::at_rest(k * 20_000, planar_isometry(0.0, 0.0, 0.0));
+            node.on_pose(&pose, &mut |_| panic!("a report before any image"));
+        }
+        node
+    }
+
     #[test]
     fn an_image_arriving_more_than_a_second_after_its_capture_is_counted_late_and_still_evaluated()
     {
-        let mut node =
-            PerceptionNode::new(&PerceptionConfig::default(), &PipelineConfig::default()).unwrap();
+        let mut node = at_rest_for_3_s();
         let mut reports = 0;
-        for k in 0..=150 {
-            let pose = Pose::at_rest(k * 20_000, planar_isometry(0.0, 0.0, 0.0));
-            node.on_pose(&pose, &mut |_| reports += 1);
-        }
         let sensor = SensorModel::erim();
         // Newest pose at 3 s: an image of 0.5 s is late, evaluated all the same.
         node.on_image(sensor.blank_image(500_000), &mut |_| reports += 1);
@@ -506,13 +513,8 @@ mod tests {
 
     #[test]
     fn range_data_from_more_sensors_than_the_map_tracks_is_dropped_and_counted() {
-        let mut node =
-            PerceptionNode::new(&PerceptionConfig::default(), &PipelineConfig::default()).unwrap();
+        let mut node = at_rest_for_3_s();
         let mut reports = 0;
-        for k in 0..=150 {
-            let pose = Pose::at_rest(k * 20_000, planar_isometry(0.0, 0.0, 0.0));
-            node.on_pose(&pose, &mut |_| reports += 1);
-        }
         let sensor = SensorModel::erim();
         for i in 0..MAX_SENSORS + 3 {
             let mut image = sensor.blank_image(2_000_000);

@@ -23,6 +23,23 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// The pinned version of the reference implementation.
 pub const LCM_VERSION: &str = "1.5.3";
 
+/// Runs `program` with `args` to its end: its exit code (-1 when a signal
+/// ended it) and what it printed on standard output and standard error.
+/// A test crate passes its binary (`env!("CARGO_BIN_EXE_arcnav")`, which
+/// only the test crate can read).
+pub fn output_of(program: impl AsRef<std::ffi::OsStr>, args: &[&str]) -> (i32, String, String) {
+    let program = program.as_ref();
+    let out = Command::new(program)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("{}: {e}", program.display()));
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// The workspace root.
 pub fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
