@@ -43,7 +43,9 @@ enum Command {
     /// summary.csv/json (one per setting) and sweep.png to --out, keeping
     /// each run's row as it finishes: an interrupted sweep carries on with
     /// --resume. Exit status 0 when every run was done (whatever its outcome),
-    /// 130 when interrupted.
+    /// 130 when interrupted. On a cluster, each task runs one --shard K/N and
+    /// `arcnav sweep merge` joins them.
+    #[command(args_conflicts_with_subcommands = true)]
     Sweep(SweepArgs),
     /// Replay a log through the pipeline and compare the decisions.
     ///
@@ -217,6 +219,34 @@ struct SweepArgs {
     /// Runs at a time, 1 to 1024 (default: one per core; never more than there are runs).
     #[arg(long, value_name = "N")]
     jobs: Option<usize>,
+    /// Run only the K-th of N parts of the plan (runs K-1, K-1+N, …), e.g. one
+    /// task of a cluster's array job; `arcnav sweep merge` joins the parts.
+    #[arg(long, value_name = "K/N", value_parser = arcnav::sweep::Shard::parse)]
+    shard: Option<arcnav::sweep::Shard>,
+    #[command(subcommand)]
+    action: Option<SweepAction>,
+}
+
+#[derive(Debug, Subcommand)]
+enum SweepAction {
+    /// Join the directories of a sweep's shards into one sweep.
+    ///
+    /// Join the output directories of `arcnav sweep --shard K/N` runs (all N of
+    /// them, each complete) into one sweep directory: sweep.json, rows.jsonl,
+    /// the tables and sweep.png, as one unsharded sweep writes them. Refuses
+    /// directories of different plans (worlds, settings, base configuration),
+    /// a shard given twice and a shard missing or incomplete.
+    Merge(SweepMergeArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct SweepMergeArgs {
+    /// The shards' output directories.
+    #[arg(required = true, value_name = "DIR")]
+    dirs: Vec<PathBuf>,
+    /// Directory of the merged sweep (new, or one holding no sweep).
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]

@@ -146,6 +146,124 @@ fn a_sweep_writes_a_reproducible_table_a_consistent_summary_and_a_picture() {
     assert!(text(&refused.stderr).contains("--resume carries it on"));
 }
 
+/// `--shard K/N` × 3 as three processes at once, merged: the table of one
+/// unsharded sweep of the same plan (wall time aside); a shard missing,
+/// given twice, of another plan, or merged over a sweep: refused.
+#[test]
+fn three_shards_merged_give_the_table_of_one_sweep_and_mixed_plans_are_refused() {
+    let root = temp_dir("sweep-shards");
+    let whole = root.join("whole");
+    let shards: Vec<PathBuf> = (1..=3).map(|k| root.join(format!("shard{k}"))).collect();
+    let mut running = vec![sweep(&PLAN, &whole).stderr(Stdio::piped()).spawn().unwrap()];
+    for (k, dir) in shards.iter().enumerate() {
+        let shard = format!("{}/3", k + 1);
+        let mut args = PLAN.to_vec();
+        args.extend(["--shard", &shard, "--jobs", "1"]);
+        running.push(sweep(&args, dir).stderr(Stdio::piped()).spawn().unwrap());
+    }
+    for child in running {
+        let out = child.wait_with_output().unwrap();
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    }
+    // Each shard ran its own runs only: 0 and 3, 1, 2 of the four.
+    let runs = |dir: &Path| -> Vec<u64> {
+        json(dir.join("table.json"))
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["run"].as_u64().unwrap())
+            .collect()
+    };
+    assert_eq!(runs(&shards[0]), [0, 3]);
+    assert_eq!(runs(&shards[1]), [1]);
+    assert_eq!(runs(&shards[2]), [2]);
+
+    let merge = |dirs: &[&Path], out: &Path| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_arcnav"));
+        command
+            .args(["sweep", "merge"])
+            .args(dirs)
+            .arg("--out")
+            .arg(out);
+        command.output().unwrap()
+    };
+    let merged = root.join("merged");
+    let all: Vec<&Path> = shards.iter().map(PathBuf::as_path).collect();
+    let out = merge(&[all[2], all[0], all[1]], &merged);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(
+        table_without_wall_time(&merged),
+        table_without_wall_time(&whole)
+    );
+    for file in ["summary.csv", "sweep.json"] {
+        let read = |dir: &Path| std::fs::read_to_string(dir.join(file)).unwrap();
+        assert_eq!(read(&merged), read(&whole), "{file}");
+    }
+    assert_eq!(runs(&merged), [0, 1, 2, 3]);
+    // The merged directory is a whole sweep: resumed, it has nothing to do.
+    let resumed = run(&[&PLAN[..], &["--resume"]].concat(), &merged);
+    assert_eq!(resumed.status.code(), Some(0), "{}", text(&resumed.stderr));
+    assert!(
+        text(&resumed.stderr).contains("(4 already done)"),
+        "{}",
+        text(&resumed.stderr)
+    );
+
+    let refused = |dirs: &[&Path], out: &Path, says: &str| {
+        let out = merge(dirs, out);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(says), "{says}: {stderr}");
+    };
+    refused(&all[..2], &root.join("m1"), "no directory holds shard 3/3");
+    refused(
+        &[all[0], all[1], all[1]],
+        &root.join("m2"),
+        "shard 2/3 is given twice",
+    );
+    refused(
+        &[all[0], &whole],
+        &root.join("m3"),
+        "is of a plan in 3 shards",
+    );
+    refused(&all, &whole, "already holds a sweep");
+    refused(&all, all[0], "it is one of the shards given");
+    // A shard of another plan (its worlds' digests differ).
+    let other = root.join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    std::fs::copy(shards[2].join("rows.jsonl"), other.join("rows.jsonl")).unwrap();
+    let mut plan = json(shards[2].join("sweep.json"));
+    plan["world_digests"][0] = "0".repeat(64).into();
+    std::fs::write(other.join("sweep.json"), plan.to_string()).unwrap();
+    refused(
+        &[all[0], all[1], &other],
+        &root.join("m4"),
+        "holds another sweep than",
+    );
+    // Resuming a shard as another shard: another sweep.
+    let wrong = run(
+        &[&PLAN[..], &["--resume", "--shard", "2/3"]].concat(),
+        &shards[0],
+    );
+    assert_eq!(wrong.status.code(), Some(1), "{}", text(&wrong.stderr));
+    assert!(
+        text(&wrong.stderr).contains("shard 1/3, not 2/3"),
+        "{}",
+        text(&wrong.stderr)
+    );
+    // A bad shard is refused before any run.
+    let bad = run(
+        &[&PLAN[..], &["--shard", "4/3"]].concat(),
+        &root.join("bad"),
+    );
+    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad.stderr));
+    assert!(
+        text(&bad.stderr).contains("expected K/N"),
+        "{}",
+        text(&bad.stderr)
+    );
+}
+
 #[test]
 fn an_interrupted_sweep_resumed_gives_the_table_of_an_uninterrupted_one() {
     let whole = temp_dir("sweep-whole");

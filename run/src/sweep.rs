@@ -9,6 +9,12 @@
 //! interrupted sweep loses only the runs under way; the tables are written
 //! in plan order, so the same plan gives the same tables (every column but
 //! `wall_time_s`, the one thing a machine's load changes).
+//!
+//! On a cluster a plan is split into [`Shard`]s, `--shard K/N` running the
+//! runs whose number is K − 1 modulo N (interleaved, so each shard has a
+//! share of every world and setting); the shards' directories are then
+//! joined into one sweep by [`merge`], which refuses directories of
+//! different plans, a shard given twice and shards missing.
 
 use std::collections::BTreeMap;
 use std::io::Write as _;
@@ -24,6 +30,52 @@ use arcnav_config::{Config, ConfigLoadError, Resolved};
 
 /// Settings a sweep may hold (the product of every key's values).
 pub const MAX_SETTINGS: usize = 10_000;
+
+/// Parts a plan may be split into.
+pub const MAX_SHARDS: usize = 100_000;
+
+/// The `index`-th (from 1) of `count` parts of a plan: the runs whose
+/// number is `index − 1` modulo `count`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// The whole plan.
+    pub const WHOLE: Shard = Shard { index: 1, count: 1 };
+
+    /// `K/N`.
+    pub fn parse(text: &str) -> Result<Self, SweepError> {
+        let bad = || SweepError::BadShard(text.to_owned());
+        let (k, n) = text.trim().split_once('/').ok_or_else(bad)?;
+        let (index, count) = (
+            k.trim().parse::<usize>().map_err(|_| bad())?,
+            n.trim().parse::<usize>().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count || count > MAX_SHARDS {
+            return Err(bad());
+        }
+        Ok(Self { index, count })
+    }
+
+    /// Whether run `run` is this shard's.
+    pub fn holds(&self, run: usize) -> bool {
+        run % self.count == self.index - 1
+    }
+
+    /// This shard's runs of a plan of `runs`, in order.
+    pub fn runs(&self, runs: usize) -> impl Iterator<Item = usize> + '_ {
+        (self.index - 1..runs).step_by(self.count)
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
 
 /// A sweep that cannot be run.
 #[derive(Debug, thiserror::Error)]
@@ -46,6 +98,10 @@ pub enum SweepError {
     TooMany(usize),
     #[error("grid file {}: {reason}", path.display())]
     GridFile { path: PathBuf, reason: String },
+    #[error(
+        "--shard {0:?}: expected K/N, the K-th of N parts (1 ≤ K ≤ N ≤ {MAX_SHARDS}), e.g. 2/8"
+    )]
+    BadShard(String),
     #[error("setting {label}: {source}")]
     Invalid {
         label: String,
@@ -247,20 +303,24 @@ pub struct Setting {
 impl Setting {
     /// `key=value, key=value` (`defaults` with no axes).
     pub fn label(&self, axes: &[Axis]) -> String {
-        label(axes, &self.values)
+        label(axes.iter().map(|a| a.key.as_str()), &self.values)
     }
 }
 
-/// The label of the setting with `values` on `axes`.
-fn label(axes: &[Axis], values: &[String]) -> String {
-    if axes.is_empty() {
-        return "defaults".into();
-    }
-    axes.iter()
+/// The label of the setting with `values` for `keys`: `key=value, …`, or
+/// `defaults` when nothing is swept.
+fn label<'a>(keys: impl IntoIterator<Item = &'a str>, values: &[String]) -> String {
+    let label = keys
+        .into_iter()
         .zip(values)
-        .map(|(a, v)| format!("{}={v}", a.key))
+        .map(|(k, v)| format!("{k}={v}"))
         .collect::<Vec<_>>()
-        .join(", ")
+        .join(", ");
+    if label.is_empty() {
+        "defaults".into()
+    } else {
+        label
+    }
 }
 
 /// Every combination of the axes' values (the last axis varying fastest),
@@ -292,7 +352,7 @@ pub fn settings(
                 assign(&mut config, &axis.key, (*value).clone())?;
             }
             let values: Vec<String> = values.iter().map(|v| v.to_string()).collect();
-            let label = label(axes, &values);
+            let label = label(axes.iter().map(|a| a.key.as_str()), &values);
             // Loading validates the whole configuration.
             let text = toml::to_string(&config).unwrap_or_default();
             let config = Resolved::from_toml(&text, &label, registry)
@@ -336,6 +396,7 @@ impl Plan {
     /// configuration (a resumed sweep must be the same sweep).
     pub fn identity(&self) -> PlanIdentity {
         PlanIdentity {
+            shard: None,
             worlds: self.worlds.iter().map(|w| w.label.clone()).collect(),
             world_digests: self.worlds.iter().map(|w| world_digest(&w.world)).collect(),
             keys: self.axes.iter().map(|a| a.key.clone()).collect(),
@@ -367,9 +428,13 @@ fn world_digest(world: &World) -> String {
     hash.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Written as `sweep.json`: what a resumed sweep is checked against.
+/// Written as `sweep.json`: what a resumed sweep is checked against, and
+/// all the tables need (world labels, swept keys, setting values).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PlanIdentity {
+    /// The part of the plan a directory holds (`None`: all of it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<Shard>,
     pub worlds: Vec<String>,
     /// SHA-256 of each world as built (its spec, scatter expanded) and of
     /// the height file it reads: a world file changed between the runs of
@@ -379,6 +444,71 @@ pub struct PlanIdentity {
     pub keys: Vec<String>,
     pub settings: Vec<Vec<String>>,
     pub configs: Vec<String>,
+}
+
+impl PlanIdentity {
+    pub fn runs(&self) -> usize {
+        self.worlds.len() * self.settings.len()
+    }
+
+    /// The part of the plan this is (the whole plan when not sharded).
+    pub fn shard(&self) -> Shard {
+        self.shard.unwrap_or(Shard::WHOLE)
+    }
+
+    /// The runs this part holds.
+    pub fn runs_held(&self) -> usize {
+        self.shard().runs(self.runs()).count()
+    }
+
+    /// Run `run`'s world label, setting index and setting values.
+    pub fn run(&self, run: usize) -> (&str, usize, &[String]) {
+        let s = run % self.settings.len();
+        (
+            &self.worlds[run / self.settings.len()],
+            s,
+            &self.settings[s],
+        )
+    }
+
+    /// `key=value, key=value` of setting `s` (`defaults` with no keys).
+    pub fn label(&self, s: usize) -> String {
+        label(self.keys.iter().map(String::as_str), &self.settings[s])
+    }
+
+    /// Whether `other` is a part of the same plan (or all of it).
+    pub fn same_plan(&self, other: &PlanIdentity) -> bool {
+        PlanIdentity {
+            shard: None,
+            ..self.clone()
+        } == PlanIdentity {
+            shard: None,
+            ..other.clone()
+        }
+    }
+
+    /// How `self` differs from `other`, in words.
+    pub fn difference(&self, other: &PlanIdentity) -> String {
+        let (a, b) = (self, other);
+        if a.worlds != b.worlds {
+            format!("worlds {:?}, not {:?}", a.worlds, b.worlds)
+        } else if a.world_digests != b.world_digests {
+            let changed: Vec<&str> = a
+                .worlds
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| a.world_digests.get(*i) != b.world_digests.get(*i))
+                .map(|(_, w)| w.as_str())
+                .collect();
+            format!("the worlds {changed:?} changed since it started")
+        } else if a.keys != b.keys || a.settings != b.settings {
+            format!("settings of {:?}, not {:?}", a.keys, b.keys)
+        } else if a.configs != b.configs {
+            "the same settings over another base configuration".into()
+        } else {
+            format!("shard {}, not {}", a.shard(), b.shard())
+        }
+    }
 }
 
 /// One run's outcome.
@@ -515,7 +645,7 @@ pub struct SettingSummary {
 }
 
 /// The summary of each setting that has rows.
-pub fn summarise(plan: &Plan, rows: &[Row]) -> Vec<SettingSummary> {
+pub fn summarise(plan: &PlanIdentity, rows: &[Row]) -> Vec<SettingSummary> {
     (0..plan.settings.len())
         .filter_map(|s| {
             let of: Vec<&Row> = rows.iter().filter(|r| r.setting == s).collect();
@@ -526,7 +656,7 @@ pub fn summarise(plan: &Plan, rows: &[Row]) -> Vec<SettingSummary> {
             let successes = of.iter().filter(|r| r.success).count();
             Some(SettingSummary {
                 setting: s,
-                values: plan.settings[s].values.clone(),
+                values: plan.settings[s].clone(),
                 runs: of.len(),
                 successes,
                 success_rate: successes as f64 / n,
@@ -562,11 +692,11 @@ fn optional(v: Option<f64>) -> String {
 }
 
 /// `table.csv`: one line per row, the swept keys as columns.
-pub fn table_csv(plan: &Plan, rows: &[Row]) -> String {
+pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
     let mut out = String::from("run,world");
-    for axis in &plan.axes {
+    for key in &plan.keys {
         out.push(',');
-        out.push_str(&field(&axis.key));
+        out.push_str(&field(key));
     }
     out.push_str(
         ",outcome,success,collisions,collision_cause,waypoints_reached,waypoints,distance_m,\
@@ -604,11 +734,11 @@ pub fn table_csv(plan: &Plan, rows: &[Row]) -> String {
 }
 
 /// `summary.csv`: one line per setting.
-pub fn summary_csv(plan: &Plan, summary: &[SettingSummary]) -> String {
+pub fn summary_csv(plan: &PlanIdentity, summary: &[SettingSummary]) -> String {
     let mut out = String::from("setting");
-    for axis in &plan.axes {
+    for key in &plan.keys {
         out.push(',');
-        out.push_str(&field(&axis.key));
+        out.push_str(&field(key));
     }
     out.push_str(
         ",runs,successes,success_rate,mean_speed_mps,worst_closest_approach_m,collisions,\
@@ -647,20 +777,122 @@ pub struct Finished {
 }
 
 impl Finished {
-    /// Keeps the rows that are runs of `plan` (their world and setting
-    /// values are the plan's for their run index); the others — a row
-    /// edited, or from another sweep's file — are dropped and their runs
-    /// done again. How many were dropped.
-    pub fn keep_runs_of(&mut self, plan: &Plan) -> usize {
+    /// Keeps the rows that are runs of `plan`'s part (their world and
+    /// setting values are the plan's for their run index, and the run is
+    /// the shard's); the others — a row edited, or from another sweep's or
+    /// shard's file — are dropped and their runs done again. How many were
+    /// dropped.
+    pub fn keep_runs_of(&mut self, plan: &PlanIdentity) -> usize {
         let before = self.rows.len();
+        let shard = plan.shard();
         self.rows.retain(|row| {
-            row.run < plan.runs() && {
-                let (world, s, setting) = plan.run(row.run);
-                row.world == world.label && row.setting == s && row.values == setting.values
+            row.run < plan.runs() && shard.holds(row.run) && {
+                let (world, s, values) = plan.run(row.run);
+                row.world == world && row.setting == s && row.values == values
             }
         });
         before - self.rows.len()
     }
+}
+
+/// One directory given to [`merge`]: its name (for messages), its plan
+/// and what its rows file held.
+#[derive(Debug)]
+pub struct Part {
+    pub name: String,
+    pub plan: PlanIdentity,
+    pub finished: Finished,
+}
+
+/// Parts that do not make one whole sweep.
+#[derive(Debug, thiserror::Error)]
+pub enum MergeError {
+    #[error("nothing to merge: give the directories of a sweep's shards")]
+    Nothing,
+    #[error("{part} holds another sweep than {first}: {difference}")]
+    OtherPlan {
+        part: String,
+        first: String,
+        difference: String,
+    },
+    #[error("{part} is shard {shard}, {first} is of a plan in {count} shards")]
+    OtherSplit {
+        part: String,
+        shard: Shard,
+        first: String,
+        count: usize,
+    },
+    #[error("shard {shard} is given twice: {a} and {b}")]
+    Twice { shard: Shard, a: String, b: String },
+    #[error("not a whole sweep: {0}")]
+    Incomplete(String),
+}
+
+/// The whole sweep that `parts` make: its plan (not sharded) and every
+/// run's row in plan order, and how many rows of the parts were not theirs
+/// (another sweep's or shard's, or edited) and left out. Refuses parts of
+/// different plans or splits, a shard given twice, and a shard missing or
+/// missing runs.
+pub fn merge(parts: Vec<Part>) -> Result<(PlanIdentity, Vec<Row>, usize), MergeError> {
+    let first = parts.first().ok_or(MergeError::Nothing)?;
+    let count = first.plan.shard().count;
+    let mut by_shard: BTreeMap<usize, &str> = BTreeMap::new();
+    for part in &parts {
+        if !part.plan.same_plan(&first.plan) {
+            return Err(MergeError::OtherPlan {
+                part: part.name.clone(),
+                first: first.name.clone(),
+                difference: part.plan.difference(&first.plan),
+            });
+        }
+        let shard = part.plan.shard();
+        if shard.count != count {
+            return Err(MergeError::OtherSplit {
+                part: part.name.clone(),
+                shard,
+                first: first.name.clone(),
+                count,
+            });
+        }
+        if let Some(a) = by_shard.insert(shard.index, &part.name) {
+            return Err(MergeError::Twice {
+                shard,
+                a: a.to_owned(),
+                b: part.name.clone(),
+            });
+        }
+    }
+    let mut problems = Vec::new();
+    let absent: Vec<String> = (1..=count)
+        .filter(|k| !by_shard.contains_key(k))
+        .map(|index| Shard { index, count }.to_string())
+        .collect();
+    if !absent.is_empty() {
+        problems.push(format!("no directory holds shard {}", absent.join(", ")));
+    }
+    let mut plan = first.plan.clone();
+    plan.shard = None;
+    let mut rows = Vec::with_capacity(plan.runs());
+    let mut foreign = 0;
+    for mut part in parts {
+        foreign += part.finished.keep_runs_of(&part.plan);
+        let held = part.plan.runs_held();
+        if part.finished.rows.len() < held {
+            problems.push(format!(
+                "{} (shard {}) has {} of its {held} runs: carry it on with its command and \
+                 --resume",
+                part.name,
+                part.plan.shard(),
+                part.finished.rows.len()
+            ));
+        }
+        rows.append(&mut part.finished.rows);
+    }
+    if !problems.is_empty() {
+        return Err(MergeError::Incomplete(problems.join("; ")));
+    }
+    rows.sort_by_key(|r| r.run);
+    Ok((plan, rows, foreign))
 }
 
 impl RowLog {
@@ -868,5 +1100,109 @@ mod tests {
             RowLog::read(&dir, 1).is_err(),
             "run 1 is not in a plan of 1"
         );
+    }
+
+    /// Two worlds × three settings, as `sweep.json` holds it.
+    fn identity(shard: Option<Shard>) -> PlanIdentity {
+        PlanIdentity {
+            shard,
+            worlds: vec!["a".into(), "b".into()],
+            world_digests: vec!["1".into(), "2".into()],
+            keys: vec!["arbiter.cruise_speed_mps".into()],
+            settings: vec![vec!["2.5".into()], vec!["4.0".into()], vec!["6.0".into()]],
+            configs: vec![String::new(); 3],
+        }
+    }
+
+    /// Shard `k` of `n` of [`identity`] with a row for each of its runs.
+    fn part(k: usize, n: usize) -> Part {
+        let plan = identity((n > 1).then_some(Shard { index: k, count: n }));
+        let rows = plan
+            .shard()
+            .runs(plan.runs())
+            .map(|r| {
+                let (world, s, values) = plan.run(r);
+                Row::failed(r, world, s, values, "")
+            })
+            .collect();
+        Part {
+            name: format!("shard{k}"),
+            plan,
+            finished: Finished {
+                rows,
+                unreadable: 0,
+            },
+        }
+    }
+
+    #[test]
+    fn shards_split_a_plan_into_parts_that_hold_every_run_once() {
+        for bad in ["", "1", "0/3", "4/3", "a/3", "1/0", "-1/3", "1/100001"] {
+            assert!(Shard::parse(bad).is_err(), "{bad:?}");
+        }
+        assert_eq!(Shard::parse(" 2/3 ").unwrap(), Shard { index: 2, count: 3 });
+        for count in [1, 2, 3, 6, 7] {
+            let mut seen = vec![0; 6];
+            for index in 1..=count {
+                let shard = Shard { index, count };
+                for r in shard.runs(6) {
+                    assert!(shard.holds(r));
+                    seen[r] += 1;
+                }
+                assert_eq!(
+                    shard.runs(6).count(),
+                    (0..6).filter(|&r| shard.holds(r)).count()
+                );
+            }
+            assert_eq!(seen, [1; 6], "{count} shards");
+        }
+        // An old sweep.json (no shard) reads as the whole plan.
+        let text = serde_json::to_string(&identity(None)).unwrap();
+        assert!(!text.contains("shard"));
+        let read: PlanIdentity = serde_json::from_str(&text).unwrap();
+        assert_eq!(read.shard(), Shard::WHOLE);
+        assert_eq!(read.runs_held(), 6);
+    }
+
+    #[test]
+    fn merging_joins_the_shards_of_one_plan_and_refuses_anything_else() {
+        let (plan, rows, foreign) = merge((1..=4).rev().map(|k| part(k, 4)).collect()).unwrap();
+        assert_eq!(plan, identity(None));
+        assert_eq!(
+            rows.iter().map(|r| r.run).collect::<Vec<_>>(),
+            [0, 1, 2, 3, 4, 5]
+        );
+        assert_eq!(foreign, 0);
+        // A whole sweep merges with itself alone.
+        assert_eq!(merge(vec![part(1, 1)]).unwrap().1.len(), 6);
+
+        let said = |parts: Vec<Part>| merge(parts).unwrap_err().to_string();
+        assert!(said(Vec::new()).contains("nothing to merge"));
+        let mut other = part(2, 2);
+        other.plan.world_digests[1] = "changed".into();
+        let e = said(vec![part(1, 2), other]);
+        assert!(
+            e.contains("shard2 holds another sweep than shard1: the worlds [\"b\"] changed"),
+            "{e}"
+        );
+        let e = said(vec![part(1, 2), part(2, 3)]);
+        assert!(
+            e.contains("shard2 is shard 2/3, shard1 is of a plan in 2 shards"),
+            "{e}"
+        );
+        let e = said(vec![part(1, 2), part(1, 2)]);
+        assert!(e.contains("shard 1/2 is given twice"), "{e}");
+        let e = said(vec![part(1, 3), part(3, 3)]);
+        assert!(e.contains("no directory holds shard 2/3"), "{e}");
+        let mut cut = part(2, 2);
+        cut.finished.rows.pop();
+        let e = said(vec![part(1, 2), cut]);
+        assert!(e.contains("shard2 (shard 2/2) has 2 of its 3 runs"), "{e}");
+        // A row of another shard in a shard's file is not taken for it.
+        let mut mixed = part(1, 2);
+        let stray = part(2, 2).finished.rows[0].clone();
+        mixed.finished.rows.push(stray);
+        let (_, rows, foreign) = merge(vec![mixed, part(2, 2)]).unwrap();
+        assert_eq!((rows.len(), foreign), (6, 1));
     }
 }

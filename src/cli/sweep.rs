@@ -10,15 +10,15 @@ use anyhow::Context as _;
 use arcnav::Config;
 use arcnav::mission::{MissionOptions, run_mission};
 use arcnav::sweep::{
-    Finished, Plan, PlanIdentity, Row, RowLog, SweepWorld, axes, parse_set, read_grid, settings,
-    summarise, summary_csv, table_csv,
+    Finished, Part, Plan, PlanIdentity, Row, RowLog, Shard, SweepWorld, axes, parse_set, read_grid,
+    settings, summarise, summary_csv, table_csv,
 };
 use arcnav_behaviours::Registry;
 use arcnav_sim::{Difficulty, World};
 use rayon::prelude::*;
 
 use super::sim::named_world;
-use crate::SweepArgs;
+use crate::{SweepAction, SweepArgs, SweepMergeArgs};
 
 const PLAN_FILE: &str = "sweep.json";
 
@@ -30,8 +30,16 @@ const INTERRUPTED: u8 = 130;
 /// 50 s, and did not stop for SIGTERM.)
 const MAX_JOBS: usize = 1024;
 
-pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
+pub fn sweep(mut args: SweepArgs) -> anyhow::Result<ExitCode> {
+    if let Some(SweepAction::Merge(merge_args)) = args.action.take() {
+        return merge(merge_args);
+    }
     let plan = plan(&args, &Registry::builtin())?;
+    let shard = args.shard.unwrap_or(Shard::WHOLE);
+    let mut identity = plan.identity();
+    if shard != Shard::WHOLE {
+        identity.shard = Some(shard);
+    }
     let jobs = match args.jobs {
         Some(0) => anyhow::bail!("--jobs 0: at least one run at a time"),
         Some(n) if n > MAX_JOBS => {
@@ -43,16 +51,24 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
     let out = &args.out;
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create the output directory {}", out.display()))?;
-    let finished = prepare(out, &plan, args.resume)?;
+    let finished = prepare(out, &identity, args.resume)?;
     let done: std::collections::BTreeSet<usize> = finished.rows.iter().map(|r| r.run).collect();
-    let pending: Vec<usize> = (0..plan.runs()).filter(|r| !done.contains(r)).collect();
+    let pending: Vec<usize> = shard
+        .runs(plan.runs())
+        .filter(|r| !done.contains(r))
+        .collect();
     // A thread a run at most: more would wait for nothing.
     let jobs = jobs.min(pending.len()).max(1);
     eprintln!(
-        "arcnav sweep: {} worlds × {} settings = {} runs{}, {} at a time; results in {}",
+        "arcnav sweep: {} worlds × {} settings = {} runs{}{}, {} at a time; results in {}",
         plan.worlds.len(),
         plan.settings.len(),
         plan.runs(),
+        if shard == Shard::WHOLE {
+            String::new()
+        } else {
+            format!(" (shard {shard}: {} of them)", identity.runs_held())
+        },
         if done.is_empty() {
             String::new()
         } else {
@@ -72,10 +88,12 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
     let started = Instant::now();
     let ran = run_pending(&plan, &pending, jobs, out, &interrupted)?;
     let elapsed = started.elapsed().as_secs_f64();
-    let rows = RowLog::read(out, plan.runs())
-        .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?
-        .rows;
-    write_tables(out, &plan, &rows)?;
+    let mut finished = RowLog::read(out, plan.runs())
+        .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?;
+    // Rows prepare set aside as not this plan's were run again and replaced.
+    finished.keep_runs_of(&identity);
+    let rows = finished.rows;
+    write_tables(out, &identity, &rows)?;
     if !ran.is_empty() {
         let busy: f64 = ran.iter().map(|r| r.wall_time_s).sum();
         let cores = elapsed * jobs as f64;
@@ -88,12 +106,12 @@ pub fn sweep(args: SweepArgs) -> anyhow::Result<ExitCode> {
             100.0 * cpu_seconds() / cores.max(1e-9)
         );
     }
-    print_summary(&plan, &rows);
-    if rows.len() < plan.runs() {
+    print_summary(&identity, &rows);
+    if rows.len() < identity.runs_held() {
         eprintln!(
             "interrupted: {} of {} runs done, kept in {}; the same command with --resume carries on",
             rows.len(),
-            plan.runs(),
+            identity.runs_held(),
             out.display()
         );
         return Ok(ExitCode::from(INTERRUPTED));
@@ -172,9 +190,8 @@ fn parse_seeds(range: &str) -> anyhow::Result<std::ops::Range<u64>> {
 
 /// Checks `out` against the plan: a fresh directory gets the plan, a
 /// resumed one must hold the same plan; the finished rows.
-fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
+fn prepare(out: &Path, identity: &PlanIdentity, resume: bool) -> anyhow::Result<Finished> {
     let plan_path = out.join(PLAN_FILE);
-    let identity = plan.identity();
     let earlier: Option<PlanIdentity> = match std::fs::read_to_string(&plan_path) {
         Ok(text) => Some(
             serde_json::from_str(&text)
@@ -184,11 +201,11 @@ fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", plan_path.display())),
     };
     match (resume, &earlier) {
-        (true, Some(earlier)) if *earlier != identity => anyhow::bail!(
+        (true, Some(earlier)) if earlier != identity => anyhow::bail!(
             "--resume: {} holds another sweep ({}); resume it with the command that started it, \
              or give another --out",
             out.display(),
-            difference(earlier, &identity)
+            earlier.difference(identity)
         ),
         (true, None) => anyhow::bail!(
             "--resume: {} holds no sweep to carry on (no {PLAN_FILE})",
@@ -197,9 +214,9 @@ fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
         _ => {}
     }
     let finished = if earlier.is_some() {
-        let mut rows = RowLog::read(out, plan.runs())
+        let mut rows = RowLog::read(out, identity.runs())
             .with_context(|| format!("cannot read {}", out.join(RowLog::FILE).display()))?;
-        let foreign = rows.keep_runs_of(plan);
+        let foreign = rows.keep_runs_of(identity);
         if foreign > 0 {
             eprintln!(
                 "note: {foreign} rows of {} are not runs of this plan (their world or values \
@@ -229,30 +246,10 @@ fn prepare(out: &Path, plan: &Plan, resume: bool) -> anyhow::Result<Finished> {
     }
     arcnav::output::write_file(
         &plan_path,
-        serde_json::to_string_pretty(&identity)?.as_bytes(),
+        serde_json::to_string_pretty(identity)?.as_bytes(),
     )
     .with_context(|| format!("cannot write {}", plan_path.display()))?;
     Ok(finished)
-}
-
-/// What differs between two plans, said briefly.
-fn difference(a: &PlanIdentity, b: &PlanIdentity) -> String {
-    if a.worlds != b.worlds {
-        format!("worlds {:?}, not {:?}", a.worlds, b.worlds)
-    } else if a.world_digests != b.world_digests {
-        let changed: Vec<&str> = a
-            .worlds
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| a.world_digests.get(*i) != b.world_digests.get(*i))
-            .map(|(_, w)| w.as_str())
-            .collect();
-        format!("the worlds {changed:?} changed since it started")
-    } else if a.keys != b.keys || a.settings != b.settings {
-        format!("settings of {:?}, not {:?}", a.keys, b.keys)
-    } else {
-        "the same settings over another base configuration".into()
-    }
 }
 
 /// Runs `pending` on `jobs` threads, appending each row to the rows file
@@ -350,7 +347,7 @@ fn one_run(plan: &Plan, run: usize, beside_others: bool) -> Row {
     }
 }
 
-fn write_tables(out: &Path, plan: &Plan, rows: &[Row]) -> anyhow::Result<()> {
+fn write_tables(out: &Path, plan: &PlanIdentity, rows: &[Row]) -> anyhow::Result<()> {
     let write = |name: &str, bytes: &[u8]| -> anyhow::Result<PathBuf> {
         let path = out.join(name);
         arcnav::output::write_file(&path, bytes)
@@ -365,25 +362,24 @@ fn write_tables(out: &Path, plan: &Plan, rows: &[Row]) -> anyhow::Result<()> {
         "summary.json",
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    let keys: Vec<String> = plan.axes.iter().map(|a| a.key.clone()).collect();
     let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
     let title = format!(
-        "arcnav sweep: {} of {}, {} × {}",
+        "arcnav sweep: {} of {}{}, {} × {}",
         rows.len(),
         count(plan.runs(), "run"),
+        plan.shard
+            .map(|s| format!(" (shard {s})"))
+            .unwrap_or_default(),
         count(plan.worlds.len(), "world"),
         count(plan.settings.len(), "setting")
     );
-    arcnav::render::sweep_picture(&out.join("sweep.png"), &title, &keys, &summary)?;
+    arcnav::render::sweep_picture(&out.join("sweep.png"), &title, &plan.keys, &summary)?;
     Ok(())
 }
 
-fn print_summary(plan: &Plan, rows: &[Row]) {
+fn print_summary(plan: &PlanIdentity, rows: &[Row]) {
     let summary = summarise(plan, rows);
-    let labels: Vec<String> = summary
-        .iter()
-        .map(|s| plan.settings[s.setting].label(&plan.axes))
-        .collect();
+    let labels: Vec<String> = summary.iter().map(|s| plan.label(s.setting)).collect();
     let w = labels
         .iter()
         .map(|l| l.chars().count())
@@ -419,4 +415,91 @@ fn cpu_seconds() -> f64 {
     let usage = unsafe { usage.assume_init() };
     let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
     seconds(usage.ru_utime) + seconds(usage.ru_stime)
+}
+
+/// `arcnav sweep merge DIR… --out OUT`: the shards' directories joined into
+/// one sweep directory, as an unsharded sweep of the same plan writes it.
+fn merge(args: SweepMergeArgs) -> anyhow::Result<ExitCode> {
+    let out = &args.out;
+    for dir in &args.dirs {
+        anyhow::ensure!(
+            !(out.exists() && same_dir(out, dir)),
+            "--out {}: it is one of the shards given; give a new directory",
+            out.display()
+        );
+    }
+    let mut parts = Vec::with_capacity(args.dirs.len());
+    for dir in &args.dirs {
+        let plan_path = dir.join(PLAN_FILE);
+        let text = std::fs::read_to_string(&plan_path).with_context(|| {
+            format!(
+                "{} holds no sweep (cannot read its {PLAN_FILE})",
+                dir.display()
+            )
+        })?;
+        let plan: PlanIdentity = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a sweep plan", plan_path.display()))?;
+        let finished = RowLog::read(dir, plan.runs())
+            .with_context(|| format!("cannot read {}", dir.join(RowLog::FILE).display()))?;
+        if finished.unreadable > 0 {
+            eprintln!(
+                "  {}: {} cut-off line(s) of {} ignored",
+                dir.display(),
+                finished.unreadable,
+                RowLog::FILE
+            );
+        }
+        parts.push(Part {
+            name: dir.display().to_string(),
+            plan,
+            finished,
+        });
+    }
+    let shards = parts.len();
+    let (plan, rows, foreign) = arcnav::sweep::merge(parts)?;
+    if foreign > 0 {
+        eprintln!(
+            "note: {foreign} rows were not runs of their shard's plan (edited, or another \
+             shard's) and are left out"
+        );
+    }
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create the output directory {}", out.display()))?;
+    for existing in [PLAN_FILE, RowLog::FILE] {
+        anyhow::ensure!(
+            !out.join(existing).exists(),
+            "{} already holds a sweep ({existing}): give another --out (nothing was overwritten)",
+            out.display()
+        );
+    }
+    let write = |name: &str, bytes: &[u8]| -> anyhow::Result<()> {
+        let path = out.join(name);
+        arcnav::output::write_file(&path, bytes)
+            .with_context(|| format!("cannot write {}", path.display()))
+    };
+    let mut lines = String::new();
+    for row in &rows {
+        lines.push_str(&serde_json::to_string(row)?);
+        lines.push('\n');
+    }
+    write(RowLog::FILE, lines.as_bytes())?;
+    write_tables(out, &plan, &rows)?;
+    // The plan last: a directory with it is a whole sweep.
+    write(PLAN_FILE, serde_json::to_string_pretty(&plan)?.as_bytes())?;
+    eprintln!(
+        "arcnav sweep merge: {} runs from {shards} director{} into {}",
+        rows.len(),
+        if shards == 1 { "y" } else { "ies" },
+        out.display()
+    );
+    print_summary(&plan, &rows);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Whether `a` and `b` name the same directory.
+fn same_dir(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
 }
