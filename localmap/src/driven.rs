@@ -12,6 +12,7 @@
 //! The memory is bounded: the oldest patches are forgotten first, and
 //! `driven_memory_m` of travel (at the vehicle's width) is kept.
 
+use arcnav_vehicle::numbers::floor_i64;
 use std::collections::{HashSet, VecDeque};
 
 use nalgebra::Point2;
@@ -67,10 +68,10 @@ impl DrivenGround {
         let world = |p: Point2<f64>| (t.x + cos * p.x - sin * p.y, t.y + sin * p.x + cos * p.y);
         let corners = bearing.corners().map(world);
         let lo = |f: fn(&(f64, f64)) -> f64| {
-            (corners.iter().map(f).fold(f64::INFINITY, f64::min) / s).floor() as i64
+            floor_i64(corners.iter().map(f).fold(f64::INFINITY, f64::min) / s)
         };
         let hi = |f: fn(&(f64, f64)) -> f64| {
-            (corners.iter().map(f).fold(f64::NEG_INFINITY, f64::max) / s).floor() as i64
+            floor_i64(corners.iter().map(f).fold(f64::NEG_INFINITY, f64::max) / s)
         };
         let (i0, i1, j0, j1) = (lo(|c| c.0), hi(|c| c.0), lo(|c| c.1), hi(|c| c.1));
         let mut added = 0;

@@ -29,6 +29,7 @@
 //! cleared, a slot that now stands for another cell reads as unknown, and
 //! lookups outside the square around the vehicle are unknown.
 
+use arcnav_vehicle::numbers::floor_i64;
 use serde::{Deserialize, Serialize};
 
 use arcnav_perception::HeightSample;
@@ -175,7 +176,7 @@ impl ElevationLayer {
     /// World cell holding world (x, y).
     pub fn cell_of(&self, x: f64, y: f64) -> (i64, i64) {
         let s = self.config.cell_size_m;
-        ((x / s).floor() as i64, (y / s).floor() as i64)
+        (floor_i64(x / s), floor_i64(y / s))
     }
 
     /// Moves the square's centre to the vehicle at world (x, y).
@@ -327,8 +328,8 @@ impl ElevationGrid {
             return None;
         }
         let inverse = 1.0 / self.cell_size_m;
-        let i = (x * inverse).floor() as i64 - self.origin.0;
-        let j = (y * inverse).floor() as i64 - self.origin.1;
+        let i = floor_i64(x * inverse) - self.origin.0;
+        let j = floor_i64(y * inverse) - self.origin.1;
         let side = i64::from(self.side);
         if !(0..side).contains(&i) || !(0..side).contains(&j) {
             return None;

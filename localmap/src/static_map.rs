@@ -11,6 +11,7 @@
 //! [`crate::MapStats::already_in_static_map`]).
 
 use arcnav_vehicle::Isometry;
+use arcnav_vehicle::numbers::floor_i64;
 
 /// An occupancy grid in the world frame: `cols × rows` cells of
 /// `resolution_m`, cell (row 0, col 0) with its corner at `origin`, rows
@@ -105,10 +106,7 @@ impl StaticMap {
                             0.0,
                         );
                         let p = grid.origin * local;
-                        f(
-                            (p.x / patch_size_m).floor() as i64,
-                            (p.y / patch_size_m).floor() as i64,
-                        );
+                        f(floor_i64(p.x / patch_size_m), floor_i64(p.y / patch_size_m));
                     }
                 }
             }

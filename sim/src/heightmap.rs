@@ -6,6 +6,7 @@
 //! and in an image; columns west to east. The grid's `origin` is the world
 //! position of the centre of its south-west sample.
 
+use crate::numbers::floor;
 use std::path::{Path, PathBuf};
 
 /// A height file that cannot be used.
@@ -156,7 +157,7 @@ impl HeightGrid {
     pub fn height(&self, x: f64, y: f64) -> f64 {
         let fx = (x - self.origin[0]) / self.resolution;
         let fy = (y - self.origin[1]) / self.resolution;
-        let (cx, cy) = (fx.floor() as i64, fy.floor() as i64);
+        let (cx, cy) = (floor(fx), floor(fy));
         let (tx, ty) = (fx - cx as f64, fy - cy as f64);
         let mut column = [0.0; 4];
         for (k, value) in column.iter_mut().enumerate() {

@@ -7,9 +7,5 @@
 pub(crate) const MAX_MAGNITUDE: f64 = 100_000.0;
 
 /// `x.floor() as i64` without the library call `floor` is on x86-64's
-/// baseline (no SSE4.1): a few percent of a frame. Exact for |x| < 2⁶³.
-#[inline]
-pub(crate) fn floor(x: f64) -> i64 {
-    let i = x as i64;
-    if (i as f64) > x { i - 1 } else { i }
-}
+/// baseline (no SSE4.1): a few percent of a frame.
+pub(crate) use arcnav_vehicle::numbers::floor_i64 as floor;

@@ -155,7 +155,7 @@ impl TileCache {
     /// them as a view.
     pub fn view(&mut self, x: f64, y: f64, radius: f64) -> TileView {
         self.clock += 1;
-        let index = |v: f64| (v / TILE_M).floor() as i64;
+        let index = |v: f64| floor(v / TILE_M);
         let (tx0, ty0, tx1, ty1) = (
             index(x - radius),
             index(y - radius),
@@ -581,7 +581,7 @@ height_m = 3.0
     /// The plain answer: every cell along the ray, in order, the first one
     /// the ray dips to (a 2-D DDA at 0.1 m; Amanatides & Woo, 1987).
     fn cell_by_cell(view: &TileView, o: &Point3<f64>, d: &Vector3<f64>, range: f64) -> Option<f64> {
-        let (mut cx, mut cy) = ((o.x / CELL_M).floor() as i64, (o.y / CELL_M).floor() as i64);
+        let (mut cx, mut cy) = (floor(o.x / CELL_M), floor(o.y / CELL_M));
         let axis = |p: f64, dir: f64, c: i64| {
             if dir.abs() < 1e-15 {
                 return (0, f64::INFINITY, f64::INFINITY);

@@ -15,7 +15,7 @@ use serde::Serialize;
 
 use crate::heightmap::{HeightGrid, HeightmapError};
 use crate::noise::Noise;
-use crate::numbers::MAX_MAGNITUDE;
+use crate::numbers::{MAX_MAGNITUDE, floor};
 use crate::rng::Rng;
 pub use crate::spec::{
     BankSpec, DitchSpec, HoleSpec, RoundSpec, RubbleSpec, ScatterKind, ScatterSpec, StartSpec,
@@ -168,10 +168,7 @@ fn stone(p: [f64; 2]) -> f64 {
         h ^= h >> 29;
         (h >> 11) as f64 / (1u64 << 53) as f64
     };
-    let (ci, cj) = (
-        (p[0] / SPACING).floor() as i64,
-        (p[1] / SPACING).floor() as i64,
-    );
+    let (ci, cj) = (floor(p[0] / SPACING), floor(p[1] / SPACING));
     let mut best: f64 = 0.0;
     for i in ci - 1..=ci + 1 {
         for j in cj - 1..=cj + 1 {

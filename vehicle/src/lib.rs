@@ -17,6 +17,7 @@ pub mod files;
 pub mod frames;
 pub mod model;
 pub mod motion;
+pub mod numbers;
 pub mod pose_history;
 pub mod time;
 pub mod watchdog;

@@ -3,6 +3,7 @@
 //! wholly, how rough).
 
 use arcnav_localmap::MapSnapshot;
+use arcnav_vehicle::numbers::floor_i64;
 
 use super::config::RouteConfig;
 
@@ -22,8 +23,8 @@ impl Layout {
     pub(super) fn cell_at(&self, x: f64, y: f64) -> Option<usize> {
         let (i0, j0) = self.origin?;
         let (i, j) = (
-            (x / self.cell_m).floor() as i64 - i0,
-            (y / self.cell_m).floor() as i64 - j0,
+            floor_i64(x / self.cell_m) - i0,
+            floor_i64(y / self.cell_m) - j0,
         );
         let side = self.side as i64;
         ((0..side).contains(&i) && (0..side).contains(&j)).then(|| (j * side + i) as usize)
@@ -92,7 +93,7 @@ pub(super) fn wholly_seen(map: &MapSnapshot, x: f64, y: f64, cell: f64) -> bool 
     // its high edge (a hair inside, so a patch that only touches it is out).
     let span = |c: f64| {
         (
-            ((c - half) / s).floor() as i64,
+            floor_i64((c - half) / s),
             ((c + half) / s - 1e-9).ceil() as i64,
         )
     };
@@ -137,11 +138,11 @@ pub(super) fn roughness_level(config: &RouteConfig, map: &MapSnapshot, x: f64, y
     let half = config.cell_m / 2.0;
     let side = i64::from(grid.side);
     let (lo_i, hi_i) = (
-        ((x - half) / s).floor() as i64 - grid.origin.0,
+        floor_i64((x - half) / s) - grid.origin.0,
         ((x + half) / s).ceil() as i64 - 1 - grid.origin.0,
     );
     let (lo_j, hi_j) = (
-        ((y - half) / s).floor() as i64 - grid.origin.1,
+        floor_i64((y - half) / s) - grid.origin.1,
         ((y + half) / s).ceil() as i64 - 1 - grid.origin.1,
     );
     let z = |i: i64, j: i64| grid.cells[(j * side + i) as usize][0];

@@ -76,6 +76,7 @@ use arcnav_localmap::{LocalMapConfig, MapSnapshot};
 use arcnav_vehicle::SteeringResponse;
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::frames::yaw_of;
+use arcnav_vehicle::numbers::floor_i64;
 
 use crate::behaviour::Plugin;
 use crate::behaviour::{
@@ -263,10 +264,7 @@ impl Route {
     fn recentre(&mut self, x: f64, y: f64) -> bool {
         let cell = self.config.cell_m;
         let half = (self.layout.side / 2) as i64;
-        let wanted = (
-            (x / cell).floor() as i64 - half,
-            (y / cell).floor() as i64 - half,
-        );
+        let wanted = (floor_i64(x / cell) - half, floor_i64(y / cell) - half);
         if let Some((i0, j0)) = self.layout.origin {
             let quarter = (self.layout.side / 4) as i64;
             if (wanted.0 - i0).abs() < quarter && (wanted.1 - j0).abs() < quarter {
@@ -305,11 +303,11 @@ impl Route {
         for c in 0..self.state.len() {
             let [x, y] = self.layout.centre(c);
             let (lo_i, hi_i) = (
-                ((x - cell / 2.0) / patch).floor() as i64,
+                floor_i64((x - cell / 2.0) / patch),
                 ((x + cell / 2.0) / patch).ceil() as i64 - 1,
             );
             let (lo_j, hi_j) = (
-                ((y - cell / 2.0) / patch).floor() as i64,
+                floor_i64((y - cell / 2.0) / patch),
                 ((y + cell / 2.0) / patch).ceil() as i64 - 1,
             );
             let occupied = (lo_j..=hi_j).any(|j| (lo_i..=hi_i).any(|i| statics.contains(i, j)));
@@ -565,8 +563,7 @@ impl Route {
                     let seen = if self.state[c] == SHUT {
                         wholly_seen(map, x, y, cell)
                     } else {
-                        map.seen
-                            .contains((x / s).floor() as i64, (y / s).floor() as i64)
+                        map.seen.contains(floor_i64(x / s), floor_i64(y / s))
                     };
                     if hit {
                         self.set_state(c, OBSTACLE);
@@ -617,11 +614,11 @@ impl Route {
         frontier.clear();
         let mut partly_seen = Vec::new();
         let (lo_i, hi_i) = (
-            ((front[0] - reach) / cell).floor() as i64,
+            floor_i64((front[0] - reach) / cell),
             ((front[0] + reach) / cell).ceil() as i64,
         );
         let (lo_j, hi_j) = (
-            ((front[1] - reach) / cell).floor() as i64,
+            floor_i64((front[1] - reach) / cell),
             ((front[1] + reach) / cell).ceil() as i64,
         );
         for j in lo_j..=hi_j {

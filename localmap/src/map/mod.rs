@@ -51,6 +51,7 @@
 //! lookup by position is O(1), iteration touches only live patches, and
 //! nothing is copied as the vehicle moves.
 
+use arcnav_vehicle::numbers::floor_i64;
 use std::sync::Arc;
 
 use nalgebra::Point2;
@@ -421,7 +422,7 @@ impl LocalMap {
         let distance =
             |x: f64, y: f64| viewpoint.map_or(f32::INFINITY, |o| ((x - o.x).hypot(y - o.y)) as f32);
         for cell in &report.cells {
-            let (i, j) = ((cell.x / s).floor() as i64, (cell.y / s).floor() as i64);
+            let (i, j) = (floor_i64(cell.x / s), floor_i64(cell.y / s));
             if self.is_static(i, j) {
                 self.stats.already_in_static_map += 1;
                 continue;
@@ -501,7 +502,7 @@ impl LocalMap {
         let t = pose.world_from_vehicle.translation.vector;
         let s = self.config.patch_size_m;
         let reach = (self.config.radius_m() / s).ceil() as i64 + 1;
-        let (i, j) = ((t.x / s).floor() as i64, (t.y / s).floor() as i64);
+        let (i, j) = (floor_i64(t.x / s), floor_i64(t.y / s));
         Some((i - reach, j - reach, (2 * reach + 1) as u32))
     }
 
@@ -517,14 +518,8 @@ impl LocalMap {
         };
         let (s, r) = (self.config.patch_size_m, self.config.assume_seen_m);
         let t = pose.world_from_vehicle.translation.vector;
-        let (lo_i, hi_i) = (
-            ((t.x - r) / s).floor() as i64,
-            ((t.x + r) / s).floor() as i64,
-        );
-        let (lo_j, hi_j) = (
-            ((t.y - r) / s).floor() as i64,
-            ((t.y + r) / s).floor() as i64,
-        );
+        let (lo_i, hi_i) = (floor_i64((t.x - r) / s), floor_i64((t.x + r) / s));
+        let (lo_j, hi_j) = (floor_i64((t.y - r) / s), floor_i64((t.y + r) / s));
         for j in lo_j..=hi_j {
             for i in lo_i..=hi_i {
                 let (cx, cy) = self.patch_centre(i, j);
@@ -824,7 +819,7 @@ impl LocalMap {
             let mut found: Vec<(i64, i64)> = cells
                 .iter()
                 .map(|&(i, j)| {
-                    let centre = |k: i64| ((k as f64 + 0.5) * c / s).floor() as i64;
+                    let centre = |k: i64| floor_i64((k as f64 + 0.5) * c / s);
                     (centre(i), centre(j))
                 })
                 .collect();

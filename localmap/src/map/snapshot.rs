@@ -1,6 +1,7 @@
 //! An immutable view of the map in the vehicle frame, cheap to share:
 //! what the behaviours read.
 
+use arcnav_vehicle::numbers::floor_i64;
 use std::sync::Arc;
 
 use arcnav_vehicle::frames::yaw_of;
@@ -41,7 +42,7 @@ impl MapSnapshot {
         move |x, y| {
             let (wx, wy) = (t.x + cos * x - sin * y, t.y + sin * x + cos * y);
             self.seen
-                .contains((wx * inverse).floor() as i64, (wy * inverse).floor() as i64)
+                .contains(floor_i64(wx * inverse), floor_i64(wy * inverse))
         }
     }
 
