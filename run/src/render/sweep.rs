@@ -23,7 +23,11 @@ pub fn sweep_picture(
     let n = summary.len().max(1);
     let slot = (680.0 / n as f32).clamp(14.0, 170.0);
     let left = 70.0;
-    let width = (left + slot * n as f32 + 30.0).max(560.0);
+    // Wide enough for the title too (a shard's names its part).
+    let title_width = Canvas::new(1, 1, WHITE)?.text(0.0, 0.0, 18.0, BLACK, title);
+    let width = (left + slot * n as f32 + 30.0)
+        .max(560.0)
+        .max(left + title_width + 20.0);
     let label_lines = keys.len().max(1) as f32;
     let panel = 190.0;
     let (top1, top2) = (70.0, 70.0 + panel + 50.0);
@@ -172,4 +176,25 @@ fn nice_ceiling(v: f64) -> f64 {
         .map(|m| m * magnitude)
         .find(|&m| m >= v)
         .unwrap_or(10.0 * magnitude)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_picture_is_wide_enough_for_its_title() {
+        let dir = arcnav_testkit::scratch_dir("arcnav-sweep-picture");
+        let width = |title: &str| {
+            let path = dir.join("sweep.png");
+            sweep_picture(&path, title, &["k".into()], &[]).unwrap();
+            tiny_skia::Pixmap::load_png(&path).unwrap().width()
+        };
+        assert_eq!(
+            width("arcnav sweep: 4 of 4 runs, 2 worlds × 2 settings"),
+            560
+        );
+        let long = "arcnav sweep: 20 of 1000 runs (shard 13/50), 500 worlds × 2 settings";
+        assert!(width(long) > 620, "{}", width(long));
+    }
 }
