@@ -563,6 +563,9 @@ fn a_mission_never_writes_over_the_world_or_configuration_it_reads() {
 fn a_generated_world_can_be_saved_and_run_again() {
     let dir = out_dir("generated");
     let file = dir.join("seed7.toml");
+    // The first 40 s of each run (the worlds themselves are compared whole).
+    let limit = dir.join("limit.toml");
+    std::fs::write(&limit, "[sim]\ntime_limit_s = 40.0\n").unwrap();
     let (code, stdout, stderr) = arcnav(&[
         "sim",
         "--seed",
@@ -571,6 +574,8 @@ fn a_generated_world_can_be_saved_and_run_again() {
         "easy",
         "--save-world",
         file.to_str().unwrap(),
+        "--config",
+        limit.to_str().unwrap(),
         "--out",
         dir.to_str().unwrap(),
         "--no-images",
@@ -584,10 +589,15 @@ fn a_generated_world_can_be_saved_and_run_again() {
         "exit status 0 exactly when the mission succeeds"
     );
     let again = dir.join("again");
+    let resaved = dir.join("again.toml");
     let (_, _, stderr) = arcnav(&[
         "sim",
         "--world",
         file.to_str().unwrap(),
+        "--save-world",
+        resaved.to_str().unwrap(),
+        "--config",
+        limit.to_str().unwrap(),
         "--out",
         again.to_str().unwrap(),
         "--no-images",
@@ -595,9 +605,17 @@ fn a_generated_world_can_be_saved_and_run_again() {
     let second: Value =
         serde_json::from_str(&std::fs::read_to_string(again.join("report.json")).unwrap())
             .unwrap_or_else(|_| panic!("{stderr}"));
+    // The saved world read back saves as the same file: the whole world,
+    // not only the part the first 40 s drive through.
+    assert_eq!(
+        std::fs::read_to_string(&file).unwrap(),
+        std::fs::read_to_string(&resaved).unwrap(),
+        "the saved world is the generated one"
+    );
+    assert!(first["distance_m"].as_f64().unwrap() > 50.0, "{first}");
     assert_eq!(
         first["distance_m"], second["distance_m"],
-        "the saved world is the generated one"
+        "and drives the same"
     );
 }
 
