@@ -33,9 +33,8 @@ use arcnav_testkit::{LcmReference, NetNs, temp_dir};
 use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{CommandWatchdog, SteeringCommand, Utime};
 
-/// One live test at a time, ahead of the CPU-bound tests beside it.
+/// One live test at a time.
 fn serial() -> MutexGuard<'static, ()> {
-    arcnav_testkit::on_the_wall_clock();
     static LOCK: Mutex<()> = Mutex::new(());
     LOCK.lock().unwrap_or_else(|e| e.into_inner())
 }

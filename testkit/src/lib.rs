@@ -279,23 +279,6 @@ impl Drop for ScratchDir {
     }
 }
 
-/// How much a test on the wall clock raises its priority (a nice value
-/// below the default 0).
-const WALL_CLOCK_NICE: libc::c_int = -10;
-
-/// Called by a test whose executors run on the wall clock (live traffic,
-/// real-time feeds, watchdogs): raises the calling thread's priority, and
-/// so that of the threads and processes it starts afterwards, above the
-/// CPU-bound missions `scripts/test` runs beside it (it runs one test more
-/// than there are cores, because a live test mostly waits). Needs root or
-/// CAP_SYS_NICE; without them the test runs at the default priority, as it
-/// does beside nothing.
-pub fn on_the_wall_clock() {
-    // SAFETY: setpriority has no memory preconditions; on Linux `0` names
-    // the calling thread.
-    let _ = unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, WALL_CLOCK_NICE) };
-}
-
 /// A network namespace owned by one test; deleted on drop.
 #[derive(Debug)]
 pub struct NetNs {
@@ -314,7 +297,6 @@ impl NetNs {
             return Err("network-namespace tests need root (ip netns add)".into());
         }
         remove_stale_namespaces();
-        on_the_wall_clock();
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let name = format!("{NETNS_PREFIX}{}-{n}-{tag}", std::process::id());
         let name: String = name.chars().take(60).collect();
