@@ -36,7 +36,11 @@ pub const MAX_SHARDS: usize = 100_000;
 
 /// The `index`-th (from 1) of `count` parts of a plan: the runs whose
 /// number is `index − 1` modulo `count`.
+///
+/// In `sweep.json` it is its `K/N` text, read back through [`Shard::parse`]
+/// (a shard of 0 parts had divided by zero).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub struct Shard {
     pub index: usize,
     pub count: usize,
@@ -68,6 +72,20 @@ impl Shard {
     /// This shard's runs of a plan of `runs`, in order.
     pub fn runs(&self, runs: usize) -> impl Iterator<Item = usize> + '_ {
         (self.index - 1..runs).step_by(self.count)
+    }
+}
+
+impl TryFrom<String> for Shard {
+    type Error = SweepError;
+
+    fn try_from(text: String) -> Result<Self, SweepError> {
+        Self::parse(&text)
+    }
+}
+
+impl From<Shard> for String {
+    fn from(shard: Shard) -> String {
+        shard.to_string()
     }
 }
 
@@ -384,12 +402,8 @@ impl Plan {
 
     /// Run `run`'s world and setting.
     pub fn run(&self, run: usize) -> (&SweepWorld, usize, &Setting) {
-        let s = run % self.settings.len();
-        (
-            &self.worlds[run / self.settings.len()],
-            s,
-            &self.settings[s],
-        )
+        let (w, s) = place(run, self.settings.len());
+        (&self.worlds[w], s, &self.settings[s])
     }
 
     /// What identifies the plan: worlds, axes, and every setting's whole
@@ -408,6 +422,12 @@ impl Plan {
                 .collect(),
         }
     }
+}
+
+/// Run `run`'s world and setting indices in a plan of `settings` settings
+/// per world (runs are numbered world-major).
+fn place(run: usize, settings: usize) -> (usize, usize) {
+    (run / settings, run % settings)
 }
 
 /// The digest [`PlanIdentity::world_digests`] holds, hex.
@@ -463,12 +483,8 @@ impl PlanIdentity {
 
     /// Run `run`'s world label, setting index and setting values.
     pub fn run(&self, run: usize) -> (&str, usize, &[String]) {
-        let s = run % self.settings.len();
-        (
-            &self.worlds[run / self.settings.len()],
-            s,
-            &self.settings[s],
-        )
+        let (w, s) = place(run, self.settings.len());
+        (&self.worlds[w], s, &self.settings[s])
     }
 
     /// `key=value, key=value` of setting `s` (`defaults` with no keys).
@@ -917,10 +933,24 @@ impl RowLog {
 
     /// Appends `row` as one line, on disk before it returns.
     pub fn push(&mut self, row: &Row) -> std::io::Result<()> {
+        self.file.write_all(Self::line(row)?.as_bytes())?;
+        self.file.sync_data()
+    }
+
+    /// Writes `dir`'s rows file whole, holding `rows` (a merged sweep's).
+    pub fn write(dir: &Path, rows: &[Row]) -> std::io::Result<()> {
+        let mut text = String::new();
+        for row in rows {
+            text.push_str(&Self::line(row)?);
+        }
+        crate::output::write_file(&dir.join(Self::FILE), text.as_bytes())
+    }
+
+    /// `row` as a line of the rows file.
+    fn line(row: &Row) -> std::io::Result<String> {
         let mut line = serde_json::to_string(row).map_err(std::io::Error::other)?;
         line.push('\n');
-        self.file.write_all(line.as_bytes())?;
-        self.file.sync_data()
+        Ok(line)
     }
 
     /// The rows already in `dir` (none when there is no rows file), each
@@ -1155,6 +1185,16 @@ mod tests {
                 );
             }
             assert_eq!(seen, [1; 6], "{count} shards");
+        }
+        // In sweep.json a shard is its K/N text, read back through parse.
+        let text = serde_json::to_string(&identity(Some(Shard { index: 2, count: 3 }))).unwrap();
+        assert!(text.contains("\"shard\":\"2/3\""), "{text}");
+        let read: PlanIdentity = serde_json::from_str(&text).unwrap();
+        assert_eq!(read.shard(), Shard { index: 2, count: 3 });
+        for bad in ["0/0", "4/3", "1/x"] {
+            let edited = text.replace("\"2/3\"", &format!("\"{bad}\""));
+            let e = serde_json::from_str::<PlanIdentity>(&edited).unwrap_err();
+            assert!(e.to_string().contains("expected K/N"), "{bad}: {e}");
         }
         // An old sweep.json (no shard) reads as the whole plan.
         let text = serde_json::to_string(&identity(None)).unwrap();

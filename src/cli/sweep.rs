@@ -1,6 +1,6 @@
 //! `arcnav sweep`: missions over worlds × settings on every core, one table.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -244,11 +244,11 @@ fn prepare(out: &Path, identity: &PlanIdentity, resume: bool) -> anyhow::Result<
         ),
         _ => {}
     }
-    arcnav::output::write_file(
-        &plan_path,
+    write_in(
+        out,
+        PLAN_FILE,
         serde_json::to_string_pretty(identity)?.as_bytes(),
-    )
-    .with_context(|| format!("cannot write {}", plan_path.display()))?;
+    )?;
     Ok(finished)
 }
 
@@ -347,13 +347,15 @@ fn one_run(plan: &Plan, run: usize, beside_others: bool) -> Row {
     }
 }
 
+/// Writes `bytes` whole as the file `name` of the sweep directory `out`.
+fn write_in(out: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
+    let path = out.join(name);
+    arcnav::output::write_file(&path, bytes)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
 fn write_tables(out: &Path, plan: &PlanIdentity, rows: &[Row]) -> anyhow::Result<()> {
-    let write = |name: &str, bytes: &[u8]| -> anyhow::Result<PathBuf> {
-        let path = out.join(name);
-        arcnav::output::write_file(&path, bytes)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        Ok(path)
-    };
+    let write = |name: &str, bytes: &[u8]| write_in(out, name, bytes);
     let summary = summarise(plan, rows);
     write("table.csv", table_csv(plan, rows).as_bytes())?;
     write("table.json", serde_json::to_string_pretty(rows)?.as_bytes())?;
@@ -423,7 +425,7 @@ fn merge(args: SweepMergeArgs) -> anyhow::Result<ExitCode> {
     let out = &args.out;
     for dir in &args.dirs {
         anyhow::ensure!(
-            !(out.exists() && same_dir(out, dir)),
+            !same_dir(out, dir),
             "--out {}: it is one of the shards given; give a new directory",
             out.display()
         );
@@ -472,20 +474,15 @@ fn merge(args: SweepMergeArgs) -> anyhow::Result<ExitCode> {
             out.display()
         );
     }
-    let write = |name: &str, bytes: &[u8]| -> anyhow::Result<()> {
-        let path = out.join(name);
-        arcnav::output::write_file(&path, bytes)
-            .with_context(|| format!("cannot write {}", path.display()))
-    };
-    let mut lines = String::new();
-    for row in &rows {
-        lines.push_str(&serde_json::to_string(row)?);
-        lines.push('\n');
-    }
-    write(RowLog::FILE, lines.as_bytes())?;
+    RowLog::write(out, &rows)
+        .with_context(|| format!("cannot write {}", out.join(RowLog::FILE).display()))?;
     write_tables(out, &plan, &rows)?;
     // The plan last: a directory with it is a whole sweep.
-    write(PLAN_FILE, serde_json::to_string_pretty(&plan)?.as_bytes())?;
+    write_in(
+        out,
+        PLAN_FILE,
+        serde_json::to_string_pretty(&plan)?.as_bytes(),
+    )?;
     eprintln!(
         "arcnav sweep merge: {} runs from {shards} director{} into {}",
         rows.len(),
