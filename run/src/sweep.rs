@@ -69,6 +69,12 @@ impl Shard {
         run % self.count == self.index - 1
     }
 
+    /// How many runs of a plan of `runs` this shard holds (counted, not
+    /// walked: a plan's size may come from a file).
+    pub fn held(&self, runs: usize) -> usize {
+        runs.saturating_sub(self.index - 1).div_ceil(self.count)
+    }
+
     /// This shard's runs of a plan of `runs`, in order.
     pub fn runs(&self, runs: usize) -> impl Iterator<Item = usize> + '_ {
         (self.index - 1..runs).step_by(self.count)
@@ -478,7 +484,7 @@ impl PlanIdentity {
 
     /// The runs this part holds.
     pub fn runs_held(&self) -> usize {
-        self.shard().runs(self.runs()).count()
+        self.shard().held(self.runs())
     }
 
     /// Run `run`'s world label, setting index and setting values.
@@ -888,7 +894,7 @@ pub fn merge(parts: Vec<Part>) -> Result<(PlanIdentity, Vec<Row>, usize), MergeE
     }
     let mut plan = first.plan.clone();
     plan.shard = None;
-    let mut rows = Vec::with_capacity(plan.runs());
+    let mut rows = Vec::new();
     let mut foreign = 0;
     for mut part in parts {
         foreign += part.finished.keep_runs_of(&part.plan);
@@ -1183,6 +1189,8 @@ mod tests {
                     shard.runs(6).count(),
                     (0..6).filter(|&r| shard.holds(r)).count()
                 );
+                assert_eq!(shard.held(6), shard.runs(6).count());
+                assert_eq!(shard.held(0), 0);
             }
             assert_eq!(seen, [1; 6], "{count} shards");
         }
