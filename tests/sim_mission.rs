@@ -12,6 +12,13 @@ fn arcnav(args: &[&str]) -> (i32, String, String) {
     arcnav_testkit::output_of(env!("CARGO_BIN_EXE_arcnav"), args)
 }
 
+/// The `report.json` a run wrote in `dir`.
+fn read_report(dir: &Path) -> Value {
+    let path = dir.join("report.json");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 fn out_dir(tag: &str) -> ScratchDir {
     arcnav_testkit::scratch_dir(&format!("arcnav-sim-{tag}"))
 }
@@ -181,8 +188,7 @@ fn run_short_course(tag: &str) -> ScratchDir {
 #[test]
 fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
     let out = run_short_course("e2e");
-    let report: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let report: Value = read_report(&out);
     assert_eq!(report["outcome"], "completed");
     assert_eq!(report["success"], true);
     assert_eq!(report["waypoints_reached"], 3);
@@ -357,6 +363,17 @@ fn the_missions_write_the_logs_their_committed_digests_hold() {
                                 panic!("{tag}: no log (exit {code}, {e}):\n{stdout}\n{stderr}")
                             });
                             assert!(log.len() > 100_000, "{tag}: {} bytes", log.len());
+                            // With no fault, the guard beside the pipeline
+                            // never has to act (issue 65).
+                            let report = read_report(&out);
+                            assert_eq!(
+                                report["guard"]["stops"]
+                                    .as_u64()
+                                    .zip(report["guard"]["slows"].as_u64()),
+                                Some((0, 0)),
+                                "{tag}: the guard intervened: {}",
+                                report["guard"]
+                            );
                             let digest = sha2::Sha256::digest(&log);
                             let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
                             (tag.to_string(), hex)
@@ -581,8 +598,7 @@ fn a_generated_world_can_be_saved_and_run_again() {
         "--no-images",
     ]);
     assert!(stdout.contains("world saved to"), "{stdout}{stderr}");
-    let first: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let first: Value = read_report(&dir);
     assert_eq!(
         code == 0,
         first["success"] == true,
@@ -645,9 +661,7 @@ fn the_drop_offs_world_completes_without_falling_into_anything() {
         all.extend_from_slice(args);
         let (code, stdout, stderr) = arcnav(&all);
         assert_eq!(code, 0, "{tag}:\n{stdout}\n{stderr}");
-        let report: Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
-                .unwrap();
+        let report: Value = read_report(&out);
         assert_eq!(report["outcome"], "completed", "{tag}");
         assert_eq!(report["collisions"].as_array().unwrap().len(), 0, "{tag}");
         assert!(
@@ -1232,9 +1246,7 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
             held,
             "{stdout}"
         );
-        let report: Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
-                .unwrap();
+        let report: Value = read_report(&out);
         let _ = std::fs::remove_file(&file);
         report
     };
@@ -1387,4 +1399,69 @@ fn missions_complete_with_images_streamed_in_slices() {
         );
         assert!(stdout.contains("streamed      "), "{tag}:\n{stdout}");
     }
+}
+
+/// Issue 65: the guard is a second path beside the pipeline. With obstacle
+/// avoidance out of the vote (the fault: its weight 0, not required), the
+/// route alone drives into a tree on `forest`; the guard stops the vehicle
+/// short of it and says why, and without the guard the same mission
+/// collides.
+#[test]
+fn the_guard_stops_a_faulty_pipeline_short_of_the_tree_it_would_hit() {
+    let world = arcnav_testkit::workspace_root().join("tests/worlds/forest.toml");
+    let fault = "[arbiter]\nrequired = []\n[arbiter.weights]\nobstacle_avoidance = 0.0\n\
+                 [sim]\nstuck_after_s = 20.0\n";
+    let run = |tag: &str, extra: &str| {
+        let out = out_dir(tag);
+        let config = out.join("fault.toml");
+        std::fs::write(&config, format!("{fault}{extra}")).unwrap();
+        let (code, stdout, stderr) = arcnav(&[
+            "sim",
+            "--world",
+            world.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+            "--no-images",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_ne!(
+            code, 0,
+            "{tag}: a faulty pipeline cannot complete:\n{stdout}"
+        );
+        (read_report(&out), stdout, stderr)
+    };
+    let (guarded, unguarded) = std::thread::scope(|scope| {
+        let guarded = scope.spawn(|| run("guard-on", ""));
+        let unguarded = scope.spawn(|| run("guard-off", "[guard]\nenabled = false\n"));
+        (guarded.join().unwrap(), unguarded.join().unwrap())
+    });
+    let (report, stdout, stderr) = guarded;
+    assert_no_collision("guard-on", &report, &stdout);
+    let guard = &report["guard"];
+    assert!(
+        guard["stops"].as_u64().unwrap() >= 1,
+        "{guard}\n{stdout}{stderr}"
+    );
+    assert!(
+        guard["by_reason"]["obstacle"].as_u64().unwrap() >= 1,
+        "{guard}"
+    );
+    let first = &guard["first"][0];
+    assert_eq!(first["verdict"], "stop", "{guard}");
+    assert!(
+        first["reason"].as_str().unwrap().starts_with("obstacle"),
+        "{guard}"
+    );
+    assert!(
+        stdout.contains("guard "),
+        "the summary says what the guard did:\n{stdout}"
+    );
+    let (report, stdout, _) = unguarded;
+    assert_eq!(report["outcome"], "collision", "guard-off:\n{stdout}");
+    assert!(
+        report.get("guard").is_none_or(Value::is_null),
+        "{}",
+        report["guard"]
+    );
 }

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 
 use arcnav_arbiter::ArbiterConfig;
 use arcnav_behaviours::Registry;
+use arcnav_guard::GuardConfig;
 use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
 use arcnav_pipeline::{LiveConfig, PipelineConfig};
@@ -54,6 +55,8 @@ pub struct Config {
     pub live: LiveConfig,
     pub bus: BusConfig,
     pub sim: SimConfig,
+    /// The guard beside the pipeline.
+    pub guard: GuardConfig,
     /// One table per active behaviour, `[behaviours.NAME]`. The built-in
     /// behaviours are always present (set their weight to 0 to skip them);
     /// a table in a file changes only the keys it names.
@@ -126,6 +129,7 @@ impl Default for Config {
             live: LiveConfig::default(),
             bus: BusConfig::default(),
             sim: SimConfig::default(),
+            guard: GuardConfig::default(),
             behaviours: default_behaviours(),
             origins: BTreeMap::new(),
             source: None,
@@ -432,6 +436,7 @@ impl Config {
             .map_err(|e| e.within("lookahead"))?;
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
         self.live.validate().map_err(|e| e.within("live"))?;
+        self.guard.validate().map_err(|e| e.within("guard"))?;
         if let Some(name) = self
             .live
             .external_behaviours

@@ -85,6 +85,8 @@ pub struct Resolved {
     pub live: LiveConfig,
     pub bus: BusConfig,
     pub sim: SimConfig,
+    /// `[guard]` as given.
+    pub guard: arcnav_guard::GuardConfig,
     pub cruise: Cruise,
     pub lookahead: Lookahead,
     pub speed_bound: SpeedBound,
@@ -181,6 +183,7 @@ impl Resolved {
             live: given.live.clone(),
             bus: given.bus.clone(),
             sim: given.sim.clone(),
+            guard: given.guard.clone(),
             cruise,
             lookahead,
             speed_bound,

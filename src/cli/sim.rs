@@ -413,6 +413,36 @@ fn print_ride_stops_and_recoveries(r: &arcnav::mission::MissionReport) {
     if !s.stopped_s.is_empty() {
         println!("stopped       {}", seconds_list(&s.stopped_s));
     }
+    match &r.guard {
+        Some(g) => {
+            println!(
+                "guard         {} stops, {} slows (stopped {:.1} s, slowed {:.1} s); {} hazardous returns ({} standing, {} holes) from {} images and {} slices, {:.2} ms each",
+                g.stops,
+                g.slows,
+                g.stopped_s,
+                g.slowed_s,
+                g.standing + g.holes,
+                g.standing,
+                g.holes,
+                g.images,
+                g.slices,
+                g.observe_ms
+            );
+            if g.unknown_sensor + g.before_pose + g.malformed + g.forgotten > 0 {
+                println!(
+                    "              not tested: {} of an unknown sensor, {} before any pose, {} malformed; {} returns forgotten (guard.max_points held)",
+                    g.unknown_sensor, g.before_pose, g.malformed, g.forgotten
+                );
+            }
+            if let Some(e) = g.first.first() {
+                println!(
+                    "              first: {} at {:.1} s at ({:.1}, {:.1}): {}",
+                    e.verdict, e.t_s, e.x, e.y, e.reason
+                );
+            }
+        }
+        None => println!("guard         off ([guard] enabled = false)"),
+    }
     let rec = &r.recovery;
     println!(
         "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned, {} turned the other way; {} retraces over {:.1} m; blocked with no way back {} decisions, out of recoveries {})",

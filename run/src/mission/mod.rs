@@ -7,6 +7,7 @@
 //! and, at the sensor's rate, a range image ray-cast from the true pose. The
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
+mod guarded;
 pub mod report;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -30,6 +31,7 @@ use crate::render;
 use arcnav_config::Resolved;
 use arcnav_pipeline::{Input, Pipeline, Sink};
 use arcnav_wire as wire;
+pub use guarded::{GuardEvent, GuardReport};
 pub use report::{
     MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats, TrackPoint,
 };
@@ -267,6 +269,7 @@ pub fn run_mission(
         },
     )?;
     let mut pipeline = config.lockstep()?;
+    let mut guard = guarded::GuardWatch::new(config, sensors);
     pipeline.time_stages(Instant::now);
     pipeline.set_explain(options.snapshot_every_s.is_some());
     let log = Recorder::create(options.log.as_deref())
@@ -318,9 +321,23 @@ pub fn run_mission(
                 speed_mps: state.speed_mps,
             });
         }
+        if let Some(guard) = guard.as_mut() {
+            guard.observe(
+                &step.pose,
+                step.slices.iter().map(|(_, _, slice)| slice),
+                step.images.iter().map(|(_, image)| image),
+            );
+        }
         feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
         pipeline.run_until(t, &mut sink);
-        for command in sink.commands.drain(..) {
+        let commands = std::mem::take(&mut sink.commands);
+        let commands = match guard.as_mut() {
+            Some(guard) => {
+                guard.commands(commands, t, t0, [state.x, state.y], 1.0 / sim.pose_rate_hz)
+            }
+            None => commands,
+        };
+        for command in commands {
             simulator.command(command);
         }
         if let Some(e) = sink.log.error.take() {
@@ -360,6 +377,7 @@ pub fn run_mission(
         simulator: &simulator,
         pipeline: &pipeline,
         sink: &sink,
+        guard: guard.as_ref().map(guarded::GuardWatch::report),
         outcome,
         duration_s: micros_to_seconds(t - t0),
         wall_time_s: wall.elapsed().as_secs_f64(),
@@ -423,6 +441,7 @@ struct Ended<'e, 'a> {
     simulator: &'e Simulator,
     pipeline: &'e Pipeline,
     sink: &'e MissionSink<'a>,
+    guard: Option<GuardReport>,
     outcome: Outcome,
     duration_s: f64,
     wall_time_s: f64,
@@ -436,6 +455,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         simulator,
         pipeline,
         sink,
+        guard: _,
         outcome,
         duration_s: duration,
         wall_time_s: wall_time,
@@ -465,6 +485,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         0.0
     };
     MissionReport {
+        guard: ended.guard.clone(),
         world: world.spec.name.clone(),
         sensor: sensors
             .iter()

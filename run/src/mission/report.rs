@@ -58,6 +58,9 @@ pub struct MissionReport {
     pub cruise_cap_mps: Option<f64>,
     pub images: u64,
     pub images_dropped: u64,
+    /// What the guard did (`[guard]`); absent when it is off.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub guard: Option<super::GuardReport>,
     /// Images sent in slices (`sim.slice_lines`): what perception did
     /// with them (slices, steps, lines lost). Absent for whole images.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -1,0 +1,278 @@
+//! The returns that stand above the ground or lie far below it, found from
+//! the returns themselves: each column of beams is a profile of the ground
+//! along its heading.
+//!
+//! Taken from the lowest beam up, a column's returns run outward over the
+//! ground. Each return `(d, z)` (horizontal distance from the sensor,
+//! height in the vehicle's level frame) is judged against every return
+//! before it that was judged ground, `(d_k, z_k)` — at first the ground
+//! under the sensor:
+//!
+//! ```text
+//! standing  if  z − z_k >  step  and  z − z_k >  (d − d_k)·tan(max_slope) + noise   for some k
+//! a hole    if  z_k − z >  step  and  z_k − z >  (d − d_k)·tan(max_slope) + noise   for some k
+//! ground    otherwise
+//! ```
+//!
+//! `step` is `vehicle.tolerated_step_m`, `max_slope` is
+//! `vehicle.max_slope_deg` and `noise` is `guard.ground_noise_m`: the
+//! ground rises and falls no more steeply than the vehicle climbs, and
+//! whatever rises or falls from it by more than a step at a steeper rate is
+//! something the wheels cannot take. "For some k", not "from the last
+//! ground return": the beams landing on the face of a wall, each a few
+//! centimetres above the one before, must not carry the ground up the
+//! wall. Only the lowest `z_k − d_k·tan` and the highest `z_k + d_k·tan`
+//! decide, so the pass keeps those two. No cells, no evaluator, no map: one
+//! pass over the returns.
+//!
+//! A hole shows this way only where the rays that pass its near edge come
+//! down into it more steeply than `max_slope`: a sensor `H` up sees the
+//! far wall of a hole whose edge is `R` out at most `w·H/R` down over the
+//! hole's width `w`, so within `R < H / tan(max_slope)` (5.1 m from a
+//! sensor 2.4 m up at 25°). Farther holes are perception's to find over
+//! several frames.
+
+use arcnav_perception::BeamTable;
+use arcnav_vehicle::frames::Isometry;
+use nalgebra::{Point3, Vector3};
+
+/// What a hazardous return is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum HazardKind {
+    /// It stands above the ground profile.
+    Standing,
+    /// It lies far below it (a ditch, a drop).
+    Hole,
+}
+
+impl HazardKind {
+    /// The name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Standing => "obstacle",
+            Self::Hole => "hole",
+        }
+    }
+}
+
+/// One hazardous return, in the world frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hazard {
+    pub position: Point3<f64>,
+    pub kind: HazardKind,
+    /// How far above (standing) or below (hole) the ground profile, m.
+    pub height_m: f64,
+}
+
+/// The ground-profile test's thresholds.
+#[derive(Debug, Clone, Copy)]
+pub struct Profile {
+    /// `vehicle.tolerated_step_m`.
+    pub step_m: f64,
+    /// tan(`vehicle.max_slope_deg`).
+    pub max_rise_per_m: f64,
+    /// Returns farther than this from the vehicle are not reported, m.
+    pub range_m: f64,
+    /// `guard.ground_noise_m`.
+    pub noise_m: f64,
+}
+
+/// A block of returns: `rows × cols` ranges (row-major), the beams of its
+/// rows and columns, and where its sensor was.
+pub struct Returns<'a> {
+    pub beams: &'a BeamTable,
+    pub range: &'a [f32],
+    pub vehicle_from_sensor: &'a Isometry,
+    /// The vehicle when the returns were taken.
+    pub world_from_vehicle: &'a Isometry,
+}
+
+/// How many returns a block had, and how many were hazardous.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Found {
+    pub returns: u64,
+    pub standing: u64,
+    pub holes: u64,
+}
+
+impl Profile {
+    /// Walks each column of `returns` and pushes its hazardous returns onto
+    /// `out`. Ranges that are not finite and positive are no return.
+    pub fn hazards(&self, returns: &Returns<'_>, out: &mut Vec<Hazard>) -> Found {
+        let beams = returns.beams;
+        let (rows, cols) = (beams.rows(), beams.cols());
+        let mut found = Found::default();
+        if rows * cols != returns.range.len() {
+            return found;
+        }
+        let level = arcnav_vehicle::frames::level_frame(returns.world_from_vehicle);
+        let level_from_vehicle = level.inverse() * returns.world_from_vehicle;
+        let level_from_sensor = level_from_vehicle * returns.vehicle_from_sensor;
+        let sensor = level_from_sensor.translation.vector;
+        // The ground under the sensor: the vehicle frame's ground plane
+        // (z = 0, the wheels' contact) below the mount.
+        let mount = returns.vehicle_from_sensor.translation.vector;
+        let under = level_from_vehicle * Point3::new(mount.x, mount.y, 0.0);
+        // Lowest beam first.
+        let mut order: Vec<usize> = (0..rows).collect();
+        order.sort_by(|&a, &b| beams.elevation[a].total_cmp(&beams.elevation[b]));
+        let rotation = level_from_sensor.rotation;
+        for col in 0..cols {
+            let az = f64::from(beams.azimuth[col]);
+            let (sin_az, cos_az) = az.sin_cos();
+            let slope = self.max_rise_per_m;
+            // (z_k − d_k·tan, z_k) at the lowest, (z_k + d_k·tan, z_k) at
+            // the highest.
+            let mut low = (under.z, under.z);
+            let mut high = (under.z, under.z);
+            for &row in &order {
+                let r = f64::from(returns.range[row * cols + col]);
+                if !(r.is_finite() && r > 0.0) {
+                    continue;
+                }
+                found.returns += 1;
+                let el = f64::from(beams.elevation[row]);
+                let (sin_el, cos_el) = el.sin_cos();
+                let d = Vector3::new(cos_el * cos_az, cos_el * sin_az, sin_el);
+                let p = sensor + rotation * (d * r);
+                let across = (p.x - sensor.x).hypot(p.y - sensor.y);
+                let above = p.z - (low.0 + across * slope + self.noise_m);
+                let below = (high.0 - across * slope - self.noise_m) - p.z;
+                let kind = if above > 0.0 && p.z - low.1 > self.step_m {
+                    Some(HazardKind::Standing)
+                } else if below > 0.0 && high.1 - p.z > self.step_m {
+                    Some(HazardKind::Hole)
+                } else {
+                    if p.z - across * slope < low.0 {
+                        low = (p.z - across * slope, p.z);
+                    }
+                    if p.z + across * slope > high.0 {
+                        high = (p.z + across * slope, p.z);
+                    }
+                    None
+                };
+                let Some(kind) = kind else { continue };
+                if p.x.hypot(p.y) > self.range_m {
+                    continue;
+                }
+                match kind {
+                    HazardKind::Standing => found.standing += 1,
+                    HazardKind::Hole => found.holes += 1,
+                }
+                let height_m = match kind {
+                    HazardKind::Standing => p.z - low.1,
+                    HazardKind::Hole => high.1 - p.z,
+                };
+                out.push(Hazard {
+                    position: level * Point3::from(p),
+                    kind,
+                    height_m,
+                });
+            }
+        }
+        found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+
+    /// One column looking straight ahead from 2 m up, beams from -40° to
+    /// 0° every 0.25°, over ground given as height(x).
+    fn column(height: impl Fn(f64) -> f64, obstacle: Option<(f64, f64)>) -> Vec<Hazard> {
+        let rows = 161;
+        let beams = BeamTable {
+            elevation: (0..rows)
+                .map(|k| (-(k as f32) / 4.0).to_radians())
+                .collect(),
+            azimuth: vec![0.0],
+        };
+        let mount = isometry_from_xyz_rpy([1.0, 0.0, 2.0], 0.0, 0.0, 0.0);
+        // Range to the first crossing, marched finely.
+        let range: Vec<f32> = beams
+            .elevation
+            .iter()
+            .map(|&el| {
+                let (s, c) = f64::from(el).sin_cos();
+                let mut t = 0.0;
+                while t < 60.0 {
+                    t += 0.005;
+                    let (x, z) = (1.0 + c * t, 2.0 + s * t);
+                    let top = match obstacle {
+                        Some((at, h)) if (at..at + 0.5).contains(&x) => height(x) + h,
+                        _ => height(x),
+                    };
+                    if z <= top {
+                        return t as f32;
+                    }
+                }
+                f32::NAN
+            })
+            .collect();
+        let profile = Profile {
+            step_m: 0.2,
+            max_rise_per_m: 25f64.to_radians().tan(),
+            range_m: 30.0,
+            noise_m: 0.05,
+        };
+        let world = isometry_from_xyz_rpy([0.0, 0.0, 0.0], 0.0, 0.0, 0.0);
+        let mut out = Vec::new();
+        profile.hazards(
+            &Returns {
+                beams: &beams,
+                range: &range,
+                vehicle_from_sensor: &mount,
+                world_from_vehicle: &world,
+            },
+            &mut out,
+        );
+        out
+    }
+
+    #[test]
+    fn level_ground_and_a_slope_the_vehicle_climbs_are_ground() {
+        assert!(column(|_| 0.0, None).is_empty());
+        // 20° up from 6 m on: steep, but climbable.
+        let slope = |x: f64| (x - 6.0).max(0.0) * 20f64.to_radians().tan();
+        assert!(column(slope, None).is_empty());
+    }
+
+    #[test]
+    fn a_box_standing_on_the_ground_is_standing() {
+        let found = column(|_| 0.0, Some((8.0, 0.6)));
+        assert!(!found.is_empty());
+        for h in &found {
+            assert_eq!(h.kind, HazardKind::Standing);
+            assert!((8.0..8.6).contains(&h.position.x), "{h:?}");
+            assert!(h.height_m > 0.2, "{h:?}");
+        }
+        // A step the wheels take is not.
+        assert!(column(|_| 0.0, Some((8.0, 0.15))).is_empty());
+    }
+
+    #[test]
+    fn the_far_floor_of_a_ditch_is_a_hole() {
+        // 1.5 m deep from 4 to 6 m: its edge 3 m from the sensor, within
+        // H / tan(max_slope) = 4.3 m.
+        let ditch = |x: f64| if (4.0..6.0).contains(&x) { -1.5 } else { 0.0 };
+        let found = column(ditch, None);
+        assert!(
+            found.iter().any(|h| h.kind == HazardKind::Hole),
+            "{found:?}"
+        );
+        // Every hazard is in the ditch or just beyond: its far wall rises
+        // steeply from the floor seen (a wall too, standing), and so does
+        // the ground beyond until it is as far from the floor as its depth
+        // allows at max_slope.
+        for h in &found {
+            assert!((4.0..6.0 + 1.5 / 0.46).contains(&h.position.x), "{h:?}");
+        }
+        // The same ditch 10 m out shows its far wall too little below the
+        // edge for the profile to tell it from a dip: found there by
+        // perception, not here.
+        let far = |x: f64| if (11.0..13.0).contains(&x) { -1.5 } else { 0.0 };
+        assert!(column(far, None).iter().all(|h| h.kind != HazardKind::Hole));
+    }
+}
