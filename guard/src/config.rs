@@ -17,8 +17,10 @@ pub struct GuardConfig {
     /// The zones are the body's swept footprint widened by this much on
     /// each side, m.
     pub side_margin_m: f64,
-    /// A zone holds a hazard when at least this many hazardous returns lie
-    /// in it (one return may be noise).
+    /// Hazardous returns are held in cells of this side on the ground, m.
+    pub cell_size_m: f64,
+    /// A cell holds a hazard when at least this many hazardous returns
+    /// fell in it within `memory_s` (one return may be noise).
     pub min_points: usize,
     /// Returns farther than this from the vehicle (horizontally) are not
     /// tested, m; the ground profile still runs through them.
@@ -31,9 +33,9 @@ pub struct GuardConfig {
     /// front of the bumper is in every roof sensor's blind zone, so what was
     /// seen there from farther must not be forgotten when it is reached.
     pub memory_s: f64,
-    /// At most this many hazardous returns are remembered (the oldest go
-    /// first, counted).
-    pub max_points: usize,
+    /// At most this many cells are held (hazardous returns in new cells
+    /// beyond it are counted as forgotten).
+    pub max_cells: usize,
     /// Measured roll or pitch beyond `vehicle.max_slope_deg` less this
     /// stops, degrees.
     pub tilt_margin_deg: f64,
@@ -50,11 +52,12 @@ impl Default for GuardConfig {
             enabled: true,
             margin_m: 1.0,
             side_margin_m: 0.15,
+            cell_size_m: 0.2,
             min_points: 3,
             range_m: 30.0,
             ground_noise_m: 0.05,
             memory_s: 5.0,
-            max_points: 20_000,
+            max_cells: 200_000,
             tilt_margin_deg: 2.0,
             image_timeout_periods: 3.0,
             pose_timeout_s: 0.5,
@@ -67,14 +70,15 @@ impl GuardConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         config::non_negative("margin_m", self.margin_m)?;
         config::non_negative("side_margin_m", self.side_margin_m)?;
+        config::in_range("cell_size_m", self.cell_size_m, 0.01, 2.0)?;
         if self.min_points == 0 {
             return Err(ConfigError::new("min_points", "must be at least 1"));
         }
         config::positive("range_m", self.range_m)?;
         config::non_negative("ground_noise_m", self.ground_noise_m)?;
         config::non_negative("memory_s", self.memory_s)?;
-        if self.max_points == 0 || self.max_points > 10_000_000 {
-            return Err(ConfigError::new("max_points", "must be 1 to 10 000 000"));
+        if self.max_cells == 0 || self.max_cells > 10_000_000 {
+            return Err(ConfigError::new("max_cells", "must be 1 to 10 000 000"));
         }
         config::in_range("tilt_margin_deg", self.tilt_margin_deg, 0.0, 90.0)?;
         config::positive("image_timeout_periods", self.image_timeout_periods)?;
@@ -104,7 +108,7 @@ mod tests {
                 ..GuardConfig::default()
             },
             GuardConfig {
-                max_points: 0,
+                max_cells: 0,
                 ..GuardConfig::default()
             },
             GuardConfig {
@@ -116,7 +120,7 @@ mod tests {
             "margin_m",
             "min_points",
             "range_m",
-            "max_points",
+            "max_cells",
             "pose_timeout_s",
         ];
         for (config, key) in bad.iter().zip(keys) {

@@ -18,13 +18,14 @@ pub mod config;
 pub mod returns;
 pub mod zones;
 
-use std::collections::VecDeque;
+use std::collections::HashMap;
 
 use arcnav_perception::{RangeImage, RangeSlice, SensorModel};
 use arcnav_vehicle::command::SteeringCommand;
 use arcnav_vehicle::frames::{Pose, level_frame};
 use arcnav_vehicle::model::VehicleConfig;
 use arcnav_vehicle::time::Utime;
+use arcnav_vehicle::{DrivenPath, Steering, SteeringResponse};
 use nalgebra::Point2;
 
 pub use config::GuardConfig;
@@ -144,13 +145,30 @@ pub struct GuardCounts {
     pub returns: u64,
     pub standing: u64,
     pub holes: u64,
-    /// Hazardous returns forgotten because `max_points` were held.
+    /// Hazardous returns forgotten because `max_cells` were held.
     pub forgotten: u64,
 }
 
-struct Remembered {
+/// A cell of the ground that hazardous returns fell in.
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    /// The latest return in it.
     hazard: Hazard,
-    utime: Utime,
+    /// Returns in it, and when the last one came.
+    count: u32,
+    last: Utime,
+}
+
+/// The contact last found, followed as the vehicle drives on.
+#[derive(Debug, Clone, Copy)]
+struct Contact {
+    /// For this command (its time and curvature) and these hazards.
+    command: (Utime, f64),
+    version: u64,
+    /// Where the vehicle was (world, m), and the contact then: the
+    /// distance along the path and the hazard.
+    from: [f64; 2],
+    found: Option<(f64, Hazard)>,
 }
 
 /// The guard: see the crate documentation.
@@ -158,13 +176,22 @@ pub struct Guard {
     config: GuardConfig,
     profile: Profile,
     braking: Braking,
+    response: SteeringResponse,
     footprint: arcnav_vehicle::model::Footprint,
     max_tilt_rad: f64,
     /// Each sensor's id, period and last image or slice.
     sensors: Vec<(String, Utime, Option<Utime>)>,
     pose: Option<Pose>,
-    hazards: VecDeque<Remembered>,
+    /// Hazardous cells by (column, row) of `cell_size_m` in the world.
+    cells: HashMap<(i64, i64), Cell, foldhash::fast::RandomState>,
+    /// Bumped whenever `cells` changes.
+    version: u64,
     scratch: Vec<Hazard>,
+    /// The last command checked, and the curvature of the one before it
+    /// (on its way to the wheels while the latest takes effect).
+    current: Option<SteeringCommand>,
+    in_flight: f64,
+    contact: Option<Contact>,
     counts: GuardCounts,
 }
 
@@ -178,8 +205,10 @@ impl Guard {
                 max_rise_per_m: vehicle.max_slope_rad().tan(),
                 range_m: config.range_m,
                 noise_m: config.ground_noise_m,
+                max_gap_m: Profile::bridged_gap_m(vehicle.wheel_radius_m, vehicle.tolerated_step_m),
             },
             braking: Braking::of(vehicle, config.margin_m),
+            response: SteeringResponse::of(vehicle),
             footprint: vehicle.footprint().widened(config.side_margin_m),
             max_tilt_rad: (vehicle.max_slope_deg - config.tilt_margin_deg)
                 .max(0.0)
@@ -190,8 +219,12 @@ impl Guard {
                 .collect(),
             config: config.clone(),
             pose: None,
-            hazards: VecDeque::new(),
+            cells: HashMap::default(),
+            version: 0,
             scratch: Vec::new(),
+            current: None,
+            in_flight: 0.0,
+            contact: None,
             counts: GuardCounts::default(),
         }
     }
@@ -204,9 +237,19 @@ impl Guard {
         self.counts
     }
 
-    /// The hazardous returns remembered now.
-    pub fn hazards(&self) -> impl Iterator<Item = &Hazard> {
-        self.hazards.iter().map(|r| &r.hazard)
+    /// The hazards held at `now`: the latest return of each cell that
+    /// `min_points` hazardous returns fell in within `memory_s`.
+    pub fn hazards(&self, now: Utime) -> impl Iterator<Item = &Hazard> {
+        let memory = self.memory_us();
+        let min = self.config.min_points;
+        self.cells
+            .values()
+            .filter(move |c| c.count as usize >= min && now - c.last <= memory)
+            .map(|c| &c.hazard)
+    }
+
+    fn memory_us(&self) -> Utime {
+        (self.config.memory_s * 1e6) as Utime
     }
 
     /// The latest pose.
@@ -274,22 +317,53 @@ impl Guard {
         self.counts.returns += found.returns;
         self.counts.standing += found.standing;
         self.counts.holes += found.holes;
+        let memory = self.memory_us();
+        let before = self.cells.len();
+        self.cells.retain(|_, c| utime - c.last <= memory);
+        let mut changed = self.cells.len() != before;
+        let size = self.config.cell_size_m;
         for hazard in self.scratch.drain(..) {
-            if self.hazards.len() >= self.config.max_points {
-                self.hazards.pop_front();
-                self.counts.forgotten += 1;
+            let key = (
+                (hazard.position.x / size).floor() as i64,
+                (hazard.position.y / size).floor() as i64,
+            );
+            let full = self.cells.len() >= self.config.max_cells;
+            match self.cells.entry(key) {
+                std::collections::hash_map::Entry::Occupied(mut cell) => {
+                    let cell = cell.get_mut();
+                    cell.hazard = hazard;
+                    cell.count = cell.count.saturating_add(1);
+                    cell.last = cell.last.max(utime);
+                }
+                std::collections::hash_map::Entry::Vacant(_) if full => {
+                    self.counts.forgotten += 1;
+                    continue;
+                }
+                std::collections::hash_map::Entry::Vacant(cell) => {
+                    cell.insert(Cell {
+                        hazard,
+                        count: 1,
+                        last: utime,
+                    });
+                }
             }
-            self.hazards.push_back(Remembered { hazard, utime });
+            changed = true;
+        }
+        if changed {
+            self.version += 1;
         }
     }
 
     /// The verdict on `command` at `now`.
     pub fn check(&mut self, command: &SteeringCommand, now: Utime) -> Verdict {
-        let memory = (self.config.memory_s * 1e6) as Utime;
-        while self.hazards.front().is_some_and(|r| now - r.utime > memory) {
-            self.hazards.pop_front();
-        }
         let age = |t: Utime| (now - t) as f64 * 1e-6;
+        if self
+            .current
+            .is_none_or(|c| c.utime != command.utime || c.curvature != command.curvature)
+        {
+            self.in_flight = self.current.map_or(command.curvature, |c| c.curvature);
+            self.current = Some(*command);
+        }
         let Some(pose) = self.pose else {
             return Verdict::Stop {
                 reason: Reason::StalePose { age_s: None },
@@ -326,23 +400,9 @@ impl Guard {
         if command.is_stop() {
             return Verdict::Clear;
         }
-        let level = level_frame(&pose.world_from_vehicle);
-        let to_level = level.inverse();
-        let local = |h: &Hazard| {
-            let p = to_level * h.position;
-            Point2::new(p.x, p.y)
-        };
-        let Some((s, k)) = nearest_contact(
-            self.footprint,
-            command.curvature,
-            command.is_reverse(),
-            self.braking.reach_m(),
-            self.config.min_points,
-            self.hazards.iter().map(|r| local(&r.hazard)),
-        ) else {
+        let Some((s, hazard)) = self.contact(command, &pose, now) else {
             return Verdict::Clear;
         };
-        let hazard = &self.hazards[k].hazard;
         let reason = Reason::Hazard {
             kind: hazard.kind,
             at: [hazard.position.x, hazard.position.y],
@@ -361,5 +421,236 @@ impl Guard {
         } else {
             Verdict::Clear
         }
+    }
+
+    /// The nearest hazard on the path `command` puts the vehicle on, and
+    /// how far along it. Found again when the command or the hazards
+    /// change, or the vehicle has driven `RECHECK_M` since; in between,
+    /// the distance is what it was less the distance driven.
+    fn contact(
+        &mut self,
+        command: &SteeringCommand,
+        pose: &Pose,
+        now: Utime,
+    ) -> Option<(f64, Hazard)> {
+        /// Driven this far, the contact is found again, m.
+        const RECHECK_M: f64 = 0.5;
+        let at = pose.world_from_vehicle.translation.vector;
+        let key = (command.utime, command.curvature);
+        if let Some(c) = self.contact
+            && c.command == key
+            && c.version == self.version
+        {
+            let driven = (at.x - c.from[0]).hypot(at.y - c.from[1]);
+            if driven < RECHECK_M {
+                return c.found.map(|(s, h)| (s - driven, h));
+            }
+        }
+        let level = level_frame(&pose.world_from_vehicle);
+        let to_level = level.inverse();
+        let (sin, cos) = pose.yaw().sin_cos();
+        let forwards = (pose.velocity.x * cos + pose.velocity.y * sin).max(0.0);
+        let steering = Steering {
+            speed_mps: forwards,
+            curvature: if forwards > 0.5 {
+                pose.yaw_rate / forwards
+            } else {
+                self.in_flight
+            },
+            commanded_curvature: self.in_flight,
+        };
+        let path = DrivenPath::new(&steering, &self.response, command.curvature);
+        let held: Vec<Hazard> = self.hazards(now).copied().collect();
+        let found = nearest_contact(
+            self.footprint,
+            &path,
+            command.is_reverse(),
+            self.braking.reach_m(),
+            held.iter().map(|h| {
+                let p = to_level * h.position;
+                Point2::new(p.x, p.y)
+            }),
+        )
+        .map(|(s, k)| (s, held[k]));
+        self.contact = Some(Contact {
+            command: key,
+            version: self.version,
+            from: [at.x, at.y],
+            found,
+        });
+        found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arcnav_perception::scene::HeightFunction;
+    use arcnav_vehicle::frames::Isometry;
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+    const T0: Utime = 10_000_000;
+
+    fn command(speed_mps: f64, curvature: f64) -> SteeringCommand {
+        SteeringCommand {
+            utime: T0,
+            curvature,
+            speed_mps,
+            arc_index: Some(0),
+            vote: 1.0,
+        }
+    }
+
+    /// The default vehicle at the origin facing +x at `speed` m/s, having
+    /// seen `height` with the ERIM.
+    fn guard_seeing(height: impl Fn(f64, f64) -> f64 + Sync, speed: f64) -> Guard {
+        let sensor = SensorModel::erim();
+        let mut guard = Guard::new(
+            &GuardConfig::default(),
+            &VehicleConfig::default(),
+            std::slice::from_ref(&sensor),
+        );
+        let pose = Pose {
+            velocity: Vector3::new(speed, 0.0, 0.0),
+            ..Pose::at_rest(T0, Isometry::identity())
+        };
+        guard.observe_pose(&pose);
+        let image = sensor.render(T0, &pose.world_from_vehicle, &HeightFunction::new(height));
+        guard.observe_image(&image);
+        guard
+    }
+
+    /// A box 0.6 m tall, 1 m deep and 2 m wide, its near face `s` ahead of
+    /// the default vehicle's front (x = 4 m).
+    fn box_at(s: f64) -> impl Fn(f64, f64) -> f64 + Sync {
+        move |x, y| {
+            if (4.0 + s..5.0 + s).contains(&x) && y.abs() < 1.0 {
+                0.6
+            } else {
+                0.0
+            }
+        }
+    }
+
+    fn reason_name(verdict: &Verdict) -> Option<&'static str> {
+        verdict.reason().map(Reason::name)
+    }
+
+    #[test]
+    fn level_open_ground_lets_every_command_through() {
+        let mut guard = guard_seeing(|_, _| 0.0, 8.0);
+        for curvature in [-0.2, 0.0, 0.1] {
+            assert_eq!(guard.check(&command(8.0, curvature), T0), Verdict::Clear);
+        }
+        assert_eq!(guard.counts().standing + guard.counts().holes, 0);
+        assert!(guard.counts().returns > 10_000, "{:?}", guard.counts());
+    }
+
+    #[test]
+    fn a_box_within_the_stopping_distance_stops_beyond_it_slows_to_the_speed_that_stops_short() {
+        // At 5 m/s d(v) = 5·0.25 + 25/6 = 5.4 m: a box 4 m ahead is in the
+        // stop zone.
+        let near = guard_seeing(box_at(4.0), 5.0).check(&command(8.0, 0.0), T0);
+        assert!(matches!(near, Verdict::Stop { .. }), "{near:?}");
+        assert_eq!(reason_name(&near), Some("obstacle"));
+        // 11 m ahead: v_allowed = 3·(−0.25 + sqrt(0.0625 + 2·10/3)) ≈ 7.0 m/s.
+        let mut far = guard_seeing(box_at(11.0), 5.0);
+        let verdict = far.check(&command(8.0, 0.0), T0);
+        let Verdict::Slow { cap_mps, reason } = &verdict else {
+            panic!("{verdict:?}");
+        };
+        let Reason::Hazard { distance_m, .. } = reason else {
+            panic!("{reason:?}");
+        };
+        assert!((distance_m - 11.0).abs() < 0.3, "{distance_m}");
+        let braking = Braking::of(&VehicleConfig::default(), 1.0);
+        assert!((cap_mps - braking.allowed_mps(*distance_m)).abs() < 1e-9);
+        assert!((6.5..7.5).contains(cap_mps), "{cap_mps}");
+        // Slowed, the command keeps its arc; under the cap it goes as it is.
+        assert_eq!(verdict.apply(&command(8.0, 0.0)).speed_mps, *cap_mps);
+        assert_eq!(far.check(&command(4.0, 0.0), T0), Verdict::Clear);
+        // An arc curving away from the box does not meet it.
+        assert_eq!(far.check(&command(8.0, 0.2), T0), Verdict::Clear);
+        // A stop is a stop.
+        assert_eq!(far.check(&SteeringCommand::stop(T0), T0), Verdict::Clear);
+    }
+
+    #[test]
+    fn a_ditch_ahead_is_a_hole_and_stops_the_vehicle() {
+        let ditch = |x: f64, _: f64| if (7.0..9.0).contains(&x) { -1.5 } else { 0.0 };
+        let mut guard = guard_seeing(ditch, 5.0);
+        assert!(guard.counts().holes > 0, "{:?}", guard.counts());
+        let verdict = guard.check(&command(5.0, 0.0), T0);
+        assert!(matches!(verdict, Verdict::Stop { .. }), "{verdict:?}");
+        assert_eq!(reason_name(&verdict), Some("hole"));
+    }
+
+    #[test]
+    fn hazards_are_forgotten_after_memory_s() {
+        let mut guard = guard_seeing(box_at(4.0), 0.0);
+        // At rest 4 m short of it: 5 m/s is more than stops 1 m short of it.
+        assert!(matches!(
+            guard.check(&command(5.0, 0.0), T0),
+            Verdict::Slow { .. }
+        ));
+        let later = T0 + 6_000_000;
+        guard.observe_pose(&Pose::at_rest(later, Isometry::identity()));
+        // No image for 6 s: the sensor's silence stops it, not the box.
+        let verdict = guard.check(&command(2.0, 0.0), later);
+        assert_eq!(reason_name(&verdict), Some("no image"), "{verdict:?}");
+        assert_eq!(guard.hazards(later).count(), 0);
+    }
+
+    #[test]
+    fn missing_data_and_tilt_stop_the_vehicle() {
+        let config = GuardConfig::default();
+        let vehicle = VehicleConfig::default();
+        let sensor = SensorModel::erim();
+        let mut guard = Guard::new(&config, &vehicle, std::slice::from_ref(&sensor));
+        let go = command(2.0, 0.0);
+        assert_eq!(
+            guard.check(&go, T0),
+            Verdict::Stop {
+                reason: Reason::StalePose { age_s: None }
+            }
+        );
+        guard.observe_pose(&Pose::at_rest(T0, Isometry::identity()));
+        assert_eq!(
+            guard.check(&go, T0),
+            Verdict::Stop {
+                reason: Reason::NoImage {
+                    sensor: sensor.id.clone(),
+                    age_s: None
+                }
+            }
+        );
+        let image = sensor.render(T0, &Isometry::identity(), &HeightFunction::new(|_, _| 0.0));
+        guard.observe_image(&image);
+        assert_eq!(guard.check(&go, T0), Verdict::Clear);
+        // A pose older than pose_timeout_s.
+        let verdict = guard.check(&go, T0 + 600_000);
+        assert_eq!(reason_name(&verdict), Some("stale pose"), "{verdict:?}");
+        // Images more than image_timeout_periods apart.
+        let silent = T0 + 2 * sensor.period_us() + sensor.period_us() * 3 / 2;
+        guard.observe_pose(&Pose::at_rest(silent, Isometry::identity()));
+        let verdict = guard.check(&go, silent);
+        assert_eq!(reason_name(&verdict), Some("no image"), "{verdict:?}");
+        guard.observe_image(&RangeImage {
+            utime: silent,
+            ..image.clone()
+        });
+        assert_eq!(guard.check(&go, silent), Verdict::Clear);
+        // Rolled beyond max_slope_deg − tilt_margin_deg (25 − 2).
+        let tilted = Isometry::from_parts(
+            Translation3::identity(),
+            UnitQuaternion::from_euler_angles(24f64.to_radians(), 0.0, 0.0),
+        );
+        guard.observe_pose(&Pose::at_rest(silent, tilted));
+        let verdict = guard.check(&go, silent);
+        assert_eq!(reason_name(&verdict), Some("tilt"), "{verdict:?}");
+        // Inputs it cannot use are counted.
+        let other = SensorModel::lidar64();
+        guard.observe_image(&other.blank_image(silent));
+        assert_eq!(guard.counts().unknown_sensor, 1);
     }
 }

@@ -28,9 +28,25 @@
 //! A hole shows this way only where the rays that pass its near edge come
 //! down into it more steeply than `max_slope`: a sensor `H` up sees the
 //! far wall of a hole whose edge is `R` out at most `w·H/R` down over the
-//! hole's width `w`, so within `R < H / tan(max_slope)` (5.1 m from a
-//! sensor 2.4 m up at 25°). Farther holes are perception's to find over
-//! several frames.
+//! hole's width `w`, so within `R < H / tan(max_slope)` (4.7 m from the
+//! ERIM 2.2 m up, 5.1 m from a lidar 2.4 m up, at 25°). Farther, what the
+//! column shows of a hole is its shadow and its far wall: a gap in the
+//! returns longer than the wheels bridge (`max_gap_m`, the
+//! `2·sqrt(2·r·step − step²)` of a wheel of radius `r` rolling over a
+//! step), the returns beyond it lower than the one before it, and then,
+//! within `max_gap_m` of the gap's far side, a return standing above them
+//! (the wall rising out of the hole to its far lip). That gap's near return
+//! is a hole's near edge:
+//!
+//! ```text
+//! hole edge at k  if  d_{k+1} − d_k > max_gap,  z_{k+1} < z_k − noise,  and some j > k with
+//!                     d_j ≤ d_{k+1} + max_gap is standing (all of k+1 … j−1 ground)
+//! ```
+//!
+//! A crest the ground falls away behind gently leaves a gap too, but no
+//! wall rises beyond it; a dropout leaves a gap with the ground beyond at
+//! the same height. Holes whose far wall is out of the beams' reach are
+//! perception's to find over several frames.
 
 use arcnav_perception::BeamTable;
 use arcnav_vehicle::frames::Isometry;
@@ -75,6 +91,17 @@ pub struct Profile {
     pub range_m: f64,
     /// `guard.ground_noise_m`.
     pub noise_m: f64,
+    /// The longest gap the wheels bridge, m (see the module documentation).
+    pub max_gap_m: f64,
+}
+
+impl Profile {
+    /// The gap a wheel of `wheel_radius_m` rolls over without dropping more
+    /// than `step_m`: `2·sqrt(2·r·step − step²)`, m.
+    pub fn bridged_gap_m(wheel_radius_m: f64, step_m: f64) -> f64 {
+        let step = step_m.min(wheel_radius_m);
+        2.0 * (2.0 * wheel_radius_m * step - step * step).max(0.0).sqrt()
+    }
 }
 
 /// A block of returns: `rows × cols` ranges (row-major), the beams of its
@@ -93,6 +120,31 @@ pub struct Found {
     pub returns: u64,
     pub standing: u64,
     pub holes: u64,
+}
+
+/// What a column's walk holds between its returns.
+#[derive(Debug, Clone, Copy)]
+struct Column {
+    /// (z_k − d_k·tan, z_k) at the lowest, (z_k + d_k·tan, z_k) at the
+    /// highest.
+    low: (f64, f64),
+    high: (f64, f64),
+    /// The last return (d, z, point), and a hole's near edge waiting for
+    /// its far wall (the point, the gap's far side d).
+    last: Option<(f64, f64, Point3<f64>)>,
+    edge: Option<(Point3<f64>, f64)>,
+}
+
+impl Column {
+    /// Before its first return: the ground under the sensor at `z`.
+    fn new(z: f64) -> Self {
+        Self {
+            low: (z, z),
+            high: (z, z),
+            last: None,
+            edge: None,
+        }
+    }
 }
 
 impl Profile {
@@ -116,55 +168,95 @@ impl Profile {
         // Lowest beam first.
         let mut order: Vec<usize> = (0..rows).collect();
         order.sort_by(|&a, &b| beams.elevation[a].total_cmp(&beams.elevation[b]));
-        let rotation = level_from_sensor.rotation;
-        for col in 0..cols {
-            let az = f64::from(beams.azimuth[col]);
-            let (sin_az, cos_az) = az.sin_cos();
-            let slope = self.max_rise_per_m;
-            // (z_k − d_k·tan, z_k) at the lowest, (z_k + d_k·tan, z_k) at
-            // the highest.
-            let mut low = (under.z, under.z);
-            let mut high = (under.z, under.z);
-            for &row in &order {
-                let r = f64::from(returns.range[row * cols + col]);
+        let order: Vec<(usize, f64, f64)> = order
+            .into_iter()
+            .map(|row| {
+                let (sin, cos) = f64::from(beams.elevation[row]).sin_cos();
+                (row, sin, cos)
+            })
+            .collect();
+        let rotation = level_from_sensor.rotation.to_rotation_matrix();
+        let (to_world, shift) = (
+            level.rotation.to_rotation_matrix(),
+            level.translation.vector,
+        );
+        let world = |p: Point3<f64>| to_world * p + shift;
+        let range2 = self.range_m * self.range_m;
+        let slope = self.max_rise_per_m;
+        // Each column walked from its lowest beam up, all columns a row at
+        // a time (the rows are contiguous in memory).
+        let azimuths: Vec<(f64, f64)> = beams
+            .azimuth
+            .iter()
+            .map(|&az| f64::from(az).sin_cos())
+            .collect();
+        let mut state = vec![Column::new(under.z); cols];
+        for &(row, sin_el, cos_el) in &order {
+            let ranges = &returns.range[row * cols..(row + 1) * cols];
+            for ((&r, &(sin_az, cos_az)), column) in ranges.iter().zip(&azimuths).zip(&mut state) {
+                let r = f64::from(r);
                 if !(r.is_finite() && r > 0.0) {
                     continue;
                 }
                 found.returns += 1;
-                let el = f64::from(beams.elevation[row]);
-                let (sin_el, cos_el) = el.sin_cos();
                 let d = Vector3::new(cos_el * cos_az, cos_el * sin_az, sin_el);
                 let p = sensor + rotation * (d * r);
-                let across = (p.x - sensor.x).hypot(p.y - sensor.y);
+                let (dx, dy) = (p.x - sensor.x, p.y - sensor.y);
+                let across = (dx * dx + dy * dy).sqrt();
+                let (low, high) = (column.low, column.high);
                 let above = p.z - (low.0 + across * slope + self.noise_m);
                 let below = (high.0 - across * slope - self.noise_m) - p.z;
+                let after_gap = column
+                    .last
+                    .filter(|&(d, z, _)| across - d > self.max_gap_m && p.z < z - self.noise_m);
+                column.last = Some((across, p.z, Point3::from(p)));
                 let kind = if above > 0.0 && p.z - low.1 > self.step_m {
-                    Some(HazardKind::Standing)
+                    HazardKind::Standing
                 } else if below > 0.0 && high.1 - p.z > self.step_m {
-                    Some(HazardKind::Hole)
+                    HazardKind::Hole
                 } else {
                     if p.z - across * slope < low.0 {
-                        low = (p.z - across * slope, p.z);
+                        column.low = (p.z - across * slope, p.z);
                     }
                     if p.z + across * slope > high.0 {
-                        high = (p.z + across * slope, p.z);
+                        column.high = (p.z + across * slope, p.z);
                     }
-                    None
+                    if let Some((_, _, near)) = after_gap {
+                        column.edge = Some((near, across));
+                    } else if column
+                        .edge
+                        .is_some_and(|(_, far)| across > far + self.max_gap_m)
+                    {
+                        column.edge = None;
+                    }
+                    continue;
                 };
-                let Some(kind) = kind else { continue };
-                if p.x.hypot(p.y) > self.range_m {
+                if kind == HazardKind::Standing
+                    && let Some((near, _)) = column.edge.take()
+                    && near.x * near.x + near.y * near.y <= range2
+                {
+                    found.holes += 1;
+                    out.push(Hazard {
+                        position: world(near),
+                        kind: HazardKind::Hole,
+                        height_m: near.z - low.1,
+                    });
+                }
+                if p.x * p.x + p.y * p.y > range2 {
                     continue;
                 }
-                match kind {
-                    HazardKind::Standing => found.standing += 1,
-                    HazardKind::Hole => found.holes += 1,
-                }
                 let height_m = match kind {
-                    HazardKind::Standing => p.z - low.1,
-                    HazardKind::Hole => high.1 - p.z,
+                    HazardKind::Standing => {
+                        found.standing += 1;
+                        p.z - low.1
+                    }
+                    HazardKind::Hole => {
+                        found.holes += 1;
+                        high.1 - p.z
+                    }
                 };
                 out.push(Hazard {
-                    position: level * Point3::from(p),
+                    position: world(Point3::from(p)),
                     kind,
                     height_m,
                 });
@@ -216,6 +308,7 @@ mod tests {
             max_rise_per_m: 25f64.to_radians().tan(),
             range_m: 30.0,
             noise_m: 0.05,
+            max_gap_m: Profile::bridged_gap_m(0.4, 0.2),
         };
         let world = isometry_from_xyz_rpy([0.0, 0.0, 0.0], 0.0, 0.0, 0.0);
         let mut out = Vec::new();
@@ -269,10 +362,38 @@ mod tests {
         for h in &found {
             assert!((4.0..6.0 + 1.5 / 0.46).contains(&h.position.x), "{h:?}");
         }
-        // The same ditch 10 m out shows its far wall too little below the
-        // edge for the profile to tell it from a dip: found there by
-        // perception, not here.
+    }
+
+    #[test]
+    fn a_far_ditch_is_a_hole_at_its_near_edge_from_its_shadow_and_far_wall() {
+        // 10 m out the far wall is seen too little below the edge to tell
+        // it from a dip; its top rising to the far lip, beyond the ditch's
+        // shadow, makes the edge a hole.
         let far = |x: f64| if (11.0..13.0).contains(&x) { -1.5 } else { 0.0 };
-        assert!(column(far, None).iter().all(|h| h.kind != HazardKind::Hole));
+        let found = column(far, None);
+        let holes: Vec<_> = found
+            .iter()
+            .filter(|h| h.kind == HazardKind::Hole)
+            .collect();
+        assert_eq!(holes.len(), 1, "{found:?}");
+        assert!((10.5..=11.0).contains(&holes[0].position.x), "{holes:?}");
+        // Narrower than the wheels bridge: no hole.
+        let narrow = |x: f64| if (11.0..11.5).contains(&x) { -1.5 } else { 0.0 };
+        assert!(
+            column(narrow, None)
+                .iter()
+                .all(|h| h.kind != HazardKind::Hole)
+        );
+        // A crest the ground falls away behind at 15° leaves a shadow but
+        // no wall: no hole, nothing standing.
+        let crest = |x: f64| {
+            let rise = 10f64.to_radians().tan();
+            if x < 8.0 {
+                x * rise
+            } else {
+                8.0 * rise - (x - 8.0) * 15f64.to_radians().tan()
+            }
+        };
+        assert!(column(crest, None).is_empty(), "{:?}", column(crest, None));
     }
 }

@@ -20,6 +20,7 @@
 //! margin`: the command's speed is capped to `v_allowed(s)`, so that the
 //! stop zone is never entered at speed. One formula, both zones.
 
+use arcnav_vehicle::DrivenPath;
 use arcnav_vehicle::arcs::Arc;
 use arcnav_vehicle::model::{Footprint, VehicleConfig};
 use nalgebra::Point2;
@@ -66,53 +67,85 @@ impl Braking {
     }
 }
 
-/// Where the commanded path first meets enough hazards: the arc length to
-/// the `min_points`-th nearest hazard the swept footprint touches, and
-/// which point that is (its place in `points`), if any within `reach_m`.
-/// `points` are in the vehicle's level frame (x forward); `reverse` drives
-/// the arc backwards.
+/// Poses along the curvature ramp are tried this far apart, m (a cell
+/// is 0.2 m).
+const RAMP_STEP_M: f64 = 0.1;
+
+/// Where the path the vehicle drives first meets a hazard: the distance
+/// along it at which the swept footprint first touches one of `points`,
+/// and which point that is (its place in `points`), if any within
+/// `reach_m`. `points` are in the vehicle's level frame (x forward).
+/// Forwards the path is [`DrivenPath`]: the command's arc reached through
+/// the vehicle's latency and steering rate, as the behaviours judge it
+/// (along the ramp the footprint is tried every 0.1 m, along the arc the
+/// contact is exact). `reverse` drives the arc backwards (at the speeds
+/// the vehicle backs, at once).
 pub fn nearest_contact(
     footprint: Footprint,
-    curvature: f64,
+    path: &DrivenPath,
     reverse: bool,
     reach_m: f64,
-    min_points: usize,
     points: impl Iterator<Item = Point2<f64>>,
 ) -> Option<(f64, usize)> {
     // Backing along an arc is driving the same arc forwards in the frame
     // mirrored front to back: the body mirrored too.
-    let (footprint, mirror) = if reverse {
-        (
-            Footprint {
-                x_min: -footprint.x_max,
-                x_max: -footprint.x_min,
-                half_width: footprint.half_width,
-            },
-            -1.0,
-        )
+    let (footprint, mirror, path) = if reverse {
+        let arc = DrivenPath::arc(path.curvature_at(path.settled_at()));
+        let body = Footprint {
+            x_min: -footprint.x_max,
+            x_max: -footprint.x_min,
+            half_width: footprint.half_width,
+        };
+        (body, -1.0, arc)
     } else {
-        (footprint, 1.0)
+        (footprint, 1.0, *path)
     };
-    let swept = Arc::new(curvature).swept(footprint, reach_m);
+    let settled = path.settled_at().min(reach_m);
+    let from = path.pose_at(settled);
+    let (sin, cos) = from.heading.sin_cos();
+    let arc = Arc::new(path.curvature_at(settled)).swept(footprint, reach_m - settled);
+    let ramp: Vec<(f64, Point2<f64>, f64, f64)> = if settled > 0.0 {
+        path.sample(settled, RAMP_STEP_M)
+            .into_iter()
+            .map(|(s, pose)| {
+                let (sin, cos) = pose.heading.sin_cos();
+                (s, pose.position, sin, cos)
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let bound = reach_m + footprint.x_max.max(-footprint.x_min) + footprint.half_width;
-    let mut contacts: Vec<(f64, usize)> = points
-        .map(|p| Point2::new(p.x * mirror, p.y))
-        .enumerate()
-        .filter(|(_, p)| p.coords.norm() <= bound)
-        .filter_map(|(k, p)| Some((swept.first_contact(p)?, k)))
-        .collect();
-    if contacts.len() < min_points {
-        return None;
+    let mut nearest: Option<(f64, usize)> = None;
+    for (k, p) in points.enumerate() {
+        let p = Point2::new(p.x * mirror, p.y);
+        if p.coords.norm() > bound {
+            continue;
+        }
+        let on_ramp = ramp.iter().find_map(|&(s, at, sin, cos)| {
+            let d = p - at;
+            let local = Point2::new(cos * d.x + sin * d.y, -sin * d.x + cos * d.y);
+            footprint.contains(local).then_some(s)
+        });
+        let s = on_ramp.or_else(|| {
+            let d = p - from.position;
+            let local = Point2::new(cos * d.x + sin * d.y, -sin * d.x + cos * d.y);
+            arc.first_contact(local).map(|s| settled + s)
+        });
+        if let Some(s) = s
+            && nearest.is_none_or(|(best, _)| s < best)
+        {
+            nearest = Some((s, k));
+        }
     }
-    let k = min_points - 1;
-    contacts.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
-    Some(contacts[k])
+    nearest
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+    use arcnav_vehicle::{Steering, SteeringResponse};
 
     fn braking() -> Braking {
         Braking {
@@ -142,22 +175,46 @@ mod tests {
             x_max: 4.0,
             half_width: 1.1,
         };
-        let ahead: Vec<Point2<f64>> = (0..3)
-            .map(|k| Point2::new(10.0 + k as f64 * 0.1, 0.3))
-            .collect();
+        let ahead = [Point2::new(10.2, 0.3), Point2::new(10.0, 0.3)];
+        let straight = DrivenPath::arc(0.0);
         // Straight on: the front (4 m) reaches 10 m after 6.
-        let (s, k) = nearest_contact(body, 0.0, false, 20.0, 3, ahead.iter().copied()).unwrap();
-        assert_relative_eq!(s, 6.2, epsilon = 1e-6);
-        assert_eq!(k, 2);
-        // Two points are not enough for three.
-        assert!(nearest_contact(body, 0.0, false, 20.0, 3, ahead[..2].iter().copied()).is_none());
-        // Turning hard left passes right of them... or well away.
-        assert!(nearest_contact(body, 1.0 / 8.0, false, 20.0, 3, ahead.iter().copied()).is_none());
+        let (s, k) = nearest_contact(body, &straight, false, 20.0, ahead.into_iter()).unwrap();
+        assert_relative_eq!(s, 6.0, epsilon = 1e-6);
+        assert_eq!(k, 1);
+        // Not within the reach.
+        assert!(nearest_contact(body, &straight, false, 5.0, ahead.into_iter()).is_none());
+        // Turning hard left passes well away.
+        let left = DrivenPath::arc(1.0 / 8.0);
+        assert!(nearest_contact(body, &left, false, 20.0, ahead.into_iter()).is_none());
         // Backing up does not meet what is ahead, and meets what is behind.
-        assert!(nearest_contact(body, 0.0, true, 20.0, 3, ahead.iter().copied()).is_none());
+        assert!(nearest_contact(body, &straight, true, 20.0, ahead.into_iter()).is_none());
         let behind = ahead.iter().map(|p| Point2::new(-p.x, p.y));
-        let (s, _) = nearest_contact(body, 0.0, true, 20.0, 3, behind).unwrap();
+        let (s, _) = nearest_contact(body, &straight, true, 20.0, behind).unwrap();
         // The rear (0.6 m) reaches 10 m after 9.4.
-        assert_relative_eq!(s, 9.6, epsilon = 1e-6);
+        assert_relative_eq!(s, 9.4, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn at_speed_the_path_is_the_arc_reached_through_latency_and_steering_rate() {
+        let vehicle = VehicleConfig::default();
+        let body = vehicle.footprint();
+        // Driving straight at 8 m/s, commanded hard left: 0.25 s latency
+        // (2 m) straight on, then the curvature ramps at 0.15/s, 0.019/m.
+        let steering = Steering {
+            speed_mps: 8.0,
+            curvature: 0.0,
+            commanded_curvature: 0.0,
+        };
+        let k = vehicle.max_curvature();
+        let path = DrivenPath::new(&steering, &SteeringResponse::of(&vehicle), k);
+        assert!(path.settled_at() > 5.0, "{}", path.settled_at());
+        // A point 8 m ahead, 1.3 m left, that the arc taken at once would
+        // pass left of (its inner side), is met by the path driven.
+        let point = [Point2::new(8.0, 1.3)];
+        assert!(
+            nearest_contact(body, &DrivenPath::arc(k), false, 20.0, point.into_iter()).is_none()
+        );
+        let (s, _) = nearest_contact(body, &path, false, 20.0, point.into_iter()).unwrap();
+        assert!((3.0..6.0).contains(&s), "{s}");
     }
 }

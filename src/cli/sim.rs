@@ -430,7 +430,7 @@ fn print_ride_stops_and_recoveries(r: &arcnav::mission::MissionReport) {
             );
             if g.unknown_sensor + g.before_pose + g.malformed + g.forgotten > 0 {
                 println!(
-                    "              not tested: {} of an unknown sensor, {} before any pose, {} malformed; {} returns forgotten (guard.max_points held)",
+                    "              not tested: {} of an unknown sensor, {} before any pose, {} malformed; {} returns forgotten (guard.max_cells held)",
                     g.unknown_sensor, g.before_pose, g.malformed, g.forgotten
                 );
             }

@@ -57,6 +57,8 @@ pub struct GuardReport {
     /// The guard's own time, mean per image or slice and per check, ms.
     pub observe_ms: f64,
     pub check_ms: f64,
+    /// The guard's time in all, s.
+    pub time_s: f64,
 }
 
 impl GuardReport {
@@ -224,6 +226,7 @@ impl GuardWatch {
             forgotten,
             observe_ms: mean(self.observe_s, self.observed),
             check_ms: mean(self.check_s, self.checks),
+            time_s: self.observe_s + self.check_s,
             ..self.report.clone()
         }
     }

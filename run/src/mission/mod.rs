@@ -321,15 +321,27 @@ pub fn run_mission(
                 speed_mps: state.speed_mps,
             });
         }
-        if let Some(guard) = guard.as_mut() {
-            guard.observe(
-                &step.pose,
-                step.slices.iter().map(|(_, _, slice)| slice),
-                step.images.iter().map(|(_, image)| image),
-            );
+        // The guard takes the tick's images beside the pipeline, on a
+        // thread of its own: it shares nothing with it.
+        match guard.as_mut() {
+            Some(guard) if !(step.images.is_empty() && step.slices.is_empty()) => {
+                let pose = step.pose;
+                let slices: Vec<_> = step.slices.iter().map(|(_, _, s)| s.clone()).collect();
+                let images: Vec<_> = step.images.iter().map(|(_, i)| i.clone()).collect();
+                std::thread::scope(|scope| {
+                    scope.spawn(|| guard.observe(&pose, slices.iter(), images.iter()));
+                    feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
+                    pipeline.run_until(t, &mut sink);
+                });
+            }
+            guard => {
+                if let Some(guard) = guard {
+                    guard.observe(&step.pose, std::iter::empty(), std::iter::empty());
+                }
+                feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
+                pipeline.run_until(t, &mut sink);
+            }
         }
-        feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
-        pipeline.run_until(t, &mut sink);
         let commands = std::mem::take(&mut sink.commands);
         let commands = match guard.as_mut() {
             Some(guard) => {
