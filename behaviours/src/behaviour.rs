@@ -71,19 +71,7 @@ impl VoteContext<'_> {
     /// takes effect. With [`DrivenPath`](arcnav_vehicle::DrivenPath), the
     /// path each arc's command would really put the vehicle on.
     pub fn steering(&self) -> Steering {
-        let (sin, cos) = self.pose.yaw().sin_cos();
-        let forwards = (self.pose.velocity.x * cos + self.pose.velocity.y * sin).max(0.0);
-        let commanded = self.last_command.map(|c| c.curvature);
-        let curvature = if forwards > 0.5 {
-            self.pose.yaw_rate / forwards
-        } else {
-            commanded.unwrap_or(0.0)
-        };
-        Steering {
-            speed_mps: forwards,
-            curvature,
-            commanded_curvature: commanded.unwrap_or(curvature),
-        }
+        Steering::of(self.pose, self.last_command.map(|c| c.curvature))
     }
 }
 

@@ -131,7 +131,7 @@ impl Verdict {
 }
 
 /// What the guard took in and remembered.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct GuardCounts {
     pub images: u64,
     pub slices: u64,
@@ -448,17 +448,7 @@ impl Guard {
         }
         let level = level_frame(&pose.world_from_vehicle);
         let to_level = level.inverse();
-        let (sin, cos) = pose.yaw().sin_cos();
-        let forwards = (pose.velocity.x * cos + pose.velocity.y * sin).max(0.0);
-        let steering = Steering {
-            speed_mps: forwards,
-            curvature: if forwards > 0.5 {
-                pose.yaw_rate / forwards
-            } else {
-                self.in_flight
-            },
-            commanded_curvature: self.in_flight,
-        };
+        let steering = Steering::of(pose, Some(self.in_flight));
         let path = DrivenPath::new(&steering, &self.response, command.curvature);
         let held: Vec<Hazard> = self.hazards(now).copied().collect();
         let found = nearest_contact(

@@ -421,17 +421,25 @@ fn print_ride_stops_and_recoveries(r: &arcnav::mission::MissionReport) {
                 g.slows,
                 g.stopped_s,
                 g.slowed_s,
-                g.standing + g.holes,
-                g.standing,
-                g.holes,
-                g.images,
-                g.slices,
+                g.counts.standing + g.counts.holes,
+                g.counts.standing,
+                g.counts.holes,
+                g.counts.images,
+                g.counts.slices,
                 g.observe_ms
             );
-            if g.unknown_sensor + g.before_pose + g.malformed + g.forgotten > 0 {
+            if g.counts.unknown_sensor
+                + g.counts.before_pose
+                + g.counts.malformed
+                + g.counts.forgotten
+                > 0
+            {
                 println!(
                     "              not tested: {} of an unknown sensor, {} before any pose, {} malformed; {} returns forgotten (guard.max_cells held)",
-                    g.unknown_sensor, g.before_pose, g.malformed, g.forgotten
+                    g.counts.unknown_sensor,
+                    g.counts.before_pose,
+                    g.counts.malformed,
+                    g.counts.forgotten
                 );
             }
             if let Some(e) = g.first.first() {

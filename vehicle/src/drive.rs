@@ -25,6 +25,7 @@
 //! 10 ms at 10 m/s), so the path judged is the path driven.
 
 use crate::arcs::{Arc, ArcPose};
+use crate::frames::Pose;
 use crate::model::VehicleConfig;
 
 /// Longest integration step along a curvature ramp, m.
@@ -40,6 +41,27 @@ pub struct Steering {
     /// Curvature of the command already on its way, 1/m: the vehicle
     /// steers towards it until a new command takes effect.
     pub commanded_curvature: f64,
+}
+
+impl Steering {
+    /// How the vehicle at `pose` steers, its last command's curvature
+    /// `commanded` (if any) on its way: its speed forwards (0 backing up),
+    /// the curvature it drives (yaw rate over speed when it moves faster
+    /// than 0.5 m/s; the command's otherwise) and the command on its way.
+    pub fn of(pose: &Pose, commanded: Option<f64>) -> Self {
+        let (sin, cos) = pose.yaw().sin_cos();
+        let forwards = (pose.velocity.x * cos + pose.velocity.y * sin).max(0.0);
+        let curvature = if forwards > 0.5 {
+            pose.yaw_rate / forwards
+        } else {
+            commanded.unwrap_or(0.0)
+        };
+        Self {
+            speed_mps: forwards,
+            curvature,
+            commanded_curvature: commanded.unwrap_or(curvature),
+        }
+    }
 }
 
 /// How the vehicle's steering answers a command.

@@ -45,15 +45,9 @@ pub struct GuardReport {
     pub by_reason: BTreeMap<String, u64>,
     /// The first interventions.
     pub first: Vec<GuardEvent>,
-    pub images: u64,
-    pub slices: u64,
-    pub returns: u64,
-    pub standing: u64,
-    pub holes: u64,
-    pub forgotten: u64,
-    pub unknown_sensor: u64,
-    pub before_pose: u64,
-    pub malformed: u64,
+    /// What it took in and held.
+    #[serde(flatten)]
+    pub counts: GuardCounts,
     /// The guard's own time, mean per image or slice and per check, ms.
     pub observe_ms: f64,
     pub check_ms: f64,
@@ -202,28 +196,9 @@ impl GuardWatch {
 
     /// What the guard did, for the report.
     pub(crate) fn report(&self) -> GuardReport {
-        let GuardCounts {
-            images,
-            slices,
-            unknown_sensor,
-            before_pose,
-            malformed,
-            returns,
-            standing,
-            holes,
-            forgotten,
-        } = self.guard.counts();
         let mean = |s: f64, n: u64| if n == 0 { 0.0 } else { s * 1e3 / n as f64 };
         GuardReport {
-            images,
-            slices,
-            unknown_sensor,
-            before_pose,
-            malformed,
-            returns,
-            standing,
-            holes,
-            forgotten,
+            counts: self.guard.counts(),
             observe_ms: mean(self.observe_s, self.observed),
             check_ms: mean(self.check_s, self.checks),
             time_s: self.observe_s + self.check_s,

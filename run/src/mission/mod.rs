@@ -323,6 +323,10 @@ pub fn run_mission(
         }
         // The guard takes the tick's images beside the pipeline, on a
         // thread of its own: it shares nothing with it.
+        let mut advance = |step| {
+            feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
+            pipeline.run_until(t, &mut sink);
+        };
         match guard.as_mut() {
             Some(guard) if !(step.images.is_empty() && step.slices.is_empty()) => {
                 let pose = step.pose;
@@ -330,16 +334,14 @@ pub fn run_mission(
                 let images: Vec<_> = step.images.iter().map(|(_, i)| i.clone()).collect();
                 std::thread::scope(|scope| {
                     scope.spawn(|| guard.observe(&pose, slices.iter(), images.iter()));
-                    feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
-                    pipeline.run_until(t, &mut sink);
+                    advance(step);
                 });
             }
             guard => {
                 if let Some(guard) = guard {
                     guard.observe(&step.pose, std::iter::empty(), std::iter::empty());
                 }
-                feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
-                pipeline.run_until(t, &mut sink);
+                advance(step);
             }
         }
         let commands = std::mem::take(&mut sink.commands);
