@@ -9,16 +9,19 @@
 //! under the sensor:
 //!
 //! ```text
-//! standing  if  z − z_k >  step  and  z − z_k >  (d − d_k)·tan(max_slope) + noise   for some k
-//! a hole    if  z_k − z >  step  and  z_k − z >  (d − d_k)·tan(max_slope) + noise   for some k
+//! standing  if  z − z_k >  (d − d_k)·tan(max_slope) + step + noise   for some k
+//! a hole    if  z_k − z >  (d − d_k)·tan(max_slope) + step + noise   for some k
 //! ground    otherwise
 //! ```
 //!
 //! `step` is `vehicle.tolerated_step_m`, `max_slope` is
 //! `vehicle.max_slope_deg` and `noise` is `guard.ground_noise_m`: the
-//! ground rises and falls no more steeply than the vehicle climbs, and
-//! whatever rises or falls from it by more than a step at a steeper rate is
-//! something the wheels cannot take. "For some k", not "from the last
+//! ground rises and falls no more steeply than the vehicle climbs, give or
+//! take a step the wheels take, and whatever rises or falls from it by more
+//! is something they cannot. The step is allowed on top of the slope, not
+//! beside it: real ground is steeper than `max_slope` over a metre here
+//! and there on a hillside the vehicle drives (its attitude follows the
+//! ground over its wheelbase), and a slope test alone there sees holes. "For some k", not "from the last
 //! ground return": the beams landing on the face of a wall, each a few
 //! centimetres above the one before, must not carry the ground up the
 //! wall. Only the lowest `z_k − d_k·tan` and the highest `z_k + d_k·tan`
@@ -210,9 +213,9 @@ impl Profile {
                     .last
                     .filter(|&(d, z, _)| across - d > self.max_gap_m && p.z < z - self.noise_m);
                 column.last = Some((across, p.z, Point3::from(p)));
-                let kind = if above > 0.0 && p.z - low.1 > self.step_m {
+                let kind = if above > self.step_m {
                     HazardKind::Standing
-                } else if below > 0.0 && high.1 - p.z > self.step_m {
+                } else if below > self.step_m {
                     HazardKind::Hole
                 } else {
                     if p.z - across * slope < low.0 {

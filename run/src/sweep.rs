@@ -568,14 +568,12 @@ pub struct Row {
     /// The route behaviour's re-plans (0 without it).
     pub replans: u64,
     pub wall_time_s: f64,
-    /// The guard's stops and slows (0 with no fault), and its own time, s
-    /// (0 with the guard off).
+    /// The guard's stops and slows (0 with no fault; its time is in each
+    /// run's report.json: a table is reproducible, wall time aside).
     #[serde(default)]
     pub guard_stops: u64,
     #[serde(default)]
     pub guard_slows: u64,
-    #[serde(default)]
-    pub guard_time_s: f64,
     /// Why the run could not be done (outcome `error`); empty otherwise.
     #[serde(default)]
     pub error: String,
@@ -609,7 +607,6 @@ impl Row {
             wall_time_s: 0.0,
             guard_stops: 0,
             guard_slows: 0,
-            guard_time_s: 0.0,
             error: error.to_owned(),
         }
     }
@@ -657,7 +654,6 @@ impl Row {
             wall_time_s: r.wall_time_s,
             guard_stops: r.guard.as_ref().map_or(0, |g| g.stops),
             guard_slows: r.guard.as_ref().map_or(0, |g| g.slows),
-            guard_time_s: r.guard.as_ref().map_or(0.0, |g| g.time_s),
             error: String::new(),
         }
     }
@@ -679,9 +675,8 @@ pub struct SettingSummary {
     pub collisions: usize,
     pub mean_distance_m: f64,
     /// The guard's stops and slows in all (0 with no fault in the
-    /// pipeline), and its share of the runs' wall time.
+    /// pipeline).
     pub guard_interventions: u64,
-    pub guard_time_share: f64,
 }
 
 /// The summary of each setting that has rows.
@@ -708,11 +703,6 @@ pub fn summarise(plan: &PlanIdentity, rows: &[Row]) -> Vec<SettingSummary> {
                 collisions: of.iter().map(|r| r.collisions).sum(),
                 mean_distance_m: of.iter().map(|r| r.distance_m).sum::<f64>() / n,
                 guard_interventions: of.iter().map(|r| r.guard_stops + r.guard_slows).sum(),
-                guard_time_share: {
-                    let wall: f64 = of.iter().map(|r| r.wall_time_s).sum();
-                    let guard: f64 = of.iter().map(|r| r.guard_time_s).sum();
-                    if wall > 0.0 { guard / wall } else { 0.0 }
-                },
             })
         })
         .collect()
@@ -747,7 +737,7 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
     out.push_str(
         ",outcome,success,collisions,collision_cause,waypoints_reached,waypoints,distance_m,\
          duration_s,average_speed_mps,closest_approach_m,closest_approach_at_s,speed_bound_mps,\
-         stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,guard_time_s,error\n",
+         stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,error\n",
     );
     for r in rows {
         let mut line = vec![r.run.to_string(), field(&r.world)];
@@ -773,7 +763,6 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
             number(r.wall_time_s),
             r.guard_stops.to_string(),
             r.guard_slows.to_string(),
-            number(r.guard_time_s),
             field(&r.error),
         ]);
         out.push_str(&line.join(","));
@@ -791,7 +780,7 @@ pub fn summary_csv(plan: &PlanIdentity, summary: &[SettingSummary]) -> String {
     }
     out.push_str(
         ",runs,successes,success_rate,mean_speed_mps,worst_closest_approach_m,collisions,\
-         mean_distance_m,guard_interventions,guard_time_share\n",
+         mean_distance_m,guard_interventions\n",
     );
     for s in summary {
         let mut line = vec![s.setting.to_string()];
@@ -805,7 +794,6 @@ pub fn summary_csv(plan: &PlanIdentity, summary: &[SettingSummary]) -> String {
             s.collisions.to_string(),
             number(s.mean_distance_m),
             s.guard_interventions.to_string(),
-            number(s.guard_time_share),
         ]);
         out.push_str(&line.join(","));
         out.push('\n');
@@ -1134,7 +1122,6 @@ mod tests {
             wall_time_s: 3.0,
             guard_stops: 0,
             guard_slows: 0,
-            guard_time_s: 0.01,
             error: String::new(),
         };
         let mut log = RowLog::append(&dir).unwrap();
