@@ -33,22 +33,35 @@
 //! far wall of a hole whose edge is `R` out at most `w·H/R` down over the
 //! hole's width `w`, so within `R < H / tan(max_slope)` (4.7 m from the
 //! ERIM 2.2 m up, 5.1 m from a lidar 2.4 m up, at 25°). Farther, what the
-//! column shows of a hole is its shadow and its far wall: a gap in the
-//! returns longer than the wheels bridge (`max_gap_m`, the
-//! `2·sqrt(2·r·step − step²)` of a wheel of radius `r` rolling over a
-//! step), the returns beyond it lower than the one before it, and then,
-//! within `max_gap_m` of the gap's far side, a return standing above them
-//! (the wall rising out of the hole to its far lip). That gap's near return
-//! is a hole's near edge:
+//! column shows of a hole is its shadow and its far wall: a stretch of
+//! ground the rays pass over without meeting it, longer than the wheels
+//! bridge (`max_gap_m`, the `2·sqrt(2·r·step − step²)` of a wheel of
+//! radius `r` rolling over a step), and then, within `max_gap_m` of the
+//! shadow's far side, a return standing above the ones beyond it (the wall
+//! rising out of the hole to its far lip). The shadow is not the gap
+//! between two returns: far out the beams land farther apart than the
+//! wheels bridge on any ground (1.8 m at 22 m from 2 m up, beams 0.25°
+//! apart), and downhill farther still. It is how far short of the return
+//! beyond the gap, at `(d_{k+1}, z_{k+1})`, the ray to it would have met the
+//! ground going on from the ground return `(d_k, z_k)` before the gap at
+//! the column's grade `g` (its rise per m over the last `max_gap_m` of
+//! ground, within ±tan(max_slope)); from a sensor at height `z_s`, the ray
+//! comes down `t = (z_s − z_{k+1}) / d_{k+1}` per m and meets that ground at
+//! `(z_s − z_k + g·d_k) / (t + g)`:
 //!
 //! ```text
-//! hole edge at k  if  d_{k+1} − d_k > max_gap,  z_{k+1} < z_k − noise,  and some j > k with
+//! hole edge at k  if  d_{k+1} − (z_s − z_k + g·d_k) / (t + g) > max_gap,
+//!                     z_{k+1} < z_k + g·(d_{k+1} − d_k) − noise,  t + g > 0,  and some j > k with
 //!                     d_j ≤ d_{k+1} + max_gap is standing (all of k+1 … j−1 ground)
 //! ```
 //!
-//! A crest the ground falls away behind gently leaves a gap too, but no
-//! wall rises beyond it; a dropout leaves a gap with the ground beyond at
-//! the same height. Holes whose far wall is out of the beams' reach are
+//! On level ground (`g = 0`) the shadow is `d_{k+1}·(z_k − z_{k+1}) / (z_s −
+//! z_{k+1})`, the hole's width `w` for a far wall seen `w·H/R` down. Only a
+//! ground return starts a shadow: the gap behind something standing is its
+//! own shadow, not a hole's. A crest the ground falls away behind gently
+//! leaves a shadow too, but no wall rises beyond it; a dropout leaves a gap
+//! with the ground beyond where the grade puts it. Holes whose far wall is
+//! out of the beams' reach are
 //! perception's to find over several frames.
 
 use arcnav_perception::BeamTable;
@@ -132,10 +145,14 @@ struct Column {
     /// highest.
     low: (f64, f64),
     high: (f64, f64),
-    /// The last return (d, z, point), and a hole's near edge waiting for
+    /// The last return (d, z, point) if it was ground, and a hole's near edge waiting for
     /// its far wall (the point, the gap's far side d).
     last: Option<(f64, f64, Point3<f64>)>,
     edge: Option<(Point3<f64>, f64)>,
+    /// The ground's grade (rise per m, within ±tan(max_slope)) over the
+    /// last `max_gap_m` or more of ground, and the return it ends at (d, z).
+    grade: f64,
+    anchor: (f64, f64),
 }
 
 impl Column {
@@ -146,6 +163,8 @@ impl Column {
             high: (z, z),
             last: None,
             edge: None,
+            grade: 0.0,
+            anchor: (0.0, z),
         }
     }
 }
@@ -164,10 +183,16 @@ impl Profile {
         let level_from_vehicle = level.inverse() * returns.world_from_vehicle;
         let level_from_sensor = level_from_vehicle * returns.vehicle_from_sensor;
         let sensor = level_from_sensor.translation.vector;
-        // The ground under the sensor: the vehicle frame's ground plane
-        // (z = 0, the wheels' contact) below the mount.
-        let mount = returns.vehicle_from_sensor.translation.vector;
-        let under = level_from_vehicle * Point3::new(mount.x, mount.y, 0.0);
+        // The ground under the sensor: where the vertical through it meets
+        // the vehicle frame's ground plane (z = 0, the wheels' contact).
+        // Not the plane's point under the mount: on a side slope the
+        // vehicle's roll sets that aside from the sensor, uphill, and a
+        // column running downhill would start too high.
+        let origin = level_from_vehicle.translation.vector;
+        let normal = level_from_vehicle.rotation * Vector3::z();
+        let under_z = origin.z
+            - (normal.x * (sensor.x - origin.x) + normal.y * (sensor.y - origin.y))
+                / normal.z.max(f64::EPSILON);
         // Lowest beam first.
         let mut order: Vec<usize> = (0..rows).collect();
         order.sort_by(|&a, &b| beams.elevation[a].total_cmp(&beams.elevation[b]));
@@ -193,7 +218,7 @@ impl Profile {
             .iter()
             .map(|&az| f64::from(az).sin_cos())
             .collect();
-        let mut state = vec![Column::new(under.z); cols];
+        let mut state = vec![Column::new(under_z); cols];
         for &(row, sin_el, cos_el) in &order {
             let ranges = &returns.range[row * cols..(row + 1) * cols];
             for ((&r, &(sin_az, cos_az)), column) in ranges.iter().zip(&azimuths).zip(&mut state) {
@@ -209,10 +234,16 @@ impl Profile {
                 let (low, high) = (column.low, column.high);
                 let above = p.z - (low.0 + across * slope + self.noise_m);
                 let below = (high.0 - across * slope - self.noise_m) - p.z;
-                let after_gap = column
-                    .last
-                    .filter(|&(d, z, _)| across - d > self.max_gap_m && p.z < z - self.noise_m);
-                column.last = Some((across, p.z, Point3::from(p)));
+                // The shadow: how far short of this return the ray would
+                // have met the ground going on at its grade from the last.
+                let grade = column.grade;
+                let after_gap = column.last.filter(|&(d, z, _)| {
+                    let descent = (sensor.z - p.z) / across + grade;
+                    let drop = z + grade * (across - d) - p.z;
+                    descent > f64::EPSILON
+                        && drop > self.noise_m
+                        && across - (sensor.z - z + grade * d) / descent > self.max_gap_m
+                });
                 let kind = if above > self.step_m {
                     HazardKind::Standing
                 } else if below > self.step_m {
@@ -224,6 +255,12 @@ impl Profile {
                     if p.z + across * slope > high.0 {
                         column.high = (p.z + across * slope, p.z);
                     }
+                    column.last = Some((across, p.z, Point3::from(p)));
+                    let (d0, z0) = column.anchor;
+                    if across - d0 >= self.max_gap_m {
+                        column.grade = ((p.z - z0) / (across - d0)).clamp(-slope, slope);
+                        column.anchor = (across, p.z);
+                    }
                     if let Some((_, _, near)) = after_gap {
                         column.edge = Some((near, across));
                     } else if column
@@ -234,6 +271,8 @@ impl Profile {
                     }
                     continue;
                 };
+                // A gap after a hazard is its shadow, not a hole's.
+                column.last = None;
                 if kind == HazardKind::Standing
                     && let Some((near, _)) = column.edge.take()
                     && near.x * near.x + near.y * near.y <= range2
@@ -398,5 +437,82 @@ mod tests {
             }
         };
         assert!(column(crest, None).is_empty(), "{:?}", column(crest, None));
+    }
+
+    #[test]
+    fn far_beams_spaced_wider_than_the_wheels_bridge_and_a_downhill_are_no_hole() {
+        // 22 m out the beams land 1.8 m apart on level ground: a box there
+        // behind a 6 cm dip leaves no shadow longer than the dip explains.
+        let dip = |x: f64| {
+            if (20.0..22.0).contains(&x) {
+                -0.06
+            } else {
+                0.0
+            }
+        };
+        let found = column(dip, Some((22.0, 0.6)));
+        assert!(found.iter().any(|h| h.kind == HazardKind::Standing));
+        assert!(
+            found.iter().all(|h| h.kind != HazardKind::Hole),
+            "{found:?}"
+        );
+        // Nor does ground going down at 12° to a box: its grade explains
+        // the rays landing far apart.
+        let down = |x: f64| -(x - 8.0).max(0.0) * 12f64.to_radians().tan();
+        let found = column(down, Some((15.0, 0.6)));
+        assert!(found.iter().any(|h| h.kind == HazardKind::Standing));
+        assert!(
+            found.iter().all(|h| h.kind != HazardKind::Hole),
+            "{found:?}"
+        );
+    }
+
+    #[test]
+    fn a_side_slope_the_vehicle_stands_rolled_on_is_ground_all_round() {
+        // Rolled 24° on a plane falling to its right, the sensor 2 m up
+        // stands 0.8 m downhill of the ground under its mount: the columns
+        // running downhill start from the ground under the sensor.
+        let roll = 24f64.to_radians();
+        let world = isometry_from_xyz_rpy([0.0, 0.0, 0.0], roll, 0.0, 0.0);
+        let normal = world.rotation * Vector3::z();
+        let ground = |x: f64, y: f64| -(normal.x * x + normal.y * y) / normal.z;
+        let mount = isometry_from_xyz_rpy([1.0, 0.0, 2.0], 0.0, 0.0, 0.0);
+        let beams = BeamTable {
+            elevation: (0..121).map(|k| (-(k as f32) / 4.0).to_radians()).collect(),
+            azimuth: (0..36).map(|k| (k as f32 * 10.0).to_radians()).collect(),
+        };
+        let sensor = world * mount;
+        let mut range = Vec::new();
+        for &el in &beams.elevation {
+            for &az in &beams.azimuth {
+                let (se, ce) = f64::from(el).sin_cos();
+                let (sa, ca) = f64::from(az).sin_cos();
+                let dir = sensor.rotation * Vector3::new(ce * ca, ce * sa, se);
+                let o = sensor.translation.vector;
+                let hit = (1..12_000)
+                    .map(|k| f64::from(k) * 0.005)
+                    .find(|t| o.z + dir.z * t <= ground(o.x + dir.x * t, o.y + dir.y * t));
+                range.push(hit.map_or(f32::NAN, |t| t as f32));
+            }
+        }
+        let profile = Profile {
+            step_m: 0.2,
+            max_rise_per_m: 25f64.to_radians().tan(),
+            range_m: 30.0,
+            noise_m: 0.05,
+            max_gap_m: Profile::bridged_gap_m(0.4, 0.2),
+        };
+        let mut out = Vec::new();
+        let found = profile.hazards(
+            &Returns {
+                beams: &beams,
+                range: &range,
+                vehicle_from_sensor: &mount,
+                world_from_vehicle: &world,
+            },
+            &mut out,
+        );
+        assert!(found.returns > 2000, "{found:?}");
+        assert!(out.is_empty(), "{found:?}: {:?}", &out[..out.len().min(3)]);
     }
 }
