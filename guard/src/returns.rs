@@ -53,9 +53,13 @@
 //! hole edge at k  if  d_{k+1} − (z_s − z_k + g·d_k) / (t + g) > max_gap,
 //!                     z_{k+1} < z_k + g·(d_{k+1} − d_k) − noise,  t + g > 0,  and some j > k with
 //!                     d_j ≤ d_{k+1} + max_gap is standing (all of k+1 … j−1 ground)
+//!                     and z_j ≤ z_k + g·(d_j − d_k) + noise
 //! ```
 //!
-//! On level ground (`g = 0`) the shadow is `d_{k+1}·(z_k − z_{k+1}) / (z_s −
+//! The last line: a far wall rises out of the hole no higher than the
+//! ground at the near edge's level, so a hole is seen only where it is
+//! deeper than a step below that level; what stands higher stands on the
+//! ground (a tree behind a 7 cm dip 30 m out) and is judged standing. On level ground (`g = 0`) the shadow is `d_{k+1}·(z_k − z_{k+1}) / (z_s −
 //! z_{k+1})`, the hole's width `w` for a far wall seen `w·H/R` down. Only a
 //! ground return starts a shadow: the gap behind something standing is its
 //! own shadow, not a hole's. A crest the ground falls away behind gently
@@ -145,10 +149,11 @@ struct Column {
     /// highest.
     low: (f64, f64),
     high: (f64, f64),
-    /// The last return (d, z, point) if it was ground, and a hole's near edge waiting for
-    /// its far wall (the point, the gap's far side d).
+    /// The last return (d, z, point) if it was ground, and a hole's near
+    /// edge waiting for its far wall (the point, its d, the grade there,
+    /// the shadow's far side d).
     last: Option<(f64, f64, Point3<f64>)>,
-    edge: Option<(Point3<f64>, f64)>,
+    edge: Option<(Point3<f64>, f64, f64, f64)>,
     /// The ground's grade (rise per m, within ±tan(max_slope)) over the
     /// last `max_gap_m` or more of ground, and the return it ends at (d, z).
     grade: f64,
@@ -236,7 +241,7 @@ impl Profile {
                 let below = (high.0 - across * slope - self.noise_m) - p.z;
                 // The shadow: how far short of this return the ray would
                 // have met the ground going on at its grade from the last.
-                let grade = column.grade;
+                let grade = column.grade.min(0.0);
                 let after_gap = column.last.filter(|&(d, z, _)| {
                     let descent = (sensor.z - p.z) / across + grade;
                     let drop = z + grade * (across - d) - p.z;
@@ -261,11 +266,11 @@ impl Profile {
                         column.grade = ((p.z - z0) / (across - d0)).clamp(-slope, slope);
                         column.anchor = (across, p.z);
                     }
-                    if let Some((_, _, near)) = after_gap {
-                        column.edge = Some((near, across));
+                    if let Some((d, _, near)) = after_gap {
+                        column.edge = Some((near, d, grade, across));
                     } else if column
                         .edge
-                        .is_some_and(|(_, far)| across > far + self.max_gap_m)
+                        .is_some_and(|(.., far)| across > far + self.max_gap_m)
                     {
                         column.edge = None;
                     }
@@ -273,8 +278,12 @@ impl Profile {
                 };
                 // A gap after a hazard is its shadow, not a hole's.
                 column.last = None;
+                // The far wall rises out of the hole no higher than the
+                // ground at the near edge's level: what stands above that
+                // stands on the ground, and is judged standing.
                 if kind == HazardKind::Standing
-                    && let Some((near, _)) = column.edge.take()
+                    && let Some((near, d, grade, _)) = column.edge.take()
+                    && p.z <= near.z + grade * (across - d) + self.noise_m
                     && near.x * near.x + near.y * near.y <= range2
                 {
                     found.holes += 1;
