@@ -354,6 +354,18 @@ mod tests {
                 f32::NAN
             })
             .collect();
+        let world = isometry_from_xyz_rpy([0.0, 0.0, 0.0], 0.0, 0.0, 0.0);
+        judge(&beams, &range, &mount, &world).1
+    }
+
+    /// The hazards a vehicle with 0.4 m wheels, a 0.2 m step and a 25°
+    /// slope limit finds in `range`.
+    fn judge(
+        beams: &BeamTable,
+        range: &[f32],
+        mount: &Isometry,
+        world: &Isometry,
+    ) -> (Found, Vec<Hazard>) {
         let profile = Profile {
             step_m: 0.2,
             max_rise_per_m: 25f64.to_radians().tan(),
@@ -361,18 +373,17 @@ mod tests {
             noise_m: 0.05,
             max_gap_m: Profile::bridged_gap_m(0.4, 0.2),
         };
-        let world = isometry_from_xyz_rpy([0.0, 0.0, 0.0], 0.0, 0.0, 0.0);
         let mut out = Vec::new();
-        profile.hazards(
+        let found = profile.hazards(
             &Returns {
-                beams: &beams,
-                range: &range,
-                vehicle_from_sensor: &mount,
-                world_from_vehicle: &world,
+                beams,
+                range,
+                vehicle_from_sensor: mount,
+                world_from_vehicle: world,
             },
             &mut out,
         );
-        out
+        (found, out)
     }
 
     #[test]
@@ -504,23 +515,7 @@ mod tests {
                 range.push(hit.map_or(f32::NAN, |t| t as f32));
             }
         }
-        let profile = Profile {
-            step_m: 0.2,
-            max_rise_per_m: 25f64.to_radians().tan(),
-            range_m: 30.0,
-            noise_m: 0.05,
-            max_gap_m: Profile::bridged_gap_m(0.4, 0.2),
-        };
-        let mut out = Vec::new();
-        let found = profile.hazards(
-            &Returns {
-                beams: &beams,
-                range: &range,
-                vehicle_from_sensor: &mount,
-                world_from_vehicle: &world,
-            },
-            &mut out,
-        );
+        let (found, out) = judge(&beams, &range, &mount, &world);
         assert!(found.returns > 2000, "{found:?}");
         assert!(out.is_empty(), "{found:?}: {:?}", &out[..out.len().min(3)]);
     }
