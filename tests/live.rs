@@ -1643,14 +1643,18 @@ fn mean_heading(log: &Path) -> f64 {
 }
 
 /// `examples/python/heading_hold.py`, run with the reference `lcm` package
-/// beside `arcnav run` and named in `live.external_behaviours`: it gets the
+/// beside `arcnav run` and named in `[behaviours.external]`: it gets the
 /// local map each cycle, its votes reach the arbiter, and with its weight
 /// they pull the decisions towards its heading (60° left of the course);
 /// every other behaviour's votes are as in the lock-step replay without it.
 #[test]
 fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
     let mut config = config(SensorPreset::Erim, true);
-    config.live.external_behaviours = vec!["heading_hold".into()];
+    // Live only (no command): the test starts it beside arcnav run.
+    config.behaviours.insert(
+        arcnav_config::EXTERNAL.into(),
+        toml::Table::from_iter([("heading_hold".to_owned(), toml::Table::new().into())]),
+    );
     config.arbiter.weights.insert("heading_hold".into(), 1.0);
     let Some(net) = Net::erim("python", config) else {
         return;
@@ -1666,7 +1670,7 @@ fn a_behaviour_in_python_beside_arcnav_run_steers_by_its_weight() {
     let json = temp_dir("python-run").join("run.json");
     let builtin_only = {
         let mut c = net.config.clone();
-        c.live.external_behaviours.clear();
+        c.behaviours.remove(arcnav_config::EXTERNAL);
         c.arbiter.weights.remove("heading_hold");
         c
     };

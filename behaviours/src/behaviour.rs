@@ -131,6 +131,21 @@ pub trait Behaviour: Send {
     /// to neutral (0, no veto, no speed). The hot method: allocate nothing.
     fn vote(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes);
 
+    /// Whether its last [`vote`](Self::vote) cast no votes: a behaviour
+    /// in another process that did not answer in time, say. Its votes of
+    /// that cycle are then not counted anywhere, and the arbiter ages its
+    /// earlier ones as if it had not voted (002 §6: DAMN fuses the votes it
+    /// has).
+    fn abstained(&self) -> bool {
+        false
+    }
+
+    /// Why it can no longer vote at all, if it cannot (an external
+    /// program that exited, hung or wrote garbage): it abstains from then on.
+    fn fault(&self) -> Option<&str> {
+        None
+    }
+
     /// Forgets everything carried between cycles. Called when a mission
     /// starts over or the local map was reset.
     fn reset(&mut self) {}

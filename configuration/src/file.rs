@@ -18,7 +18,7 @@ use arcnav_behaviours::Registry;
 use arcnav_guard::GuardConfig;
 use arcnav_localmap::LocalMapConfig;
 use arcnav_perception::{PerceptionConfig, SensorConfig};
-use arcnav_pipeline::{LiveConfig, PipelineConfig};
+use arcnav_pipeline::{ExternalConfig, LiveConfig, PipelineConfig};
 use arcnav_sim::SimConfig;
 
 use arcnav_vehicle::config::toml_location;
@@ -27,6 +27,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::bus::BusConfig;
 use crate::lookahead::section::LookaheadConfig;
+
+/// The table under `[behaviours]` that holds the external behaviours,
+/// `[behaviours.external.NAME]` (no built-in behaviour has this name).
+pub const EXTERNAL: &str = "external";
 
 /// The documented defaults, as shipped in `config/default.toml`.
 pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
@@ -59,7 +63,8 @@ pub struct Config {
     pub guard: GuardConfig,
     /// One table per active behaviour, `[behaviours.NAME]`. The built-in
     /// behaviours are always present (set their weight to 0 to skip them);
-    /// a table in a file changes only the keys it names.
+    /// a table in a file changes only the keys it names. Programs of their
+    /// own are `[behaviours.external.NAME]` ([`ExternalConfig`]).
     #[serde(deserialize_with = "behaviours_with_defaults")]
     pub behaviours: BTreeMap<String, toml::Table>,
     /// Where each key that is not a default came from.
@@ -303,22 +308,77 @@ impl Config {
         self.origins.get(key)
     }
 
-    /// Every name the arbiter's section gives must be a configured behaviour
-    /// (weights may also name `live.external_behaviours`; `required` may
-    /// not: `arcnav sim` and `arcnav replay` run without them).
-    pub(crate) fn arbiter_names_behaviours(&self) -> Result<(), ConfigError> {
+    /// The built-in (and registered) behaviours' tables: `[behaviours.NAME]`
+    /// but `[behaviours.external]`.
+    pub(crate) fn behaviour_tables(&self) -> impl Iterator<Item = (&String, &toml::Table)> {
+        self.behaviours.iter().filter(|(name, _)| *name != EXTERNAL)
+    }
+
+    /// `[behaviours.external.NAME]`, each parsed and checked (keys in
+    /// errors are absolute).
+    pub(crate) fn external_behaviours(
+        &self,
+    ) -> Result<BTreeMap<String, ExternalConfig>, ConfigError> {
+        let Some(tables) = self.behaviours.get(EXTERNAL) else {
+            return Ok(BTreeMap::new());
+        };
+        let mut externals = BTreeMap::new();
+        for (name, table) in tables {
+            let key = format!("behaviours.{EXTERNAL}.{name}");
+            if !ExternalConfig::is_plain_name(name) {
+                return Err(ConfigError::new(
+                    key,
+                    format!(
+                        "{name:?} is not a behaviour name: lower-case letters, digits and _ \
+                         (its votes come on ARC_VOTES_<NAME in upper case>)"
+                    ),
+                ));
+            }
+            if self.behaviours.contains_key(name) {
+                return Err(ConfigError::new(
+                    key,
+                    format!(
+                        "{name:?} is also configured under [behaviours.{name}]: one behaviour, \
+                         one name (rename the external one)"
+                    ),
+                ));
+            }
+            let toml::Value::Table(table) = table else {
+                return Err(ConfigError::new(
+                    key,
+                    "must be a table (`[behaviours.external.NAME]` with `command = [...]`)",
+                ));
+            };
+            let external: ExternalConfig = table
+                .clone()
+                .try_into()
+                .map_err(|e: toml::de::Error| ConfigError::new(key.clone(), e.message()))?;
+            external.validate().map_err(|e| e.within(&key))?;
+            externals.insert(name.clone(), external);
+        }
+        Ok(externals)
+    }
+
+    /// Every name the arbiter's section gives must be a configured
+    /// behaviour, built in or external.
+    pub(crate) fn arbiter_names_behaviours(
+        &self,
+        externals: &BTreeMap<String, ExternalConfig>,
+    ) -> Result<(), ConfigError> {
+        let names = || {
+            self.behaviour_tables()
+                .map(|(name, _)| name)
+                .chain(externals.keys())
+        };
         let known = || {
             let mut known = self
-                .behaviours
-                .keys()
-                .cloned()
+                .behaviour_tables()
+                .map(|(name, _)| name.as_str())
                 .collect::<Vec<_>>()
                 .join(", ");
-            if !self.live.external_behaviours.is_empty() {
-                known.push_str(&format!(
-                    "; external: {}",
-                    self.live.external_behaviours.join(", ")
-                ));
+            if !externals.is_empty() {
+                let external: Vec<&str> = externals.keys().map(String::as_str).collect();
+                known.push_str(&format!("; external: {}", external.join(", ")));
             }
             known
         };
@@ -331,24 +391,23 @@ impl Config {
                 ),
             )
         };
-        if let Some(name) = self.arbiter.weights.keys().find(|name| {
-            !self.behaviours.contains_key(*name) && !self.live.external_behaviours.contains(name)
-        }) {
+        if let Some(name) = self
+            .arbiter
+            .weights
+            .keys()
+            .find(|name| !names().any(|n| n == *name))
+        {
             return Err(unknown(format!("arbiter.weights.{name}"), name));
         }
         if let Some(name) = self
             .arbiter
             .required
             .iter()
-            .find(|name| !self.behaviours.contains_key(*name))
+            .find(|name| !names().any(|n| n == *name))
         {
             return Err(unknown("arbiter.required".into(), name));
         }
-        if self
-            .behaviours
-            .keys()
-            .all(|name| self.arbiter.weight(name) <= 0.0)
-        {
+        if names().all(|name| self.arbiter.weight(name) <= 0.0) {
             return Err(ConfigError::new(
                 "arbiter.weights",
                 "every configured behaviour has weight 0: nothing would vote and the vehicle would never move",
@@ -437,20 +496,6 @@ impl Config {
         self.pipeline.validate().map_err(|e| e.within("pipeline"))?;
         self.live.validate().map_err(|e| e.within("live"))?;
         self.guard.validate().map_err(|e| e.within("guard"))?;
-        if let Some(name) = self
-            .live
-            .external_behaviours
-            .iter()
-            .find(|name| self.behaviours.contains_key(*name))
-        {
-            return Err(ConfigError::new(
-                "live.external_behaviours",
-                format!(
-                    "{name:?} is also configured under [behaviours.{name}]: one behaviour, one \
-                     process (remove one of them)"
-                ),
-            ));
-        }
         self.bus.validate().map_err(|e| e.within("bus"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
         Ok(sensors)

@@ -28,7 +28,9 @@ mod resolved;
 pub mod speed_bound;
 
 pub use bus::{BusAuthConfig, BusConfig};
-pub use file::{Config, ConfigLoadError, DEFAULT_TOML, LoadCounts, Location, Origin, load_counts};
+pub use file::{
+    Config, ConfigLoadError, DEFAULT_TOML, EXTERNAL, LoadCounts, Location, Origin, load_counts,
+};
 pub use lookahead::{Lookahead, LookaheadConfig};
 pub use resolved::{Cruise, Derivation, Resolved};
 pub use speed_bound::SpeedBound;

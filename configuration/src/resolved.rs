@@ -19,8 +19,8 @@ use arcnav_behaviours::{
 use arcnav_localmap::{LocalMapConfig, StaticMap};
 use arcnav_perception::{PerceptionConfig, SensorModel};
 use arcnav_pipeline::{
-    BehaviourSet, DecisionCycle, Delivery, LiveConfig, LocalMapNode, PerceptionNode, Pipeline,
-    PipelineConfig,
+    BehaviourSet, DecisionCycle, Delivery, ExternalConfig, LiveConfig, LocalMapNode,
+    PerceptionNode, Pipeline, PipelineConfig,
 };
 use arcnav_sim::SimConfig;
 use arcnav_vehicle::{ArcSet, ConfigError, VehicleConfig};
@@ -91,6 +91,9 @@ pub struct Resolved {
     pub lookahead: Lookahead,
     pub speed_bound: SpeedBound,
     behaviours: BTreeMap<String, Prepared>,
+    /// `[behaviours.external.NAME]`: behaviours that are programs of their
+    /// own (lock-step executors start them; live, they are on the bus).
+    pub external: BTreeMap<String, ExternalConfig>,
     statics: Option<Arc<StaticMap>>,
     /// The image a `.yaml` occupancy map names, if any.
     occupancy_image: Option<PathBuf>,
@@ -124,8 +127,7 @@ impl Resolved {
                 cruise.mps,
             );
             given
-                .behaviours
-                .iter()
+                .behaviour_tables()
                 .map(|(name, table)| {
                     registry
                         .prepare(name, table, &setup)
@@ -134,7 +136,8 @@ impl Resolved {
                 })
                 .collect::<Result<BTreeMap<_, _>, _>>()?
         };
-        given.arbiter_names_behaviours()?;
+        let external = given.external_behaviours()?;
+        given.arbiter_names_behaviours(&external)?;
         let avoidance = behaviours
             .get(OBSTACLE_AVOIDANCE)
             .and_then(Prepared::config::<ObstacleAvoidanceConfig>)
@@ -188,6 +191,7 @@ impl Resolved {
             lookahead,
             speed_bound,
             behaviours,
+            external,
             statics,
             occupancy_image,
             derived,
@@ -346,11 +350,11 @@ impl Resolved {
     }
 
     /// The behaviours whose votes complete a cycle: every configured one
-    /// with a positive weight.
+    /// (built in or external) with a positive weight.
     pub fn expected_behaviours(&self) -> Vec<String> {
         self.behaviours
             .keys()
-            .chain(&self.live.external_behaviours)
+            .chain(self.external.keys())
             .filter(|name| self.arbiter.weight(name) > 0.0)
             .cloned()
             .collect()

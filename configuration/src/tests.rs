@@ -235,19 +235,26 @@ fn a_weight_or_required_name_that_is_no_configured_behaviour_is_refused() {
 }
 
 #[test]
-fn external_behaviours_are_weighted_and_expected_but_never_required_or_doubled() {
+fn external_behaviours_are_parsed_once_weighted_expected_and_checked() {
     let config = from_toml(
-        "[live]\nexternal_behaviours = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.5\n",
+        "[behaviours.external.heading_hold]\ncommand = [\"python3\", \"hh.py\"]\ntimeout_s = 0.5\n\
+         [arbiter]\nrequired = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.5\n",
         "t",
     )
     .unwrap();
+    let external = &config.external["heading_hold"];
+    assert_eq!(external.command, ["python3", "hh.py"]);
+    assert_eq!(external.timeout_s, 0.5);
+    assert_eq!(external.start_timeout_s, 10.0);
+    // Not a built-in behaviour: the registry never sees its table.
+    assert!(!config.behaviour_names().any(|n| n == "external"));
     assert!(
         config
             .expected_behaviours()
             .contains(&"heading_hold".to_owned())
     );
     let unweighted = from_toml(
-        "[live]\nexternal_behaviours = [\"heading_hold\"]\n[arbiter.weights]\nheading_hold = 0.0\n",
+        "[behaviours.external.heading_hold]\n[arbiter.weights]\nheading_hold = 0.0\n",
         "t",
     )
     .unwrap();
@@ -258,25 +265,41 @@ fn external_behaviours_are_weighted_and_expected_but_never_required_or_doubled()
     );
     for (toml, expect) in [
         (
-            "[live]\nexternal_behaviours = [\"Heading Hold\"]\n",
-            "\"Heading Hold\" is not a behaviour name",
+            "[behaviours.external.\"Heading Hold\"]\n",
+            "`behaviours.external.Heading Hold`: \"Heading Hold\" is not a behaviour name",
         ),
         (
-            "[live]\nexternal_behaviours = [\"x\", \"x\"]\n",
-            "\"x\" is listed twice",
-        ),
-        (
-            "[live]\nexternal_behaviours = [\"route\"]\n",
+            "[behaviours.external.route]\n",
             "\"route\" is also configured under [behaviours.route]",
         ),
         (
-            "[live]\nexternal_behaviours = [\"x\"]\n[arbiter]\nrequired = [\"x\"]\n",
-            "`arbiter.required`: \"x\" is not a configured behaviour (configured: goal_seeking, \
+            "[behaviours.external]\nx = 3\n",
+            "`behaviours.external.x`: must be a table",
+        ),
+        (
+            "[behaviours.external.x]\ncomand = [\"a\"]\n",
+            "`behaviours.external.x`: unknown field `comand`",
+        ),
+        (
+            "[behaviours.external.x]\ntimeout_s = 0.0\n",
+            "`behaviours.external.x.timeout_s`",
+        ),
+        (
+            "[behaviours.external.x]\ncommand = [\"\"]\n",
+            "`behaviours.external.x.command`: starts with an empty program name",
+        ),
+        (
+            "[behaviours.external.x]\n[arbiter]\nrequired = [\"y\"]\n",
+            "`arbiter.required`: \"y\" is not a configured behaviour (configured: goal_seeking, \
              obstacle_avoidance, route; external: x)",
+        ),
+        (
+            "[live]\nexternal_behaviours = [\"x\"]\n",
+            "unknown field `external_behaviours`",
         ),
     ] {
         let msg = parse_error(toml);
-        assert!(msg.contains(expect), "{msg}");
+        assert!(msg.contains(expect), "{toml}: {msg}");
     }
 }
 

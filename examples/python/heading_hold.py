@@ -3,25 +3,26 @@
 
 It votes for the arcs that turn the vehicle towards a compass heading (say,
 "keep going east" across open country between waypoints). Each decision
-cycle `arcnav run` (or `arcnav node localmap`) publishes the local map on
-LOCAL_MAP, with the pose the cycle is expressed in; this script answers on
-ARC_VOTES_HEADING_HOLD with one vote in [-1, 1] per arc, stamped with the
-cycle's time, and the arbiter fuses it with the other behaviours' votes at
-the weight the configuration gives it. Obstacle avoidance still vetoes what
-it must: this behaviour only says where it would like to go.
+cycle it is sent the local map, with the pose the cycle is expressed in; it
+answers with one vote in [-1, 1] per arc, stamped with the cycle's time,
+and the arbiter fuses it with the other behaviours' votes at the weight the
+configuration gives it. Obstacle avoidance still vetoes what it must: this
+behaviour only says where it would like to go.
 
-Set-up (the README's "A behaviour in Python" says more):
+The same script runs in both places (arcnav_behaviour.py hides how): in
+lock-step, started by `arcnav sim`, `sweep` or `replay` from
+
+    [behaviours.external.heading_hold]
+    command = ["python3", "examples/python/heading_hold.py", "--heading-deg", "90"]
+    [arbiter.weights]
+    heading_hold = 0.5
+
+and live beside `arcnav run` with the same configuration, over LCM (LOCAL_MAP
+in, ARC_VOTES_HEADING_HOLD out):
 
     python3 -m pip install lcm                                   # the reference LCM
     lcm-gen -p --ppath examples/python/lcmtypes bus/lcmtypes/*.lcm   # arcnav's types, once
-    PYTHONPATH=examples/python/lcmtypes python3 examples/python/heading_hold.py --heading-deg 90
-
-and in the configuration given to `arcnav run`:
-
-    [live]
-    external_behaviours = ["heading_hold"]
-    [arbiter.weights]
-    heading_hold = 0.5
+    python3 examples/python/heading_hold.py --heading-deg 90
 
 With [bus.auth] on, give it the same key file (--key-file): its votes then
 carry the HMAC-SHA256 trailer bus/src/auth.rs describes.
@@ -38,7 +39,7 @@ import struct
 import sys
 import time
 
-import lcm
+from arcnav_behaviour import Bus, arc_curvatures, behaviour_name
 
 try:
     from arcnav import arc_votes_t, local_map_t
@@ -46,15 +47,8 @@ except ImportError:
     sys.exit(
         "heading_hold: arcnav's LCM types are not importable; generate them with\n"
         "  lcm-gen -p --ppath examples/python/lcmtypes bus/lcmtypes/*.lcm\n"
-        "and put that directory on PYTHONPATH"
+        "(or put a directory holding them on PYTHONPATH)"
     )
-
-
-def arc_curvatures(count, min_radius_m):
-    """The arc set of [arcs] count and min_radius_m, as arcnav builds it."""
-    k_max = 1.0 / min_radius_m
-    half = count - 1
-    return [k_max * (2 * i - half) / half for i in range(count)]
 
 
 def yaw_of(q):
@@ -100,16 +94,18 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--heading-deg", type=float, required=True,
                         help="the heading to hold, degrees counter-clockwise from east (+x)")
-    parser.add_argument("--name", default="heading_hold",
-                        help="behaviour name: votes go to ARC_VOTES_<NAME> (default heading_hold)")
+    parser.add_argument("--name", default=behaviour_name("heading_hold"),
+                        help="behaviour name: votes go to ARC_VOTES_<NAME> (default: the name arcnav "
+                             "gives in lock-step, else heading_hold)")
     parser.add_argument("--lookahead-m", type=float, default=8.0,
                         help="judge each arc's heading after this distance along it (default 8)")
-    parser.add_argument("--arcs", type=int, default=39, help="[arcs] count (default 39)")
+    parser.add_argument("--arcs", type=int, default=39,
+                        help="[arcs] count, live (default 39; in lock-step arcnav gives the arc set)")
     parser.add_argument("--min-radius-m", type=float, default=8.0,
-                        help="[arcs] min_radius_m (default 8)")
+                        help="[arcs] min_radius_m, live (default 8)")
     parser.add_argument("--lcm", default=os.environ.get("LCM_DEFAULT_URL", ""),
                         help="LCM URL (default: $LCM_DEFAULT_URL or LCM's default)")
-    parser.add_argument("--key-file", help="[bus.auth] key file: sign the votes")
+    parser.add_argument("--key-file", help="[bus.auth] key file: sign the votes (live)")
     args = parser.parse_args()
     if args.arcs < 3 or args.arcs % 2 == 0 or args.min_radius_m <= 0 or args.lookahead_m <= 0:
         sys.exit("--arcs must be odd and at least 3; --min-radius-m and --lookahead-m positive")
@@ -117,8 +113,8 @@ def main():
     curvatures = arc_curvatures(args.arcs, args.min_radius_m)
     target = math.radians(args.heading_deg)
     channel = "ARC_VOTES_" + args.name.upper()
-    signer = Signer(args.key_file) if args.key_file else None
-    bus = lcm.LCM(args.lcm) if args.lcm else lcm.LCM()
+    bus = Bus(args.lcm)
+    signer = Signer(args.key_file) if args.key_file and not bus.lockstep else None
     voted = {"cycles": 0, "undecodable": 0}
 
     def on_map(_channel, data):
@@ -158,7 +154,8 @@ def main():
     failures = 0
     while running[0]:
         try:
-            bus.handle_timeout(100)
+            if not bus.handle(100):
+                break  # lock-step: arcnav closed the input
             failures = 0
         except OSError:
             # A signal interrupts the wait (its handler runs right after);

@@ -150,8 +150,8 @@ pub fn run(
                 .reproduce_lockstep
                 .then(|| Duration::from_secs_f64(config.arbiter.vote_timeout_s)),
             awaiting: None,
-            map_out: (!live.external_behaviours.is_empty()).then(|| lcm.publisher()),
-            map_elevation: live.external_elevation,
+            map_out: (!config.external.is_empty()).then(|| lcm.publisher()),
+            map_elevation: config.external.values().any(|e| e.elevation),
         };
         let arbiter_tx = arbiter_tx.clone();
         let period = live.status_period_s;
@@ -174,8 +174,8 @@ pub fn run(
         })?
     };
 
-    let external = (!live.external_behaviours.is_empty()).then(|| External {
-        names: live.external_behaviours.clone(),
+    let external = (!config.external.is_empty()).then(|| External {
+        names: config.external.keys().cloned().collect(),
         arcs: arcs.clone(),
     });
     let routes = IoRoutes {
@@ -222,7 +222,8 @@ struct Voter {
     awaiting: Option<Utime>,
     /// Publishes each cycle's LOCAL_MAP for behaviours in other processes.
     map_out: Option<Publisher>,
-    /// ... with the elevation layer (`live.external_elevation`).
+    /// ... with the elevation layer (an external behaviour asks for it:
+    /// `[behaviours.external.NAME] elevation`).
     map_elevation: bool,
 }
 

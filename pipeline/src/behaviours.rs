@@ -73,7 +73,8 @@ impl BehaviourSet {
         self.vote(now, pose, map)
     }
 
-    /// Every behaviour votes at `now` on `map`.
+    /// Every behaviour votes at `now` on `map`: the votes cast, in voting
+    /// order (a behaviour that [abstained](Behaviour::abstained) is left out).
     pub fn vote(&mut self, now: Utime, pose: &Pose, map: &MapSnapshot) -> &[BehaviourVotes] {
         let ctx = VoteContext {
             utime: now,
@@ -83,12 +84,43 @@ impl BehaviourSet {
             arcs: &self.arcs,
             last_command: self.last_command.as_ref(),
         };
-        for (behaviour, out) in self.behaviours.iter_mut().zip(self.votes.iter_mut()) {
+        // The votes cast fill the buffers from the front: with nobody
+        // abstaining each behaviour keeps its own buffer (and its name).
+        let mut cast = 0;
+        for behaviour in &mut self.behaviours {
+            let out = &mut self.votes[cast];
             out.votes.clear();
             out.utime = now;
             behaviour.vote(&ctx, &mut out.votes);
+            if behaviour.abstained() {
+                continue;
+            }
+            if out.behaviour != behaviour.name() {
+                out.behaviour.clear();
+                out.behaviour.push_str(behaviour.name());
+            }
+            cast += 1;
         }
-        &self.votes
+        &self.votes[..cast]
+    }
+
+    /// Behaviours that can no longer vote, by name, with why.
+    pub fn faults(&self) -> Vec<(&str, &str)> {
+        self.behaviours
+            .iter()
+            .filter_map(|b| b.fault().map(|why| (b.name(), why)))
+            .collect()
+    }
+
+    /// Adds a behaviour, voting after those already in the set (an
+    /// external program's, which executors start themselves).
+    pub fn push(&mut self, behaviour: Box<dyn Behaviour>) {
+        self.votes.push(BehaviourVotes {
+            behaviour: behaviour.name().to_owned(),
+            utime: 0,
+            votes: Votes::new(self.arcs.len()),
+        });
+        self.behaviours.push(behaviour);
     }
 
     /// What each behaviour's last vote rested on, by name, in the vehicle

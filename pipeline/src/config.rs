@@ -102,18 +102,6 @@ pub struct LiveConfig {
     /// a sleep takes much longer than one after another (2-vCPU VM,
     /// 128×2048 at 10 Hz, image arrival to command: median 2.9-3.2 → 2.0-2.5 ms).
     pub perception_busy_poll: bool,
-    /// Behaviours that run in processes of their own (a Python script, a
-    /// program in another language): they take LOCAL_MAP and publish their
-    /// votes on `ARC_VOTES_<NAME>` with `behaviour` = NAME. The arbiter fuses
-    /// them with their weight in `[arbiter.weights]` (and waits for them
-    /// like any other), and `arcnav run` publishes LOCAL_MAP for them.
-    pub external_behaviours: Vec<String>,
-    /// The LOCAL_MAP `arcnav run` publishes for external behaviours
-    /// carries the elevation layer (004 §III) too: some 0.4 MB a cycle
-    /// with the default layer, more than a script decodes ten times a
-    /// second. Off: its elevation square is empty. (`arcnav node localmap`
-    /// always sends it: the built-in behaviours judge attitude on it.)
-    pub external_elevation: bool,
 }
 
 impl Default for LiveConfig {
@@ -127,8 +115,6 @@ impl Default for LiveConfig {
             status_period_s: 10.0,
             queue_capacity: 1024,
             perception_busy_poll: false,
-            external_behaviours: Vec::new(),
-            external_elevation: false,
         }
     }
 }
@@ -146,29 +132,72 @@ impl LiveConfig {
                 format!("is {}, must be 8 to 1000000", self.queue_capacity),
             ));
         }
-        for (i, name) in self.external_behaviours.iter().enumerate() {
-            let plain = !name.is_empty()
-                && name.len() <= 64
-                && name
-                    .bytes()
-                    .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_');
-            if !plain {
-                return Err(ConfigError::new(
-                    "external_behaviours",
-                    format!(
-                        "{name:?} is not a behaviour name: lower-case letters, digits and _ \
-                         (its votes come on ARC_VOTES_<NAME in upper case>)"
-                    ),
-                ));
-            }
-            if self.external_behaviours[..i].contains(name) {
-                return Err(ConfigError::new(
-                    "external_behaviours",
-                    format!("{name:?} is listed twice"),
-                ));
-            }
+        Ok(())
+    }
+}
+
+/// An external behaviour, `[behaviours.external.NAME]`: a program of its
+/// own, in any language, that votes like a built-in behaviour. Live, it
+/// takes LOCAL_MAP on the bus and answers on `ARC_VOTES_<NAME>` (started by
+/// whoever starts the vehicle's processes); `arcnav sim`, `sweep` and
+/// `replay` start `command` themselves and talk to it over its standard
+/// input and output in lock-step, one cycle at a time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ExternalConfig {
+    /// The program and its arguments (relative paths from the directory
+    /// arcnav runs in). Empty: live only (sim, sweep and replay refuse it).
+    pub command: Vec<String>,
+    /// Lock-step: how long a cycle waits for the program's votes, s. A
+    /// program that misses it is stopped and the mission goes on without
+    /// it (counted; a required one stops the vehicle).
+    pub timeout_s: f64,
+    /// Lock-step: how long the first cycle waits (the program starting:
+    /// an interpreter, imports), s.
+    pub start_timeout_s: f64,
+    /// The local map it is sent carries the elevation layer (004 §III):
+    /// some 0.4 MB a cycle with the default layer. Off: its elevation
+    /// square is empty.
+    pub elevation: bool,
+}
+
+impl Default for ExternalConfig {
+    fn default() -> Self {
+        Self {
+            command: Vec::new(),
+            timeout_s: 1.0,
+            start_timeout_s: 10.0,
+            elevation: false,
+        }
+    }
+}
+
+impl ExternalConfig {
+    /// Keys relative to its table.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check::in_range("timeout_s", self.timeout_s, 0.001, 60.0)?;
+        check::in_range("start_timeout_s", self.start_timeout_s, 0.001, 600.0)?;
+        if self
+            .command
+            .first()
+            .is_some_and(|program| program.is_empty())
+        {
+            return Err(ConfigError::new(
+                "command",
+                "starts with an empty program name",
+            ));
         }
         Ok(())
+    }
+
+    /// Whether `name` may name an external behaviour: lower-case letters,
+    /// digits and `_` (its votes come on `ARC_VOTES_<NAME in upper case>`).
+    pub fn is_plain_name(name: &str) -> bool {
+        !name.is_empty()
+            && name.len() <= 64
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_')
     }
 }
 

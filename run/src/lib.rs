@@ -10,12 +10,15 @@
 //!   decisions written to a new log and compared with the recorded ones;
 //! - [`export::export_mcap`]: a log written as MCAP for Foxglove;
 //! - [`sweep`]: many missions over worlds and speeds, one row each;
+//! - [`external`]: behaviours that are programs of their own, started and
+//!   voting in lock-step with the executors above;
 //! - [`detection`]: the detection-rate experiment of the range sensors;
 //! - [`render`]: the pictures of each (map.png, sweep and detection figures).
 
 pub mod detection;
 #[doc(hidden)]
 pub mod export;
+pub mod external;
 pub mod fuzzing;
 pub mod mission;
 pub mod output;

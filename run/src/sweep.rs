@@ -574,6 +574,14 @@ pub struct Row {
     pub guard_stops: u64,
     #[serde(default)]
     pub guard_slows: u64,
+    /// Cycles the external behaviours (`[behaviours.external.NAME]`) voted
+    /// on, summed over them.
+    #[serde(default)]
+    pub external_votes: u64,
+    /// Behaviours that could no longer vote, `NAME: why`, `; `-separated
+    /// (an external program that exited, hung or wrote garbage).
+    #[serde(default)]
+    pub behaviour_faults: String,
     /// Why the run could not be done (outcome `error`); empty otherwise.
     #[serde(default)]
     pub error: String,
@@ -607,6 +615,8 @@ impl Row {
             wall_time_s: 0.0,
             guard_stops: 0,
             guard_slows: 0,
+            external_votes: 0,
+            behaviour_faults: String::new(),
             error: error.to_owned(),
         }
     }
@@ -617,6 +627,7 @@ impl Row {
         setting: usize,
         values: &[String],
         r: &MissionReport,
+        external: &[String],
     ) -> Self {
         Self {
             run,
@@ -654,6 +665,18 @@ impl Row {
             wall_time_s: r.wall_time_s,
             guard_stops: r.guard.as_ref().map_or(0, |g| g.stops),
             guard_slows: r.guard.as_ref().map_or(0, |g| g.slows),
+            external_votes: r
+                .behaviour_counters
+                .iter()
+                .filter(|(name, _)| external.iter().any(|e| e == *name))
+                .filter_map(|(_, c)| c.get("voted"))
+                .sum(),
+            behaviour_faults: r
+                .behaviour_faults
+                .iter()
+                .map(|(name, why)| format!("{name}: {why}"))
+                .collect::<Vec<_>>()
+                .join("; "),
             error: String::new(),
         }
     }
@@ -737,7 +760,8 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
     out.push_str(
         ",outcome,success,collisions,collision_cause,waypoints_reached,waypoints,distance_m,\
          duration_s,average_speed_mps,closest_approach_m,closest_approach_at_s,speed_bound_mps,\
-         stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,error\n",
+         stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,\
+         external_votes,behaviour_faults,error\n",
     );
     for r in rows {
         let mut line = vec![r.run.to_string(), field(&r.world)];
@@ -763,6 +787,8 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
             number(r.wall_time_s),
             r.guard_stops.to_string(),
             r.guard_slows.to_string(),
+            r.external_votes.to_string(),
+            field(&r.behaviour_faults),
             field(&r.error),
         ]);
         out.push_str(&line.join(","));
@@ -1122,6 +1148,8 @@ mod tests {
             wall_time_s: 3.0,
             guard_stops: 0,
             guard_slows: 0,
+            external_votes: 0,
+            behaviour_faults: String::new(),
             error: String::new(),
         };
         let mut log = RowLog::append(&dir).unwrap();

@@ -104,6 +104,17 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             .map(|o| format!(", written to {}", o.display()))
             .unwrap_or_default()
     );
+    for run in &last.external {
+        let counts: Vec<String> = run
+            .counters
+            .iter()
+            .map(|(k, v)| format!("{k} {v}"))
+            .collect();
+        println!("{:<13} {}", run.name, counts.join(", "));
+        if let Some(why) = &run.fault {
+            println!("{:<13} ENDED: {why}", run.name);
+        }
+    }
     let weight_of = |c: &Resolved| {
         let c = c.clone();
         move |name: &str| c.arbiter.weight(name)
@@ -214,6 +225,22 @@ fn print_comparison(c: &arcnav::replay::Comparison, show: usize) {
             (d.a.curvature - d.b.curvature).abs(),
             d.time_s
         );
+    }
+    let mut movers: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
+    for d in &c.differences {
+        *movers
+            .entry(
+                d.moved_by
+                    .as_deref()
+                    .unwrap_or("none (a stop, or votes alike)"),
+            )
+            .or_default() += 1;
+    }
+    if !movers.is_empty() {
+        let mut movers: Vec<_> = movers.into_iter().collect();
+        movers.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(b.0)));
+        let movers: Vec<String> = movers.iter().map(|(b, n)| format!("{b} {n}")).collect();
+        println!("              differences moved by: {}", movers.join(", "));
     }
     for d in c.differences.iter().take(show) {
         let arc =

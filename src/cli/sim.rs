@@ -234,6 +234,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         arcnav::mission::Outcome::Collision => "FAILED: collision",
         arcnav::mission::Outcome::Timeout => "FAILED: time limit",
         arcnav::mission::Outcome::Stuck => "FAILED: stuck",
+        arcnav::mission::Outcome::BehaviourFailed => "FAILED: a required behaviour ended",
     };
     println!("mission       {} on {} with {}", outcome, r.world, r.sensor);
     println!("waypoints     {}/{}", r.waypoints_reached, r.waypoints);
@@ -319,6 +320,9 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
     for (behaviour, counters) in &r.behaviour_counters {
         let counts: Vec<String> = counters.iter().map(|(k, v)| format!("{k} {v}")).collect();
         println!("{:<13} {}", behaviour, counts.join(", "));
+    }
+    for (behaviour, why) in &r.behaviour_faults {
+        println!("{behaviour:<13} ENDED: {why}");
     }
     let t = &r.stage_times;
     println!(

@@ -342,7 +342,17 @@ fn one_run(plan: &Plan, run: usize, beside_others: bool) -> Row {
         },
         &mut |_| {},
     ) {
-        Ok(done) => Row::new(run, &world.label, s, &setting.values, &done.report),
+        Ok(done) => {
+            let external: Vec<String> = setting.config.external.keys().cloned().collect();
+            Row::new(
+                run,
+                &world.label,
+                s,
+                &setting.values,
+                &done.report,
+                &external,
+            )
+        }
         Err(e) => Row::failed(run, &world.label, s, &setting.values, &e.to_string()),
     }
 }

@@ -89,6 +89,8 @@ pub enum MissionError {
     },
     #[error("cannot write a snapshot picture: {0}")]
     Picture(#[from] render::RenderError),
+    #[error(transparent)]
+    External(#[from] crate::external::ExternalError),
 }
 
 /// Receives the pipeline's outputs during a mission.
@@ -269,6 +271,7 @@ pub fn run_mission(
         },
     )?;
     let mut pipeline = config.lockstep()?;
+    crate::external::attach(config, &mut pipeline)?;
     let mut guard = guarded::GuardWatch::new(config, sensors);
     pipeline.time_stages(Instant::now);
     pipeline.set_explain(options.snapshot_every_s.is_some());
@@ -356,6 +359,12 @@ pub fn run_mission(
         }
         if let Some(e) = sink.log.error.take() {
             return Err(e);
+        }
+        if pipeline.behaviours.faults().iter().any(|(name, _)| {
+            config.arbiter.required.iter().any(|r| r == name) && config.arbiter.weight(name) > 0.0
+        }) {
+            outcome = Outcome::BehaviourFailed;
+            break;
         }
         let status = pipeline.behaviours.progress();
         if status.is_some_and(|p| p.complete) {
@@ -491,6 +500,12 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         .into_iter()
         .map(|(name, counters)| (name, counters.into_iter().collect()))
         .collect();
+    let behaviour_faults = pipeline
+        .behaviours
+        .faults()
+        .into_iter()
+        .map(|(name, why)| (name.to_owned(), why.to_owned()))
+        .collect();
     let reached = pipeline.behaviours.progress().map_or(0, |p| p.current);
     let drops = pipeline.perception.drops;
     let average_speed = if duration > 0.0 {
@@ -546,6 +561,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         ride: simulator.ride().report(),
         recovery,
         behaviour_counters,
+        behaviour_faults,
         steering_activity: sink.curvature_change.0 / sink.curvature_change.1.max(1) as f64,
         map_resets: pipeline.cycle.counts().map_resets,
         localmap: *pipeline.cycle.map.map.stats(),

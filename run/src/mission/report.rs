@@ -21,6 +21,9 @@ pub enum Outcome {
     Collision,
     Timeout,
     Stuck,
+    /// A required behaviour can no longer vote (an external program that
+    /// ended): the vehicle would stand for good.
+    BehaviourFailed,
 }
 
 /// Progress, reported about once per simulated second.
@@ -87,6 +90,10 @@ pub struct MissionReport {
     /// Counters behaviours keep (the route planner's plans and re-plans),
     /// by behaviour.
     pub behaviour_counters: BTreeMap<String, BTreeMap<&'static str, u64>>,
+    /// Behaviours that could no longer vote, by name, with why (an
+    /// external program that exited, hung or wrote garbage).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub behaviour_faults: BTreeMap<String, String>,
     /// Mean |change of curvature| between consecutive commands, 1/m: how
     /// much the vehicle weaves.
     pub steering_activity: f64,

@@ -80,6 +80,17 @@ pub struct ReplayResult {
     /// The decision kept for `stop_at_s`.
     pub kept: Option<KeptDecision>,
     pub arcs: ArcSet,
+    /// What each external behaviour did (`[behaviours.external.NAME]`):
+    /// its counters, and why it ended if it did.
+    pub external: Vec<ExternalRun>,
+}
+
+/// What an external behaviour did in a replay.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ExternalRun {
+    pub name: String,
+    pub counters: Vec<(&'static str, u64)>,
+    pub fault: Option<String>,
 }
 
 /// The first decision at or after `stop_at_s`, with what a picture of it
@@ -119,6 +130,8 @@ pub enum ReplayError {
     },
     #[error(transparent)]
     Config(#[from] ConfigError),
+    #[error(transparent)]
+    External(#[from] crate::external::ExternalError),
 }
 
 struct ReplaySink<'a> {
@@ -428,6 +441,7 @@ pub fn replay(
     })?;
     let mut events = TypedEvents::new(InTimeOrder::new(reader, ReorderWindow::default()));
     let mut pipeline = config.lockstep()?;
+    crate::external::attach(config, &mut pipeline)?;
     pipeline.set_explain(options.stop_at_s.is_some());
     let arcs = pipeline.arcs().clone();
     let out = Recorder::create(options.out.as_deref())
@@ -556,5 +570,28 @@ pub fn replay(
         span,
         kept: sink.kept,
         arcs,
+        external: external_runs(config, &pipeline),
     })
+}
+
+/// The external behaviours' counters and faults, in name order.
+fn external_runs(config: &Resolved, pipeline: &arcnav_pipeline::Pipeline) -> Vec<ExternalRun> {
+    let counters = pipeline.behaviours.counters();
+    let faults = pipeline.behaviours.faults();
+    config
+        .external
+        .keys()
+        .map(|name| ExternalRun {
+            name: name.clone(),
+            counters: counters
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, c)| c.clone())
+                .unwrap_or_default(),
+            fault: faults
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, why)| (*why).to_owned()),
+        })
+        .collect()
 }
