@@ -208,9 +208,11 @@ fn generate_struct(out: &mut String, def: &StructDef, fingerprint: u64) {
     if !def.constants.is_empty() {
         let _ = writeln!(out, "impl {name} {{");
         for c in &def.constants {
+            // A literal of the constant's type (`1_i8`, `-2.5_f64`): the
+            // value is a number, as the schema parser checked.
             let _ = writeln!(
                 out,
-                "    pub const {}: {ty} = ({}) as {ty};",
+                "    pub const {}: {ty} = {}_{ty};",
                 c.name,
                 c.value,
                 ty = scalar_type(&c.type_name)

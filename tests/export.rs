@@ -133,6 +133,7 @@ fn an_exported_sim_run_reads_back_in_the_reference_mcap_reader() {
                 expect("/steering_command", count, "arcnav.SteeringCommand");
                 expect("/arcs", count, "foxglove.SceneUpdate");
             }
+            "DECISION" => expect("/decision", count, "arcnav.Decision"),
             "OBSTACLE_CELLS" | "WAYPOINTS" | "LOCAL_MAP" => {
                 expect(
                     &arcnav::export::topic(channel),

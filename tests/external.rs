@@ -76,6 +76,22 @@ fn heading_hold(reference: &LcmReference, heading_deg: f64) -> Vec<String> {
     ]
 }
 
+/// `arcnav sim` on open_field with `config`, into `out`.
+fn sim_open_field(types: &Path, config: &Path, out: &Path) -> (i32, String, String) {
+    arcnav(
+        types,
+        &[
+            "sim",
+            "--world",
+            "open_field",
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    )
+}
+
 fn report(dir: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
 }
@@ -94,9 +110,8 @@ fn mean_heading(log: &Path, from_s: f64) -> f64 {
             continue;
         }
         use arcnav_bus::Message;
-        let q = pose_t::decode(&event.data).unwrap().orientation;
-        let yaw =
-            (2.0 * (q[0] * q[3] + q[1] * q[2])).atan2(1.0 - 2.0 * (q[2] * q[2] + q[3] * q[3]));
+        let pose = pose_t::decode(&event.data).unwrap();
+        let yaw = arcnav_vehicle::Pose::try_from(&pose).unwrap().yaw();
         s += yaw.sin();
         c += yaw.cos();
     }
@@ -122,18 +137,7 @@ fn a_python_behaviour_steers_a_simulated_mission_and_the_run_reproduces() {
     let mut logs = Vec::new();
     for (run, config) in [("a", &with), ("b", &with), ("base", &without)] {
         let out = dir.join(run);
-        let (code, stdout, stderr) = arcnav(
-            types,
-            &[
-                "sim",
-                "--world",
-                "open_field",
-                "--config",
-                config.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ],
-        );
+        let (code, stdout, stderr) = sim_open_field(types, config, &out);
         // A 30 s mission ends at its time limit (exit 1) or off the map.
         assert!(code == 0 || code == 1, "{run}: {code}\n{stdout}\n{stderr}");
         logs.push((out.join("mission.lcm"), stdout, report(&out)));
@@ -227,18 +231,7 @@ fn a_replay_with_the_python_behaviour_names_it_as_what_changed_the_decisions() {
     let plain = dir.join("plain.toml");
     std::fs::write(&plain, "[sim]\ntime_limit_s = 20.0\n").unwrap();
     let recorded = dir.join("recorded");
-    let (code, stdout, stderr) = arcnav(
-        types,
-        &[
-            "sim",
-            "--world",
-            "open_field",
-            "--config",
-            plain.to_str().unwrap(),
-            "--out",
-            recorded.to_str().unwrap(),
-        ],
-    );
+    let (code, stdout, stderr) = sim_open_field(types, &plain, &recorded);
     assert!(code == 0 || code == 1, "{stdout}\n{stderr}");
     let command = heading_hold(reference, 120.0);
     let command: Vec<&str> = command.iter().map(String::as_str).collect();
@@ -291,18 +284,7 @@ fn misbehaving(mode: &str, extra: &str) -> (i32, Value, String, std::time::Durat
     .unwrap();
     let out = dir.join("out");
     let started = std::time::Instant::now();
-    let (code, stdout, stderr) = arcnav(
-        types,
-        &[
-            "sim",
-            "--world",
-            "open_field",
-            "--config",
-            config.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ],
-    );
+    let (code, stdout, stderr) = sim_open_field(types, &config, &out);
     let took = started.elapsed();
     let _keep: &ScratchDir = &dir;
     (code, report(&out), format!("{stdout}\n{stderr}"), took)
@@ -403,18 +385,7 @@ fn an_external_behaviour_without_a_runnable_command_is_refused_up_front() {
     ] {
         let config = dir.join("c.toml");
         std::fs::write(&config, toml).unwrap();
-        let (code, stdout, stderr) = arcnav(
-            &dir,
-            &[
-                "sim",
-                "--world",
-                "open_field",
-                "--config",
-                config.to_str().unwrap(),
-                "--out",
-                dir.join("out").to_str().unwrap(),
-            ],
-        );
+        let (code, stdout, stderr) = sim_open_field(&dir, &config, &dir.join("out"));
         assert_ne!(code, 0, "{stdout}");
         assert!(stderr.contains(expect), "{stderr}");
     }

@@ -22,6 +22,7 @@ use arcnav::mission::{MissionOptions, SIM_EPOCH_US, run_mission};
 use arcnav::replay::{ReplayOptions, replay};
 use arcnav_bus::auth::{AuthPolicy, GroupKey, Signer, TRAILER_LEN};
 use arcnav_bus::codec::Message as _;
+use arcnav_bus::lcmtypes::decision_t;
 use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::channels;
@@ -80,9 +81,28 @@ fn sliced(mut config: Config) -> Config {
 /// for this build of the tests (shared by their processes:
 /// [`arcnav_testkit::shared_file`]).
 fn sim_log_of(config: &Config) -> PathBuf {
-    let key = format!("{:?}-{}", config.sensor.preset, config.sim.slice_lines);
+    sim_log_on("short_course", config)
+}
+
+/// The first `LOG_S` seconds of `world` (an embedded world's name, or a
+/// file under tests/worlds) under `config`, made once for this build of
+/// the tests.
+fn sim_log_on(world: &str, config: &Config) -> PathBuf {
+    let key = format!(
+        "{world}-{:?}-{}",
+        config.sensor.preset, config.sim.slice_lines
+    );
     arcnav_testkit::shared_file(&format!("{key}.lcm"), |path| {
-        let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
+        let world = Arc::new(
+            World::embedded(world)
+                .unwrap_or_else(|| {
+                    World::load(
+                        &arcnav_testkit::workspace_root()
+                            .join(format!("tests/worlds/{world}.toml")),
+                    )
+                })
+                .unwrap(),
+        );
         let options = MissionOptions {
             log: Some(path.to_owned()),
             ..MissionOptions::default()
@@ -767,6 +787,30 @@ fn distributed_nodes_reproduce_the_lockstep_replay_of_streamed_slices() {
     assert_distributed_reproduces(&net);
 }
 
+/// Runs `nodes` (name, arguments) as processes while the log's inputs
+/// play at real time, until the last cycle is decided; what they printed
+/// and the commands heard.
+fn run_nodes(net: &Net, nodes: &[(&str, &[&str])]) -> (String, Received) {
+    let last = last_cycle(&net.log, &net.config);
+    recording_watched(&net.ns, |heard| {
+        let procs: Vec<Proc> = nodes
+            .iter()
+            .map(|(name, args)| net.arcnav(name, args))
+            .collect();
+        procs.iter().for_each(Proc::wait_ready);
+        assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
+        heard.wait_for_cycle(last, Duration::from_secs(10));
+        procs.iter().for_each(|p| p.signal("TERM"));
+        let mut printed = String::new();
+        for p in procs {
+            let (code, out) = p.finish();
+            assert_eq!(code, Some(0));
+            printed.push_str(&out);
+        }
+        printed
+    })
+}
+
 fn assert_distributed_reproduces(net: &Net) {
     let nodes: [(&str, &[&str]); 5] = [
         ("perception", &["node", "perception", "--stats"]),
@@ -778,24 +822,7 @@ fn assert_distributed_reproduces(net: &Net) {
         ("route", &["node", "behaviour", "route", "--stats"]),
         ("arbiter", &["node", "arbiter", "--stats"]),
     ];
-    let last = last_cycle(&net.log, &net.config);
-    let (stats, received) = recording_watched(&net.ns, |heard| {
-        let procs: Vec<Proc> = nodes
-            .iter()
-            .map(|(name, args)| net.arcnav(name, args))
-            .collect();
-        procs.iter().for_each(Proc::wait_ready);
-        assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
-        heard.wait_for_cycle(last, Duration::from_secs(10));
-        procs.iter().for_each(|p| p.signal("TERM"));
-        let mut stats = String::new();
-        for p in procs {
-            let (code, out) = p.finish();
-            assert_eq!(code, Some(0));
-            stats.push_str(&out);
-        }
-        stats
-    });
+    let (stats, received) = run_nodes(net, &nodes);
     eprintln!("{stats}");
     assert_reproduces(
         &format!("distributed ({})", net.log.display()),
@@ -812,6 +839,135 @@ fn assert_distributed_reproduces(net: &Net) {
     ] {
         assert!(stats.contains(node), "no {node} row in:\n{stats}");
     }
+}
+
+/// The `DECISION`s of `log`, by the time of their command.
+fn decisions(log: &Path) -> BTreeMap<Utime, decision_t> {
+    let mut reader = LogReader::open(log).unwrap();
+    let mut out = BTreeMap::new();
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::DECISION {
+            let d = decision_t::decode(&event.data).unwrap();
+            out.insert(d.utime, d);
+        }
+    }
+    out
+}
+
+/// Issue 66: nodes as processes stop before a wall of rocks (a lane too
+/// narrow to turn in, closed ahead: tests/worlds/rock_wall.toml), and the
+/// run's log, as `lcm-logger` records it, says why as the single-process
+/// run's does: each stop's `DECISION` has the same cause, reason and
+/// vetoing behaviour with its cell; `arcnav render` of either log names
+/// them alike.
+#[test]
+fn a_distributed_run_says_why_it_stopped_as_one_process_does() {
+    let Some(net) = Net::setup("why-stopped", config(SensorPreset::Erim, true), |config| {
+        let mut log_config = config.clone();
+        log_config.live.reproduce_lockstep = false;
+        sim_log_on("rock_wall", &log_config)
+    }) else {
+        return;
+    };
+    let single = decisions(&net.log);
+    let (first_stop, expected) = single
+        .iter()
+        .find(|(_, d)| {
+            matches!(
+                d.cause,
+                decision_t::ALL_ARCS_VETOED | decision_t::NO_ACCEPTABLE_ARC
+            )
+        })
+        .expect("the single-process run stops before the wall");
+    assert!(
+        expected.vetoer.iter().any(|v| v == "obstacle_avoidance")
+            && expected.has_cell.iter().any(|&c| c),
+        "{}",
+        expected.reason
+    );
+    let recorded = temp_dir("why-stopped").join("distributed.lcm");
+    let mut logger = KillOnDrop(
+        net.ns
+            .command(net.reference.tool_path("lcm-logger"))
+            .args(["-f", "--flush-interval=50"])
+            .arg(&recorded)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let nodes: [(&str, &[&str]); 5] = [
+        ("perception", &["node", "perception"]),
+        ("localmap", &["node", "localmap"]),
+        (
+            "obstacle_avoidance",
+            &["node", "behaviour", "obstacle_avoidance"],
+        ),
+        ("route", &["node", "behaviour", "route"]),
+        ("arbiter", &["node", "arbiter"]),
+    ];
+    run_nodes(&net, &nodes);
+    Command::new("kill")
+        .args(["-INT", &logger.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(logger.0.wait().unwrap().success());
+    let distributed = decisions(&recorded);
+    let got = distributed
+        .get(first_stop)
+        .unwrap_or_else(|| panic!("no DECISION at the stop's time in {}", recorded.display()));
+    eprintln!(
+        "stop at {:.1} s: single process says {:?}; distributed says {:?}",
+        (first_stop - SIM_EPOCH_US) as f64 * 1e-6,
+        expected.reason,
+        got.reason
+    );
+    assert_eq!(got, expected);
+    // Every stop the single process made, for a cause, the nodes made for
+    // the same one.
+    let stops = single
+        .iter()
+        .filter(|(_, d)| d.cause != decision_t::DRIVE)
+        .filter(|(t, _)| distributed.contains_key(t))
+        .count();
+    let same = single
+        .iter()
+        .filter(|(t, d)| distributed.get(t).is_some_and(|g| g.cause == d.cause))
+        .count();
+    assert!(stops >= 5, "{stops} stops compared");
+    assert!(
+        same * 100 >= distributed.len().min(single.len()) * 95,
+        "{same} agree"
+    );
+    // `arcnav render` of both logs at the stop names them alike.
+    let at = format!("{:.2}", (first_stop - SIM_EPOCH_US) as f64 * 1e-6);
+    let mut logged = Vec::new();
+    for log in [&net.log, &recorded] {
+        let picture = recorded.with_extension(format!("{}.png", logged.len()));
+        let (code, stdout, stderr) = arcnav_testkit::output_of(
+            env!("CARGO_BIN_EXE_arcnav"),
+            &[
+                "render",
+                log.to_str().unwrap(),
+                "--at",
+                &at,
+                "--config",
+                &net.file,
+                "--out",
+                picture.to_str().unwrap(),
+            ],
+        );
+        assert_eq!(code, 0, "{stdout}\n{stderr}");
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with("as logged"))
+            .unwrap_or_else(|| panic!("{stdout}"))
+            .to_owned();
+        assert!(line.contains(&expected.reason), "{line}\n{stdout}");
+        logged.push(line);
+    }
+    assert_eq!(logged[0], logged[1]);
 }
 
 #[test]
@@ -1632,9 +1788,8 @@ fn mean_heading(log: &Path) -> f64 {
     let (mut s, mut c) = (0.0, 0.0);
     while let Some(event) = reader.next_event().unwrap() {
         if event.channel == channels::POSE {
-            let q = pose_t::decode(&event.data).unwrap().orientation;
-            let yaw =
-                (2.0 * (q[0] * q[3] + q[1] * q[2])).atan2(1.0 - 2.0 * (q[2] * q[2] + q[3] * q[3]));
+            let pose = pose_t::decode(&event.data).unwrap();
+            let yaw = arcnav_vehicle::Pose::try_from(&pose).unwrap().yaw();
             s += yaw.sin();
             c += yaw.cos();
         }

@@ -256,6 +256,7 @@ fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
             "ARC_VOTES_GOAL_SEEKING",
             "ARC_VOTES_OBSTACLE_AVOIDANCE",
             "ARC_VOTES_ROUTE",
+            "DECISION",
             "OBSTACLE_CELLS",
             "POSE",
             "RANGE_IMAGE_ERIM",
@@ -263,6 +264,8 @@ fn a_short_mission_completes_and_its_report_log_and_pictures_are_sound() {
             "WAYPOINTS"
         ]
     );
+    // Every command says why (DECISION, at the same times).
+    assert_eq!(times["DECISION"], times["STEERING_COMMAND"]);
     let rate = |channel: &str| {
         let t = &times[channel];
         let gaps: Vec<i64> = t.windows(2).map(|w| w[1] - w[0]).collect();

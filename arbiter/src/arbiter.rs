@@ -36,8 +36,8 @@ pub enum StopReason {
         behaviour: String,
         age_us: Option<Utime>,
     },
-    /// Every arc is vetoed; how many arcs each behaviour vetoed.
-    AllArcsForbidden { vetoes: Vec<(String, usize)> },
+    /// Every arc is vetoed: by whom, how many arcs, and for what.
+    AllArcsForbidden { vetoes: Vec<Vetoer> },
     /// The best fused vote is below `min_acceptable_vote`.
     NoAcceptableArc { best_vote: f32 },
     /// Blocked again after `attempts` recoveries in a row.
@@ -65,10 +65,7 @@ impl std::fmt::Display for StopReason {
                 write!(f, "required behaviour {behaviour} has never voted")
             }
             StopReason::AllArcsForbidden { vetoes } => {
-                let who: Vec<String> = vetoes
-                    .iter()
-                    .map(|(b, n)| format!("{b} vetoed {n}"))
-                    .collect();
+                let who: Vec<String> = vetoes.iter().map(Vetoer::to_string).collect();
                 write!(f, "every arc is forbidden ({})", who.join(", "))
             }
             StopReason::NoAcceptableArc { best_vote } => {
@@ -82,6 +79,74 @@ impl std::fmt::Display for StopReason {
                     f,
                     "stuck: {blocked} after backing up {attempts} times without getting through"
                 )
+            }
+        }
+    }
+}
+
+/// A behaviour's part in a stop for vetoes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Vetoer {
+    pub behaviour: String,
+    /// Arcs it vetoed.
+    pub arcs: usize,
+    /// What is behind its veto of the arc nearest straight ahead, when it
+    /// said: a cell's centre in the vehicle frame of the cycle, m.
+    pub cell: Option<[f32; 2]>,
+}
+
+impl std::fmt::Display for Vetoer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} vetoed {}", self.behaviour, self.arcs)?;
+        if let Some([x, y]) = self.cell {
+            write!(f, ", for the cell at ({x:.1}, {y:.1}) m")?;
+        }
+        Ok(())
+    }
+}
+
+/// Why the last command is what it is, in short: kept for every decision
+/// (what `DECISION` carries on the wire); [`Decision`] is the full record.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reason {
+    /// The fused votes' best arc.
+    Drive,
+    /// A recovery manoeuvre's command: backing up, a forward leg of a
+    /// turn, or standing to steer for the next leg.
+    Manoeuvre { backing: bool, standing: bool },
+    /// Stop with arcs allowed: the best arc's speed limit is 0 (unseen
+    /// ground, cells right ahead), or `asked`: a behaviour asked to stop
+    /// (a mission complete).
+    SpeedLimited { asked: bool },
+    /// Stop, and why; with the behaviours that vetoed arcs in this
+    /// decision, whatever the stop's cause (a stop for no acceptable arc
+    /// among a few left by vetoes names them too).
+    Stop {
+        stop: StopReason,
+        vetoers: Vec<Vetoer>,
+    },
+}
+
+impl std::fmt::Display for Reason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Reason::Drive => write!(f, "driving the best arc"),
+            Reason::Manoeuvre { backing: true, .. } => write!(f, "recovery: backing up"),
+            Reason::Manoeuvre { standing: true, .. } => {
+                write!(f, "recovery: standing to steer for the next leg")
+            }
+            Reason::Manoeuvre { .. } => write!(f, "recovery: a forward leg of a turn"),
+            Reason::SpeedLimited { asked: true } => write!(f, "a behaviour asked to stop"),
+            Reason::SpeedLimited { asked: false } => {
+                write!(f, "arcs are allowed, but the best arc's speed limit is 0")
+            }
+            Reason::Stop { stop, vetoers } => {
+                stop.fmt(f)?;
+                if !matches!(stop, StopReason::AllArcsForbidden { .. }) && !vetoers.is_empty() {
+                    let who: Vec<String> = vetoers.iter().map(Vetoer::to_string).collect();
+                    write!(f, " ({})", who.join("; "))?;
+                }
+                Ok(())
             }
         }
     }
@@ -285,6 +350,7 @@ pub struct Arbiter {
     kernel: Vec<f32>,
     explain: bool,
     decision: Option<Decision>,
+    reason: Reason,
     stats: ArbiterStats,
     recovery: Recovery,
     /// Per arc: the fused vote before vetoes (which way the behaviours
@@ -327,6 +393,10 @@ impl Arbiter {
             kernel,
             explain: false,
             decision: None,
+            reason: Reason::Stop {
+                stop: StopReason::NoVotes,
+                vetoers: Vec::new(),
+            },
             stats: ArbiterStats::default(),
             recovery: Recovery::new(&config.recovery, vehicle),
             preference: vec![0.0; n],
@@ -386,6 +456,11 @@ impl Arbiter {
     /// The record of the last decision, when explaining.
     pub fn decision(&self) -> Option<&Decision> {
         self.decision.as_ref()
+    }
+
+    /// Why the last command is what it is (kept whether explaining or not).
+    pub fn reason(&self) -> &Reason {
+        &self.reason
     }
 
     fn input_index(&mut self, name: &str) -> usize {
@@ -518,6 +593,24 @@ impl Arbiter {
         };
         self.last_command = Some((now, counter));
         self.recovery.sent(now, &command);
+        self.reason = match &outcome {
+            Err(StopReason::AllArcsForbidden { vetoes }) => Reason::Stop {
+                stop: StopReason::AllArcsForbidden {
+                    vetoes: vetoes.clone(),
+                },
+                vetoers: vetoes.clone(),
+            },
+            Err(stop) => Reason::Stop {
+                stop: stop.clone(),
+                vetoers: self.vetoers(now),
+            },
+            Ok((_, limits)) if SpeedTime::manoeuvre(limits) => Reason::Manoeuvre {
+                backing: command.is_reverse(),
+                standing: command.is_stop(),
+            },
+            Ok(_) if command.is_stop() => Reason::SpeedLimited { asked: stop_asked },
+            Ok(_) => Reason::Drive,
+        };
         if self.explain {
             let (stop, limits) = match outcome {
                 Ok((_, limits)) => (None, limits),
@@ -526,6 +619,25 @@ impl Arbiter {
             self.decision = Some(self.explanation(now, command, stop, limits));
         }
         command
+    }
+
+    /// The behaviours whose fresh votes veto arcs at `now`: how many, and
+    /// the cell behind the veto of the arc nearest straight ahead.
+    fn vetoers(&self, now: Utime) -> Vec<Vetoer> {
+        let straight = self.arcs.straight_index();
+        self.used(now)
+            .filter_map(|(input, votes)| {
+                let count = votes.vetoed().iter().filter(|&&v| v).count();
+                let nearest_straight = (0..votes.len())
+                    .filter(|&i| votes.is_vetoed(i))
+                    .min_by_key(|&i| i.abs_diff(straight))?;
+                Some(Vetoer {
+                    behaviour: input.name.clone(),
+                    arcs: count,
+                    cell: votes.causes()[nearest_straight],
+                })
+            })
+            .collect()
     }
 
     /// Per arc, the least clearance, backing up and creeping forwards, the
@@ -640,13 +752,7 @@ impl Arbiter {
         });
         let Some(best) = best else {
             return Err(StopReason::AllArcsForbidden {
-                vetoes: self
-                    .used(now)
-                    .filter_map(|(input, votes)| {
-                        let count = votes.vetoed().iter().filter(|&&v| v).count();
-                        (count > 0).then(|| (input.name.clone(), count))
-                    })
-                    .collect(),
+                vetoes: self.vetoers(now),
             });
         };
         let best_vote = self.smoothed[best];

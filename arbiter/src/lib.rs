@@ -11,7 +11,8 @@ pub mod trail;
 pub mod votes;
 
 pub use arbiter::{
-    Arbiter, ArbiterStats, Decision, InputExplanation, StopReason, StopTime, VoteSizeError,
+    Arbiter, ArbiterStats, Decision, InputExplanation, Reason, StopReason, StopTime, Vetoer,
+    VoteSizeError,
 };
 pub use config::ArbiterConfig;
 pub use recovery::{RecoveryConfig, RecoveryStats};

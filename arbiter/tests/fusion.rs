@@ -1,6 +1,6 @@
 //! DAMN fusion: weights, vetoes, smoothing, staleness, speed, explanations.
 
-use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, StopReason, Votes};
+use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, Reason, StopReason, Vetoer, Votes};
 use arcnav_vehicle::{ArcSet, ArcSetConfig, VehicleConfig};
 
 const SECOND: i64 = 1_000_000;
@@ -174,13 +174,24 @@ fn all_arcs_forbidden_means_stop_with_speed_zero_and_says_who() {
     assert_eq!(
         a.decision().unwrap().stop,
         Some(StopReason::AllArcsForbidden {
-            vetoes: vec![("obstacle_avoidance".into(), 39)]
+            vetoes: vec![Vetoer {
+                behaviour: "obstacle_avoidance".into(),
+                arcs: 39,
+                cell: Some([3.0, 0.0]),
+            }]
         })
     );
     assert_eq!(
         a.decision().unwrap().stop.as_ref().unwrap().to_string(),
-        "every arc is forbidden (obstacle_avoidance vetoed 39)"
+        "every arc is forbidden (obstacle_avoidance vetoed 39, for the cell at (3.0, 0.0) m)"
     );
+    // Kept whether explaining or not, as DECISION carries it.
+    let Reason::Stop { stop, vetoers } = a.reason() else {
+        panic!("{:?}", a.reason());
+    };
+    assert_eq!(Some(stop), a.decision().unwrap().stop.as_ref());
+    assert_eq!(vetoers.len(), 1);
+    assert_eq!(vetoers[0].cell, Some([3.0, 0.0]));
 }
 
 #[test]

@@ -8,8 +8,8 @@ use nalgebra::Vector3;
 
 use crate::codec::{DecodeError, EncodeError, Message, peek_fingerprint};
 use crate::lcmtypes::{
-    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, range_slice_t,
-    steering_command_t, waypoints_t,
+    arc_votes_t, arc_votes_v1_t, decision_t, local_map_t, obstacle_cells_t, pose_t, range_image_t,
+    range_slice_t, steering_command_t, waypoints_t,
 };
 use crate::log::{EventSource, LogStats};
 
@@ -23,6 +23,8 @@ pub mod channels {
     pub const OBSTACLE_CELLS: &str = "OBSTACLE_CELLS";
     pub const STEERING_COMMAND: &str = "STEERING_COMMAND";
     pub const LOCAL_MAP: &str = "LOCAL_MAP";
+    /// Why each STEERING_COMMAND is what it is (`decision_t`).
+    pub const DECISION: &str = "DECISION";
     /// Prefix of each behaviour's vote channel.
     pub const ARC_VOTES_PREFIX: &str = "ARC_VOTES_";
 
@@ -53,6 +55,40 @@ pub enum AnyMessage {
     ObstacleCells(obstacle_cells_t),
     Waypoints(waypoints_t),
     LocalMap(local_map_t),
+    Decision(decision_t),
+}
+
+/// Votes of the older type (before veto causes), read as votes whose
+/// vetoes give no cause.
+impl From<arc_votes_v1_t> for arc_votes_t {
+    fn from(v: arc_votes_v1_t) -> Self {
+        let n = v.votes.len();
+        Self {
+            utime: v.utime,
+            behaviour: v.behaviour,
+            num_arcs: v.num_arcs,
+            curvature: v.curvature,
+            votes: v.votes,
+            vetoed: v.vetoed,
+            has_speed_vote: v.has_speed_vote,
+            speed_vote: v.speed_vote,
+            arc_speed: v.arc_speed,
+            reverse_clear: v.reverse_clear,
+            forward_clear: v.forward_clear,
+            veto_cause: vec![arc_votes_t::NOT_SAID; n],
+            veto_x: vec![0.0; n],
+            veto_y: vec![0.0; n],
+        }
+    }
+}
+
+/// Decodes votes of either type (`arc_votes_t`, or the older
+/// `arc_votes_v1_t` of logs and programs written before veto causes).
+pub fn decode_votes(bytes: &[u8]) -> Result<arc_votes_t, DecodeError> {
+    match peek_fingerprint(bytes) {
+        Some(arc_votes_v1_t::FINGERPRINT) => Ok(arc_votes_v1_t::decode(bytes)?.into()),
+        _ => arc_votes_t::decode(bytes),
+    }
 }
 
 impl AnyMessage {
@@ -69,7 +105,10 @@ impl AnyMessage {
             steering_command_t::FINGERPRINT => {
                 Self::SteeringCommand(steering_command_t::decode(bytes)?)
             }
-            arc_votes_t::FINGERPRINT => Self::ArcVotes(arc_votes_t::decode(bytes)?),
+            arc_votes_t::FINGERPRINT | arc_votes_v1_t::FINGERPRINT => {
+                Self::ArcVotes(decode_votes(bytes)?)
+            }
+            decision_t::FINGERPRINT => Self::Decision(decision_t::decode(bytes)?),
             obstacle_cells_t::FINGERPRINT => Self::ObstacleCells(obstacle_cells_t::decode(bytes)?),
             waypoints_t::FINGERPRINT => Self::Waypoints(waypoints_t::decode(bytes)?),
             local_map_t::FINGERPRINT => Self::LocalMap(local_map_t::decode(bytes)?),
@@ -87,6 +126,7 @@ impl AnyMessage {
             Self::ObstacleCells(m) => m.encode(),
             Self::Waypoints(m) => m.encode(),
             Self::LocalMap(m) => m.encode(),
+            Self::Decision(m) => m.encode(),
         }
     }
 
@@ -101,6 +141,7 @@ impl AnyMessage {
             Self::ObstacleCells(m) => m.utime,
             Self::Waypoints(m) => m.utime,
             Self::LocalMap(m) => m.utime,
+            Self::Decision(m) => m.utime,
         }
     }
 
@@ -127,6 +168,7 @@ impl AnyMessage {
             Self::ObstacleCells(_) => channel == OBSTACLE_CELLS,
             Self::Waypoints(_) => channel == WAYPOINTS,
             Self::LocalMap(_) => channel == LOCAL_MAP,
+            Self::Decision(_) => channel == DECISION,
         }
     }
 
@@ -141,6 +183,7 @@ impl AnyMessage {
             Self::ObstacleCells(_) => obstacle_cells_t::TYPE_NAME,
             Self::Waypoints(_) => waypoints_t::TYPE_NAME,
             Self::LocalMap(_) => local_map_t::TYPE_NAME,
+            Self::Decision(_) => decision_t::TYPE_NAME,
         }
     }
 }
@@ -404,6 +447,38 @@ mod tests {
         assert_eq!(events[1].event_number, 3);
         assert_eq!(typed.stats().unknown["LCM_SELF_TEST"], 1);
         assert_eq!(typed.stats().undecodable["POSE"], 1);
+    }
+
+    #[test]
+    fn votes_written_before_veto_causes_still_decode_as_votes_without_causes() {
+        // arc_votes_t's fingerprint until 2026-12 (pinned: logs and
+        // programs of that time carry it).
+        assert_eq!(arc_votes_v1_t::FINGERPRINT, 0x883c_d606_e2fa_1e13);
+        assert_ne!(arc_votes_t::FINGERPRINT, arc_votes_v1_t::FINGERPRINT);
+        let old = arc_votes_v1_t {
+            utime: 7,
+            behaviour: "heading_hold".into(),
+            num_arcs: 3,
+            curvature: vec![-0.1, 0.0, 0.1],
+            votes: vec![0.5, 1.0, -1.0],
+            vetoed: vec![false, false, true],
+            has_speed_vote: false,
+            speed_vote: 0.0,
+            arc_speed: vec![-1.0; 3],
+            reverse_clear: vec![-1.0; 3],
+            forward_clear: vec![-1.0; 3],
+        };
+        let bytes = old.encode().unwrap();
+        let Some(AnyMessage::ArcVotes(new)) = AnyMessage::decode(&bytes).unwrap() else {
+            panic!("old votes not decoded as votes");
+        };
+        assert_eq!(new.votes, old.votes);
+        assert_eq!(new.vetoed, old.vetoed);
+        assert_eq!(new.veto_cause, vec![arc_votes_t::NOT_SAID; 3]);
+        assert_eq!(decode_votes(&bytes).unwrap(), new);
+        // And the new ones decode as themselves.
+        let again = new.encode().unwrap();
+        assert_eq!(decode_votes(&again).unwrap(), new);
     }
 
     #[test]

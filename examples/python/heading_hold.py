@@ -135,6 +135,9 @@ def main():
         msg.arc_speed = [-1.0] * len(curvatures)      # no speed limit of its own
         msg.reverse_clear = [-1.0] * len(curvatures)  # no opinion on backing up
         msg.forward_clear = [-1.0] * len(curvatures)  # nor on creeping forwards
+        msg.veto_cause = [0] * len(curvatures)        # it vetoes nothing (NOT_SAID)
+        msg.veto_x = [0.0] * len(curvatures)
+        msg.veto_y = [0.0] * len(curvatures)
         payload = msg.encode()
         bus.publish(channel, signer.sign(channel, payload) if signer else payload)
         voted["cycles"] += 1

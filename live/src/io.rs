@@ -183,6 +183,20 @@ pub(crate) fn publish_command(
     ) {
         tracing::error!(%e, "cannot publish the steering command");
     }
+    let hazard;
+    let said = match &decided.why {
+        Why::Watchdog(h) => {
+            hazard = h.to_string();
+            wire::Said::StaleInput(&hazard)
+        }
+        Why::Held => wire::Said::Held,
+        Why::Final => wire::Said::Final,
+        Why::Complete | Why::Deadline { .. } => wire::Said::Arbiter(&decided.reason),
+    };
+    let decision = wire::decision_to_wire(decided.command.utime, said);
+    if let Err(e) = publisher.publish_message(channels::DECISION, &decision) {
+        tracing::error!(%e, "cannot publish the decision");
+    }
     if let Some(tap) = tap {
         let _ = tap.try_send(decided.clone());
     }

@@ -6,7 +6,7 @@
 //! | perception | POSE, RANGE_IMAGE* | OBSTACLE_CELLS |
 //! | localmap | POSE, OBSTACLE_CELLS | LOCAL_MAP (one per cycle) |
 //! | behaviour NAME | LOCAL_MAP, WAYPOINTS, STEERING_COMMAND | ARC_VOTES_NAME |
-//! | arbiter | ARC_VOTES_*, POSE, OBSTACLE_CELLS | STEERING_COMMAND |
+//! | arbiter | ARC_VOTES_*, POSE, OBSTACLE_CELLS | STEERING_COMMAND, DECISION |
 //!
 //! The arbiter decides a cycle when every behaviour with a positive weight
 //! has voted for it, or `live.decision_deadline_s` after the first vote;

@@ -4,7 +4,7 @@
 
 use std::collections::VecDeque;
 
-use arcnav_arbiter::{Arbiter, BehaviourVotes, VoteSizeError};
+use arcnav_arbiter::{Arbiter, BehaviourVotes, Reason, VoteSizeError};
 use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{SteeringCommand, Utime};
 use serde::Serialize;
@@ -72,6 +72,9 @@ pub enum Why {
 pub struct Decided {
     pub command: SteeringCommand,
     pub why: Why,
+    /// The arbiter's reason for it (its last decision's, for a command
+    /// the watchdog, a hold or the shutdown published instead).
+    pub reason: Reason,
 }
 
 /// The arbiter node of a live run: the DAMN [`Arbiter`] with what live
@@ -467,7 +470,11 @@ impl ArbiterNode {
         if command.is_stop() {
             self.counts.stops += 1;
         }
-        Decided { command, why }
+        Decided {
+            command,
+            why,
+            reason: self.arbiter.reason().clone(),
+        }
     }
 }
 

@@ -10,7 +10,7 @@
 
 use std::time::Instant;
 
-use arcnav_arbiter::{Arbiter, BehaviourVotes, Decision};
+use arcnav_arbiter::{Arbiter, BehaviourVotes, Decision, Reason};
 use arcnav_behaviours::{Mission, Overlay};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::{ObstacleReport, RangeImage, RangeSlice};
@@ -61,11 +61,13 @@ pub trait Sink {
     /// What the behaviours' votes of the cycle at `at` rested on
     /// ([`arcnav_behaviours::Behaviour::overlay`]), before its command.
     fn on_overlays(&mut self, _at: Utime, _overlays: Vec<(String, Overlay)>) {}
-    /// The arbiter decided at `at` (with its explanation when explaining).
+    /// The arbiter decided at `at`, for `reason` (with its full
+    /// explanation when explaining).
     fn on_command(
         &mut self,
         _at: Utime,
         _command: &SteeringCommand,
+        _reason: &Reason,
         _decision: Option<&Decision>,
         _map: &MapSnapshot,
     ) {
@@ -86,6 +88,7 @@ impl Sink for Commands {
         &mut self,
         _: Utime,
         command: &SteeringCommand,
+        _: &Reason,
         _: Option<&Decision>,
         _: &MapSnapshot,
     ) {
@@ -289,7 +292,13 @@ impl Pipeline {
             }
             self.behaviours.on_command(&command);
             self.commands += 1;
-            sink.on_command(cycle.utime, &command, self.arbiter.decision(), &cycle.map);
+            sink.on_command(
+                cycle.utime,
+                &command,
+                self.arbiter.reason(),
+                self.arbiter.decision(),
+                &cycle.map,
+            );
         }
         self.cycles = cycles;
     }

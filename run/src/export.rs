@@ -24,7 +24,7 @@ use std::sync::Arc;
 
 use arcnav_arbiter::Arbiter;
 use arcnav_bus::lcmtypes::{
-    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, steering_command_t, waypoints_t,
+    arc_votes_t, decision_t, local_map_t, obstacle_cells_t, pose_t, steering_command_t, waypoints_t,
 };
 use arcnav_bus::log::LogReader;
 use arcnav_bus::messages::{AnyMessage, channels};
@@ -375,6 +375,30 @@ impl Topics {
         true
     }
 
+    /// Why a command is what it is (`/decision`, from `DECISION`).
+    fn decision_json(&mut self, msg: &decision_t, time: PartialMetadata) -> bool {
+        let vetoers: Vec<serde_json::Value> = (0..msg.vetoer.len())
+            .map(|i| {
+                serde_json::json!({
+                    "behaviour": msg.vetoer[i],
+                    "arcs": msg.vetoed_arcs[i],
+                    "cell": msg.has_cell[i].then(|| [msg.cell_x[i], msg.cell_y[i]]),
+                })
+            })
+            .collect();
+        let json = serde_json::json!({
+            "utime": msg.utime,
+            "cause": msg.cause,
+            "reason": msg.reason,
+            "vetoers": vetoers,
+        });
+        let Some(channel) = self.json("/decision", "arcnav.Decision", DECISION_SCHEMA) else {
+            return false;
+        };
+        channel.log_with_meta(json.to_string().as_bytes(), time);
+        true
+    }
+
     /// The arcs by their fused vote, the commanded one marked (`/arcs`).
     fn arcs(
         &mut self,
@@ -395,6 +419,8 @@ impl Topics {
 
 const VOTES_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"behaviour":{"type":"string"},"curvature":{"type":"array","items":{"type":"number"}},"votes":{"type":"array","items":{"type":"number"}},"vetoed":{"type":"array","items":{"type":"boolean"}},"speed_vote":{"type":["number","null"]}}}"#;
 const COMMAND_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"curvature":{"type":"number"},"speed_mps":{"type":"number"},"arc_index":{"type":"integer"},"vote":{"type":"number"}}}"#;
+
+const DECISION_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"cause":{"type":"integer"},"reason":{"type":"string"},"vetoers":{"type":"array","items":{"type":"object","properties":{"behaviour":{"type":"string"},"arcs":{"type":"integer"},"cell":{"type":["array","null"],"items":{"type":"number"}}}}}}}"#;
 
 /// Writes `log` as MCAP to `out`; the arc set and the fused votes follow
 /// `config`.
@@ -522,6 +548,10 @@ pub fn export_mcap(
                     false => refused_topics += 1,
                 }
             }
+            AnyMessage::Decision(msg) => match topics.decision_json(&msg, time) {
+                true => wrote("/decision"),
+                false => refused_topics += 1,
+            },
             AnyMessage::SteeringCommand(msg) => {
                 match topics.command_json(&msg, time) {
                     true => wrote("/steering_command"),

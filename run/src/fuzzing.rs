@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use arcnav_bus::codec::Message;
 use arcnav_bus::lcmtypes::{
-    arc_votes_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, range_slice_t,
+    decision_t, local_map_t, obstacle_cells_t, pose_t, range_image_t, range_slice_t,
     steering_command_t, waypoints_t,
 };
 use arcnav_bus::log::{InTimeOrder, LogReader, ReorderWindow};
@@ -56,13 +56,15 @@ pub fn lcm_messages(data: &[u8]) {
                 let _ = arcnav_vehicle::SteeringCommand::from(&m);
             }
             AnyMessage::ArcVotes(_) => {}
+            AnyMessage::Decision(m) => drop(arcnav_wire::decision_from_wire(&m)),
         }
     }
     let _ = pose_t::decode(data);
     let _ = range_image_t::decode(data);
     let _ = range_slice_t::decode(data);
     let _ = steering_command_t::decode(data);
-    let _ = arc_votes_t::decode(data);
+    let _ = arcnav_bus::messages::decode_votes(data);
+    let _ = decision_t::decode(data);
     let _ = obstacle_cells_t::decode(data);
     let _ = waypoints_t::decode(data);
     let _ = local_map_t::decode(data);

@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use arcnav_arbiter::BehaviourVotes;
+use arcnav_arbiter::{BehaviourVotes, Reason};
 use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::log::{LogWriteError, LogWriter};
 use arcnav_bus::messages::channels;
@@ -93,11 +93,17 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
     }
 
     /// Writes the arbiter's command on STEERING_COMMAND.
-    pub fn command(&mut self, at: Utime, command: &SteeringCommand) {
+    /// Writes the command (STEERING_COMMAND) and why (DECISION).
+    pub fn command(&mut self, at: Utime, command: &SteeringCommand, reason: &Reason) {
         self.message(
             at,
             channels::STEERING_COMMAND,
             &steering_command_t::from(command),
+        );
+        self.message(
+            at,
+            channels::DECISION,
+            &wire::decision_to_wire(command.utime, wire::Said::Arbiter(reason)),
         );
     }
 

@@ -44,7 +44,10 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         ..ReplayOptions::default()
     };
     let result = run_replay(&args.log, &config, &options, &mut |_| {})?;
-    let origin = result.span.map_or(0, |s| s.0);
+    let origin = result
+        .clock_origin
+        .or(result.span.map(|s| s.0))
+        .unwrap_or(0);
     let log = &result.problems.log;
     anyhow::ensure!(
         log.events > 0,
@@ -78,6 +81,17 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         (kept.at - origin) as f64 * 1e-6,
         out.display()
     );
+    println!("redone        {}", kept.reason);
+    // What the run that wrote the log said of the same decision (DECISION;
+    // a distributed run's arbiter node publishes it), if it logged it.
+    match result
+        .recorded_reasons
+        .iter()
+        .find(|((_, utime), _)| *utime == kept.at)
+    {
+        Some((_, logged)) => println!("as logged     {}", logged.reason),
+        None => println!("as logged     (no DECISION at this time in the log)"),
+    }
     Ok(ExitCode::SUCCESS)
 }
 

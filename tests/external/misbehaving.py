@@ -39,6 +39,9 @@ def votes(utime, curvatures):
     msg.arc_speed = [-1.0] * len(curvatures)
     msg.reverse_clear = [-1.0] * len(curvatures)
     msg.forward_clear = [-1.0] * len(curvatures)
+    msg.veto_cause = [0] * len(curvatures)
+    msg.veto_x = [0.0] * len(curvatures)
+    msg.veto_y = [0.0] * len(curvatures)
     return msg.encode()
 
 

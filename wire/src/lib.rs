@@ -2,11 +2,11 @@
 //! (`bus/lcmtypes/*.lcm`). Incoming messages are checked: a message that does
 //! not describe a valid value is an error, never a panic.
 
-use arcnav_arbiter::{BehaviourVotes, Votes};
+use arcnav_arbiter::{BehaviourVotes, Reason, StopReason, Vetoer, Votes};
 use arcnav_behaviours::{Mission, Waypoint};
 use arcnav_bus::lcmtypes::{
-    arc_votes_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t, range_image_t,
-    range_slice_t, waypoints_t,
+    arc_votes_t, decision_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t,
+    range_image_t, range_slice_t, waypoints_t,
 };
 use arcnav_localmap::{ElevationGrid, MapSnapshot, Patch, SeenGround};
 use arcnav_perception::{
@@ -333,6 +333,7 @@ pub fn obstacles_from_wire(msg: obstacle_cells_t) -> Result<ObstacleReport, Wire
 /// A behaviour's votes for the wire.
 pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
     let n = votes.votes.len();
+    let causes = votes.votes.causes();
     arc_votes_t {
         utime: votes.utime,
         behaviour: votes.behaviour.clone(),
@@ -350,7 +351,125 @@ pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
             .collect(),
         reverse_clear: votes.votes.reverse_clearances().to_vec(),
         forward_clear: votes.votes.forward_clearances().to_vec(),
+        veto_cause: causes
+            .iter()
+            .map(|c| {
+                if c.is_some() {
+                    arc_votes_t::CELL
+                } else {
+                    arc_votes_t::NOT_SAID
+                }
+            })
+            .collect(),
+        veto_x: causes.iter().map(|c| c.map_or(0.0, |c| c[0])).collect(),
+        veto_y: causes.iter().map(|c| c.map_or(0.0, |c| c[1])).collect(),
     }
+}
+
+/// What `DECISION` says of a command besides the arbiter's reason.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Said<'a> {
+    /// The arbiter decided it, for this reason.
+    Arbiter(&'a Reason),
+    /// The watchdog stopped: an input is stale (the hazard in words).
+    StaleInput(&'a str),
+    /// The last command again: this cycle's decision is late.
+    Held,
+    /// The executor is shutting down.
+    Final,
+    /// The guard stopped or slowed the pipeline's command (why, in words).
+    Guard(&'a str),
+}
+
+/// Why the command at `utime` is what it is, for the wire.
+pub fn decision_to_wire(utime: Utime, said: Said<'_>) -> decision_t {
+    let (cause, reason, vetoers): (i8, String, &[Vetoer]) = match said {
+        Said::Arbiter(reason) => {
+            let cause = match reason {
+                Reason::Drive => decision_t::DRIVE,
+                Reason::Manoeuvre { .. } => decision_t::MANOEUVRE,
+                Reason::SpeedLimited { .. } => decision_t::SPEED_LIMITED,
+                Reason::Stop { stop, .. } => match stop {
+                    StopReason::AllArcsForbidden { .. } => decision_t::ALL_ARCS_VETOED,
+                    StopReason::NoAcceptableArc { .. } => decision_t::NO_ACCEPTABLE_ARC,
+                    StopReason::NoVotes => decision_t::NO_VOTES,
+                    StopReason::RequiredStale { .. } => decision_t::REQUIRED_STALE,
+                    StopReason::Stuck { .. } => decision_t::STUCK,
+                },
+            };
+            let vetoers = match reason {
+                Reason::Stop { vetoers, .. } => vetoers.as_slice(),
+                _ => &[],
+            };
+            (cause, reason.to_string(), vetoers)
+        }
+        Said::StaleInput(hazard) => (decision_t::STALE_INPUT, format!("watchdog: {hazard}"), &[]),
+        Said::Held => (
+            decision_t::HELD,
+            "the last command again: this cycle's decision is late".into(),
+            &[],
+        ),
+        Said::Final => (decision_t::FINAL, "shutting down".into(), &[]),
+        Said::Guard(why) => (decision_t::GUARD, format!("guard: {why}"), &[]),
+    };
+    decision_t {
+        utime,
+        cause,
+        reason,
+        num_vetoers: vetoers.len() as i32,
+        vetoer: vetoers.iter().map(|v| v.behaviour.clone()).collect(),
+        vetoed_arcs: vetoers
+            .iter()
+            .map(|v| i32::try_from(v.arcs).unwrap_or(i32::MAX))
+            .collect(),
+        has_cell: vetoers.iter().map(|v| v.cell.is_some()).collect(),
+        cell_x: vetoers
+            .iter()
+            .map(|v| v.cell.map_or(0.0, |c| c[0]))
+            .collect(),
+        cell_y: vetoers
+            .iter()
+            .map(|v| v.cell.map_or(0.0, |c| c[1]))
+            .collect(),
+    }
+}
+
+/// A recorded `DECISION`: why the command at `utime` was what it was.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedDecision {
+    pub utime: Utime,
+    /// `decision_t`'s cause code (a newer writer's unknown code is kept).
+    pub cause: i8,
+    pub reason: String,
+    pub vetoers: Vec<Vetoer>,
+}
+
+impl RecordedDecision {
+    /// Whether its cause is one of the pipeline's stops (a guard's
+    /// verdict may be a stop or a slow: see the command).
+    pub fn is_stop(&self) -> bool {
+        (decision_t::SPEED_LIMITED..=decision_t::FINAL).contains(&self.cause)
+            && self.cause != decision_t::HELD
+    }
+}
+
+/// A `DECISION` from the wire.
+pub fn decision_from_wire(msg: &decision_t) -> Result<RecordedDecision, WireError> {
+    plausible("decision", &[msg.utime])?;
+    let vetoers = (0..msg.vetoer.len())
+        .map(|i| Vetoer {
+            behaviour: msg.vetoer[i].clone(),
+            arcs: usize::try_from(msg.vetoed_arcs[i]).unwrap_or(0),
+            cell: (msg.has_cell[i] && msg.cell_x[i].is_finite() && msg.cell_y[i].is_finite())
+                .then(|| [msg.cell_x[i], msg.cell_y[i]]),
+        })
+        .collect();
+    Ok(RecordedDecision {
+        utime: msg.utime,
+        cause: msg.cause,
+        reason: msg.reason.clone(),
+        vetoers,
+    })
 }
 
 /// A behaviour's votes from the wire; they must be over `arcs`.
@@ -382,7 +501,14 @@ pub fn votes_from_wire(msg: &arc_votes_t, arcs: &ArcSet) -> Result<BehaviourVote
     let mut votes = Votes::new(arcs.len());
     for (i, (&v, &vetoed)) in msg.votes.iter().zip(&msg.vetoed).enumerate() {
         if vetoed {
-            votes.veto(i, None);
+            // A cell's position, when given and finite (another cause, or
+            // none, is a veto without one).
+            let at = |v: &[f32]| v.get(i).copied().unwrap_or(f32::NAN);
+            let cell = [at(&msg.veto_x), at(&msg.veto_y)];
+            let cause = (msg.veto_cause.get(i) == Some(&arc_votes_t::CELL)
+                && cell.iter().all(|c| c.is_finite()))
+            .then_some(cell);
+            votes.veto(i, cause);
         } else {
             votes.set(i, v);
         }
@@ -856,9 +982,15 @@ mod tests {
             utime: 9,
             votes,
         };
+        votes_are_vetoed_with_their_causes(&bv, &arcs);
         let back = votes_from_wire(&votes_to_wire(&bv, &arcs), &arcs).unwrap();
         assert_eq!(back.votes.values(), bv.votes.values());
         assert_eq!(back.votes.vetoed(), bv.votes.vetoed());
+        assert_eq!(
+            back.votes.causes(),
+            bv.votes.causes(),
+            "veto causes survive"
+        );
         assert_eq!(back.votes.speed_mps(), Some(1.5));
         assert_eq!(back.votes.arc_speeds(), bv.votes.arc_speeds());
         assert_eq!(back.votes.arc_speed(5), Some(0.0));
@@ -887,6 +1019,89 @@ mod tests {
         .unwrap();
         let err = votes_from_wire(&votes_to_wire(&bv, &other), &arcs).unwrap_err();
         assert!(err.to_string().contains("arc 0 has curvature"), "{err}");
+    }
+
+    /// A veto's cell crosses the wire; one without a cause, or a cell that
+    /// is not a number, arrives as a veto without cause.
+    fn votes_are_vetoed_with_their_causes(bv: &BehaviourVotes, arcs: &ArcSet) {
+        let mut msg = votes_to_wire(bv, arcs);
+        assert_eq!(msg.veto_cause[19], arc_votes_t::CELL);
+        assert_eq!((msg.veto_x[19], msg.veto_y[19]), (1.0, 2.0));
+        msg.vetoed[20] = true;
+        msg.vetoed[21] = true;
+        msg.veto_cause[21] = arc_votes_t::CELL;
+        msg.veto_x[21] = f32::NAN;
+        msg.vetoed[22] = true;
+        msg.veto_cause[22] = 77;
+        let back = votes_from_wire(&msg, arcs).unwrap();
+        assert_eq!(back.votes.causes()[19], Some([1.0, 2.0]));
+        for i in 20..=22 {
+            assert!(back.votes.is_vetoed(i));
+            assert_eq!(back.votes.causes()[i], None, "arc {i}");
+        }
+    }
+
+    #[test]
+    fn a_decision_says_why_on_the_wire_and_back() {
+        let vetoes = vec![
+            Vetoer {
+                behaviour: "obstacle_avoidance".into(),
+                arcs: 39,
+                cell: Some([4.5, -0.5]),
+            },
+            Vetoer {
+                behaviour: "terrain".into(),
+                arcs: 2,
+                cell: None,
+            },
+        ];
+        let stop = Reason::Stop {
+            stop: StopReason::AllArcsForbidden {
+                vetoes: vetoes.clone(),
+            },
+            vetoers: vetoes.clone(),
+        };
+        let msg = decision_to_wire(1_700_000_000_000_000, Said::Arbiter(&stop));
+        assert_eq!(msg.cause, decision_t::ALL_ARCS_VETOED);
+        let back = decision_from_wire(&msg).unwrap();
+        assert!(back.is_stop());
+        assert_eq!(back.reason, stop.to_string());
+        assert!(
+            back.reason
+                .contains("obstacle_avoidance vetoed 39, for the cell at (4.5, -0.5) m"),
+            "{}",
+            back.reason
+        );
+        assert_eq!(back.vetoers, vetoes);
+        for (said, cause) in [
+            (Said::Arbiter(&Reason::Drive), decision_t::DRIVE),
+            (
+                Said::Arbiter(&Reason::Manoeuvre {
+                    backing: true,
+                    standing: false,
+                }),
+                decision_t::MANOEUVRE,
+            ),
+            (
+                Said::StaleInput("last pose 0.80 s ago"),
+                decision_t::STALE_INPUT,
+            ),
+            (Said::Held, decision_t::HELD),
+            (Said::Final, decision_t::FINAL),
+            (
+                Said::Guard("a standing return 3.1 m ahead"),
+                decision_t::GUARD,
+            ),
+        ] {
+            let msg = decision_to_wire(1_700_000_000_000_000, said);
+            assert_eq!(msg.cause, cause);
+            assert_eq!(msg.num_vetoers, 0);
+            let back = decision_from_wire(&msg).unwrap();
+            assert_eq!(back.is_stop(), !matches!(cause, 0 | 1 | 9 | 11), "{said:?}");
+        }
+        let mut late = decision_to_wire(1, Said::Held);
+        late.utime = -5;
+        assert!(decision_from_wire(&late).is_err(), "an implausible time");
     }
 
     #[test]

@@ -36,6 +36,22 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         arc_speed: (0..39).map(|i| i as f32 * 0.25 - 1.0).collect(),
         reverse_clear: (0..39).map(|i| i as f32 * 0.125 - 0.5).collect(),
         forward_clear: (0..39).map(|i| 4.0 - i as f32 * 0.25).collect(),
+        veto_cause: (0..39).map(|i| (i % 5 == 0 && i % 2 == 0) as i8).collect(),
+        veto_x: (0..39).map(|i| i as f32 * 0.5).collect(),
+        veto_y: (0..39).map(|i: i32| (-i) as f32 * 0.25).collect(),
+    };
+    let decision = decision_t {
+        utime: 1_700_000_000_600_000,
+        cause: decision_t::ALL_ARCS_VETOED,
+        reason:
+            "every arc is forbidden (obstacle_avoidance vetoed 39, for the cell at (4.5, -0.5) m)"
+                .into(),
+        num_vetoers: 2,
+        vetoer: vec!["obstacle_avoidance".into(), "h\u{f6}henangst".into()],
+        vetoed_arcs: vec![39, 3],
+        has_cell: vec![true, false],
+        cell_x: vec![4.5, 0.0],
+        cell_y: vec![-0.5, 0.0],
     };
     let cells = obstacle_cells_t {
         utime: 1_700_000_000_800_000,
@@ -124,6 +140,7 @@ pub fn samples() -> Vec<(&'static str, AnyMessage)> {
         ("waypoints_t", AnyMessage::Waypoints(waypoints)),
         ("local_map_t", AnyMessage::LocalMap(map)),
         ("range_slice_t", AnyMessage::RangeSlice(range_slice())),
+        ("decision_t", AnyMessage::Decision(decision)),
     ]
 }
 
@@ -258,10 +275,10 @@ impl Rng {
     }
 }
 
-/// A random message of type `kind` (0..8, the order of [`samples`]).
+/// A random message of type `kind` (0..9, the order of [`samples`]).
 pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) {
     let utime = rng.next_u64() as i64;
-    match kind % 8 {
+    match kind % 9 {
         0 => (
             "pose_t",
             AnyMessage::Pose(pose_t {
@@ -315,6 +332,9 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     arc_speed: (0..n).map(|_| rng.f32()).collect(),
                     reverse_clear: (0..n).map(|_| rng.f32()).collect(),
                     forward_clear: (0..n).map(|_| rng.f32()).collect(),
+                    veto_cause: (0..n).map(|_| rng.next_u64() as i8).collect(),
+                    veto_x: (0..n).map(|_| rng.f32()).collect(),
+                    veto_y: (0..n).map(|_| rng.f32()).collect(),
                 }),
             )
         }
@@ -362,6 +382,23 @@ pub fn random_message(rng: &mut Rng, kind: usize) -> (&'static str, AnyMessage) 
                     num_waypoints: n as i32,
                     position: (0..n).map(|_| [rng.f64(), rng.f64()]).collect(),
                     radius: (0..n).map(|_| rng.f32()).collect(),
+                }),
+            )
+        }
+        8 => {
+            let n = rng.len();
+            (
+                "decision_t",
+                AnyMessage::Decision(decision_t {
+                    utime,
+                    cause: rng.next_u64() as i8,
+                    reason: rng.string(),
+                    num_vetoers: n as i32,
+                    vetoer: (0..n).map(|_| rng.string()).collect(),
+                    vetoed_arcs: (0..n).map(|_| rng.next_u64() as i32).collect(),
+                    has_cell: (0..n).map(|_| rng.below(2) == 1).collect(),
+                    cell_x: (0..n).map(|_| rng.f32()).collect(),
+                    cell_y: (0..n).map(|_| rng.f32()).collect(),
                 }),
             )
         }

@@ -60,6 +60,9 @@ def samples(arcnav):
     m.arc_speed = [i * 0.25 - 1.0 for i in range(39)]
     m.reverse_clear = [i * 0.125 - 0.5 for i in range(39)]
     m.forward_clear = [4.0 - i * 0.25 for i in range(39)]
+    m.veto_cause = [1 if i % 10 == 0 else 0 for i in range(39)]
+    m.veto_x = [i * 0.5 for i in range(39)]
+    m.veto_y = [-i * 0.25 for i in range(39)]
     out["arc_votes_t"] = m
 
     m = arcnav.obstacle_cells_t()
@@ -155,6 +158,18 @@ def samples(arcnav):
     m.range = [[(r * 16 + c) * 0.25 for c in range(16)] for r in range(4)]
     m.range[0][3] = float("nan")
     out["range_slice_t"] = m
+
+    m = arcnav.decision_t()
+    m.utime = 1_700_000_000_600_000
+    m.cause = arcnav.decision_t.ALL_ARCS_VETOED
+    m.reason = "every arc is forbidden (obstacle_avoidance vetoed 39, for the cell at (4.5, -0.5) m)"
+    m.num_vetoers = 2
+    m.vetoer = ["obstacle_avoidance", "h\u00f6henangst"]
+    m.vetoed_arcs = [39, 3]
+    m.has_cell = [True, False]
+    m.cell_x = [4.5, 0.0]
+    m.cell_y = [-0.5, 0.0]
+    out["decision_t"] = m
     return out
 
 

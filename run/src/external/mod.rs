@@ -32,7 +32,7 @@ use std::time::{Duration, Instant};
 use arcnav_arbiter::Votes;
 use arcnav_behaviours::{Behaviour, VoteContext};
 use arcnav_bus::Message;
-use arcnav_bus::lcmtypes::{arc_votes_t, pose_t, steering_command_t};
+use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
 use arcnav_bus::messages::channels;
 use arcnav_config::Resolved;
 use arcnav_pipeline::{ExternalConfig, Pipeline};
@@ -268,7 +268,7 @@ impl ExternalBehaviour {
                 continue;
             }
             self.answered_once = true;
-            let msg = match arc_votes_t::decode(&frame.payload) {
+            let msg = match arcnav_bus::messages::decode_votes(&frame.payload) {
                 Ok(msg) => msg,
                 Err(e) => {
                     self.counts.undecodable += 1;

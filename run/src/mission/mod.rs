@@ -136,10 +136,11 @@ impl Sink for MissionSink<'_> {
         &mut self,
         at: Utime,
         command: &SteeringCommand,
+        reason: &arcnav_arbiter::Reason,
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.log.command(at, command);
+        self.log.command(at, command, reason);
         self.commands.push(*command);
         if let Some(previous) = self.previous_curvature {
             self.curvature_change.0 += (command.curvature - previous).abs();

@@ -13,7 +13,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use arcnav_arbiter::{BehaviourVotes, Decision};
+use arcnav_arbiter::{BehaviourVotes, Decision, Reason};
 use arcnav_behaviours::{Mission, Overlay};
 use arcnav_bus::log::{EventSource, InTimeOrder, LogReader, LogWriteError, ReorderWindow};
 use arcnav_bus::messages::{AnyMessage, TypedEvent, TypedEvents};
@@ -73,10 +73,16 @@ pub struct ReplayResult {
     /// The log's own decisions by run and time (STEERING_COMMAND and
     /// ARC_VOTES_*).
     pub recorded: Decisions,
+    /// Why each of them was what it was, by run and time (DECISION; logs
+    /// written before it have none).
+    pub recorded_reasons: BTreeMap<(u32, Utime), wire::RecordedDecision>,
     pub inputs: InputCounts,
     pub problems: InputProblems,
     /// First and last message time of the log, µs.
     pub span: Option<(Utime, Utime)>,
+    /// With `stop_at_s`: the first pose's time, from which it counts (on
+    /// the messages' clock), µs.
+    pub clock_origin: Option<Utime>,
     /// The decision kept for `stop_at_s`.
     pub kept: Option<KeptDecision>,
     pub arcs: ArcSet,
@@ -99,6 +105,8 @@ pub struct ExternalRun {
 pub struct KeptDecision {
     pub at: Utime,
     pub decision: Decision,
+    /// Why, as DECISION says it.
+    pub reason: Reason,
     pub map: MapSnapshot,
     /// What each behaviour's vote rested on (those that show anything).
     pub overlays: Vec<(String, Overlay)>,
@@ -172,10 +180,11 @@ impl Sink for ReplaySink<'_> {
         &mut self,
         at: Utime,
         command: &SteeringCommand,
+        reason: &Reason,
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.out.command(at, command);
+        self.out.command(at, command, reason);
         if self.warming {
             return;
         }
@@ -192,6 +201,7 @@ impl Sink for ReplaySink<'_> {
             self.kept = Some(KeptDecision {
                 at,
                 decision: decision.clone(),
+                reason: reason.clone(),
                 map: map.clone(),
                 overlays: std::mem::take(&mut self.overlays),
             });
@@ -252,6 +262,8 @@ struct Fed {
     recorded_votes: BTreeMap<Utime, Vec<BehaviourVotes>>,
     /// Recorded obstacle cells (recomputed, unless replayed as they were).
     recorded_cells: u64,
+    /// The log's own DECISION messages, by run and time.
+    recorded_reasons: BTreeMap<(u32, Utime), wire::RecordedDecision>,
 }
 
 /// How a replay takes its events.
@@ -342,6 +354,14 @@ fn take(
         // it receives them, later than the cycle.
         AnyMessage::SteeringCommand(_) if fed.warming => {}
         AnyMessage::ArcVotes(_) if fed.warming => {}
+        AnyMessage::Decision(_) if fed.warming => {}
+        AnyMessage::Decision(msg) => match wire::decision_from_wire(&msg) {
+            Ok(decision) => {
+                fed.recorded_reasons
+                    .insert((fed.run, decision.utime), decision);
+            }
+            Err(_) => *fed.problems.undecodable.entry(event.channel).or_default() += 1,
+        },
         AnyMessage::SteeringCommand(msg) => {
             fed.recorded.insert(
                 (fed.run, msg.utime),
@@ -469,6 +489,7 @@ pub fn replay(
     let (wall_start, mut first_time) = (Instant::now(), None::<Utime>);
     let mut last_progress = 0;
     let mut paced: Option<(Utime, Utime)> = None;
+    let mut clock_origin: Option<Utime> = None;
     while let Some(event) = events.next() {
         let event = event.map_err(|source| ReplayError::Read {
             path: path.to_owned(),
@@ -508,11 +529,8 @@ pub fn replay(
             continue;
         }
         past_to = false;
-        if let Some(at) = options.stop_at_s {
-            sink.keep_at = Some(origin.saturating_add((at * 1e6) as Utime));
-            if sink.kept.is_some() {
-                break;
-            }
+        if options.stop_at_s.is_some() && sink.kept.is_some() {
+            break;
         }
         if let Some(speed) = options.speed.filter(|_| !warming) {
             // Log time jumping ahead by more than a minute (a gap, a corrupt
@@ -547,6 +565,13 @@ pub fn replay(
             &mut sink,
             &mut fed,
         );
+        // `stop_at_s` counts from the first pose, on the pipeline's clock
+        // (the messages' own times: a log recorded with lcm-logger stamps
+        // its events with the wall clock of the recording instead).
+        if let (Some(at), None, Some(pose)) = (options.stop_at_s, sink.keep_at, pipeline.pose()) {
+            clock_origin = Some(pose.utime);
+            sink.keep_at = Some(pose.utime.saturating_add((at * 1e6) as Utime));
+        }
         if let Some(e) = sink.out.error.take() {
             return Err(e);
         }
@@ -565,6 +590,8 @@ pub fn replay(
     Ok(ReplayResult {
         cycles: sink.cycles,
         recorded: fed.recorded,
+        recorded_reasons: fed.recorded_reasons,
+        clock_origin,
         inputs: fed.inputs,
         problems: fed.problems,
         span,
