@@ -371,7 +371,11 @@ struct VehicleArgs {
     timeout: Option<f64>,
     /// Print what to execute on stdout, one JSON line per tick: wall_us,
     /// state (following, no_command_yet, stale, shutting_down),
-    /// command_utime, curvature, speed_mps, arc_index.
+    /// command_utime, curvature, speed_mps, arc_index, guard (off, clear,
+    /// slow, stop) and guard_reason. With [guard] enabled (the default) the
+    /// bridge also takes POSE and RANGE_IMAGE* and stops or slows the
+    /// vehicle on hazards along the commanded path, tilt or missing data,
+    /// publishing each verdict on GUARD_STATUS.
     #[arg(long)]
     print: bool,
     /// Republish what to execute, unsigned, as STEERING_COMMAND on this LCM

@@ -970,6 +970,154 @@ fn a_distributed_run_says_why_it_stopped_as_one_process_does() {
     assert_eq!(logged[0], logged[1]);
 }
 
+/// Issue 65: `arcnav vehicle` with the guard (on by default), in a
+/// network namespace, is played a log whose commands drive straight at a
+/// 1 m box (obstacle avoidance and the route weighted 0, the sim's guard
+/// off: the logged vehicle hit it) while its images show the box. The
+/// bridge stops the vehicle (executed speed 0) before the box, says why
+/// (JSON `guard_reason`, its log, `GUARD_STATUS` on the bus), and counts it.
+#[test]
+fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
+    let mut blind = config(SensorPreset::Erim, false);
+    blind.guard.enabled = false;
+    for (name, weight) in [
+        ("obstacle_avoidance", 0.0),
+        ("route", 0.0),
+        ("goal_seeking", 1.0),
+    ] {
+        blind.arbiter.weights.insert(name.into(), weight);
+    }
+    let Some(net) = Net::setup("vehicle-guard", config(SensorPreset::Erim, false), |_| {
+        sim_log_on("box_ahead", &blind)
+    }) else {
+        return;
+    };
+    // The logged vehicle's x by pose time, and where it hit the box.
+    let mut xs = BTreeMap::new();
+    let mut reader = LogReader::open(&net.log).unwrap();
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::POSE {
+            let pose = pose_t::decode(&event.data).unwrap();
+            xs.insert(pose.utime, pose.position[0]);
+        }
+    }
+    let hit_x = *xs.values().last().unwrap();
+    let heard_guard = Arc::new(Mutex::new(Vec::new()));
+    let recorded = temp_dir("vehicle-guard").join("bus.lcm");
+    let mut logger = KillOnDrop(
+        net.ns
+            .command(net.reference.tool_path("lcm-logger"))
+            .args(["-f", "--flush-interval=50"])
+            .arg(&recorded)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let vehicle = net.arcnav("vehicle", &["vehicle", "--print", "--stats"]);
+    vehicle.wait_ready();
+    let (_, ()) = listening(
+        &net.ns,
+        |stop, ready| {
+            let mut lcm = Lcm::new("").unwrap();
+            lcm.subscribe(channels::GUARD_STATUS);
+            ready.send(()).unwrap();
+            while !stop.load(Ordering::Relaxed) {
+                if let Some(m) = lcm.recv_timeout(Duration::from_millis(20)).unwrap() {
+                    let msg = arcnav_bus::lcmtypes::guard_status_t::decode(&m.data).unwrap();
+                    heard_guard.lock().unwrap().push(msg);
+                }
+            }
+        },
+        || {
+            assert!(
+                net.play("POSE|RANGE_IMAGE.*|STEERING_COMMAND", 1.0)
+                    .wait()
+                    .unwrap()
+                    .success()
+            );
+        },
+    );
+    vehicle.signal("TERM");
+    let stderr = vehicle.stderr.lock().unwrap().clone();
+    let (code, stdout) = vehicle.finish();
+    assert_eq!(code, Some(0), "{stderr}");
+    let ticks: Vec<serde_json::Value> = stdout
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    // The first stop for the box, not for data still missing at the start.
+    let stop = ticks
+        .iter()
+        .find(|t| {
+            t["guard"] == "stop"
+                && t["guard_reason"]
+                    .as_str()
+                    .is_some_and(|r| r.starts_with("obstacle"))
+        })
+        .unwrap_or_else(|| panic!("the guard never stopped for the box:\n{stderr}"));
+    assert_eq!(stop["speed_mps"], 0.0);
+    assert_eq!(stop["state"], "following");
+    let at = stop["command_utime"].as_i64().unwrap();
+    let x = *xs.range(..=at).next_back().unwrap().1;
+    eprintln!(
+        "guard stop at x = {x:.1} m (the logged vehicle hit the box at x = {hit_x:.1} m): {}",
+        stop["guard_reason"]
+    );
+    assert!(
+        x < hit_x - 1.0,
+        "stopped at x = {x:.1} m, the box hit at {hit_x:.1} m"
+    );
+    // From then on the guard never lets a command through as it is: the
+    // vehicle stands, or creeps at the speed from which it stops short of
+    // the box by the margin (a slow).
+    let wall = stop["wall_us"].as_i64().unwrap();
+    let through: Vec<_> = ticks
+        .iter()
+        .filter(|t| t["wall_us"].as_i64().unwrap() >= wall && t["state"] == "following")
+        .filter(|t| t["guard"] == "clear" || (t["guard"] != "slow" && t["speed_mps"] != 0.0))
+        .collect();
+    assert!(
+        through.is_empty(),
+        "let through after the stop: {through:?}"
+    );
+    assert!(stderr.contains("guard: STOP: obstacle"), "{stderr}");
+    let heard = heard_guard.lock().unwrap();
+    assert!(
+        heard
+            .iter()
+            .any(|g| g.verdict == arcnav_bus::lcmtypes::guard_status_t::STOP
+                && g.reason.starts_with("obstacle")),
+        "{} GUARD_STATUS heard",
+        heard.len()
+    );
+    assert!(stdout.contains("guard_interventions"), "{stdout}");
+    // `arcnav render` of the bus's log at that command says what the guard did.
+    Command::new("kill")
+        .args(["-INT", &logger.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(logger.0.wait().unwrap().success());
+    let first_pose = *xs.keys().next().unwrap();
+    let (code, out, err) = arcnav_testkit::output_of(
+        env!("CARGO_BIN_EXE_arcnav"),
+        &[
+            "render",
+            recorded.to_str().unwrap(),
+            "--at",
+            &format!("{:.3}", (at - first_pose) as f64 * 1e-6),
+            "--config",
+            &net.file,
+            "--out",
+            recorded.with_extension("png").to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(out.contains("guard         STOP: obstacle"), "{out}");
+}
+
 #[test]
 fn arcnav_run_reproduces_the_lockstep_replay_over_udp_multicast() {
     let Some(net) = Net::erim("run", config(SensorPreset::Erim, true)) else {

@@ -8,8 +8,8 @@ use nalgebra::Vector3;
 
 use crate::codec::{DecodeError, EncodeError, Message, peek_fingerprint};
 use crate::lcmtypes::{
-    arc_votes_t, arc_votes_v1_t, decision_t, local_map_t, obstacle_cells_t, pose_t, range_image_t,
-    range_slice_t, steering_command_t, waypoints_t,
+    arc_votes_t, arc_votes_v1_t, decision_t, guard_status_t, local_map_t, obstacle_cells_t, pose_t,
+    range_image_t, range_slice_t, steering_command_t, waypoints_t,
 };
 use crate::log::{EventSource, LogStats};
 
@@ -25,6 +25,8 @@ pub mod channels {
     pub const LOCAL_MAP: &str = "LOCAL_MAP";
     /// Why each STEERING_COMMAND is what it is (`decision_t`).
     pub const DECISION: &str = "DECISION";
+    /// The vehicle-side guard's verdicts (`guard_status_t`).
+    pub const GUARD_STATUS: &str = "GUARD_STATUS";
     /// Prefix of each behaviour's vote channel.
     pub const ARC_VOTES_PREFIX: &str = "ARC_VOTES_";
 
@@ -56,6 +58,7 @@ pub enum AnyMessage {
     Waypoints(waypoints_t),
     LocalMap(local_map_t),
     Decision(decision_t),
+    GuardStatus(guard_status_t),
 }
 
 /// Votes of the older type (before veto causes), read as votes whose
@@ -109,6 +112,7 @@ impl AnyMessage {
                 Self::ArcVotes(decode_votes(bytes)?)
             }
             decision_t::FINGERPRINT => Self::Decision(decision_t::decode(bytes)?),
+            guard_status_t::FINGERPRINT => Self::GuardStatus(guard_status_t::decode(bytes)?),
             obstacle_cells_t::FINGERPRINT => Self::ObstacleCells(obstacle_cells_t::decode(bytes)?),
             waypoints_t::FINGERPRINT => Self::Waypoints(waypoints_t::decode(bytes)?),
             local_map_t::FINGERPRINT => Self::LocalMap(local_map_t::decode(bytes)?),
@@ -127,6 +131,7 @@ impl AnyMessage {
             Self::Waypoints(m) => m.encode(),
             Self::LocalMap(m) => m.encode(),
             Self::Decision(m) => m.encode(),
+            Self::GuardStatus(m) => m.encode(),
         }
     }
 
@@ -142,6 +147,7 @@ impl AnyMessage {
             Self::Waypoints(m) => m.utime,
             Self::LocalMap(m) => m.utime,
             Self::Decision(m) => m.utime,
+            Self::GuardStatus(m) => m.utime,
         }
     }
 
@@ -169,6 +175,7 @@ impl AnyMessage {
             Self::Waypoints(_) => channel == WAYPOINTS,
             Self::LocalMap(_) => channel == LOCAL_MAP,
             Self::Decision(_) => channel == DECISION,
+            Self::GuardStatus(_) => channel == GUARD_STATUS,
         }
     }
 
@@ -184,6 +191,7 @@ impl AnyMessage {
             Self::Waypoints(_) => waypoints_t::TYPE_NAME,
             Self::LocalMap(_) => local_map_t::TYPE_NAME,
             Self::Decision(_) => decision_t::TYPE_NAME,
+            Self::GuardStatus(_) => guard_status_t::TYPE_NAME,
         }
     }
 }

@@ -8,15 +8,26 @@
 //! controller what to execute: the newest accepted command while it is
 //! fresh, a stop when commands stop coming. When it stops (signal,
 //! `--duration`), the last thing it hands over is a stop.
+//!
+//! With the guard on (`[guard] enabled`, the default), it also takes the
+//! sensor's images (`RANGE_IMAGE*`, whole or in slices) and `POSE`, and
+//! every command it would hand over goes through the guard
+//! ([`arcnav_guard::Guard::check`]) on the sensor clock: whatever the
+//! pipeline decided, a hazard the returns show on the commanded path, tilt
+//! or missing data stops or slows the vehicle. Each verdict is published on
+//! `GUARD_STATUS`, said when it changes, and counted.
 
 use std::time::Duration;
 
 use arcnav_bus::codec::Message as _;
 use arcnav_bus::lcmtypes::steering_command_t;
-use arcnav_bus::messages::channels;
+use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_bus::transport::Lcm;
+use arcnav_guard::{Guard, Verdict};
+use arcnav_vehicle::Pose;
 use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{CommandWatchdog, SteeringCommand};
+use arcnav_wire as wire;
 use serde::Serialize;
 
 use super::io::{Refused, Ticker, auth_status, pump};
@@ -48,8 +59,21 @@ pub enum Execution {
     ShuttingDown,
 }
 
+/// The guard's verdict on what is executed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Guarded {
+    /// No guard (`[guard] enabled = false`), or no command to judge.
+    Off,
+    Clear,
+    /// The speed is capped.
+    Slow,
+    /// The vehicle stops.
+    Stop,
+}
+
 /// What the controller is told to execute at one tick.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Serialize)]
 pub struct Executed {
     /// The bridge's clock (µs since the Unix epoch).
     pub wall_us: i64,
@@ -58,8 +82,13 @@ pub struct Executed {
     /// for stops the bridge makes itself.
     pub command_utime: i64,
     pub curvature: f64,
+    /// The speed to execute: the command's, held to the guard's verdict.
     pub speed_mps: f64,
     pub arc_index: Option<usize>,
+    pub guard: Guarded,
+    /// Why the guard slowed or stopped the vehicle.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub guard_reason: Option<String>,
 }
 
 impl Executed {
@@ -71,6 +100,22 @@ impl Executed {
             curvature: command.curvature,
             speed_mps: command.speed_mps,
             arc_index: command.arc_index,
+            guard: Guarded::Off,
+            guard_reason: None,
+        }
+    }
+
+    /// `command` as the guard's `verdict` lets it go.
+    fn guarded(wall_us: i64, command: &SteeringCommand, verdict: &Verdict) -> Self {
+        let applied = verdict.apply(command);
+        Self {
+            guard: match verdict {
+                Verdict::Clear => Guarded::Clear,
+                Verdict::Slow { .. } => Guarded::Slow,
+                Verdict::Stop { .. } => Guarded::Stop,
+            },
+            guard_reason: verdict.reason().map(ToString::to_string),
+            ..Self::new(wall_us, Execution::Following, &applied)
         }
     }
 
@@ -89,12 +134,87 @@ impl Executed {
     }
 }
 
+/// The guard in the bridge: the guard, the newest pose's sensor time and
+/// when it arrived (the sensor clock runs on from it), what it did.
+struct BridgeGuard {
+    guard: Guard,
+    pose_at: Option<(i64, i64)>,
+    last: Guarded,
+    stops: u64,
+    slows: u64,
+    interventions: u64,
+    ignored: u64,
+}
+
+impl BridgeGuard {
+    fn on_message(&mut self, message: AnyMessage, now: i64) {
+        match message {
+            AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
+                Ok(pose) => {
+                    self.guard.observe_pose(&pose);
+                    if self.pose_at.is_none_or(|(t, _)| pose.utime >= t) {
+                        self.pose_at = Some((pose.utime, now));
+                    }
+                }
+                Err(_) => self.ignored += 1,
+            },
+            AnyMessage::RangeImage(msg) => match wire::range_image_from_wire(msg) {
+                Ok(image) => self.guard.observe_image(&image),
+                Err(_) => self.ignored += 1,
+            },
+            AnyMessage::RangeSlice(msg) => match wire::range_slice_from_wire(msg) {
+                Ok(slice) => self.guard.observe_slice(&slice),
+                Err(_) => self.ignored += 1,
+            },
+            _ => self.ignored += 1,
+        }
+    }
+
+    /// `now` (the bridge's clock) on the sensor clock.
+    fn sensor_time(&self, now: i64) -> i64 {
+        self.pose_at.map_or(now, |(utime, at)| utime + (now - at))
+    }
+
+    /// The verdict on `command` at `now`, said when it changes.
+    fn judge(&mut self, command: &SteeringCommand, now: i64) -> (i64, Verdict) {
+        let at = self.sensor_time(now);
+        let verdict = self.guard.check(command, at);
+        let state = match &verdict {
+            Verdict::Clear => Guarded::Clear,
+            Verdict::Slow { .. } => Guarded::Slow,
+            Verdict::Stop { .. } => Guarded::Stop,
+        };
+        match state {
+            Guarded::Stop => self.stops += 1,
+            Guarded::Slow => self.slows += 1,
+            _ => {}
+        }
+        if state != self.last {
+            match &verdict {
+                Verdict::Clear => tracing::info!("guard: clear"),
+                Verdict::Slow { cap_mps, reason } => {
+                    self.interventions += 1;
+                    tracing::warn!("guard: SLOW to {cap_mps:.2} m/s: {reason}");
+                }
+                Verdict::Stop { reason } => {
+                    self.interventions += 1;
+                    tracing::warn!("guard: STOP: {reason}");
+                }
+            }
+            self.last = state;
+        }
+        (at, verdict)
+    }
+}
+
 /// Runs the bridge on `lcm` until `options.stop`; `execute` gets what to
-/// execute at every tick, and a stop last.
+/// execute at every tick, and a stop last. With `guard`, every command goes
+/// through it (see the module documentation).
 pub fn run_bridge(
     mut lcm: Lcm,
     options: &LiveOptions,
     bridge: &BridgeOptions,
+    guard: Option<Guard>,
     mut execute: impl FnMut(&Executed),
 ) -> Result<LiveReport, LiveError> {
     let started = std::time::Instant::now();
@@ -106,6 +226,20 @@ pub fn run_bridge(
     let mut tick = Ticker::new(1.0 / bridge.rate_hz, clock.now_us());
     let mut report = Ticker::new(bridge.status_period_s, clock.now_us());
     lcm.subscribe(channels::STEERING_COMMAND);
+    let mut guard = guard.map(|guard| BridgeGuard {
+        guard,
+        pose_at: None,
+        last: Guarded::Off,
+        stops: 0,
+        slows: 0,
+        interventions: 0,
+        ignored: 0,
+    });
+    if guard.is_some() {
+        lcm.subscribe(channels::POSE);
+        lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
+    }
+    let publisher = lcm.publisher();
     let wait = Duration::from_secs_f64((0.25 / bridge.rate_hz).min(0.005));
     pump(
         &mut lcm,
@@ -114,12 +248,23 @@ pub fn run_bridge(
         wait,
         |message, now| {
             if let Some(message) = message {
-                match steering_command_t::decode(&message.data) {
-                    Ok(msg) => {
-                        status.handled += 1;
-                        watchdog.on_command(now, SteeringCommand::from(&msg));
+                if message.channel != channels::STEERING_COMMAND {
+                    if let Some(guard) = &mut guard {
+                        match AnyMessage::decode(&message.data) {
+                            Ok(Some(m)) if m.on_its_channel(&message.channel) => {
+                                guard.on_message(m, now)
+                            }
+                            _ => guard.ignored += 1,
+                        }
                     }
-                    Err(e) => bad.refuse("steering command", &message.channel, &e),
+                } else {
+                    match steering_command_t::decode(&message.data) {
+                        Ok(msg) => {
+                            status.handled += 1;
+                            watchdog.on_command(now, SteeringCommand::from(&msg));
+                        }
+                        Err(e) => bad.refuse("steering command", &message.channel, &e),
+                    }
                 }
             }
             if tick.due(now) {
@@ -135,11 +280,24 @@ pub fn run_bridge(
                     _ => stopped += 1,
                 }
                 let command = watchdog.command_at(now);
-                execute(&Executed::new(now, state, &command));
+                match (&mut guard, state) {
+                    (Some(guard), Execution::Following) => {
+                        let (at, verdict) = guard.judge(&command, now);
+                        let msg = wire::guard_status_to_wire(at, command.utime, &verdict);
+                        if let Err(e) = publisher.publish_message(channels::GUARD_STATUS, &msg) {
+                            tracing::debug!(%e, "cannot publish the guard's status");
+                        }
+                        execute(&Executed::guarded(now, &command, &verdict));
+                    }
+                    _ => execute(&Executed::new(now, state, &command)),
+                }
             }
             if report.due(now) {
                 status.dropped = bad.total();
                 status.set("watchdog_trips", watchdog.trips);
+                if let Some(guard) = &guard {
+                    guard_status(guard, &mut status);
+                }
                 status.log();
             }
         },
@@ -154,6 +312,9 @@ pub fn run_bridge(
     status.set("ticks_following", following);
     status.set("ticks_stopped", stopped + 1);
     status.set("watchdog_trips", watchdog.trips);
+    if let Some(guard) = &guard {
+        guard_status(guard, &mut status);
+    }
     status.set("own_datagrams_ignored", lcm.stats().own);
     auth_status(&lcm, &mut status);
     Ok(LiveReport {
@@ -162,6 +323,16 @@ pub fn run_bridge(
         nodes: vec![status],
         ..LiveReport::default()
     })
+}
+
+/// The guard's counts on the status lines and in `--stats`.
+fn guard_status(guard: &BridgeGuard, status: &mut NodeStatus) {
+    let counts = guard.guard.counts();
+    status.set("guard_interventions", guard.interventions);
+    status.set("guard_stop_ticks", guard.stops);
+    status.set("guard_slow_ticks", guard.slows);
+    status.set("guard_images", counts.images + counts.slices);
+    status.set("guard_messages_unused", guard.ignored);
 }
 
 #[cfg(test)]
@@ -207,7 +378,7 @@ mod tests {
                 .unwrap();
         });
         let mut ticks = Vec::new();
-        let report = run_bridge(lcm, &options, &bridge, |e| ticks.push(*e)).unwrap();
+        let report = run_bridge(lcm, &options, &bridge, None, |e| ticks.push(e.clone())).unwrap();
         sender.join().unwrap();
         let states: Vec<Execution> = ticks.iter().map(|t| t.state).collect();
         let mut runs = states.clone();

@@ -399,6 +399,26 @@ impl Topics {
         true
     }
 
+    /// The guard's verdicts (`/guard_status`, from `GUARD_STATUS`).
+    fn guard_json(
+        &mut self,
+        msg: &arcnav_bus::lcmtypes::guard_status_t,
+        time: PartialMetadata,
+    ) -> bool {
+        let json = serde_json::json!({
+            "utime": msg.utime,
+            "command_utime": msg.command_utime,
+            "verdict": msg.verdict,
+            "reason": msg.reason,
+            "speed_cap_mps": msg.speed_cap,
+        });
+        let Some(channel) = self.json("/guard_status", "arcnav.GuardStatus", GUARD_SCHEMA) else {
+            return false;
+        };
+        channel.log_with_meta(json.to_string().as_bytes(), time);
+        true
+    }
+
     /// The arcs by their fused vote, the commanded one marked (`/arcs`).
     fn arcs(
         &mut self,
@@ -419,6 +439,8 @@ impl Topics {
 
 const VOTES_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"behaviour":{"type":"string"},"curvature":{"type":"array","items":{"type":"number"}},"votes":{"type":"array","items":{"type":"number"}},"vetoed":{"type":"array","items":{"type":"boolean"}},"speed_vote":{"type":["number","null"]}}}"#;
 const COMMAND_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"curvature":{"type":"number"},"speed_mps":{"type":"number"},"arc_index":{"type":"integer"},"vote":{"type":"number"}}}"#;
+
+const GUARD_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"command_utime":{"type":"integer"},"verdict":{"type":"integer"},"reason":{"type":"string"},"speed_cap_mps":{"type":"number"}}}"#;
 
 const DECISION_SCHEMA: &str = r#"{"type":"object","properties":{"utime":{"type":"integer"},"cause":{"type":"integer"},"reason":{"type":"string"},"vetoers":{"type":"array","items":{"type":"object","properties":{"behaviour":{"type":"string"},"arcs":{"type":"integer"},"cell":{"type":["array","null"],"items":{"type":"number"}}}}}}}"#;
 
@@ -550,6 +572,10 @@ pub fn export_mcap(
             }
             AnyMessage::Decision(msg) => match topics.decision_json(&msg, time) {
                 true => wrote("/decision"),
+                false => refused_topics += 1,
+            },
+            AnyMessage::GuardStatus(msg) => match topics.guard_json(&msg, time) {
+                true => wrote("/guard_status"),
                 false => refused_topics += 1,
             },
             AnyMessage::SteeringCommand(msg) => {

@@ -57,6 +57,7 @@ pub fn lcm_messages(data: &[u8]) {
             }
             AnyMessage::ArcVotes(_) => {}
             AnyMessage::Decision(m) => drop(arcnav_wire::decision_from_wire(&m)),
+            AnyMessage::GuardStatus(m) => drop(arcnav_wire::guard_status_from_wire(&m)),
         }
     }
     let _ = pose_t::decode(data);
@@ -65,6 +66,7 @@ pub fn lcm_messages(data: &[u8]) {
     let _ = steering_command_t::decode(data);
     let _ = arcnav_bus::messages::decode_votes(data);
     let _ = decision_t::decode(data);
+    let _ = arcnav_bus::lcmtypes::guard_status_t::decode(data);
     let _ = obstacle_cells_t::decode(data);
     let _ = waypoints_t::decode(data);
     let _ = local_map_t::decode(data);

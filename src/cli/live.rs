@@ -216,12 +216,24 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
         rate_hz = args.rate,
         timeout_s,
         forward = args.forward.as_deref().unwrap_or("-"),
-        "vehicle bridge: executing verified commands, stop when none arrive within the timeout; \
-         Ctrl-C or SIGTERM stops"
+        guard = config.guard.enabled,
+        "vehicle bridge: executing verified commands, stop when none arrive within the timeout \
+         or the guard sees a hazard on the commanded path; Ctrl-C or SIGTERM stops"
     );
     let mut stdout = std::io::stdout().lock();
     let mut forward_failed = false;
-    let report = run_bridge(lcm, &options, &bridge, |executed| {
+    // The guard, independent of the pipeline: the sensor's images and the
+    // pose in, every command judged before it is handed over.
+    let guard = config
+        .guard
+        .enabled
+        .then(|| arcnav_guard::Guard::new(&config.guard, &config.vehicle, &config.sensors));
+    if guard.is_none() {
+        tracing::warn!(
+            "[guard] enabled = false: commands are handed over as the pipeline made them"
+        );
+    }
+    let report = run_bridge(lcm, &options, &bridge, guard, |executed| {
         if args.print {
             match serde_json::to_string(executed) {
                 Ok(line) => {

@@ -92,6 +92,19 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         Some((_, logged)) => println!("as logged     {}", logged.reason),
         None => println!("as logged     (no DECISION at this time in the log)"),
     }
+    // The vehicle-side guard's verdicts on this command (GUARD_STATUS),
+    // the gravest first, when the log holds any.
+    if !result.recorded_guard.is_empty() {
+        match result
+            .recorded_guard
+            .iter()
+            .filter(|g| g.command_utime == kept.at)
+            .max_by_key(|g| g.verdict)
+        {
+            Some(verdict) => println!("guard         {verdict}"),
+            None => println!("guard         (no GUARD_STATUS on this command in the log)"),
+        }
+    }
     Ok(ExitCode::SUCCESS)
 }
 

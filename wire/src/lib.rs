@@ -5,8 +5,8 @@
 use arcnav_arbiter::{BehaviourVotes, Reason, StopReason, Vetoer, Votes};
 use arcnav_behaviours::{Mission, Waypoint};
 use arcnav_bus::lcmtypes::{
-    arc_votes_t, decision_t, local_map_patch_t, local_map_t, obstacle_cell_t, obstacle_cells_t,
-    range_image_t, range_slice_t, waypoints_t,
+    arc_votes_t, decision_t, guard_status_t, local_map_patch_t, local_map_t, obstacle_cell_t,
+    obstacle_cells_t, range_image_t, range_slice_t, waypoints_t,
 };
 use arcnav_localmap::{ElevationGrid, MapSnapshot, Patch, SeenGround};
 use arcnav_perception::{
@@ -469,6 +469,79 @@ pub fn decision_from_wire(msg: &decision_t) -> Result<RecordedDecision, WireErro
         cause: msg.cause,
         reason: msg.reason.clone(),
         vetoers,
+    })
+}
+
+/// The guard's verdict at `utime` (sensor clock) on the command stamped
+/// `command_utime`, for the wire.
+pub fn guard_status_to_wire(
+    utime: Utime,
+    command_utime: Utime,
+    verdict: &arcnav_guard::Verdict,
+) -> guard_status_t {
+    use arcnav_guard::Verdict;
+    let (code, cap) = match verdict {
+        Verdict::Clear => (guard_status_t::CLEAR, 0.0),
+        Verdict::Slow { cap_mps, .. } => (guard_status_t::SLOW, *cap_mps),
+        Verdict::Stop { .. } => (guard_status_t::STOP, 0.0),
+    };
+    guard_status_t {
+        utime,
+        command_utime,
+        verdict: code,
+        reason: verdict
+            .reason()
+            .map(ToString::to_string)
+            .unwrap_or_default(),
+        speed_cap: cap,
+    }
+}
+
+/// A recorded `GUARD_STATUS`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedGuard {
+    pub utime: Utime,
+    pub command_utime: Utime,
+    /// `guard_status_t::CLEAR`, `SLOW` or `STOP`.
+    pub verdict: i8,
+    pub reason: String,
+    pub speed_cap_mps: f64,
+}
+
+impl std::fmt::Display for RecordedGuard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.verdict {
+            guard_status_t::STOP => write!(f, "STOP: {}", self.reason),
+            guard_status_t::SLOW => {
+                write!(f, "SLOW to {:.2} m/s: {}", self.speed_cap_mps, self.reason)
+            }
+            _ => write!(f, "clear"),
+        }
+    }
+}
+
+/// A `GUARD_STATUS` from the wire.
+pub fn guard_status_from_wire(msg: &guard_status_t) -> Result<RecordedGuard, WireError> {
+    plausible("guard status", &[msg.utime, msg.command_utime])?;
+    let invalid = |reason: String| WireError::Invalid {
+        what: "guard status",
+        reason,
+    };
+    if !(guard_status_t::CLEAR..=guard_status_t::STOP).contains(&msg.verdict) {
+        return Err(invalid(format!(
+            "verdict {} is none of 0, 1, 2",
+            msg.verdict
+        )));
+    }
+    if !(msg.speed_cap.is_finite() && msg.speed_cap >= 0.0) {
+        return Err(invalid(format!("speed cap {} m/s", msg.speed_cap)));
+    }
+    Ok(RecordedGuard {
+        utime: msg.utime,
+        command_utime: msg.command_utime,
+        verdict: msg.verdict,
+        reason: msg.reason.clone(),
+        speed_cap_mps: msg.speed_cap,
     })
 }
 

@@ -76,6 +76,9 @@ pub struct ReplayResult {
     /// Why each of them was what it was, by run and time (DECISION; logs
     /// written before it have none).
     pub recorded_reasons: BTreeMap<(u32, Utime), wire::RecordedDecision>,
+    /// The vehicle-side guard's verdicts the log holds (GUARD_STATUS), in
+    /// log order.
+    pub recorded_guard: Vec<wire::RecordedGuard>,
     pub inputs: InputCounts,
     pub problems: InputProblems,
     /// First and last message time of the log, µs.
@@ -264,6 +267,8 @@ struct Fed {
     recorded_cells: u64,
     /// The log's own DECISION messages, by run and time.
     recorded_reasons: BTreeMap<(u32, Utime), wire::RecordedDecision>,
+    /// The log's GUARD_STATUS messages, in log order.
+    recorded_guard: Vec<wire::RecordedGuard>,
 }
 
 /// How a replay takes its events.
@@ -354,7 +359,11 @@ fn take(
         // it receives them, later than the cycle.
         AnyMessage::SteeringCommand(_) if fed.warming => {}
         AnyMessage::ArcVotes(_) if fed.warming => {}
-        AnyMessage::Decision(_) if fed.warming => {}
+        AnyMessage::Decision(_) | AnyMessage::GuardStatus(_) if fed.warming => {}
+        AnyMessage::GuardStatus(msg) => match wire::guard_status_from_wire(&msg) {
+            Ok(status) => fed.recorded_guard.push(status),
+            Err(_) => *fed.problems.undecodable.entry(event.channel).or_default() += 1,
+        },
         AnyMessage::Decision(msg) => match wire::decision_from_wire(&msg) {
             Ok(decision) => {
                 fed.recorded_reasons
@@ -448,6 +457,10 @@ fn tally<S: EventSource>(
     }
 }
 
+/// With `stop_at_s`, how far past the kept decision the log is read for
+/// what was said of it (DECISION, GUARD_STATUS), µs of message time.
+const RECORDED_AFTER_US: Utime = 1_000_000;
+
 /// Replays the log at `path`.
 pub fn replay(
     path: &Path,
@@ -529,8 +542,20 @@ pub fn replay(
             continue;
         }
         past_to = false;
-        if options.stop_at_s.is_some() && sink.kept.is_some() {
-            break;
+        if options.stop_at_s.is_some()
+            && let Some(kept) = &sink.kept
+        {
+            // What the run said of the kept decision comes after it: the
+            // vehicle's guard judges a command for as long as it holds it.
+            // Read on, feeding nothing, while the messages are of the
+            // decision's next second.
+            if event.message.utime() > kept.at + RECORDED_AFTER_US {
+                break;
+            }
+            match event.message {
+                AnyMessage::Decision(_) | AnyMessage::GuardStatus(_) => {}
+                _ => continue,
+            }
         }
         if let Some(speed) = options.speed.filter(|_| !warming) {
             // Log time jumping ahead by more than a minute (a gap, a corrupt
@@ -591,6 +616,7 @@ pub fn replay(
         cycles: sink.cycles,
         recorded: fed.recorded,
         recorded_reasons: fed.recorded_reasons,
+        recorded_guard: fed.recorded_guard,
         clock_origin,
         inputs: fed.inputs,
         problems: fed.problems,
