@@ -247,19 +247,22 @@ impl ExternalBehaviour {
             let frame = match self.from_program.recv_timeout(wait) {
                 Ok(FromProgram::Frame(frame)) => frame,
                 Ok(FromProgram::Garbage(e)) => {
-                    self.end(format!(
-                        "wrote something that is not a framed message on its standard output \
-                         ({e}; print to standard error instead)"
-                    ));
+                    self.end(
+                        format!(
+                            "wrote something that is not a framed message on its standard \
+                             output ({e}; print to standard error instead)"
+                        ),
+                        Duration::ZERO,
+                    );
                     return None;
                 }
                 Err(RecvTimeoutError::Timeout) => {
                     self.counts.timeouts += 1;
-                    self.end(format!("gave no votes within {timeout} s"));
+                    self.end(format!("gave no votes within {timeout} s"), Duration::ZERO);
                     return None;
                 }
                 Err(RecvTimeoutError::Disconnected) => {
-                    self.end("closed its standard output".into());
+                    self.end("closed its standard output".into(), END_GRACE);
                     return None;
                 }
             };
@@ -315,15 +318,23 @@ impl ExternalBehaviour {
         }
     }
 
-    /// The program is done for: stopped, and why said once.
-    fn end(&mut self, why: String) {
+    /// The program is done for: stopped, and why said once. A program
+    /// that closed its output is given `grace` to exit on its own (its
+    /// status then says how it ended).
+    fn end(&mut self, why: String, grace: Duration) {
         self.to_program = None;
         let status = self.child.take().map(|mut child| {
-            let status = match child.try_wait() {
-                Ok(Some(status)) => Some(status),
-                _ => {
-                    let _ = child.kill();
-                    None
+            let until = Instant::now() + grace;
+            let status = loop {
+                match child.try_wait() {
+                    Ok(Some(status)) => break Some(status),
+                    Ok(None) if Instant::now() < until => {
+                        std::thread::sleep(Duration::from_millis(5))
+                    }
+                    _ => {
+                        let _ = child.kill();
+                        break None;
+                    }
                 }
             };
             let _ = child.wait();
@@ -377,7 +388,7 @@ impl Behaviour for ExternalBehaviour {
                         .as_ref()
                         .is_some_and(|to| to.send(bytes).is_ok());
                     if !sent {
-                        self.end("closed its standard input".into());
+                        self.end("closed its standard input".into(), END_GRACE);
                     } else if let Some(cast) = self.answer(ctx.utime) {
                         votes.copy_from(&cast);
                         self.abstained = false;
