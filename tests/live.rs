@@ -679,9 +679,39 @@ impl Net {
         Proc::arcnav(&self.ns, name, &args)
     }
 
+    /// The reference `lcm-logger` recording everything on the bus to `path`
+    /// (until [`Logger::finish`]).
+    fn logger(&self, path: &Path) -> Logger {
+        Logger(KillOnDrop(
+            self.ns
+                .command(self.reference.tool_path("lcm-logger"))
+                .args(["-f", "--flush-interval=50"])
+                .arg(path)
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap(),
+        ))
+    }
+
     /// The reference player on the test's log.
     fn play(&self, channels: &str, speed: f64) -> Child {
         logplayer(&self.ns, &self.reference, &self.log, channels, speed)
+    }
+}
+
+/// A running `lcm-logger`.
+struct Logger(KillOnDrop);
+
+impl Logger {
+    /// Stops it as Ctrl-C would (its log then ends whole) and waits.
+    fn finish(mut self) {
+        Command::new("kill")
+            .args(["-INT", &self.0.0.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(self.0.0.wait().unwrap().success(), "lcm-logger failed");
     }
 }
 
@@ -886,17 +916,7 @@ fn a_distributed_run_says_why_it_stopped_as_one_process_does() {
         expected.reason
     );
     let recorded = temp_dir("why-stopped").join("distributed.lcm");
-    let mut logger = KillOnDrop(
-        net.ns
-            .command(net.reference.tool_path("lcm-logger"))
-            .args(["-f", "--flush-interval=50"])
-            .arg(&recorded)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    let logger = net.logger(&recorded);
     let nodes: [(&str, &[&str]); 5] = [
         ("perception", &["node", "perception"]),
         ("localmap", &["node", "localmap"]),
@@ -908,11 +928,7 @@ fn a_distributed_run_says_why_it_stopped_as_one_process_does() {
         ("arbiter", &["node", "arbiter"]),
     ];
     run_nodes(&net, &nodes);
-    Command::new("kill")
-        .args(["-INT", &logger.0.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(logger.0.wait().unwrap().success());
+    logger.finish();
     let distributed = decisions(&recorded);
     let got = distributed
         .get(first_stop)
@@ -1004,17 +1020,7 @@ fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
     let hit_x = *xs.values().last().unwrap();
     let heard_guard = Arc::new(Mutex::new(Vec::new()));
     let recorded = temp_dir("vehicle-guard").join("bus.lcm");
-    let mut logger = KillOnDrop(
-        net.ns
-            .command(net.reference.tool_path("lcm-logger"))
-            .args(["-f", "--flush-interval=50"])
-            .arg(&recorded)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    let logger = net.logger(&recorded);
     let vehicle = net.arcnav("vehicle", &["vehicle", "--print", "--stats"]);
     vehicle.wait_ready();
     let (_, ()) = listening(
@@ -1095,11 +1101,7 @@ fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
     );
     assert!(stdout.contains("guard_interventions"), "{stdout}");
     // `arcnav render` of the bus's log at that command says what the guard did.
-    Command::new("kill")
-        .args(["-INT", &logger.0.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(logger.0.wait().unwrap().success());
+    logger.finish();
     let first_pose = *xs.keys().next().unwrap();
     let (code, out, err) = arcnav_testkit::output_of(
         env!("CARGO_BIN_EXE_arcnav"),
