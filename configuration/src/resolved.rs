@@ -23,6 +23,7 @@ use arcnav_pipeline::{
     PerceptionNode, Pipeline, PipelineConfig,
 };
 use arcnav_sim::SimConfig;
+use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{ArcSet, ConfigError, VehicleConfig};
 
 use crate::bus::BusConfig;
@@ -341,12 +342,17 @@ impl Resolved {
 
     /// The lock-step executor with every node of this configuration.
     pub fn lockstep(&self) -> Result<Pipeline, ConfigError> {
-        Ok(Pipeline::new(
+        let mut pipeline = Pipeline::new(
             self.perception_node()?,
             self.decision_cycle(Delivery::held(&self.pipeline)),
             self.behaviour_set(),
             self.arbiter(),
-        ))
+        );
+        pipeline.inject(
+            self.pipeline.fault,
+            seconds_to_micros(self.pipeline.fault_after_s),
+        );
+        Ok(pipeline)
     }
 
     /// The behaviours whose votes complete a cycle: every configured one

@@ -20,7 +20,7 @@ pub struct GuardConfig {
     /// Hazardous returns are held in cells of this side on the ground, m.
     pub cell_size_m: f64,
     /// A cell holds a hazard when at least this many hazardous returns
-    /// fell in it within `memory_s` (one return may be noise).
+    /// fell in it (one return may be noise).
     pub min_points: usize,
     /// Returns farther than this from the vehicle (horizontally) are not
     /// tested, m; the ground profile still runs through them.
@@ -29,9 +29,11 @@ pub struct GuardConfig {
     /// the rows' spacing (the range noise, and the roughness of ground the
     /// vehicle drives), m.
     pub ground_noise_m: f64,
-    /// Hazardous returns are remembered this long, s: the ground just in
-    /// front of the bumper is in every roof sensor's blind zone, so what was
-    /// seen there from farther must not be forgotten when it is reached.
+    /// A hazard is forgotten when images have looked at it this long
+    /// without seeing it again, s (it moved, or was noise). One the sensor
+    /// cannot look at (in the blind zone in front of the bumper below the
+    /// lowest beam, beside a narrow field of view) is held however long the
+    /// vehicle stands before it, until it is twice `range_m` away.
     pub memory_s: f64,
     /// At most this many cells are held (hazardous returns in new cells
     /// beyond it are counted as forgotten).

@@ -5,7 +5,8 @@
 //! is a second, simple code path beside it (it shares only the range-image
 //! and pose types): from each range image or slice and the pose, the
 //! returns that stand above the ground or lie far below it
-//! ([`returns`]), remembered for `memory_s`, are tested against zones
+//! ([`returns`]), remembered until the sensor looks at them again for
+//! `memory_s` without seeing them, are tested against zones
 //! around the commanded path ([`zones`]); tilt and missing data stop the
 //! vehicle too. Nav2's collision monitor is the model (stop and slow
 //! polygons, an approach mode, `block_if_invalid`); the zones here follow
@@ -100,8 +101,10 @@ pub enum Verdict {
     Clear,
     /// Its speed is capped to `cap_mps`.
     Slow { cap_mps: f64, reason: Reason },
-    /// The vehicle stops.
-    Stop { reason: Reason },
+    /// The vehicle stops, holding `curvature`: the path it was last sent
+    /// (which the guard let through), not the new command's, which may be
+    /// the one that turns it into the hazard.
+    Stop { reason: Reason, curvature: f64 },
 }
 
 impl Verdict {
@@ -113,8 +116,9 @@ impl Verdict {
                 speed_mps: command.speed_mps.clamp(-cap_mps, *cap_mps),
                 ..*command
             },
-            Self::Stop { .. } => SteeringCommand {
+            Self::Stop { curvature, .. } => SteeringCommand {
                 speed_mps: 0.0,
+                curvature: *curvature,
                 arc_index: None,
                 ..*command
             },
@@ -125,7 +129,7 @@ impl Verdict {
     pub fn reason(&self) -> Option<&Reason> {
         match self {
             Self::Clear => None,
-            Self::Slow { reason, .. } | Self::Stop { reason } => Some(reason),
+            Self::Slow { reason, .. } | Self::Stop { reason, .. } => Some(reason),
         }
     }
 }
@@ -157,6 +161,65 @@ struct Cell {
     /// Returns in it, and when the last one came.
     count: u32,
     last: Utime,
+    /// How long images that looked at it have not seen it again, µs, and
+    /// when one last looked.
+    missing: Utime,
+    looked: Utime,
+}
+
+/// The directions an image or slice looks in, in its sensor's frame: a
+/// held hazard whose direction is among them was looked at (and is
+/// forgotten when looked at for `memory_s` without being seen); one
+/// below the lowest beam (the blind zone round a roof sensor), beside a
+/// narrow field of view or beyond `range_m` was not, and is kept.
+#[derive(Debug, Clone, Copy)]
+struct View {
+    world_to_sensor: arcnav_vehicle::frames::Isometry,
+    azimuth: [f64; 2],
+    elevation: [f64; 2],
+    range_m: f64,
+}
+
+impl View {
+    fn of(
+        beams: &arcnav_perception::BeamTable,
+        world_from_sensor: arcnav_vehicle::frames::Isometry,
+        range_m: f64,
+    ) -> Option<Self> {
+        let span = |angles: &[f32]| {
+            let (lo, hi) = angles
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &a| {
+                    (lo.min(f64::from(a)), hi.max(f64::from(a)))
+                });
+            // Half a pixel beyond the outer centres.
+            let half = if angles.len() > 1 {
+                (hi - lo) / (angles.len() - 1) as f64 / 2.0
+            } else {
+                0.0
+            };
+            (lo <= hi).then_some([lo - half, hi + half])
+        };
+        Some(Self {
+            world_to_sensor: world_from_sensor.inverse(),
+            azimuth: span(&beams.azimuth)?,
+            elevation: span(&beams.elevation)?,
+            range_m,
+        })
+    }
+
+    fn sees(&self, world: &nalgebra::Point3<f64>) -> bool {
+        let p = self.world_to_sensor * world;
+        let horizontal = p.x.hypot(p.y);
+        if horizontal > self.range_m {
+            return false;
+        }
+        let (azimuth, elevation) = (p.y.atan2(p.x), p.z.atan2(horizontal));
+        let within = |[lo, hi]: [f64; 2], a: f64| (lo..=hi).contains(&a);
+        (self.azimuth[1] - self.azimuth[0] >= std::f64::consts::TAU - 1e-3
+            || within(self.azimuth, azimuth))
+            && within(self.elevation, elevation)
+    }
 }
 
 /// The contact last found, followed as the vehicle drives on.
@@ -191,6 +254,8 @@ pub struct Guard {
     /// (on its way to the wheels while the latest takes effect).
     current: Option<SteeringCommand>,
     in_flight: f64,
+    /// The curvature the last verdict sent the vehicle on.
+    sent: Option<f64>,
     contact: Option<Contact>,
     counts: GuardCounts,
 }
@@ -224,6 +289,7 @@ impl Guard {
             scratch: Vec::new(),
             current: None,
             in_flight: 0.0,
+            sent: None,
             contact: None,
             counts: GuardCounts::default(),
         }
@@ -237,14 +303,14 @@ impl Guard {
         self.counts
     }
 
-    /// The hazards held at `now`: the latest return of each cell that
-    /// `min_points` hazardous returns fell in within `memory_s`.
-    pub fn hazards(&self, now: Utime) -> impl Iterator<Item = &Hazard> {
-        let memory = self.memory_us();
+    /// The hazards held: the latest return of each cell that `min_points`
+    /// hazardous returns fell in. (Cells are forgotten as images look at
+    /// them again and do not see them: `now` is kept for callers.)
+    pub fn hazards(&self, _now: Utime) -> impl Iterator<Item = &Hazard> {
         let min = self.config.min_points;
         self.cells
             .values()
-            .filter(move |c| c.count as usize >= min && now - c.last <= memory)
+            .filter(move |c| c.count as usize >= min)
             .map(|c| &c.hazard)
     }
 
@@ -296,6 +362,7 @@ impl Guard {
             return;
         };
         entry.2 = Some(entry.2.map_or(utime, |t| t.max(utime)));
+        let period = entry.1;
         let Some(pose) = self.pose else {
             self.counts.before_pose += 1;
             return;
@@ -317,10 +384,7 @@ impl Guard {
         self.counts.returns += found.returns;
         self.counts.standing += found.standing;
         self.counts.holes += found.holes;
-        let memory = self.memory_us();
-        let before = self.cells.len();
-        self.cells.retain(|_, c| utime - c.last <= memory);
-        let mut changed = self.cells.len() != before;
+        let mut changed = false;
         let size = self.config.cell_size_m;
         for hazard in self.scratch.drain(..) {
             let key = (
@@ -344,18 +408,75 @@ impl Guard {
                         hazard,
                         count: 1,
                         last: utime,
+                        missing: 0,
+                        looked: utime,
                     });
                 }
             }
             changed = true;
         }
+        changed |= self.forget(
+            utime,
+            View::of(
+                beams,
+                pose.world_from_vehicle * vehicle_from_sensor,
+                self.config.range_m,
+            ),
+            &pose,
+            period,
+        );
         if changed {
             self.version += 1;
         }
     }
 
+    /// Ages every held cell that `view` (an image or slice at `utime`)
+    /// looked at without seeing it, and forgets those missing for longer
+    /// than `memory_s`, and those twice `range_m` from the vehicle; true
+    /// when any was forgotten. A look adds the time since the one before,
+    /// at most the sensor's `period`: time in the blind zone is not time
+    /// missing.
+    fn forget(&mut self, utime: Utime, view: Option<View>, pose: &Pose, period: Utime) -> bool {
+        let memory = self.memory_us();
+        let far = 2.0 * self.config.range_m;
+        let at = pose.world_from_vehicle.translation.vector;
+        let before = self.cells.len();
+        self.cells.retain(|_, c| {
+            let p = c.hazard.position;
+            if (p.x - at.x).hypot(p.y - at.y) > far {
+                return false;
+            }
+            if c.last >= utime {
+                c.missing = 0;
+                c.looked = utime;
+            } else if view.is_some_and(|v| v.sees(&p)) {
+                c.missing += (utime - c.looked.max(c.last)).min(period);
+                c.looked = utime;
+            }
+            c.missing <= memory
+        });
+        self.cells.len() != before
+    }
+
     /// The verdict on `command` at `now`.
     pub fn check(&mut self, command: &SteeringCommand, now: Utime) -> Verdict {
+        let hold = self.sent.unwrap_or(command.curvature);
+        let verdict = match self.judge(command, now) {
+            Ok(verdict) => verdict,
+            Err(reason) => Verdict::Stop {
+                reason,
+                curvature: hold,
+            },
+        };
+        self.sent = Some(match verdict {
+            Verdict::Stop { curvature, .. } => curvature,
+            _ => command.curvature,
+        });
+        verdict
+    }
+
+    /// The verdict on `command` at `now`, or why it stops.
+    fn judge(&mut self, command: &SteeringCommand, now: Utime) -> Result<Verdict, Reason> {
         let age = |t: Utime| (now - t) as f64 * 1e-6;
         if self
             .current
@@ -365,43 +486,35 @@ impl Guard {
             self.current = Some(*command);
         }
         let Some(pose) = self.pose else {
-            return Verdict::Stop {
-                reason: Reason::StalePose { age_s: None },
-            };
+            return Err(Reason::StalePose { age_s: None });
         };
         if age(pose.utime) > self.config.pose_timeout_s {
-            return Verdict::Stop {
-                reason: Reason::StalePose {
-                    age_s: Some(age(pose.utime)),
-                },
-            };
+            return Err(Reason::StalePose {
+                age_s: Some(age(pose.utime)),
+            });
         }
         for (id, period, last) in &self.sensors {
             let limit = *period as f64 * 1e-6 * self.config.image_timeout_periods;
             let silent = last.map(age);
             if silent.is_none_or(|a| a > limit) {
-                return Verdict::Stop {
-                    reason: Reason::NoImage {
-                        sensor: id.clone(),
-                        age_s: silent,
-                    },
-                };
+                return Err(Reason::NoImage {
+                    sensor: id.clone(),
+                    age_s: silent,
+                });
             }
         }
         let (roll, pitch, _) = pose.world_from_vehicle.rotation.euler_angles();
         if roll.abs() > self.max_tilt_rad || pitch.abs() > self.max_tilt_rad {
-            return Verdict::Stop {
-                reason: Reason::Tilt {
-                    roll_deg: roll.to_degrees(),
-                    pitch_deg: pitch.to_degrees(),
-                },
-            };
+            return Err(Reason::Tilt {
+                roll_deg: roll.to_degrees(),
+                pitch_deg: pitch.to_degrees(),
+            });
         }
         if command.is_stop() {
-            return Verdict::Clear;
+            return Ok(Verdict::Clear);
         }
         let Some((s, hazard)) = self.contact(command, &pose, now) else {
-            return Verdict::Clear;
+            return Ok(Verdict::Clear);
         };
         let reason = Reason::Hazard {
             kind: hazard.kind,
@@ -410,17 +523,17 @@ impl Guard {
         };
         let speed = pose.velocity.xy().norm();
         if s - self.braking.margin_m <= self.braking.stopping_m(speed) {
-            return Verdict::Stop { reason };
+            return Err(reason);
         }
         let cap = self.braking.allowed_mps(s);
-        if cap < command.speed_mps.abs() {
+        Ok(if cap < command.speed_mps.abs() {
             Verdict::Slow {
                 cap_mps: cap,
                 reason,
             }
         } else {
             Verdict::Clear
-        }
+        })
     }
 
     /// The nearest hazard on the path `command` puts the vehicle on, and
@@ -565,6 +678,48 @@ mod tests {
         assert_eq!(far.check(&SteeringCommand::stop(T0), T0), Verdict::Clear);
     }
 
+    /// A command that turns into a hazard is stopped on the path the
+    /// vehicle was on: braking on the new arc would steer it into what
+    /// the guard stopped it for.
+    #[test]
+    fn a_stop_holds_the_path_the_vehicle_was_sent_not_the_new_arc() {
+        // A box 4 m ahead and 3 m to the left; driving straight at 5 m/s
+        // passes it, a hard left runs into it within the stopping distance.
+        let left_box = |x: f64, y: f64| {
+            if (7.0..9.0).contains(&x) && (2.0..4.0).contains(&y) {
+                0.6
+            } else {
+                0.0
+            }
+        };
+        let mut guard = guard_seeing(left_box, 5.0);
+        assert_eq!(guard.check(&command(5.0, 0.0), T0), Verdict::Clear);
+        let turn = SteeringCommand {
+            utime: T0 + 100_000,
+            ..command(5.0, 0.15)
+        };
+        let verdict = guard.check(&turn, T0 + 100_000);
+        let Verdict::Stop { curvature, .. } = verdict else {
+            panic!("{verdict:?}");
+        };
+        assert_eq!(curvature, 0.0);
+        let sent = verdict.apply(&turn);
+        assert_eq!((sent.speed_mps, sent.curvature), (0.0, 0.0));
+        // The stop is what was sent: the next command into the box holds
+        // the same path.
+        let again = guard.check(
+            &SteeringCommand {
+                utime: T0 + 200_000,
+                ..command(5.0, 0.15)
+            },
+            T0 + 100_000,
+        );
+        assert!(
+            matches!(again, Verdict::Stop { curvature, .. } if curvature == 0.0),
+            "{again:?}"
+        );
+    }
+
     #[test]
     fn a_ditch_ahead_is_a_hole_and_stops_the_vehicle() {
         let ditch = |x: f64, _: f64| if (7.0..9.0).contains(&x) { -1.5 } else { 0.0 };
@@ -575,20 +730,60 @@ mod tests {
         assert_eq!(reason_name(&verdict), Some("hole"));
     }
 
+    /// A hazard the sensor looks at again and does not see for
+    /// `memory_s` is forgotten (it moved); one in the blind zone in front
+    /// of the bumper is held however long the vehicle stands before it.
     #[test]
-    fn hazards_are_forgotten_after_memory_s() {
+    fn hazards_are_forgotten_only_when_looked_at_and_not_seen_for_memory_s() {
+        let sensor = SensorModel::erim();
+        let period = sensor.period_us();
+        fn images<F: Fn(f64, f64) -> f64 + Sync>(
+            guard: &mut Guard,
+            from: Utime,
+            seconds: i64,
+            x: f64,
+            height: &HeightFunction<F>,
+        ) -> Utime {
+            let sensor = SensorModel::erim();
+            let period = sensor.period_us();
+            let mut t = from;
+            while t < from + seconds * 1_000_000 {
+                let pose = Pose::at_rest(t, Isometry::translation(x, 0.0, 0.0));
+                guard.observe_pose(&pose);
+                guard.observe_image(&sensor.render(t, &pose.world_from_vehicle, height));
+                t += period;
+            }
+            t
+        }
+        let with_box = HeightFunction::new(box_at(4.0));
+        let open = HeightFunction::new(|_, _| 0.0);
+        // Seen from 4 m, then stood 0.8 m short of it (below the lowest
+        // beam) for 20 s of images: still held, and it stops the vehicle.
         let mut guard = guard_seeing(box_at(4.0), 0.0);
-        // At rest 4 m short of it: 5 m/s is more than stops 1 m short of it.
-        assert!(matches!(
-            guard.check(&command(5.0, 0.0), T0),
-            Verdict::Slow { .. }
-        ));
-        let later = T0 + 6_000_000;
-        guard.observe_pose(&Pose::at_rest(later, Isometry::identity()));
-        // No image for 6 s: the sensor's silence stops it, not the box.
-        let verdict = guard.check(&command(2.0, 0.0), later);
-        assert_eq!(reason_name(&verdict), Some("no image"), "{verdict:?}");
-        assert_eq!(guard.hazards(later).count(), 0);
+        let held = guard.hazards(T0).count();
+        assert!(held > 0);
+        let t = images(&mut guard, T0, 20, 3.2, &with_box);
+        assert!(
+            guard.hazards(t).count() >= held,
+            "{}",
+            guard.hazards(t).count()
+        );
+        guard.observe_pose(&Pose::at_rest(t, Isometry::translation(3.2, 0.0, 0.0)));
+        let verdict = guard.check(
+            &SteeringCommand {
+                utime: t,
+                ..command(1.0, 0.0)
+            },
+            t,
+        );
+        assert_eq!(reason_name(&verdict), Some("obstacle"), "{verdict:?}");
+        // The box taken away and looked at from 4 m: forgotten after
+        // memory_s (5 s), not before.
+        let mut guard = guard_seeing(box_at(4.0), 0.0);
+        let t = images(&mut guard, T0 + period, 4, 0.0, &open);
+        assert!(guard.hazards(t).count() > 0);
+        let t = images(&mut guard, t, 2, 0.0, &open);
+        assert_eq!(guard.hazards(t).count(), 0);
     }
 
     #[test]
@@ -601,7 +796,8 @@ mod tests {
         assert_eq!(
             guard.check(&go, T0),
             Verdict::Stop {
-                reason: Reason::StalePose { age_s: None }
+                reason: Reason::StalePose { age_s: None },
+                curvature: 0.0
             }
         );
         guard.observe_pose(&Pose::at_rest(T0, Isometry::identity()));
@@ -611,7 +807,8 @@ mod tests {
                 reason: Reason::NoImage {
                     sensor: sensor.id.clone(),
                     age_s: None
-                }
+                },
+                curvature: 0.0
             }
         );
         let image = sensor.render(T0, &Isometry::identity(), &HeightFunction::new(|_, _| 0.0));

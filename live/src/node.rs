@@ -56,6 +56,7 @@ pub fn run_node(
     lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
+    super::options::refuse_fault(config)?;
     let started = Instant::now();
     let mut report = match kind {
         NodeKind::Perception => perception(config, lcm, options)?,

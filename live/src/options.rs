@@ -33,6 +33,18 @@ pub enum LiveError {
     Panicked(&'static str),
     #[error("no behaviour named {name:?} in the configuration (configured: {known})")]
     UnknownBehaviour { name: String, known: String },
+    #[error(
+        "the configuration injects a fault into the pipeline ([pipeline] fault = {0:?}): that is for the simulator and replay, never a vehicle; remove it"
+    )]
+    FaultInjected(&'static str),
+}
+
+/// A live executor refuses a configuration that injects a fault.
+pub(crate) fn refuse_fault(config: &arcnav_config::Resolved) -> Result<(), LiveError> {
+    match config.pipeline.fault {
+        arcnav_pipeline::Fault::None => Ok(()),
+        fault => Err(LiveError::FaultInjected(fault.name())),
+    }
 }
 
 /// When a live executor stops.

@@ -72,6 +72,7 @@ pub fn run(
     mut lcm: Lcm,
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
+    super::options::refuse_fault(config)?;
     let started = Instant::now();
     let clock = options.clock();
     let live = config.live.clone();

@@ -196,7 +196,7 @@ impl BridgeGuard {
                     self.interventions += 1;
                     tracing::warn!("guard: SLOW to {cap_mps:.2} m/s: {reason}");
                 }
-                Verdict::Stop { reason } => {
+                Verdict::Stop { reason, .. } => {
                     self.interventions += 1;
                     tracing::warn!("guard: STOP: {reason}");
                 }

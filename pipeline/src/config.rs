@@ -30,6 +30,45 @@ pub struct PipelineConfig {
     /// yaw rate, rather than waiting for the next pose (at 50 Hz, up to
     /// 20 ms); 0: slices wait, as whole images always do, s.
     pub slice_pose_extrapolation_s: f64,
+    /// A defect put into the pipeline on purpose, to show that what stands
+    /// beside it (the guard) stops the vehicle when the pipeline does not:
+    /// see [`Fault`]. Only the lock-step executor (`arcnav sim`, `sweep`,
+    /// `replay`) injects it; a live run refuses a configuration with one.
+    pub fault: Fault,
+    /// The fault begins this long after the first pose, s.
+    pub fault_after_s: f64,
+}
+
+/// A defect of the pipeline, injected on purpose (`[pipeline] fault`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fault {
+    /// The pipeline as it is.
+    #[default]
+    None,
+    /// Perception reports nothing: each image's report says the ground it
+    /// observed, with no cell, region, shadow or height in it (a null
+    /// evaluator).
+    BlindPerception,
+    /// The local map drops every cell it is given: perception's reports
+    /// (logged whole) reach it with only the ground they observed, which
+    /// it then holds as clear.
+    ForgetfulMap,
+    /// The map stops changing: each cycle from the fault on votes on the
+    /// map of the last cycle before it.
+    StaleMap,
+}
+
+impl Fault {
+    /// Its name in the configuration.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::BlindPerception => "blind_perception",
+            Self::ForgetfulMap => "forgetful_map",
+            Self::StaleMap => "stale_map",
+        }
+    }
 }
 
 impl Default for PipelineConfig {
@@ -41,6 +80,8 @@ impl Default for PipelineConfig {
             max_waiting_images: 4,
             max_pose_gap_s: 0.2,
             slice_pose_extrapolation_s: 0.05,
+            fault: Fault::None,
+            fault_after_s: 0.0,
         }
     }
 }
@@ -58,6 +99,7 @@ impl PipelineConfig {
             0.0,
             0.5,
         )?;
+        check::in_range("fault_after_s", self.fault_after_s, 0.0, 1e6)?;
         if !(1..=1000).contains(&self.max_waiting_images) {
             return Err(ConfigError::new(
                 "max_waiting_images",

@@ -8,6 +8,7 @@
 //! t runs after every input at t ([`Pipeline::run_until`] runs those). A
 //! cycle lets every behaviour vote on the map snapshot and the arbiter decide.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use arcnav_arbiter::{Arbiter, BehaviourVotes, Decision, Reason};
@@ -18,6 +19,7 @@ use arcnav_vehicle::{ArcSet, Pose, SteeringCommand, Utime};
 use serde::Serialize;
 
 use crate::behaviours::BehaviourSet;
+use crate::config::Fault;
 use crate::cycle::{Cycle, DecisionCycle};
 use crate::perception::PerceptionNode;
 
@@ -148,6 +150,63 @@ pub struct Pipeline {
     stopwatch: Option<Stopwatch>,
     pub times: StageTimes,
     pub commands: u64,
+    fault: Injected,
+}
+
+/// A fault injected on purpose ([`Pipeline::inject`]) and what it did.
+#[derive(Debug, Clone, Default)]
+struct Injected {
+    fault: Fault,
+    /// It begins this long after the first pose, µs.
+    after: Utime,
+    /// When it begins (set by the first pose).
+    from: Option<Utime>,
+    /// The last cycle's map before it began ([`Fault::StaleMap`]).
+    last_map: Option<Arc<MapSnapshot>>,
+    counts: FaultCounts,
+}
+
+impl Injected {
+    fn active(&self, t: Utime) -> bool {
+        self.fault != Fault::None && self.from.is_some_and(|from| t >= from)
+    }
+}
+
+/// Takes every cell, region, shadow and height out of `report`, leaving the
+/// ground it observed; returns how many cells it held.
+fn strip(report: &mut ObstacleReport) -> u64 {
+    let cells = report.cells.len() as u64;
+    report.cells.clear();
+    report.regions.clear();
+    report.shadows.clear();
+    report.heights.clear();
+    cells
+}
+
+impl Injected {
+    /// The map the cycle votes on, as the fault leaves it.
+    fn corrupt(&mut self, cycle: &mut Cycle) {
+        if !self.active(cycle.utime) {
+            if self.fault == Fault::StaleMap {
+                self.last_map = Some(Arc::clone(&cycle.map));
+            }
+            return;
+        }
+        if self.fault == Fault::StaleMap {
+            let frozen = self.last_map.get_or_insert_with(|| Arc::clone(&cycle.map));
+            cycle.map = Arc::clone(frozen);
+            self.counts.cycles_stale += 1;
+        }
+    }
+}
+
+/// What an injected fault did (`report.json`'s `fault`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct FaultCounts {
+    /// Perception's untraversable and graded cells thrown away.
+    pub cells_dropped: u64,
+    /// Cycles that voted on a stale map.
+    pub cycles_stale: u64,
 }
 
 impl Pipeline {
@@ -168,7 +227,23 @@ impl Pipeline {
             stopwatch: None,
             times: StageTimes::default(),
             commands: 0,
+            fault: Injected::default(),
         }
+    }
+
+    /// Makes the pipeline faulty on purpose from `after` µs past the first
+    /// pose (`[pipeline] fault`): to test what stands beside it.
+    pub fn inject(&mut self, fault: Fault, after: Utime) {
+        self.fault = Injected {
+            fault,
+            after,
+            ..Injected::default()
+        };
+    }
+
+    /// The fault injected, and what it did so far.
+    pub fn fault(&self) -> (Fault, FaultCounts) {
+        (self.fault.fault, self.fault.counts)
     }
 
     /// Keeps an explanation of every decision (for pictures and replays).
@@ -200,6 +275,9 @@ impl Pipeline {
         let started = self.started();
         match input {
             Input::Pose(pose) => {
+                if self.fault.from.is_none() {
+                    self.fault.from = Some(pose.utime + self.fault.after);
+                }
                 // Runs the events before the pose, then moves the map.
                 self.cycle.on_pose(pose, &mut self.cycles);
                 self.times.localmap.add(started, self.stopwatch);
@@ -240,8 +318,19 @@ impl Pipeline {
             return;
         }
         self.times.perception.add(started, self.stopwatch);
-        for report in self.reports.drain(..) {
+        // A blind perception's reports are empty as they leave it; a
+        // forgetful map's lose their cells as they reach it.
+        let fault = self.fault.active(now).then_some(self.fault.fault);
+        if fault == Some(Fault::BlindPerception) {
+            for report in &mut self.reports {
+                self.fault.counts.cells_dropped += strip(report);
+            }
+        }
+        for mut report in self.reports.drain(..) {
             sink.on_obstacles(now, &report);
+            if fault == Some(Fault::ForgetfulMap) {
+                self.fault.counts.cells_dropped += strip(&mut report);
+            }
             self.cycle.on_report(report, (), &mut self.cycles);
         }
     }
@@ -272,7 +361,8 @@ impl Pipeline {
         let mut cycles = std::mem::take(&mut self.cycles);
         let stopwatch = self.stopwatch;
         let started = || stopwatch.map(|clock| clock());
-        for cycle in cycles.drain(..) {
+        for mut cycle in cycles.drain(..) {
+            self.fault.corrupt(&mut cycle);
             let begun = started();
             let votes =
                 self.behaviours

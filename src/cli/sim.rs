@@ -417,6 +417,12 @@ fn print_ride_stops_and_recoveries(r: &arcnav::mission::MissionReport) {
     if !s.stopped_s.is_empty() {
         println!("stopped       {}", seconds_list(&s.stopped_s));
     }
+    if let Some(f) = &r.fault {
+        println!(
+            "fault         {} from {:.1} s, injected on purpose ([pipeline] fault): {} cells perception found thrown away, {} cycles voted on a stale map",
+            f.fault, f.after_s, f.counts.cells_dropped, f.counts.cycles_stale
+        );
+    }
     match &r.guard {
         Some(g) => {
             println!(

@@ -33,7 +33,8 @@ use arcnav_pipeline::{Input, Pipeline, Sink};
 use arcnav_wire as wire;
 pub use guarded::{GuardEvent, GuardReport};
 pub use report::{
-    MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats, TrackPoint,
+    FaultReport, MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats,
+    TrackPoint,
 };
 
 /// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
@@ -514,7 +515,13 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
     } else {
         0.0
     };
+    let (fault, fault_counts) = pipeline.fault();
     MissionReport {
+        fault: (fault != arcnav_pipeline::Fault::None).then(|| report::FaultReport {
+            fault: fault.name(),
+            after_s: config.pipeline.fault_after_s,
+            counts: fault_counts,
+        }),
         guard: ended.guard.clone(),
         world: world.spec.name.clone(),
         sensor: sensors

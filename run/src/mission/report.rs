@@ -61,6 +61,10 @@ pub struct MissionReport {
     pub cruise_cap_mps: Option<f64>,
     pub images: u64,
     pub images_dropped: u64,
+    /// The defect injected into the pipeline on purpose (`[pipeline]
+    /// fault`) and what it did; absent when there is none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fault: Option<FaultReport>,
     /// What the guard did (`[guard]`); absent when it is off.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub guard: Option<super::GuardReport>,
@@ -172,4 +176,15 @@ pub struct MissionRun {
     pub seen_patches: BTreeSet<(i64, i64)>,
     pub patch_size_m: f64,
     pub snapshots: Vec<PathBuf>,
+}
+
+/// A fault injected into the pipeline (`report.json`'s `fault`).
+#[derive(Debug, Clone, Serialize)]
+pub struct FaultReport {
+    /// `[pipeline] fault`.
+    pub fault: &'static str,
+    /// It began this long after the first pose, s.
+    pub after_s: f64,
+    #[serde(flatten)]
+    pub counts: arcnav_pipeline::FaultCounts,
 }
