@@ -91,3 +91,20 @@ pub(crate) enum ToArbiter {
         images: Vec<(Utime, i64)>,
     },
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fault is for the simulator and replay: every live executor
+    /// refuses it by name before it starts a thread.
+    #[test]
+    fn a_live_run_refuses_a_configuration_that_injects_a_fault() {
+        let mut config = arcnav_config::Config::default();
+        assert!(refuse_fault(&config.resolved().unwrap()).is_ok());
+        config.pipeline.fault = arcnav_pipeline::Fault::StaleMap;
+        let e = refuse_fault(&config.resolved().unwrap()).unwrap_err();
+        assert!(matches!(e, LiveError::FaultInjected("stale_map")), "{e}");
+        assert!(e.to_string().contains("[pipeline] fault"), "{e}");
+    }
+}
