@@ -113,10 +113,9 @@ fn mission(world: &World, config: &Config) -> MissionReport {
 fn line(run: &Run) -> String {
     let r = &run.guarded;
     let guard = r.guard.as_ref().unwrap();
-    let first = guard
-        .first
-        .first()
-        .map_or("-".to_string(), |e| format!("{} at x {:.1}: {}", e.verdict, e.x, e.reason));
+    let first = guard.first.first().map_or("-".to_string(), |e| {
+        format!("{} at x {:.1}: {}", e.verdict, e.x, e.reason)
+    });
     let hit = |r: &MissionReport| {
         r.collisions
             .first()

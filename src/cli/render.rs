@@ -67,6 +67,14 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
             result.cycles.len()
         );
     };
+    // The guard's verdict on this command (GUARD_STATUS), the gravest
+    // first, when the log holds any.
+    let guard = result
+        .recorded_guard
+        .iter()
+        .filter(|g| g.command_utime == kept.at)
+        .max_by_key(|g| g.verdict)
+        .map(ToString::to_string);
     arcnav::render::snapshot_picture(
         &out,
         &config,
@@ -75,6 +83,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         Some(&kept.decision),
         kept.at - origin,
         &kept.overlays,
+        guard.as_deref(),
     )?;
     println!(
         "decision at {:.2} s drawn to {}",
@@ -92,18 +101,13 @@ pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         Some((_, logged)) => println!("as logged     {}", logged.reason),
         None => println!("as logged     (no DECISION at this time in the log)"),
     }
-    // The vehicle-side guard's verdicts on this command (GUARD_STATUS),
-    // the gravest first, when the log holds any.
-    if !result.recorded_guard.is_empty() {
-        match result
-            .recorded_guard
-            .iter()
-            .filter(|g| g.command_utime == kept.at)
-            .max_by_key(|g| g.verdict)
-        {
-            Some(verdict) => println!("guard         {verdict}"),
-            None => println!("guard         (no GUARD_STATUS on this command in the log)"),
-        }
+    match &guard {
+        Some(verdict) => println!("guard         {verdict}"),
+        None if !result.recorded_guard.is_empty() => println!(
+            "guard         no verdict on this command in the log (a simulated run logs only the \
+             guard's stops and slows, and the clear after them)"
+        ),
+        None => {}
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -115,6 +115,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             println!("{:<13} ENDED: {why}", run.name);
         }
     }
+    super::print_guard(last.guard.as_ref());
     let weight_of = |c: &Resolved| {
         let c = c.clone();
         move |name: &str| c.arbiter.weight(name)
@@ -168,6 +169,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             "problems": problems,
             "input_lost": problems.lost_input(),
             "comparisons": comparisons,
+            "guard": last.guard,
         });
         arcnav::output::write_file(path, serde_json::to_string_pretty(&json)?.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;

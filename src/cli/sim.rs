@@ -423,44 +423,7 @@ fn print_ride_stops_and_recoveries(r: &arcnav::mission::MissionReport) {
             f.fault, f.after_s, f.counts.cells_dropped, f.counts.cycles_stale
         );
     }
-    match &r.guard {
-        Some(g) => {
-            println!(
-                "guard         {} stops, {} slows (stopped {:.1} s, slowed {:.1} s); {} hazardous returns ({} standing, {} holes) from {} images and {} slices, {:.2} ms each",
-                g.stops,
-                g.slows,
-                g.stopped_s,
-                g.slowed_s,
-                g.counts.standing + g.counts.holes,
-                g.counts.standing,
-                g.counts.holes,
-                g.counts.images,
-                g.counts.slices,
-                g.observe_ms
-            );
-            if g.counts.unknown_sensor
-                + g.counts.before_pose
-                + g.counts.malformed
-                + g.counts.forgotten
-                > 0
-            {
-                println!(
-                    "              not tested: {} of an unknown sensor, {} before any pose, {} malformed; {} returns forgotten (guard.max_cells held)",
-                    g.counts.unknown_sensor,
-                    g.counts.before_pose,
-                    g.counts.malformed,
-                    g.counts.forgotten
-                );
-            }
-            if let Some(e) = g.first.first() {
-                println!(
-                    "              first: {} at {:.1} s at ({:.1}, {:.1}): {}",
-                    e.verdict, e.t_s, e.x, e.y, e.reason
-                );
-            }
-        }
-        None => println!("guard         off ([guard] enabled = false)"),
-    }
+    super::print_guard(r.guard.as_ref());
     let rec = &r.recovery;
     println!(
         "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned, {} turned the other way; {} retraces over {:.1} m; blocked with no way back {} decisions, out of recoveries {})",

@@ -33,6 +33,13 @@ pub struct GuardEvent {
     pub reason: String,
 }
 
+/// An input the guard takes.
+pub(crate) enum Observed<'a> {
+    Pose(&'a Pose),
+    Image(&'a RangeImage),
+    Slice(&'a RangeSlice),
+}
+
 /// What the guard did in a mission (`report.json`'s `guard`).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct GuardReport {
@@ -75,6 +82,9 @@ pub(crate) struct GuardWatch {
     observed: u64,
     check_s: f64,
     checks: u64,
+    /// Verdicts to log (GUARD_STATUS): every stop and slow, and the clear
+    /// after them.
+    said: Vec<arcnav_bus::lcmtypes::guard_status_t>,
 }
 
 impl GuardWatch {
@@ -90,6 +100,7 @@ impl GuardWatch {
             observed: 0,
             check_s: 0.0,
             checks: 0,
+            said: Vec::new(),
         })
     }
 
@@ -190,8 +201,69 @@ impl GuardWatch {
                 });
             }
         }
+        if level > 0 || level != self.level {
+            self.said.push(arcnav_wire::guard_status_to_wire(
+                t,
+                command.utime,
+                &verdict,
+            ));
+        }
         self.level = level;
         verdict
+    }
+
+    /// One input of a replayed log, in log order (before the pipeline
+    /// takes it: its commands before it are judged without it).
+    pub(crate) fn observe_one(&mut self, input: Observed<'_>) {
+        let start = Instant::now();
+        match input {
+            Observed::Pose(pose) => self.guard.observe_pose(pose),
+            Observed::Image(image) => {
+                self.guard.observe_image(image);
+                self.observed += 1;
+            }
+            Observed::Slice(slice) => {
+                self.guard.observe_slice(slice);
+                self.observed += 1;
+            }
+        }
+        self.observe_s += start.elapsed().as_secs_f64();
+    }
+
+    /// The verdict on a replayed `command` at `t` (the vehicle at `at`),
+    /// counted as in a mission: what the guard would have done.
+    pub(crate) fn judge(
+        &mut self,
+        command: &SteeringCommand,
+        t: Utime,
+        t0: Utime,
+        at: [f64; 2],
+    ) -> Verdict {
+        let start = Instant::now();
+        // The time since the last command was under the verdict then.
+        if let Some(last) = self.last {
+            let dt = micros_to_seconds((t - last.utime).max(0));
+            match self.level {
+                1 => self.report.slowed_s += dt,
+                2 => self.report.stopped_s += dt,
+                _ => {}
+            }
+        }
+        self.last = Some(SteeringCommand {
+            utime: t,
+            ..*command
+        });
+        let verdict = self.verdict(command, t, t0, at);
+        self.check_s += start.elapsed().as_secs_f64();
+        self.checks += 1;
+        verdict
+    }
+
+    /// The verdicts to log since the last call.
+    pub(crate) fn said(
+        &mut self,
+    ) -> impl Iterator<Item = arcnav_bus::lcmtypes::guard_status_t> + '_ {
+        self.said.drain(..)
     }
 
     /// What the guard did, for the report.

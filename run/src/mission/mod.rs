@@ -7,7 +7,7 @@
 //! and, at the sensor's rate, a range image ray-cast from the true pose. The
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
-mod guarded;
+pub(crate) mod guarded;
 pub mod report;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -185,6 +185,7 @@ impl Sink for MissionSink<'_> {
                 decision,
                 at - SIM_EPOCH_US,
                 &std::mem::take(&mut self.overlays),
+                None,
             ) {
                 Ok(()) => self.snapshots.push(path),
                 Err(e) => self.log.error = Some(e.into()),
@@ -352,7 +353,12 @@ pub fn run_mission(
         let commands = std::mem::take(&mut sink.commands);
         let commands = match guard.as_mut() {
             Some(guard) => {
-                guard.commands(commands, t, t0, [state.x, state.y], 1.0 / sim.pose_rate_hz)
+                let sent =
+                    guard.commands(commands, t, t0, [state.x, state.y], 1.0 / sim.pose_rate_hz);
+                for status in guard.said() {
+                    sink.log.message(t, channels::GUARD_STATUS, &status);
+                }
+                sent
             }
             None => commands,
         };

@@ -346,6 +346,7 @@ fn patch_color(reasons: Reasons, cost: f32, alpha: u8) -> [u8; 4] {
 /// One decision: the local map in the vehicle frame with the arcs coloured by
 /// fused vote (chosen arc in blue, forbidden arcs dashed), and each
 /// behaviour's votes and the fused votes as bars, hardest left turn first.
+#[allow(clippy::too_many_arguments)]
 pub fn snapshot_picture(
     path: &Path,
     config: &Resolved,
@@ -354,6 +355,7 @@ pub fn snapshot_picture(
     decision: Option<&Decision>,
     elapsed_us: Utime,
     overlays: &[(String, Overlay)],
+    guard: Option<&str>,
 ) -> Result<(), RenderError> {
     let ppm = 20.0f32;
     // The picture reaches 2 m past the map window as the nodes use it
@@ -482,13 +484,15 @@ pub fn snapshot_picture(
         decision,
         elapsed_us,
         &legend,
+        guard,
     );
     canvas.save(path)
 }
 
 /// The panel right of a snapshot's map, from `x0`, `panel` wide: each
 /// behaviour's votes and the fused ones as bars, the map's key, the
-/// command and who vetoed what.
+/// command, the guard's verdict on it and who vetoed what.
+#[allow(clippy::too_many_arguments)]
 fn vote_panel(
     canvas: &mut Canvas,
     x0: f32,
@@ -497,6 +501,7 @@ fn vote_panel(
     decision: Option<&Decision>,
     elapsed_us: Utime,
     legend: &[(String, Rgba)],
+    guard: Option<&str>,
 ) {
     let chosen = decision.and_then(|d| d.command.arc_index);
     let bar_w = ((panel - 40.0) / arcs.len() as f32).max(1.0);
@@ -603,6 +608,18 @@ fn vote_panel(
             &line,
         );
         y += 20.0;
+        // The guard's verdict on this command, when the log says it.
+        if let Some(verdict) = guard {
+            let colour = if verdict.starts_with("STOP") {
+                RED
+            } else if verdict.starts_with("SLOW") {
+                [200, 110, 0, 255]
+            } else {
+                BLACK
+            };
+            canvas.text(x0, y, 13.0, colour, &format!("guard: {verdict}"));
+            y += 20.0;
+        }
         let mut listed = 0;
         for (arc, vetoes) in d.vetoes.iter().enumerate() {
             for (who, cause) in vetoes {
@@ -670,7 +687,7 @@ mod tests {
         let dir = arcnav_testkit::temp_dir("render-overlay");
         let picture = |overlays: &[(String, Overlay)], name: &str| {
             let path = dir.join(name);
-            snapshot_picture(&path, &config, &arcs, &map, None, 0, overlays).unwrap();
+            snapshot_picture(&path, &config, &arcs, &map, None, 0, overlays, None).unwrap();
             tiny_skia::Pixmap::load_png(&path).unwrap()
         };
         let with = picture(&[("b".to_owned(), overlay)], "with.png");

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 use arcnav_arbiter::{BehaviourVotes, Decision, Reason};
 use arcnav_behaviours::{Mission, Overlay};
 use arcnav_bus::log::{EventSource, InTimeOrder, LogReader, LogWriteError, ReorderWindow};
-use arcnav_bus::messages::{AnyMessage, TypedEvent, TypedEvents};
+use arcnav_bus::messages::{AnyMessage, TypedEvent, TypedEvents, channels};
 use arcnav_localmap::MapSnapshot;
 use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::{ArcSet, ConfigError, Pose, SteeringCommand, Utime};
@@ -28,6 +28,8 @@ mod problems;
 pub use compare::{Comparison, Cycle, Decided, Decisions, Difference, WeightOf, compare};
 pub use problems::{InputProblems, LogSummary};
 
+use crate::mission::GuardReport;
+use crate::mission::guarded::{GuardWatch, Observed};
 use crate::recorder::{Recorder, WriteFailed};
 use arcnav_config::Resolved;
 use arcnav_pipeline::{Input, Pipeline, Sink};
@@ -92,6 +94,9 @@ pub struct ReplayResult {
     /// What each external behaviour did (`[behaviours.external.NAME]`):
     /// its counters, and why it ended if it did.
     pub external: Vec<ExternalRun>,
+    /// What the guard would have done with the recomputed commands
+    /// (`[guard] enabled`); its verdicts are in `--out`'s GUARD_STATUS.
+    pub guard: Option<GuardReport>,
 }
 
 /// What an external behaviour did in a replay.
@@ -159,6 +164,10 @@ struct ReplaySink<'a> {
     kept: Option<KeptDecision>,
     /// The overlays of the cycle about to be decided, when it may be kept.
     overlays: Vec<(String, Overlay)>,
+    /// The guard, judging every recomputed command on the log's returns
+    /// (`[guard] enabled`), and the first pose's time.
+    guard: Option<GuardWatch>,
+    first_pose: Option<Utime>,
 }
 
 impl Sink for ReplaySink<'_> {
@@ -190,6 +199,14 @@ impl Sink for ReplaySink<'_> {
         self.out.command(at, command, reason);
         if self.warming {
             return;
+        }
+        if let Some(guard) = &mut self.guard {
+            let p = map.world_from_vehicle.translation.vector;
+            let t0 = self.first_pose.unwrap_or(at);
+            guard.judge(command, at, t0, [p.x, p.y]);
+            for status in guard.said() {
+                self.out.message(at, channels::GUARD_STATUS, &status);
+            }
         }
         self.cycles.insert(
             (self.run, at),
@@ -280,6 +297,25 @@ struct Taking<'a> {
     arcs: &'a ArcSet,
 }
 
+/// The guard takes an image or slice at `utime` after the pipeline has
+/// decided every cycle before it (what the pipeline does first with one),
+/// so that the commands of those cycles are judged without it, as they
+/// would be live.
+fn guard_takes(
+    pipeline: &mut Pipeline,
+    sink: &mut ReplaySink<'_>,
+    utime: Utime,
+    input: Observed<'_>,
+) {
+    if sink.guard.is_none() {
+        return;
+    }
+    pipeline.run_until(utime - 1, sink);
+    if let Some(guard) = &mut sink.guard {
+        guard.observe_one(input);
+    }
+}
+
 /// One event of the log within the replay's window: fed to the pipeline
 /// (and copied to the output log), kept as a recorded decision, or counted
 /// as a problem.
@@ -301,7 +337,13 @@ fn take(
             Ok(pose) => {
                 fed.inputs.poses += 1;
                 sink.out.message(t, channel, &msg);
+                sink.first_pose.get_or_insert(pose.utime);
+                // The pose's own cycles are the pipeline's to run (a jump
+                // ahead skips some): the guard takes it after them.
                 pipeline.input(Input::Pose(pose), sink);
+                if let Some(guard) = &mut sink.guard {
+                    guard.observe_one(Observed::Pose(&pose));
+                }
             }
             Err(e) => {
                 tracing::debug!(%e, "invalid pose skipped");
@@ -314,6 +356,7 @@ fn take(
                 Ok(image) => {
                     fed.inputs.images += 1;
                     sink.out.event(t, channel, &encoded);
+                    guard_takes(pipeline, sink, image.utime, Observed::Image(&image));
                     pipeline.input(Input::Image(image), sink);
                 }
                 Err(e) => {
@@ -328,6 +371,7 @@ fn take(
                 Ok(slice) => {
                     fed.inputs.slices += 1;
                     sink.out.event(t, channel, &encoded);
+                    guard_takes(pipeline, sink, slice.utime, Observed::Slice(&slice));
                     pipeline.input(Input::Slice(slice), sink);
                 }
                 Err(e) => {
@@ -489,6 +533,8 @@ pub fn replay(
         keep_at: None,
         kept: None,
         overlays: Vec::new(),
+        guard: GuardWatch::new(config, &config.sensors),
+        first_pose: None,
     };
     let mut fed = Fed::default();
     let mut span: Option<(Utime, Utime)> = None;
@@ -624,6 +670,7 @@ pub fn replay(
         kept: sink.kept,
         arcs,
         external: external_runs(config, &pipeline),
+        guard: sink.guard.as_ref().map(GuardWatch::report),
     })
 }
 
