@@ -382,6 +382,11 @@ struct VehicleArgs {
     /// URL: the controller's own link, e.g. udpm://239.255.76.68:7669?ttl=0.
     #[arg(long, value_name = "URL")]
     forward: Option<String>,
+    /// The commands to follow: STEERING_COMMAND (the arbiter's), or
+    /// STEERING_COMMAND_GUARDED when `arcnav node guard` runs between the
+    /// arbiter and the vehicle.
+    #[arg(long, value_name = "CHANNEL", default_value = "STEERING_COMMAND")]
+    commands: String,
 }
 
 #[derive(Debug, Subcommand)]
@@ -399,6 +404,16 @@ enum NodeCommand {
     },
     /// ARC_VOTES_* → STEERING_COMMAND, with the safety watchdog.
     Arbiter(LiveArgs),
+    /// The guard on its own: STEERING_COMMAND, POSE, RANGE_IMAGE* →
+    /// STEERING_COMMAND_GUARDED, GUARD_STATUS.
+    ///
+    /// The guard as a node of its own between the arbiter and the vehicle
+    /// (as Nav2's collision monitor sits between the controller and the
+    /// base): every command is judged on the raw returns, tilt and the
+    /// age of the data, and republished as it is let through on
+    /// STEERING_COMMAND_GUARDED (run `arcnav vehicle --commands
+    /// STEERING_COMMAND_GUARDED`), with its verdict on GUARD_STATUS.
+    Guard(LiveArgs),
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -530,6 +545,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             NodeCommand::Perception(args) => cli::live(Some(NodeKind::Perception), args),
             NodeCommand::Localmap(args) => cli::live(Some(NodeKind::LocalMap), args),
             NodeCommand::Arbiter(args) => cli::live(Some(NodeKind::Arbiter), args),
+            NodeCommand::Guard(args) => cli::live(Some(NodeKind::Guard), args),
             NodeCommand::Behaviour { name, live: args } => {
                 cli::live(Some(NodeKind::Behaviour(name)), args)
             }

@@ -1120,6 +1120,95 @@ fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
     assert!(out.contains("guard         STOP: obstacle"), "{out}");
 }
 
+/// `arcnav node guard` between the arbiter and the vehicle: the same log
+/// of commands driving at a box (obstacle avoidance out of the vote), the
+/// guard a node of its own, the vehicle (its own guard off) following
+/// STEERING_COMMAND_GUARDED: it is stopped before the box.
+#[test]
+fn the_guard_node_stops_a_vehicle_that_follows_it_short_of_a_box() {
+    let mut blind = config(SensorPreset::Erim, false);
+    blind.guard.enabled = false;
+    for (name, weight) in [
+        ("obstacle_avoidance", 0.0),
+        ("route", 0.0),
+        ("goal_seeking", 1.0),
+    ] {
+        blind.arbiter.weights.insert(name.into(), weight);
+    }
+    let Some(net) = Net::setup("node-guard", config(SensorPreset::Erim, false), |_| {
+        sim_log_on("box_ahead", &blind)
+    }) else {
+        return;
+    };
+    let mut xs = BTreeMap::new();
+    let mut reader = LogReader::open(&net.log).unwrap();
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::POSE {
+            let pose = pose_t::decode(&event.data).unwrap();
+            xs.insert(pose.utime, pose.position[0]);
+        }
+    }
+    let hit_x = *xs.values().last().unwrap();
+    let mut unguarded = config(SensorPreset::Erim, false);
+    unguarded.guard.enabled = false;
+    let vehicle_file = write_config(&unguarded, &temp_dir("node-guard-vehicle"));
+    let guard = net.arcnav("guard", &["node", "guard", "--stats"]);
+    let vehicle = Proc::arcnav(
+        &net.ns,
+        "vehicle",
+        &[
+            "vehicle",
+            "--print",
+            "--commands",
+            channels::STEERING_COMMAND_GUARDED,
+            "--config",
+            &vehicle_file,
+        ],
+    );
+    guard.wait_ready();
+    vehicle.wait_ready();
+    assert!(
+        net.play("POSE|RANGE_IMAGE.*|STEERING_COMMAND", 1.0)
+            .wait()
+            .unwrap()
+            .success()
+    );
+    vehicle.signal("TERM");
+    guard.signal("TERM");
+    let guard_err = guard.stderr.lock().unwrap().clone();
+    let (code, guard_out) = guard.finish();
+    assert_eq!(code, Some(0), "{guard_err}");
+    let vehicle_err = vehicle.stderr.lock().unwrap().clone();
+    let (code, stdout) = vehicle.finish();
+    assert_eq!(code, Some(0), "{vehicle_err}");
+    assert!(guard_err.contains("guard: STOP: obstacle"), "{guard_err}");
+    assert!(guard_out.contains("guard_interventions"), "{guard_out}");
+    let ticks: Vec<serde_json::Value> = stdout
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    // The vehicle followed moving commands, then a stop before the box.
+    let moving = ticks
+        .iter()
+        .position(|t| t["state"] == "following" && t["speed_mps"].as_f64().unwrap() > 0.5)
+        .unwrap_or_else(|| panic!("never moved:\n{vehicle_err}\n{guard_err}"));
+    let stop = ticks[moving..]
+        .iter()
+        .find(|t| t["state"] == "following" && t["speed_mps"] == 0.0)
+        .unwrap_or_else(|| panic!("never stopped:\n{guard_err}"));
+    assert_eq!(stop["guard"], "off", "the vehicle's own guard is off");
+    let at = stop["command_utime"].as_i64().unwrap();
+    let x = *xs.range(..=at).next_back().unwrap().1;
+    eprintln!(
+        "stopped by the guard node at x = {x:.1} m (the logged vehicle hit the box at {hit_x:.1} m)"
+    );
+    assert!(
+        x < hit_x - 1.0,
+        "stopped at x = {x:.1} m, the box hit at {hit_x:.1} m"
+    );
+}
+
 #[test]
 fn arcnav_run_reproduces_the_lockstep_replay_over_udp_multicast() {
     let Some(net) = Net::erim("run", config(SensorPreset::Erim, true)) else {

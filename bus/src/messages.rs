@@ -25,8 +25,11 @@ pub mod channels {
     pub const LOCAL_MAP: &str = "LOCAL_MAP";
     /// Why each STEERING_COMMAND is what it is (`decision_t`).
     pub const DECISION: &str = "DECISION";
-    /// The vehicle-side guard's verdicts (`guard_status_t`).
+    /// The guard's verdicts (`guard_status_t`).
     pub const GUARD_STATUS: &str = "GUARD_STATUS";
+    /// STEERING_COMMAND as `arcnav node guard` lets it through, for a
+    /// vehicle that follows it (`arcnav vehicle --commands`).
+    pub const STEERING_COMMAND_GUARDED: &str = "STEERING_COMMAND_GUARDED";
     /// Prefix of each behaviour's vote channel.
     pub const ARC_VOTES_PREFIX: &str = "ARC_VOTES_";
 

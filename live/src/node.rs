@@ -7,6 +7,7 @@
 //! | localmap | POSE, OBSTACLE_CELLS | LOCAL_MAP (one per cycle) |
 //! | behaviour NAME | LOCAL_MAP, WAYPOINTS, STEERING_COMMAND | ARC_VOTES_NAME |
 //! | arbiter | ARC_VOTES_*, POSE, OBSTACLE_CELLS | STEERING_COMMAND, DECISION |
+//! | guard | STEERING_COMMAND, POSE, RANGE_IMAGE* | STEERING_COMMAND_GUARDED, GUARD_STATUS |
 //!
 //! The arbiter decides a cycle when every behaviour with a positive weight
 //! has voted for it, or `live.decision_deadline_s` after the first vote;
@@ -36,6 +37,8 @@ pub enum NodeKind {
     Arbiter,
     /// A behaviour configured under `[behaviours.NAME]`.
     Behaviour(String),
+    /// The guard between the arbiter and the vehicle.
+    Guard,
 }
 
 impl std::fmt::Display for NodeKind {
@@ -45,6 +48,7 @@ impl std::fmt::Display for NodeKind {
             NodeKind::LocalMap => write!(f, "localmap"),
             NodeKind::Arbiter => write!(f, "arbiter"),
             NodeKind::Behaviour(name) => write!(f, "behaviour {name}"),
+            NodeKind::Guard => write!(f, "guard"),
         }
     }
 }
@@ -63,6 +67,7 @@ pub fn run_node(
         NodeKind::LocalMap => localmap(config, lcm, options)?,
         NodeKind::Arbiter => arbiter(config, lcm, options)?,
         NodeKind::Behaviour(name) => behaviour(config, name, lcm, options)?,
+        NodeKind::Guard => guard(config, lcm, options)?,
     };
     report.wall_s = started.elapsed().as_secs_f64();
     Ok(report)
@@ -371,4 +376,99 @@ fn arbiter(
         nodes: vec![status],
         ..LiveReport::default()
     })
+}
+
+/// The guard as a node of its own, between the arbiter and the vehicle (as
+/// Nav2's collision monitor sits between the controller and the base): it
+/// takes the images and the pose, judges every STEERING_COMMAND on the
+/// sensor clock and publishes it as it lets it through on
+/// STEERING_COMMAND_GUARDED, with its verdict on GUARD_STATUS; an image that
+/// changes the verdict on the newest command (received within three
+/// command periods) publishes it again at once.
+fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
+    use super::vehicle::{BridgeGuard, guard_status};
+    use arcnav_bus::Message as _;
+    use arcnav_bus::lcmtypes::steering_command_t;
+    use arcnav_vehicle::SteeringCommand;
+
+    if !config.guard.enabled {
+        return Err(LiveError::GuardOff);
+    }
+    let mut guard = BridgeGuard::new(arcnav_guard::Guard::new(
+        &config.guard,
+        &config.vehicle,
+        &config.sensors,
+    ));
+    let Books {
+        mut status,
+        mut bad,
+        mut busy,
+        mut ticker,
+        period_ms,
+    } = Books::new("guard", config, options);
+    lcm.subscribe(channels::STEERING_COMMAND);
+    lcm.subscribe(channels::POSE);
+    lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
+    let publisher = lcm.publisher();
+    let fresh_us = (3e6 / config.pipeline.command_rate_hz) as i64;
+    let mut newest: Option<(SteeringCommand, i64)> = None;
+    let send = |command: &SteeringCommand, at: i64, verdict: &arcnav_guard::Verdict| {
+        let sent = steering_command_t::from(&verdict.apply(command));
+        if let Err(e) = publisher.publish_message(channels::STEERING_COMMAND_GUARDED, &sent) {
+            tracing::error!(%e, "cannot publish the guarded command");
+        }
+        let said = wire::guard_status_to_wire(at, command.utime, verdict);
+        if let Err(e) = publisher.publish_message(channels::GUARD_STATUS, &said) {
+            tracing::debug!(%e, "cannot publish the guard's status");
+        }
+    };
+    pump(
+        &mut lcm,
+        options,
+        config.live.status_period_s,
+        Duration::from_millis(50),
+        |message, now| {
+            let started = Instant::now();
+            if let Some(message) = message {
+                if message.channel == channels::STEERING_COMMAND {
+                    match steering_command_t::decode(&message.data) {
+                        Ok(msg) => {
+                            status.handled += 1;
+                            let command = SteeringCommand::from(&msg);
+                            newest = Some((command, now));
+                            let (at, verdict) = guard.judge(&command, now);
+                            send(&command, at, &verdict);
+                        }
+                        Err(e) => bad.refuse("steering command", &message.channel, &e),
+                    }
+                } else {
+                    match decode(&message) {
+                        Some(m) => guard.on_message(m, now),
+                        None => guard.ignored += 1,
+                    }
+                    // A verdict the new image changes goes out at once.
+                    if let Some((command, received)) = newest
+                        && now - received <= fresh_us
+                    {
+                        let before = guard.last();
+                        let (at, verdict) = guard.judge(&command, now);
+                        if guard.last() != before {
+                            send(&command, at, &verdict);
+                        }
+                    }
+                }
+                status.took(&mut busy, started.elapsed().as_secs_f64() * 1e3, period_ms);
+            }
+            if ticker.due(now) {
+                guard_status(&guard, &mut status);
+                status.busy_ms = busy.summary();
+                status.log();
+            }
+        },
+    )?;
+    guard_status(&guard, &mut status);
+    status.busy_ms = busy.summary();
+    bad.report(&mut status);
+    auth_status(&lcm, &mut status);
+    Ok(report(vec![status]))
 }

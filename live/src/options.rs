@@ -37,6 +37,10 @@ pub enum LiveError {
         "the configuration injects a fault into the pipeline ([pipeline] fault = {0:?}): that is for the simulator and replay, never a vehicle; remove it"
     )]
     FaultInjected(&'static str),
+    #[error(
+        "[guard] enabled = false: the guard node has nothing to do; enable it, or do not run it"
+    )]
+    GuardOff,
 }
 
 /// A live executor refuses a configuration that injects a fault.

@@ -35,8 +35,11 @@ use super::threaded::{LiveError, LiveOptions};
 use super::{LiveReport, NodeStatus};
 
 /// How the bridge runs.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct BridgeOptions {
+    /// The commands to follow: STEERING_COMMAND (the arbiter's), or
+    /// STEERING_COMMAND_GUARDED behind `arcnav node guard`.
+    pub channel: String,
     /// What to execute is handed over this often, Hz.
     pub rate_hz: f64,
     /// A command received longer ago than this is not executed: stop, s.
@@ -136,18 +139,35 @@ impl Executed {
 
 /// The guard in the bridge: the guard, the newest pose's sensor time and
 /// when it arrived (the sensor clock runs on from it), what it did.
-struct BridgeGuard {
-    guard: Guard,
+pub(crate) struct BridgeGuard {
+    pub(crate) guard: Guard,
     pose_at: Option<(i64, i64)>,
     last: Guarded,
     stops: u64,
     slows: u64,
     interventions: u64,
-    ignored: u64,
+    pub(crate) ignored: u64,
 }
 
 impl BridgeGuard {
-    fn on_message(&mut self, message: AnyMessage, now: i64) {
+    pub(crate) fn new(guard: Guard) -> Self {
+        Self {
+            guard,
+            pose_at: None,
+            last: Guarded::Off,
+            stops: 0,
+            slows: 0,
+            interventions: 0,
+            ignored: 0,
+        }
+    }
+
+    /// The verdict last said.
+    pub(crate) fn last(&self) -> Guarded {
+        self.last
+    }
+
+    pub(crate) fn on_message(&mut self, message: AnyMessage, now: i64) {
         match message {
             AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
                 Ok(pose) => {
@@ -176,7 +196,7 @@ impl BridgeGuard {
     }
 
     /// The verdict on `command` at `now`, said when it changes.
-    fn judge(&mut self, command: &SteeringCommand, now: i64) -> (i64, Verdict) {
+    pub(crate) fn judge(&mut self, command: &SteeringCommand, now: i64) -> (i64, Verdict) {
         let at = self.sensor_time(now);
         let verdict = self.guard.check(command, at);
         let state = match &verdict {
@@ -225,16 +245,8 @@ pub fn run_bridge(
     let (mut following, mut stopped) = (0u64, 0u64);
     let mut tick = Ticker::new(1.0 / bridge.rate_hz, clock.now_us());
     let mut report = Ticker::new(bridge.status_period_s, clock.now_us());
-    lcm.subscribe(channels::STEERING_COMMAND);
-    let mut guard = guard.map(|guard| BridgeGuard {
-        guard,
-        pose_at: None,
-        last: Guarded::Off,
-        stops: 0,
-        slows: 0,
-        interventions: 0,
-        ignored: 0,
-    });
+    lcm.subscribe(&bridge.channel);
+    let mut guard = guard.map(BridgeGuard::new);
     if guard.is_some() {
         lcm.subscribe(channels::POSE);
         lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
@@ -248,7 +260,7 @@ pub fn run_bridge(
         wait,
         |message, now| {
             if let Some(message) = message {
-                if message.channel != channels::STEERING_COMMAND {
+                if message.channel != bridge.channel {
                     if let Some(guard) = &mut guard {
                         match AnyMessage::decode(&message.data) {
                             Ok(Some(m)) if m.on_its_channel(&message.channel) => {
@@ -326,7 +338,7 @@ pub fn run_bridge(
 }
 
 /// The guard's counts on the status lines and in `--stats`.
-fn guard_status(guard: &BridgeGuard, status: &mut NodeStatus) {
+pub(crate) fn guard_status(guard: &BridgeGuard, status: &mut NodeStatus) {
     let counts = guard.guard.counts();
     status.set("guard_interventions", guard.interventions);
     status.set("guard_stop_ticks", guard.stops);
@@ -354,6 +366,7 @@ mod tests {
             ..LiveOptions::default()
         };
         let bridge = BridgeOptions {
+            channel: channels::STEERING_COMMAND.into(),
             rate_hz: 100.0,
             timeout_s: 0.1,
             status_period_s: 0.0,

@@ -168,13 +168,23 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
             "authentication is off: this vehicle follows any STEERING_COMMAND published on the \
              bus; set [bus.auth] key_file to follow only commands signed with the group key"
         );
-    } else if !lcm.authenticates(channels::STEERING_COMMAND) {
+    } else if !lcm.authenticates(&args.commands) {
         anyhow::bail!(
-            "[bus.auth] channels {:?} do not include STEERING_COMMAND: the vehicle would follow \
-             unsigned commands; add \"STEERING_COMMAND\"",
-            config.bus.auth.channels
+            "[bus.auth] channels {:?} do not include {}: the vehicle would follow unsigned \
+             commands; add \"{}\"",
+            config.bus.auth.channels,
+            args.commands,
+            args.commands
         );
     }
+    anyhow::ensure!(
+        args.commands == channels::STEERING_COMMAND
+            || args.commands == channels::STEERING_COMMAND_GUARDED,
+        "--commands {}: the vehicle follows {} (the arbiter's) or {} (behind arcnav node guard)",
+        args.commands,
+        channels::STEERING_COMMAND,
+        channels::STEERING_COMMAND_GUARDED
+    );
     let mut lcm = lcm;
     let forward = match &args.forward {
         Some(url) => {
@@ -207,6 +217,7 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
         ..LiveOptions::default()
     };
     let bridge = BridgeOptions {
+        channel: args.commands.clone(),
         rate_hz: args.rate,
         timeout_s,
         status_period_s: config.live.status_period_s,
