@@ -300,11 +300,27 @@ fn assert_threaded_gives_lockstep_on(mut config: Config, speed: f64) {
     let last = decided.last().unwrap();
     assert_eq!(last.why, Why::Final);
     assert!(last.command.is_stop());
-    // Figures for every node.
+    // Figures for every node, the guard's among them: it judged every
+    // command and, with no fault, changed none.
     let names: Vec<&str> = report.nodes.iter().map(|n| n.node.as_str()).collect();
     assert_eq!(
         names,
-        ["io", "perception", "localmap", "behaviours", "arbiter"]
+        [
+            "io",
+            "perception",
+            "localmap",
+            "behaviours",
+            "arbiter",
+            "guard"
+        ]
+    );
+    let guard = &report.nodes[5];
+    assert!(
+        guard
+            .counters
+            .contains(&("guard_interventions".to_owned(), 0)),
+        "{}",
+        report.table()
     );
     assert_eq!(report.nodes[1].dropped, 0, "{}", report.table());
 }
@@ -1207,6 +1223,73 @@ fn the_guard_node_stops_a_vehicle_that_follows_it_short_of_a_box() {
         x < hit_x - 1.0,
         "stopped at x = {x:.1} m, the box hit at {hit_x:.1} m"
     );
+}
+
+/// The guard inside `arcnav run`: a pipeline blind to the box (obstacle
+/// avoidance and the route out of the vote) steers at it; the run's own
+/// guard turns its commands into stops before the box, and the DECISION
+/// says `guard: obstacle …`.
+#[test]
+fn arcnav_run_with_its_guard_stops_a_blind_pipeline_short_of_a_box() {
+    let mut blind = config(SensorPreset::Erim, false);
+    for (name, weight) in [
+        ("obstacle_avoidance", 0.0),
+        ("route", 0.0),
+        ("goal_seeking", 1.0),
+    ] {
+        blind.arbiter.weights.insert(name.into(), weight);
+    }
+    blind.arbiter.required.clear();
+    let Some(net) = Net::setup("run-guard", blind.clone(), |_| {
+        let mut unguarded = blind.clone();
+        unguarded.guard.enabled = false;
+        sim_log_on("box_ahead", &unguarded)
+    }) else {
+        return;
+    };
+    let mut xs = BTreeMap::new();
+    let mut reader = LogReader::open(&net.log).unwrap();
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::POSE {
+            let pose = pose_t::decode(&event.data).unwrap();
+            xs.insert(pose.utime, pose.position[0]);
+        }
+    }
+    let hit_x = *xs.values().last().unwrap();
+    let recorded = temp_dir("run-guard").join("bus.lcm");
+    let logger = net.logger(&recorded);
+    let run = net.arcnav("run", &["run", "--stats"]);
+    run.wait_ready();
+    assert!(net.play(INPUTS, 1.0).wait().unwrap().success());
+    run.signal("TERM");
+    let stderr = run.stderr.lock().unwrap().clone();
+    let (code, stats) = run.finish();
+    assert_eq!(code, Some(0), "{stderr}");
+    logger.finish();
+    let said = decisions(&recorded);
+    let (&at, stop) = said
+        .iter()
+        .find(|(_, d)| d.cause == decision_t::GUARD && d.reason.contains("obstacle"))
+        .unwrap_or_else(|| panic!("no DECISION says the guard stopped it:\n{stats}\n{stderr}"));
+    let mut speeds = BTreeMap::new();
+    let mut reader = LogReader::open(&recorded).unwrap();
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::STEERING_COMMAND {
+            let c = steering_command_t::decode(&event.data).unwrap();
+            speeds.insert(c.utime, c.speed);
+        }
+    }
+    assert!(speeds[&at] < 1.0, "{} m/s: {}", speeds[&at], stop.reason);
+    let x = *xs.range(..=at).next_back().unwrap().1;
+    eprintln!(
+        "arcnav run's guard: {} at x = {x:.1} m (the box hit at {hit_x:.1} m)",
+        stop.reason
+    );
+    assert!(
+        x < hit_x - 1.0,
+        "at x = {x:.1} m, the box hit at {hit_x:.1} m"
+    );
+    assert!(stats.contains("guard_interventions"), "{stats}");
 }
 
 #[test]

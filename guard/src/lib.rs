@@ -485,6 +485,10 @@ impl Guard {
             self.in_flight = self.current.map_or(command.curvature, |c| c.curvature);
             self.current = Some(*command);
         }
+        // A stop is as safe as it gets, whatever the data.
+        if command.is_stop() {
+            return Ok(Verdict::Clear);
+        }
         let Some(pose) = self.pose else {
             return Err(Reason::StalePose { age_s: None });
         };
@@ -509,9 +513,6 @@ impl Guard {
                 roll_deg: roll.to_degrees(),
                 pitch_deg: pitch.to_degrees(),
             });
-        }
-        if command.is_stop() {
-            return Ok(Verdict::Clear);
         }
         let Some((s, hazard)) = self.contact(command, &pose, now) else {
             return Ok(Verdict::Clear);

@@ -14,6 +14,7 @@ use arcnav_vehicle::{ArcSet, Pose};
 use crossbeam_channel::Sender;
 
 use super::NodeStatus;
+use super::guarded::GuardInput;
 use super::handoff::{Arrived, SensorFeed, offer};
 use super::options::{LiveError, LiveOptions, ToArbiter};
 use arcnav_wire as wire;
@@ -191,6 +192,7 @@ pub(crate) fn publish_command(
         }
         Why::Held => wire::Said::Held,
         Why::Final => wire::Said::Final,
+        Why::Guard(why) => wire::Said::Guard(why),
         Why::Complete | Why::Deadline { .. } => wire::Said::Arbiter(&decided.reason),
     };
     let decision = wire::decision_to_wire(decided.command.utime, said);
@@ -213,6 +215,8 @@ pub(crate) struct IoRoutes {
     pub(crate) arbiter: Option<Sender<ToArbiter>>,
     /// Behaviours in processes of their own, whose votes go to `arbiter`.
     pub external: Option<External>,
+    /// The guard's thread: poses and copies of the images.
+    pub(crate) guard: Option<Sender<super::guarded::GuardInput>>,
 }
 
 /// Behaviours that vote from other processes, and the arc set their votes
@@ -225,10 +229,15 @@ pub struct External {
 impl IoRoutes {
     /// Subscribes `lcm` to the channels these routes take.
     pub(crate) fn subscribe(&self, lcm: &mut Lcm) -> Result<(), LiveError> {
-        if self.perception_poses.is_some() || self.map_poses.is_some() || self.arbiter.is_some() {
+        let guard = self.guard.is_some();
+        if self.perception_poses.is_some()
+            || self.map_poses.is_some()
+            || self.arbiter.is_some()
+            || guard
+        {
             lcm.subscribe(channels::POSE);
         }
-        if self.images.is_some() {
+        if self.images.is_some() || guard {
             lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
         }
         if self.waypoints.is_some() {
@@ -273,12 +282,18 @@ pub(crate) fn io_loop(
                             if let Some(arbiter) = &routes.arbiter {
                                 offer(arbiter, ToArbiter::Pose(pose.utime, now), &mut queue_full);
                             }
+                            if let Some(guard) = &routes.guard {
+                                offer(guard, GuardInput::Pose(pose, now), &mut queue_full);
+                            }
                         }
                         Err(e) => bad.refuse("pose", &message.channel, &e),
                     },
                     Some(AnyMessage::RangeImage(msg)) => match wire::range_image_from_wire(msg) {
                         Ok(image) => {
                             images += 1;
+                            if let Some(guard) = &routes.guard {
+                                offer(guard, GuardInput::Image(image.clone()), &mut queue_full);
+                            }
                             if let Some(feed) = &routes.images {
                                 feed.images.put(Arrived {
                                     item: image,
@@ -291,6 +306,9 @@ pub(crate) fn io_loop(
                     Some(AnyMessage::RangeSlice(msg)) => match wire::range_slice_from_wire(msg) {
                         Ok(slice) => {
                             slices += 1;
+                            if let Some(guard) = &routes.guard {
+                                offer(guard, GuardInput::Slice(slice.clone()), &mut queue_full);
+                            }
                             if let Some(feed) = &routes.images {
                                 let slice = Arrived {
                                     item: slice,

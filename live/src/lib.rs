@@ -14,6 +14,7 @@
 //! [`Pipeline`]: arcnav_pipeline::Pipeline
 
 pub mod clock;
+mod guarded;
 pub mod handoff;
 pub mod io;
 pub mod node;

@@ -36,6 +36,7 @@ use arcnav_vehicle::{Pose, SteeringCommand, Utime};
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, select};
 
 use super::clock::{Clock, SharedClock};
+use super::guarded::{GuardInput, RunGuard};
 use super::handoff::{self, Arrived, Handoff};
 use super::io::{External, IoRoutes, Ticker, io_loop, publish_command};
 pub(crate) use super::options::ToArbiter;
@@ -162,13 +163,41 @@ pub fn run(
         })?
     };
 
+    // The guard, on a thread of its own fed by the io thread: every
+    // command the arbiter decides goes through it.
+    let guard = config.guard.enabled.then(|| {
+        RunGuard::new(arcnav_guard::Guard::new(
+            &config.guard,
+            &config.vehicle,
+            &config.sensors,
+        ))
+    });
+    let (guard_tx, guard_rx) = crossbeam_channel::bounded::<GuardInput>(capacity);
+    let guard_thread = match &guard {
+        Some(guard) => {
+            let guard = guard.clone();
+            Some(spawn("guard", move || guard.run(&guard_rx))?)
+        }
+        None => None,
+    };
+
     let arbiter_thread = {
         let tap = options.command_tap.clone();
         let period = live.status_period_s;
         let tick = Duration::from_secs_f64((period_s / 4.0).min(0.01));
         let clock = clock.clone();
+        let guard = guard.clone();
         spawn("arbiter", move || {
+            let now = clock.clone();
             arbiter_worker(arbiter, arbiter_rx, &*clock, tick, period, |decided| {
+                let guarded;
+                let decided = match &guard {
+                    Some(guard) => {
+                        guarded = guard.judge(decided, now.now_us(), &publisher);
+                        &guarded
+                    }
+                    None => decided,
+                };
                 publish_command(&publisher, decided, tap.as_ref());
                 let _ = commands_tx.try_send(decided.command);
             })
@@ -186,6 +215,7 @@ pub fn run(
         waypoints: Some(waypoints_tx),
         arbiter: Some(arbiter_tx),
         external,
+        guard: guard.is_some().then_some(guard_tx),
     };
     routes.subscribe(&mut lcm)?;
     let io_status = io_loop(&mut lcm, options, &live, routes);
@@ -194,6 +224,7 @@ pub fn run(
     let map_status = join(map_thread)?;
     let behaviours_status = join(behaviours_thread)?;
     let (arbiter_status, arbiter) = join(arbiter_thread)?;
+    let guard_status = guard_thread.map(join).transpose()?;
     let io_status = io_status?;
     let counts = arbiter.counts();
     Ok(LiveReport {
@@ -202,13 +233,16 @@ pub fn run(
         stops: counts.stops,
         arrival_to_command_ms: arbiter.arrival_to_command_ms.summary(),
         capture_to_command_ms: arbiter.capture_to_command_ms.summary(),
-        nodes: vec![
+        nodes: [
             io_status,
             perception_status,
             map_status,
             behaviours_status,
             arbiter_status,
-        ],
+        ]
+        .into_iter()
+        .chain(guard_status)
+        .collect(),
     })
 }
 

@@ -167,15 +167,18 @@ impl BridgeGuard {
         self.last
     }
 
+    /// A pose that arrived at `now` (the bridge's clock).
+    pub(crate) fn observe_pose(&mut self, pose: &Pose, now: i64) {
+        self.guard.observe_pose(pose);
+        if self.pose_at.is_none_or(|(t, _)| pose.utime >= t) {
+            self.pose_at = Some((pose.utime, now));
+        }
+    }
+
     pub(crate) fn on_message(&mut self, message: AnyMessage, now: i64) {
         match message {
             AnyMessage::Pose(msg) => match Pose::try_from(&msg) {
-                Ok(pose) => {
-                    self.guard.observe_pose(&pose);
-                    if self.pose_at.is_none_or(|(t, _)| pose.utime >= t) {
-                        self.pose_at = Some((pose.utime, now));
-                    }
-                }
+                Ok(pose) => self.observe_pose(&pose, now),
                 Err(_) => self.ignored += 1,
             },
             AnyMessage::RangeImage(msg) => match wire::range_image_from_wire(msg) {

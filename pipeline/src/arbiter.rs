@@ -65,6 +65,9 @@ pub enum Why {
     Held,
     /// The executor is shutting down.
     Final,
+    /// The guard beside the pipeline stopped or slowed the arbiter's
+    /// command (why, in words).
+    Guard(String),
 }
 
 /// A command to publish.
