@@ -246,3 +246,44 @@ fn the_guard_stops_each_faulty_pipeline_before_each_barrier_at_each_speed() {
         assert!(run.guarded.collisions.is_empty(), "{what}\n\n{table}");
     }
 }
+
+/// A trench 3 m wide and 2 m deep (`drop_offs`) in front of a blind
+/// pipeline: the guard stops the vehicle short of it and keeps it there.
+/// The hole shows as returns on the trench's floor, each image a little
+/// farther in; held only where they fell, the nearer ones were seen to be
+/// ground and forgotten, and the vehicle crept 0.1-0.3 m at a time until
+/// its wheels went over the edge. The near edge is held as the hole.
+#[test]
+fn a_blind_pipeline_is_held_short_of_a_wide_trench_however_long_it_stands() {
+    let world = World::embedded("drop_offs").unwrap().unwrap();
+    let run = |guard: bool| {
+        let mut config = config("blind_perception", 2.5, guard);
+        config.pipeline.fault_after_s = 0.0;
+        config.sim.stuck_after_s = 20.0;
+        config.sim.time_limit_s = 60.0;
+        mission(&world, &config)
+    };
+    let guarded = run(true);
+    let guard = guarded.guard.as_ref().unwrap();
+    assert!(
+        guarded.collisions.is_empty(),
+        "{:?}\n{:?}",
+        guarded.collisions,
+        guard.first
+    );
+    assert!(guard.stops > 0, "{guard:?}");
+    assert_eq!(guard.by_reason.get("hole"), Some(&guard.stops), "{guard:?}");
+    // It stood before the trench (its near edge at x = 28.5 m) until the
+    // mission gave up (20 s without getting nearer its waypoint).
+    assert_eq!(guarded.outcome, arcnav::mission::Outcome::Stuck);
+    assert!(guard.stopped_s > 15.0, "{guard:?}");
+    let unguarded = run(false);
+    assert!(
+        unguarded
+            .collisions
+            .iter()
+            .any(|c| c.cause.starts_with("ditch")),
+        "{:?}",
+        unguarded.collisions
+    );
+}

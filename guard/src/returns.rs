@@ -209,6 +209,10 @@ impl Profile {
             })
             .collect();
         let rotation = level_from_sensor.rotation.to_rotation_matrix();
+        // A beam's direction in the level frame is cos(el)·R·(cos az, sin
+        // az, 0) + sin(el)·R·z: the column's part once per frame, the
+        // row's two numbers per return.
+        let up = rotation * Vector3::z();
         let (to_world, shift) = (
             level.rotation.to_rotation_matrix(),
             level.translation.vector,
@@ -218,22 +222,25 @@ impl Profile {
         let slope = self.max_rise_per_m;
         // Each column walked from its lowest beam up, all columns a row at
         // a time (the rows are contiguous in memory).
-        let azimuths: Vec<(f64, f64)> = beams
+        let azimuths: Vec<Vector3<f64>> = beams
             .azimuth
             .iter()
-            .map(|&az| f64::from(az).sin_cos())
+            .map(|&az| {
+                let (sin, cos) = f64::from(az).sin_cos();
+                rotation * Vector3::new(cos, sin, 0.0)
+            })
             .collect();
         let mut state = vec![Column::new(under_z); cols];
         for &(row, sin_el, cos_el) in &order {
             let ranges = &returns.range[row * cols..(row + 1) * cols];
-            for ((&r, &(sin_az, cos_az)), column) in ranges.iter().zip(&azimuths).zip(&mut state) {
+            let up = up * sin_el;
+            for ((&r, across_dir), column) in ranges.iter().zip(&azimuths).zip(&mut state) {
                 let r = f64::from(r);
                 if !(r.is_finite() && r > 0.0) {
                     continue;
                 }
                 found.returns += 1;
-                let d = Vector3::new(cos_el * cos_az, cos_el * sin_az, sin_el);
-                let p = sensor + rotation * (d * r);
+                let p = sensor + (across_dir * cos_el + up) * r;
                 let (dx, dy) = (p.x - sensor.x, p.y - sensor.y);
                 let across = (dx * dx + dy * dy).sqrt();
                 let (low, high) = (column.low, column.high);
@@ -276,6 +283,21 @@ impl Profile {
                     }
                     continue;
                 };
+                // A return far below the ground: the vehicle meets the
+                // hole at its near edge, the last ground return before it
+                // (held as a hole too, once per edge), not where the ray
+                // met the floor or the far wall.
+                if kind == HazardKind::Hole
+                    && let Some((_, z, near)) = column.last
+                    && near.x * near.x + near.y * near.y <= range2
+                {
+                    found.holes += 1;
+                    out.push(Hazard {
+                        position: world(near),
+                        kind: HazardKind::Hole,
+                        height_m: z - p.z,
+                    });
+                }
                 // A gap after a hazard is its shadow, not a hole's.
                 column.last = None;
                 // The far wall rises out of the hole no higher than the
@@ -417,12 +439,20 @@ mod tests {
             found.iter().any(|h| h.kind == HazardKind::Hole),
             "{found:?}"
         );
-        // Every hazard is in the ditch or just beyond: its far wall rises
-        // steeply from the floor seen (a wall too, standing), and so does
-        // the ground beyond until it is as far from the floor as its depth
-        // allows at max_slope.
+        // The near edge is a hole: the last ground return before the floor
+        // (where a wheel would drop), within a return's spacing of it.
+        assert!(
+            found
+                .iter()
+                .any(|h| h.kind == HazardKind::Hole && (3.5..4.0).contains(&h.position.x)),
+            "{found:?}"
+        );
+        // Every hazard is at the edge, in the ditch or just beyond: its far
+        // wall rises steeply from the floor seen (a wall too, standing), and
+        // so does the ground beyond until it is as far from the floor as
+        // its depth allows at max_slope.
         for h in &found {
-            assert!((4.0..6.0 + 1.5 / 0.46).contains(&h.position.x), "{h:?}");
+            assert!((3.5..6.0 + 1.5 / 0.46).contains(&h.position.x), "{h:?}");
         }
     }
 
