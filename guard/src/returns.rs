@@ -246,21 +246,25 @@ impl Profile {
                 let (low, high) = (column.low, column.high);
                 let above = p.z - (low.0 + across * slope + self.noise_m);
                 let below = (high.0 - across * slope - self.noise_m) - p.z;
-                // The shadow: how far short of this return the ray would
-                // have met the ground going on at its grade from the last.
-                let grade = column.grade.min(0.0);
-                let after_gap = column.last.filter(|&(d, z, _)| {
-                    let descent = (sensor.z - p.z) / across + grade;
-                    let drop = z + grade * (across - d) - p.z;
-                    descent > f64::EPSILON
-                        && drop > self.noise_m
-                        && across - (sensor.z - z + grade * d) / descent > self.max_gap_m
-                });
                 let kind = if above > self.step_m {
                     HazardKind::Standing
                 } else if below > self.step_m {
                     HazardKind::Hole
                 } else {
+                    // The shadow: how far short of this return the ray
+                    // would have met the ground going on at its grade from
+                    // the last (with descent = (H − z)/across + grade, the
+                    // shadow is across − (H − z_k + grade·d_k)/descent;
+                    // multiplied out by across·descent > 0, no division).
+                    let grade = column.grade.min(0.0);
+                    let after_gap = column.last.filter(|&(d, z, _)| {
+                        let drop = z + grade * (across - d) - p.z;
+                        let descent_across = sensor.z - p.z + grade * across;
+                        drop > self.noise_m
+                            && descent_across > f64::EPSILON * across
+                            && (across - self.max_gap_m) * descent_across
+                                > (sensor.z - z + grade * d) * across
+                    });
                     if p.z - across * slope < low.0 {
                         column.low = (p.z - across * slope, p.z);
                     }
