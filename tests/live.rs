@@ -1002,6 +1002,35 @@ fn a_distributed_run_says_why_it_stopped_as_one_process_does() {
     assert_eq!(logged[0], logged[1]);
 }
 
+/// The ERIM configuration of a pipeline blind to `box_ahead`'s box:
+/// obstacle avoidance and the route out of the vote, goal seeking alone
+/// steering at the waypoint behind it.
+fn blind_to_the_box() -> Config {
+    let mut blind = config(SensorPreset::Erim, false);
+    for (name, weight) in [
+        ("obstacle_avoidance", 0.0),
+        ("route", 0.0),
+        ("goal_seeking", 1.0),
+    ] {
+        blind.arbiter.weights.insert(name.into(), weight);
+    }
+    blind.arbiter.required.clear();
+    blind
+}
+
+/// The vehicle's x by pose time in `log`.
+fn pose_xs(log: &Path) -> BTreeMap<Utime, f64> {
+    let mut xs = BTreeMap::new();
+    let mut reader = LogReader::open(log).unwrap();
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::POSE {
+            let pose = pose_t::decode(&event.data).unwrap();
+            xs.insert(pose.utime, pose.position[0]);
+        }
+    }
+    xs
+}
+
 /// Issue 65: `arcnav vehicle` with the guard (on by default), in a
 /// network namespace, is played a log whose commands drive straight at a
 /// 1 m box (obstacle avoidance and the route weighted 0, the sim's guard
@@ -1010,29 +1039,15 @@ fn a_distributed_run_says_why_it_stopped_as_one_process_does() {
 /// (JSON `guard_reason`, its log, `GUARD_STATUS` on the bus), and counts it.
 #[test]
 fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
-    let mut blind = config(SensorPreset::Erim, false);
+    let mut blind = blind_to_the_box();
     blind.guard.enabled = false;
-    for (name, weight) in [
-        ("obstacle_avoidance", 0.0),
-        ("route", 0.0),
-        ("goal_seeking", 1.0),
-    ] {
-        blind.arbiter.weights.insert(name.into(), weight);
-    }
     let Some(net) = Net::setup("vehicle-guard", config(SensorPreset::Erim, false), |_| {
         sim_log_on("box_ahead", &blind)
     }) else {
         return;
     };
     // The logged vehicle's x by pose time, and where it hit the box.
-    let mut xs = BTreeMap::new();
-    let mut reader = LogReader::open(&net.log).unwrap();
-    while let Some(event) = reader.next_event().unwrap() {
-        if event.channel == channels::POSE {
-            let pose = pose_t::decode(&event.data).unwrap();
-            xs.insert(pose.utime, pose.position[0]);
-        }
-    }
+    let xs = pose_xs(&net.log);
     let hit_x = *xs.values().last().unwrap();
     let heard_guard = Arc::new(Mutex::new(Vec::new()));
     let recorded = temp_dir("vehicle-guard").join("bus.lcm");
@@ -1142,28 +1157,14 @@ fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
 /// STEERING_COMMAND_GUARDED: it is stopped before the box.
 #[test]
 fn the_guard_node_stops_a_vehicle_that_follows_it_short_of_a_box() {
-    let mut blind = config(SensorPreset::Erim, false);
+    let mut blind = blind_to_the_box();
     blind.guard.enabled = false;
-    for (name, weight) in [
-        ("obstacle_avoidance", 0.0),
-        ("route", 0.0),
-        ("goal_seeking", 1.0),
-    ] {
-        blind.arbiter.weights.insert(name.into(), weight);
-    }
     let Some(net) = Net::setup("node-guard", config(SensorPreset::Erim, false), |_| {
         sim_log_on("box_ahead", &blind)
     }) else {
         return;
     };
-    let mut xs = BTreeMap::new();
-    let mut reader = LogReader::open(&net.log).unwrap();
-    while let Some(event) = reader.next_event().unwrap() {
-        if event.channel == channels::POSE {
-            let pose = pose_t::decode(&event.data).unwrap();
-            xs.insert(pose.utime, pose.position[0]);
-        }
-    }
+    let xs = pose_xs(&net.log);
     let hit_x = *xs.values().last().unwrap();
     let mut unguarded = config(SensorPreset::Erim, false);
     unguarded.guard.enabled = false;
@@ -1231,15 +1232,7 @@ fn the_guard_node_stops_a_vehicle_that_follows_it_short_of_a_box() {
 /// says `guard: obstacle …`.
 #[test]
 fn arcnav_run_with_its_guard_stops_a_blind_pipeline_short_of_a_box() {
-    let mut blind = config(SensorPreset::Erim, false);
-    for (name, weight) in [
-        ("obstacle_avoidance", 0.0),
-        ("route", 0.0),
-        ("goal_seeking", 1.0),
-    ] {
-        blind.arbiter.weights.insert(name.into(), weight);
-    }
-    blind.arbiter.required.clear();
+    let blind = blind_to_the_box();
     let Some(net) = Net::setup("run-guard", blind.clone(), |_| {
         let mut unguarded = blind.clone();
         unguarded.guard.enabled = false;
@@ -1247,14 +1240,7 @@ fn arcnav_run_with_its_guard_stops_a_blind_pipeline_short_of_a_box() {
     }) else {
         return;
     };
-    let mut xs = BTreeMap::new();
-    let mut reader = LogReader::open(&net.log).unwrap();
-    while let Some(event) = reader.next_event().unwrap() {
-        if event.channel == channels::POSE {
-            let pose = pose_t::decode(&event.data).unwrap();
-            xs.insert(pose.utime, pose.position[0]);
-        }
-    }
+    let xs = pose_xs(&net.log);
     let hit_x = *xs.values().last().unwrap();
     let recorded = temp_dir("run-guard").join("bus.lcm");
     let logger = net.logger(&recorded);
