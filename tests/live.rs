@@ -1018,6 +1018,20 @@ fn blind_to_the_box() -> Config {
     blind
 }
 
+/// The network for a test of the guard: the log of a pipeline blind to
+/// `box_ahead`'s box (its own guard off) driving into it, the logged
+/// vehicle's x by pose time, and where it hit the box.
+fn box_net(tag: &str) -> Option<(Net, BTreeMap<Utime, f64>, f64)> {
+    let mut blind = blind_to_the_box();
+    blind.guard.enabled = false;
+    let net = Net::setup(tag, config(SensorPreset::Erim, false), |_| {
+        sim_log_on("box_ahead", &blind)
+    })?;
+    let xs = pose_xs(&net.log);
+    let hit_x = *xs.values().last()?;
+    Some((net, xs, hit_x))
+}
+
 /// The vehicle's x by pose time in `log`.
 fn pose_xs(log: &Path) -> BTreeMap<Utime, f64> {
     let mut xs = BTreeMap::new();
@@ -1039,16 +1053,9 @@ fn pose_xs(log: &Path) -> BTreeMap<Utime, f64> {
 /// (JSON `guard_reason`, its log, `GUARD_STATUS` on the bus), and counts it.
 #[test]
 fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
-    let mut blind = blind_to_the_box();
-    blind.guard.enabled = false;
-    let Some(net) = Net::setup("vehicle-guard", config(SensorPreset::Erim, false), |_| {
-        sim_log_on("box_ahead", &blind)
-    }) else {
+    let Some((net, xs, hit_x)) = box_net("vehicle-guard") else {
         return;
     };
-    // The logged vehicle's x by pose time, and where it hit the box.
-    let xs = pose_xs(&net.log);
-    let hit_x = *xs.values().last().unwrap();
     let heard_guard = Arc::new(Mutex::new(Vec::new()));
     let recorded = temp_dir("vehicle-guard").join("bus.lcm");
     let logger = net.logger(&recorded);
@@ -1157,15 +1164,9 @@ fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
 /// STEERING_COMMAND_GUARDED: it is stopped before the box.
 #[test]
 fn the_guard_node_stops_a_vehicle_that_follows_it_short_of_a_box() {
-    let mut blind = blind_to_the_box();
-    blind.guard.enabled = false;
-    let Some(net) = Net::setup("node-guard", config(SensorPreset::Erim, false), |_| {
-        sim_log_on("box_ahead", &blind)
-    }) else {
+    let Some((net, xs, hit_x)) = box_net("node-guard") else {
         return;
     };
-    let xs = pose_xs(&net.log);
-    let hit_x = *xs.values().last().unwrap();
     let mut unguarded = config(SensorPreset::Erim, false);
     unguarded.guard.enabled = false;
     let vehicle_file = write_config(&unguarded, &temp_dir("node-guard-vehicle"));
