@@ -231,18 +231,30 @@ impl Profile {
             })
             .collect();
         let mut state = vec![Column::new(under_z); cols];
+        // A row's returns in the level frame first, in a loop of plain
+        // arithmetic the compiler vectorises (x, y, z, the horizontal
+        // distance; NaN where there is no return), then each column's walk.
+        let mut points = vec![[0.0f64; 4]; cols];
         for &(row, sin_el, cos_el) in &order {
             let ranges = &returns.range[row * cols..(row + 1) * cols];
             let up = up * sin_el;
-            for ((&r, across_dir), column) in ranges.iter().zip(&azimuths).zip(&mut state) {
+            for ((&r, across_dir), point) in ranges.iter().zip(&azimuths).zip(&mut points) {
                 let r = f64::from(r);
-                if !(r.is_finite() && r > 0.0) {
+                let valid = r.is_finite() && r > 0.0;
+                let r = if valid { r } else { 0.0 };
+                let x = sensor.x + (across_dir.x * cos_el + up.x) * r;
+                let y = sensor.y + (across_dir.y * cos_el + up.y) * r;
+                let z = sensor.z + (across_dir.z * cos_el + up.z) * r;
+                let (dx, dy) = (x - sensor.x, y - sensor.y);
+                let across = (dx * dx + dy * dy).sqrt();
+                *point = [x, y, z, if valid { across } else { f64::NAN }];
+            }
+            for (&[x, y, z, across], column) in points.iter().zip(&mut state) {
+                if across.is_nan() {
                     continue;
                 }
                 found.returns += 1;
-                let p = sensor + (across_dir * cos_el + up) * r;
-                let (dx, dy) = (p.x - sensor.x, p.y - sensor.y);
-                let across = (dx * dx + dy * dy).sqrt();
+                let p = Vector3::new(x, y, z);
                 let (low, high) = (column.low, column.high);
                 let above = p.z - (low.0 + across * slope + self.noise_m);
                 let below = (high.0 - across * slope - self.noise_m) - p.z;
