@@ -5,6 +5,8 @@
 //! in process, each image rendered beside the pipeline (`sim.render_ahead`,
 //! the default) and each rendered when due, with where a frame's wall time
 //! goes. The two missions are the same byte for byte; only the time differs.
+//! A third runs without the guard (`[guard] enabled = false`): what the
+//! guard costs the mission's wall time (issue 65's target: under 5 %).
 //! `cargo bench --bench mission [-- lidar128]` (about a minute a mission).
 
 use std::sync::Arc;
@@ -33,10 +35,12 @@ fn main() {
             .expect("valid"),
     );
     println!("paper_loop, {preset:?}, default configuration, no log, two cores:");
-    for ahead in [true, false] {
+    let mut wall = Vec::new();
+    for (ahead, guard) in [(true, true), (false, true), (true, false)] {
         let mut config = Config::default();
         config.sensor.preset = preset;
         config.sim.render_ahead = ahead;
+        config.guard.enabled = guard;
         if common::quick() {
             config.sim.time_limit_s = 10.0;
         }
@@ -58,7 +62,11 @@ fn main() {
             "  rendered {:<8} {:>5.0} s simulated in {:>5.1} s: {:>5.1}× real time (target ≥ 20×), \
              {frame_ms:.1} ms a frame: rendering {:.1} ms ({} of {} images ahead), \
              perception {:.2}, behaviours {:.2}, local map {:.2} (wall clock, ms an image), {:?}",
-            if ahead { "ahead" } else { "when due" },
+            match (ahead, guard) {
+                (true, true) => "ahead",
+                (false, _) => "when due",
+                (true, false) => "ahead, no guard",
+            },
             r.duration_s,
             r.wall_time_s,
             r.realtime_factor,
@@ -70,5 +78,16 @@ fn main() {
             t.localmap.total_ms / r.images.max(1) as f64,
             r.outcome,
         );
+        if let Some(g) = &r.guard {
+            println!(
+                "  guard: {:.2} ms an image on a thread of its own ({:.1} s in all)",
+                g.observe_ms, g.time_s
+            );
+        }
+        wall.push(r.wall_time_s);
     }
+    println!(
+        "  the guard costs the mission {:+.1} % of its wall time (rendered ahead; target < 5 %)",
+        100.0 * (wall[0] / wall[2] - 1.0)
+    );
 }
