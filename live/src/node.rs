@@ -386,7 +386,7 @@ fn arbiter(
 /// changes the verdict on the newest command (received within three
 /// command periods) publishes it again at once.
 fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
-    use super::vehicle::{BridgeGuard, guard_status};
+    use super::guarded::{BridgeGuard, guard_status};
     use arcnav_bus::Message as _;
     use arcnav_bus::lcmtypes::steering_command_t;
     use arcnav_vehicle::SteeringCommand;

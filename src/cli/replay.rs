@@ -115,7 +115,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             println!("{:<13} ENDED: {why}", run.name);
         }
     }
-    super::print_guard(last.guard.as_ref());
+    super::terminal::print_guard(last.guard.as_ref());
     let weight_of = |c: &Resolved| {
         let c = c.clone();
         move |name: &str| c.arbiter.weight(name)

@@ -423,7 +423,7 @@ fn print_ride_stops_and_recoveries(r: &arcnav::mission::MissionReport) {
             f.fault, f.after_s, f.counts.cells_dropped, f.counts.cycles_stale
         );
     }
-    super::print_guard(r.guard.as_ref());
+    super::terminal::print_guard(r.guard.as_ref());
     let rec = &r.recovery;
     println!(
         "recoveries    {} (backed {:.1} m; {} turns round in {} legs, {:.0}° turned, {} turned the other way; {} retraces over {:.1} m; blocked with no way back {} decisions, out of recoveries {})",

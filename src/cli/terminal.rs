@@ -1,4 +1,5 @@
-//! What the commands share at the terminal: Ctrl-C, progress bars.
+//! What the commands share at the terminal: Ctrl-C, progress bars, the
+//! guard's lines of a summary.
 
 /// Set by the first SIGINT or SIGTERM; a second one while shutting down
 /// exits at once.
@@ -23,4 +24,47 @@ pub(super) fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
             .progress_chars("=> "),
     )
+}
+
+/// What the guard did (a mission's, or what it would have done with a
+/// replay's commands), as the summaries print it.
+pub(super) fn print_guard(guard: Option<&arcnav::mission::GuardReport>) {
+    match guard {
+        Some(g) => {
+            println!(
+                "guard         {} stops, {} slows (stopped {:.1} s, slowed {:.1} s); {} hazardous returns ({} standing, {} holes) from {} images and {} slices, {:.2} ms each",
+                g.stops,
+                g.slows,
+                g.stopped_s,
+                g.slowed_s,
+                g.counts.standing + g.counts.holes,
+                g.counts.standing,
+                g.counts.holes,
+                g.counts.images,
+                g.counts.slices,
+                g.observe_ms
+            );
+            if g.counts.unknown_sensor
+                + g.counts.before_pose
+                + g.counts.malformed
+                + g.counts.forgotten
+                > 0
+            {
+                println!(
+                    "              not tested: {} of an unknown sensor, {} before any pose, {} malformed; {} returns forgotten (guard.max_cells held)",
+                    g.counts.unknown_sensor,
+                    g.counts.before_pose,
+                    g.counts.malformed,
+                    g.counts.forgotten
+                );
+            }
+            if let Some(e) = g.first.first() {
+                println!(
+                    "              first: {} at {:.1} s at ({:.1}, {:.1}): {}",
+                    e.verdict, e.t_s, e.x, e.y, e.reason
+                );
+            }
+        }
+        None => println!("guard         off ([guard] enabled = false)"),
+    }
 }
