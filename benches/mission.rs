@@ -80,7 +80,7 @@ fn main() {
         );
         if let Some(g) = &r.guard {
             println!(
-                "  guard: {:.2} ms an image on a thread of its own ({:.1} s in all)",
+                "  guard: {:.2} ms an image, on the pipeline's thread ({:.1} s in all)",
                 g.observe_ms, g.time_s
             );
         }

@@ -146,6 +146,8 @@ pub struct GuardCounts {
     pub before_pose: u64,
     /// Images and slices whose shape does not match their beams.
     pub malformed: u64,
+    /// Returns walked (of the columns walked: see
+    /// [`returns::Profile::column_stride`]).
     pub returns: u64,
     pub standing: u64,
     pub holes: u64,
@@ -271,6 +273,7 @@ impl Guard {
                 range_m: config.range_m,
                 noise_m: config.ground_noise_m,
                 max_gap_m: Profile::bridged_gap_m(vehicle.wheel_radius_m, vehicle.tolerated_step_m),
+                cell_m: config.cell_size_m,
             },
             braking: Braking::of(vehicle, config.margin_m),
             response: SteeringResponse::of(vehicle),

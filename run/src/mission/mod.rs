@@ -327,29 +327,19 @@ pub fn run_mission(
                 speed_mps: state.speed_mps,
             });
         }
-        // The guard takes the tick's images beside the pipeline, on a
-        // thread of its own: it shares nothing with it.
-        let mut advance = |step| {
-            feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
-            pipeline.run_until(t, &mut sink);
-        };
-        match guard.as_mut() {
-            Some(guard) if !(step.images.is_empty() && step.slices.is_empty()) => {
-                let pose = step.pose;
-                let slices: Vec<_> = step.slices.iter().map(|(_, _, s)| s.clone()).collect();
-                let images: Vec<_> = step.images.iter().map(|(_, i)| i.clone()).collect();
-                std::thread::scope(|scope| {
-                    scope.spawn(|| guard.observe(&pose, slices.iter(), images.iter()));
-                    advance(step);
-                });
-            }
-            guard => {
-                if let Some(guard) = guard {
-                    guard.observe(&step.pose, std::iter::empty(), std::iter::empty());
-                }
-                advance(step);
-            }
+        // The guard takes the tick's pose and images before the pipeline
+        // does, on the pipeline's thread: the images are rendered ahead on
+        // another (`sim.render_ahead`), and the renderer, not the
+        // pipeline, sets the pace; a third thread would take from it.
+        if let Some(guard) = guard.as_mut() {
+            guard.observe(
+                &step.pose,
+                step.slices.iter().map(|(_, _, s)| s),
+                step.images.iter().map(|(_, i)| i),
+            );
         }
+        feed(step, t, options.log_mode, sensors, &mut pipeline, &mut sink);
+        pipeline.run_until(t, &mut sink);
         let commands = std::mem::take(&mut sink.commands);
         let commands = match guard.as_mut() {
             Some(guard) => {
