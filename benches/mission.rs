@@ -7,7 +7,11 @@
 //! goes. The two missions are the same byte for byte; only the time differs.
 //! A third runs without the guard (`[guard] enabled = false`): what the
 //! guard costs the mission's wall time (issue 65's target: under 5 %).
-//! `cargo bench --bench mission [-- lidar128]` (about a minute a mission).
+//! `cargo bench --bench mission [-- lidar128]` (about a minute a mission);
+//! `… -- dem_loop` drives tests/worlds/dem_loop.toml instead (2 km over a
+//! 10 m DEM with slopes to 20° and scattered obstacles, at `--speed 10`:
+//! issue 69's real terrain, about three minutes a mission). In quick mode
+//! both worlds run for 10 simulated seconds.
 
 use std::sync::Arc;
 
@@ -21,26 +25,61 @@ use arcnav_sim::World;
 mod common;
 
 fn main() {
-    let preset = match std::env::args().skip(1).find(|a| !a.starts_with('-')) {
-        Some(name) if name == "lidar128" => SensorPreset::Lidar128,
-        Some(name) if name != "lidar64" => {
-            eprintln!("unknown sensor {name:?}: lidar64 (the default) or lidar128");
-            std::process::exit(2);
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
+    let mut preset = SensorPreset::Lidar64;
+    let mut dem = false;
+    for arg in &args {
+        match arg.as_str() {
+            "lidar64" => preset = SensorPreset::Lidar64,
+            "lidar128" => preset = SensorPreset::Lidar128,
+            "dem_loop" => dem = true,
+            "paper_loop" => dem = false,
+            other => {
+                eprintln!(
+                    "unknown argument {other:?}: lidar64 (the default) or lidar128, paper_loop (the default) or dem_loop"
+                );
+                std::process::exit(2);
+            }
         }
-        _ => SensorPreset::Lidar64,
-    };
-    let world = Arc::new(
+    }
+    if common::quick() {
+        drive(preset, false);
+        drive(preset, true);
+    } else {
+        drive(preset, dem);
+    }
+}
+
+/// The mission of paper_loop at the defaults, or of dem_loop at 10 m/s,
+/// rendered ahead and when due, and without the guard.
+fn drive(preset: SensorPreset, dem: bool) {
+    let world = Arc::new(if dem {
+        World::load(&arcnav_testkit::workspace_root().join("tests/worlds/dem_loop.toml"))
+            .expect("tests/worlds/dem_loop.toml builds")
+    } else {
         World::embedded("paper_loop")
             .expect("embedded")
-            .expect("valid"),
+            .expect("valid")
+    });
+    let speed = if dem {
+        10.0
+    } else {
+        Config::default().arbiter.cruise_speed_mps
+    };
+    println!(
+        "{}, {preset:?}, default configuration at {speed} m/s, no log, two cores:",
+        world.spec.name
     );
-    println!("paper_loop, {preset:?}, default configuration, no log, two cores:");
     let mut wall = Vec::new();
     for (ahead, guard) in [(true, true), (false, true), (true, false)] {
         let mut config = Config::default();
         config.sensor.preset = preset;
         config.sim.render_ahead = ahead;
         config.guard.enabled = guard;
+        config.arbiter.cruise_speed_mps = speed;
         if common::quick() {
             config.sim.time_limit_s = 10.0;
         }

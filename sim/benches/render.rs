@@ -19,7 +19,9 @@
 //! the Intel hosts of 2026-11-28 gave 11-20 ms before it). See
 //! docs/simulator.md for what has been measured and tried.
 //! Run with `cargo bench -p arcnav-sim --bench render`, or `… -- lidar64`
-//! for one sensor.
+//! for one sensor; `… -- dem_loop` renders over tests/worlds/dem_loop.toml
+//! instead (a 2 km loop over a 10 m DEM with slopes to 20°: real terrain,
+//! issue 69) — in quick mode both worlds are rendered.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -93,13 +95,33 @@ fn render_streamed(
         .collect()
 }
 
-fn main() {
-    let world = Arc::new(
+/// The world named on the command line: `dem_loop` (the DEM world of the
+/// repository's tests) or the embedded `paper_loop`.
+fn world(dem: bool) -> Arc<World> {
+    Arc::new(if dem {
+        let path = arcnav_testkit::workspace_root().join("tests/worlds/dem_loop.toml");
+        World::load(&path).expect("tests/worlds/dem_loop.toml builds")
+    } else {
         World::embedded("paper_loop")
             .expect("paper_loop is embedded")
-            .expect("paper_loop builds"),
-    );
-    let mut tiles = TileCache::new(Arc::clone(&world), 256, 2);
+            .expect("paper_loop builds")
+    })
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let dem = args.iter().any(|a| a == "dem_loop");
+    if quick() {
+        render(&world(false), &args);
+        render(&world(true), &args);
+    } else {
+        render(&world(dem), &args);
+    }
+}
+
+fn render(world: &Arc<World>, args: &[String]) {
+    println!("{}:", world.spec.name);
+    let mut tiles = TileCache::new(Arc::clone(world), 256, 2);
     let sim = SimConfig::default();
     let noise = (sim.range_noise_m, sim.dropout_probability);
     // A mission renders only as far as perception looks, plus a margin
@@ -110,9 +132,9 @@ fn main() {
         "sensor", "range m", "poses", "threads", "median ms", "p90 ms", "10 Hz × real"
     );
     // `cargo bench --bench render -- lidar64` times only the sensors named.
-    let only: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| !a.starts_with('-'))
+    let only: Vec<&String> = args
+        .iter()
+        .filter(|a| !a.starts_with('-') && *a != "dem_loop")
         .collect();
     for sensor in [
         SensorModel::lidar64(),
@@ -120,7 +142,7 @@ fn main() {
         SensorModel::erim(),
     ]
     .into_iter()
-    .filter(|s| only.is_empty() || only.contains(&s.id))
+    .filter(|s| only.is_empty() || only.contains(&&s.id))
     .flat_map(|sensor| {
         let full = sensor.max_range_m;
         let mut ranges = vec![full.min(mission_range), full];
@@ -132,7 +154,7 @@ fn main() {
         })
     }) {
         for tilted in [false, true] {
-            let poses = poses(&world, tilted);
+            let poses = poses(world, tilted);
             let views: Vec<_> = poses
                 .iter()
                 .map(|pose| {
