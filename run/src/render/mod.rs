@@ -203,6 +203,43 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         canvas.polyline(&[(x - 8.0, y + 8.0), (x + 8.0, y - 8.0)], RED, 3.0, false);
         canvas.label(x + 10.0, y, 13.0, RED, &c.cause);
     }
+    // Where the guard stopped (red) or slowed (orange) the vehicle, each a
+    // defect of the pipeline to find: a square, and the time of the first
+    // at each place.
+    if let Some(guard) = &run.report.guard {
+        let mut labelled: Vec<(f64, f64)> = Vec::new();
+        for e in &guard.first {
+            let (x, y) = to_px(e.x, e.y);
+            let colour = if e.verdict == "stop" {
+                RED
+            } else {
+                [230, 140, 0, 255]
+            };
+            canvas.polygon(
+                &[
+                    (x - 6.0, y - 6.0),
+                    (x + 6.0, y - 6.0),
+                    (x + 6.0, y + 6.0),
+                    (x - 6.0, y + 6.0),
+                ],
+                None,
+                Some((colour, 2.5)),
+            );
+            if labelled
+                .iter()
+                .all(|&(lx, ly)| (lx - e.x).hypot(ly - e.y) > 10.0)
+            {
+                labelled.push((e.x, e.y));
+                canvas.label(
+                    x + 9.0,
+                    y + 12.0,
+                    12.0,
+                    colour,
+                    &format!("guard {} at {:.0} s", e.verdict, e.t_s),
+                );
+            }
+        }
+    }
     // Header: what happened, and the speed scale.
     let r = &run.report;
     canvas.fill_rect(0.0, 0.0, w as f32, header as f32, WHITE);
@@ -212,14 +249,21 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         19.0,
         BLACK,
         &format!(
-            "{} — {} — {:.0} m in {:.0} s, {:.2} m/s average, {} images, {} collision(s)",
+            "{} — {} — {:.0} m in {:.0} s, {:.2} m/s average, {} images, {} collision(s){}",
             r.world,
             if r.success { "completed" } else { "FAILED" },
             r.distance_m,
             r.duration_s,
             r.average_speed_mps,
             r.images,
-            r.collisions.len()
+            r.collisions.len(),
+            match &r.guard {
+                Some(g) if g.interventions() > 0 => format!(
+                    ", guard: {} stops (red squares), {} slows (orange)",
+                    g.stops, g.slows
+                ),
+                _ => String::new(),
+            }
         ),
     );
     canvas.text(10.0, 50.0, 14.0, BLACK, "path speed:");
