@@ -1032,6 +1032,15 @@ fn box_net(tag: &str) -> Option<(Net, BTreeMap<Utime, f64>, f64)> {
     Some((net, xs, hit_x))
 }
 
+/// The JSON lines of a command's standard output (`--print`).
+fn json_lines(stdout: &str) -> Vec<serde_json::Value> {
+    stdout
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
 /// The vehicle's x by pose time in `log`.
 fn pose_xs(log: &Path) -> BTreeMap<Utime, f64> {
     let mut xs = BTreeMap::new();
@@ -1087,11 +1096,7 @@ fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
     let stderr = vehicle.stderr.lock().unwrap().clone();
     let (code, stdout) = vehicle.finish();
     assert_eq!(code, Some(0), "{stderr}");
-    let ticks: Vec<serde_json::Value> = stdout
-        .lines()
-        .filter(|l| l.starts_with('{'))
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let ticks = json_lines(&stdout);
     // The first stop for the box, not for data still missing at the start.
     let stop = ticks
         .iter()
@@ -1201,11 +1206,7 @@ fn the_guard_node_stops_a_vehicle_that_follows_it_short_of_a_box() {
     assert_eq!(code, Some(0), "{vehicle_err}");
     assert!(guard_err.contains("guard: STOP: obstacle"), "{guard_err}");
     assert!(guard_out.contains("guard_interventions"), "{guard_out}");
-    let ticks: Vec<serde_json::Value> = stdout
-        .lines()
-        .filter(|l| l.starts_with('{'))
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let ticks = json_lines(&stdout);
     // The vehicle followed moving commands, then a stop before the box.
     let moving = ticks
         .iter()
@@ -1964,11 +1965,7 @@ fn an_attacker_on_an_authenticated_bus_changes_no_command() {
     for (_, command) in &heard.authentic {
         authentic.entry(command.utime).or_default().push(*command);
     }
-    let ticks: Vec<serde_json::Value> = executed
-        .lines()
-        .filter(|l| l.starts_with('{'))
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let ticks = json_lines(&executed);
     let mut states: BTreeMap<String, usize> = BTreeMap::new();
     for tick in &ticks {
         *states.entry(tick["state"].to_string()).or_default() += 1;
