@@ -731,6 +731,17 @@ impl Logger {
     }
 }
 
+/// Plays what a guard takes (poses, images and the logged commands) in
+/// real time.
+fn play_to_the_guard(net: &Net) {
+    assert!(
+        net.play("POSE|RANGE_IMAGE.*|STEERING_COMMAND", 1.0)
+            .wait()
+            .unwrap()
+            .success()
+    );
+}
+
 /// Every input of the pipeline, as `lcm-logplayer -e` takes it.
 const INPUTS: &str = "POSE|RANGE_IMAGE.*|WAYPOINTS";
 
@@ -1084,12 +1095,7 @@ fn the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees() {
             }
         },
         || {
-            assert!(
-                net.play("POSE|RANGE_IMAGE.*|STEERING_COMMAND", 1.0)
-                    .wait()
-                    .unwrap()
-                    .success()
-            );
+            play_to_the_guard(&net);
         },
     );
     vehicle.signal("TERM");
@@ -1190,12 +1196,7 @@ fn the_guard_node_stops_a_vehicle_that_follows_it_short_of_a_box() {
     );
     guard.wait_ready();
     vehicle.wait_ready();
-    assert!(
-        net.play("POSE|RANGE_IMAGE.*|STEERING_COMMAND", 1.0)
-            .wait()
-            .unwrap()
-            .success()
-    );
+    play_to_the_guard(&net);
     vehicle.signal("TERM");
     guard.signal("TERM");
     let guard_err = guard.stderr.lock().unwrap().clone();

@@ -307,9 +307,9 @@ impl Guard {
     }
 
     /// The hazards held: the latest return of each cell that `min_points`
-    /// hazardous returns fell in. (Cells are forgotten as images look at
-    /// them again and do not see them: `now` is kept for callers.)
-    pub fn hazards(&self, _now: Utime) -> impl Iterator<Item = &Hazard> {
+    /// hazardous returns fell in (cells are forgotten as images look at
+    /// them again and do not see them, not by the clock).
+    pub fn hazards(&self) -> impl Iterator<Item = &Hazard> {
         let min = self.config.min_points;
         self.cells
             .values()
@@ -517,7 +517,7 @@ impl Guard {
                 pitch_deg: pitch.to_degrees(),
             });
         }
-        let Some((s, hazard)) = self.contact(command, &pose, now) else {
+        let Some((s, hazard)) = self.contact(command, &pose) else {
             return Ok(Verdict::Clear);
         };
         let reason = Reason::Hazard {
@@ -544,12 +544,7 @@ impl Guard {
     /// how far along it. Found again when the command or the hazards
     /// change, or the vehicle has driven `RECHECK_M` since; in between,
     /// the distance is what it was less the distance driven.
-    fn contact(
-        &mut self,
-        command: &SteeringCommand,
-        pose: &Pose,
-        now: Utime,
-    ) -> Option<(f64, Hazard)> {
+    fn contact(&mut self, command: &SteeringCommand, pose: &Pose) -> Option<(f64, Hazard)> {
         /// Driven this far, the contact is found again, m.
         const RECHECK_M: f64 = 0.5;
         let at = pose.world_from_vehicle.translation.vector;
@@ -567,7 +562,7 @@ impl Guard {
         let to_level = level.inverse();
         let steering = Steering::of(pose, Some(self.in_flight));
         let path = DrivenPath::new(&steering, &self.response, command.curvature);
-        let held: Vec<Hazard> = self.hazards(now).copied().collect();
+        let held: Vec<Hazard> = self.hazards().copied().collect();
         let found = nearest_contact(
             self.footprint,
             &path,
@@ -764,13 +759,13 @@ mod tests {
         // Seen from 4 m, then stood 0.8 m short of it (below the lowest
         // beam) for 20 s of images: still held, and it stops the vehicle.
         let mut guard = guard_seeing(box_at(4.0), 0.0);
-        let held = guard.hazards(T0).count();
+        let held = guard.hazards().count();
         assert!(held > 0);
         let t = images(&mut guard, T0, 20, 3.2, &with_box);
         assert!(
-            guard.hazards(t).count() >= held,
+            guard.hazards().count() >= held,
             "{}",
-            guard.hazards(t).count()
+            guard.hazards().count()
         );
         guard.observe_pose(&Pose::at_rest(t, Isometry::translation(3.2, 0.0, 0.0)));
         let verdict = guard.check(
@@ -785,9 +780,9 @@ mod tests {
         // memory_s (5 s), not before.
         let mut guard = guard_seeing(box_at(4.0), 0.0);
         let t = images(&mut guard, T0 + period, 4, 0.0, &open);
-        assert!(guard.hazards(t).count() > 0);
-        let t = images(&mut guard, t, 2, 0.0, &open);
-        assert_eq!(guard.hazards(t).count(), 0);
+        assert!(guard.hazards().count() > 0);
+        images(&mut guard, t, 2, 0.0, &open);
+        assert_eq!(guard.hazards().count(), 0);
     }
 
     #[test]

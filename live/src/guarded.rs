@@ -64,10 +64,7 @@ impl RunGuard {
     /// saying so, otherwise. GUARD_STATUS says the verdict either way.
     pub(crate) fn judge(&self, decided: &Decided, now: i64, publisher: &Publisher) -> Decided {
         let (at, verdict) = self.lock().judge(&decided.command, now);
-        let said = wire::guard_status_to_wire(at, decided.command.utime, &verdict);
-        if let Err(e) = publisher.publish_message(channels::GUARD_STATUS, &said) {
-            tracing::debug!(%e, "cannot publish the guard's status");
-        }
+        say(publisher, at, decided.command.utime, &verdict);
         let mut out = decided.clone();
         if let Some(reason) = verdict.reason() {
             out.command = verdict.apply(&decided.command);
@@ -88,6 +85,16 @@ pub enum Guarded {
     Slow,
     /// The vehicle stops.
     Stop,
+}
+
+impl From<&Verdict> for Guarded {
+    fn from(verdict: &Verdict) -> Self {
+        match verdict {
+            Verdict::Clear => Self::Clear,
+            Verdict::Slow { .. } => Self::Slow,
+            Verdict::Stop { .. } => Self::Stop,
+        }
+    }
 }
 
 /// The guard in the bridge: the guard, the newest pose's sensor time and
@@ -118,6 +125,15 @@ impl BridgeGuard {
     /// The verdict last said.
     pub(crate) fn last(&self) -> Guarded {
         self.last
+    }
+
+    /// Subscribes `lcm` to what the guard takes: POSE and RANGE_IMAGE*.
+    pub(crate) fn subscribe(
+        lcm: &mut arcnav_bus::transport::Lcm,
+    ) -> Result<(), super::options::LiveError> {
+        lcm.subscribe(channels::POSE);
+        lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
+        Ok(())
     }
 
     /// A pose that arrived at `now` (the bridge's clock).
@@ -155,11 +171,7 @@ impl BridgeGuard {
     pub(crate) fn judge(&mut self, command: &SteeringCommand, now: i64) -> (i64, Verdict) {
         let at = self.sensor_time(now);
         let verdict = self.guard.check(command, at);
-        let state = match &verdict {
-            Verdict::Clear => Guarded::Clear,
-            Verdict::Slow { .. } => Guarded::Slow,
-            Verdict::Stop { .. } => Guarded::Stop,
-        };
+        let state = Guarded::from(&verdict);
         match state {
             Guarded::Stop => self.stops += 1,
             Guarded::Slow => self.slows += 1,
@@ -180,6 +192,15 @@ impl BridgeGuard {
             self.last = state;
         }
         (at, verdict)
+    }
+}
+
+/// The guard's verdict at `at` (sensor clock) on the command stamped
+/// `command_utime`, on GUARD_STATUS.
+pub(crate) fn say(publisher: &Publisher, at: i64, command_utime: i64, verdict: &Verdict) {
+    let said = wire::guard_status_to_wire(at, command_utime, verdict);
+    if let Err(e) = publisher.publish_message(channels::GUARD_STATUS, &said) {
+        tracing::debug!(%e, "cannot publish the guard's status");
     }
 }
 

@@ -386,7 +386,7 @@ fn arbiter(
 /// changes the verdict on the newest command (received within three
 /// command periods) publishes it again at once.
 fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
-    use super::guarded::{BridgeGuard, guard_status};
+    use super::guarded::{BridgeGuard, guard_status, say};
     use arcnav_bus::Message as _;
     use arcnav_bus::lcmtypes::steering_command_t;
     use arcnav_vehicle::SteeringCommand;
@@ -407,8 +407,7 @@ fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
         period_ms,
     } = Books::new("guard", config, options);
     lcm.subscribe(channels::STEERING_COMMAND);
-    lcm.subscribe(channels::POSE);
-    lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
+    BridgeGuard::subscribe(&mut lcm)?;
     let publisher = lcm.publisher();
     let fresh_us = (3e6 / config.pipeline.command_rate_hz) as i64;
     let mut newest: Option<(SteeringCommand, i64)> = None;
@@ -417,10 +416,7 @@ fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
         if let Err(e) = publisher.publish_message(channels::STEERING_COMMAND_GUARDED, &sent) {
             tracing::error!(%e, "cannot publish the guarded command");
         }
-        let said = wire::guard_status_to_wire(at, command.utime, verdict);
-        if let Err(e) = publisher.publish_message(channels::GUARD_STATUS, &said) {
-            tracing::debug!(%e, "cannot publish the guard's status");
-        }
+        say(&publisher, at, command.utime, verdict);
     };
     pump(
         &mut lcm,
@@ -446,7 +442,7 @@ fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
                         Some(m) => guard.on_message(m, now),
                         None => guard.ignored += 1,
                     }
-                    // A verdict the new image changes goes out at once.
+                    // A verdict a new pose or image changes goes out at once.
                     if let Some((command, received)) = newest
                         && now - received <= fresh_us
                     {

@@ -21,16 +21,15 @@ use std::time::Duration;
 
 use arcnav_bus::codec::Message as _;
 use arcnav_bus::lcmtypes::steering_command_t;
-use arcnav_bus::messages::{AnyMessage, channels};
+use arcnav_bus::messages::AnyMessage;
 use arcnav_bus::transport::Lcm;
 use arcnav_guard::{Guard, Verdict};
 use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{CommandWatchdog, SteeringCommand};
-use arcnav_wire as wire;
 use serde::Serialize;
 
 pub use super::guarded::Guarded;
-use super::guarded::{BridgeGuard, guard_status};
+use super::guarded::{BridgeGuard, guard_status, say};
 use super::io::{Refused, Ticker, auth_status, pump};
 use super::threaded::{LiveError, LiveOptions};
 use super::{LiveReport, NodeStatus};
@@ -100,11 +99,7 @@ impl Executed {
     fn guarded(wall_us: i64, command: &SteeringCommand, verdict: &Verdict) -> Self {
         let applied = verdict.apply(command);
         Self {
-            guard: match verdict {
-                Verdict::Clear => Guarded::Clear,
-                Verdict::Slow { .. } => Guarded::Slow,
-                Verdict::Stop { .. } => Guarded::Stop,
-            },
+            guard: Guarded::from(verdict),
             guard_reason: verdict.reason().map(ToString::to_string),
             ..Self::new(wall_us, Execution::Following, &applied)
         }
@@ -146,8 +141,7 @@ pub fn run_bridge(
     lcm.subscribe(&bridge.channel);
     let mut guard = guard.map(BridgeGuard::new);
     if guard.is_some() {
-        lcm.subscribe(channels::POSE);
-        lcm.subscribe_regex(&format!("{}.*", channels::RANGE_IMAGE))?;
+        BridgeGuard::subscribe(&mut lcm)?;
     }
     let publisher = lcm.publisher();
     let wait = Duration::from_secs_f64((0.25 / bridge.rate_hz).min(0.005));
@@ -193,10 +187,7 @@ pub fn run_bridge(
                 match (&mut guard, state) {
                     (Some(guard), Execution::Following) => {
                         let (at, verdict) = guard.judge(&command, now);
-                        let msg = wire::guard_status_to_wire(at, command.utime, &verdict);
-                        if let Err(e) = publisher.publish_message(channels::GUARD_STATUS, &msg) {
-                            tracing::debug!(%e, "cannot publish the guard's status");
-                        }
+                        say(&publisher, at, command.utime, &verdict);
                         execute(&Executed::guarded(now, &command, &verdict));
                     }
                     _ => execute(&Executed::new(now, state, &command)),
@@ -239,6 +230,7 @@ pub fn run_bridge(
 mod tests {
     use super::*;
     use crate::threaded::StopWhen;
+    use arcnav_bus::messages::channels;
 
     /// Stops before the first command, the command while it is fresh, stops
     /// once it is stale, and a stop last: in that order, and only that.

@@ -166,12 +166,6 @@ struct Injected {
     counts: FaultCounts,
 }
 
-impl Injected {
-    fn active(&self, t: Utime) -> bool {
-        self.fault != Fault::None && self.from.is_some_and(|from| t >= from)
-    }
-}
-
 /// Takes every cell, region, shadow and height out of `report`, leaving the
 /// ground it observed; returns how many cells it held.
 fn strip(report: &mut ObstacleReport) -> u64 {
@@ -184,6 +178,10 @@ fn strip(report: &mut ObstacleReport) -> u64 {
 }
 
 impl Injected {
+    fn active(&self, t: Utime) -> bool {
+        self.fault != Fault::None && self.from.is_some_and(|from| t >= from)
+    }
+
     /// The map the cycle votes on, as the fault leaves it.
     fn corrupt(&mut self, cycle: &mut Cycle) {
         if !self.active(cycle.utime) {

@@ -111,17 +111,13 @@ impl GuardWatch {
         slices: impl Iterator<Item = &'a RangeSlice>,
         images: impl Iterator<Item = &'a RangeImage>,
     ) {
-        let start = Instant::now();
-        self.guard.observe_pose(pose);
+        self.observe_one(Observed::Pose(pose));
         for slice in slices {
-            self.guard.observe_slice(slice);
-            self.observed += 1;
+            self.observe_one(Observed::Slice(slice));
         }
         for image in images {
-            self.guard.observe_image(image);
-            self.observed += 1;
+            self.observe_one(Observed::Image(image));
         }
-        self.observe_s += start.elapsed().as_secs_f64();
     }
 
     /// The commands to send the vehicle at `t`: each of the pipeline's new
@@ -160,11 +156,7 @@ impl GuardWatch {
         if let Some(sent) = out.last() {
             self.sent = Some(*sent);
         }
-        match self.level {
-            1 => self.report.slowed_s += dt_s,
-            2 => self.report.stopped_s += dt_s,
-            _ => {}
-        }
+        self.held(dt_s);
         self.check_s += start.elapsed().as_secs_f64();
         self.checks += 1;
         out
@@ -212,8 +204,8 @@ impl GuardWatch {
         verdict
     }
 
-    /// One input of a replayed log, in log order (before the pipeline
-    /// takes it: its commands before it are judged without it).
+    /// One input, before the pipeline takes it (in a replay, in log order:
+    /// the commands before it are judged without it).
     pub(crate) fn observe_one(&mut self, input: Observed<'_>) {
         let start = Instant::now();
         match input {
@@ -242,12 +234,7 @@ impl GuardWatch {
         let start = Instant::now();
         // The time since the last command was under the verdict then.
         if let Some(last) = self.last {
-            let dt = micros_to_seconds((t - last.utime).max(0));
-            match self.level {
-                1 => self.report.slowed_s += dt,
-                2 => self.report.stopped_s += dt,
-                _ => {}
-            }
+            self.held(micros_to_seconds((t - last.utime).max(0)));
         }
         self.last = Some(SteeringCommand {
             utime: t,
@@ -257,6 +244,16 @@ impl GuardWatch {
         self.check_s += start.elapsed().as_secs_f64();
         self.checks += 1;
         verdict
+    }
+
+    /// `dt_s` passed under the verdict in force: counted as stopped or
+    /// slowed time.
+    fn held(&mut self, dt_s: f64) {
+        match self.level {
+            1 => self.report.slowed_s += dt_s,
+            2 => self.report.stopped_s += dt_s,
+            _ => {}
+        }
     }
 
     /// The verdicts to log since the last call.
