@@ -73,6 +73,8 @@ fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
         localmap: &LOCALMAP,
         statics: None,
         cruise_mps: 2.5,
+        area: None,
+        unreachable: Default::default(),
     };
     let behaviour = registry
         .build("prefer_current", &toml::Table::new(), &setup)

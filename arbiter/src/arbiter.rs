@@ -24,7 +24,7 @@ use arcnav_vehicle::{ArcSet, SteeringCommand, Utime, VehicleConfig};
 
 use crate::config::ArbiterConfig;
 use crate::recovery::{self, Behind, Recovery, RecoveryStats};
-use crate::votes::{BehaviourVotes, Votes};
+use crate::votes::{BehaviourVotes, VetoCause, Votes};
 
 /// Why the arbiter commanded stop.
 #[derive(Debug, Clone, PartialEq)]
@@ -91,15 +91,16 @@ pub struct Vetoer {
     /// Arcs it vetoed.
     pub arcs: usize,
     /// What is behind its veto of the arc nearest straight ahead, when it
-    /// said: a cell's centre in the vehicle frame of the cycle, m.
-    pub cell: Option<[f32; 2]>,
+    /// said: a cell, or the operating area's edge (vehicle frame of the
+    /// cycle).
+    pub cause: Option<VetoCause>,
 }
 
 impl std::fmt::Display for Vetoer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} vetoed {}", self.behaviour, self.arcs)?;
-        if let Some([x, y]) = self.cell {
-            write!(f, ", for the cell at ({x:.1}, {y:.1}) m")?;
+        if let Some(cause) = self.cause {
+            write!(f, ", for {cause}")?;
         }
         Ok(())
     }
@@ -182,7 +183,7 @@ pub struct Decision {
     /// Fused (and smoothed) vote per arc; vetoed arcs hold -1.
     pub fused: Vec<f32>,
     /// Per arc, the behaviours that vetoed it with the cell that caused it.
-    pub vetoes: Vec<Vec<(String, Option<[f32; 2]>)>>,
+    pub vetoes: Vec<Vec<(String, Option<VetoCause>)>>,
     pub inputs: Vec<InputExplanation>,
     /// The speed limits that applied, m/s: cruise, speed votes, lateral, weak vote.
     pub speed_limits: Vec<(String, f64)>,
@@ -634,7 +635,7 @@ impl Arbiter {
                 Some(Vetoer {
                     behaviour: input.name.clone(),
                     arcs: count,
-                    cell: votes.causes()[nearest_straight],
+                    cause: votes.causes()[nearest_straight],
                 })
             })
             .collect()

@@ -25,6 +25,34 @@ fn clearance_of(slots: &[f32], index: usize) -> Option<f64> {
         .map(|&m| f64::from(m))
 }
 
+/// What makes an arc forbidden, where a behaviour says.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum VetoCause {
+    /// A map cell, its centre in the vehicle frame of the cycle, m.
+    Cell([f32; 2]),
+    /// The operating area's edge: where the arc's swept footprint first
+    /// leaves the area, vehicle frame of the cycle, m.
+    AreaEdge([f32; 2]),
+}
+
+impl VetoCause {
+    /// Where it is, vehicle frame, m.
+    pub fn at(&self) -> [f32; 2] {
+        match *self {
+            Self::Cell(at) | Self::AreaEdge(at) => at,
+        }
+    }
+}
+
+impl std::fmt::Display for VetoCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Cell([x, y]) => write!(f, "the cell at ({x:.1}, {y:.1}) m"),
+            Self::AreaEdge([x, y]) => write!(f, "the operating area's edge at ({x:.1}, {y:.1}) m"),
+        }
+    }
+}
+
 /// What a behaviour thinks of every arc: a vote in [-1, 1] per arc (index
 /// order of the `ArcSet`), arcs it forbids outright (a veto: no weighted sum
 /// can make such an arc win), the map cell that caused each veto, an
@@ -36,7 +64,7 @@ fn clearance_of(slots: &[f32], index: usize) -> Option<f64> {
 pub struct Votes {
     values: Vec<f32>,
     vetoed: Vec<bool>,
-    causes: Vec<Option<[f32; 2]>>,
+    causes: Vec<Option<VetoCause>>,
     speed_mps: Option<f64>,
     /// Per arc: the highest speed accepted on it (∞: no limit).
     arc_speeds: Vec<f32>,
@@ -91,9 +119,14 @@ impl Votes {
         }
     }
 
-    /// Forbids arc `index` (its vote becomes -1); `cause` is the vehicle-frame
-    /// position of what makes it forbidden, if known.
-    pub fn veto(&mut self, index: usize, cause: Option<[f32; 2]>) {
+    /// Forbids arc `index` (its vote becomes -1); `cell` is the vehicle-frame
+    /// position of the map cell that makes it forbidden, if known.
+    pub fn veto(&mut self, index: usize, cell: Option<[f32; 2]>) {
+        self.veto_for(index, cell.map(VetoCause::Cell));
+    }
+
+    /// Forbids arc `index` (its vote becomes -1) for `cause`, if known.
+    pub fn veto_for(&mut self, index: usize, cause: Option<VetoCause>) {
         if index < self.values.len() {
             self.values[index] = -1.0;
             self.vetoed[index] = true;
@@ -172,7 +205,7 @@ impl Votes {
         &self.vetoed
     }
 
-    pub fn causes(&self) -> &[Option<[f32; 2]>] {
+    pub fn causes(&self) -> &[Option<VetoCause>] {
         &self.causes
     }
 
@@ -223,7 +256,7 @@ mod tests {
         v.set(9, 1.0);
         assert_eq!(v.values(), [1.0, -1.0, -1.0, -1.0, 0.0]);
         assert_eq!(v.vetoed(), [false, false, false, true, false]);
-        assert_eq!(v.causes()[3], Some([5.0, 0.0]));
+        assert_eq!(v.causes()[3], Some(VetoCause::Cell([5.0, 0.0])));
         v.vote_speed(-2.0);
         assert_eq!(v.speed_mps(), Some(0.0));
         v.limit_arc_speed(1, 3.5);

@@ -1,6 +1,8 @@
 //! DAMN fusion: weights, vetoes, smoothing, staleness, speed, explanations.
 
-use arcnav_arbiter::{Arbiter, ArbiterConfig, BehaviourVotes, Reason, StopReason, Vetoer, Votes};
+use arcnav_arbiter::{
+    Arbiter, ArbiterConfig, BehaviourVotes, Reason, StopReason, VetoCause, Vetoer, Votes,
+};
 use arcnav_vehicle::{ArcSet, ArcSetConfig, VehicleConfig};
 
 const SECOND: i64 = 1_000_000;
@@ -99,7 +101,10 @@ fn a_veto_beats_a_high_weighted_sum() {
     let decision = a.decision().unwrap();
     assert_eq!(
         decision.vetoes[30],
-        [("obstacle_avoidance".to_owned(), Some([5.0, 1.0]))]
+        [(
+            "obstacle_avoidance".to_owned(),
+            Some(VetoCause::Cell([5.0, 1.0]))
+        )]
     );
     assert_eq!(decision.fused[30], -1.0);
 }
@@ -177,7 +182,7 @@ fn all_arcs_forbidden_means_stop_with_speed_zero_and_says_who() {
             vetoes: vec![Vetoer {
                 behaviour: "obstacle_avoidance".into(),
                 arcs: 39,
-                cell: Some([3.0, 0.0]),
+                cause: Some(VetoCause::Cell([3.0, 0.0])),
             }]
         })
     );
@@ -191,7 +196,7 @@ fn all_arcs_forbidden_means_stop_with_speed_zero_and_says_who() {
     };
     assert_eq!(Some(stop), a.decision().unwrap().stop.as_ref());
     assert_eq!(vetoers.len(), 1);
-    assert_eq!(vetoers[0].cell, Some([3.0, 0.0]));
+    assert_eq!(vetoers[0].cause, Some(VetoCause::Cell([3.0, 0.0])));
 }
 
 #[test]

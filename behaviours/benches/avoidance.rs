@@ -82,6 +82,8 @@ fn main() {
             localmap: &localmap,
             statics: None,
             cruise_mps: 2.5,
+            area: None,
+            unreachable: Default::default(),
         };
         let mut behaviour = ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup);
         for (label, speed, curvature) in [

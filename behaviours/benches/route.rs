@@ -48,6 +48,8 @@ fn main() {
         localmap: &localmap,
         statics: None,
         cruise_mps: 2.5,
+        area: None,
+        unreachable: Default::default(),
     };
     let mut route = Route::new(RouteConfig::default(), &setup);
     let mut map = LocalMap::new(&localmap, &vehicle);

@@ -3,6 +3,7 @@
 
 use arcnav_arbiter::Votes;
 use arcnav_localmap::{LocalMapConfig, MapSnapshot};
+use arcnav_vehicle::mission::{Area, WhenUnreachable};
 use arcnav_vehicle::{
     ArcSet, ConfigError, Pose, Steering, SteeringCommand, SteeringResponse, Utime, VehicleConfig,
 };
@@ -90,6 +91,11 @@ pub struct Setup<'a> {
     /// (`arbiter.cruise_speed_mps`): speed limits given as a fraction of it
     /// (terrain speed) use it.
     pub cruise_mps: f64,
+    /// The operating area (`[mission] area`), if the vehicle has one: the
+    /// route plans inside it, obstacle avoidance vetoes arcs that leave it.
+    pub area: Option<&'a Area>,
+    /// When a waypoint no route reaches is given up on, and what follows.
+    pub unreachable: WhenUnreachable,
 }
 
 impl Setup<'_> {
@@ -113,6 +119,38 @@ pub struct Progress {
     pub current: usize,
     pub waypoints: usize,
     pub complete: bool,
+    /// Waypoints given up as unreachable (`on_unreachable = "skip"`).
+    pub skipped: usize,
+    /// The waypoint being sought has no route and the mission stops there
+    /// (`on_unreachable = "stop"`): the behaviour votes to stand.
+    pub unreachable: bool,
+}
+
+/// A waypoint no route reached, and the evidence: the planner searched all
+/// of the operating area it knows and every way to the waypoint ran
+/// through ground known to be impassable (or beyond the area's edge).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct NoRoute {
+    /// Index of the waypoint (from 0) and where it is, world frame, m.
+    pub waypoint: usize,
+    pub position: [f64; 2],
+    /// When the planner first found no way, and when that had lasted
+    /// `unreachable_after_s` (the decision), µs.
+    pub since: Utime,
+    pub decided: Utime,
+    /// Where the vehicle was when the planner last found no way, m.
+    pub vehicle_at: [f64; 2],
+    /// Ground of the operating area within the planner's memory that
+    /// images have shown, and all of it there, m².
+    pub known_m2: f64,
+    pub area_m2: f64,
+    /// Centres of the impassable cells that close the waypoint off (or the
+    /// vehicle in), world frame, m: the ring the planner could not cross.
+    pub ring: Vec<[f64; 2]>,
+    /// Side of those cells, m.
+    pub cell_m: f64,
+    /// Whether the mission went on to the next waypoint.
+    pub skipped: bool,
 }
 
 /// A voting behaviour (002 §6, DAMN).
@@ -156,6 +194,11 @@ pub trait Behaviour: Send {
     /// Progress through the mission, for behaviours that follow one.
     fn progress(&self) -> Option<Progress> {
         None
+    }
+
+    /// The waypoints this behaviour found no route to, with the evidence.
+    fn no_routes(&self) -> &[NoRoute] {
+        &[]
     }
 
     /// Counts worth reporting (a planner's re-plans, say), by name, for

@@ -13,6 +13,7 @@
 use arcnav_arbiter::Votes;
 use arcnav_vehicle::config::{self, ConfigError};
 use arcnav_vehicle::frames::wrap_angle;
+use arcnav_vehicle::mission::OnUnreachable;
 use arcnav_vehicle::{DrivenPath, SteeringResponse};
 use serde::{Deserialize, Serialize};
 
@@ -57,6 +58,8 @@ pub(crate) struct WaypointTracker {
     mission_version: Option<i64>,
     waypoints: usize,
     current: usize,
+    skipped: usize,
+    stopped: bool,
 }
 
 impl WaypointTracker {
@@ -67,6 +70,8 @@ impl WaypointTracker {
             mission_version: None,
             waypoints: 0,
             current: 0,
+            skipped: 0,
+            stopped: false,
         }
     }
 
@@ -76,6 +81,11 @@ impl WaypointTracker {
         if self.mission_version != Some(ctx.mission.version) {
             self.mission_version = Some(ctx.mission.version);
             self.current = 0;
+            self.skipped = 0;
+            self.stopped = false;
+        }
+        if self.stopped {
+            return None;
         }
         self.waypoints = ctx.mission.waypoints.len();
         let position = ctx.pose.position();
@@ -106,8 +116,23 @@ impl WaypointTracker {
         }
     }
 
+    /// Gives up the waypoint being sought: [`OnUnreachable::Skip`] goes on
+    /// to the next, [`OnUnreachable::Stop`] seeks none from now on (until
+    /// the mission changes).
+    pub fn give_up(&mut self, then: OnUnreachable) {
+        match then {
+            OnUnreachable::Skip => {
+                self.current += 1;
+                self.skipped += 1;
+            }
+            OnUnreachable::Stop => self.stopped = true,
+        }
+    }
+
     pub fn reset(&mut self) {
         self.current = 0;
+        self.skipped = 0;
+        self.stopped = false;
         self.mission_version = None;
     }
 
@@ -116,6 +141,8 @@ impl WaypointTracker {
             current: self.current.min(self.waypoints),
             waypoints: self.waypoints,
             complete: self.waypoints > 0 && self.current >= self.waypoints,
+            skipped: self.skipped,
+            unreachable: self.stopped,
         }
     }
 }

@@ -18,8 +18,8 @@ pub mod route;
 pub mod terrain;
 
 pub use behaviour::{
-    Behaviour, Mission, Overlay, OverlayCells, OverlayLine, OverlayPoint, Plugin, Progress, Setup,
-    VoteContext, Waypoint,
+    Behaviour, Mission, NoRoute, Overlay, OverlayCells, OverlayLine, OverlayPoint, Plugin,
+    Progress, Setup, VoteContext, Waypoint,
 };
 pub use goal_seeking::{GoalSeeking, GoalSeekingConfig};
 pub use obstacle_avoidance::{ObstacleAvoidance, ObstacleAvoidanceConfig, UnseenGround};

@@ -141,6 +141,8 @@ fn oa_votes(elevation: ElevationGrid, patches: Vec<arcnav_localmap::Patch>) -> V
         localmap: &localmap,
         statics: None,
         cruise_mps: 2.5,
+        area: None,
+        unreachable: Default::default(),
     };
     let mut oa = ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup);
     let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));

@@ -34,6 +34,8 @@ fn setup<'a>(arcs: &'a ArcSet, vehicle: &'a VehicleConfig) -> Setup<'a> {
         localmap: &LOCALMAP,
         statics: None,
         cruise_mps: 2.5,
+        area: None,
+        unreachable: Default::default(),
     }
 }
 
@@ -184,7 +186,7 @@ fn an_obstacle_5_m_ahead_forbids_straight_and_leaves_the_hard_turns_clear() {
         "straight collides 5 m ahead, closer than 6 m"
     );
     assert_eq!(votes.vote(19), Some(-1.0));
-    let cause = votes.causes()[19].expect("the veto names its cell");
+    let cause = votes.causes()[19].expect("the veto names its cell").at();
     assert!(
         (f64::from(cause[0]) - 9.0).abs() < 0.3 && f64::from(cause[1]).abs() < 0.3,
         "{cause:?}"
@@ -445,7 +447,9 @@ fn an_arc_the_vehicle_can_no_longer_stop_on_before_unseen_ground_is_forbidden() 
     let config = ObstacleAvoidanceConfig::default;
     let fast = avoidance_votes_moving(&map, config(), 5.0);
     assert!(fast.is_vetoed(19), "straight");
-    let cause = fast.causes()[19].expect("the veto names the unseen ground");
+    let cause = fast.causes()[19]
+        .expect("the veto names the unseen ground")
+        .at();
     assert!(
         (f64::from(cause[0]) - 8.0).abs() < 0.5,
         "the first unseen ground straight ahead: {cause:?}"
@@ -1072,6 +1076,8 @@ fn lookahead_s_aims_seconds_of_cruise_ahead_when_that_is_farther() {
     let votes = |name: &str, table: &str, cruise: f64| {
         let setup = Setup {
             cruise_mps: cruise,
+            area: None,
+            unreachable: Default::default(),
             ..setup(&arcs, &vehicle)
         };
         let mut behaviour = Registry::builtin()

@@ -22,6 +22,7 @@ use arcnav_pipeline::{ExternalConfig, LiveConfig, PipelineConfig};
 use arcnav_sim::SimConfig;
 
 use arcnav_vehicle::config::toml_location;
+use arcnav_vehicle::mission::{Mission, MissionConfig};
 use arcnav_vehicle::{ArcSetConfig, ConfigError, VehicleConfig};
 use serde::{Deserialize, Serialize};
 
@@ -61,6 +62,9 @@ pub struct Config {
     pub sim: SimConfig,
     /// The guard beside the pipeline.
     pub guard: GuardConfig,
+    /// The operating area and what a mission does when a waypoint cannot
+    /// be reached.
+    pub mission: MissionConfig,
     /// One table per active behaviour, `[behaviours.NAME]`. The built-in
     /// behaviours are always present (set their weight to 0 to skip them);
     /// a table in a file changes only the keys it names. Programs of their
@@ -135,6 +139,7 @@ impl Default for Config {
             bus: BusConfig::default(),
             sim: SimConfig::default(),
             guard: GuardConfig::default(),
+            mission: MissionConfig::default(),
             behaviours: default_behaviours(),
             origins: BTreeMap::new(),
             source: None,
@@ -467,7 +472,7 @@ impl Config {
     /// the vehicle's sensors, which the check builds.
     pub(crate) fn validate_sections(
         &self,
-    ) -> Result<Vec<arcnav_perception::SensorModel>, ConfigError> {
+    ) -> Result<(Vec<arcnav_perception::SensorModel>, Mission), ConfigError> {
         count(|c| c.validations += 1);
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
         self.arcs
@@ -498,7 +503,8 @@ impl Config {
         self.guard.validate().map_err(|e| e.within("guard"))?;
         self.bus.validate().map_err(|e| e.within("bus"))?;
         self.sim.validate().map_err(|e| e.within("sim"))?;
-        Ok(sensors)
+        let mission = self.mission.checked().map_err(|e| e.within("mission"))?;
+        Ok((sensors, mission))
     }
 
     /// Perception must evaluate all the ground the local map keeps.

@@ -23,6 +23,7 @@ use arcnav_pipeline::{
     PerceptionNode, Pipeline, PipelineConfig,
 };
 use arcnav_sim::SimConfig;
+use arcnav_vehicle::mission::{Area, AreaSetting, AreaSpec, Mission, WhenUnreachable};
 use arcnav_vehicle::time::seconds_to_micros;
 use arcnav_vehicle::{ArcSet, ConfigError, VehicleConfig};
 
@@ -88,6 +89,12 @@ pub struct Resolved {
     pub sim: SimConfig,
     /// `[guard]` as given.
     pub guard: arcnav_guard::GuardConfig,
+    /// `[mission]` checked: the operating area asked for, and what to do
+    /// with an unreachable waypoint.
+    pub mission: Mission,
+    /// The simulated world's operating area, once [`Resolved::in_world`]
+    /// gave it (what `area = "world"` stands for).
+    world_area: Option<Area>,
     pub cruise: Cruise,
     pub lookahead: Lookahead,
     pub speed_bound: SpeedBound,
@@ -105,7 +112,7 @@ impl Resolved {
     /// Checks `given` once and derives what follows from it (the module
     /// documentation says what, in which order).
     pub(crate) fn new(given: Config, registry: &Registry) -> Result<Self, ConfigError> {
-        let sensors = given.validate_sections()?;
+        let (sensors, mission) = given.validate_sections()?;
         let (statics, occupancy_image) = static_map(&given)?;
         let cap = if given.lookahead.hole_speed_cap {
             speed_bound::hole_speed_cap(&given, &sensors)
@@ -188,6 +195,8 @@ impl Resolved {
             bus: given.bus.clone(),
             sim: given.sim.clone(),
             guard: given.guard.clone(),
+            mission,
+            world_area: None,
             cruise,
             lookahead,
             speed_bound,
@@ -282,13 +291,39 @@ impl Resolved {
 
     /// What behaviours are built with.
     pub fn setup(&self) -> Setup<'_> {
-        setup(
-            &self.arcs,
-            &self.vehicle,
-            &self.localmap,
-            self.statics.as_ref(),
-            self.cruise.mps,
-        )
+        Setup {
+            area: self.area(),
+            unreachable: self.mission.unreachable,
+            ..setup(
+                &self.arcs,
+                &self.vehicle,
+                &self.localmap,
+                self.statics.as_ref(),
+                self.cruise.mps,
+            )
+        }
+    }
+
+    /// The operating area the vehicle keeps to: the polygon `[mission]
+    /// area` gives, or the simulated world's for `"world"` once
+    /// [`Resolved::in_world`] gave it; `None`: anywhere.
+    pub fn area(&self) -> Option<&Area> {
+        self.mission.area(self.world_area.as_ref())
+    }
+
+    /// This configuration in a simulated world whose operating area is
+    /// `area` (its map less `[mission] area_margin_m`, or its own
+    /// polygon): `area = "world"` becomes that polygon, in the
+    /// configuration as given too, so that the `config.toml` a run writes
+    /// replays in the same area. Nothing is parsed or checked again.
+    #[must_use]
+    pub fn in_world(&self, area: &Area) -> Self {
+        let mut config = self.clone();
+        if config.mission.area == AreaSetting::World {
+            config.world_area = Some(area.clone());
+            config.given.mission.area = AreaSpec::Vertices(area.vertices().to_vec());
+        }
+        config
     }
 
     /// Builds the configured behaviour `name` (`None`: not configured).
@@ -535,6 +570,8 @@ fn setup<'a>(
         localmap,
         statics,
         cruise_mps,
+        area: None,
+        unreachable: WhenUnreachable::default(),
     }
 }
 

@@ -73,6 +73,8 @@ fn bench_cycle(bencher: Bencher, arc_count: usize) {
         localmap: &LOCALMAP,
         statics: None,
         cruise_mps: 2.5,
+        area: None,
+        unreachable: Default::default(),
     };
     let registry = Registry::builtin();
     let built = std::time::Instant::now();

@@ -164,8 +164,22 @@ impl BehaviourSet {
             .collect()
     }
 
-    /// The mission progress of the behaviour that follows waypoints.
+    /// The waypoints the behaviours found no route to, with the evidence.
+    pub fn no_routes(&self) -> Vec<arcnav_behaviours::NoRoute> {
+        self.behaviours
+            .iter()
+            .flat_map(|b| b.no_routes().iter().cloned())
+            .collect()
+    }
+
+    /// The mission's progress: of the behaviours that follow waypoints,
+    /// the one that has come furthest (ended, or the most waypoints
+    /// behind it). Goal seeking follows them weighted 0 too, and cannot
+    /// tell that the route gave one up.
     pub fn progress(&self) -> Option<Progress> {
-        self.behaviours.iter().find_map(|b| b.progress())
+        self.behaviours
+            .iter()
+            .filter_map(|b| b.progress())
+            .max_by_key(|p| (p.complete || p.unreachable, p.current))
     }
 }

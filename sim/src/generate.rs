@@ -209,6 +209,7 @@ pub fn generate(seed: u64, difficulty: Difficulty) -> WorldSpec {
         ditches,
         banks,
         rubble: vec![],
+        area: None,
         scatter: vec![
             scatter(
                 ScatterKind::Boulder,

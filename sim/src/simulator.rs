@@ -43,6 +43,9 @@ pub struct Setup<'a> {
     pub exclusive: bool,
     /// The time of the first tick.
     pub start: Utime,
+    /// The mission's operating area, if it has one: leaving it is a
+    /// collision in the ground truth.
+    pub area: Option<&'a arcnav_vehicle::mission::Area>,
 }
 
 /// One pose tick of the simulator.
@@ -153,7 +156,7 @@ impl Simulator {
             && seconds_to_micros(setup.vehicle.command_latency_s) >= sensors[0].period_us();
         Ok(Self {
             tiles: TileCache::new(Arc::clone(&world), 128, threads),
-            truth: Truth::new(&world, setup.vehicle),
+            truth: Truth::new(&world, setup.vehicle, setup.area),
             ride: Ride::new(setup.start, setup.vehicle.max_slope_deg),
             pose_rng: Rng::stream(sim.seed, 0x0b5e_55ed),
             drift: [0.0; 2],

@@ -238,4 +238,9 @@ pub struct WorldSpec {
     pub rubble: Vec<RubbleSpec>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub scatter: Vec<ScatterSpec>,
+    /// The operating area of the mission, a polygon `[[x, y], ...]` in
+    /// world coordinates (`[mission] area = "world"`); none: the map less
+    /// `[mission] area_margin_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub area: Option<Vec<[f64; 2]>>,
 }

@@ -1,12 +1,15 @@
 //! Ground truth: the vehicle's footprint against the world's true hazards —
 //! features it cannot drive over (rocks above the tolerated step, trunks,
 //! bushes, ditches and holes deeper than the step, banks steeper than its
-//! limit), attitude beyond its slope limit, and the edge of the map. Each
+//! limit), attitude beyond its slope limit, the edge of the mission's
+//! operating area (any corner of the footprint beyond it), and the edge of
+//! the map. Each
 //! contact with a hazard is one collision, however long it lasts.
 
 use std::collections::BTreeSet;
 
 use arcnav_vehicle::frames::yaw_of;
+use arcnav_vehicle::mission::Area;
 use arcnav_vehicle::{Footprint, Utime, VehicleConfig};
 use serde::Serialize;
 
@@ -36,6 +39,10 @@ pub struct Truth {
     in_contact: BTreeSet<usize>,
     tilted: bool,
     off_map: bool,
+    /// The operating area, if the mission has one, and whether the
+    /// footprint is beyond its edge.
+    area: Option<Area>,
+    off_area: bool,
     near: Vec<u32>,
     /// Every collision so far.
     pub collisions: Vec<Collision>,
@@ -57,7 +64,7 @@ pub struct NearMiss {
 }
 
 impl Truth {
-    pub fn new(world: &World, vehicle: &VehicleConfig) -> Self {
+    pub fn new(world: &World, vehicle: &VehicleConfig, area: Option<&Area>) -> Self {
         Self {
             hazards: world.features.iter().map(|f| f.hazard(vehicle)).collect(),
             vehicle: vehicle.clone(),
@@ -65,6 +72,8 @@ impl Truth {
             in_contact: BTreeSet::new(),
             tilted: false,
             off_map: false,
+            area: area.cloned(),
+            off_area: false,
             near: Vec::new(),
             collisions: Vec::new(),
             closest_approach_m: f64::INFINITY,
@@ -147,6 +156,26 @@ impl Truth {
             });
         }
         self.off_map = off_map;
+        if let Some(area) = &self.area {
+            let f = &self.footprint;
+            let off_area = [
+                [f.x_min, -f.half_width],
+                [f.x_max, -f.half_width],
+                [f.x_max, f.half_width],
+                [f.x_min, f.half_width],
+            ]
+            .into_iter()
+            .any(|[cx, cy]| !area.contains([x + cos * cx - sin * cy, y + sin * cx + cos * cy]));
+            if off_area && !self.off_area && !off_map {
+                self.collisions.push(Collision {
+                    utime,
+                    position: [x, y],
+                    cause: "left the operating area".into(),
+                    feature: None,
+                });
+            }
+            self.off_area = off_area;
+        }
         &self.collisions[before..]
     }
 }

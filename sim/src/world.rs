@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use arcnav_vehicle::VehicleConfig;
 use arcnav_vehicle::config::toml_location;
+use arcnav_vehicle::mission::Area;
 use serde::Serialize;
 
 use crate::heightmap::{HeightGrid, HeightmapError};
@@ -500,6 +501,16 @@ impl World {
         for scatter in &spec.scatter {
             scatter_features(scatter, &route, bounds, &mut features).map_err(invalid)?;
         }
+        if let Some(vertices) = &spec.area {
+            let area = Area::new(vertices.clone()).map_err(|e| invalid(format!("area {e}")))?;
+            let (lo, hi) = area.bounds();
+            if lo[0] < bounds[0] || lo[1] < bounds[1] || hi[0] > bounds[2] || hi[1] > bounds[3] {
+                return Err(invalid(format!(
+                    "area reaches ({:.1}, {:.1}) to ({:.1}, {:.1}), beyond the map ({:.1}, {:.1}) to ({:.1}, {:.1})",
+                    lo[0], lo[1], hi[0], hi[1], bounds[0], bounds[1], bounds[2], bounds[3]
+                )));
+            }
+        }
         let index = FeatureIndex::new(bounds, &features);
         Ok(World {
             roughness: Noise::new(t.seed.wrapping_add(7919)),
@@ -602,6 +613,19 @@ impl World {
     /// Indices of the features whose bounds may meet the box.
     pub fn features_within(&self, bounds: [f64; 4], out: &mut Vec<u32>) {
         self.index.within(bounds, out);
+    }
+
+    /// The mission's operating area in this world: the polygon its file
+    /// gives, else its map less `margin_m` on every side (a map too small
+    /// for that margin keeps a tenth of its size instead).
+    pub fn area(&self, margin_m: f64) -> Area {
+        if let Some(area) = self.spec.area.clone().and_then(|v| Area::new(v).ok()) {
+            return area;
+        }
+        let [x0, y0, x1, y1] = self.bounds;
+        let margin = margin_m.min(0.45 * (x1 - x0).min(y1 - y0));
+        Area::rectangle([x0 + margin, y0 + margin], [x1 - margin, y1 - margin])
+            .expect("a world's map is a rectangle of positive size")
     }
 
     /// True when (x, y) is inside the world's bounds.

@@ -23,6 +23,9 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     }
     let config = configuration(&args)?;
     let world = world_of(&args)?;
+    // `[mission] area = "world"`: this world's area, in the config.toml
+    // the run writes too.
+    let config = config.in_world(&world.area(config.mission.area_margin_m));
     let name = world.spec.name.clone();
     let out = args
         .out
@@ -125,6 +128,8 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     }
     Ok(if run.report.success {
         ExitCode::SUCCESS
+    } else if run.report.outcome == arcnav::mission::Outcome::Unreachable {
+        ExitCode::from(UNREACHABLE_EXIT)
     } else {
         ExitCode::FAILURE
     })
@@ -228,6 +233,10 @@ fn speed_notes(config: &Resolved) {
     }
 }
 
+/// The exit status of a mission that ended at a waypoint no route reaches
+/// (a collision or any other failure is 1).
+pub(crate) const UNREACHABLE_EXIT: u8 = 4;
+
 fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[PathBuf]) {
     let outcome = match r.outcome {
         arcnav::mission::Outcome::Completed => "completed",
@@ -235,9 +244,35 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         arcnav::mission::Outcome::Timeout => "FAILED: time limit",
         arcnav::mission::Outcome::Stuck => "FAILED: stuck",
         arcnav::mission::Outcome::BehaviourFailed => "FAILED: a required behaviour ended",
+        arcnav::mission::Outcome::Unreachable => "ENDED: a waypoint no route reaches",
     };
     println!("mission       {} on {} with {}", outcome, r.world, r.sensor);
-    println!("waypoints     {}/{}", r.waypoints_reached, r.waypoints);
+    println!(
+        "waypoints     {}/{}{}",
+        r.waypoints_reached,
+        r.waypoints,
+        if r.waypoints_skipped > 0 {
+            format!(", {} skipped as unreachable", r.waypoints_skipped)
+        } else {
+            String::new()
+        }
+    );
+    for n in &r.unreachable {
+        println!(
+            "unreachable   waypoint {} at ({:.1}, {:.1}): no way round {} impassable cells, {:.0} of the {:.0} m² of the area in the planner's memory seen; no way since {:.0} s, given up at {:.0} s with the vehicle at ({:.1}, {:.1}){}",
+            n.waypoint,
+            n.position[0],
+            n.position[1],
+            n.ring_cells,
+            n.known_m2,
+            n.area_m2,
+            n.no_way_since_s,
+            n.given_up_at_s,
+            n.vehicle_at[0],
+            n.vehicle_at[1],
+            if n.skipped { "; skipped" } else { "" }
+        );
+    }
     println!(
         "distance      {:.0} m in {:.0} s: average {:.2} m/s, max {:.2} m/s (cruise {:.2} m/s{})",
         r.distance_m,

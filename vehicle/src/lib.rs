@@ -15,6 +15,7 @@ pub mod config;
 pub mod drive;
 pub mod files;
 pub mod frames;
+pub mod mission;
 pub mod model;
 pub mod motion;
 pub mod numbers;

@@ -2,7 +2,7 @@
 //! (`bus/lcmtypes/*.lcm`). Incoming messages are checked: a message that does
 //! not describe a valid value is an error, never a panic.
 
-use arcnav_arbiter::{BehaviourVotes, Reason, StopReason, Vetoer, Votes};
+use arcnav_arbiter::{BehaviourVotes, Reason, StopReason, VetoCause, Vetoer, Votes};
 use arcnav_behaviours::{Mission, Waypoint};
 use arcnav_bus::lcmtypes::{
     arc_votes_t, decision_t, guard_status_t, local_map_patch_t, local_map_t, obstacle_cell_t,
@@ -353,16 +353,20 @@ pub fn votes_to_wire(votes: &BehaviourVotes, arcs: &ArcSet) -> arc_votes_t {
         forward_clear: votes.votes.forward_clearances().to_vec(),
         veto_cause: causes
             .iter()
-            .map(|c| {
-                if c.is_some() {
-                    arc_votes_t::CELL
-                } else {
-                    arc_votes_t::NOT_SAID
-                }
+            .map(|c| match c {
+                Some(VetoCause::Cell(_)) => arc_votes_t::CELL,
+                Some(VetoCause::AreaEdge(_)) => arc_votes_t::AREA,
+                None => arc_votes_t::NOT_SAID,
             })
             .collect(),
-        veto_x: causes.iter().map(|c| c.map_or(0.0, |c| c[0])).collect(),
-        veto_y: causes.iter().map(|c| c.map_or(0.0, |c| c[1])).collect(),
+        veto_x: causes
+            .iter()
+            .map(|c| c.map_or(0.0, |c| c.at()[0]))
+            .collect(),
+        veto_y: causes
+            .iter()
+            .map(|c| c.map_or(0.0, |c| c.at()[1]))
+            .collect(),
     }
 }
 
@@ -422,15 +426,25 @@ pub fn decision_to_wire(utime: Utime, said: Said<'_>) -> decision_t {
             .iter()
             .map(|v| i32::try_from(v.arcs).unwrap_or(i32::MAX))
             .collect(),
-        has_cell: vetoers.iter().map(|v| v.cell.is_some()).collect(),
+        // Only a cell has a place here (the area's edge is said in the
+        // reason's words).
+        has_cell: vetoers.iter().map(|v| cell_of(v).is_some()).collect(),
         cell_x: vetoers
             .iter()
-            .map(|v| v.cell.map_or(0.0, |c| c[0]))
+            .map(|v| cell_of(v).map_or(0.0, |c| c[0]))
             .collect(),
         cell_y: vetoers
             .iter()
-            .map(|v| v.cell.map_or(0.0, |c| c[1]))
+            .map(|v| cell_of(v).map_or(0.0, |c| c[1]))
             .collect(),
+    }
+}
+
+/// The cell behind a vetoer's veto, when a cell is.
+fn cell_of(v: &Vetoer) -> Option<[f32; 2]> {
+    match v.cause {
+        Some(VetoCause::Cell(at)) => Some(at),
+        _ => None,
     }
 }
 
@@ -460,8 +474,8 @@ pub fn decision_from_wire(msg: &decision_t) -> Result<RecordedDecision, WireErro
         .map(|i| Vetoer {
             behaviour: msg.vetoer[i].clone(),
             arcs: usize::try_from(msg.vetoed_arcs[i]).unwrap_or(0),
-            cell: (msg.has_cell[i] && msg.cell_x[i].is_finite() && msg.cell_y[i].is_finite())
-                .then(|| [msg.cell_x[i], msg.cell_y[i]]),
+            cause: (msg.has_cell[i] && msg.cell_x[i].is_finite() && msg.cell_y[i].is_finite())
+                .then(|| VetoCause::Cell([msg.cell_x[i], msg.cell_y[i]])),
         })
         .collect();
     Ok(RecordedDecision {
@@ -578,10 +592,13 @@ pub fn votes_from_wire(msg: &arc_votes_t, arcs: &ArcSet) -> Result<BehaviourVote
             // none, is a veto without one).
             let at = |v: &[f32]| v.get(i).copied().unwrap_or(f32::NAN);
             let cell = [at(&msg.veto_x), at(&msg.veto_y)];
-            let cause = (msg.veto_cause.get(i) == Some(&arc_votes_t::CELL)
-                && cell.iter().all(|c| c.is_finite()))
-            .then_some(cell);
-            votes.veto(i, cause);
+            let cause = match msg.veto_cause.get(i) {
+                _ if !cell.iter().all(|c| c.is_finite()) => None,
+                Some(&arc_votes_t::CELL) => Some(VetoCause::Cell(cell)),
+                Some(&arc_votes_t::AREA) => Some(VetoCause::AreaEdge(cell)),
+                _ => None,
+            };
+            votes.veto_for(i, cause);
         } else {
             votes.set(i, v);
         }
@@ -1106,8 +1123,17 @@ mod tests {
         msg.veto_x[21] = f32::NAN;
         msg.vetoed[22] = true;
         msg.veto_cause[22] = 77;
+        msg.vetoed[23] = true;
+        msg.veto_cause[23] = arc_votes_t::AREA;
+        (msg.veto_x[23], msg.veto_y[23]) = (6.0, -1.5);
         let back = votes_from_wire(&msg, arcs).unwrap();
-        assert_eq!(back.votes.causes()[19], Some([1.0, 2.0]));
+        assert_eq!(back.votes.causes()[19], Some(VetoCause::Cell([1.0, 2.0])));
+        assert_eq!(
+            back.votes.causes()[23],
+            Some(VetoCause::AreaEdge([6.0, -1.5])),
+            "the area's edge is a cause of its own"
+        );
+        assert_eq!(votes_to_wire(&back, arcs).veto_cause[23], arc_votes_t::AREA);
         for i in 20..=22 {
             assert!(back.votes.is_vetoed(i));
             assert_eq!(back.votes.causes()[i], None, "arc {i}");
@@ -1120,12 +1146,12 @@ mod tests {
             Vetoer {
                 behaviour: "obstacle_avoidance".into(),
                 arcs: 39,
-                cell: Some([4.5, -0.5]),
+                cause: Some(VetoCause::Cell([4.5, -0.5])),
             },
             Vetoer {
                 behaviour: "terrain".into(),
                 arcs: 2,
-                cell: None,
+                cause: None,
             },
         ];
         let stop = Reason::Stop {

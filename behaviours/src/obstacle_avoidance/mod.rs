@@ -50,6 +50,11 @@
 //! the votes ([`Votes::set_reverse_clearance`]); the arbiter backs up only
 //! along arcs clear for the distance it needs.
 //!
+//! **The operating area** (`[mission] area`): an arc along which the
+//! body leaves the area meets its edge as it would a cell (a veto within
+//! `min_distance_m`, cause the area's edge), and backing up is clear only
+//! as far as the edge (`area::AreaEdge`).
+//!
 //! **Creeping forwards**: each arc's distance to its first collision, cell
 //! within the widest near-miss band inside `reverse_margin_m` (0.25 m) of
 //! the body, or unseen ground, however close, also goes out with the votes
@@ -59,7 +64,7 @@
 //! room backing up keeps (clear to the body itself, a retrace's forward run
 //! brought a corner 0.2 m from a bank's side).
 
-use arcnav_arbiter::Votes;
+use arcnav_arbiter::{VetoCause, Votes};
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::{Arc, ArcPose, DrivenPath, Footprint, SteeringResponse};
 use nalgebra::Point2;
@@ -67,11 +72,13 @@ use nalgebra::Point2;
 use crate::behaviour::{Behaviour, Plugin, Setup, VoteContext};
 use crate::terrain::{ArcTerrain, TerrainCheck};
 
+mod area;
 mod backing;
 pub mod config;
 mod raster;
 mod under_start;
 
+use area::AreaEdge;
 use backing::Reverse;
 pub use config::{ObstacleAvoidanceConfig, UnseenGround};
 use raster::{
@@ -131,6 +138,11 @@ pub struct ObstacleAvoidance {
     /// This cycle: distance from the rear axle to the nearest cell of each
     /// [`Layer`] of the vehicle-frame raster, m (∞ when it has none).
     nearest: [f64; 4],
+    /// The operating area's edge, when the mission has an area.
+    area: Option<AreaEdge>,
+    /// Per arc: where its body first leaves the area (distance along,
+    /// vehicle-frame point).
+    area_exit: Vec<Option<(f64, [f32; 2])>>,
 }
 
 /// The layers of a raster a path's lead is checked against.
@@ -310,6 +322,8 @@ impl ObstacleAvoidance {
             under_start: UnderStart::default(),
             near: Vec::new(),
             nearest: [f64::INFINITY; 4],
+            area: setup.area.map(|a| AreaEdge::new(a.clone(), &body)),
+            area_exit: vec![None; setup.arcs.len()],
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
             cruise_mps: setup.cruise_mps,
             deceleration: setup.vehicle.max_deceleration_mps2 * config.braking_fraction,
@@ -592,11 +606,14 @@ impl ObstacleAvoidance {
                 (Some((d, cause)), Some((g, _))) if d <= g => Some((d, cause)),
                 (_, Some((g, at))) => Some((g, Some(at))),
                 (cell, None) => cell,
-            };
-            if let Some((distance, cause)) = collision {
+            }
+            .map(|(d, cell)| (d, cell.map(VetoCause::Cell)));
+            // ... or the operating area's edge, if nearer still.
+            let edge = self.area_exit[arc].map(|(d, at)| (d, Some(VetoCause::AreaEdge(at))));
+            if let Some((distance, cause)) = nearer(collision, edge) {
                 self.free[arc] = distance;
                 if distance < min {
-                    votes.veto(arc, cause);
+                    votes.veto_for(arc, cause);
                 } else {
                     votes.set(arc, -(1.0 - (distance - min) / (max - min)) as f32);
                 }
@@ -677,10 +694,22 @@ impl ObstacleAvoidance {
         }
     }
 
-    /// Each arc's clearance backing up ([`Reverse::vote`]).
+    /// Each arc's clearance backing up ([`Reverse::vote`]), no farther
+    /// than the operating area's edge.
     fn vote_reverse(&mut self, ctx: &VoteContext<'_>, votes: &mut Votes) {
+        let reach = self.config.reverse_reach_m;
         if let Some(reverse) = &mut self.reverse {
-            reverse.vote(&mut self.terrain, self.config.reverse_reach_m, ctx, votes);
+            reverse.vote(&mut self.terrain, reach, ctx, votes);
+            if let Some(area) = &mut self.area {
+                for (arc, &k) in ctx.arcs.curvatures().iter().enumerate().take(votes.len()) {
+                    if let (Some(edge), Some(clear)) = (
+                        area.backing(ctx.pose, k, reach),
+                        votes.reverse_clearance(arc),
+                    ) {
+                        votes.set_reverse_clearance(arc, clear.min(edge));
+                    }
+                }
+            }
         }
     }
 }
@@ -712,6 +741,14 @@ impl Behaviour for ObstacleAvoidance {
             *path = DrivenPath::new(&steering, &self.response, k);
         }
         self.judge_ground(ctx, horizon, arcs);
+        if let Some(area) = &mut self.area {
+            area.forward(
+                ctx.pose,
+                &self.paths[..arcs],
+                max,
+                &mut self.area_exit[..arcs],
+            );
+        }
         self.vote_arcs(ctx, horizon, arcs, votes);
         // How far each arc is clear at a crawl: to the first collision,
         // cell within the crawl band or unseen ground, however close (a

@@ -74,13 +74,17 @@ pub mod dstar;
 use arcnav_arbiter::Votes;
 use arcnav_localmap::{LocalMapConfig, MapSnapshot};
 use arcnav_vehicle::SteeringResponse;
+use arcnav_vehicle::Utime;
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::frames::yaw_of;
+use arcnav_vehicle::mission::{Area, OnUnreachable, WhenUnreachable};
 use arcnav_vehicle::numbers::floor_i64;
+use arcnav_vehicle::time::seconds_to_micros;
 
 use crate::behaviour::Plugin;
 use crate::behaviour::{
-    Behaviour, Overlay, OverlayCells, OverlayLine, OverlayPoint, Progress, Setup, VoteContext,
+    Behaviour, NoRoute, Overlay, OverlayCells, OverlayLine, OverlayPoint, Progress, Setup,
+    VoteContext,
 };
 use crate::goal_seeking::{WaypointTracker, lookahead, vote_towards};
 use dstar::{DStarLite, PlannerStats};
@@ -181,6 +185,20 @@ pub struct Route {
     held_at: usize,
     /// Where the vehicle last stood (slower than [`STANDING_MPS`]).
     stood_at: Option<[f64; 2]>,
+    /// The operating area: the route plans inside it only.
+    area: Option<Area>,
+    /// Per memory cell: its centre lies beyond the area, or nearer its
+    /// edge than half the vehicle's width (the vehicle on the path would
+    /// stick out). Impassable, whatever images show.
+    outside: Vec<bool>,
+    /// Half the vehicle's width, m.
+    half_width_m: f64,
+    unreachable: WhenUnreachable,
+    /// The waypoint (index) the planner has found no way to, searching all
+    /// it knows, since when (µs), and where the vehicle then was.
+    no_way_since: Option<(usize, Utime)>,
+    /// The waypoints given up as unreachable, with the evidence.
+    no_routes: Vec<NoRoute>,
 }
 
 impl Route {
@@ -216,6 +234,12 @@ impl Route {
             held: Vec::new(),
             held_at: 0,
             stood_at: None,
+            area: setup.area.cloned(),
+            outside: vec![false; n],
+            half_width_m: 0.5 * setup.vehicle.width_m,
+            unreachable: setup.unreachable,
+            no_way_since: None,
+            no_routes: Vec::new(),
             config,
         }
     }
@@ -285,11 +309,29 @@ impl Route {
             self.stats.recentres += 1;
         }
         self.layout.origin = Some(wanted);
+        self.mark_outside();
         self.mark_statics();
         for c in 0..self.costs.len() {
             self.costs[c] = self.cost_of(c);
         }
         true
+    }
+
+    /// Marks the memory cells the vehicle may not plan through for the
+    /// operating area ([`Route::outside`]).
+    fn mark_outside(&mut self) {
+        let Some(area) = &self.area else {
+            return;
+        };
+        for (c, outside) in self.outside.iter_mut().enumerate() {
+            *outside = !area.holds(self.layout.centre(c), self.half_width_m);
+        }
+    }
+
+    /// Whether cell `c` is impassable whatever its cost around it: an
+    /// obstacle, shut, or outside the area.
+    fn blocked(&self, c: usize) -> bool {
+        self.outside[c] || matches!(self.state[c], OBSTACLE | SHUT)
     }
 
     /// Marks every memory cell a static-map patch touches an obstacle (the
@@ -319,6 +361,9 @@ impl Route {
 
     /// The cost of crossing cell `c` (see the module docs).
     fn cost_of(&self, c: usize) -> f32 {
+        if self.outside[c] {
+            return f32::INFINITY;
+        }
         let base = match self.state[c] {
             OBSTACLE | SHUT => return f32::INFINITY,
             FREE => 1.0,
@@ -349,7 +394,7 @@ impl Route {
                 if self
                     .layout
                     .index(x + dx, y + dy)
-                    .is_some_and(|n| matches!(self.state[n], OBSTACLE | SHUT))
+                    .is_some_and(|n| self.blocked(n))
                 {
                     nearest = nearest.min(dx.abs().max(dy.abs()));
                 }
@@ -734,6 +779,119 @@ impl Route {
         );
     }
 
+    /// Plans within the budget: whether a path was found, and whether the
+    /// search ran to its end (a failure is then the answer, not the budget).
+    fn plan(&mut self) -> (bool, bool) {
+        let expanded = self.planner.stats.expansions;
+        let found = self.planner.plan(&self.costs, self.config.max_expansions);
+        let searched = self.planner.stats.expansions - expanded < self.config.max_expansions;
+        (found, searched)
+    }
+
+    /// Gives up waypoint `index` at `position` as unreachable, keeping the
+    /// evidence: how much of the area the memory knows, and the ring of
+    /// impassable cells that closes off whichever of the vehicle (`cells.0`)
+    /// and the waypoint (`cells.1`) has less ground around it.
+    fn give_up(
+        &mut self,
+        index: usize,
+        position: [f64; 2],
+        since: Utime,
+        now: Utime,
+        vehicle_at: [f64; 2],
+        (start, goal): (usize, usize),
+    ) {
+        let cell_area = self.config.cell_m * self.config.cell_m;
+        let inside = (0..self.state.len()).filter(|&c| !self.outside[c]);
+        let (known, all) = inside.fold((0usize, 0usize), |(k, a), c| {
+            (
+                k + usize::from(!matches!(self.state[c], UNKNOWN | SHUT)),
+                a + 1,
+            )
+        });
+        let around_goal = self.passable_around(goal);
+        let around_start = self.passable_around(start);
+        let closed = if around_goal.len() <= around_start.len() {
+            around_goal
+        } else {
+            around_start
+        };
+        let ring = self.ring_round(&closed, goal);
+        let skipped = self.unreachable.then == OnUnreachable::Skip;
+        tracing::warn!(
+            waypoint = index,
+            x = position[0],
+            y = position[1],
+            known_m2 = known as f64 * cell_area,
+            ring_cells = ring.len(),
+            skipped,
+            "route: no route to the waypoint inside the operating area"
+        );
+        self.no_routes.push(NoRoute {
+            waypoint: index,
+            position,
+            since,
+            decided: now,
+            vehicle_at,
+            known_m2: known as f64 * cell_area,
+            area_m2: all as f64 * cell_area,
+            ring,
+            cell_m: self.config.cell_m,
+            skipped,
+        });
+        self.tracker.give_up(self.unreachable.then);
+        self.no_way_since = None;
+        self.goal = None;
+    }
+
+    /// The memory cells passable ground joins to cell `from` (8-connected;
+    /// none when `from` itself is impassable).
+    fn passable_around(&self, from: usize) -> Vec<usize> {
+        let mut seen = vec![false; self.state.len()];
+        let mut cells = Vec::new();
+        if !self.costs[from].is_finite() {
+            return cells;
+        }
+        seen[from] = true;
+        cells.push(from);
+        let mut next = 0;
+        while let Some(&c) = cells.get(next) {
+            next += 1;
+            let (x, y) = self.layout.column_row(c);
+            for (dx, dy) in NEIGHBOURS {
+                if let Some(n) = self.layout.index(x + dx, y + dy)
+                    && !seen[n]
+                    && self.costs[n].is_finite()
+                {
+                    seen[n] = true;
+                    cells.push(n);
+                }
+            }
+        }
+        cells
+    }
+
+    /// The centres of the impassable cells bordering `region` (or cell
+    /// `lone` alone, when the region is empty: the waypoint's own cell is
+    /// impassable).
+    fn ring_round(&self, region: &[usize], lone: usize) -> Vec<[f64; 2]> {
+        if region.is_empty() {
+            return vec![self.layout.centre(lone)];
+        }
+        let mut ring = std::collections::BTreeSet::new();
+        for &c in region {
+            let (x, y) = self.layout.column_row(c);
+            for (dx, dy) in NEIGHBOURS {
+                if let Some(n) = self.layout.index(x + dx, y + dy)
+                    && !self.costs[n].is_finite()
+                {
+                    ring.insert(n);
+                }
+            }
+        }
+        ring.into_iter().map(|c| self.layout.centre(c)).collect()
+    }
+
     /// The memory cell to plan to for waypoint (x, y): its own, or where
     /// the line from the vehicle to it leaves the memory.
     fn goal_cell(&self, from: [f64; 2], to: [f64; 2]) -> Option<usize> {
@@ -809,16 +967,14 @@ impl Behaviour for Route {
             self.planner.move_start(start);
             self.planner.cells_changed(&self.costs, &self.changed);
         }
-        let expanded = self.planner.stats.expansions;
-        let mut found = self.planner.plan(&self.costs, self.config.max_expansions);
+        let (mut found, mut searched) = self.plan();
         // No path within the budget's reach (not cut short by it) while
         // shut cells stand: the way may lie through them.
-        let searched = self.planner.stats.expansions - expanded < self.config.max_expansions;
         if !found && searched && self.state.contains(&SHUT) {
             self.changed.clear();
             self.reopen();
             self.planner.cells_changed(&self.costs, &self.changed);
-            found = self.planner.plan(&self.costs, self.config.max_expansions);
+            (found, searched) = self.plan();
         }
         if !found {
             self.stats.no_path_cycles += 1;
@@ -830,10 +986,28 @@ impl Behaviour for Route {
             }
             self.has_path = false;
             self.held.clear();
+            // Searched to the end: every way runs through ground known to
+            // be impassable or out of the area. Lasting, that is the
+            // answer; the vehicle gives the waypoint up.
+            if searched {
+                let since = match self.no_way_since {
+                    Some((i, since)) if i == index => since,
+                    _ => ctx.utime,
+                };
+                self.no_way_since = Some((index, since));
+                if ctx.utime - since >= seconds_to_micros(self.unreachable.after_s) {
+                    self.give_up(index, target, since, ctx.utime, here, (start, goal));
+                    if self.unreachable.then == OnUnreachable::Stop {
+                        votes.vote_speed(0.0);
+                        return;
+                    }
+                }
+            }
             self.aimed_at = Some((target, false));
             vote_towards(ctx, &self.response, target, reach, votes);
             return;
         }
+        self.no_way_since = None;
         self.has_path = true;
         self.hold_or_switch(start, here);
         // The point of the path `reach` from the vehicle.
@@ -930,6 +1104,7 @@ impl Behaviour for Route {
 
     fn reset(&mut self) {
         self.aimed_at = None;
+        self.no_way_since = None;
         self.held.clear();
         self.stood_at = None;
         self.tracker.reset();
@@ -944,6 +1119,10 @@ impl Behaviour for Route {
         Some(self.tracker.progress())
     }
 
+    fn no_routes(&self) -> &[NoRoute] {
+        &self.no_routes
+    }
+
     fn counters(&self) -> Vec<(&'static str, u64)> {
         let planner = &self.planner.stats;
         vec![
@@ -952,6 +1131,7 @@ impl Behaviour for Route {
             ("expansions", planner.expansions),
             ("recentres", self.stats.recentres),
             ("no_path_cycles", self.stats.no_path_cycles),
+            ("unreachable", self.no_routes.len() as u64),
             ("shut_cells", self.stats.shut_cells),
             ("reopened_cells", self.stats.reopened_cells),
             ("held_cycles", self.stats.held_cycles),

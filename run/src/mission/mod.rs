@@ -92,6 +92,11 @@ pub enum MissionError {
     Picture(#[from] render::RenderError),
     #[error(transparent)]
     External(#[from] crate::external::ExternalError),
+    #[error(
+        "the start ({:.1}, {:.1}) lies outside the operating area ([mission] area): give an area that holds it, or area = \"none\"",
+        start[0], start[1]
+    )]
+    StartOutsideArea { start: [f64; 2] },
 }
 
 /// Receives the pipeline's outputs during a mission.
@@ -259,6 +264,14 @@ pub fn run_mission(
     progress: &mut dyn FnMut(&MissionProgress),
 ) -> Result<MissionRun, MissionError> {
     let wall = Instant::now();
+    let config = &config.in_world(&world.area(config.mission.area_margin_m));
+    if let Some(area) = config.area()
+        && !area.contains(world.start.0)
+    {
+        return Err(MissionError::StartOutsideArea {
+            start: world.start.0,
+        });
+    }
     let sensors: &[SensorModel] = &config.sensors;
     let sim = &config.sim;
     let t0 = SIM_EPOCH_US;
@@ -271,6 +284,7 @@ pub fn run_mission(
             evaluated_range_m: config.perception.max_range_m,
             exclusive: !options.beside_others,
             start: t0,
+            area: config.area(),
         },
     )?;
     let mut pipeline = config.lockstep()?;
@@ -367,6 +381,10 @@ pub fn run_mission(
         let status = pipeline.behaviours.progress();
         if status.is_some_and(|p| p.complete) {
             outcome = Outcome::Completed;
+            break;
+        }
+        if status.is_some_and(|p| p.unreachable) {
+            outcome = Outcome::Unreachable;
             break;
         }
         if let Some(p) = status
@@ -504,7 +522,25 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         .into_iter()
         .map(|(name, why)| (name.to_owned(), why.to_owned()))
         .collect();
-    let reached = pipeline.behaviours.progress().map_or(0, |p| p.current);
+    let progress = pipeline.behaviours.progress();
+    let skipped = progress.map_or(0, |p| p.skipped);
+    let reached = progress.map_or(0, |p| p.current) - skipped;
+    let unreachable = pipeline
+        .behaviours
+        .no_routes()
+        .iter()
+        .map(|n| report::NoRouteReport {
+            waypoint: n.waypoint + 1,
+            position: n.position,
+            no_way_since_s: micros_to_seconds(n.since - t0),
+            given_up_at_s: micros_to_seconds(n.decided - t0),
+            vehicle_at: n.vehicle_at,
+            known_m2: n.known_m2,
+            area_m2: n.area_m2,
+            ring_cells: n.ring.len(),
+            skipped: n.skipped,
+        })
+        .collect();
     let drops = pipeline.perception.drops;
     let average_speed = if duration > 0.0 {
         simulator.distance_m() / duration
@@ -529,6 +565,9 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         outcome,
         waypoints_reached: reached,
         waypoints: world.waypoints.len(),
+        waypoints_skipped: skipped,
+        unreachable,
+        area: config.area().map(|a| a.vertices().to_vec()),
         distance_m: simulator.distance_m(),
         duration_s: duration,
         average_speed_mps: average_speed,

@@ -24,6 +24,31 @@ pub enum Outcome {
     /// A required behaviour can no longer vote (an external program that
     /// ended): the vehicle would stand for good.
     BehaviourFailed,
+    /// A waypoint no route reaches inside the operating area
+    /// (`[mission] on_unreachable = "stop"`).
+    Unreachable,
+}
+
+/// A waypoint no route reached, and why the route said so.
+#[derive(Debug, Clone, Serialize)]
+pub struct NoRouteReport {
+    /// The waypoint, counted from 1, and where it is, m.
+    pub waypoint: usize,
+    pub position: [f64; 2],
+    /// Mission time at which the planner first found no way, and at which
+    /// it gave the waypoint up, s.
+    pub no_way_since_s: f64,
+    pub given_up_at_s: f64,
+    /// Where the vehicle was then, m.
+    pub vehicle_at: [f64; 2],
+    /// Ground of the operating area in the planner's memory that images
+    /// had shown, and all of it there, m².
+    pub known_m2: f64,
+    pub area_m2: f64,
+    /// Impassable memory cells in the ring that closed it off.
+    pub ring_cells: usize,
+    /// Whether the mission went on to the next waypoint.
+    pub skipped: bool,
 }
 
 /// Progress, reported about once per simulated second.
@@ -47,6 +72,15 @@ pub struct MissionReport {
     pub success: bool,
     pub waypoints_reached: usize,
     pub waypoints: usize,
+    /// Waypoints given up as unreachable (`on_unreachable = "skip"`).
+    pub waypoints_skipped: usize,
+    /// The waypoints found unreachable, with the evidence.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub unreachable: Vec<NoRouteReport>,
+    /// The operating area the vehicle kept to (`[mission] area`), world
+    /// frame, m; absent when it had none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub area: Option<Vec<[f64; 2]>>,
     pub distance_m: f64,
     pub duration_s: f64,
     pub average_speed_mps: f64,

@@ -668,9 +668,7 @@ fn vote_panel(
         for (arc, vetoes) in d.vetoes.iter().enumerate() {
             for (who, cause) in vetoes {
                 if listed < 6 {
-                    let at = cause.map_or("unknown cell".to_owned(), |c| {
-                        format!("cell at ({:.1}, {:.1}) m", c[0], c[1])
-                    });
+                    let at = cause.map_or("cause not said".to_owned(), |c| c.to_string());
                     canvas.text(
                         x0,
                         y,
