@@ -70,6 +70,11 @@ pub(super) const SUSPECTED_LEVEL: u8 = u8::MAX;
 /// Ground never seen that the vehicle was held short of: planned round
 /// like an obstacle until an image sees it.
 pub(super) const SHUT: u8 = SUSPECT + 1;
+/// An obstacle seen only from farther than `confirm_within_m`: planned
+/// through at `doubtful_cost`, so that a way closed only by what was seen
+/// from afar (a gap's edges seen at a grazing angle) is looked at from
+/// near before the route says there is none.
+pub(super) const DOUBTFUL: u8 = SHUT + 1;
 
 /// Half the angle ahead of the vehicle's heading in which unseen ground is
 /// shut when it starts to back up (`shut_unseen_m`).

@@ -49,6 +49,13 @@ pub struct RouteConfig {
     pub arrival_radius_m: f64,
     /// A waypoint behind the vehicle and within this many arrival radii is passed.
     pub pass_radius_factor: f64,
+    /// An obstacle is certain once seen within this distance of the
+    /// vehicle; seen only from farther, it is doubtful, m.
+    pub confirm_within_m: f64,
+    /// Cost of crossing a doubtful obstacle's cell, relative to seen free
+    /// ground: a way through ground seen blocked only from afar is looked
+    /// at when the way round is longer than about this many cells.
+    pub doubtful_cost: f64,
     /// Vertices a cycle's planning may expand at most (it carries on next cycle).
     pub max_expansions: u64,
     /// Near where the vehicle last stood (as before backing up), the path
@@ -75,6 +82,8 @@ impl Default for RouteConfig {
             shut_along_m: 25.0,
             arrival_radius_m: 5.0,
             pass_radius_factor: 2.0,
+            confirm_within_m: 12.0,
+            doubtful_cost: 50.0,
             max_expansions: 200_000,
             hold_fraction: 0.25,
         }
@@ -106,6 +115,8 @@ impl RouteConfig {
         config::in_range("shut_unseen_m", c.shut_unseen_m, 0.0, 100.0)?;
         config::in_range("shut_along_m", c.shut_along_m, 0.0, 200.0)?;
         config::in_range("hold_fraction", c.hold_fraction, 0.0, 10.0)?;
+        config::in_range("confirm_within_m", c.confirm_within_m, 0.0, 1000.0)?;
+        config::in_range("doubtful_cost", c.doubtful_cost, 1.0, 10_000.0)?;
         if c.suspect_cost > 0.0 && c.suspect_cost < 1.0 {
             // Cheaper than free ground, it would break the planner's
             // heuristic (a cell costs at least 1).

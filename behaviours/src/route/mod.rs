@@ -93,9 +93,9 @@ mod cells;
 pub mod config;
 
 use cells::{
-    AXES, FREE, GAP_CELLS, Layout, NEIGHBOURS, OBSTACLE, ROUGH, ROUGH_LEVELS, SHADOW_CELLS, SHUT,
-    SHUT_HALF_ANGLE_DEG, SHUT_IN_VIEW_M, SUSPECT, SUSPECTED_LEVEL, UNKNOWN, roughness_level,
-    wholly_seen,
+    AXES, DOUBTFUL, FREE, GAP_CELLS, Layout, NEIGHBOURS, OBSTACLE, ROUGH, ROUGH_LEVELS,
+    SHADOW_CELLS, SHUT, SHUT_HALF_ANGLE_DEG, SHUT_IN_VIEW_M, SUSPECT, SUSPECTED_LEVEL, UNKNOWN,
+    roughness_level, wholly_seen,
 };
 pub use config::RouteConfig;
 
@@ -115,6 +115,11 @@ const STANDING_MPS: f64 = 0.1;
 /// to a path up to 8 m off, the ERIM wandered up `hillside_steep` after
 /// a stop, 477 m for 255).
 const HOLD_OFF_PATH_M: f64 = 2.0;
+
+/// The memory covers the whole operating area, fixed over it, when the
+/// area's bounding box fits in this many cells a side; a larger area is
+/// remembered as any mission is, `size_m` around the vehicle.
+const MAX_AREA_CELLS: usize = 1000;
 
 /// What the route behaviour did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -147,12 +152,18 @@ pub struct Route {
     window: LocalMapConfig,
     /// Where the memory cells lie in the world.
     layout: Layout,
+    /// The memory's origin when it is fixed over the operating area
+    /// (never re-centred).
+    fixed: Option<(i64, i64)>,
     state: Vec<u8>,
     costs: Vec<f32>,
     planner: DStarLite,
     /// The waypoint being planned to and its memory cell.
     goal: Option<(usize, usize)>,
     hits: Vec<u32>,
+    /// Per cell: the stamp of the cycle an obstacle patch seen from within
+    /// `confirm_within_m` (or from a distance not known) lay in it.
+    near_hits: Vec<u32>,
     /// Per cell: the stamp of the cycle a graded patch lay in it, and the
     /// highest roughness level of those patches.
     graded: Vec<(u32, u8)>,
@@ -203,7 +214,7 @@ pub struct Route {
 
 impl Route {
     pub fn new(config: RouteConfig, setup: &Setup<'_>) -> Self {
-        let side = (config.size_m / config.cell_m).round() as usize;
+        let (side, fixed) = memory_over(&config, setup.area);
         let n = side * side;
         Self {
             tracker: WaypointTracker::new(config.arrival_radius_m, config.pass_radius_factor),
@@ -213,11 +224,13 @@ impl Route {
                 origin: None,
                 cell_m: config.cell_m,
             },
+            fixed,
             state: vec![UNKNOWN; n],
             costs: vec![0.0; n],
             planner: DStarLite::new(side, 1.0),
             goal: None,
             hits: vec![0; n],
+            near_hits: vec![0; n],
             graded: vec![(0, 0); n],
             stamp: 0,
             changed: Vec::new(),
@@ -259,8 +272,9 @@ impl Route {
     /// Bytes the memory and the planner hold.
     pub fn memory_bytes(&self) -> usize {
         let n = self.layout.side * self.layout.side;
-        // state, costs, hits, graded; the planner's g, rhs, queued key, marks.
-        n * (1 + 4 + 4 + std::mem::size_of::<(u32, u8)>())
+        // state, outside, costs, hits, near hits, graded; the planner's g,
+        // rhs, queued key, marks.
+        n * (1 + 1 + 4 + 4 + 4 + std::mem::size_of::<(u32, u8)>())
             + n * (4 + 4 + 12 + 4)
             + (self.path.capacity() + self.flood.capacity() + self.held.capacity()) * 8
     }
@@ -288,7 +302,9 @@ impl Route {
     fn recentre(&mut self, x: f64, y: f64) -> bool {
         let cell = self.config.cell_m;
         let half = (self.layout.side / 2) as i64;
-        let wanted = (floor_i64(x / cell) - half, floor_i64(y / cell) - half);
+        let wanted = self
+            .fixed
+            .unwrap_or((floor_i64(x / cell) - half, floor_i64(y / cell) - half));
         if let Some((i0, j0)) = self.layout.origin {
             let quarter = (self.layout.side / 4) as i64;
             if (wanted.0 - i0).abs() < quarter && (wanted.1 - j0).abs() < quarter {
@@ -366,6 +382,7 @@ impl Route {
         }
         let base = match self.state[c] {
             OBSTACLE | SHUT => return f32::INFINITY,
+            DOUBTFUL => self.config.doubtful_cost as f32,
             FREE => 1.0,
             UNKNOWN => self.config.unseen_cost as f32,
             SUSPECT => self.config.suspect_cost as f32,
@@ -550,6 +567,7 @@ impl Route {
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
             self.hits.fill(0);
+            self.near_hits.fill(0);
             self.graded.fill((0, 0));
             self.stamp = 1;
         }
@@ -559,6 +577,12 @@ impl Route {
             if let Some(c) = self.layout.cell_at(x, y) {
                 if patch.is_obstacle() {
                     self.hits[c] = self.stamp;
+                    // Seen from near, or from a distance not known (a map
+                    // off the wire): certain.
+                    let near = f64::from(patch.nearest_m);
+                    if !near.is_finite() || near <= self.config.confirm_within_m {
+                        self.near_hits[c] = self.stamp;
+                    }
                 } else {
                     // Graded ground: rough, as costly as its cost says; a
                     // suspected drop-off costs `suspect_cost` when set (see
@@ -611,7 +635,13 @@ impl Route {
                         map.seen.contains(floor_i64(x / s), floor_i64(y / s))
                     };
                     if hit {
-                        self.set_state(c, OBSTACLE);
+                        let near = self.near_hits[c] == self.stamp;
+                        let state = if near || self.state[c] == OBSTACLE {
+                            OBSTACLE
+                        } else {
+                            DOUBTFUL
+                        };
+                        self.set_state(c, state);
                     } else if seen {
                         let graded = self.graded[c];
                         let graded = if graded.0 == self.stamp { graded.1 } else { 0 };
@@ -809,13 +839,7 @@ impl Route {
                 a + 1,
             )
         });
-        let around_goal = self.passable_around(goal);
-        let around_start = self.passable_around(start);
-        let closed = if around_goal.len() <= around_start.len() {
-            around_goal
-        } else {
-            around_start
-        };
+        let closed = self.closed_off(start, goal).unwrap_or_default();
         let ring = self.ring_round(&closed, goal);
         let skipped = self.unreachable.then == OnUnreachable::Skip;
         tracing::warn!(
@@ -842,6 +866,36 @@ impl Route {
         self.tracker.give_up(self.unreachable.then);
         self.no_way_since = None;
         self.goal = None;
+    }
+
+    /// Of the vehicle's cell `start` and the goal's `goal`, the ground
+    /// passable from the one with less of it, when that ground is closed
+    /// off inside the memory: `None` when both reach the memory's edge
+    /// where the area (or the world, with none) goes on beyond it — what
+    /// lies there the planner cannot know, and no ring is proven.
+    fn closed_off(&self, start: usize, goal: usize) -> Option<Vec<usize>> {
+        let side = self.layout.side as i64;
+        let open_edge = |cells: &[usize]| {
+            cells.iter().any(|&c| {
+                let (x, y) = self.layout.column_row(c);
+                let on_edge = x == 0 || y == 0 || x == side - 1 || y == side - 1;
+                on_edge && self.fixed.is_none()
+            })
+        };
+        let around_goal = self.passable_around(goal);
+        let around_start = self.passable_around(start);
+        let (small, large) = if around_goal.len() <= around_start.len() {
+            (around_goal, around_start)
+        } else {
+            (around_start, around_goal)
+        };
+        if !open_edge(&small) {
+            Some(small)
+        } else if !open_edge(&large) {
+            Some(large)
+        } else {
+            None
+        }
     }
 
     /// The memory cells passable ground joins to cell `from` (8-connected;
@@ -989,7 +1043,7 @@ impl Behaviour for Route {
             // Searched to the end: every way runs through ground known to
             // be impassable or out of the area. Lasting, that is the
             // answer; the vehicle gives the waypoint up.
-            if searched {
+            if searched && self.closed_off(start, goal).is_some() {
                 let since = match self.no_way_since {
                     Some((i, since)) if i == index => since,
                     _ => ctx.utime,
@@ -1084,6 +1138,7 @@ impl Behaviour for Route {
         }
         for (state, label) in [
             (OBSTACLE, "route: obstacles remembered"),
+            (DOUBTFUL, "route: obstacles seen only from afar (doubtful)"),
             (SHUT, "route: shut (unseen, backed away from)"),
         ] {
             let centres: Vec<[f64; 2]> = (0..self.state.len())
@@ -1151,4 +1206,25 @@ impl Plugin for Route {
     fn build(config: Self::Config, setup: &Setup<'_>) -> Self {
         Self::new(config, setup)
     }
+}
+
+/// The memory's side in cells, and its fixed origin when it covers the
+/// operating area: with an area whose bounding box (and a cell beyond it)
+/// fits in [`MAX_AREA_CELLS`] a side, the memory lies over all of it for
+/// the whole mission, so that a way round a barrier is never cut off by
+/// the memory's edge; else `size_m` around the vehicle, re-centred.
+fn memory_over(config: &RouteConfig, area: Option<&Area>) -> (usize, Option<(i64, i64)>) {
+    let side = (config.size_m / config.cell_m).round() as usize;
+    let Some(area) = area else {
+        return (side, None);
+    };
+    let cell = config.cell_m;
+    let (lo, hi) = area.bounds();
+    let (i0, j0) = (floor_i64(lo[0] / cell) - 1, floor_i64(lo[1] / cell) - 1);
+    let (i1, j1) = (floor_i64(hi[0] / cell) + 1, floor_i64(hi[1] / cell) + 1);
+    let needed = usize::try_from((i1 - i0).max(j1 - j0) + 1).unwrap_or(usize::MAX);
+    if needed > MAX_AREA_CELLS {
+        return (side, None);
+    }
+    (needed.max(side.min(MAX_AREA_CELLS)), Some((i0, j0)))
 }

@@ -430,6 +430,7 @@ pub fn run_mission(
         seen_patches: sink.seen.patches(),
         patch_size_m: config.localmap.patch_size_m,
         snapshots: sink.snapshots,
+        no_routes: pipeline.behaviours.no_routes(),
     })
 }
 

@@ -210,6 +210,8 @@ pub struct MissionRun {
     pub seen_patches: BTreeSet<(i64, i64)>,
     pub patch_size_m: f64,
     pub snapshots: Vec<PathBuf>,
+    /// The waypoints no route reached, with the rings that closed them off.
+    pub no_routes: Vec<arcnav_behaviours::NoRoute>,
 }
 
 /// A fault injected into the pipeline (`report.json`'s `fault`).

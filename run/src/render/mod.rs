@@ -197,6 +197,33 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
             &format!("{}", k + 1),
         );
     }
+    // The operating area's edge, dashed; the ring of impassable cells that
+    // closed off each waypoint no route reached, magenta, and where the
+    // vehicle was when the route gave it up.
+    if let Some(area) = &run.report.area {
+        let mut outline: Vec<(f32, f32)> = area.iter().map(|p| to_px(p[0], p[1])).collect();
+        outline.extend(outline.first().copied());
+        canvas.polyline(&outline, AREA_EDGE, 2.5, true);
+    }
+    for n in &run.no_routes {
+        let side = ((n.cell_m * scale) as f32).max(2.0);
+        for p in &n.ring {
+            let (x, y) = to_px(p[0], p[1]);
+            canvas.fill_rect(x - side / 2.0, y - side / 2.0, side, side, NO_ROUTE);
+        }
+        let (x, y) = to_px(n.vehicle_at[0], n.vehicle_at[1]);
+        canvas.label(
+            x + 9.0,
+            y - 8.0,
+            13.0,
+            NO_ROUTE,
+            &format!(
+                "no route to waypoint {}{}",
+                n.waypoint + 1,
+                if n.skipped { ": skipped" } else { "" }
+            ),
+        );
+    }
     for c in &run.report.collisions {
         let (x, y) = to_px(c.position[0], c.position[1]);
         canvas.polyline(&[(x - 8.0, y - 8.0), (x + 8.0, y + 8.0)], RED, 3.0, false);
@@ -277,7 +304,7 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         50.0,
         14.0,
         BLACK,
-        &format!("black: cells in the local map · orange: drop-offs (pale: suspected) · purple: graded ground · light: ground seen · white: images · circles: waypoints ({} reached) · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
+        &format!("black: cells in the local map · orange: drop-offs (pale: suspected) · purple: graded ground · light: ground seen · white: images · circles: waypoints ({} reached) · dashed: operating area · magenta: no way through · grey: no map · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
     );
     canvas.save(path)
 }
@@ -285,6 +312,13 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
 /// The mission picture's terrain below `header` pixel rows: an elevation
 /// tint with hill shading, `scale` pixels a metre from world (`min_x`,
 /// `max_y`) at the top left.
+/// Beyond the map: no ground.
+const NO_GROUND: [u8; 3] = [205, 205, 205];
+/// The operating area's edge.
+const AREA_EDGE: Rgba = [40, 40, 160, 255];
+/// The cells that closed a waypoint off.
+const NO_ROUTE: Rgba = [200, 0, 160, 255];
+
 fn shade_terrain(
     canvas: &mut Canvas,
     world: &World,
@@ -306,9 +340,18 @@ fn shade_terrain(
             )
         })
         .collect();
+    // The tint spans the heights on the map only.
     let (lo, hi) = heights
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+        .enumerate()
+        .filter(|&(k, _)| {
+            let (c, r) = (k % gw, k / gw);
+            world.contains(
+                min_x + (c as f64 + 0.5) * step,
+                max_y - (r as f64 + 0.5) * step,
+            )
+        })
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (_, &v)| {
             (a.min(v), b.max(v))
         });
     let pixels = canvas.pixmap.pixels_mut();
@@ -323,7 +366,16 @@ fn shade_terrain(
                 / 1.3;
             let t = (heights[r * gw + c] - lo) / (hi - lo).max(0.1);
             let base = [150.0 + 60.0 * t, 175.0 + 30.0 * t, 120.0 + 50.0 * t];
-            let rgb = base.map(|v| (v * (0.55 + 0.45 * shade)).clamp(0.0, 255.0) as u8);
+            let (x, y) = (
+                min_x + (c as f64 + 0.5) * step,
+                max_y - (r as f64 + 0.5) * step,
+            );
+            // Beyond the map there is no ground: a flat grey.
+            let rgb = if world.contains(x, y) {
+                base.map(|v| (v * (0.55 + 0.45 * shade)).clamp(0.0, 255.0) as u8)
+            } else {
+                NO_GROUND
+            };
             if let Some(p) = tiny_skia::PremultipliedColorU8::from_rgba(rgb[0], rgb[1], rgb[2], 255)
             {
                 pixels[(r + header) * gw + c] = p;
