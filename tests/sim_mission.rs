@@ -1468,3 +1468,80 @@ fn the_guard_stops_a_faulty_pipeline_short_of_the_tree_it_would_hit() {
         report["guard"]
     );
 }
+
+/// Issue 62. A barrier across the whole map with one crossing out of sight
+/// (60 m left of the line): the vehicle meets it, searches one way, turns
+/// back where that side ends at the operating area's edge (the map less
+/// `mission.area_margin_m`) and crosses where the crossing is — completed,
+/// no collision (leaving the area is one). A waypoint on an island closed
+/// by a trench ends the mission `unreachable` (exit status 4) within 300 s
+/// of the start, its report naming the waypoint and the ring; with
+/// `on_unreachable = "skip"` the mission goes on and reaches the next.
+/// Without the area the vehicle left the map; without the unreachable
+/// model it circled the island until the time limit.
+#[test]
+fn a_barrier_is_searched_inside_the_area_and_a_closed_island_is_unreachable() {
+    let world = |name: &str| {
+        format!(
+            "{}/tests/worlds/barriers/{name}.toml",
+            env!("CARGO_MANIFEST_DIR")
+        )
+    };
+    let configs = out_dir("barriers-config");
+    let skip = configs.join("skip.toml");
+    std::fs::write(&skip, "[mission]\non_unreachable = \"skip\"\n").unwrap();
+    let runs: Vec<(&str, Vec<String>)> = vec![
+        ("trench", vec!["--world".into(), world("trench_left_far")]),
+        ("island", vec!["--world".into(), world("ring_trench")]),
+        (
+            "skip",
+            vec![
+                "--world".into(),
+                world("ring_skip"),
+                "--config".into(),
+                skip.to_str().unwrap().into(),
+            ],
+        ),
+    ];
+    let reports = missions("barriers", &runs);
+    let (tag, trench, stdout) = &reports[0];
+    assert_completed_without_collision(tag, trench, stdout);
+    let area = trench["area"]
+        .as_array()
+        .expect("the world's area is reported");
+    assert_eq!(area.len(), 4, "the map less its margin: {area:?}");
+    assert!(
+        trench["distance_m"].as_f64().unwrap() > 200.0,
+        "the crossing lay out of sight, off the first side searched: {stdout}"
+    );
+
+    let (tag, island, stdout) = &reports[1];
+    assert_eq!(island["outcome"], "unreachable", "{tag}:\n{stdout}");
+    assert_no_collision(tag, island, stdout);
+    let given_up = &island["unreachable"][0];
+    assert_eq!(given_up["waypoint"], 1, "{given_up}");
+    assert!(given_up["ring_cells"].as_u64().unwrap() > 20, "{given_up}");
+    assert!(
+        given_up["given_up_at_s"].as_f64().unwrap() <= 300.0,
+        "{given_up}"
+    );
+    assert!(stdout.contains("unreachable   waypoint 1"), "{stdout}");
+
+    let (tag, skipped, stdout) = &reports[2];
+    assert_completed_without_collision(tag, skipped, stdout);
+    assert_eq!(skipped["waypoints_skipped"], 1, "{stdout}");
+    assert_eq!(skipped["waypoints_reached"], 1, "{stdout}");
+    assert_eq!(skipped["unreachable"][0]["skipped"], true, "{stdout}");
+
+    // The exit status tells an unreachable waypoint from a failure.
+    let out = out_dir("barriers-exit");
+    let (code, _, _) = arcnav(&[
+        "sim",
+        "--world",
+        &world("ring_boulders"),
+        "--no-images",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 4, "unreachable exits 4");
+}

@@ -258,6 +258,7 @@ fn behaviour(
                                 tracing::error!(%e, "cannot publish the votes");
                             }
                             status.handled += 1;
+                            status.set("unreachable_waypoints", node.unreachable() as u64);
                             status.took(
                                 &mut busy,
                                 started.elapsed().as_secs_f64() * 1e3,

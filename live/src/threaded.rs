@@ -286,6 +286,9 @@ impl Voter {
                         .to_vec();
                     status.took(&mut busy, started.elapsed().as_secs_f64() * 1e3, period_s * 1e3);
                     status.handled += 1;
+                    // The route gave a waypoint up (it says why as it does,
+                    // and votes to stand or goes on: `[mission] on_unreachable`).
+                    status.set("unreachable_waypoints", self.behaviours.unreachable() as u64);
                     if self.debrief_wait.is_some() {
                         self.awaiting = Some(cycle.utime);
                     }

@@ -164,6 +164,12 @@ impl BehaviourSet {
             .collect()
     }
 
+    /// How many waypoints the behaviours found no route to (live status
+    /// lines and `--stats`: `unreachable_waypoints`).
+    pub fn unreachable(&self) -> usize {
+        self.behaviours.iter().map(|b| b.no_routes().len()).sum()
+    }
+
     /// The waypoints the behaviours found no route to, with the evidence.
     pub fn no_routes(&self) -> Vec<arcnav_behaviours::NoRoute> {
         self.behaviours

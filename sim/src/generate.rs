@@ -84,6 +84,43 @@ impl Recipe {
     }
 }
 
+/// One generated world in [`BARRIER_ONE_IN`] has a barrier (issue 62): a
+/// 2 m deep, 3 m wide trench running out from inside the loop of
+/// waypoints, across one leg, to beyond the map's edge, with one 6 m
+/// crossing 25 m outside the loop. The way across is round its inner end
+/// or through the crossing, neither in sight from where the leg meets it;
+/// outwards the trench runs on to the operating area's edge. Drawn from a
+/// stream of its own, so the rest of the world is as without it.
+pub const BARRIER_ONE_IN: u64 = 4;
+
+/// The barrier of the world of `seed` (none for most seeds; see
+/// [`BARRIER_ONE_IN`]): the trench's two pieces either side of its
+/// crossing. The loop has `n` legs starting at angle `phase`, `radius` m
+/// round.
+fn barrier(seed: u64, n: usize, phase: f64, radius: f64) -> Vec<DitchSpec> {
+    let mut rng = Rng::new(seed ^ 0x6261_7272_6965_7273);
+    if rng.next_u64() % BARRIER_ONE_IN != 0 {
+        return Vec::new();
+    }
+    // Across a leg other than the first (the start is at its beginning).
+    let leg = (1 + rng.next_u64() % (n as u64 - 1)) as f64;
+    let angle = phase + std::f64::consts::TAU * (leg + 0.5) / n as f64;
+    let (c, s) = (angle.cos(), angle.sin());
+    let at = |r: f64| [(r * c * 10.0).round() / 10.0, (r * s * 10.0).round() / 10.0];
+    let (width, gap) = (3.0, 6.0);
+    let crossing = radius + 25.0;
+    let piece = |from: f64, to: f64| DitchSpec {
+        from_m: at(from),
+        to_m: at(to),
+        width_m: width,
+        depth_m: 2.0,
+    };
+    vec![
+        piece(0.45 * radius, crossing - gap / 2.0 - width / 2.0),
+        piece(crossing + gap / 2.0 + width / 2.0, 4.0 * radius + 200.0),
+    ]
+}
+
 /// A world generated from `seed`.
 pub fn generate(seed: u64, difficulty: Difficulty) -> WorldSpec {
     let recipe = Recipe::of(difficulty);
@@ -148,6 +185,9 @@ pub fn generate(seed: u64, difficulty: Difficulty) -> WorldSpec {
             }
         })
         .collect();
+    let mut ditches: Vec<DitchSpec> = ditches;
+    let barrier = barrier(seed, n, phase, radius);
+    ditches.extend(barrier.iter().cloned());
     let banks = legs[recipe.ditches..recipe.ditches + recipe.banks]
         .iter()
         .map(|&i| {
@@ -179,8 +219,15 @@ pub fn generate(seed: u64, difficulty: Difficulty) -> WorldSpec {
     let extent = radius * 1.15 + 60.0;
     WorldSpec {
         name: format!("generated-{seed}-{difficulty:?}").to_lowercase(),
-        description: format!("procedural world, seed {seed}, {difficulty:?} difficulty")
-            .to_lowercase(),
+        description: format!(
+            "procedural world, seed {seed}, {difficulty:?} difficulty{}",
+            if barrier.is_empty() {
+                ""
+            } else {
+                ", a trench across the loop"
+            }
+        )
+        .to_lowercase(),
         terrain: TerrainSpec {
             origin_m: [-extent.round(), -extent.round()],
             size_m: [2.0 * extent.round(), 2.0 * extent.round()],
@@ -257,5 +304,34 @@ mod tests {
                 .unwrap_err()
                 .contains("easy, moderate, hard")
         );
+    }
+
+    /// Issue 62: some generated worlds hold a barrier the sweeps meet —
+    /// about one in four, each a trench across one leg of the loop, well
+    /// clear of every waypoint, the rest of the world as without it.
+    #[test]
+    fn one_generated_world_in_four_has_a_trench_across_its_loop() {
+        let with: Vec<u64> = (0..40)
+            .filter(|&seed| !barrier(seed, 8, 0.0, 70.0).is_empty())
+            .collect();
+        assert!((5..=16).contains(&with.len()), "{with:?}");
+        for &seed in &with {
+            let spec = generate(seed, Difficulty::Hard);
+            assert!(spec.description.contains("trench across the loop"));
+            let world = World::build(spec.clone(), "generated", None).unwrap();
+            world
+                .validate_for(&VehicleConfig::default(), "generated")
+                .unwrap();
+            let trench = &spec.ditches[spec.ditches.len() - 2..];
+            for w in &spec.waypoints {
+                for d in trench {
+                    let gap = crate::world::segment_distance(w.position_m, d.from_m, d.to_m);
+                    assert!(
+                        gap > 15.0,
+                        "seed {seed}: waypoint {gap:.1} m from the trench"
+                    );
+                }
+            }
+        }
     }
 }

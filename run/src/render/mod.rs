@@ -312,6 +312,38 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
 /// The mission picture's terrain below `header` pixel rows: an elevation
 /// tint with hill shading, `scale` pixels a metre from world (`min_x`,
 /// `max_y`) at the top left.
+/// The part of segment a-b inside the box (lo, hi), if any
+/// (Liang-Barsky).
+fn clip_segment(
+    a: [f32; 2],
+    b: [f32; 2],
+    (lo, hi): ([f32; 2], [f32; 2]),
+) -> Option<([f32; 2], [f32; 2])> {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let (mut t0, mut t1) = (0.0f32, 1.0f32);
+    for axis in 0..2 {
+        for (p, q) in [
+            (-d[axis], a[axis] - lo[axis]),
+            (d[axis], hi[axis] - a[axis]),
+        ] {
+            if p == 0.0 {
+                if q < 0.0 {
+                    return None;
+                }
+            } else {
+                let r = q / p;
+                if p < 0.0 {
+                    t0 = t0.max(r);
+                } else {
+                    t1 = t1.min(r);
+                }
+            }
+        }
+    }
+    let at = |t: f32| [a[0] + t * d[0], a[1] + t * d[1]];
+    (t0 <= t1).then(|| (at(t0), at(t1)))
+}
+
 /// Beyond the map: no ground.
 const NO_GROUND: [u8; 3] = [205, 205, 205];
 /// The operating area's edge.
@@ -504,6 +536,31 @@ pub fn snapshot_picture(
         let (x, y) = to_px(p.x + s / 2.0, p.y + s / 2.0);
         canvas.fill_rect(x, y, s * ppm, s * ppm, patch_color(p.reasons, p.cost, 255));
     }
+    // The operating area's edge, in the vehicle frame of the decision.
+    if let Some(area) = config.area() {
+        let t = map.world_from_vehicle.translation.vector;
+        let (sin, cos) = arcnav_vehicle::frames::yaw_of(&map.world_from_vehicle).sin_cos();
+        let local: Vec<[f32; 2]> = area
+            .vertices()
+            .iter()
+            .map(|&[x, y]| {
+                let (dx, dy) = (x - t.x, y - t.y);
+                [(cos * dx + sin * dy) as f32, (-sin * dx + cos * dy) as f32]
+            })
+            .collect();
+        let panel = ([-x_behind, -half], [x_ahead, half]);
+        for (k, &a) in local.iter().enumerate() {
+            let b = local[(k + 1) % local.len()];
+            if let Some((a, b)) = clip_segment(a, b, panel) {
+                canvas.polyline(
+                    &[to_px(a[0], a[1]), to_px(b[0], b[1])],
+                    AREA_EDGE,
+                    2.5,
+                    true,
+                );
+            }
+        }
+    }
     // What the behaviours' votes rested on: cells under the arcs, lines
     // and points over them.
     let map_panel = MapPanel {
@@ -560,7 +617,7 @@ pub fn snapshot_picture(
         map_h as f32 - 8.0,
         12.0,
         [60, 60, 60, 255],
-        "grey: ground not seen · black: cells · orange: drop-offs (pale: suspected) · purple: graded ground (by cost)",
+        "grey: ground not seen · black: cells · orange: drop-offs (pale: suspected) · purple: graded ground (by cost) · dashed: operating area",
     );
     let f = config.vehicle.footprint();
     let body = [
