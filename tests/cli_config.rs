@@ -51,6 +51,43 @@ fn config_check_names_the_bad_key_and_fails() {
     );
 }
 
+/// `[mission]` (issue 62): the operating area is "world", "none" or a
+/// simple polygon; anything else, a crossing or degenerate polygon, or an
+/// unknown `on_unreachable`, is refused naming the key and the reason.
+#[test]
+fn the_operating_area_and_unreachable_keys_are_checked() {
+    let (_dir, good) = temp_file(
+        "area.toml",
+        "[mission]\narea = [[0, 0], [100, 0], [100, 50], [0, 50]]\non_unreachable = \"skip\"\n",
+    );
+    let (code, stdout, stderr) = arcnav(&["config", "--check", good.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    for (text, expect) in [
+        (
+            "[mission]\narea = \"map\"\n",
+            "`mission.area`: is \"map\": give \"world\", \"none\" or",
+        ),
+        (
+            "[mission]\narea = [[0, 0], [10, 10], [10, 0], [0, 10]]\n",
+            "`mission.area`: edges 0 and 2 cross",
+        ),
+        (
+            "[mission]\narea = [[0, 0], [10, 0]]\n",
+            "`mission.area`: has 2 vertices, a polygon needs at least 3",
+        ),
+        (
+            "[mission]\nunreachable_after_s = -1\n",
+            "`mission.unreachable_after_s`",
+        ),
+        ("[mission]\non_unreachable = \"wait\"\n", "on_unreachable"),
+    ] {
+        let (_dir, file) = temp_file("bad-area.toml", text);
+        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+        assert_eq!(code, 1, "{text}");
+        assert!(stderr.contains(expect), "{text}: {stderr}");
+    }
+}
+
 /// Values that aborted or hung `arcnav sim` (found by setting every number
 /// of config/default.toml to ±1e300 in turn), refused by their key.
 #[test]
