@@ -99,7 +99,7 @@ pub const BARRIER_ONE_IN: u64 = 4;
 /// round.
 fn barrier(seed: u64, n: usize, phase: f64, radius: f64) -> Vec<DitchSpec> {
     let mut rng = Rng::new(seed ^ 0x6261_7272_6965_7273);
-    if rng.next_u64() % BARRIER_ONE_IN != 0 {
+    if !rng.next_u64().is_multiple_of(BARRIER_ONE_IN) {
         return Vec::new();
     }
     // Across a leg other than the first (the start is at its beginning).
