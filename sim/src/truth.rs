@@ -10,6 +10,7 @@ use std::collections::BTreeSet;
 
 use arcnav_vehicle::frames::yaw_of;
 use arcnav_vehicle::mission::Area;
+use arcnav_vehicle::numbers::segments_cross;
 use arcnav_vehicle::{Footprint, Utime, VehicleConfig};
 use serde::Serialize;
 
@@ -207,15 +208,6 @@ fn segment_box_distance(a: [f64; 2], b: [f64; 2], f: &Footprint) -> f64 {
         best = best.min(crate::world::segment_distance(c, a, b));
     }
     best
-}
-
-fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
-    let cross = |o: [f64; 2], p: [f64; 2], q: [f64; 2]| {
-        (p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0])
-    };
-    let (d1, d2) = (cross(c, d, a), cross(c, d, b));
-    let (d3, d4) = (cross(a, b, c), cross(a, b, d));
-    d1 * d2 < 0.0 && d3 * d4 < 0.0
 }
 
 #[cfg(test)]

@@ -186,17 +186,7 @@ fn stone(p: [f64; 2]) -> f64 {
     best
 }
 
-/// Distance from p to the segment a–b.
-pub fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = abx * abx + aby * aby;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * abx + (p[1] - a[1]) * aby) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * abx).hypot(p[1] - a[1] - t * aby)
-}
+pub use arcnav_vehicle::numbers::segment_distance;
 
 #[derive(Debug, Clone)]
 enum Base {

@@ -11,6 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::config::{self, ConfigError};
+use crate::numbers::{segment_distance, segments_cross};
 
 /// A simple polygon in world coordinates (x east, y north, m), convex or
 /// not, its vertices in order (either way round; the last joins the first).
@@ -144,30 +145,6 @@ impl Area {
         }
         None
     }
-}
-
-fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
-}
-
-fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
-    let orient = |p: [f64; 2], q: [f64; 2], r: [f64; 2]| {
-        ((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])).signum()
-    };
-    let (o1, o2, o3, o4) = (
-        orient(a, b, c),
-        orient(a, b, d),
-        orient(c, d, a),
-        orient(c, d, b),
-    );
-    o1 * o2 < 0.0 && o3 * o4 < 0.0
 }
 
 /// `[mission] area` as written: `"world"`, `"none"`, or the vertices.
