@@ -1038,9 +1038,12 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
 /// went neither way and was stuck after 107 s. Near where it stood, the
 /// route now holds to the path it follows while that costs at most
 /// `hold_fraction` more than the plan: one short turn (2 legs, 50°) and
-/// round the near end. With `hold_fraction = 0` the turn goes the other
-/// way when the way comes to lie ahead there, and the vehicle still gets
-/// round, but only after turning on the spot through 468° in 16 legs.
+/// round the near end. With `hold_fraction = 0` the turn went the other
+/// way when the way came to lie ahead there (468° in 16 legs); since the
+/// route plans inside an operating area with obstacles seen only from
+/// afar doubtful (issue 62), the plan no longer flips here and the vehicle
+/// gets round without the hold too (64° in 3 legs): both complete without
+/// a collision, the held run holding and turning less than 90°.
 #[test]
 fn at_speed_the_route_holds_to_one_end_of_a_ditch_across_the_way() {
     let world = format!(
@@ -1070,8 +1073,7 @@ fn at_speed_the_route_holds_to_one_end_of_a_ditch_across_the_way() {
     let turned = |r: &Value| r["recovery"]["turned_deg"].as_f64().unwrap();
     assert!(turned(report) < 90.0, "{tag}:\n{stdout}");
     let (tag, flipping, stdout) = &done[1];
-    assert_no_collision(tag, flipping, stdout);
-    assert!(turned(flipping) > 4.0 * turned(report), "{tag}:\n{stdout}");
+    assert_completed_without_collision(tag, flipping, stdout);
 }
 
 /// 020 at speed: a ditch too short to be seen from afar, square across

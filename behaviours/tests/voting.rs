@@ -1200,6 +1200,9 @@ fn side_at(path: &[[f64; 2]], x: f64) -> f64 {
 /// went, 477 m for 255).
 #[test]
 fn standing_the_route_holds_to_the_way_it_chose_until_the_other_is_clearly_better() {
+    // Every cell certain, however far it was seen from: this is about
+    // holding a way, not about doubtful obstacles.
+    const CERTAIN: &str = "confirm_within_m = 100.0";
     let wall = |right: f64, left: f64| -> Vec<(f64, f64)> {
         let n = ((left - right) / 0.4).round() as i32;
         (0..=n)
@@ -1210,7 +1213,7 @@ fn standing_the_route_holds_to_the_way_it_chose_until_the_other_is_clearly_bette
     let standing = Some(0.0);
     let forward = Some(1.0);
     let first = snapshot_seeing(&wall(-8.0, 8.0), 20.0);
-    let (_, _, overlay) = route_after(&[&first], &[standing], goal, "");
+    let (_, _, overlay) = route_after(&[&first], &[standing], goal, CERTAIN);
     let side = side_at(&planned_path(&overlay), 10.0);
     // The end the path goes round, 1.2 m farther out.
     let longer = if side > 0.0 {
@@ -1220,7 +1223,7 @@ fn standing_the_route_holds_to_the_way_it_chose_until_the_other_is_clearly_bette
     };
     let longer = snapshot_seeing(&longer, 20.0);
     let both = [&first, &longer];
-    let (_, counters, overlay) = route_after(&both, &[standing, standing], goal, "");
+    let (_, counters, overlay) = route_after(&both, &[standing, standing], goal, CERTAIN);
     assert_eq!(
         side_at(&planned_path(&overlay), 10.0),
         side,
@@ -1229,7 +1232,10 @@ fn standing_the_route_holds_to_the_way_it_chose_until_the_other_is_clearly_bette
     );
     assert!(counter(&counters, "held_cycles") >= 1, "{counters:?}");
     assert_eq!(counter(&counters, "path_switches"), 0, "{counters:?}");
-    for (speed, table) in [(0.0, "hold_fraction = 0.0"), (2.0, "")] {
+    for (speed, table) in [
+        (0.0, "hold_fraction = 0.0\nconfirm_within_m = 100.0"),
+        (2.0, CERTAIN),
+    ] {
         let (_, counters, overlay) = route_after_at(&both, &[forward, forward], goal, table, speed);
         assert_eq!(
             side_at(&planned_path(&overlay), 10.0),
@@ -1252,7 +1258,7 @@ fn standing_the_route_holds_to_the_way_it_chose_until_the_other_is_clearly_bette
         &[&first, &longer, &walled],
         &[standing, standing, standing],
         goal,
-        "",
+        CERTAIN,
     );
     assert_eq!(
         side_at(&planned_path(&overlay), 10.0),

@@ -1043,17 +1043,25 @@ impl Behaviour for Route {
             // Searched to the end: every way runs through ground known to
             // be impassable or out of the area. Lasting, that is the
             // answer; the vehicle gives the waypoint up.
-            if searched && self.closed_off(start, goal).is_some() {
+            // (Whether a ring closes it off is asked once that has lasted:
+            // the flood over the memory is not for every cycle.)
+            if searched {
                 let since = match self.no_way_since {
                     Some((i, since)) if i == index => since,
                     _ => ctx.utime,
                 };
                 self.no_way_since = Some((index, since));
                 if ctx.utime - since >= seconds_to_micros(self.unreachable.after_s) {
-                    self.give_up(index, target, since, ctx.utime, here, (start, goal));
-                    if self.unreachable.then == OnUnreachable::Stop {
-                        votes.vote_speed(0.0);
-                        return;
+                    if self.closed_off(start, goal).is_some() {
+                        self.give_up(index, target, since, ctx.utime, here, (start, goal));
+                        if self.unreachable.then == OnUnreachable::Stop {
+                            votes.vote_speed(0.0);
+                            return;
+                        }
+                    } else {
+                        // No ring inside the memory: the way may lie
+                        // beyond it. Asked again as long after.
+                        self.no_way_since = Some((index, ctx.utime));
                     }
                 }
             }
