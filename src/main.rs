@@ -33,7 +33,9 @@ enum Command {
     /// local map, behaviours, arbiter) drives a simulated vehicle through a
     /// world it has never seen. Writes the LCM log, report.json and map.png
     /// to --out; exit status 0 only when the mission completes without a
-    /// collision.
+    /// collision, 4 when it ends at a waypoint no route reaches inside the
+    /// operating area (`[mission] on_unreachable`, docs/route.md), 1 for
+    /// any other failure.
     Sim(SimArgs),
     /// Run missions over many worlds and settings, on every core.
     ///
