@@ -316,14 +316,17 @@ impl Resolved {
     /// polygon): `area = "world"` becomes that polygon, in the
     /// configuration as given too, so that the `config.toml` a run writes
     /// replays in the same area. Nothing is parsed or checked again.
+    /// Borrowed as it is when the area is not the world's (a polygon, or
+    /// none).
     #[must_use]
-    pub fn in_world(&self, area: &Area) -> Self {
-        let mut config = self.clone();
-        if config.mission.area == AreaSetting::World {
-            config.world_area = Some(area.clone());
-            config.given.mission.area = AreaSpec::Vertices(area.vertices().to_vec());
+    pub fn in_world(&self, area: &Area) -> std::borrow::Cow<'_, Self> {
+        if self.mission.area != AreaSetting::World {
+            return std::borrow::Cow::Borrowed(self);
         }
-        config
+        let mut config = self.clone();
+        config.world_area = Some(area.clone());
+        config.given.mission.area = AreaSpec::Vertices(area.vertices().to_vec());
+        std::borrow::Cow::Owned(config)
     }
 
     /// Builds the configured behaviour `name` (`None`: not configured).

@@ -158,15 +158,10 @@ impl Truth {
         }
         self.off_map = off_map;
         if let Some(area) = &self.area {
-            let f = &self.footprint;
-            let off_area = [
-                [f.x_min, -f.half_width],
-                [f.x_max, -f.half_width],
-                [f.x_max, f.half_width],
-                [f.x_min, f.half_width],
-            ]
-            .into_iter()
-            .any(|[cx, cy]| !area.contains([x + cos * cx - sin * cy, y + sin * cx + cos * cy]));
+            let off_area =
+                self.footprint.corners().into_iter().any(|c| {
+                    !area.contains([x + cos * c.x - sin * c.y, y + sin * c.x + cos * c.y])
+                });
             if off_area && !self.off_area && !off_map {
                 self.collisions.push(Collision {
                     utime,

@@ -25,7 +25,9 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     let world = world_of(&args)?;
     // `[mission] area = "world"`: this world's area, in the config.toml
     // the run writes too.
-    let config = config.in_world(&world.area(config.mission.area_margin_m));
+    let config = config
+        .in_world(&world.area(config.mission.area_margin_m))
+        .into_owned();
     let name = world.spec.name.clone();
     let out = args
         .out

@@ -78,7 +78,7 @@ impl AreaEdge {
 
     /// Whether no path within `reach` of a vehicle at `pose` can reach the
     /// edge: well inside, every arc is clear of it.
-    fn far_inside(&self, pose: &Pose, reach: f64) -> bool {
+    pub(super) fn far_inside(&self, pose: &Pose, reach: f64) -> bool {
         let p = pose.position();
         let p = [p.x, p.y];
         self.area.contains(p) && self.area.distance_to_edge(p) > reach + self.radius
@@ -133,10 +133,8 @@ impl AreaEdge {
 
     /// How far the vehicle at `pose` may back up along curvature `k`
     /// within `reach` before its body leaves the area (None: all of it).
+    /// Asked only when it is not [far inside](AreaEdge::far_inside).
     pub(super) fn backing(&mut self, pose: &Pose, k: f64, reach: f64) -> Option<f64> {
-        if self.far_inside(pose, reach) {
-            return None;
-        }
         let arc = Arc::new(k);
         let steps = (reach / STEP_M).ceil() as usize;
         self.poses.clear();
@@ -177,6 +175,7 @@ mod tests {
         let (bent, _) = exits[1].expect("a gentle turn reaches it too");
         assert!(bent >= s, "no sooner than straight on");
         // Turned away from the edge, backing up never meets it.
+        assert!(!edge.far_inside(&pose, 8.0));
         assert_eq!(edge.backing(&pose, 0.0, 8.0), None);
         // Far inside, nothing is computed and nothing leaves.
         let mut far = edge_ahead(90.0);

@@ -700,7 +700,11 @@ impl ObstacleAvoidance {
         let reach = self.config.reverse_reach_m;
         if let Some(reverse) = &mut self.reverse {
             reverse.vote(&mut self.terrain, reach, ctx, votes);
-            if let Some(area) = &mut self.area {
+            if let Some(area) = self
+                .area
+                .as_mut()
+                .filter(|a| !a.far_inside(ctx.pose, reach))
+            {
                 for (arc, &k) in ctx.arcs.curvatures().iter().enumerate().take(votes.len()) {
                     if let (Some(edge), Some(clear)) = (
                         area.backing(ctx.pose, k, reach),

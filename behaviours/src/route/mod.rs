@@ -206,7 +206,7 @@ pub struct Route {
     half_width_m: f64,
     unreachable: WhenUnreachable,
     /// The waypoint (index) the planner has found no way to, searching all
-    /// it knows, since when (µs), and where the vehicle then was.
+    /// it knows, and since when (µs).
     no_way_since: Option<(usize, Utime)>,
     /// The waypoints given up as unreachable, with the evidence.
     no_routes: Vec<NoRoute>,
@@ -818,18 +818,17 @@ impl Route {
         (found, searched)
     }
 
-    /// Gives up waypoint `index` at `position` as unreachable, keeping the
-    /// evidence: how much of the area the memory knows, and the ring of
-    /// impassable cells that closes off whichever of the vehicle (`cells.0`)
-    /// and the waypoint (`cells.1`) has less ground around it.
+    /// Gives up waypoint `index` at `position` (its memory cell `goal`) as
+    /// unreachable, keeping the evidence: how much of the area the memory
+    /// knows, and the ring of impassable cells round `closed`, the ground
+    /// [`Route::closed_off`] found closed off.
     fn give_up(
         &mut self,
-        index: usize,
-        position: [f64; 2],
+        (index, position, goal): (usize, [f64; 2], usize),
         since: Utime,
         now: Utime,
         vehicle_at: [f64; 2],
-        (start, goal): (usize, usize),
+        closed: &[usize],
     ) {
         let cell_area = self.config.cell_m * self.config.cell_m;
         let inside = (0..self.state.len()).filter(|&c| !self.outside[c]);
@@ -839,8 +838,7 @@ impl Route {
                 a + 1,
             )
         });
-        let closed = self.closed_off(start, goal).unwrap_or_default();
-        let ring = self.ring_round(&closed, goal);
+        let ring = self.ring_round(closed, goal);
         let skipped = self.unreachable.then == OnUnreachable::Skip;
         tracing::warn!(
             waypoint = index,
@@ -875,12 +873,14 @@ impl Route {
     /// lies there the planner cannot know, and no ring is proven.
     fn closed_off(&self, start: usize, goal: usize) -> Option<Vec<usize>> {
         let side = self.layout.side as i64;
+        // A memory fixed over the whole area has no edge the area goes on
+        // beyond.
         let open_edge = |cells: &[usize]| {
-            cells.iter().any(|&c| {
-                let (x, y) = self.layout.column_row(c);
-                let on_edge = x == 0 || y == 0 || x == side - 1 || y == side - 1;
-                on_edge && self.fixed.is_none()
-            })
+            self.fixed.is_none()
+                && cells.iter().any(|&c| {
+                    let (x, y) = self.layout.column_row(c);
+                    x == 0 || y == 0 || x == side - 1 || y == side - 1
+                })
         };
         let around_goal = self.passable_around(goal);
         let around_start = self.passable_around(start);
@@ -1052,8 +1052,8 @@ impl Behaviour for Route {
                 };
                 self.no_way_since = Some((index, since));
                 if ctx.utime - since >= seconds_to_micros(self.unreachable.after_s) {
-                    if self.closed_off(start, goal).is_some() {
-                        self.give_up(index, target, since, ctx.utime, here, (start, goal));
+                    if let Some(closed) = self.closed_off(start, goal) {
+                        self.give_up((index, target, goal), since, ctx.utime, here, &closed);
                         if self.unreachable.then == OnUnreachable::Stop {
                             votes.vote_speed(0.0);
                             return;

@@ -264,7 +264,7 @@ pub fn run_mission(
     progress: &mut dyn FnMut(&MissionProgress),
 ) -> Result<MissionRun, MissionError> {
     let wall = Instant::now();
-    let config = &config.in_world(&world.area(config.mission.area_margin_m));
+    let config = &*config.in_world(&world.area(config.mission.area_margin_m));
     if let Some(area) = config.area()
         && !area.contains(world.start.0)
     {
@@ -410,6 +410,7 @@ pub fn run_mission(
             });
         }
     }
+    let no_routes = pipeline.behaviours.no_routes();
     let report = mission_report(&Ended {
         config,
         world: &world,
@@ -417,6 +418,7 @@ pub fn run_mission(
         pipeline: &pipeline,
         sink: &sink,
         guard: guard.as_ref().map(guarded::GuardWatch::report),
+        no_routes: &no_routes,
         outcome,
         duration_s: micros_to_seconds(t - t0),
         wall_time_s: wall.elapsed().as_secs_f64(),
@@ -430,7 +432,7 @@ pub fn run_mission(
         seen_patches: sink.seen.patches(),
         patch_size_m: config.localmap.patch_size_m,
         snapshots: sink.snapshots,
-        no_routes: pipeline.behaviours.no_routes(),
+        no_routes,
     })
 }
 
@@ -482,6 +484,8 @@ struct Ended<'e, 'a> {
     pipeline: &'e Pipeline,
     sink: &'e MissionSink<'a>,
     guard: Option<GuardReport>,
+    /// The waypoints the behaviours found no route to.
+    no_routes: &'e [arcnav_behaviours::NoRoute],
     outcome: Outcome,
     duration_s: f64,
     wall_time_s: f64,
@@ -496,6 +500,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         pipeline,
         sink,
         guard: _,
+        no_routes: _,
         outcome,
         duration_s: duration,
         wall_time_s: wall_time,
@@ -526,9 +531,8 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
     let progress = pipeline.behaviours.progress();
     let skipped = progress.map_or(0, |p| p.skipped);
     let reached = progress.map_or(0, |p| p.current) - skipped;
-    let unreachable = pipeline
-        .behaviours
-        .no_routes()
+    let unreachable = ended
+        .no_routes
         .iter()
         .map(|n| report::NoRouteReport {
             waypoint: n.waypoint + 1,
