@@ -16,5 +16,5 @@ pub use arcnav_config::{Config, Resolved};
 pub use arcnav_live as live;
 #[doc(hidden)]
 pub use arcnav_run::export;
-pub use arcnav_run::{detection, fuzzing, mission, output, render, replay, sweep};
+pub use arcnav_run::{bag, detection, fuzzing, mission, output, render, replay, sweep};
 pub use arcnav_wire as wire;

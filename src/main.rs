@@ -54,6 +54,17 @@ enum Command {
     /// Replay an LCM log (POSE, RANGE_IMAGE, WAYPOINTS) through perception,
     /// local map, behaviours and arbiter in log time; write the recomputed
     /// decisions to --out and compare them with the ones the log recorded.
+    ///
+    /// A ROS 2 bag (its .mcap file) replays the same way: its
+    /// sensor_msgs/PointCloud2 topic becomes range images (an organized
+    /// cloud keeps its rows and columns; a cloud with a `ring` field is
+    /// binned by ring and azimuth; any other on the configured sensor's
+    /// grid), its nav_msgs/Odometry, geometry_msgs/PoseStamped or
+    /// PoseWithCovarianceStamped (or /tf) the vehicle's pose, /tf_static the
+    /// sensor's mount. Topics are found when there is one of each kind
+    /// (--cloud, --pose, --vehicle-frame otherwise); waypoints from
+    /// --waypoints or --goal-ahead.
+    ///
     /// Exit status: 0 all input used, 3 some input was lost (listed), 1 error.
     Replay(ReplayArgs),
     /// Drive live: every node in this process, on LCM.
@@ -282,7 +293,7 @@ struct DetectArgs {
 #[derive(Debug, clap::Args)]
 struct ReplayArgs {
     /// The LCM event log (written by arcnav sim, lcm-logger or any LCM program
-    /// using the arcnav types).
+    /// using the arcnav types), or a ROS 2 bag's .mcap file.
     log: PathBuf,
     /// Configuration file (defaults merged with it).
     #[arg(long, conflicts_with = "compare_config")]
@@ -317,6 +328,22 @@ struct ReplayArgs {
     /// List at most this many differing decisions.
     #[arg(long, default_value_t = 10)]
     show: usize,
+    /// A bag's point-cloud topic (sensor_msgs/PointCloud2), when it has
+    /// several.
+    #[arg(long, value_name = "TOPIC")]
+    cloud: Option<String>,
+    /// A bag's pose topic (nav_msgs/Odometry, geometry_msgs/PoseStamped or
+    /// PoseWithCovarianceStamped), or /tf for the chain of frames to the
+    /// vehicle's, when it has several.
+    #[arg(long, value_name = "TOPIC")]
+    pose: Option<String>,
+    /// The vehicle's frame in a bag (default: the odometry's child frame,
+    /// else base_link).
+    #[arg(long, value_name = "FRAME")]
+    vehicle_frame: Option<String>,
+    /// With no waypoints: one this many metres ahead of the first pose.
+    #[arg(long, value_name = "M", conflicts_with = "waypoints")]
+    goal_ahead: Option<f64>,
 }
 
 #[derive(Debug, clap::Args)]

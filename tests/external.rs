@@ -8,7 +8,6 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::OnceLock;
 
 use arcnav_bus::lcmtypes::pose_t;
 use arcnav_bus::log::LogReader;
@@ -16,22 +15,9 @@ use arcnav_bus::messages::channels;
 use arcnav_testkit::{LcmReference, ScratchDir, workspace_root};
 use serde_json::Value;
 
-/// The reference LCM and arcnav's types generated for Python by its
-/// `lcm-gen` (once per test process).
+/// The reference LCM and arcnav's types generated for Python.
 fn python() -> Option<&'static (LcmReference, PathBuf)> {
-    static TYPES: OnceLock<Option<(LcmReference, PathBuf)>> = OnceLock::new();
-    TYPES
-        .get_or_init(|| {
-            let reference = LcmReference::require()?;
-            let files: Vec<PathBuf> = std::fs::read_dir(workspace_root().join("bus/lcmtypes"))
-                .unwrap()
-                .map(|e| e.unwrap().path())
-                .collect();
-            let types = reference
-                .generate_python(&files, &arcnav_testkit::temp_dir("external-python-types"));
-            Some((reference, types))
-        })
-        .as_ref()
+    LcmReference::with_arcnav_types()
 }
 
 /// `arcnav ARGS…` with the Python types importable; exit code, stdout, stderr.

@@ -441,6 +441,11 @@ impl<S: EventSource> InTimeOrder<S> {
         &self.order
     }
 
+    /// Where the events come from.
+    pub fn source(&self) -> &S {
+        &self.source
+    }
+
     fn must_release(&self) -> bool {
         let (Some(earliest), Some(newest)) = (self.held.peek(), self.newest_read) else {
             return false;

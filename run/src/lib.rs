@@ -6,8 +6,9 @@
 //!
 //! - [`mission::run_mission`]: a simulated mission on a world of
 //!   [`arcnav_sim`], closing the loop through the simulator;
-//! - [`replay::replay`]: a recorded log played against the pipeline, its
-//!   decisions written to a new log and compared with the recorded ones;
+//! - [`replay::replay`]: a recorded log (arcnav's LCM log, or a ROS 2 bag
+//!   through [`bag`]) played against the pipeline, its decisions written
+//!   to a new log and compared with the recorded ones;
 //! - [`export::export_mcap`]: a log written as MCAP for Foxglove;
 //! - [`sweep`]: many missions over worlds and speeds, one row each;
 //! - [`external`]: behaviours that are programs of their own, started and
@@ -15,6 +16,7 @@
 //! - [`detection`]: the detection-rate experiment of the range sensors;
 //! - [`render`]: the pictures of each (map.png, sweep and detection figures).
 
+pub mod bag;
 pub mod detection;
 #[doc(hidden)]
 pub mod export;

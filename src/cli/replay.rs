@@ -44,6 +44,12 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         speed: args.speed,
         recorded_cells: args.recorded_cells,
         stop_at_s: None,
+        bag: arcnav::bag::BagOptions {
+            cloud: args.cloud.clone(),
+            pose: args.pose.clone(),
+            vehicle_frame: args.vehicle_frame.clone(),
+        },
+        goal_ahead_m: args.goal_ahead,
     };
     let size = std::fs::metadata(&args.log)
         .with_context(|| format!("cannot read the log {}", args.log.display()))?
@@ -82,6 +88,9 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         })
         .collect();
     println!("configuration {}", configurations.join(" vs "));
+    if let Some(bag) = &last.problems.bag {
+        print_bag(bag);
+    }
     println!(
         "inputs        {} poses, {} range images, {} waypoint lists{}",
         i.poses,
@@ -179,6 +188,48 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// A bag's topics and what the replay made of them.
+fn print_bag(bag: &arcnav::bag::BagSummary) {
+    println!(
+        "bag           {}: {} topic(s)",
+        bag.format,
+        bag.topics.len()
+    );
+    for t in &bag.topics {
+        let what = match (t.used_as, &t.skipped_because) {
+            (Some(used), Some(why)) => format!("chosen as the {used}, but not read: {why}"),
+            (Some(used), None) => format!("used: {used}"),
+            (None, Some(why)) => format!("skipped: {why}"),
+            (None, None) => "skipped".to_owned(),
+        };
+        println!(
+            "              {} ({}, {} messages): {what}",
+            t.topic, t.type_name, t.messages
+        );
+    }
+    let clouds: Vec<String> = bag.clouds.iter().map(|(l, n)| format!("{n} {l}")).collect();
+    println!(
+        "clouds        {} from {}: {} points, {} no return, {} moved to the pixel they fall in, \
+         {} behind a nearer one, {} off the grid",
+        if clouds.is_empty() {
+            "none".to_owned()
+        } else {
+            clouds.join(", ")
+        },
+        bag.cloud_topic,
+        bag.points.points,
+        bag.points.no_return,
+        bag.points.moved,
+        bag.points.hidden,
+        bag.points.off_grid
+    );
+    println!(
+        "poses         {} from {}, vehicle frame {}",
+        bag.poses, bag.poses_from, bag.vehicle_frame
+    );
+    println!("mount         from {}", bag.mount_from);
 }
 
 /// `--speed`, `--from` and `--to` make sense.

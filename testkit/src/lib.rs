@@ -134,6 +134,27 @@ impl LcmReference {
         self.bin.join(name)
     }
 
+    /// The reference LCM and arcnav's types (`bus/lcmtypes`) generated for
+    /// Python by its `lcm-gen`, once per test process: the directory to
+    /// put on `PYTHONPATH` (`from arcnav import pose_t`). `None` (or a
+    /// failure under CI) as [`require`](Self::require).
+    #[track_caller]
+    pub fn with_arcnav_types() -> Option<&'static (Self, PathBuf)> {
+        static TYPES: std::sync::OnceLock<Option<(LcmReference, PathBuf)>> =
+            std::sync::OnceLock::new();
+        TYPES
+            .get_or_init(|| {
+                let reference = Self::require()?;
+                let files: Vec<PathBuf> = std::fs::read_dir(workspace_root().join("bus/lcmtypes"))
+                    .expect("read bus/lcmtypes")
+                    .map(|e| e.expect("a bus/lcmtypes entry").path())
+                    .collect();
+                let types = reference.generate_python(&files, &temp_dir("arcnav-python-types"));
+                Some((reference, types))
+            })
+            .as_ref()
+    }
+
     /// Runs `lcm-gen -p` on `lcm_files` into `out_dir`; returns `out_dir`.
     pub fn generate_python(&self, lcm_files: &[PathBuf], out_dir: &Path) -> PathBuf {
         std::fs::create_dir_all(out_dir).expect("create the lcm-gen output directory");

@@ -28,6 +28,7 @@ mod problems;
 pub use compare::{Comparison, Cycle, Decided, Decisions, Difference, WeightOf, compare};
 pub use problems::{InputProblems, LogSummary};
 
+use crate::bag::{Bag, BagError, BagEvents, BagOptions, Format};
 use crate::mission::GuardReport;
 use crate::mission::guarded::{GuardWatch, Observed};
 use crate::recorder::{Recorder, WriteFailed};
@@ -54,6 +55,10 @@ pub struct ReplayOptions {
     /// Keep the decision and map of the first cycle at or after this many
     /// seconds (for `arcnav render`), and stop there.
     pub stop_at_s: Option<f64>,
+    /// Which topics and frames of a bag to use.
+    pub bag: BagOptions,
+    /// Without waypoints: one this many metres ahead of the first pose.
+    pub goal_ahead_m: Option<f64>,
 }
 
 /// Inputs used.
@@ -148,6 +153,10 @@ pub enum ReplayError {
     Config(#[from] ConfigError),
     #[error(transparent)]
     External(#[from] crate::external::ExternalError),
+    #[error(transparent)]
+    Bag(#[from] BagError),
+    #[error("--goal-ahead: the bag holds no pose to place the goal from")]
+    NoFirstPose,
 }
 
 struct ReplaySink<'a> {
@@ -505,18 +514,75 @@ fn tally<S: EventSource>(
 /// what was said of it (DECISION, GUARD_STATUS), µs of message time.
 const RECORDED_AFTER_US: Utime = 1_000_000;
 
-/// Replays the log at `path`.
+/// Replays the log at `path`: an LCM log, or a ROS 2 bag (MCAP).
 pub fn replay(
     path: &Path,
     config: &Resolved,
     options: &ReplayOptions,
     progress: &mut dyn FnMut(u64),
 ) -> Result<ReplayResult, ReplayError> {
-    let reader = LogReader::open(path).map_err(|source| ReplayError::Read {
+    let read = |source| ReplayError::Read {
         path: path.to_owned(),
         source,
+    };
+    if crate::bag::format_of(path).map_err(read)? != Format::Other {
+        return replay_bag(path, config, options, progress);
+    }
+    let reader = LogReader::open(path).map_err(read)?;
+    let events = TypedEvents::new(InTimeOrder::new(reader, ReorderWindow::default()));
+    replay_events(path, events, config, options, progress, |_| None)
+}
+
+/// [`replay`] of a bag: its clouds and poses as the events of a log.
+fn replay_bag(
+    path: &Path,
+    config: &Resolved,
+    options: &ReplayOptions,
+    progress: &mut dyn FnMut(u64),
+) -> Result<ReplayResult, ReplayError> {
+    let bag = Bag::open(path)?;
+    let sensor = config.sensors.first().ok_or_else(|| {
+        BagError::Choice("the configuration has no sensor to make the clouds images of".into())
     })?;
-    let mut events = TypedEvents::new(InTimeOrder::new(reader, ReorderWindow::default()));
+    let plan = bag.plan(&options.bag, sensor)?;
+    let mut options = options.clone();
+    if let (Some(ahead), None) = (options.goal_ahead_m, &options.waypoints) {
+        let first = plan.first_pose(&bag)?.ok_or(ReplayError::NoFirstPose)?;
+        options.waypoints = Some(goal_ahead(&first, ahead));
+    }
+    let events = TypedEvents::new(InTimeOrder::new(
+        bag.events(&plan)?,
+        ReorderWindow::default(),
+    ));
+    let summary = |events: &TypedEvents<InTimeOrder<BagEvents<'_>>>| {
+        Some(events.source().source().summary().clone())
+    };
+    replay_events(path, events, config, &options, progress, summary)
+}
+
+/// One waypoint `ahead` metres along the heading of `pose`.
+pub fn goal_ahead(pose: &arcnav_vehicle::Pose, ahead: f64) -> Mission {
+    let p = pose.world_from_vehicle * nalgebra::Point3::new(ahead, 0.0, 0.0);
+    Mission {
+        version: 1,
+        waypoints: vec![arcnav_behaviours::Waypoint {
+            x: p.x,
+            y: p.y,
+            radius_m: None,
+        }],
+    }
+}
+
+/// Replays `events` (read from `path`); `bag` gives a bag's summary at
+/// the end.
+fn replay_events<S: EventSource>(
+    path: &Path,
+    mut events: TypedEvents<InTimeOrder<S>>,
+    config: &Resolved,
+    options: &ReplayOptions,
+    progress: &mut dyn FnMut(u64),
+    bag: impl Fn(&TypedEvents<InTimeOrder<S>>) -> Option<crate::bag::BagSummary>,
+) -> Result<ReplayResult, ReplayError> {
     let mut pipeline = config.lockstep()?;
     crate::external::attach(config, &mut pipeline)?;
     pipeline.set_explain(options.stop_at_s.is_some());
@@ -657,6 +723,7 @@ pub fn replay(
     sink.out.paused = false;
     sink.out.finish()?;
     tally(&mut fed, &pipeline, &events, options.recorded_cells);
+    fed.problems.bag = bag(&events);
     fed.problems.window_empty = fed.problems.before_window > 0 && sink.cycles.is_empty();
     Ok(ReplayResult {
         cycles: sink.cycles,

@@ -3,6 +3,8 @@
 use std::collections::BTreeMap;
 
 use arcnav_bus::log::LogStats;
+
+use crate::bag::BagSummary;
 use serde::Serialize;
 
 /// What could not be used, and why. Any of it but `unknown_channels` and
@@ -72,6 +74,9 @@ pub struct InputProblems {
     /// Images still waiting for the pose at their capture time when the log
     /// ended or started over (the pose stream stops before them).
     pub images_unplaced: u64,
+    /// A bag's topics, what was used of them, and what could not be.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bag: Option<BagSummary>,
 }
 
 /// The log reader's counts.
@@ -114,6 +119,7 @@ impl InputProblems {
             || self.no_poses
             || self.window_empty
             || self.images_unplaced > 0
+            || self.bag.as_ref().is_some_and(BagSummary::lost_input)
     }
 
     /// One line per problem, for the summary.
@@ -153,7 +159,19 @@ impl InputProblems {
                 self.clock_restarts
             ));
         }
-        if self.log.events == 0 {
+        if let Some(bag) = &self.bag {
+            for (why, n) in &bag.refused {
+                lines.push(format!("{n} message(s) of {why}"));
+            }
+            if let Some(damage) = &bag.damaged {
+                lines.push(format!(
+                    "the bag is damaged: {damage}; it was read up to there"
+                ));
+            }
+        }
+        if self.log.events == 0 && self.bag.is_some() {
+            lines.push("no message of the bag could be used: nothing was replayed".into());
+        } else if self.log.events == 0 {
             lines.push(format!(
                 "no LCM event could be read from the log ({} bytes skipped as damaged): is it an LCM log?",
                 self.log.skipped_bytes + self.log.truncated_tail_bytes

@@ -1,0 +1,361 @@
+//! Issue 64: `arcnav replay` of ROS 2 bags (MCAP, CDR). The bags are
+//! written by the reference writer (PyPI rosbags, installed by
+//! scripts/test-tools; under CI these tests never skip) from a simulated
+//! run's inputs (`tests/tools/lcm_to_bag.py`, which reads the run's LCM
+//! log with the reference `lcm`): replayed, each gives the decisions of
+//! the log it came from. Damaged bags end with exit status 3 and say what
+//! was lost.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use arcnav_bus::Message as _;
+use arcnav_bus::lcmtypes::steering_command_t;
+use arcnav_bus::log::LogReader;
+use arcnav_bus::messages::channels;
+use arcnav_testkit::{LcmReference, workspace_root};
+
+/// `arcnav ARGS…`: exit code, stdout, stderr.
+fn arcnav(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The run a bag is made from: `short_course` with `sensor`, in a
+/// directory of its own (its log, and its config.toml).
+fn run(sensor: &str) -> &'static Path {
+    static RUNS: OnceLock<std::sync::Mutex<BTreeMap<String, &'static Path>>> = OnceLock::new();
+    let runs = RUNS.get_or_init(Default::default);
+    let mut runs = runs.lock().unwrap();
+    runs.entry(sensor.to_owned()).or_insert_with(|| {
+        let dir: &'static Path =
+            Box::leak(arcnav_testkit::temp_dir(&format!("bag-run-{sensor}")).into_boxed_path());
+        let out = dir.join("run");
+        let (code, stdout, stderr) = arcnav(&[
+            "sim",
+            "--world",
+            "short_course",
+            "--sensor",
+            sensor,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{stdout}\n{stderr}");
+        dir
+    })
+}
+
+/// A bag of `run`'s log written by rosbags (`lcm_to_bag.py ARGS`): the
+/// path of its .mcap (or .bag), or `None` when the reference tools are
+/// missing (a failure under CI).
+fn make_bag(run: &Path, name: &str, args: &[&str]) -> Option<PathBuf> {
+    let (reference, types) = LcmReference::with_arcnav_types()?;
+    let out = run.join(name);
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_file(&out);
+    let output = reference
+        .python()
+        .arg(workspace_root().join("tests/tools/lcm_to_bag.py"))
+        .arg(run.join("run/mission.lcm"))
+        .arg(&out)
+        .args(args)
+        .env("PYTHONPATH", types)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() && stderr.contains("No module named 'rosbags'") {
+        arcnav_testkit::missing("the reference ROS bag writer (PyPI rosbags)");
+        return None;
+    }
+    assert!(output.status.success(), "lcm_to_bag.py {args:?}: {stderr}");
+    if out.is_file() {
+        return Some(out);
+    }
+    let mcap = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .expect("a ROS 2 bag holds a .mcap");
+    Some(mcap)
+}
+
+/// `arcnav replay BAG` with the run's configuration and the course's
+/// waypoints, and `extra`; the recomputed log is `out`.
+fn replay(run: &Path, bag: &Path, out: &Path, extra: &[&str]) -> (i32, String, String) {
+    let config = run.join("run/config.toml");
+    let waypoints = workspace_root().join("sim/worlds/short_course.toml");
+    let mut args = vec![
+        "replay",
+        bag.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    if !extra.contains(&"--goal-ahead") {
+        args.extend(["--waypoints", waypoints.to_str().unwrap()]);
+    }
+    args.extend_from_slice(extra);
+    arcnav(&args)
+}
+
+/// A log's steering commands by their cycle's time: (curvature, speed).
+fn commands(log: &Path) -> BTreeMap<i64, (f64, f64)> {
+    LogReader::open(log)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.channel == channels::STEERING_COMMAND)
+        .map(|e| {
+            let c = steering_command_t::decode(&e.data).unwrap();
+            (c.utime, (c.curvature, c.speed))
+        })
+        .collect()
+}
+
+/// Every cycle of `replayed` is a cycle of `recorded` with the same
+/// command; `replayed` has at least `min` of them.
+fn assert_same_decisions(tag: &str, recorded: &Path, replayed: &Path, min: usize) {
+    let (a, b) = (commands(recorded), commands(replayed));
+    assert!(b.len() >= min, "{tag}: {} decisions", b.len());
+    let differing: Vec<_> = b
+        .iter()
+        .filter(|(t, (k, v))| {
+            a.get(t)
+                .is_none_or(|(k0, v0)| (k - k0).abs() > 1e-6 || (v - v0).abs() > 1e-6)
+        })
+        .take(5)
+        .collect();
+    assert!(
+        differing.is_empty(),
+        "{tag}: {} decisions, these differ from the log's own: {differing:?}",
+        b.len()
+    );
+}
+
+#[test]
+fn bags_written_by_rosbags_replay_to_the_decisions_of_the_log_they_came_from() {
+    let erim = run("erim");
+    // Each cloud layout, each kind of pose.
+    for (name, args) in [
+        (
+            "organized-odometry",
+            &["--cloud", "organized", "--poses", "odometry"],
+        ),
+        ("rings-tf", &["--cloud", "rings", "--poses", "tf"]),
+        ("xyz-pose", &["--cloud", "xyz", "--poses", "pose"]),
+    ] {
+        let mut all = vec!["--format", "mcap"];
+        all.extend_from_slice(args);
+        let Some(bag) = make_bag(erim, name, &all) else {
+            return;
+        };
+        let out = erim.join(format!("{name}.lcm"));
+        let (code, stdout, stderr) = replay(erim, &bag, &out, &[]);
+        assert_eq!(code, 0, "{name}:\n{stdout}\n{stderr}");
+        assert!(stdout.contains("problems      none"), "{name}:\n{stdout}");
+        assert!(
+            stdout.contains("mount         from /tf_static: base_link ← lidar"),
+            "{name}:\n{stdout}"
+        );
+        // The whole course: 62 s, a decision every 0.1 s.
+        assert_same_decisions(name, &erim.join("run/mission.lcm"), &out, 600);
+    }
+    // The 64-beam lidar's 64 × 2048 organized clouds, 4 s of them.
+    let lidar = run("lidar64");
+    let args = [
+        "--format",
+        "mcap",
+        "--cloud",
+        "organized",
+        "--poses",
+        "odometry",
+        "--seconds",
+        "4",
+    ];
+    let Some(bag) = make_bag(lidar, "organized-odometry", &args) else {
+        return;
+    };
+    let out = lidar.join("organized.lcm");
+    let (code, stdout, stderr) = replay(lidar, &bag, &out, &[]);
+    assert_eq!(code, 0, "lidar64:\n{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("clouds        41 organized from /points"),
+        "{stdout}"
+    );
+    assert_same_decisions("lidar64", &lidar.join("run/mission.lcm"), &out, 40);
+}
+
+#[test]
+fn a_bag_replays_toward_a_goal_ahead_and_names_what_it_cannot_choose() {
+    let erim = run("erim");
+    let Some(bag) = make_bag(
+        erim,
+        "goal",
+        &[
+            "--format",
+            "mcap",
+            "--cloud",
+            "organized",
+            "--poses",
+            "odometry",
+            "--seconds",
+            "10",
+        ],
+    ) else {
+        return;
+    };
+    let out = erim.join("goal.lcm");
+    let (code, stdout, stderr) = replay(erim, &bag, &out, &["--goal-ahead", "30"]);
+    assert_eq!(code, 0, "{stdout}\n{stderr}");
+    assert!(stdout.contains("1 waypoint lists"), "{stdout}");
+    assert!(commands(&out).len() >= 90, "{stdout}");
+    // A topic that is not there, or not of the kind asked for.
+    let (code, _, stderr) = replay(erim, &bag, &out, &["--cloud", "/velodyne_points"]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains(
+            "the bag has no topic /velodyne_points; its topics: /odom (nav_msgs/msg/Odometry, "
+        ),
+        "{stderr}"
+    );
+    let (code, _, stderr) = replay(erim, &bag, &out, &["--pose", "/points"]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("/points is a sensor_msgs/msg/PointCloud2, not a pose"),
+        "{stderr}"
+    );
+    // A ROS 1 bag is named for what it is, with the way to convert it.
+    let Some(ros1) = make_bag(
+        erim,
+        "goal.bag",
+        &[
+            "--format",
+            "ros1",
+            "--cloud",
+            "organized",
+            "--poses",
+            "odometry",
+            "--seconds",
+            "1",
+        ],
+    ) else {
+        return;
+    };
+    let (code, _, stderr) = replay(erim, &ros1, &out, &[]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("is a ROS 1 bag") && stderr.contains("rosbags-convert"),
+        "{stderr}"
+    );
+}
+
+/// Where each record of an MCAP file starts (after its magic), with its
+/// opcode: opcode u8, length u64 LE, body.
+fn records(bytes: &[u8]) -> Vec<(usize, u8)> {
+    let mut at = 8;
+    let mut found = Vec::new();
+    while at + 9 <= bytes.len() {
+        let op = bytes[at];
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+        found.push((at, op));
+        if op == 0x02 {
+            break; // the footer
+        }
+        at += 9 + len;
+    }
+    found
+}
+
+#[test]
+fn a_damaged_bag_ends_in_a_clear_message_and_exit_3_with_counts() {
+    let erim = run("erim");
+    let Some(bag) = make_bag(
+        erim,
+        "damage",
+        &[
+            "--format",
+            "mcap",
+            "--cloud",
+            "organized",
+            "--poses",
+            "odometry",
+            "--seconds",
+            "20",
+            "--rewrite",
+        ],
+    ) else {
+        return;
+    };
+    let bytes = std::fs::read(&bag).unwrap();
+    let chunks: Vec<usize> = records(&bytes)
+        .into_iter()
+        .filter(|&(_, op)| op == 0x06)
+        .map(|(at, _)| at)
+        .collect();
+    assert!(chunks.len() >= 3, "{} chunks", chunks.len());
+    let out = erim.join("damage.lcm");
+    let damaged = erim.join("damaged.mcap");
+    let check = |what: &str, bytes: &[u8], says: &str| {
+        std::fs::write(&damaged, bytes).unwrap();
+        let (code, stdout, stderr) = replay(erim, &damaged, &out, &[]);
+        assert_eq!(code, 3, "{what}:\n{stdout}\n{stderr}");
+        assert!(stdout.contains(says), "{what}: not {says:?}:\n{stdout}");
+        // What came before the damage was replayed.
+        assert!(!commands(&out).is_empty(), "{what}:\n{stdout}");
+    };
+    // Cut in the middle of its third chunk.
+    check("truncated", &bytes[..chunks[2] + 100], "the bag is damaged");
+    // A byte of the third chunk's records changed (written by the
+    // reference writer with CRCs): its CRC no longer holds.
+    let mut flipped = bytes.clone();
+    flipped[chunks[2] + 200] ^= 0x40;
+    check("a chunk's CRC", &flipped, "the bag is damaged");
+    // A record declaring 2 GB, put before the third chunk.
+    let mut huge = bytes[..chunks[2]].to_vec();
+    huge.push(0x05);
+    huge.extend_from_slice(&(2u64 << 30).to_le_bytes());
+    huge.extend_from_slice(&[0u8; 64]);
+    huge.extend_from_slice(&bytes[chunks[2]..]);
+    check("a 2 GB record", &huge, "the bag is damaged");
+    // The cloud topic's schema is not ROS 2's: every cloud counted, none
+    // misread.
+    let Some(renamed) = make_bag(
+        erim,
+        "renamed",
+        &[
+            "--format",
+            "mcap",
+            "--cloud",
+            "organized",
+            "--poses",
+            "odometry",
+            "--seconds",
+            "3",
+            "--cloud-schema-renamed",
+        ],
+    ) else {
+        return;
+    };
+    let (code, stdout, stderr) = replay(erim, &renamed, &out, &[]);
+    assert_eq!(code, 3, "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains(
+            "7 message(s) of /points: its schema differs from ROS 2's: PointCloud2's field 7 is \
+             `uint32 row_stride`, not `uint32 row_step`"
+        ),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("inputs        151 poses, 0 range images"),
+        "{stdout}"
+    );
+}
