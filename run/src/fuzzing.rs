@@ -38,7 +38,69 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("occupancy_map", occupancy_map),
     ("key_file", key_file),
     ("range_slices", range_slices),
+    ("ros2_bag", ros2_bag),
+    ("cdr_messages", cdr_messages),
 ];
+
+/// A ROS 2 bag (MCAP): its topics chosen (as found, and as the seeds name
+/// them), every message converted as a replay converts them (clouds on the
+/// ERIM's grid), every event read.
+pub fn ros2_bag(data: &[u8]) {
+    use arcnav_bus::log::EventSource as _;
+    let bag = crate::bag::Bag::from_bytes("fuzz.mcap", data.to_vec());
+    let sensor = arcnav_perception::SensorModel::erim();
+    let choices = [
+        (None, None),
+        (Some("/points"), Some("/odom")),
+        (Some("/velodyne_points"), Some("/tf")),
+    ];
+    for (cloud, pose) in choices {
+        let options = crate::bag::BagOptions {
+            cloud: cloud.map(str::to_owned),
+            pose: pose.map(str::to_owned),
+            vehicle_frame: None,
+        };
+        let Ok(plan) = bag.plan(&options, &sensor) else {
+            continue;
+        };
+        let Ok(mut events) = bag.events(&plan) else {
+            continue;
+        };
+        let mut n = 0u64;
+        while let Ok(Some(event)) = events.next_event() {
+            assert!(!event.data.is_empty());
+            n += 1;
+        }
+        let summary = events.summary();
+        assert_eq!(summary.poses + summary.clouds.values().sum::<u64>(), n);
+    }
+}
+
+/// CDR bytes as each message type a replay reads; a cloud that decodes,
+/// as an image on a small grid.
+pub fn cdr_messages(data: &[u8]) {
+    use crate::bag::msgs;
+    if let Ok(cloud) = msgs::from_cdr::<msgs::PointCloud2>(data) {
+        let grid = arcnav_perception::BeamTable::uniform(16, 64, 0.3, -0.3, 3.0, -3.0);
+        if let Ok(image) = crate::bag::cloud::to_image(&cloud, &grid, 1 << 20) {
+            assert_eq!(image.range.len(), image.beams.rows() * image.beams.cols());
+        }
+    }
+    let _ = msgs::from_cdr::<msgs::Odometry>(data).map(|o| o.pose.pose.isometry());
+    let _ = msgs::from_cdr::<msgs::PoseStamped>(data).map(|p| p.pose.isometry());
+    let _ = msgs::from_cdr::<msgs::PoseWithCovarianceStamped>(data);
+    if let Ok(tf) = msgs::from_cdr::<msgs::TfMessage>(data) {
+        let mut frames = crate::bag::frames::Frames::default();
+        for t in &tf.transforms {
+            if let Ok(iso) = msgs::isometry(t.transform.translation, t.transform.rotation) {
+                frames.set(&t.header.frame_id, &t.child_frame_id, iso);
+            }
+        }
+        for t in &tf.transforms {
+            let _ = frames.to_top(&t.child_frame_id);
+        }
+    }
+}
 
 /// LCM message decoding: by fingerprint, and as each type whatever the
 /// fingerprint says; what decodes converts to arcnav's types or is refused.

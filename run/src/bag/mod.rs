@@ -143,10 +143,26 @@ impl BagSummary {
     }
 }
 
-/// A bag, mapped.
+/// A bag, mapped (or, for the fuzz targets, in memory).
 pub struct Bag {
     path: PathBuf,
-    map: memmap2::Mmap,
+    bytes: Bytes,
+}
+
+enum Bytes {
+    Mapped(memmap2::Mmap),
+    Owned(Vec<u8>),
+}
+
+impl std::ops::Deref for Bytes {
+    type Target = [u8];
+
+    fn deref(&self) -> &[u8] {
+        match self {
+            Self::Mapped(map) => map,
+            Self::Owned(bytes) => bytes,
+        }
+    }
 }
 
 impl Bag {
@@ -177,27 +193,41 @@ impl Bag {
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(open)?;
         Ok(Self {
             path: path.to_owned(),
-            map,
+            bytes: Bytes::Mapped(map),
         })
+    }
+
+    /// A bag of `bytes` (the MCAP file's), named `name` in messages.
+    pub fn from_bytes(name: &str, bytes: Vec<u8>) -> Self {
+        Self {
+            path: PathBuf::from(name),
+            bytes: Bytes::Owned(bytes),
+        }
     }
 
     fn messages(&self) -> Result<mcap::MessageStream<'_>, BagError> {
+        let unreadable = |reason: String| BagError::Unreadable {
+            path: self.path.clone(),
+            reason,
+        };
+        if !self.bytes.starts_with(MCAP_MAGIC) {
+            return Err(unreadable(
+                "it does not start with MCAP's magic bytes".into(),
+            ));
+        }
         mcap::MessageStream::new_with_options(
-            &self.map,
+            &self.bytes,
             mcap::read::Options::ValidateChunkCrcs.into(),
         )
-        .map_err(|e| BagError::Unreadable {
-            path: self.path.clone(),
-            reason: e.to_string(),
-        })
+        .map_err(|e| unreadable(e.to_string()))
     }
 
     pub fn len(&self) -> u64 {
-        self.map.len() as u64
+        self.bytes.len() as u64
     }
 
     pub fn is_empty(&self) -> bool {
-        self.map.is_empty()
+        self.bytes.is_empty()
     }
 
     /// Reads the bag once: its topics, the static frames, the first

@@ -1,0 +1,116 @@
+"""Seeds for the `ros2_bag` and `cdr_messages` fuzz targets, written by the
+reference tools (PyPI rosbags for the messages, PyPI mcap for the file):
+a few-kilobyte ROS 2 bag of every kind a replay reads (an organized cloud
+of 2 x 4 points, a ring cloud, odometry, a pose, /tf and /tf_static), and
+each message's CDR bytes alone.
+
+    python bag_seeds.py FUZZ_CORPUS_DIR
+
+writes FUZZ_CORPUS_DIR/ros2_bag/seed-* and FUZZ_CORPUS_DIR/cdr_messages/seed-*.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+from mcap.writer import CompressionType, Writer
+from rosbags.typesys import Stores, get_typestore
+
+ts = get_typestore(Stores.ROS2_HUMBLE)
+T = ts.types
+
+
+def header(sec, frame):
+    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=0), frame_id=frame)
+
+
+def cloud(sec, ring):
+    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")]
+    points = [(5.0, 1.0, -1.0), (5.0, -1.0, -1.0), (6.0, 0.5, -1.2), (float("nan"),) * 3,
+              (4.0, 1.0, -0.8), (4.0, -1.0, -0.8), (0.0, 0.0, 0.0), (7.0, 0.0, -1.5)]
+    if ring:
+        fields.append(T["sensor_msgs/msg/PointField"](name="ring", offset=12, datatype=4, count=1))
+        dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("ring", "<u2"), ("pad", "<u2")]
+        data = np.array([p + (i % 2, 0) for i, p in enumerate(points)], dtype=dtype)
+        height, width, step = 1, 8, 16
+    else:
+        dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+        data = np.array(points, dtype=dtype)
+        height, width, step = 2, 4, 12
+    return T["sensor_msgs/msg/PointCloud2"](
+        header=header(sec, "lidar"), height=height, width=width, fields=fields, is_bigendian=False,
+        point_step=step, row_step=step * width, data=np.frombuffer(data.tobytes(), dtype=np.uint8),
+        is_dense=False,
+    )
+
+
+def pose(x):
+    return T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=x, y=0.0, z=0.0),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+    )
+
+
+def transform(sec, parent, child, x, z):
+    return T["geometry_msgs/msg/TransformStamped"](
+        header=header(sec, parent), child_frame_id=child,
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=T["geometry_msgs/msg/Vector3"](x=x, y=0.0, z=z),
+            rotation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        ),
+    )
+
+
+def odometry(sec):
+    zero = np.zeros(36)
+    twist = T["geometry_msgs/msg/Twist"](
+        linear=T["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0),
+        angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.1),
+    )
+    return T["nav_msgs/msg/Odometry"](
+        header=header(sec, "odom"), child_frame_id="base_link",
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose(float(sec)), covariance=zero),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=zero),
+    )
+
+
+def messages():
+    """(topic, type, message) in time order, a second apart."""
+    tf = "tf2_msgs/msg/TFMessage"
+    yield 0, "/tf_static", tf, T[tf](transforms=[transform(0, "base_link", "lidar", 1.0, 2.0)])
+    for sec in range(1, 3):
+        yield sec, "/odom", "nav_msgs/msg/Odometry", odometry(sec)
+        yield sec, "/pose", "geometry_msgs/msg/PoseStamped", T["geometry_msgs/msg/PoseStamped"](
+            header=header(sec, "odom"), pose=pose(float(sec)))
+        yield sec, "/tf", tf, T[tf](transforms=[transform(sec, "odom", "base_link", float(sec), 0.0)])
+        yield sec, "/points", "sensor_msgs/msg/PointCloud2", cloud(sec, ring=False)
+        yield sec, "/velodyne_points", "sensor_msgs/msg/PointCloud2", cloud(sec, ring=True)
+
+
+def main():
+    root = Path(sys.argv[1])
+    bags, cdr = root / "ros2_bag", root / "cdr_messages"
+    bags.mkdir(parents=True, exist_ok=True)
+    cdr.mkdir(parents=True, exist_ok=True)
+    written = set()
+    for name, compression in (("seed-plain", CompressionType.NONE), ("seed-zstd", CompressionType.ZSTD)):
+        with open(bags / f"{name}.mcap", "wb") as f:
+            writer = Writer(f, compression=compression)
+            writer.start(profile="ros2", library="bag_seeds.py")
+            channels = {}
+            for sec, topic, msgtype, msg in messages():
+                if topic not in channels:
+                    text, _ = ts.generate_msgdef(msgtype, ros_version=2)
+                    schema = writer.register_schema(msgtype, "ros2msg", text.encode())
+                    channels[topic] = writer.register_channel(topic, "cdr", schema)
+                data = ts.serialize_cdr(msg, msgtype)
+                writer.add_message(channels[topic], sec * 10**9, bytes(data), sec * 10**9)
+                if msgtype not in written:
+                    (cdr / f"seed-{msgtype.split('/')[-1]}").write_bytes(bytes(data))
+                    written.add(msgtype)
+            writer.finish()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
