@@ -344,6 +344,10 @@ struct ReplayArgs {
     /// With no waypoints: one this many metres ahead of the first pose.
     #[arg(long, value_name = "M", conflicts_with = "waypoints")]
     goal_ahead: Option<f64>,
+    /// Sensor preset (sets sensor.preset): a bag's unorganized clouds are
+    /// binned on its grid.
+    #[arg(long, value_enum, conflicts_with = "compare_config")]
+    sensor: Option<SensorArg>,
 }
 
 #[derive(Debug, clap::Args)]

@@ -4,32 +4,41 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use arcnav::Resolved;
+use arcnav::{Config, Resolved};
 use arcnav_behaviours::Registry;
+use arcnav_perception::SensorPreset;
 
 /// The configuration to redo a run's decisions with: `--config` if given,
 /// else the `config.toml` `arcnav sim` wrote beside the log (said so on
-/// stderr), else the defaults. A run made with another evaluator or other
-/// sensors is redone as it was driven.
+/// stderr), else the defaults; with `sensor` (`--sensor`) as its sensor
+/// preset. A run made with another evaluator or other sensors is redone
+/// as it was driven.
 pub fn config_of_log(
     log: &Path,
     given: Option<&Path>,
     registry: &Registry,
+    sensor: Option<SensorPreset>,
 ) -> anyhow::Result<Resolved> {
-    if let Some(path) = given {
-        return Ok(Resolved::load(path, registry)?);
-    }
     let beside = log.parent().unwrap_or(Path::new(".")).join("config.toml");
-    if beside.is_file() {
-        let config = Resolved::load(&beside, registry)
-            .with_context(|| format!("the run's configuration {}", beside.display()))?;
-        eprintln!(
-            "using {}, the configuration the run was made with (--config to give another)",
-            beside.display()
-        );
-        return Ok(config);
+    let (mut config, origin) = match given {
+        Some(path) => (Config::load(path)?, path.display().to_string()),
+        None if beside.is_file() => {
+            let config = Config::load(&beside)
+                .with_context(|| format!("the run's configuration {}", beside.display()))?;
+            eprintln!(
+                "using {}, the configuration the run was made with (--config to give another)",
+                beside.display()
+            );
+            (config, beside.display().to_string())
+        }
+        None => (Config::default(), "the defaults".to_owned()),
+    };
+    if let Some(preset) = sensor {
+        super::set_sensor_preset(&mut config, preset)?;
     }
-    Ok(Resolved::load_or_default(None, registry)?)
+    config
+        .resolve(registry)
+        .with_context(|| format!("the configuration {origin}"))
 }
 
 /// The files a command reading `log` with `configs` reads, each named by

@@ -13,7 +13,7 @@ use super::logged::{config_of_log, files_read};
 pub fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
     use arcnav::replay::{ReplayOptions, replay as run_replay};
     let registry = Registry::builtin();
-    let config = config_of_log(&args.log, args.config.as_deref(), &registry)?;
+    let config = config_of_log(&args.log, args.config.as_deref(), &registry, None)?;
     anyhow::ensure!(
         args.at.is_finite() && (0.0..=1e9).contains(&args.at),
         "--at {}: must be a number of seconds from the log's start, 0 or more",
@@ -134,7 +134,7 @@ fn cells_of_a_log_without_images(log: &Path) -> u64 {
 /// `arcnav export LOG --mcap OUT`.
 pub fn export(args: ExportArgs) -> anyhow::Result<ExitCode> {
     let registry = Registry::builtin();
-    let config = config_of_log(&args.log, args.config.as_deref(), &registry)?;
+    let config = config_of_log(&args.log, args.config.as_deref(), &registry, None)?;
     arcnav::output::check_outputs(&[&args.mcap], &files_read(&args.log, [&config]))?;
     write_mcap(&args.log, &args.mcap, &config)?;
     Ok(ExitCode::SUCCESS)

@@ -24,7 +24,12 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             .collect::<anyhow::Result<_>>()?,
         None => vec![(
             "replayed".to_owned(),
-            config_of_log(&args.log, args.config.as_deref(), &registry)?,
+            config_of_log(
+                &args.log,
+                args.config.as_deref(),
+                &registry,
+                args.sensor.map(Into::into),
+            )?,
         )],
     };
     let mut inputs = files_read(&args.log, configs.iter().map(|(_, c)| c));

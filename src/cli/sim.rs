@@ -158,12 +158,7 @@ fn configuration(args: &SimArgs) -> anyhow::Result<Resolved> {
         }
     }
     if let Some(sensor) = args.sensor {
-        anyhow::ensure!(
-            config.sensors.is_empty(),
-            "--sensor: the configuration lists its sensors in [[sensors]]; change them there"
-        );
-        config.sensor.preset = sensor.into();
-        config.set_by("sensor.preset", "--sensor");
+        super::set_sensor_preset(&mut config, sensor.into())?;
     }
     if let Some(evaluator) = &args.evaluator {
         config.perception.evaluator.clone_from(evaluator);
