@@ -88,6 +88,23 @@ fn make_bag(run: &Path, name: &str, args: &[&str]) -> Option<PathBuf> {
     Some(mcap)
 }
 
+/// `lcm_to_bag.py`'s arguments for a ROS 2 bag of organized clouds and
+/// odometry over the log's first `seconds`, and `extra`.
+fn organized<'a>(seconds: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "--format",
+        "mcap",
+        "--cloud",
+        "organized",
+        "--poses",
+        "odometry",
+        "--seconds",
+        seconds,
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
 /// `arcnav replay BAG` with the run's configuration and the course's
 /// waypoints, and `extra`; the recomputed log is `out`.
 fn replay(run: &Path, bag: &Path, out: &Path, extra: &[&str]) -> (i32, String, String) {
@@ -197,20 +214,7 @@ fn bags_written_by_rosbags_replay_to_the_decisions_of_the_log_they_came_from() {
 #[test]
 fn a_bag_replays_toward_a_goal_ahead_and_names_what_it_cannot_choose() {
     let erim = run("erim");
-    let Some(bag) = make_bag(
-        erim,
-        "goal",
-        &[
-            "--format",
-            "mcap",
-            "--cloud",
-            "organized",
-            "--poses",
-            "odometry",
-            "--seconds",
-            "10",
-        ],
-    ) else {
+    let Some(bag) = make_bag(erim, "goal", &organized("10", &[])) else {
         return;
     };
     let out = erim.join("goal.lcm");
@@ -278,21 +282,7 @@ fn records(bytes: &[u8]) -> Vec<(usize, u8)> {
 #[test]
 fn a_damaged_bag_ends_in_a_clear_message_and_exit_3_with_counts() {
     let erim = run("erim");
-    let Some(bag) = make_bag(
-        erim,
-        "damage",
-        &[
-            "--format",
-            "mcap",
-            "--cloud",
-            "organized",
-            "--poses",
-            "odometry",
-            "--seconds",
-            "20",
-            "--rewrite",
-        ],
-    ) else {
+    let Some(bag) = make_bag(erim, "damage", &organized("20", &["--rewrite"])) else {
         return;
     };
     let bytes = std::fs::read(&bag).unwrap();
@@ -331,17 +321,7 @@ fn a_damaged_bag_ends_in_a_clear_message_and_exit_3_with_counts() {
     let Some(renamed) = make_bag(
         erim,
         "renamed",
-        &[
-            "--format",
-            "mcap",
-            "--cloud",
-            "organized",
-            "--poses",
-            "odometry",
-            "--seconds",
-            "3",
-            "--cloud-schema-renamed",
-        ],
+        &organized("3", &["--cloud-schema-renamed"]),
     ) else {
         return;
     };

@@ -418,66 +418,55 @@ impl Plan {
                     ))),
                 }
             };
-        let is_cloud = |k: Kind| k == Kind::Cloud;
-        let cloud_topic = match &options.cloud {
-            Some(given) => named(given, "a sensor_msgs/PointCloud2", &is_cloud)?,
-            None => match of_kind(&is_cloud).as_slice() {
-                [one] => (*one).clone(),
-                [] => {
-                    return Err(BagError::Choice(format!(
-                        "the bag holds no point cloud (sensor_msgs/PointCloud2); its topics: {}",
-                        listing()
-                    )));
-                }
-                several => {
-                    return Err(BagError::Choice(format!(
-                        "the bag holds {} point-cloud topics ({}): choose one with --cloud",
+        // The one topic of a kind; none; or an error naming the several.
+        let only =
+            |found: Vec<&String>, what: &str, flag: &str| -> Result<Option<String>, BagError> {
+                match found.as_slice() {
+                    [one] => Ok(Some((*one).clone())),
+                    [] => Ok(None),
+                    several => Err(BagError::Choice(format!(
+                        "the bag holds {} {what} topics ({}): choose one with {flag}",
                         several.len(),
                         several
                             .iter()
                             .map(|s| s.as_str())
                             .collect::<Vec<_>>()
                             .join(", ")
-                    )));
+                    ))),
                 }
-            },
+            };
+        let is_cloud = |k: Kind| k == Kind::Cloud;
+        let cloud_topic = match &options.cloud {
+            Some(given) => named(given, "a sensor_msgs/PointCloud2", &is_cloud)?,
+            None => only(of_kind(&is_cloud), "point-cloud", "--cloud")?.ok_or_else(|| {
+                BagError::Choice(format!(
+                    "the bag holds no point cloud (sensor_msgs/PointCloud2); its topics: {}",
+                    listing()
+                ))
+            })?,
         };
         let has_tf = topics
             .get("/tf")
             .is_some_and(|t| t.readable() == Ok(Kind::Transforms));
+        let pose_topic = |topic: String| {
+            let kind = topics[&topic].kind.unwrap_or(Kind::PoseStamped);
+            PoseSource::Topic(topic, kind)
+        };
         let poses = match options.pose.as_deref() {
             Some("/tf") if has_tf => PoseSource::Tf,
-            Some(given) => {
-                let topic = named(
-                    given,
-                    "a pose (nav_msgs/Odometry, geometry_msgs/PoseStamped or PoseWithCovarianceStamped) or /tf",
-                    &Kind::is_pose,
-                )?;
-                let kind = topics[&topic].kind.unwrap_or(Kind::PoseStamped);
-                PoseSource::Topic(topic, kind)
-            }
-            None => match of_kind(&Kind::is_pose).as_slice() {
-                [one] => PoseSource::Topic(
-                    (*one).clone(),
-                    topics[*one].kind.unwrap_or(Kind::PoseStamped),
-                ),
-                [] if has_tf => PoseSource::Tf,
-                [] => {
+            Some(given) => pose_topic(named(
+                given,
+                "a pose (nav_msgs/Odometry, geometry_msgs/PoseStamped or PoseWithCovarianceStamped) or /tf",
+                &Kind::is_pose,
+            )?),
+            None => match only(of_kind(&Kind::is_pose), "pose", "--pose (or --pose /tf)")? {
+                Some(topic) => pose_topic(topic),
+                None if has_tf => PoseSource::Tf,
+                None => {
                     return Err(BagError::Choice(format!(
                         "the bag holds no pose (nav_msgs/Odometry, geometry_msgs/PoseStamped, \
                          PoseWithCovarianceStamped) nor /tf; its topics: {}",
                         listing()
-                    )));
-                }
-                several => {
-                    return Err(BagError::Choice(format!(
-                        "the bag holds {} pose topics ({}): choose one with --pose (or --pose /tf)",
-                        several.len(),
-                        several
-                            .iter()
-                            .map(|s| s.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
                     )));
                 }
             },
