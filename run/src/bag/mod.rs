@@ -18,6 +18,7 @@
 pub mod cloud;
 pub mod frames;
 pub mod msgs;
+mod records;
 
 use std::collections::BTreeMap;
 use std::io::Read as _;
@@ -36,6 +37,7 @@ use serde::Serialize;
 use cloud::{CloudCounts, Layout};
 use frames::Frames;
 use msgs::{Kind, Schema};
+use records::{ChannelInfo, RawMessage, Records};
 
 /// The first bytes of an MCAP file.
 pub const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
@@ -205,21 +207,14 @@ impl Bag {
         }
     }
 
-    fn messages(&self) -> Result<mcap::MessageStream<'_>, BagError> {
-        let unreadable = |reason: String| BagError::Unreadable {
-            path: self.path.clone(),
-            reason,
-        };
+    fn messages(&self) -> Result<Records<'_>, BagError> {
         if !self.bytes.starts_with(MCAP_MAGIC) {
-            return Err(unreadable(
-                "it does not start with MCAP's magic bytes".into(),
-            ));
+            return Err(BagError::Unreadable {
+                path: self.path.clone(),
+                reason: "it does not start with MCAP's magic bytes".into(),
+            });
         }
-        mcap::MessageStream::new_with_options(
-            &self.bytes,
-            mcap::read::Options::ValidateChunkCrcs.into(),
-        )
-        .map_err(|e| unreadable(e.to_string()))
+        Ok(Records::new(&self.bytes))
     }
 
     pub fn len(&self) -> u64 {
@@ -240,7 +235,7 @@ impl Bag {
             let message = match message {
                 Ok(m) => m,
                 Err(e) => {
-                    damaged = Some(e.to_string());
+                    damaged = Some(e);
                     break;
                 }
             };
@@ -287,8 +282,6 @@ impl Bag {
             dynamic: plan.statics.clone(),
             previous: None,
             stats: LogStats::default(),
-            read: 0,
-            size: self.len(),
             ended: false,
         })
     }
@@ -317,7 +310,7 @@ struct Topic {
 }
 
 impl Topic {
-    fn of(channel: &mcap::Channel<'_>) -> Self {
+    fn of(channel: &ChannelInfo) -> Self {
         let schema = channel.schema.as_deref();
         let type_name = schema.map_or_else(String::new, |s| s.name.clone());
         let kind = Kind::of(&type_name);
@@ -601,7 +594,7 @@ const MAX_PIXELS: u64 = (MAX_IMAGE_BYTES / 4) as u64;
 /// A bag's messages as LCM events: POSE (`pose_t`) and RANGE_IMAGE
 /// (`range_image_t`), stamped with the bag's log times.
 pub struct BagEvents<'a> {
-    messages: mcap::MessageStream<'a>,
+    messages: Records<'a>,
     plan: &'a Plan,
     summary: BagSummary,
     /// `/tf_static` and `/tf` as read so far.
@@ -609,8 +602,6 @@ pub struct BagEvents<'a> {
     /// The previous pose, for a velocity where the message has none.
     previous: Option<Pose>,
     stats: LogStats,
-    read: u64,
-    size: u64,
     ended: bool,
 }
 
@@ -629,7 +620,7 @@ impl BagEvents<'_> {
     }
 
     /// The LCM event a bag message makes, if any.
-    fn convert(&mut self, message: &mcap::Message<'_>) -> Option<(String, Vec<u8>)> {
+    fn convert(&mut self, message: &RawMessage) -> Option<(String, Vec<u8>)> {
         let topic = message.channel.topic.as_str();
         let plan = self.plan;
         if let Some(why) = plan.unreadable.get(topic) {
@@ -779,14 +770,13 @@ impl EventSource for BagEvents<'_> {
                 }
                 Some(Err(e)) => {
                     // Counted, and the bag ends here: its summary says so.
-                    self.summary.damaged = Some(e.to_string());
+                    self.summary.damaged = Some(e);
                     self.stats.corrupt_events += 1;
                     self.ended = true;
                     break;
                 }
                 Some(Ok(m)) => m,
             };
-            self.read += 1;
             if let Some((channel, data)) = self.convert(&message) {
                 self.stats.events += 1;
                 return Ok(Some(LogEvent {
@@ -805,10 +795,6 @@ impl EventSource for BagEvents<'_> {
     }
 
     fn position(&self) -> u64 {
-        let total: u64 = self.summary.topics.iter().map(|t| t.messages).sum();
-        if total == 0 {
-            return 0;
-        }
-        (self.size as f64 * (self.read as f64 / total as f64).min(1.0)) as u64
+        self.messages.position()
     }
 }
