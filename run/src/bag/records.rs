@@ -59,8 +59,12 @@ impl<'a> Records<'a> {
         let options = LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
             .with_record_length_limit(RECORD_LIMIT);
+        // Read no further than the first uncompressed chunk whose records
+        // overrun it: mcap's reader subtracts such a record's length from
+        // what the chunk has left (an overflow: a panic where overflow is
+        // checked, garbage where not). Found by the `ros2_bag` fuzz target.
         Self {
-            bytes,
+            bytes: overrun(bytes).map_or(bytes, |at| &bytes[..at]),
             fed: 0,
             reader: LinearReader::new_with_options(options),
             schemas: HashMap::new(),
@@ -161,6 +165,55 @@ impl Iterator for Records<'_> {
         }
         None
     }
+}
+
+/// Where the first uncompressed chunk whose records do not fit in it
+/// starts, if one does not: the file is read up to there (and found cut
+/// short). Walks the top-level records' headers only.
+fn overrun(bytes: &[u8]) -> Option<usize> {
+    const HEAD: usize = 9;
+    let mut at = crate::bag::MCAP_MAGIC.len();
+    while let Some(head) = bytes.get(at..at + HEAD) {
+        let len = u64::from_le_bytes(head[1..].try_into().unwrap_or_default());
+        let end = usize::try_from(len).ok()?.checked_add(at + HEAD)?;
+        let body = bytes.get(at + HEAD..end)?;
+        if head[0] == op::CHUNK && !chunk_fits(body) {
+            return Some(at);
+        }
+        at = end;
+    }
+    None
+}
+
+/// Whether an uncompressed chunk's records each fit in it (a compressed
+/// one is mcap's to check as it decompresses).
+fn chunk_fits(body: &[u8]) -> bool {
+    let mut r = Fields(body);
+    if r.take(8 + 8 + 8 + 4).is_err() {
+        return true;
+    }
+    let (Ok(compression), Ok(len)) = (r.bytes(), r.u64()) else {
+        return true;
+    };
+    if !compression.is_empty() {
+        return true;
+    }
+    let Ok(mut records) = r
+        .take(usize::try_from(len).unwrap_or(usize::MAX))
+        .map(Fields)
+    else {
+        return true;
+    };
+    while !records.0.is_empty() {
+        let fits = records
+            .take(1)
+            .and_then(|_| records.u64())
+            .and_then(|n| records.take(usize::try_from(n).unwrap_or(usize::MAX)));
+        if fits.is_err() {
+            return false;
+        }
+    }
+    true
 }
 
 /// A record's fields, read from its front, every length checked.
@@ -284,6 +337,26 @@ mod tests {
         let all: Vec<_> = Records::new(&orphan).collect();
         assert!(
             all[0].as_ref().unwrap_err().contains("no Channel record"),
+            "{all:?}"
+        );
+        // An uncompressed chunk whose record claims more than the chunk
+        // holds (the file going on past it): the file ends before it, an
+        // error, never a panic.
+        let mut chunk = vec![0u8; 28];
+        chunk.extend_from_slice(&0u32.to_le_bytes());
+        chunk.extend_from_slice(&13u64.to_le_bytes());
+        chunk.push(op::MESSAGE);
+        chunk.extend_from_slice(&100u64.to_le_bytes());
+        chunk.extend_from_slice(&[0u8; 4]);
+        let overrun = file(&[
+            (op::CHANNEL, channel(None)),
+            (op::MESSAGE, message()),
+            (op::CHUNK, chunk),
+            (op::METADATA, vec![0u8; 300]),
+        ]);
+        let all: Vec<_> = Records::new(&overrun).collect();
+        assert!(
+            all.len() == 2 && all[0].is_ok() && all[1].is_err(),
             "{all:?}"
         );
         // Cut short: an error, after what came before.
