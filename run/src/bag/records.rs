@@ -167,43 +167,49 @@ impl Iterator for Records<'_> {
     }
 }
 
-/// Where the first uncompressed chunk whose records do not fit in it
-/// starts, if one does not: the file is read up to there (and found cut
-/// short). Walks the top-level records' headers only.
+/// Where the first chunk that does not fit starts (cut short by the
+/// file's end, or uncompressed with records overrunning it), if one does
+/// not: the file is read up to there (and found cut short). Walks the
+/// top-level records' headers only.
 fn overrun(bytes: &[u8]) -> Option<usize> {
     const HEAD: usize = 9;
     let mut at = crate::bag::MCAP_MAGIC.len();
     while let Some(head) = bytes.get(at..at + HEAD) {
         let len = u64::from_le_bytes(head[1..].try_into().unwrap_or_default());
-        let end = usize::try_from(len).ok()?.checked_add(at + HEAD)?;
-        let body = bytes.get(at + HEAD..end)?;
-        if head[0] == op::CHUNK && !chunk_fits(body) {
-            return Some(at);
+        let body = usize::try_from(len)
+            .ok()
+            .and_then(|len| len.checked_add(at + HEAD))
+            .and_then(|end| bytes.get(at + HEAD..end));
+        match body {
+            // A chunk cut short by the file's end is read no more than one
+            // that does not fit.
+            _ if head[0] != op::CHUNK => {}
+            Some(body) if chunk_fits(body) => {}
+            _ => return Some(at),
         }
-        at = end;
+        at = at + HEAD + body?.len();
     }
     None
 }
 
-/// Whether an uncompressed chunk's records each fit in it (a compressed
-/// one is mcap's to check as it decompresses).
+/// Whether a chunk's header fits in it and, uncompressed, its records
+/// each fit in what its header says they take, and that in the chunk (a
+/// compressed one's records are mcap's to check as it decompresses).
 fn chunk_fits(body: &[u8]) -> bool {
     let mut r = Fields(body);
     if r.take(8 + 8 + 8 + 4).is_err() {
-        return true;
+        return false;
     }
     let (Ok(compression), Ok(len)) = (r.bytes(), r.u64()) else {
-        return true;
+        return false;
+    };
+    let Ok(records) = r.take(usize::try_from(len).unwrap_or(usize::MAX)) else {
+        return false;
     };
     if !compression.is_empty() {
         return true;
     }
-    let Ok(mut records) = r
-        .take(usize::try_from(len).unwrap_or(usize::MAX))
-        .map(Fields)
-    else {
-        return true;
-    };
+    let mut records = Fields(records);
     while !records.0.is_empty() {
         let fits = records
             .take(1)
