@@ -34,7 +34,7 @@ pub fn config_of_log(
         None => (Config::default(), "the defaults".to_owned()),
     };
     if let Some(preset) = sensor {
-        super::set_sensor_preset(&mut config, preset)?;
+        super::settings::set_sensor_preset(&mut config, preset)?;
     }
     config
         .resolve(registry)

@@ -158,7 +158,7 @@ fn configuration(args: &SimArgs) -> anyhow::Result<Resolved> {
         }
     }
     if let Some(sensor) = args.sensor {
-        super::set_sensor_preset(&mut config, sensor.into())?;
+        super::settings::set_sensor_preset(&mut config, sensor.into())?;
     }
     if let Some(evaluator) = &args.evaluator {
         config.perception.evaluator.clone_from(evaluator);

@@ -37,10 +37,9 @@ use serde::Serialize;
 use cloud::{CloudCounts, Layout};
 use frames::Frames;
 use msgs::{Kind, Schema};
+pub use records::MCAP_MAGIC;
 use records::{ChannelInfo, RawMessage, Records};
 
-/// The first bytes of an MCAP file.
-pub const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
 /// The first bytes of a ROS 1 bag.
 pub const ROS1_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 

@@ -15,6 +15,9 @@ use std::sync::Arc;
 use mcap::records::op;
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
+/// The first bytes of an MCAP file.
+pub const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+
 /// The longest record (a chunk's, uncompressed) the reader takes: a range
 /// image's bound (`MAX_IMAGE_BYTES`).
 const RECORD_LIMIT: usize = 1 << 28;
@@ -173,7 +176,7 @@ impl Iterator for Records<'_> {
 /// top-level records' headers only.
 fn overrun(bytes: &[u8]) -> Option<usize> {
     const HEAD: usize = 9;
-    let mut at = crate::bag::MCAP_MAGIC.len();
+    let mut at = MCAP_MAGIC.len();
     while let Some(head) = bytes.get(at..at + HEAD) {
         let len = u64::from_le_bytes(head[1..].try_into().unwrap_or_default());
         let body = usize::try_from(len)
@@ -274,7 +277,7 @@ mod tests {
     /// MCAP's magic, a header, then `records` (opcode, body), a data end, a
     /// footer and the magic again.
     fn file(records: &[(u8, Vec<u8>)]) -> Vec<u8> {
-        let mut out = crate::bag::MCAP_MAGIC.to_vec();
+        let mut out = MCAP_MAGIC.to_vec();
         let mut push = |op: u8, body: &[u8]| {
             out.push(op);
             out.extend_from_slice(&(body.len() as u64).to_le_bytes());
@@ -286,7 +289,7 @@ mod tests {
         }
         push(op::DATA_END, &[0u8; 4]);
         push(op::FOOTER, &[0u8; 20]);
-        out.extend_from_slice(crate::bag::MCAP_MAGIC);
+        out.extend_from_slice(MCAP_MAGIC);
         out
     }
 
