@@ -40,7 +40,11 @@ fn run(sensor: &str) -> &'static Path {
         let dir: &'static Path =
             Box::leak(arcnav_testkit::temp_dir(&format!("bag-run-{sensor}")).into_boxed_path());
         let out = dir.join("run");
-        let (code, stdout, stderr) = arcnav(&[
+        // The lidar's bags take its first seconds only: the run ends at 6 s
+        // (a timeout, exit status 1).
+        let limit = dir.join("six-seconds.toml");
+        std::fs::write(&limit, "[sim]\ntime_limit_s = 6.0\n").unwrap();
+        let mut args = vec![
             "sim",
             "--world",
             "short_course",
@@ -48,8 +52,20 @@ fn run(sensor: &str) -> &'static Path {
             sensor,
             "--out",
             out.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{stdout}\n{stderr}");
+        ];
+        if sensor != "erim" {
+            args.extend(["--config", limit.to_str().unwrap()]);
+        }
+        let (code, stdout, stderr) = arcnav(&args);
+        assert!(
+            out.join("mission.lcm").is_file(),
+            "{code}: {stdout}\n{stderr}"
+        );
+        assert_eq!(
+            code,
+            if sensor == "erim" { 0 } else { 1 },
+            "{stdout}\n{stderr}"
+        );
         dir
     })
 }

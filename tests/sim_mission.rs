@@ -312,8 +312,8 @@ const GOLDEN: &[(&str, &[&str])] = &[
         "paper_loop-erim",
         &["--world", "paper_loop", "--sensor", "erim"],
     ),
-    // At 5 m/s (the cruise its hole speed cap allows): the lidar's
-    // regime at speed, and half the images of the loop at 2.5 m/s.
+    // The lidar's missions at 5 m/s (the cruise its hole speed cap allows):
+    // its regime at speed, and half the images of the same at 2.5 m/s.
     (
         "paper_loop-lidar64-5",
         &[
@@ -334,14 +334,26 @@ const GOLDEN: &[(&str, &[&str])] = &[
         &["--world", "short_course", "--sensor", "lidar64"],
     ),
     ("seed3-erim", &["--seed", "3", "--sensor", "erim"]),
-    ("seed3-lidar64", &["--seed", "3", "--sensor", "lidar64"]),
+    (
+        "seed3-lidar64-5",
+        &["--seed", "3", "--sensor", "lidar64", "--speed", "5"],
+    ),
     (
         "seed8-hard-erim",
         &["--seed", "8", "--difficulty", "hard", "--sensor", "erim"],
     ),
     (
-        "seed8-hard-lidar64",
-        &["--seed", "8", "--difficulty", "hard", "--sensor", "lidar64"],
+        "seed8-hard-lidar64-5",
+        &[
+            "--seed",
+            "8",
+            "--difficulty",
+            "hard",
+            "--sensor",
+            "lidar64",
+            "--speed",
+            "5",
+        ],
     ),
 ];
 

@@ -77,10 +77,13 @@ impl Tile {
     fn build(world: &World, tx: i64, ty: i64) -> Self {
         let (x0, y0) = (tx as f64 * TILE_M, ty as f64 * TILE_M);
         let mut heights = Box::new([0.0; TILE * TILE]);
+        let mut row = [0.0f64; TILE];
         for j in 0..TILE {
             let y = y0 + (j as f64 + 0.5) * CELL_M;
-            for i in 0..TILE {
-                heights[cell_index(i, j)] = world.height(x0 + (i as f64 + 0.5) * CELL_M, y) as f32;
+            let xs = (0..TILE).map(|i| x0 + (i as f64 + 0.5) * CELL_M);
+            world.heights_along(y, xs, &mut row);
+            for (i, h) in row.iter().enumerate() {
+                heights[cell_index(i, j)] = *h as f32;
             }
         }
         let mut block_max = vec![f32::NEG_INFINITY; BLOCKS * BLOCKS];

@@ -591,6 +591,39 @@ impl World {
                 )
     }
 
+    /// [`height`](Self::height) at each of `xs` on the row at `y`, into
+    /// `out`: the same values bit for bit, the terrain's noise worked out
+    /// along the row (see [`Noise::row`]). A tile's cells are built so.
+    pub fn heights_along(&self, y: f64, xs: impl Iterator<Item = f64>, out: &mut [f64]) {
+        let mut hills = match &self.base {
+            Base::Procedural {
+                noise, wavelength, ..
+            } => Some(noise.fbm_row(y / wavelength, 3)),
+            Base::File { .. } => None,
+        };
+        let mut roughness = self.roughness.fbm_row(y / self.roughness_wavelength, 2);
+        for (x, out) in xs.zip(out) {
+            let base = match (&self.base, &mut hills) {
+                (
+                    Base::Procedural {
+                        amplitude,
+                        wavelength,
+                        ..
+                    },
+                    Some(row),
+                ) => amplitude * row.at(x / wavelength),
+                (Base::File { grid, scale }, _) => scale * grid.height(x, y),
+                (Base::Procedural { .. }, None) => unreachable!("a procedural base has its row"),
+            };
+            let mut h =
+                base + self.roughness_amplitude * roughness.at(x / self.roughness_wavelength);
+            for &i in self.index.at(x, y) {
+                h += self.features[i as usize].height_at([x, y]);
+            }
+            *out = h;
+        }
+    }
+
     /// Height of the world at (x, y): terrain plus features, m.
     pub fn height(&self, x: f64, y: f64) -> f64 {
         let mut h = self.terrain_height(x, y);

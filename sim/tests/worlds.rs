@@ -244,3 +244,43 @@ fn a_height_file_covering_a_sliver_of_the_world_is_refused() {
         "{err}"
     );
 }
+
+/// A tile's heights, taken row by row (`World::heights_along`), are the
+/// world's heights point by point, bit for bit: every embedded world, a
+/// generated hard one and the DEM loop.
+#[test]
+fn heights_along_a_row_are_the_heights_point_by_point() {
+    let mut worlds: Vec<World> = EMBEDDED
+        .iter()
+        .map(|(name, _, _)| World::embedded(name).unwrap().unwrap())
+        .collect();
+    worlds.push(
+        World::build(
+            arcnav_sim::generate(3, arcnav_sim::Difficulty::Hard),
+            "generated",
+            None,
+        )
+        .unwrap(),
+    );
+    let dem = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/worlds/dem_loop.toml");
+    worlds.push(World::load(&dem).unwrap());
+    for world in &worlds {
+        let [x0, y0, x1, y1] = world.bounds;
+        for k in 0..25 {
+            let y = y0 + (y1 - y0) * (k as f64 + 0.37) / 25.0;
+            let xs: Vec<f64> = (0..400)
+                .map(|i| x0 + (x1 - x0) * (i as f64 + 0.5) / 400.0)
+                .collect();
+            let mut row = vec![0.0; xs.len()];
+            world.heights_along(y, xs.iter().copied(), &mut row);
+            for (x, h) in xs.iter().zip(&row) {
+                assert_eq!(
+                    h.to_bits(),
+                    world.height(*x, y).to_bits(),
+                    "{} at ({x}, {y})",
+                    world.spec.name
+                );
+            }
+        }
+    }
+}
