@@ -4,7 +4,9 @@
 //! map that stops changing: `[pipeline] fault`) drives at each of four
 //! barriers ahead (a row of boulders, a row of trunks, a bank, a ditch) at
 //! 2.5 and 4.5 m/s with the ERIM (the defaults; 40 m ahead) and at 8 m/s
-//! with the 64-beam lidar (70 m ahead, room to reach that speed): with the
+//! with the 64-beam lidar (60 m ahead: room to reach that speed at 1 m/s²;
+//! the top speeds reached, 7.3-8.0 m/s, within 0.1 m/s of those at 70 m,
+//! for a tenth less of the test's time): with the
 //! guard no run touches a hazard it could have stopped for; without it the
 //! same runs collide.
 //!
@@ -19,7 +21,7 @@ use arcnav_sim::World;
 
 /// The barriers' line, m ahead of the start, at `speed`.
 fn ahead_m(speed: f64) -> f64 {
-    if speed > 5.0 { 70.0 } else { 40.0 }
+    if speed > 5.0 { 60.0 } else { 40.0 }
 }
 
 /// A world with `kind` of barrier across it `ahead` m ahead, the
@@ -149,7 +151,7 @@ fn the_guard_stops_each_faulty_pipeline_before_each_barrier_at_each_speed() {
     const SPEEDS: [f64; 3] = [2.5, 4.5, 8.0];
     let worlds: Vec<(&str, f64, World)> = WORLDS
         .iter()
-        .flat_map(|&k| [40.0, 70.0].map(|ahead| (k, ahead, barrier_world(k, ahead))))
+        .flat_map(|&k| [40.0, 60.0].map(|ahead| (k, ahead, barrier_world(k, ahead))))
         .collect();
     let cases: Vec<(&'static str, &'static str, f64)> = FAULTS
         .iter()
