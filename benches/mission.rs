@@ -11,7 +11,7 @@
 //! `… -- dem_loop` drives tests/worlds/dem_loop.toml instead (2 km over a
 //! 10 m DEM with slopes to 20° and scattered obstacles, at `--speed 10`:
 //! issue 69's real terrain, about three minutes a mission). In quick mode
-//! both worlds run for 10 simulated seconds.
+//! both worlds run for 4 simulated seconds.
 
 use std::sync::Arc;
 
@@ -81,7 +81,7 @@ fn drive(preset: SensorPreset, dem: bool) {
         config.guard.enabled = guard;
         config.arbiter.cruise_speed_mps = speed;
         if common::quick() {
-            config.sim.time_limit_s = 10.0;
+            config.sim.time_limit_s = 4.0;
         }
         let options = MissionOptions {
             log_mode: LogMode::NoImages,

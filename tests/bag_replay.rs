@@ -186,7 +186,7 @@ fn bags_written_by_rosbags_replay_to_the_decisions_of_the_log_they_came_from() {
         ("rings-tf", &["--cloud", "rings", "--poses", "tf"]),
         ("xyz-pose", &["--cloud", "xyz", "--poses", "pose"]),
     ] {
-        let mut all = vec!["--format", "mcap"];
+        let mut all = vec!["--format", "mcap", "--seconds", "30"];
         all.extend_from_slice(args);
         let Some(bag) = make_bag(erim, name, &all) else {
             return;
@@ -199,8 +199,8 @@ fn bags_written_by_rosbags_replay_to_the_decisions_of_the_log_they_came_from() {
             stdout.contains("mount         from /tf_static: base_link ← lidar"),
             "{name}:\n{stdout}"
         );
-        // The whole course: 62 s, a decision every 0.1 s.
-        assert_same_decisions(name, &erim.join("run/mission.lcm"), &out, 600);
+        // The course's first 30 s: a decision every 0.1 s.
+        assert_same_decisions(name, &erim.join("run/mission.lcm"), &out, 295);
     }
     // The 64-beam lidar's 64 × 2048 organized clouds, 4 s of them.
     let lidar = run("lidar64");

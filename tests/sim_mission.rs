@@ -330,8 +330,15 @@ const GOLDEN: &[(&str, &[&str])] = &[
         &["--world", "short_course", "--sensor", "erim"],
     ),
     (
-        "short_course-lidar64",
-        &["--world", "short_course", "--sensor", "lidar64"],
+        "short_course-lidar64-5",
+        &[
+            "--world",
+            "short_course",
+            "--sensor",
+            "lidar64",
+            "--speed",
+            "5",
+        ],
     ),
     ("seed3-erim", &["--seed", "3", "--sensor", "erim"]),
     (
