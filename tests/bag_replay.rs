@@ -204,16 +204,7 @@ fn bags_written_by_rosbags_replay_to_the_decisions_of_the_log_they_came_from() {
     }
     // The 64-beam lidar's 64 × 2048 organized clouds, 4 s of them.
     let lidar = run("lidar64");
-    let args = [
-        "--format",
-        "mcap",
-        "--cloud",
-        "organized",
-        "--poses",
-        "odometry",
-        "--seconds",
-        "4",
-    ];
+    let args = organized("4", &[]);
     let Some(bag) = make_bag(lidar, "organized-odometry", &args) else {
         return;
     };

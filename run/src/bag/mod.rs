@@ -173,25 +173,17 @@ impl Bag {
             path: path.to_owned(),
             source,
         };
-        match format_of(path).map_err(open)? {
-            Format::Ros1 => {
-                return Err(BagError::Ros1 {
-                    path: path.to_owned(),
-                });
-            }
-            Format::Other => {
-                return Err(BagError::Unreadable {
-                    path: path.to_owned(),
-                    reason: "it does not start with MCAP's magic bytes".into(),
-                });
-            }
-            Format::Mcap => {}
-        }
         let file = std::fs::File::open(path).map_err(open)?;
         // SAFETY: the map is only read; a file changed under a replay gives
         // wrong bytes (decoded with every check), not undefined behaviour
         // of ours, short of the file being truncated meanwhile.
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(open)?;
+        // What it is, from the bytes mapped (not a second read of the file).
+        if map.starts_with(ROS1_MAGIC) {
+            return Err(BagError::Ros1 {
+                path: path.to_owned(),
+            });
+        }
         Ok(Self {
             path: path.to_owned(),
             bytes: Bytes::Mapped(map),
