@@ -3,7 +3,8 @@
 //! perception that reports nothing, a local map that drops every cell, a
 //! map that stops changing: `[pipeline] fault`) drives at each of four
 //! barriers ahead (a row of boulders, a row of trunks, a bank, a ditch) at
-//! 2.5 and 4.5 m/s with the ERIM (the defaults; 40 m ahead) and at 8 m/s
+//! 2.5 and 4.5 m/s with the ERIM (the defaults; 40 m ahead) and, all but
+//! the forgetful map (below), at 8 m/s
 //! with the 64-beam lidar (60 m ahead: room to reach that speed at 1 m/s²;
 //! the top speeds reached, 7.3-8.0 m/s, within 0.1 m/s of those at 70 m,
 //! for a tenth less of the test's time): with the
@@ -153,6 +154,11 @@ fn the_guard_stops_each_faulty_pipeline_before_each_barrier_at_each_speed() {
         .iter()
         .flat_map(|&k| [40.0, 60.0].map(|ahead| (k, ahead, barrier_world(k, ahead))))
         .collect();
+    // A map that drops every cell leaves the pipeline what a blind
+    // perception does, an empty map, and the guard sees for itself: their
+    // lidar runs at 8 m/s were the same to the decimetre and the tenth of
+    // a m/s (2026-12-07), for 18 s of CPU each. The map's fault is driven
+    // with the ERIM.
     let cases: Vec<(&'static str, &'static str, f64)> = FAULTS
         .iter()
         .flat_map(|&f| {
@@ -160,6 +166,7 @@ fn the_guard_stops_each_faulty_pipeline_before_each_barrier_at_each_speed() {
                 .iter()
                 .flat_map(move |&w| SPEEDS.iter().map(move |&s| (f, w, s)))
         })
+        .filter(|&(f, _, s)| !(f == "forgetful_map" && s > 5.0))
         .collect();
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get().min(4));
     let next = std::sync::atomic::AtomicUsize::new(0);

@@ -1609,16 +1609,25 @@ fn a_flood_of_large_range_images_keeps_memory_bounded_and_counts_drops() {
     let unplaced = counter(&perception, "no_pose")
         + counter(&perception, "invalid")
         + counter(&perception, "out_of_order");
+    // Waiting for a pose when the log started over, or when the run ended
+    // (1 of 88 in a CI run, 2026-12-07: left out, the sum fell one short).
+    let abandoned = counter(&perception, "clock_restart")
+        + counter(&perception, "too_many_sensors")
+        + counter(&perception, "waiting_at_end");
     let flooded_mib = ROUNDS * published;
     eprintln!(
         "flood: {} images ({} MiB) published, {received} received ({incomplete} incomplete), \
-         {evaluated} evaluated, {replaced} replaced by newer, {unplaced} unplaceable; \
-         RSS {baseline} kB before, peak {peak} kB",
+         {evaluated} evaluated, {replaced} replaced by newer, {unplaced} unplaceable, \
+         {abandoned} left waiting for a pose; RSS {baseline} kB before, peak {peak} kB",
         ROUNDS * published,
         flooded_mib
     );
     // Every received image is evaluated or counted; none is lost silently.
-    assert_eq!(evaluated + replaced + unplaced, received);
+    assert_eq!(evaluated + replaced + unplaced + abandoned, received);
+    assert!(
+        abandoned <= ROUNDS,
+        "{abandoned} abandoned in {ROUNDS} rounds"
+    );
     // Perception fell behind in the last round and skipped to the newest.
     assert!(replaced > 0, "no image replaced by a newer one");
     // Each round starts the log over: the executor follows, placing every

@@ -186,6 +186,11 @@ pub(crate) fn perception_worker(
         }
     }
     fill(&mut status, &node, &busy);
+    // Images and slices still waiting for a pose after their capture when
+    // the inputs closed: that pose never came.
+    let left = node.waiting() as u64;
+    status.set("waiting_at_end", left);
+    status.dropped += left;
     status
 }
 
