@@ -55,7 +55,7 @@ enum Command {
     /// local map, behaviours and arbiter in log time; write the recomputed
     /// decisions to --out and compare them with the ones the log recorded.
     ///
-    /// A ROS 2 bag (its .mcap file) replays the same way: its
+    /// A ROS 1 bag (.bag) or a ROS 2 bag (its .mcap file) replays the same way: its
     /// sensor_msgs/PointCloud2 topic becomes range images (an organized
     /// cloud keeps its rows and columns; a cloud with a `ring` field is
     /// binned by ring and azimuth; any other on the configured sensor's
@@ -293,7 +293,7 @@ struct DetectArgs {
 #[derive(Debug, clap::Args)]
 struct ReplayArgs {
     /// The LCM event log (written by arcnav sim, lcm-logger or any LCM program
-    /// using the arcnav types), or a ROS 2 bag's .mcap file.
+    /// using the arcnav types), a ROS 1 .bag, or a ROS 2 bag's .mcap file.
     log: PathBuf,
     /// Configuration file (defaults merged with it).
     #[arg(long, conflicts_with = "compare_config")]

@@ -244,29 +244,45 @@ fn a_bag_replays_toward_a_goal_ahead_and_names_what_it_cannot_choose() {
         stderr.contains("/points is a sensor_msgs/msg/PointCloud2, not a pose"),
         "{stderr}"
     );
-    // A ROS 1 bag is named for what it is, with the way to convert it.
-    let Some(ros1) = make_bag(
-        erim,
-        "goal.bag",
-        &[
+}
+
+/// ROS 1 bags written by rosbags (Noetic's types), their chunks stored
+/// plain, bz2- and lz4-compressed, each kind of cloud and pose: the
+/// decisions of the log they came from, as the MCAP bags give.
+#[test]
+fn ros_1_bags_replay_to_the_decisions_of_the_log_they_came_from() {
+    let erim = run("erim");
+    for (name, compression, cloud, poses) in [
+        ("ros1-none.bag", "none", "organized", "odometry"),
+        ("ros1-bz2.bag", "bz2", "rings", "tf"),
+        ("ros1-lz4.bag", "lz4", "xyz", "pose"),
+    ] {
+        let args = [
             "--format",
             "ros1",
+            "--compression",
+            compression,
             "--cloud",
-            "organized",
+            cloud,
             "--poses",
-            "odometry",
+            poses,
             "--seconds",
-            "1",
-        ],
-    ) else {
-        return;
-    };
-    let (code, _, stderr) = replay(erim, &ros1, &out, &[]);
-    assert_eq!(code, 1);
-    assert!(
-        stderr.contains("is a ROS 1 bag") && stderr.contains("rosbags-convert"),
-        "{stderr}"
-    );
+            "10",
+        ];
+        let Some(bag) = make_bag(erim, name, &args) else {
+            return;
+        };
+        let out = erim.join(format!("{name}.lcm"));
+        let (code, stdout, stderr) = replay(erim, &bag, &out, &[]);
+        assert_eq!(code, 0, "{name}:\n{stdout}\n{stderr}");
+        assert!(stdout.contains("ROS 1 (bag)"), "{name}:\n{stdout}");
+        assert!(stdout.contains("problems      none"), "{name}:\n{stdout}");
+        assert!(
+            stdout.contains("mount         from /tf_static: base_link ← lidar"),
+            "{name}:\n{stdout}"
+        );
+        assert_same_decisions(name, &erim.join("run/mission.lcm"), &out, 95);
+    }
 }
 
 /// Where each record of an MCAP file starts (after its magic), with its

@@ -39,6 +39,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("key_file", key_file),
     ("range_slices", range_slices),
     ("ros2_bag", ros2_bag),
+    ("ros1_bag", ros1_bag),
     ("cdr_messages", cdr_messages),
 ];
 
@@ -46,8 +47,17 @@ pub const TARGETS: &[(&str, Target)] = &[
 /// them), every message converted as a replay converts them (clouds on the
 /// ERIM's grid), every event read.
 pub fn ros2_bag(data: &[u8]) {
+    bag("fuzz.mcap", data);
+}
+
+/// A ROS 1 bag, as [`ros2_bag`] reads an MCAP one.
+pub fn ros1_bag(data: &[u8]) {
+    bag("fuzz.bag", data);
+}
+
+fn bag(name: &str, data: &[u8]) {
     use arcnav_bus::log::EventSource as _;
-    let bag = crate::bag::Bag::from_bytes("fuzz.mcap", data.to_vec());
+    let bag = crate::bag::Bag::from_bytes(name, data.to_vec());
     let sensor = arcnav_perception::SensorModel::erim();
     let choices = [
         (None, None),

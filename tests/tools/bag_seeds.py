@@ -1,12 +1,13 @@
-"""Seeds for the `ros2_bag` and `cdr_messages` fuzz targets, written by the
-reference tools (PyPI rosbags for the messages, PyPI mcap for the file):
-a few-kilobyte ROS 2 bag of every kind a replay reads (an organized cloud
-of 2 x 4 points, a ring cloud, odometry, a pose, /tf and /tf_static), and
-each message's CDR bytes alone.
+"""Seeds for the `ros2_bag`, `ros1_bag` and `cdr_messages` fuzz targets,
+written by the reference tools (PyPI rosbags for the messages and ROS 1
+bags, PyPI mcap for MCAP files): a few-kilobyte bag of every kind a replay
+reads (an organized cloud of 2 x 4 points, a ring cloud, odometry, a pose,
+/tf and /tf_static), as ROS 2 (plain and zstd) and as ROS 1 (plain, bz2,
+lz4), and each message's CDR bytes alone.
 
     python bag_seeds.py FUZZ_CORPUS_DIR
 
-writes FUZZ_CORPUS_DIR/ros2_bag/seed-* and FUZZ_CORPUS_DIR/cdr_messages/seed-*.
+writes FUZZ_CORPUS_DIR/{ros2_bag,ros1_bag,cdr_messages}/seed-*.
 """
 
 import sys
@@ -18,10 +19,25 @@ from rosbags.typesys import Stores, get_typestore
 
 ts = get_typestore(Stores.ROS2_HUMBLE)
 T = ts.types
+ROS1 = False
+
+
+def use_ros1():
+    """The messages below as ROS 1 (Noetic) has them: a header with `seq`."""
+    global ts, T, ROS1
+    from rosbags.typesys import get_types_from_msg
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    T = ts.types
+    ROS1 = True
 
 
 def header(sec, frame):
-    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=0), frame_id=frame)
+    stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=0)
+    if ROS1:
+        return T["std_msgs/msg/Header"](seq=sec, stamp=stamp, frame_id=frame)
+    return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
 
 
 def cloud(sec, ring):
@@ -109,6 +125,23 @@ def main():
                     (cdr / f"seed-{msgtype.split('/')[-1]}").write_bytes(bytes(data))
                     written.add(msgtype)
             writer.finish()
+    use_ros1()
+    from rosbags.rosbag1 import Writer as Ros1Writer
+
+    ros1 = root / "ros1_bag"
+    ros1.mkdir(parents=True, exist_ok=True)
+    for compression in ("none", "bz2", "lz4"):
+        path = ros1 / f"seed-{compression}.bag"
+        path.unlink(missing_ok=True)
+        writer = Ros1Writer(path)
+        if compression != "none":
+            writer.set_compression(Ros1Writer.CompressionFormat[compression.upper()])
+        with writer:
+            connections = {}
+            for sec, topic, msgtype, msg in messages():
+                if topic not in connections:
+                    connections[topic] = writer.add_connection(topic, msgtype, typestore=ts)
+                writer.write(connections[topic], sec * 10**9, bytes(ts.serialize_ros1(msg, msgtype)))
     return 0
 
 

@@ -168,6 +168,12 @@ def main():
         help="damage: /points carries a schema whose row_step is named row_stride (implies --rewrite)",
     )
     parser.add_argument(
+        "--compression",
+        choices=["none", "bz2", "lz4"],
+        default="none",
+        help="a ROS 1 bag's chunks' compression",
+    )
+    parser.add_argument(
         "--rewrite",
         action="store_true",
         help="rewrite the .mcap with the reference mcap writer (chunks with CRCs, zstd)",
@@ -191,6 +197,8 @@ def main():
             get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
         )
         writer = Writer(args.out)
+        if args.compression != "none":
+            writer.set_compression(Writer.CompressionFormat[args.compression.upper()])
         serialize = typestore.serialize_ros1
 
     rng = random.Random(7)

@@ -588,7 +588,7 @@ mod tests {
             is_bigendian: false,
             point_step: 16,
             row_step: 16 * width,
-            data,
+            data: std::borrow::Cow::Borrowed(data),
             is_dense: false,
         }
     }

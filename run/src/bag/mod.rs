@@ -1,4 +1,5 @@
-//! ROS 2 bags (MCAP, CDR messages) as the input of a replay: their point
+//! ROS bags (ROS 1's `.bag`; ROS 2's MCAP, CDR messages) as the input of
+//! a replay: their point
 //! clouds become range images, their odometry, poses or `/tf` chain the
 //! vehicle's pose, their `/tf_static` the sensor's mount, all as the LCM
 //! events an arcnav log holds, so that everything a replay does with a
@@ -19,6 +20,7 @@ pub mod cloud;
 pub mod frames;
 pub mod msgs;
 mod records;
+mod ros1;
 
 use std::collections::BTreeMap;
 use std::io::Read as _;
@@ -39,9 +41,8 @@ use frames::Frames;
 use msgs::{Kind, Schema};
 pub use records::MCAP_MAGIC;
 use records::{ChannelInfo, RawMessage, Records};
-
-/// The first bytes of a ROS 1 bag.
-pub const ROS1_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+pub use ros1::ROS1_MAGIC;
+use ros1::Ros1Records;
 
 /// What a file holds, by its first bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -92,12 +93,7 @@ pub enum BagError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error(
-        "{path} is a ROS 1 bag: arcnav replays ROS 2 bags (MCAP) so far; convert it with \
-         `rosbags-convert --src {path} --dst OUT` (PyPI rosbags) and replay OUT's .mcap"
-    )]
-    Ros1 { path: PathBuf },
-    #[error("{path} is not a readable MCAP file: {reason}")]
+    #[error("{path} is not a readable bag (ROS 1, or ROS 2's MCAP): {reason}")]
     Unreadable { path: PathBuf, reason: String },
     #[error("{0}")]
     Choice(String),
@@ -167,7 +163,7 @@ impl std::ops::Deref for Bytes {
 }
 
 impl Bag {
-    /// Opens an MCAP bag (a ROS 1 bag is named as such, and refused).
+    /// Opens a bag: ROS 1's or MCAP, told by its first bytes.
     pub fn open(path: &Path) -> Result<Self, BagError> {
         let open = |source| BagError::Open {
             path: path.to_owned(),
@@ -178,19 +174,13 @@ impl Bag {
         // wrong bytes (decoded with every check), not undefined behaviour
         // of ours, short of the file being truncated meanwhile.
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(open)?;
-        // What it is, from the bytes mapped (not a second read of the file).
-        if map.starts_with(ROS1_MAGIC) {
-            return Err(BagError::Ros1 {
-                path: path.to_owned(),
-            });
-        }
         Ok(Self {
             path: path.to_owned(),
             bytes: Bytes::Mapped(map),
         })
     }
 
-    /// A bag of `bytes` (the MCAP file's), named `name` in messages.
+    /// A bag of `bytes` (the file's), named `name` in messages.
     pub fn from_bytes(name: &str, bytes: Vec<u8>) -> Self {
         Self {
             path: PathBuf::from(name),
@@ -198,14 +188,26 @@ impl Bag {
         }
     }
 
-    fn messages(&self) -> Result<Records<'_>, BagError> {
-        if !self.bytes.starts_with(MCAP_MAGIC) {
-            return Err(BagError::Unreadable {
+    fn messages(&self) -> Result<Messages<'_>, BagError> {
+        if self.bytes.starts_with(MCAP_MAGIC) {
+            Ok(Messages::Mcap(Box::new(Records::new(&self.bytes))))
+        } else if self.bytes.starts_with(ROS1_MAGIC) {
+            Ok(Messages::Ros1(Ros1Records::new(&self.bytes)))
+        } else {
+            Err(BagError::Unreadable {
                 path: self.path.clone(),
-                reason: "it does not start with MCAP's magic bytes".into(),
-            });
+                reason: "it starts with neither `#ROSBAG V2.0` nor MCAP's magic bytes".into(),
+            })
         }
-        Ok(Records::new(&self.bytes))
+    }
+
+    /// What the summary calls the bag's format.
+    fn format(&self) -> &'static str {
+        if self.bytes.starts_with(ROS1_MAGIC) {
+            "ROS 1 (bag)"
+        } else {
+            "ROS 2 (MCAP, CDR)"
+        }
     }
 
     pub fn len(&self) -> u64 {
@@ -238,17 +240,17 @@ impl Bag {
             let Ok(kind) = topic.readable() else { continue };
             match kind {
                 Kind::Transforms if channel.topic == "/tf_static" => {
-                    if let Ok(tf) = msgs::from_cdr::<msgs::TfMessage>(&message.data) {
+                    if let Ok(tf) = message.decode::<msgs::TfMessage>() {
                         set_frames(&mut statics, &tf);
                     }
                 }
                 Kind::Cloud if topic.frame.is_none() => {
-                    if let Ok(c) = msgs::from_cdr::<msgs::PointCloud2>(&message.data) {
+                    if let Ok(c) = message.decode::<msgs::PointCloud2>() {
                         topic.frame = Some(c.header.frame_id);
                     }
                 }
                 Kind::Odometry if topic.frame.is_none() => {
-                    if let Ok(o) = msgs::from_cdr::<msgs::Odometry>(&message.data) {
+                    if let Ok(o) = message.decode::<msgs::Odometry>() {
                         topic.frame = Some(o.child_frame_id);
                     }
                 }
@@ -256,12 +258,12 @@ impl Bag {
             }
             if kind == Kind::Transforms
                 && channel.topic == "/tf"
-                && let Ok(tf) = msgs::from_cdr::<msgs::TfMessage>(&message.data)
+                && let Ok(tf) = message.decode::<msgs::TfMessage>()
             {
                 set_frames(&mut topic.frames, &tf);
             }
         }
-        Plan::choose(topics, statics, damaged, options, sensor)
+        Plan::choose(self.format(), topics, statics, damaged, options, sensor)
     }
 
     /// The bag's messages as a replay's events, as `plan` chose them.
@@ -307,6 +309,16 @@ impl Topic {
         let kind = Kind::of(&type_name);
         let unreadable = match (kind, schema) {
             (None, _) => Some("not a type the replay reads".to_string()),
+            (Some(kind), Some(s)) if channel.message_encoding == "ros1" => {
+                let ros1 = kind.ros1_md5sum();
+                match s.md5sum.as_deref() {
+                    Some(md5) if md5 == ros1 => None,
+                    Some(md5) => Some(format!(
+                        "its type's md5sum {md5} is not ROS 1's {type_name} ({ros1})"
+                    )),
+                    None => Some("no md5sum in its connection".to_string()),
+                }
+            }
             (Some(_), _) if channel.message_encoding != "cdr" => Some(format!(
                 "message encoding {:?}, not CDR",
                 channel.message_encoding
@@ -365,6 +377,7 @@ pub struct Plan {
 
 impl Plan {
     fn choose(
+        format: &'static str,
         topics: BTreeMap<String, Topic>,
         statics: Frames,
         damaged: Option<String>,
@@ -520,7 +533,7 @@ impl Plan {
             }
         };
         let summary = BagSummary {
-            format: "ROS 2 (MCAP, CDR)",
+            format,
             topics: topics
                 .iter()
                 .map(|(name, t)| {
@@ -579,13 +592,51 @@ impl Plan {
     }
 }
 
+/// A bag's messages in file order, by its format.
+enum Messages<'a> {
+    Mcap(Box<Records<'a>>),
+    Ros1(Ros1Records<'a>),
+}
+
+impl Messages<'_> {
+    fn position(&self) -> u64 {
+        match self {
+            Self::Mcap(r) => Records::position(r),
+            Self::Ros1(r) => r.position(),
+        }
+    }
+}
+
+impl Iterator for Messages<'_> {
+    type Item = Result<RawMessage, String>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        match self {
+            Self::Mcap(r) => r.next(),
+            Self::Ros1(r) => r.next(),
+        }
+    }
+}
+
+impl RawMessage {
+    /// The message decoded as `T`, by its channel's encoding.
+    fn decode<'a, T: msgs::Message<'a>>(&'a self) -> Result<T, msgs::DecodeError> {
+        let encoding = if self.channel.message_encoding == "ros1" {
+            msgs::Encoding::Ros1
+        } else {
+            msgs::Encoding::Cdr
+        };
+        T::decode(encoding, &self.data)
+    }
+}
+
 /// The most bytes of a range image a cloud may become.
 const MAX_PIXELS: u64 = (MAX_IMAGE_BYTES / 4) as u64;
 
 /// A bag's messages as LCM events: POSE (`pose_t`) and RANGE_IMAGE
 /// (`range_image_t`), stamped with the bag's log times.
 pub struct BagEvents<'a> {
-    messages: Records<'a>,
+    messages: Messages<'a>,
     plan: &'a Plan,
     summary: BagSummary,
     /// `/tf_static` and `/tf` as read so far.
@@ -619,7 +670,7 @@ impl BagEvents<'_> {
             return None;
         }
         if topic == plan.cloud_topic {
-            let cloud = match msgs::from_cdr::<msgs::PointCloud2>(&message.data) {
+            let cloud = match message.decode::<msgs::PointCloud2>() {
                 Ok(c) => c,
                 Err(e) => {
                     self.refuse(topic, e);
@@ -657,9 +708,9 @@ impl BagEvents<'_> {
             };
         }
         let pose = match &plan.poses {
-            PoseSource::Topic(t, kind) if t == topic => self.pose_of(*kind, &message.data),
+            PoseSource::Topic(t, kind) if t == topic => self.pose_of(*kind, message),
             PoseSource::Tf if topic == "/tf" || topic == "/tf_static" => {
-                let tf = match msgs::from_cdr::<msgs::TfMessage>(&message.data) {
+                let tf = match message.decode::<msgs::TfMessage>() {
                     Ok(tf) => tf,
                     Err(e) => {
                         self.refuse(topic, e);
@@ -699,19 +750,24 @@ impl BagEvents<'_> {
     }
 
     /// A pose message as the vehicle's pose.
-    fn pose_of(&self, kind: Kind, data: &[u8]) -> Result<Pose, String> {
+    fn pose_of(&self, kind: Kind, message: &RawMessage) -> Result<Pose, String> {
         let (stamp, pose, twist) = match kind {
             Kind::Odometry => {
-                let o = msgs::from_cdr::<msgs::Odometry>(data).map_err(|e| e.to_string())?;
+                let o = message
+                    .decode::<msgs::Odometry>()
+                    .map_err(|e| e.to_string())?;
                 (o.header.stamp, o.pose.pose, Some(o.twist.twist))
             }
             Kind::PoseWithCovariance => {
-                let p = msgs::from_cdr::<msgs::PoseWithCovarianceStamped>(data)
+                let p = message
+                    .decode::<msgs::PoseWithCovarianceStamped>()
                     .map_err(|e| e.to_string())?;
                 (p.header.stamp, p.pose.pose, None)
             }
             _ => {
-                let p = msgs::from_cdr::<msgs::PoseStamped>(data).map_err(|e| e.to_string())?;
+                let p = message
+                    .decode::<msgs::PoseStamped>()
+                    .map_err(|e| e.to_string())?;
                 (p.header.stamp, p.pose, None)
             }
         };

@@ -1,10 +1,14 @@
 //! The ROS messages a replay reads from a bag, decoded from their wire
-//! bytes (ROS 2's CDR, by `cdr-encoding`) after their schema has been
-//! checked against the fields decoded here: a message whose schema says
-//! otherwise is never decoded (see [`Schema::check`]).
+//! bytes (ROS 2's CDR, by `cdr-encoding`; ROS 1's, by
+//! `roslibrust_serde_rosmsg`) after their type has been checked against
+//! the fields decoded here: a message whose schema says otherwise (ROS 2:
+//! [`Schema::check`]) or whose type's md5sum is not ROS 1's
+//! ([`Kind::ros1_md5sum`]) is never decoded.
 //!
-//! Only what a replay uses is decoded: a message's trailing fields past
-//! those (an odometry's covariances, say) are left unread.
+//! Every field is read (ROS 1's decoder holds a message to its length),
+//! but only what a replay uses is kept.
+
+use std::borrow::Cow;
 
 use arcnav_vehicle::{Isometry, Utime};
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
@@ -47,6 +51,18 @@ impl Kind {
             self,
             Self::Odometry | Self::PoseStamped | Self::PoseWithCovariance
         )
+    }
+
+    /// The md5sum ROS 1 gives the type (`rosmsg md5`): a bag's connection
+    /// whose type has another is not decoded.
+    pub fn ros1_md5sum(self) -> &'static str {
+        match self {
+            Self::Cloud => "1158d486dd51d683ce2f1be655c3c181",
+            Self::Odometry => "cd5e73d190d741a2f92e81eda573aca7",
+            Self::PoseStamped => "d3812c3cbc69362b77dc0b19b345f8f5",
+            Self::PoseWithCovariance => "953b798c0f514ff060a53a3498ce6246",
+            Self::Transforms => "94810edda583a504dfda3829e70d7eec",
+        }
     }
 
     fn top(self) -> &'static str {
@@ -222,6 +238,152 @@ pub enum DecodeError {
     Representation(u16),
     #[error("{0}")]
     Cdr(String),
+    #[error("{0}")]
+    Ros1(String),
+    #[error("a stamp {0} s after 1970: past what a ROS 2 time holds (2038)")]
+    Stamp(u32),
+}
+
+/// How a message's bytes are encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Encoding {
+    /// ROS 2: CDR with its encapsulation header.
+    Cdr,
+    /// ROS 1: little-endian, unpadded, lengths before strings and arrays.
+    Ros1,
+}
+
+/// A message type decoded here, from either encoding.
+pub trait Message<'a>: Sized + Deserialize<'a> {
+    /// From ROS 1's bytes: its own type with ROS 1's header, made this one.
+    fn from_ros1(data: &'a [u8]) -> Result<Self, DecodeError>;
+
+    fn decode(encoding: Encoding, data: &'a [u8]) -> Result<Self, DecodeError> {
+        match encoding {
+            Encoding::Cdr => from_cdr(data),
+            Encoding::Ros1 => Self::from_ros1(data),
+        }
+    }
+}
+
+/// Decodes ROS 1's bytes of a message (a bag's message data: no length
+/// before it). Every length inside is checked against the message's own
+/// before anything is allocated for it.
+fn from_ros1<T: serde::de::DeserializeOwned>(data: &[u8]) -> Result<T, DecodeError> {
+    let length = u32::try_from(data.len())
+        .map_err(|_| DecodeError::Ros1(format!("{} bytes: past 4 GiB", data.len())))?;
+    roslibrust_serde_rosmsg::from_slice_known_length(data, length)
+        .map_err(|e| DecodeError::Ros1(e.to_string()))
+}
+
+/// ROS 1's time: unsigned seconds.
+#[derive(Debug, Clone, Copy, Deserialize)]
+struct Ros1Time {
+    secs: u32,
+    nsecs: u32,
+}
+
+/// ROS 1's header: a sequence number first.
+#[derive(Debug, Clone, Deserialize)]
+pub struct Ros1Header {
+    _seq: u32,
+    stamp: Ros1Time,
+    frame_id: String,
+}
+
+impl TryFrom<Ros1Header> for Header {
+    type Error = DecodeError;
+
+    fn try_from(h: Ros1Header) -> Result<Self, DecodeError> {
+        Ok(Header {
+            stamp: Time {
+                sec: i32::try_from(h.stamp.secs).map_err(|_| DecodeError::Stamp(h.stamp.secs))?,
+                nanosec: h.stamp.nsecs,
+            },
+            frame_id: h.frame_id,
+        })
+    }
+}
+
+/// ROS 1's cloud: its bytes read whole (not byte by byte).
+#[derive(Debug, Clone, Deserialize)]
+struct Ros1Cloud {
+    header: Ros1Header,
+    height: u32,
+    width: u32,
+    fields: Vec<PointField>,
+    is_bigendian: bool,
+    point_step: u32,
+    row_step: u32,
+    data: serde_bytes::ByteBuf,
+    is_dense: bool,
+}
+
+impl<'a> Message<'a> for PointCloud2<'a> {
+    fn from_ros1(data: &'a [u8]) -> Result<Self, DecodeError> {
+        let c: Ros1Cloud = from_ros1(data)?;
+        Ok(PointCloud2 {
+            header: c.header.try_into()?,
+            height: c.height,
+            width: c.width,
+            fields: c.fields,
+            is_bigendian: c.is_bigendian,
+            point_step: c.point_step,
+            row_step: c.row_step,
+            data: Cow::Owned(c.data.into_vec()),
+            is_dense: c.is_dense,
+        })
+    }
+}
+
+impl Message<'_> for Odometry {
+    fn from_ros1(data: &[u8]) -> Result<Self, DecodeError> {
+        let o: Odometry<Ros1Header> = from_ros1(data)?;
+        Ok(Odometry {
+            header: o.header.try_into()?,
+            child_frame_id: o.child_frame_id,
+            pose: o.pose,
+            twist: o.twist,
+        })
+    }
+}
+
+impl Message<'_> for PoseStamped {
+    fn from_ros1(data: &[u8]) -> Result<Self, DecodeError> {
+        let p: PoseStamped<Ros1Header> = from_ros1(data)?;
+        Ok(PoseStamped {
+            header: p.header.try_into()?,
+            pose: p.pose,
+        })
+    }
+}
+
+impl Message<'_> for PoseWithCovarianceStamped {
+    fn from_ros1(data: &[u8]) -> Result<Self, DecodeError> {
+        let p: PoseWithCovarianceStamped<Ros1Header> = from_ros1(data)?;
+        Ok(PoseWithCovarianceStamped {
+            header: p.header.try_into()?,
+            pose: p.pose,
+        })
+    }
+}
+
+impl Message<'_> for TfMessage {
+    fn from_ros1(data: &[u8]) -> Result<Self, DecodeError> {
+        let tf: TfMessage<Ros1Header> = from_ros1(data)?;
+        let transforms = tf
+            .transforms
+            .into_iter()
+            .map(|t| {
+                Ok(TransformStamped {
+                    header: t.header.try_into()?,
+                    child_frame_id: t.child_frame_id,
+                    transform: t.transform,
+                })
+            })
+            .collect::<Result<_, DecodeError>>()?;
+        Ok(TfMessage { transforms })
+    }
 }
 
 /// Decodes a CDR-encoded message (its 4-byte encapsulation header first:
@@ -278,7 +440,7 @@ pub struct PointCloud2<'a> {
     pub point_step: u32,
     pub row_step: u32,
     #[serde(borrow, with = "serde_bytes")]
-    pub data: &'a [u8],
+    pub data: Cow<'a, [u8]>,
     pub is_dense: bool,
 }
 
@@ -321,25 +483,26 @@ pub struct Twist {
 #[derive(Debug, Clone, Copy, Deserialize)]
 pub struct TwistWithCovariance {
     pub twist: Twist,
+    _covariance: Covariance,
 }
 
 #[derive(Debug, Clone, Deserialize)]
-pub struct Odometry {
-    pub header: Header,
+pub struct Odometry<H = Header> {
+    pub header: H,
     pub child_frame_id: String,
     pub pose: PoseWithCovariance,
     pub twist: TwistWithCovariance,
 }
 
 #[derive(Debug, Clone, Deserialize)]
-pub struct PoseStamped {
-    pub header: Header,
+pub struct PoseStamped<H = Header> {
+    pub header: H,
     pub pose: RosPose,
 }
 
 #[derive(Debug, Clone, Deserialize)]
-pub struct PoseWithCovarianceStamped {
-    pub header: Header,
+pub struct PoseWithCovarianceStamped<H = Header> {
+    pub header: H,
     pub pose: PoseWithCovariance,
 }
 
@@ -350,15 +513,15 @@ pub struct Transform {
 }
 
 #[derive(Debug, Clone, Deserialize)]
-pub struct TransformStamped {
-    pub header: Header,
+pub struct TransformStamped<H = Header> {
+    pub header: H,
     pub child_frame_id: String,
     pub transform: Transform,
 }
 
 #[derive(Debug, Clone, Deserialize)]
-pub struct TfMessage {
-    pub transforms: Vec<TransformStamped>,
+pub struct TfMessage<H = Header> {
+    pub transforms: Vec<TransformStamped<H>>,
 }
 
 /// A rigid transform that is not one (a position not finite, a rotation

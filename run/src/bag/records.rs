@@ -1,4 +1,5 @@
-//! An MCAP file's messages, with their channels and schemas.
+//! An MCAP file's messages, with their channels and schemas (and the
+//! types a ROS 1 bag's reader gives its messages too).
 //!
 //! The container (its framing, chunks, their compression and CRCs) is
 //! `mcap`'s sans-I/O reader's; the three records a replay needs from it
@@ -28,6 +29,8 @@ pub struct SchemaInfo {
     pub name: String,
     pub encoding: String,
     pub data: Vec<u8>,
+    /// ROS 1's md5sum of the type (a bag's connections give it).
+    pub md5sum: Option<String>,
 }
 
 /// A channel: its topic, its messages' encoding and their schema.
@@ -90,6 +93,7 @@ impl<'a> Records<'a> {
                     name: r.string()?,
                     encoding: r.string()?,
                     data: r.bytes()?.to_vec(),
+                    md5sum: None,
                 };
                 if id != 0 && self.schemas.len() < MAX_DEFINITIONS {
                     self.schemas.insert(id, Arc::new(schema));
@@ -226,10 +230,10 @@ fn chunk_fits(body: &[u8]) -> bool {
 }
 
 /// A record's fields, read from its front, every length checked.
-struct Fields<'a>(&'a [u8]);
+pub(super) struct Fields<'a>(pub(super) &'a [u8]);
 
 impl<'a> Fields<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+    pub(super) fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
         if n > self.0.len() {
             return Err(format!(
                 "a field of {n} bytes where {} are left",
@@ -241,30 +245,30 @@ impl<'a> Fields<'a> {
         Ok(head)
     }
 
-    fn u16(&mut self) -> Result<u16, String> {
+    pub(super) fn u16(&mut self) -> Result<u16, String> {
         Ok(u16::from_le_bytes(
             self.take(2)?.try_into().unwrap_or_default(),
         ))
     }
 
-    fn u32(&mut self) -> Result<u32, String> {
+    pub(super) fn u32(&mut self) -> Result<u32, String> {
         Ok(u32::from_le_bytes(
             self.take(4)?.try_into().unwrap_or_default(),
         ))
     }
 
-    fn u64(&mut self) -> Result<u64, String> {
+    pub(super) fn u64(&mut self) -> Result<u64, String> {
         Ok(u64::from_le_bytes(
             self.take(8)?.try_into().unwrap_or_default(),
         ))
     }
 
-    fn bytes(&mut self) -> Result<&'a [u8], String> {
+    pub(super) fn bytes(&mut self) -> Result<&'a [u8], String> {
         let n = self.u32()?;
         self.take(usize::try_from(n).unwrap_or(usize::MAX))
     }
 
-    fn string(&mut self) -> Result<String, String> {
+    pub(super) fn string(&mut self) -> Result<String, String> {
         let bytes = self.bytes()?;
         String::from_utf8(bytes.to_vec()).map_err(|_| "a string that is not UTF-8".to_owned())
     }
@@ -293,7 +297,7 @@ mod tests {
         out
     }
 
-    fn string(s: &str) -> Vec<u8> {
+    pub(super) fn string(s: &str) -> Vec<u8> {
         let mut out = (s.len() as u32).to_le_bytes().to_vec();
         out.extend_from_slice(s.as_bytes());
         out
