@@ -19,6 +19,7 @@ use arcnav_testkit::{LcmReference, workspace_root};
 
 /// `arcnav ARGS…`: exit code, stdout, stderr.
 fn arcnav(args: &[&str]) -> (i32, String, String) {
+    let _slot = arcnav_testkit::cpu_slot();
     let out = Command::new(env!("CARGO_BIN_EXE_arcnav"))
         .args(args)
         .output()

@@ -15,6 +15,7 @@ fn out_dir(tag: &str) -> ScratchDir {
 /// the directory (for the log), and what it printed.
 fn sim(tag: &str, args: &[&str]) -> (Value, ScratchDir, String) {
     let out = out_dir(tag);
+    let _slot = arcnav_testkit::cpu_slot();
     let output = Command::new(env!("CARGO_BIN_EXE_arcnav"))
         .arg("sim")
         .args(["--out", out.to_str().unwrap()])

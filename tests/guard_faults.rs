@@ -103,6 +103,7 @@ fn mission(world: &World, config: &Config) -> MissionReport {
         beside_others: true,
         ..MissionOptions::default()
     };
+    let _slot = arcnav_testkit::cpu_slot();
     run_mission(
         &config.resolved().unwrap(),
         Arc::new(world.clone()),

@@ -34,6 +34,7 @@ fn sweep(args: &[&str], out: &Path) -> Command {
 }
 
 fn run(args: &[&str], out: &Path) -> Output {
+    let _slot = arcnav_testkit::cpu_slot();
     sweep(args, out).output().unwrap()
 }
 

@@ -25,6 +25,7 @@ fn drive(world: &str) -> MissionRun {
 
 /// The mission on `world` with the default configuration.
 fn run(world: World) -> MissionRun {
+    let _slot = arcnav_testkit::cpu_slot();
     run_mission(
         &Config::default().resolved().unwrap(),
         Arc::new(world),

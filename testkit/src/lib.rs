@@ -10,11 +10,16 @@
 //!
 //! - [`alloc::Largest`]: an allocator that remembers the largest allocation,
 //!   for tests that input never allocates from an unchecked size.
+//! - [`cpu_slot`]: one core's share of the suite's heavy work (missions,
+//!   replays), across every test process; [`output_of`] takes one.
 //!
 //! A missing tool skips a test with a loud message locally; under `CI=true`
 //! it fails the test with the reason instead.
 
 pub mod alloc;
+mod slots;
+
+pub use slots::{CpuSlot, cpu_slot};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -23,12 +28,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// The pinned version of the reference implementation.
 pub const LCM_VERSION: &str = "1.5.3";
 
-/// Runs `program` with `args` to its end: its exit code (-1 when a signal
-/// ended it) and what it printed on standard output and standard error.
-/// A test crate passes its binary (`env!("CARGO_BIN_EXE_arcnav")`, which
-/// only the test crate can read).
+/// Runs `program` with `args` to its end, holding a [`cpu_slot`]: its
+/// exit code (-1 when a signal ended it) and what it printed on standard
+/// output and standard error. A test crate passes its binary
+/// (`env!("CARGO_BIN_EXE_arcnav")`, which only the test crate can read).
 pub fn output_of(program: impl AsRef<std::ffi::OsStr>, args: &[&str]) -> (i32, String, String) {
     let program = program.as_ref();
+    let _slot = cpu_slot();
     let out = Command::new(program)
         .args(args)
         .output()
