@@ -165,6 +165,8 @@ fn a_half_metre_box_stands_out_of_the_ground() {
 
 #[test]
 fn the_layer_scrolls_with_the_vehicle_and_keeps_what_stays_in_the_window() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     let mut rig = Rig::new(0.02);
     let ground = |x: f64, _: f64| 0.3 * (x / 7.0).sin();
     rig.image(1, 0.0, ground);
@@ -225,6 +227,8 @@ fn steep(rig: &Rig) -> Vec<(f32, f32)> {
 
 #[test]
 fn a_bank_side_steeper_than_the_vehicle_drives_is_an_obstacle_along_its_whole_run() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     // Perception's cells mark a 35° side only in places (within a 20 cm
     // cell it rises 14 cm, below every threshold); the fused layer sees it
     // all.

@@ -621,6 +621,8 @@ impl Runner for Reversed {
 
 #[test]
 fn the_result_does_not_depend_on_how_the_parts_ran() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     // Rolling ground with boxes every 6 m, seen all around by the 128×2048
     // lidar (large enough to be split) from a tilted vehicle.
     let sensor = SensorModel::lidar128();

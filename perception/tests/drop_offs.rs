@@ -120,6 +120,8 @@ fn a_narrow_ditch_is_found_and_a_bridgeable_one_is_not() {
 
 #[test]
 fn flat_ground_rolling_hills_and_a_gentle_crest_have_no_drop_off() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     let config = PerceptionConfig::default();
     // Hills of 10 m wavelength and 1 m amplitude (2 m crest to trough)
     // beyond 3 m, starting level under the vehicle.
@@ -176,6 +178,8 @@ fn a_crest_whose_far_side_hides_from_the_sensor_is_a_drop_off_until_seen() {
 
 #[test]
 fn dropouts_and_the_shadow_behind_a_rock_are_not_drop_offs() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     let config = PerceptionConfig::default();
     for sensor in sensors() {
         let id = sensor.to_custom().id;
@@ -242,6 +246,8 @@ fn suspected(
 
 #[test]
 fn a_ditch_too_far_to_show_its_depth_is_a_suspected_drop_off_and_a_near_slot_is_not() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     // From 16-20 m a ray dips 0.15-0.3 m into a 1.5 m ditch before it
     // meets the far side, less than δ (0.24-0.25 m): no definite drop-off
     // there, but a dip wider than the wheels bridge, whose far side rises.

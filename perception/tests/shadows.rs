@@ -74,6 +74,8 @@ fn sensors() -> [SensorModel; 2] {
 
 #[test]
 fn the_ground_beyond_a_wide_trenchs_near_edge_is_a_shadow() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     // 8 m wide and 2 m deep: from afar its floor is seen beyond a long
     // shadow, and the edge looks like the crest of a gentle slope. The
     // ground just beyond the edge must not count as seen.
@@ -109,6 +111,8 @@ fn the_ground_beyond_a_wide_trenchs_near_edge_is_a_shadow() {
 
 #[test]
 fn level_ground_and_dropouts_cast_no_shadow_and_a_rock_casts_its_own() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     for sensor in sensors() {
         let id = sensor.to_custom().id;
         assert!(

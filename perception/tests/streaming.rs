@@ -97,6 +97,8 @@ fn line_time(period: Utime, lines: usize) -> impl Fn(usize) -> Utime {
 /// level and tilted.
 #[test]
 fn a_streamed_frame_reports_the_cells_of_the_whole_image() {
+    // Heavy: one core's share of the suite's work (arcnav_testkit::cpu_slot).
+    let _slot = arcnav_testkit::cpu_slot();
     for pose in [
         isometry_from_xyz_rpy([0.0, 0.0, 0.0], 0.0, 0.0, 0.3),
         isometry_from_xyz_rpy([0.5, -0.3, 0.2], 0.06, -0.1, -2.0),
