@@ -2,8 +2,8 @@
 written by the reference tools (PyPI rosbags for the messages and ROS 1
 bags, PyPI mcap for MCAP files): a few-kilobyte bag of every kind a replay
 reads (an organized cloud of 2 x 4 points, a ring cloud, odometry, a pose,
-/tf and /tf_static), as ROS 2 (plain and zstd) and as ROS 1 (plain, bz2,
-lz4), and each message's CDR bytes alone.
+/tf and /tf_static), as ROS 2 (plain and zstd), as ROS 1 (plain, bz2,
+lz4) and as ROS 1 messages in MCAP, and each message's CDR bytes alone.
 
     python bag_seeds.py FUZZ_CORPUS_DIR
 
@@ -142,6 +142,19 @@ def main():
                 if topic not in connections:
                     connections[topic] = writer.add_connection(topic, msgtype, typestore=ts)
                 writer.write(connections[topic], sec * 10**9, bytes(ts.serialize_ros1(msg, msgtype)))
+    # ROS 1 messages in an MCAP file (what `mcap convert` makes of a bag).
+    with open(bags / "seed-ros1-encoded.mcap", "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="ros1", library="bag_seeds.py")
+        channels = {}
+        for sec, topic, msgtype, msg in messages():
+            if topic not in channels:
+                text, _ = ts.generate_msgdef(msgtype, ros_version=1)
+                schema = writer.register_schema(msgtype.replace("/msg/", "/"), "ros1msg", text.encode())
+                channels[topic] = writer.register_channel(topic, "ros1", schema)
+            data = bytes(ts.serialize_ros1(msg, msgtype))
+            writer.add_message(channels[topic], sec * 10**9, data, sec * 10**9)
+        writer.finish()
     return 0
 
 

@@ -206,7 +206,7 @@ impl Bag {
         if self.bytes.starts_with(ROS1_MAGIC) {
             "ROS 1 (bag)"
         } else {
-            "ROS 2 (MCAP, CDR)"
+            "MCAP"
         }
     }
 
@@ -316,7 +316,16 @@ impl Topic {
                     Some(md5) => Some(format!(
                         "its type's md5sum {md5} is not ROS 1's {type_name} ({ros1})"
                     )),
-                    None => Some("no md5sum in its connection".to_string()),
+                    // An MCAP file's ROS 1 messages (converted from a bag):
+                    // their definition, field by field.
+                    None if s.encoding == "ros1msg" => {
+                        let text = String::from_utf8_lossy(&s.data);
+                        Schema(&text)
+                            .check_ros1(kind)
+                            .err()
+                            .map(|e| format!("its schema differs from ROS 1's: {e}"))
+                    }
+                    None => Some(format!("schema encoding {:?}, not ros1msg", s.encoding)),
                 }
             }
             (Some(_), _) if channel.message_encoding != "cdr" => Some(format!(

@@ -172,6 +172,20 @@ impl Schema<'_> {
     /// Checks the top-level type's fields, and those of every type the
     /// text defines that is decoded here, against [`FIELDS`].
     pub fn check(&self, kind: Kind) -> Result<(), SchemaMismatch> {
+        self.check_in(kind, Encoding::Cdr)
+    }
+
+    /// [`check`](Self::check) for a definition of ROS 1's (`ros1msg`, as
+    /// an MCAP file converted from a ROS 1 bag carries it): its header has
+    /// a sequence number and a `time` of its own; every other type is
+    /// ROS 2's.
+    pub fn check_ros1(&self, kind: Kind) -> Result<(), SchemaMismatch> {
+        self.check_in(kind, Encoding::Ros1)
+    }
+
+    fn check_in(&self, kind: Kind, encoding: Encoding) -> Result<(), SchemaMismatch> {
+        const ROS1_HEADER: (&str, &[&str]) =
+            ("Header", &["uint32 seq", "time stamp", "string frame_id"]);
         let mut sections = vec![(kind.top().to_string(), Vec::new())];
         for line in self.0.lines() {
             let line = line.split('#').next().unwrap_or("").trim();
@@ -198,7 +212,11 @@ impl Schema<'_> {
             }
         }
         for (type_name, found) in &sections {
-            let Some((_, expected)) = FIELDS.iter().find(|(t, _)| t == type_name) else {
+            let expected = match encoding {
+                Encoding::Ros1 if type_name == ROS1_HEADER.0 => Some(&ROS1_HEADER),
+                _ => FIELDS.iter().find(|(t, _)| t == type_name),
+            };
+            let Some((_, expected)) = expected else {
                 continue;
             };
             if found
@@ -596,6 +614,27 @@ mod tests {
              Quaternion orientation\n====\nMSG: geometry_msgs/Quaternion\n{quaternion}"
         );
         assert_eq!(Schema(&pose).check(Kind::PoseStamped), Ok(()));
+    }
+
+    #[test]
+    fn a_ros_1_definition_is_checked_with_ros_1_s_header() {
+        let pose = "std_msgs/Header header\ngeometry_msgs/Pose pose\n====\nMSG: std_msgs/Header\n\
+            uint32 seq\ntime stamp\nstring frame_id\n====\nMSG: geometry_msgs/Pose\n\
+            geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n";
+        assert_eq!(Schema(pose).check_ros1(Kind::PoseStamped), Ok(()));
+        // ROS 2's header is not ROS 1's, nor the other way round.
+        assert_eq!(
+            Schema(pose).check(Kind::PoseStamped).unwrap_err().type_name,
+            "Header"
+        );
+        let ros2 = pose.replace("uint32 seq\ntime stamp", "builtin_interfaces/Time stamp");
+        assert_eq!(
+            Schema(&ros2)
+                .check_ros1(Kind::PoseStamped)
+                .unwrap_err()
+                .type_name,
+            "Header"
+        );
     }
 
     #[test]
