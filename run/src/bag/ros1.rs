@@ -185,7 +185,7 @@ impl<'a> Ros1Records<'a> {
                     self.at = 0;
                     return Ok(Some(()));
                 }
-                OP_CONNECTION => self.connection(&record)?,
+                OP_CONNECTION => connection(&mut self.connections, &record)?,
                 // Index data, chunk info: what a reader in order passes over.
                 _ => {}
             }
@@ -193,69 +193,68 @@ impl<'a> Ros1Records<'a> {
         Ok(None)
     }
 
-    fn connection(&mut self, record: &Record<'_>) -> Result<(), String> {
-        let id = record.u32("conn")?;
-        let topic = record.text("topic")?;
-        let description = fields_of(record.data).map_err(|e| format!("connection {id}: {e}"))?;
-        let text = |name: &str| {
-            description
-                .iter()
-                .find(|(n, _)| *n == name)
-                .map(|(_, v)| String::from_utf8_lossy(v).into_owned())
-        };
-        let channel = ChannelInfo {
-            topic,
-            message_encoding: "ros1".into(),
-            schema: Some(Arc::new(SchemaInfo {
-                name: text("type").unwrap_or_default(),
-                encoding: "ros1msg".into(),
-                data: text("message_definition").unwrap_or_default().into_bytes(),
-                md5sum: text("md5sum"),
-            })),
-        };
-        if self.connections.len() < MAX_CONNECTIONS || self.connections.contains_key(&id) {
-            self.connections.insert(id, Arc::new(channel));
-        }
-        Ok(())
-    }
-
     /// The next message of the chunk being read, if any is left in it.
     fn next_inner(&mut self) -> Result<Option<RawMessage>, String> {
+        let in_chunk = |e| format!("in a chunk: {e}");
         while self.at < self.chunk.len() {
-            let chunk = std::mem::take(&mut self.chunk);
-            let result = Record::read(&chunk[self.at..]).and_then(|(record, rest)| {
-                let message = match record.op()? {
-                    OP_MESSAGE => {
-                        let id = record.u32("conn")?;
-                        let time = record.u64("time")?;
-                        // Seconds, then nanoseconds, each 32 bits.
-                        let ns = (time & 0xffff_ffff) * 1_000_000_000 + (time >> 32);
-                        let channel = self.connections.get(&id).cloned().ok_or_else(|| {
-                            format!("a message on connection {id}, which no record defines")
-                        })?;
-                        Some(RawMessage {
-                            channel,
-                            log_time: ns,
-                            data: record.data.to_vec(),
-                        })
-                    }
-                    OP_CONNECTION => {
-                        self.connection(&record)?;
-                        None
-                    }
-                    _ => None,
-                };
-                Ok((message, chunk.len() - rest.len()))
-            });
-            self.chunk = chunk;
-            let (message, next) = result.map_err(|e| format!("in a chunk: {e}"))?;
-            self.at = next;
-            if message.is_some() {
-                return Ok(message);
+            let (record, rest) = Record::read(&self.chunk[self.at..]).map_err(in_chunk)?;
+            self.at = self.chunk.len() - rest.len();
+            match record.op().map_err(in_chunk)? {
+                OP_MESSAGE => {
+                    let id = record.u32("conn").map_err(in_chunk)?;
+                    let time = record.u64("time").map_err(in_chunk)?;
+                    // Seconds, then nanoseconds, each 32 bits.
+                    let ns = (time & 0xffff_ffff) * 1_000_000_000 + (time >> 32);
+                    let channel = self.connections.get(&id).cloned().ok_or_else(|| {
+                        in_chunk(format!(
+                            "a message on connection {id}, which no record defines"
+                        ))
+                    })?;
+                    return Ok(Some(RawMessage {
+                        channel,
+                        log_time: ns,
+                        data: record.data.to_vec(),
+                    }));
+                }
+                OP_CONNECTION => connection(&mut self.connections, &record).map_err(in_chunk)?,
+                _ => {}
             }
         }
         Ok(None)
     }
+}
+
+/// Defines (or defines again) a connection from its record: its topic,
+/// and from its description the type, md5sum and definition.
+fn connection(
+    connections: &mut HashMap<u32, Arc<ChannelInfo>>,
+    record: &Record<'_>,
+) -> Result<(), String> {
+    let id = record.u32("conn")?;
+    let topic = record.text("topic")?;
+    let description = Record {
+        fields: fields_of(record.data).map_err(|e| format!("connection {id}: {e}"))?,
+        data: &[],
+    };
+    let text = |name: &str| {
+        description
+            .field(name)
+            .map(|v| String::from_utf8_lossy(v).into_owned())
+    };
+    let channel = ChannelInfo {
+        topic,
+        message_encoding: "ros1".into(),
+        schema: Some(Arc::new(SchemaInfo {
+            name: text("type").unwrap_or_default(),
+            encoding: "ros1msg".into(),
+            data: text("message_definition").unwrap_or_default().into_bytes(),
+            md5sum: text("md5sum"),
+        })),
+    };
+    if connections.len() < MAX_CONNECTIONS || connections.contains_key(&id) {
+        connections.insert(id, Arc::new(channel));
+    }
+    Ok(())
 }
 
 /// `name=value` fields, each length-prefixed: a record's header, or a
