@@ -251,13 +251,24 @@ fn assert_threaded_gives_lockstep_on(mut config: Config, speed: f64) {
     // arbiter refuses to drive; lock-step replay has no such watchdog. The
     // cycle at the first pose may come before the first image is evaluated
     // (and under load the watchdog may tick before the first pose is
-    // taken in); from the next one on the commands must be the same.
+    // taken in); from the next one on the commands must be the same. The
+    // guard beside the arbiter, with no image or pose of its own yet,
+    // stops those first cycles for the same reason (one CI run of six,
+    // 2026-12-07, under load).
     let first = live.keys().next().copied().unwrap();
     let first_s = (first - SIM_EPOCH_US) as f64 * 1e-6;
     assert!(first_s <= 0.11, "first decision on votes at {first_s:.2} s");
+    let starting = |why: &Why| match why {
+        Why::Watchdog(Hazard::NoImage | Hazard::NoPose) => true,
+        Why::Guard(reason) => {
+            reason == "no pose yet"
+                || (reason.starts_with("no image from ") && reason.ends_with(" yet"))
+        }
+        _ => false,
+    };
     for d in decided.iter().filter(|d| d.command.utime < first) {
         assert!(
-            matches!(d.why, Why::Watchdog(Hazard::NoImage | Hazard::NoPose)),
+            starting(&d.why),
             "before the first decision on votes: {:?}",
             d.why
         );
