@@ -103,13 +103,21 @@ enum Command {
     /// (the route's planned path, the point it steered for, the ground it
     /// remembers as obstacles or shut), and who vetoed what.
     Render(RenderArgs),
-    /// Write an LCM log as MCAP, for Foxglove.
+    /// Write an LCM log as MCAP for Foxglove, or as a ROS 2 bag.
     ///
-    /// Write an LCM log as MCAP, the format Foxglove opens: range images as
-    /// point clouds in the vehicle frame, obstacle cells, local map and
-    /// waypoints as 3-D scenes, the pose and world → vehicle transforms, the
-    /// arcs coloured by fused vote, each behaviour's votes and the command as
-    /// plottable series. Every message keeps its log time.
+    /// --mcap: the format Foxglove opens, with Foxglove's schemas: range
+    /// images as point clouds in the vehicle frame, obstacle cells, local map
+    /// and waypoints as 3-D scenes, the pose and world → vehicle transforms,
+    /// the arcs coloured by fused vote, each behaviour's votes and the command
+    /// as plottable series.
+    ///
+    /// --bag: a ROS 2 bag (one .mcap file) of standard messages only, for
+    /// RViz (`ros2 bag play`) and every ROS 2 tool: organized PointCloud2s in
+    /// each sensor's frame, nav_msgs/Odometry on /odom, odom → base_link on
+    /// /tf, the mounts on /tf_static, the commands as
+    /// ackermann_msgs/AckermannDriveStamped on /cmd, cells, map, waypoints and
+    /// arcs as visualization_msgs/MarkerArray. `arcnav replay` reads it back
+    /// to the log's decisions. Every message keeps its log time.
     Export(ExportArgs),
     /// Run paper 000's detection experiment per evaluator and sensor.
     ///
@@ -182,18 +190,29 @@ struct SimArgs {
     /// Save the world (e.g. a generated one) as TOML to this file.
     #[arg(long, value_name = "FILE")]
     save_world: Option<PathBuf>,
-    /// Also write the run as MCAP for Foxglove to this file (as arcnav export).
+    /// Also write the run as MCAP for Foxglove to this file (as arcnav export --mcap).
     #[arg(long, value_name = "FILE")]
     mcap: Option<PathBuf>,
+    /// Also write the run as a ROS 2 bag (.mcap) to this file (as arcnav export --bag).
+    #[arg(long, value_name = "FILE")]
+    bag: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("outputs").required(true).multiple(true).args(["mcap", "bag"])))]
 struct ExportArgs {
     /// The LCM event log (arcnav sim's mission.lcm, lcm-logger's, arcnav replay --out's).
     log: PathBuf,
-    /// The MCAP file to write.
+    /// Write an MCAP file for Foxglove (Foxglove's own schemas: scenes,
+    /// point clouds, transforms; votes, decisions and the guard as JSON).
     #[arg(long, value_name = "FILE")]
-    mcap: PathBuf,
+    mcap: Option<PathBuf>,
+    /// Write a ROS 2 bag (one .mcap file, CDR) of standard messages for
+    /// RViz, `ros2 bag play` and Foxglove: PointCloud2, Odometry, /tf,
+    /// /tf_static, AckermannDriveStamped, MarkerArray. `arcnav replay`
+    /// reads it back.
+    #[arg(long, value_name = "FILE")]
+    bag: Option<PathBuf>,
     /// Configuration (arc set and arbiter weights for the fused votes drawn
     /// on /arcs; default: the defaults).
     #[arg(long)]

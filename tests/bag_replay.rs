@@ -451,3 +451,167 @@ fn real_ouster_frames_replay_with_the_street_s_sides_as_obstacles_and_its_road_c
     );
     assert!(road <= 2, "{road} cells on the road 5-15 m ahead");
 }
+
+/// Issue 64's round trip: `arcnav export LOG --bag OUT.mcap` writes a ROS 2
+/// bag of standard messages only, which the reference readers (PyPI mcap
+/// and rosbags, each type built from the definition the bag carries) read
+/// whole, and which `arcnav replay` plays to the decisions of the log it
+/// came from.
+#[test]
+fn a_run_exported_as_a_ros_2_bag_is_read_by_ros_tools_and_replays_to_its_own_decisions() {
+    let erim = run("erim");
+    let log = erim.join("run/mission.lcm");
+    let bag = erim.join("exported.mcap");
+    let (code, stdout, stderr) = arcnav(&[
+        "export",
+        log.to_str().unwrap(),
+        "--bag",
+        bag.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stdout}\n{stderr}");
+    // Every event used or counted: the votes and decisions have no
+    // standard message, and say so.
+    assert!(
+        stderr.contains("on DECISION: no standard ROS 2 message"),
+        "{stderr}"
+    );
+
+    // What the log holds, to compare with.
+    let (mut poses, mut images, mut first_returns) = (0, 0, None);
+    for event in LogReader::open(&log).unwrap() {
+        let event = event.unwrap();
+        poses += usize::from(event.channel == channels::POSE);
+        if event.channel.starts_with(channels::RANGE_IMAGE) {
+            images += 1;
+            if first_returns.is_none()
+                && let Ok(Some(arcnav_bus::messages::AnyMessage::RangeImage(msg))) =
+                    arcnav_bus::messages::AnyMessage::decode(&event.data)
+            {
+                let image = arcnav_wire::range_image_from_wire(msg).unwrap();
+                first_returns = Some(arcnav::export::returns(&image));
+            }
+        }
+    }
+    let recorded = commands(&log);
+
+    let Some((reference, _)) = LcmReference::with_arcnav_types() else {
+        return;
+    };
+    let output = reference
+        .python()
+        .arg(workspace_root().join("tests/tools/read_ros2_bag.py"))
+        .arg(&bag)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() && stderr.contains("No module named 'rosbags'") {
+        arcnav_testkit::missing("the reference ROS bag reader (PyPI rosbags)");
+        return;
+    }
+    assert!(output.status.success(), "read_ros2_bag.py: {stderr}");
+    let read: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(read["profile"], "ros2");
+    let topics = read["topics"].as_object().unwrap();
+    for (topic, ty, count) in [
+        ("/odom", "nav_msgs/msg/Odometry", poses),
+        ("/tf", "tf2_msgs/msg/TFMessage", poses),
+        ("/tf_static", "tf2_msgs/msg/TFMessage", 1),
+        ("/points_erim", "sensor_msgs/msg/PointCloud2", images),
+        (
+            "/cmd",
+            "ackermann_msgs/msg/AckermannDriveStamped",
+            recorded.len(),
+        ),
+        (
+            "/arcs",
+            "visualization_msgs/msg/MarkerArray",
+            recorded.len(),
+        ),
+        (
+            "/obstacle_cells",
+            "visualization_msgs/msg/MarkerArray",
+            images,
+        ),
+        ("/waypoints", "visualization_msgs/msg/MarkerArray", 1),
+    ] {
+        let t = &topics[topic];
+        assert_eq!(t["type"], ty, "{topic}");
+        assert_eq!(t["count"], count, "{topic}");
+        assert_eq!(t["schema_encoding"], "ros2msg", "{topic}");
+        assert_eq!(t["encoding"], "cdr", "{topic}");
+        assert_eq!(t["increasing"], true, "{topic}");
+    }
+    // The local map rebuilt each decision cycle (the log holds none).
+    assert_eq!(topics["/local_map"]["count"], recorded.len());
+    // The frames a ROS user expects (REP 105), the mount latched.
+    assert_eq!(
+        read["frames"]["/odom"],
+        serde_json::json!(["odom", "base_link"])
+    );
+    assert_eq!(
+        read["frames"]["/tf"],
+        serde_json::json!([["odom", "base_link"]])
+    );
+    assert_eq!(
+        read["frames"]["/tf_static"],
+        serde_json::json!([["base_link", "erim"]])
+    );
+    assert!(
+        topics["/tf_static"]["qos"]
+            .as_str()
+            .unwrap()
+            .contains("durability: 1"),
+        "{}",
+        topics["/tf_static"]["qos"]
+    );
+    // The ERIM's 64 × 256 image, organized, its returns (range = distance
+    // from the sensor, checked point by point by the reader) and no more.
+    let cloud = &read["clouds"][0];
+    assert_eq!(cloud["frame"], "erim");
+    assert_eq!(
+        (cloud["height"].as_u64(), cloud["width"].as_u64()),
+        (Some(64), Some(256))
+    );
+    assert_eq!(
+        cloud["fields"],
+        serde_json::json!([["x", 0, 7], ["y", 4, 7], ["z", 8, 7], ["range", 12, 7]])
+    );
+    assert_eq!(cloud["returns"].as_u64(), first_returns.map(|n| n as u64));
+    // Commands: the steering angle of the curvature over the HMMWV's
+    // wheelbase, the speed, each at its cycle's time.
+    let wheelbase = arcnav::Config::default().vehicle.wheelbase_m;
+    let commands = read["commands"].as_array().unwrap();
+    assert_eq!(commands.len(), 50);
+    for c in commands {
+        let (curvature, speed) = recorded[&c["utime"].as_i64().unwrap()];
+        let angle = c["steering_angle"].as_f64().unwrap();
+        assert!(((wheelbase * curvature).atan() - angle).abs() < 1e-6, "{c}");
+        assert!((speed - c["speed"].as_f64().unwrap()).abs() < 1e-6, "{c}");
+    }
+    let markers = &read["markers"];
+    assert_eq!(markers["/arcs"]["types"], serde_json::json!([4]));
+    assert_eq!(markers["/arcs"]["frames"], serde_json::json!(["base_link"]));
+    assert_eq!(markers["/arcs"]["most_points"], 25);
+    assert_eq!(markers["/local_map"]["types"], serde_json::json!([6]));
+    assert!(markers["/local_map"]["most_points"].as_u64().unwrap() > 50);
+    assert_eq!(
+        markers["/obstacle_cells"]["frames"],
+        serde_json::json!(["odom"])
+    );
+    assert_eq!(markers["/waypoints"]["types"], serde_json::json!([2]));
+
+    // Replayed, the bag gives the log's own decisions, every one of them.
+    let out = erim.join("exported.lcm");
+    let (code, stdout, stderr) = replay(erim, &bag, &out, &[]);
+    assert_eq!(code, 0, "{stdout}\n{stderr}");
+    assert!(stdout.contains("problems      none"), "{stdout}");
+    assert!(
+        stdout.contains("mount         from /tf_static: base_link ← erim"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("/cmd (ackermann_msgs/msg/AckermannDriveStamped"),
+        "{stdout}"
+    );
+    assert_same_decisions("exported", &log, &out, recorded.len());
+}

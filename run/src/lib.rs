@@ -9,7 +9,8 @@
 //! - [`replay::replay`]: a recorded log (arcnav's LCM log, or a ROS 2 bag
 //!   through [`bag`]) played against the pipeline, its decisions written
 //!   to a new log and compared with the recorded ones;
-//! - [`export::export_mcap`]: a log written as MCAP for Foxglove;
+//! - [`export::export_mcap`], [`export::export_bag`]: a log written as MCAP
+//!   for Foxglove, or as a ROS 2 bag of standard messages;
 //! - [`sweep`]: many missions over worlds and speeds, one row each;
 //! - [`external`]: behaviours that are programs of their own, started and
 //!   voting in lock-step with the executors above;

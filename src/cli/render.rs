@@ -131,26 +131,50 @@ fn cells_of_a_log_without_images(log: &Path) -> u64 {
     cells
 }
 
-/// `arcnav export LOG --mcap OUT`.
+/// `arcnav export LOG --mcap OUT --bag OUT`.
 pub fn export(args: ExportArgs) -> anyhow::Result<ExitCode> {
     let registry = Registry::builtin();
     let config = config_of_log(&args.log, args.config.as_deref(), &registry, None)?;
-    arcnav::output::check_outputs(&[&args.mcap], &files_read(&args.log, [&config]))?;
-    write_mcap(&args.log, &args.mcap, &config)?;
+    let outputs: Vec<&std::path::Path> = args
+        .mcap
+        .iter()
+        .chain(&args.bag)
+        .map(|p| p.as_path())
+        .collect();
+    arcnav::output::check_outputs(&outputs, &files_read(&args.log, [&config]))?;
+    if let Some(mcap) = &args.mcap {
+        write_export(&args.log, mcap, &config, Export::Mcap)?;
+    }
+    if let Some(bag) = &args.bag {
+        write_export(&args.log, bag, &config, Export::Bag)?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 
-/// Exports `log` to `mcap` and says what it wrote and skipped.
-pub(crate) fn write_mcap(
+/// What `arcnav export` writes.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Export {
+    /// MCAP for Foxglove (`--mcap`).
+    Mcap,
+    /// A ROS 2 bag (`--bag`).
+    Bag,
+}
+
+/// Exports `log` to `out` and says what it wrote and skipped.
+pub(crate) fn write_export(
     log: &std::path::Path,
-    mcap: &std::path::Path,
+    out: &std::path::Path,
     config: &Resolved,
+    format: Export,
 ) -> anyhow::Result<()> {
-    let summary = arcnav::export::export_mcap(log, mcap, config)?;
+    let summary = match format {
+        Export::Mcap => arcnav::export::export_mcap(log, out, config)?,
+        Export::Bag => arcnav::export::export_bag(log, out, config)?,
+    };
     let written: u64 = summary.topics.values().sum();
     println!(
         "{}: {written} messages on {} topics from {} events of {}",
-        mcap.display(),
+        out.display(),
         summary.topics.len(),
         summary.events,
         log.display()

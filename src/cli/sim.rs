@@ -43,6 +43,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
         .map(PathBuf::as_path)
         .chain(args.save_world.as_deref())
         .chain(args.mcap.as_deref())
+        .chain(args.bag.as_deref())
         .collect();
     let mut inputs = config.files_read();
     inputs.extend(world.files_read.iter().cloned());
@@ -126,7 +127,10 @@ pub fn sim(args: SimArgs) -> anyhow::Result<ExitCode> {
     }
     print_summary(&run.report, &out, &run.snapshots);
     if let Some(mcap) = &args.mcap {
-        super::render::write_mcap(log_path, mcap, &config)?;
+        super::render::write_export(log_path, mcap, &config, super::render::Export::Mcap)?;
+    }
+    if let Some(bag) = &args.bag {
+        super::render::write_export(log_path, bag, &config, super::render::Export::Bag)?;
     }
     Ok(if run.report.success {
         ExitCode::SUCCESS

@@ -17,6 +17,7 @@
 //! reason ([`BagSummary::refused`], [`BagSummary::damaged`]).
 
 pub mod cloud;
+pub mod definitions;
 pub mod frames;
 pub mod msgs;
 mod records;

@@ -76,78 +76,6 @@ impl Kind {
     }
 }
 
-/// The fields (type and name, types without their package) of every
-/// message type decoded here, as ROS 2 defines them. Trailing fields that
-/// are not decoded (an odometry's twist covariance) are listed all the
-/// same: a schema must match whole.
-const FIELDS: &[(&str, &[&str])] = &[
-    ("Time", &["int32 sec", "uint32 nanosec"]),
-    ("Header", &["Time stamp", "string frame_id"]),
-    (
-        "PointCloud2",
-        &[
-            "Header header",
-            "uint32 height",
-            "uint32 width",
-            "PointField[] fields",
-            "bool is_bigendian",
-            "uint32 point_step",
-            "uint32 row_step",
-            "uint8[] data",
-            "bool is_dense",
-        ],
-    ),
-    (
-        "PointField",
-        &[
-            "string name",
-            "uint32 offset",
-            "uint8 datatype",
-            "uint32 count",
-        ],
-    ),
-    (
-        "Odometry",
-        &[
-            "Header header",
-            "string child_frame_id",
-            "PoseWithCovariance pose",
-            "TwistWithCovariance twist",
-        ],
-    ),
-    (
-        "PoseWithCovariance",
-        &["Pose pose", "float64[36] covariance"],
-    ),
-    (
-        "TwistWithCovariance",
-        &["Twist twist", "float64[36] covariance"],
-    ),
-    ("Twist", &["Vector3 linear", "Vector3 angular"]),
-    ("Pose", &["Point position", "Quaternion orientation"]),
-    ("Point", &["float64 x", "float64 y", "float64 z"]),
-    ("Vector3", &["float64 x", "float64 y", "float64 z"]),
-    (
-        "Quaternion",
-        &["float64 x", "float64 y", "float64 z", "float64 w"],
-    ),
-    ("PoseStamped", &["Header header", "Pose pose"]),
-    (
-        "PoseWithCovarianceStamped",
-        &["Header header", "PoseWithCovariance pose"],
-    ),
-    ("TFMessage", &["TransformStamped[] transforms"]),
-    (
-        "TransformStamped",
-        &[
-            "Header header",
-            "string child_frame_id",
-            "Transform transform",
-        ],
-    ),
-    ("Transform", &["Vector3 translation", "Quaternion rotation"]),
-];
-
 /// A message definition as a bag carries it (ROS 2's `ros2msg` text: the
 /// type's fields, then each type it uses after a line of `=` and
 /// `MSG: package/Type`).
@@ -170,7 +98,8 @@ fn or_none(field: Option<&String>) -> String {
 
 impl Schema<'_> {
     /// Checks the top-level type's fields, and those of every type the
-    /// text defines that is decoded here, against [`FIELDS`].
+    /// text defines, against their ROS 2 definitions
+    /// ([`super::definitions`]).
     pub fn check(&self, kind: Kind) -> Result<(), SchemaMismatch> {
         self.check_in(kind, Encoding::Cdr)
     }
@@ -213,8 +142,8 @@ impl Schema<'_> {
         }
         for (type_name, found) in &sections {
             let expected = match encoding {
-                Encoding::Ros1 if type_name == ROS1_HEADER.0 => Some(&ROS1_HEADER),
-                _ => FIELDS.iter().find(|(t, _)| t == type_name),
+                Encoding::Ros1 if type_name == ROS1_HEADER.0 => Some(ROS1_HEADER),
+                _ => super::definitions::named(type_name).map(|d| (d.name, d.fields)),
             };
             let Some((_, expected)) = expected else {
                 continue;
