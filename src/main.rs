@@ -360,6 +360,12 @@ struct ReplayArgs {
     /// else base_link).
     #[arg(long, value_name = "FRAME")]
     vehicle_frame: Option<String>,
+    /// Columns per slice of a bag's clouds that carry per-point times (a
+    /// field t, time, timestamp or time_offset): each cloud is streamed to
+    /// perception as slices of columns at their times, as a lidar's packets
+    /// arrive; 0 makes each cloud one image at its stamp.
+    #[arg(long, value_name = "N", default_value_t = arcnav::bag::SLICE_LINES)]
+    slice_lines: usize,
     /// With no waypoints: one this many metres ahead of the first pose.
     #[arg(long, value_name = "M", conflicts_with = "waypoints")]
     goal_ahead: Option<f64>,

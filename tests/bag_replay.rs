@@ -43,8 +43,17 @@ fn run(sensor: &str) -> &'static Path {
         let out = dir.join("run");
         // The lidar's bags take its first seconds only: the run ends at 6 s
         // (a timeout, exit status 1).
+        // "-sliced": its images streamed in slices of 16 columns, as
+        // `sim_mission`'s streamed missions are.
         let limit = dir.join("six-seconds.toml");
-        std::fs::write(&limit, "[sim]\ntime_limit_s = 6.0\n").unwrap();
+        let (sensor, sliced) = match sensor.strip_suffix("-sliced") {
+            Some(sensor) => (
+                sensor,
+                "slice_lines = 16\n[pipeline]\nperception_latency_s = 0.02\n",
+            ),
+            None => (sensor, ""),
+        };
+        std::fs::write(&limit, format!("[sim]\ntime_limit_s = 6.0\n{sliced}")).unwrap();
         let mut args = vec![
             "sim",
             "--world",
@@ -614,4 +623,55 @@ fn a_run_exported_as_a_ros_2_bag_is_read_by_ros_tools_and_replays_to_its_own_dec
         "{stdout}"
     );
     assert_same_decisions("exported", &log, &out, recorded.len());
+}
+
+/// A streamed run's slices gathered into organized clouds with Ouster's
+/// per-point time field `t` (as an Ouster driver publishes a frame): the
+/// replay streams each cloud to perception again as slices of 16 columns
+/// at their times, among the poses as the sensor sent them, and gives the
+/// streamed log's own decisions; `--slice-lines 0` makes each cloud one
+/// image.
+#[test]
+fn clouds_with_per_point_times_replay_as_the_slices_they_were_streamed_in() {
+    let sliced = run("lidar64-sliced");
+    let args = [
+        "--format",
+        "mcap",
+        "--cloud",
+        "organized-timed",
+        "--poses",
+        "odometry",
+    ];
+    let Some(bag) = make_bag(sliced, "timed", &args) else {
+        return;
+    };
+    let out = sliced.join("timed.lcm");
+    let (code, stdout, stderr) = replay(sliced, &bag, &out, &[]);
+    assert_eq!(code, 0, "{stdout}\n{stderr}");
+    assert!(stdout.contains("problems      none"), "{stdout}");
+    // 64 × 2048 clouds: 128 slices each.
+    assert!(
+        stdout.contains("slices of 16 columns, each at its points' times (field t)"),
+        "{stdout}"
+    );
+    let log = sliced.join("run/mission.lcm");
+    let slices_in_log = LogReader::open(&log)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.channel.starts_with(channels::RANGE_IMAGE))
+        .count();
+    assert!(
+        stdout.contains(&format!("from 0 images and {slices_in_log} slices")),
+        "{slices_in_log} slices in the log:\n{stdout}"
+    );
+    assert_same_decisions("timed", &log, &out, 55);
+    // `--slice-lines 0`: each cloud one image at its stamp.
+    let whole = sliced.join("whole.lcm");
+    let (code, stdout, _) = replay(sliced, &bag, &whole, &["--slice-lines", "0"]);
+    assert_eq!(code, 0, "{stdout}");
+    let clouds = slices_in_log / 128;
+    assert!(
+        stdout.contains(&format!("from {clouds} images and 0 slices")),
+        "{stdout}"
+    );
 }

@@ -69,6 +69,7 @@ fn bag(name: &str, data: &[u8]) {
             cloud: cloud.map(str::to_owned),
             pose: pose.map(str::to_owned),
             vehicle_frame: None,
+            slice_lines: crate::bag::SLICE_LINES,
         };
         let Ok(plan) = bag.plan(&options, &sensor) else {
             continue;

@@ -53,6 +53,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             cloud: args.cloud.clone(),
             pose: args.pose.clone(),
             vehicle_frame: args.vehicle_frame.clone(),
+            slice_lines: args.slice_lines,
         },
         goal_ahead_m: args.goal_ahead,
     };
@@ -97,9 +98,14 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         print_bag(bag);
     }
     println!(
-        "inputs        {} poses, {} range images, {} waypoint lists{}",
+        "inputs        {} poses, {} range images{}, {} waypoint lists{}",
         i.poses,
         i.images,
+        if i.slices > 0 {
+            format!(", {} range slices", i.slices)
+        } else {
+            String::new()
+        },
         i.waypoints,
         if args.recorded_cells {
             format!(", {} recorded obstacle reports", i.recorded_cells)
@@ -230,6 +236,12 @@ fn print_bag(bag: &arcnav::bag::BagSummary) {
         bag.points.hidden,
         bag.points.off_grid
     );
+    if let Some((field, lines)) = &bag.streamed {
+        println!(
+            "              streamed as {} slices of {lines} columns, each at its points' times (field {field})",
+            bag.slices
+        );
+    }
     println!(
         "poses         {} from {}, vehicle frame {}",
         bag.poses, bag.poses_from, bag.vehicle_frame

@@ -15,7 +15,12 @@ geometry_msgs/PoseStamped on /pose, or a transform odom -> base_link on
 - organized: height = rows, width = columns, NaN where there is no return;
 - rings: one row (height 1) of the returns only, with a uint16 `ring`
   field (the image's row), shuffled as a driver might send them;
-- xyz: one row of the returns only, x, y, z and nothing else.
+- xyz: one row of the returns only, x, y, z and nothing else;
+- organized-timed: a streamed log's slices (RANGE_SLICE, blocks of
+  columns) gathered into their frame's organized cloud, with Ouster's
+  per-point time field `t` (uint32, ns after the header's stamp, the
+  frame's start): each point's column's acquisition time. The cloud is
+  written when its frame's last slice arrives, stamped the frame's start.
 
 A bag message is stamped (log time and header) with the LCM message's own
 time. ROS 2 bags are a directory (metadata.yaml beside the .mcap); OUT is
@@ -31,7 +36,7 @@ import lcm
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from arcnav import pose_t, range_image_t
+from arcnav import pose_t, range_image_t, range_slice_t
 
 
 def stamp(typestore, utime):
@@ -113,6 +118,38 @@ def cloud_of(typestore, image, layout, rng):
     )
 
 
+def timed_cloud_of(typestore, frame):
+    """The organized cloud of a frame gathered from its slices, with `t`."""
+    rows, cols = frame["rows"], frame["cols"]
+    el = np.array(frame["elevation"], dtype=np.float64)
+    az = np.array(frame["azimuth"], dtype=np.float64)
+    rng_m = frame["range"]
+    with np.errstate(invalid="ignore"):
+        returned = np.isfinite(rng_m) & (rng_m > 0)
+    ce, se = np.cos(el)[:, None], np.sin(el)[:, None]
+    ca, sa = np.cos(az)[None, :], np.sin(az)[None, :]
+    x, y, z = rng_m * ce * ca, rng_m * ce * sa, rng_m * se * np.ones_like(ca)
+    points = np.zeros((rows, cols), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", "<u4")])
+    for name, values in (("x", x), ("y", y), ("z", z)):
+        points[name] = np.where(returned, values, np.nan)
+    offsets = (np.array(frame["line_utime"], dtype=np.int64) - frame["utime"]) * 1000
+    points["t"] = np.broadcast_to(offsets[None, :], (rows, cols)).astype(np.uint32)
+    field = typestore.types["sensor_msgs/msg/PointField"]
+    fields = [field(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")]
+    fields.append(field(name="t", offset=12, datatype=6, count=1))
+    return typestore.types["sensor_msgs/msg/PointCloud2"](
+        header=header(typestore, frame["utime"], "lidar"),
+        height=rows,
+        width=cols,
+        fields=fields,
+        is_bigendian=False,
+        point_step=16,
+        row_step=16 * cols,
+        data=np.frombuffer(points.tobytes(), dtype=np.uint8),
+        is_dense=False,
+    )
+
+
 def transform(typestore, utime, parent, child, position, wxyz):
     t = typestore.types
     return t["geometry_msgs/msg/TransformStamped"](
@@ -159,7 +196,7 @@ def main():
     parser.add_argument("log")
     parser.add_argument("out")
     parser.add_argument("--format", choices=["mcap", "ros1"], required=True)
-    parser.add_argument("--cloud", choices=["organized", "rings", "xyz"], required=True)
+    parser.add_argument("--cloud", choices=["organized", "rings", "xyz", "organized-timed"], required=True)
     parser.add_argument("--poses", choices=["odometry", "pose", "tf"], required=True)
     parser.add_argument("--seconds", type=float, default=math.inf, help="of the log, from its first pose")
     parser.add_argument(
@@ -214,6 +251,19 @@ def main():
             counts[topic] = counts.get(topic, 0) + 1
 
         mounted = False
+        frames = {}
+
+        def mount_once(utime, position, orientation):
+            nonlocal mounted
+            if mounted:
+                return
+            mount = transform(typestore, utime, "base_link", "lidar", position, orientation)
+            write(
+                "/tf_static", "tf2_msgs/msg/TFMessage",
+                typestore.types["tf2_msgs/msg/TFMessage"](transforms=[mount]), utime,
+            )
+            mounted = True
+
         for event in lcm.EventLog(args.log, "r"):
             if event.channel == "POSE":
                 pose = pose_t.decode(event.data)
@@ -222,18 +272,35 @@ def main():
                     break
                 topic, msgtype, msg = pose_messages(typestore, pose, args.poses)
                 write(topic, msgtype, msg, pose.utime)
+            elif event.channel.startswith("RANGE_IMAGE") and first is not None and args.cloud == "organized-timed":
+                try:
+                    part = range_slice_t.decode(event.data)
+                except ValueError:
+                    continue  # a whole image: this layout takes slices only
+                if part.axis != 0:
+                    continue
+                mount_once(part.utime, part.mount_position, part.mount_orientation)
+                frame = frames.setdefault(part.frame_utime, {
+                    "utime": part.frame_utime,
+                    "rows": part.frame_rows,
+                    "cols": part.frame_cols,
+                    "elevation": list(part.elevation),
+                    "azimuth": [0.0] * part.frame_cols,
+                    "line_utime": [part.frame_utime] * part.frame_cols,
+                    "range": np.full((part.frame_rows, part.frame_cols), np.nan),
+                    "filled": 0,
+                })
+                block = np.array(part.range, dtype=np.float64).reshape(part.rows, part.cols)
+                frame["range"][:, part.first:part.first + part.cols] = block
+                frame["azimuth"][part.first:part.first + part.cols] = list(part.azimuth)
+                frame["line_utime"][part.first:part.first + part.cols] = list(part.line_utime)
+                frame["filled"] += part.cols
+                if frame["filled"] >= frame["cols"]:
+                    del frames[part.frame_utime]
+                    write("/points", "sensor_msgs/msg/PointCloud2", timed_cloud_of(typestore, frame), part.utime)
             elif event.channel.startswith("RANGE_IMAGE") and first is not None:
                 image = range_image_t.decode(event.data)
-                if not mounted:
-                    mount = transform(
-                        typestore, image.utime, "base_link", "lidar",
-                        image.mount_position, image.mount_orientation,
-                    )
-                    write(
-                        "/tf_static", "tf2_msgs/msg/TFMessage",
-                        typestore.types["tf2_msgs/msg/TFMessage"](transforms=[mount]), image.utime,
-                    )
-                    mounted = True
+                mount_once(image.utime, image.mount_position, image.mount_orientation)
                 write(
                     "/points", "sensor_msgs/msg/PointCloud2",
                     cloud_of(typestore, image, args.cloud, rng), image.utime,

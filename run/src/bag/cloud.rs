@@ -16,6 +16,12 @@
 //!   azimuth; a return off the grid by more than half a pixel is counted
 //!   and left out.
 //!
+//! A per-point time field (`t`, `time`, `timestamp`, `time_offset`: an
+//! integer field in nanoseconds, a float field in seconds; relative to the
+//! header's stamp unless it is past 1e8 s, an absolute time) gives each
+//! column of the image its time: the latest of its points'. A replay then
+//! streams the image as slices of columns acquired at those times.
+//!
 //! A point with a coordinate that is not finite, or at the origin, is "no
 //! return". Two returns in one pixel: the nearer is kept (the other
 //! counted). Every size is checked before anything is allocated.
@@ -23,6 +29,7 @@
 use std::f64::consts::{PI, TAU};
 
 use arcnav_perception::BeamTable;
+use arcnav_vehicle::Utime;
 use serde::Serialize;
 
 use super::msgs::{PointCloud2, PointField};
@@ -173,6 +180,8 @@ struct Return {
     /// The organized cloud's pixel, or the ring (row) and no column.
     row: usize,
     col: Option<usize>,
+    /// When it was taken (µs), from a per-point time field.
+    time: Option<Utime>,
 }
 
 /// The cloud as an image: its beam table and ranges (row-major), and what
@@ -183,7 +192,27 @@ pub struct CloudImage {
     pub range: Vec<f32>,
     pub layout: Layout,
     pub counts: CloudCounts,
+    /// From a per-point time field: its name, and each column's time (µs;
+    /// a column none of whose points has one takes its neighbour's).
+    pub line_utimes: Option<(String, Vec<Utime>)>,
 }
+
+/// The names a per-point time field goes by.
+const TIME_FIELDS: [&str; 4] = ["t", "time", "timestamp", "time_offset"];
+
+/// The name of `fields`' per-point time field (32- or 64-bit, integer
+/// or float), if it has one.
+pub fn time_field(fields: &[PointField]) -> Option<&'static str> {
+    TIME_FIELDS.into_iter().find(|name| {
+        fields
+            .iter()
+            .any(|f| f.name == *name && (5..=8).contains(&f.datatype))
+    })
+}
+
+/// Past this many seconds a point's time is absolute (since the epoch),
+/// not an offset from the header's stamp.
+const ABSOLUTE_S: f64 = 1e8;
 
 /// `cloud` as a range image. `grid` is the configured sensor's beam table
 /// (the columns of a ring cloud, the whole grid of any other unorganized
@@ -202,6 +231,28 @@ pub fn to_image(
     };
     let (fx, fy, fz) = (coordinate("x")?, coordinate("y")?, coordinate("z")?);
     let ring = Field::find(&cloud.fields, "ring", step)?.filter(|f| f.datatype <= 6);
+    let time = match time_field(&cloud.fields) {
+        // One that does not fit the point is no time: the cloud is then
+        // one image at its stamp.
+        Some(name) => Field::find(&cloud.fields, name, step)
+            .ok()
+            .flatten()
+            .map(|f| (name, f)),
+        None => None,
+    };
+    let stamp = cloud.header.stamp.utime();
+    // A point's time, µs, if it has one that is a time.
+    let time_of = |point: &[u8]| -> Option<Utime> {
+        let (_, f) = time?;
+        let v = f.read(point, cloud.is_bigendian);
+        let seconds = if f.datatype <= 6 { v * 1e-9 } else { v };
+        let at = if seconds.abs() > ABSOLUTE_S {
+            seconds * 1e6
+        } else {
+            stamp as f64 + seconds * 1e6
+        };
+        (at.is_finite() && at.abs() < 9.0e15).then(|| at.round() as Utime)
+    };
     let (width, height) = (u64::from(cloud.width), u64::from(cloud.height));
     let points = width * height;
     if points > max_pixels {
@@ -236,8 +287,12 @@ pub fn to_image(
         points,
         ..CloudCounts::default()
     };
-    // Every return, read once.
+    // Every return, read once; an organized cloud's columns' times.
     let mut returns = Vec::with_capacity(points as usize);
+    let mut column_times: Vec<Option<Utime>> = match (layout, time) {
+        (Layout::Organized, Some(_)) => vec![None; width as usize],
+        _ => Vec::new(),
+    };
     let mut max_ring = 0usize;
     for r in 0..height as usize {
         for c in 0..width as usize {
@@ -248,6 +303,10 @@ pub fn to_image(
                 fy.read(point, cloud.is_bigendian),
                 fz.read(point, cloud.is_bigendian),
             );
+            let at_time = time_of(point);
+            if let (Some(t), Some(slot)) = (at_time, column_times.get_mut(c)) {
+                *slot = Some(slot.map_or(t, |s: Utime| s.max(t)));
+            }
             let range = (x * x + y * y + z * z).sqrt();
             if !range.is_finite() || range < 1e-6 {
                 counts.no_return += 1;
@@ -273,6 +332,7 @@ pub fn to_image(
                 azimuth: y.atan2(x),
                 row,
                 col,
+                time: at_time,
             });
         }
     }
@@ -323,6 +383,14 @@ pub fn to_image(
             counts.off_grid += 1;
             continue;
         };
+        if layout != Layout::Organized
+            && let Some(t) = ret.time
+        {
+            if column_times.is_empty() {
+                column_times = vec![None; cols];
+            }
+            column_times[c] = Some(column_times[c].map_or(t, |s: Utime| s.max(t)));
+        }
         if own.is_none() && layout == Layout::Organized {
             counts.moved += 1;
         }
@@ -334,12 +402,31 @@ pub fn to_image(
             *slot = slot.min(ret.range as f32);
         }
     }
+    let line_utimes = time
+        .filter(|_| column_times.iter().any(Option::is_some))
+        .map(|(name, _)| (name.to_owned(), fill_times(&column_times, cols, stamp)));
     Ok(CloudImage {
         beams,
         range,
         layout,
         counts,
+        line_utimes,
     })
+}
+
+/// `cols` columns' times, each that has none taking the last known before
+/// it (the first known, before any; `stamp` when none is known).
+fn fill_times(known: &[Option<Utime>], cols: usize, stamp: Utime) -> Vec<Utime> {
+    let first = known.iter().flatten().next().copied().unwrap_or(stamp);
+    let mut last = first;
+    (0..cols)
+        .map(|c| {
+            if let Some(Some(t)) = known.get(c) {
+                last = *t;
+            }
+            last
+        })
+        .collect()
 }
 
 /// The absolute difference of two angles, radians, in [0, π].
@@ -600,6 +687,90 @@ mod tests {
             (range * el.cos() * az.sin()) as f32,
             (range * el.sin()) as f32,
         ]
+    }
+
+    /// A 2 × 4 organized cloud (x, y, z float32, then a time field of
+    /// `datatype` named `name`, 8 bytes wide) whose column `c` was taken at
+    /// `times[c]` (in the field's unit); one column returns nothing.
+    fn timed(name: &str, datatype: u8, times: [f64; 4]) -> (Vec<PointField>, Vec<u8>) {
+        let mut fields: Vec<PointField> = ["x", "y", "z"]
+            .iter()
+            .enumerate()
+            .map(|(i, n)| PointField {
+                name: n.to_string(),
+                offset: 4 * i as u32,
+                datatype: 7,
+                count: 1,
+            })
+            .collect();
+        fields.push(PointField {
+            name: name.into(),
+            offset: 12,
+            datatype,
+            count: 1,
+        });
+        let mut data = Vec::new();
+        for el in [1.0, -1.0] {
+            for (c, az) in [30.0, 10.0, -10.0, -30.0].into_iter().enumerate() {
+                let p = if c == 2 {
+                    [f32::NAN; 3]
+                } else {
+                    point(10.0, el, az)
+                };
+                for v in p {
+                    data.extend_from_slice(&v.to_le_bytes());
+                }
+                let t = times[c];
+                let mut field = [0u8; 8];
+                match datatype {
+                    6 => field[..4].copy_from_slice(&(t as u32).to_le_bytes()),
+                    7 => field[..4].copy_from_slice(&(t as f32).to_le_bytes()),
+                    _ => field.copy_from_slice(&t.to_le_bytes()),
+                }
+                data.extend_from_slice(&field);
+            }
+        }
+        (fields, data)
+    }
+
+    #[test]
+    fn a_per_point_time_field_gives_each_column_its_time() {
+        let with_step = |fields, data: &[u8]| {
+            let mut m = message(fields, data, 4, 2);
+            m.point_step = 20;
+            m.row_step = 80;
+            to_image(&m, &BeamTable::uniform(2, 4, 0.1, -0.1, 1.0, -1.0), 1 << 20).unwrap()
+        };
+        // The stamp is 1 s; Ouster's `t`: ns after it. The column without
+        // a return still has its points' time.
+        let (fields, data) = timed("t", 6, [0.0, 25e6, 50e6, 75e6]);
+        let image = with_step(fields, &data);
+        let (name, times) = image.line_utimes.unwrap();
+        assert_eq!(name, "t");
+        assert_eq!(times, [1_000_000, 1_025_000, 1_050_000, 1_075_000]);
+        // Velodyne's `time`: float32 s after the stamp.
+        let (fields, data) = timed("time", 7, [0.0, 0.025, 0.05, 0.075]);
+        let (_, times) = with_step(fields, &data).line_utimes.unwrap();
+        assert_eq!(times, [1_000_000, 1_025_000, 1_050_000, 1_075_000]);
+        // Hesai's `timestamp`: float64 s since the epoch.
+        let (fields, data) = timed(
+            "timestamp",
+            8,
+            [1.7e9, 1.7e9 + 0.025, 1.7e9 + 0.05, 1.7e9 + 0.075],
+        );
+        let (_, times) = with_step(fields, &data).line_utimes.unwrap();
+        assert_eq!(
+            times,
+            [
+                1_700_000_000_000_000,
+                1_700_000_000_025_000,
+                1_700_000_000_050_000,
+                1_700_000_000_075_000
+            ]
+        );
+        // No such field: no times.
+        let (fields, data) = timed("intensity", 7, [0.0; 4]);
+        assert!(with_step(fields, &data).line_utimes.is_none());
     }
 
     #[test]

@@ -84,7 +84,13 @@ pub struct BagOptions {
     /// A pose topic, or `/tf` for the chain of frames to the vehicle's.
     pub pose: Option<String>,
     pub vehicle_frame: Option<String>,
+    /// Columns per slice when clouds carry per-point times (0: each cloud
+    /// one image all the same).
+    pub slice_lines: usize,
 }
+
+/// Columns per slice by default: an Ouster's packet.
+pub const SLICE_LINES: usize = 16;
 
 /// A bag that cannot be replayed at all.
 #[derive(Debug, thiserror::Error)]
@@ -125,6 +131,10 @@ pub struct BagSummary {
     pub mount_from: String,
     /// Clouds made range images, by layout.
     pub clouds: BTreeMap<String, u64>,
+    /// Of those, streamed as slices of columns at their per-point times:
+    /// the time field's name, the columns per slice and the slices made.
+    pub streamed: Option<(String, usize)>,
+    pub slices: u64,
     /// Their points.
     pub points: CloudCounts,
     pub poses: u64,
@@ -247,6 +257,7 @@ impl Bag {
                 }
                 Kind::Cloud if topic.frame.is_none() => {
                     if let Ok(c) = message.decode::<msgs::PointCloud2>() {
+                        topic.timed = cloud::time_field(&c.fields).is_some();
                         topic.frame = Some(c.header.frame_id);
                     }
                 }
@@ -277,6 +288,10 @@ impl Bag {
             previous: None,
             stats: LogStats::default(),
             ended: false,
+            held: std::collections::BinaryHeap::new(),
+            released_before: Utime::MIN,
+            newest: Utime::MIN,
+            sequence: 0,
         })
     }
 }
@@ -299,6 +314,8 @@ struct Topic {
     messages: u64,
     /// A cloud's frame, an odometry's child frame (from its first message).
     frame: Option<String>,
+    /// A cloud whose first message has a per-point time field.
+    timed: bool,
     /// `/tf`'s frames, all of them, for choosing the vehicle's chain.
     frames: Frames,
 }
@@ -351,6 +368,7 @@ impl Topic {
             unreadable,
             messages: 0,
             frame: None,
+            timed: false,
             frames: Frames::default(),
         }
     }
@@ -382,6 +400,9 @@ pub struct Plan {
     /// The configured sensor, with the mount the bag gives it.
     sensor: SensorModel,
     channel: &'static str,
+    /// Columns per slice of the clouds (0: none; only a cloud topic whose
+    /// first message has per-point times is streamed).
+    slice_lines: usize,
     summary: BagSummary,
 }
 
@@ -567,6 +588,8 @@ impl Plan {
             vehicle_frame: vehicle_frame.clone(),
             mount_from,
             clouds: BTreeMap::new(),
+            streamed: None,
+            slices: 0,
             points: CloudCounts::default(),
             poses: 0,
             refused: BTreeMap::new(),
@@ -577,6 +600,11 @@ impl Plan {
             .filter(|(name, _)| used(name).is_some())
             .filter_map(|(name, t)| Some((name.clone(), t.unreadable.clone()?)))
             .collect();
+        let slice_lines = if topics[&cloud_topic].timed {
+            options.slice_lines
+        } else {
+            0
+        };
         Ok(Self {
             unreadable,
             cloud_topic,
@@ -585,6 +613,7 @@ impl Plan {
             statics,
             channel: channels::RANGE_IMAGE,
             sensor,
+            slice_lines,
             summary,
         })
     }
@@ -655,7 +684,34 @@ pub struct BagEvents<'a> {
     previous: Option<Pose>,
     stats: LogStats,
     ended: bool,
+    /// Streaming, the events made but not yet given, by time (see
+    /// [`Held`]); given once nothing still to come can precede them.
+    held: std::collections::BinaryHeap<std::cmp::Reverse<Held>>,
+    /// Held events before this time may go: the latest streamed cloud's
+    /// stamp (every slice still to come is later), or the newest time
+    /// read less [`HOLD_S`].
+    released_before: Utime,
+    newest: Utime,
+    sequence: u64,
 }
+
+/// An event held for its time: the slices of a cloud are taken over its
+/// frame, and the poses read before the cloud go among them, as a sensor
+/// streaming its slices would have sent them (a slice before a pose of
+/// the same time, as `arcnav sim` logs them).
+#[derive(Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct Held {
+    utime: Utime,
+    /// 0 a slice, 1 anything else.
+    rank: u8,
+    sequence: u64,
+    channel: String,
+    data: Vec<u8>,
+}
+
+/// How far behind the newest time read an event is held at most, s:
+/// beyond a frame's period and a driver's delay in sending it.
+const HOLD_S: f64 = 2.0;
 
 impl BagEvents<'_> {
     /// What was read, used and refused so far.
@@ -671,8 +727,23 @@ impl BagEvents<'_> {
             .or_default() += 1;
     }
 
-    /// The LCM event a bag message makes, if any.
-    fn convert(&mut self, message: &RawMessage) -> Option<(String, Vec<u8>)> {
+    /// The LCM events a bag message makes: none, one, or a streamed
+    /// cloud's slices; each with its time (µs) and rank (0 a slice).
+    fn convert(&mut self, message: &RawMessage) -> Vec<(Utime, u8, String, Vec<u8>)> {
+        let mut out = Vec::new();
+        if let Some((utime, channel, data)) = self.convert_one(message, &mut out) {
+            out.push((utime, 1, channel, data));
+        }
+        out
+    }
+
+    /// The LCM event a bag message makes, if any; a streamed cloud's
+    /// slices go to `slices`.
+    fn convert_one(
+        &mut self,
+        message: &RawMessage,
+        slices: &mut Vec<(Utime, u8, String, Vec<u8>)>,
+    ) -> Option<(Utime, String, Vec<u8>)> {
         let topic = message.channel.topic.as_str();
         let plan = self.plan;
         if let Some(why) = plan.unreadable.get(topic) {
@@ -701,16 +772,31 @@ impl BagEvents<'_> {
             };
             *self.summary.clouds.entry(layout.to_owned()).or_default() += 1;
             self.summary.points.add(&image.counts);
+            let stamp = cloud.header.stamp.utime();
             let range_image = RangeImage {
-                utime: cloud.header.stamp.utime(),
+                utime: stamp,
                 sensor: plan.sensor.id.clone(),
                 vehicle_from_sensor: plan.sensor.vehicle_from_sensor,
                 beams: image.beams,
                 range: image.range,
             };
+            if let Some((field, line_utimes)) = image.line_utimes.filter(|_| plan.slice_lines > 0) {
+                self.summary.streamed = Some((field, plan.slice_lines));
+                self.released_before = self.released_before.max(stamp);
+                for slice in column_slices(&range_image, &line_utimes, plan.slice_lines) {
+                    match arcnav_wire::range_slice_to_wire(&slice).encode() {
+                        Ok(bytes) => {
+                            self.summary.slices += 1;
+                            slices.push((slice.utime, 0, plan.channel.to_owned(), bytes));
+                        }
+                        Err(e) => self.refuse(topic, e),
+                    }
+                }
+                return None;
+            }
             let wire = arcnav_wire::range_image_to_wire(&range_image);
             return match wire.encode() {
-                Ok(bytes) => Some((plan.channel.to_owned(), bytes)),
+                Ok(bytes) => Some((stamp, plan.channel.to_owned(), bytes)),
                 Err(e) => {
                     self.refuse(topic, e);
                     None
@@ -750,7 +836,7 @@ impl BagEvents<'_> {
                 pose_t::from(&pose)
                     .encode()
                     .ok()
-                    .map(|bytes| (channels::POSE.to_owned(), bytes))
+                    .map(|bytes| (pose.utime, channels::POSE.to_owned(), bytes))
             }
             Err(why) => {
                 self.refuse(topic, why);
@@ -817,34 +903,112 @@ impl BagEvents<'_> {
     }
 }
 
+impl BagEvents<'_> {
+    /// The next held event whose time has come (any, once the bag ended).
+    fn release(&mut self) -> Option<LogEvent> {
+        let before = self
+            .released_before
+            .max(self.newest.saturating_sub((HOLD_S * 1e6) as Utime));
+        let std::cmp::Reverse(next) = self.held.peek()?;
+        if !self.ended && next.utime >= before {
+            return None;
+        }
+        let std::cmp::Reverse(held) = self.held.pop()?;
+        Some(self.event(held.utime, held.channel, held.data))
+    }
+
+    fn event(&mut self, utime: Utime, channel: String, data: Vec<u8>) -> LogEvent {
+        self.stats.events += 1;
+        LogEvent {
+            event_number: self.stats.events as i64,
+            timestamp: utime,
+            channel,
+            data,
+        }
+    }
+}
+
+/// An image as slices of `lines` columns, each column acquired at its
+/// time in `line_utimes`, each slice complete at its last.
+fn column_slices<'a>(
+    image: &'a RangeImage,
+    line_utimes: &'a [Utime],
+    lines: usize,
+) -> impl Iterator<Item = arcnav_perception::RangeSlice> + 'a {
+    let (rows, cols) = (image.rows(), image.cols());
+    (0..cols).step_by(lines.max(1)).map(move |first| {
+        let end = (first + lines.max(1)).min(cols);
+        let times = line_utimes[first..end].to_vec();
+        arcnav_perception::RangeSlice {
+            utime: times.iter().copied().max().unwrap_or(image.utime),
+            frame_utime: image.utime,
+            sensor: image.sensor.clone(),
+            vehicle_from_sensor: image.vehicle_from_sensor,
+            frame_rows: rows,
+            frame_cols: cols,
+            axis: arcnav_perception::stream::SliceAxis::Columns,
+            first,
+            beams: arcnav_perception::BeamTable {
+                elevation: image.beams.elevation.clone(),
+                azimuth: image.beams.azimuth[first..end].to_vec(),
+            },
+            line_utimes: times,
+            range: (0..rows)
+                .flat_map(|r| {
+                    image.range[r * cols + first..r * cols + end]
+                        .iter()
+                        .copied()
+                })
+                .collect(),
+        }
+    })
+}
+
 impl EventSource for BagEvents<'_> {
     fn next_event(&mut self) -> std::io::Result<Option<LogEvent>> {
-        while !self.ended {
+        loop {
+            if let Some(event) = self.release() {
+                return Ok(Some(event));
+            }
+            if self.ended {
+                return Ok(None);
+            }
             let message = match self.messages.next() {
                 None => {
                     self.ended = true;
-                    break;
+                    continue;
                 }
                 Some(Err(e)) => {
                     // Counted, and the bag ends here: its summary says so.
                     self.summary.damaged = Some(e);
                     self.stats.corrupt_events += 1;
                     self.ended = true;
-                    break;
+                    continue;
                 }
                 Some(Ok(m)) => m,
             };
-            if let Some((channel, data)) = self.convert(&message) {
-                self.stats.events += 1;
-                return Ok(Some(LogEvent {
-                    event_number: self.stats.events as i64,
-                    timestamp: i64::try_from(message.log_time / 1000).unwrap_or(i64::MAX),
+            let log_time = i64::try_from(message.log_time / 1000).unwrap_or(i64::MAX);
+            let made = self.convert(&message);
+            if self.plan.slice_lines == 0 {
+                // Nothing streamed: each event as the bag has it, at its
+                // log time.
+                if let Some((_, _, channel, data)) = made.into_iter().next() {
+                    return Ok(Some(self.event(log_time, channel, data)));
+                }
+                continue;
+            }
+            for (utime, rank, channel, data) in made {
+                self.newest = self.newest.max(utime);
+                self.sequence += 1;
+                self.held.push(std::cmp::Reverse(Held {
+                    utime,
+                    rank,
+                    sequence: self.sequence,
                     channel,
                     data,
                 }));
             }
         }
-        Ok(None)
     }
 
     fn stats(&self) -> &LogStats {
