@@ -796,6 +796,82 @@ mod tests {
         assert_eq!(cloud_topic("RANGE_IMAGE_REAR"), "/points_rear");
     }
 
+    /// Two sensors: a cloud topic and a frame each, both mounts latched
+    /// on /tf_static (again only when a mount is new); the replay's reader
+    /// finds either sensor's mount from the bag.
+    #[test]
+    fn each_sensor_is_a_cloud_topic_in_its_own_frame_with_its_mount_latched() {
+        use arcnav_perception::{BeamTable, SensorModel};
+        let dir = arcnav_testkit::temp_dir("export-two-sensors");
+        let out = dir.join("two.mcap");
+        let mut bag = Ros2Bag::create(&out, &Resolved::default()).unwrap();
+        let mut summary = ExportSummary::default();
+        let image = |sensor: &str, x: f64| RangeImage {
+            utime: 1_000_000,
+            sensor: sensor.into(),
+            vehicle_from_sensor: arcnav_vehicle::frames::isometry_from_xyz_rpy(
+                [x, 0.0, 1.5],
+                0.0,
+                0.0,
+                0.0,
+            ),
+            beams: BeamTable::uniform(4, 8, 0.1, -0.3, 1.0, -1.0),
+            range: vec![10.0; 32],
+        };
+        let pose = pose_t {
+            utime: 1_000_000,
+            position: [0.0; 3],
+            orientation: [1.0, 0.0, 0.0, 0.0],
+            velocity: [0.0; 3],
+            yaw_rate: 0.0,
+        };
+        bag.pose(&pose, 1_000, &mut summary);
+        bag.image(
+            "RANGE_IMAGE_FRONT",
+            &image("front", 1.0),
+            2_000,
+            &mut summary,
+        );
+        bag.image(
+            "RANGE_IMAGE_REAR",
+            &image("rear", -1.0),
+            3_000,
+            &mut summary,
+        );
+        bag.image(
+            "RANGE_IMAGE_FRONT",
+            &image("front", 1.0),
+            4_000,
+            &mut summary,
+        );
+        bag.finish().unwrap();
+        assert_eq!(summary.topics["/points_front"], 2);
+        assert_eq!(summary.topics["/points_rear"], 1);
+        assert_eq!(summary.topics["/tf_static"], 2);
+
+        let read = crate::bag::Bag::open(&out).unwrap();
+        for (topic, frame) in [("/points_front", "front"), ("/points_rear", "rear")] {
+            let options = crate::bag::BagOptions {
+                cloud: Some(topic.into()),
+                ..Default::default()
+            };
+            let plan = read.plan(&options, &SensorModel::erim()).unwrap();
+            let events = read.events(&plan).unwrap();
+            assert_eq!(
+                events.summary().mount_from,
+                format!("/tf_static: base_link ← {frame}")
+            );
+        }
+        // Without --cloud, the two are named.
+        let err = read
+            .plan(&Default::default(), &SensorModel::erim())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("/points_front, /points_rear"), "{err}");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
     #[test]
     fn stamps_hold_what_ros_time_holds() {
         let t = Time::of(1_767_225_600_123_456);
