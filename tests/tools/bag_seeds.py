@@ -1,7 +1,7 @@
 """Seeds for the `ros2_bag`, `ros1_bag` and `cdr_messages` fuzz targets,
 written by the reference tools (PyPI rosbags for the messages and ROS 1
 bags, PyPI mcap for MCAP files): a few-kilobyte bag of every kind a replay
-reads (an organized cloud of 2 x 4 points, a ring cloud, odometry, a pose,
+reads (an organized cloud of 2 x 4 points with per-point times, a ring cloud, odometry, a pose,
 /tf and /tf_static), as ROS 2 (plain and zstd), as ROS 1 (plain, bz2,
 lz4) and as ROS 1 messages in MCAP, and each message's CDR bytes alone.
 
@@ -50,9 +50,12 @@ def cloud(sec, ring):
         data = np.array([p + (i % 2, 0) for i, p in enumerate(points)], dtype=dtype)
         height, width, step = 1, 8, 16
     else:
-        dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
-        data = np.array(points, dtype=dtype)
-        height, width, step = 2, 4, 12
+        # Ouster's per-point time `t` (uint32, ns after the stamp): each
+        # column 25 ms after the one before.
+        fields.append(T["sensor_msgs/msg/PointField"](name="t", offset=12, datatype=6, count=1))
+        dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", "<u4")]
+        data = np.array([p + ((i % 4) * 25_000_000,) for i, p in enumerate(points)], dtype=dtype)
+        height, width, step = 2, 4, 16
     return T["sensor_msgs/msg/PointCloud2"](
         header=header(sec, "lidar"), height=height, width=width, fields=fields, is_bigendian=False,
         point_step=step, row_step=step * width, data=np.frombuffer(data.tobytes(), dtype=np.uint8),
