@@ -621,14 +621,9 @@ mod tests {
     use crate::bag::msgs::Header;
     use crate::bag::msgs::Time;
 
-    /// A cloud of `(x, y, z)` float32 points (and a ring, u16, when given),
-    /// `width × height`.
-    fn cloud(
-        points: &[([f32; 3], Option<u16>)],
-        width: u32,
-        height: u32,
-    ) -> (Vec<PointField>, Vec<u8>) {
-        let mut fields = ["x", "y", "z"]
+    /// Fields x, y and z, float32, from offset 0.
+    fn xyz_fields() -> Vec<PointField> {
+        ["x", "y", "z"]
             .iter()
             .enumerate()
             .map(|(i, name)| PointField {
@@ -637,7 +632,17 @@ mod tests {
                 datatype: 7,
                 count: 1,
             })
-            .collect::<Vec<_>>();
+            .collect()
+    }
+
+    /// A cloud of `(x, y, z)` float32 points (and a ring, u16, when given),
+    /// `width × height`.
+    fn cloud(
+        points: &[([f32; 3], Option<u16>)],
+        width: u32,
+        height: u32,
+    ) -> (Vec<PointField>, Vec<u8>) {
+        let mut fields = xyz_fields();
         if points.iter().any(|p| p.1.is_some()) {
             fields.push(PointField {
                 name: "ring".into(),
@@ -693,16 +698,7 @@ mod tests {
     /// `datatype` named `name`, 8 bytes wide) whose column `c` was taken at
     /// `times[c]` (in the field's unit); one column returns nothing.
     fn timed(name: &str, datatype: u8, times: [f64; 4]) -> (Vec<PointField>, Vec<u8>) {
-        let mut fields: Vec<PointField> = ["x", "y", "z"]
-            .iter()
-            .enumerate()
-            .map(|(i, n)| PointField {
-                name: n.to_string(),
-                offset: 4 * i as u32,
-                datatype: 7,
-                count: 1,
-            })
-            .collect();
+        let mut fields = xyz_fields();
         fields.push(PointField {
             name: name.into(),
             offset: 12,
