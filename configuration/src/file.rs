@@ -467,6 +467,28 @@ impl Config {
         Ok(models)
     }
 
+    /// `vehicle.length_m`, `width_m` and `rear_overhang_m` are a
+    /// rectangle's: given with another footprint, they would say a body
+    /// that the outline does not.
+    fn rectangle_keys_only_with_a_rectangle(&self) -> Result<(), ConfigError> {
+        let shape = self.vehicle.footprint;
+        if shape == arcnav_vehicle::model::FootprintShape::Rectangle {
+            return Ok(());
+        }
+        for key in ["length_m", "width_m", "rear_overhang_m"] {
+            if self.origin(&format!("vehicle.{key}")).is_some() {
+                return Err(ConfigError::new(
+                    format!("vehicle.{key}"),
+                    format!(
+                        "is a rectangle's, and footprint is \"{}\": the outline gives the body's length and width; leave {key} out",
+                        shape.name()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Checks every section and the values that relate sections (the
     /// behaviours' tables are checked as they are parsed, when resolved);
     /// the vehicle's sensors, which the check builds.
@@ -475,6 +497,7 @@ impl Config {
     ) -> Result<(Vec<arcnav_perception::SensorModel>, Mission), ConfigError> {
         count(|c| c.validations += 1);
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
+        self.rectangle_keys_only_with_a_rectangle()?;
         self.arcs
             .validate_for(&self.vehicle)
             .map_err(|e| e.within("arcs"))?;

@@ -213,7 +213,7 @@ fn bound_with(config: &Config, sensor: &SensorModel, window: f64) -> SpeedBound 
         + v.command_latency_s;
     let a = v.max_deceleration_mps2;
     let r = v.min_turning_radius_m;
-    let w = (v.width_m / 2.0).min(r);
+    let w = v.footprint().half_width.min(r);
     let sideways = (w * (2.0 * r - w)).sqrt();
     let steer = (1.0 / r) / v.max_curvature_rate;
     // Stopping and swerving within `free` metres.

@@ -91,12 +91,7 @@ pub fn nearest_contact(
     // mirrored front to back: the body mirrored too.
     let (footprint, mirror, path) = if reverse {
         let arc = DrivenPath::arc(path.curvature_at(path.settled_at()));
-        let body = Footprint {
-            x_min: -footprint.x_max,
-            x_max: -footprint.x_min,
-            half_width: footprint.half_width,
-        };
-        (body, -1.0, arc)
+        (footprint.mirrored(), -1.0, arc)
     } else {
         (footprint, 1.0, *path)
     };
@@ -170,11 +165,7 @@ mod tests {
 
     #[test]
     fn only_points_on_the_path_count_and_reversing_looks_behind() {
-        let body = Footprint {
-            x_min: -0.6,
-            x_max: 4.0,
-            half_width: 1.1,
-        };
+        let body = Footprint::rectangle(-0.6, 4.0, 1.1);
         let ahead = [Point2::new(10.2, 0.3), Point2::new(10.0, 0.3)];
         let straight = DrivenPath::arc(0.0);
         // Straight on: the front (4 m) reaches 10 m after 6.

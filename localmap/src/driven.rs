@@ -38,12 +38,10 @@ impl DrivenGround {
     /// A memory of about `memory_m` of travel of `vehicle` over patches of
     /// `patch_size_m` (0: none).
     pub fn new(vehicle: &VehicleConfig, patch_size_m: f64, memory_m: f64) -> Self {
-        let bearing = Footprint {
-            x_min: 0.0,
-            x_max: vehicle.wheelbase_m,
-            half_width: vehicle.width_m / 2.0,
-        }
-        .widened(patch_size_m / 2.0 + patch_size_m * std::f64::consts::FRAC_1_SQRT_2);
+        let bearing = vehicle
+            .footprint()
+            .clipped(0.0, vehicle.wheelbase_m)
+            .widened(patch_size_m / 2.0 + patch_size_m * std::f64::consts::FRAC_1_SQRT_2);
         let across = (2.0 * bearing.half_width / patch_size_m).ceil() + 1.0;
         let along = (memory_m / patch_size_m).ceil();
         let capacity = (across * along) as usize;
@@ -66,7 +64,7 @@ impl DrivenGround {
         let t = pose.world_from_vehicle.translation.vector;
         let (sin, cos) = yaw_of(&pose.world_from_vehicle).sin_cos();
         let world = |p: Point2<f64>| (t.x + cos * p.x - sin * p.y, t.y + sin * p.x + cos * p.y);
-        let corners = bearing.corners().map(world);
+        let corners: Vec<(f64, f64)> = bearing.outline().iter().map(|&p| world(p)).collect();
         let lo = |f: fn(&(f64, f64)) -> f64| {
             floor_i64(corners.iter().map(f).fold(f64::INFINITY, f64::min) / s)
         };

@@ -95,12 +95,7 @@ impl Truth {
             let (dx, dy) = (p[0] - x, p[1] - y);
             [cos * dx + sin * dy, -sin * dx + cos * dy]
         };
-        let reach = self
-            .footprint
-            .x_max
-            .max(-self.footprint.x_min)
-            .hypot(self.footprint.half_width)
-            + 12.0;
+        let reach = self.footprint.reach() + 12.0;
         world.features_within([x - reach, y - reach, x + reach, y + reach], &mut self.near);
         let mut touching = BTreeSet::new();
         for &i in &self.near {
@@ -159,7 +154,7 @@ impl Truth {
         self.off_map = off_map;
         if let Some(area) = &self.area {
             let off_area =
-                self.footprint.corners().into_iter().any(|c| {
+                self.footprint.outline().iter().any(|c| {
                     !area.contains([x + cos * c.x - sin * c.y, y + sin * c.x + cos * c.y])
                 });
             if off_area && !self.off_area && !off_map {
@@ -176,9 +171,12 @@ impl Truth {
     }
 }
 
-/// Distance from the segment a–b to the footprint rectangle (0 if they meet),
-/// both in the vehicle frame.
+/// Distance from the segment a–b to the footprint (0 if they meet), both
+/// in the vehicle frame.
 fn segment_box_distance(a: [f64; 2], b: [f64; 2], f: &Footprint) -> f64 {
+    if !f.is_rectangle() {
+        return f.distance_to_segment(a.into(), b.into());
+    }
     let inside = |p: [f64; 2]| (f.x_min..=f.x_max).contains(&p[0]) && p[1].abs() <= f.half_width;
     if inside(a) || inside(b) {
         return 0.0;
@@ -211,11 +209,7 @@ mod tests {
 
     #[test]
     fn segment_box_distances() {
-        let f = Footprint {
-            x_min: -1.0,
-            x_max: 4.0,
-            half_width: 1.0,
-        };
+        let f = Footprint::rectangle(-1.0, 4.0, 1.0);
         assert_eq!(segment_box_distance([6.0, 0.0], [6.0, 0.0], &f), 2.0);
         assert_eq!(
             segment_box_distance([2.0, 3.0], [2.0, -3.0], &f),

@@ -538,7 +538,8 @@ impl World {
                 )));
             }
         }
-        let reach = vehicle.length_m.max(vehicle.width_m);
+        let body = vehicle.footprint();
+        let reach = (body.x_max - body.x_min).max(2.0 * body.half_width);
         if let Some((j, f, why)) = self.hazard_at(self.start.0, reach, vehicle) {
             return Err(invalid(format!(
                 "the start pose at ({:.1}, {:.1}) is within {reach} m of {} #{} ({why})",

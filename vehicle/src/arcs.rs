@@ -351,11 +351,11 @@ impl SweptFootprint {
     }
 
     /// Footprint outlines every `step_m` along the arc (for drawing).
-    pub fn outlines(&self, step_m: f64) -> Vec<[Point2<f64>; 4]> {
-        let corners = self.footprint.corners();
+    pub fn outlines(&self, step_m: f64) -> Vec<Vec<Point2<f64>>> {
+        let outline = self.footprint.outline();
         self.arc
             .sample(self.length_m, step_m)
-            .map(|pose| corners.map(|c| pose.transform_point(c)))
+            .map(|pose| outline.iter().map(|c| pose.transform_point(*c)).collect())
             .collect()
     }
 
@@ -363,6 +363,9 @@ impl SweptFootprint {
         let f = &self.footprint;
         if f.contains(p) {
             return Some(0.0);
+        }
+        if !f.is_rectangle() {
+            return self.first_contact_with_outline(p);
         }
         let k = self.arc.curvature;
         let Some(center) = self.arc.center() else {
@@ -407,6 +410,67 @@ impl SweptFootprint {
                         consider(Point2::new(x, y));
                     }
                 }
+            }
+        }
+        first
+    }
+
+    /// [`Self::first_contact_unbounded`] for any outline (`p` outside it):
+    /// where the point, followed on its circle about the turning centre
+    /// (or along −x, straight), first meets one of the outline's edges.
+    fn first_contact_with_outline(&self, p: Point2<f64>) -> Option<f64> {
+        let outline = self.footprint.outline();
+        let k = self.arc.curvature;
+        let mut first: Option<f64> = None;
+        let mut consider = |s: f64| first = Some(first.map_or(s, |best: f64| best.min(s)));
+        let Some(center) = self.arc.center() else {
+            // Straight: the point slides towards −x; it meets an edge
+            // where the edge crosses its line at or behind it.
+            for (a, b) in outline.edges() {
+                let (lo, hi) = (a.y.min(b.y), a.y.max(b.y));
+                if p.y < lo || p.y > hi {
+                    continue;
+                }
+                let x = if a.y == b.y {
+                    a.x.max(b.x).min(p.x)
+                } else {
+                    a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x)
+                };
+                if x <= p.x {
+                    consider(p.x - x);
+                }
+            }
+            return first;
+        };
+        // In the moving frame the point turns about `center` by −k·s: its
+        // circle's crossings with each edge, by the turn to reach them.
+        let offset: Vector2<f64> = p - center;
+        let radius2 = offset.norm_squared();
+        let angle_p = offset.y.atan2(offset.x);
+        for (a, b) in outline.edges() {
+            let (d, f) = (b - a, a - center);
+            let (qa, qb, qc) = (
+                d.norm_squared(),
+                2.0 * f.dot(&d),
+                f.norm_squared() - radius2,
+            );
+            let disc = qb * qb - 4.0 * qa * qc;
+            if qa == 0.0 || disc < 0.0 {
+                continue;
+            }
+            let root = disc.sqrt();
+            for t in [(-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa)] {
+                if !(0.0..=1.0).contains(&t) {
+                    continue;
+                }
+                let q = a + d * t;
+                let angle_q = (q.y - center.y).atan2(q.x - center.x);
+                let turn = if k > 0.0 {
+                    angle_p - angle_q
+                } else {
+                    angle_q - angle_p
+                };
+                consider(turn.rem_euclid(std::f64::consts::TAU) / k.abs());
             }
         }
         first
@@ -583,12 +647,31 @@ mod tests {
         })
     }
 
+    /// The bodies the contact is checked for: the HMMWV's rectangle, an
+    /// L-shaped polygon (its front right corner cut away) and a circle.
+    fn bodies() -> [Footprint; 3] {
+        let p = Point2::new;
+        [
+            VehicleConfig::default().footprint(),
+            Footprint::polygon(&[
+                p(-0.6, -1.1),
+                p(2.0, -1.1),
+                p(2.0, 0.0),
+                p(4.0, 0.0),
+                p(4.0, 1.1),
+                p(-0.6, 1.1),
+            ])
+            .unwrap(),
+            Footprint::circle(p(0.4, 0.0), 1.2).unwrap(),
+        ]
+    }
+
     proptest! {
         #[test]
         fn exact_first_contact_agrees_with_dense_sampling(
-            k in -0.125f64..0.125, x in -3.0f64..20.0, y in -12.0f64..12.0
+            body in 0usize..3, k in -0.125f64..0.125, x in -3.0f64..20.0, y in -12.0f64..12.0
         ) {
-            let footprint = VehicleConfig::default().footprint();
+            let footprint = bodies()[body];
             let swept = Arc::new(k).swept(footprint, 20.0);
             let p = Point2::new(x, y);
             let step = 0.002;
@@ -598,11 +681,23 @@ mod tests {
                 // A grazing contact may fall between samples: a footprint 1 cm
                 // larger all round must then be seen touching.
                 (Some(_), None) => {
-                    let grown = Footprint { x_min: footprint.x_min - 0.01, x_max: footprint.x_max + 0.01, half_width: footprint.half_width + 0.01 };
+                    let grown = footprint.grown(0.01, 0.01, 0.01);
                     prop_assert!(brute_force_first_contact(&swept.arc.swept(grown, 20.0 + 0.01), p, step).is_some());
                 }
                 (None, Some(b)) => prop_assert!(false, "sampling found contact at {b}, exact found none"),
             }
         }
+    }
+
+    #[test]
+    fn straight_ahead_the_notch_of_an_l_lets_a_point_in_farther() {
+        let ell = bodies()[1];
+        let swept = Arc::new(0.0).swept(ell, 20.0);
+        // In line with the notch (right of the centre line), the point
+        // meets the body's front at x = 2, not 4.
+        let s = swept.first_contact(Point2::new(10.0, -0.5)).unwrap();
+        assert!((s - 8.0).abs() < 1e-12, "{s}");
+        let s = swept.first_contact(Point2::new(10.0, 0.5)).unwrap();
+        assert!((s - 6.0).abs() < 1e-12, "{s}");
     }
 }

@@ -14,6 +14,7 @@ pub mod command;
 pub mod config;
 pub mod drive;
 pub mod files;
+pub mod footprint;
 pub mod frames;
 pub mod mission;
 pub mod model;

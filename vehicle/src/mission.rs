@@ -11,7 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::config::{self, ConfigError};
-use crate::numbers::{segment_distance, segments_cross};
+use crate::numbers::{crossing_number_inside, segment_distance, segments_cross};
 
 /// A simple polygon in world coordinates (x east, y north, m), convex or
 /// not, its vertices in order (either way round; the last joins the first).
@@ -102,16 +102,7 @@ impl Area {
     /// Whether world point `p` lies inside (crossing number: a ray from
     /// `p` along +x crosses the edges an odd number of times).
     pub fn contains(&self, p: [f64; 2]) -> bool {
-        let mut inside = false;
-        for (a, b) in self.edges() {
-            if (a[1] > p[1]) != (b[1] > p[1]) {
-                let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-                if p[0] < x {
-                    inside = !inside;
-                }
-            }
-        }
-        inside
+        crossing_number_inside(self.edges(), p)
     }
 
     /// Distance from `p` to the nearest point of the area's edge, m.

@@ -2,6 +2,8 @@
 //! negotiate. Defaults are the paper's HMMWV (002 §2, §7).
 
 use nalgebra::Point2;
+
+pub use crate::footprint::Footprint;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{self, ConfigError};
@@ -10,13 +12,28 @@ use crate::config::{self, ConfigError};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct VehicleConfig {
-    /// Body length, bumper to bumper, m.
+    /// The body's outline: `rectangle` (`length_m`, `width_m`,
+    /// `rear_overhang_m`), `circle` (`radius_m` about `centre_m`) or
+    /// `polygon` (`vertices_m`).
+    pub footprint: FootprintShape,
+    /// Body length, bumper to bumper, m (a rectangle's).
     pub length_m: f64,
-    /// Body width, m.
+    /// Body width, m (a rectangle's).
     pub width_m: f64,
     /// How far the body reaches behind the origin (the rear axle), m. The
-    /// footprint spans x ∈ [-rear_overhang_m, length_m - rear_overhang_m].
+    /// footprint spans x ∈ [-rear_overhang_m, length_m - rear_overhang_m]
+    /// (a rectangle's).
     pub rear_overhang_m: f64,
+    /// A circle's radius, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius_m: Option<f64>,
+    /// A circle's centre in the vehicle frame, m (default: the origin).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub centre_m: Option<[f64; 2]>,
+    /// A polygon's vertices in the vehicle frame (x forward, y left), m,
+    /// in order round it, either way; convex or not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vertices_m: Option<Vec<[f64; 2]>>,
     /// Distance between the axles, m.
     pub wheelbase_m: f64,
     /// Tightest turn the vehicle can drive, m (002 §7: 7.5 m).
@@ -49,9 +66,13 @@ impl Default for VehicleConfig {
     fn default() -> Self {
         // HMMWV M998: 4.57 m × 2.16 m, 3.30 m wheelbase, 0.41 m clearance.
         Self {
+            footprint: FootprintShape::Rectangle,
             length_m: 4.6,
             width_m: 2.2,
             rear_overhang_m: 0.6,
+            radius_m: None,
+            centre_m: None,
+            vertices_m: None,
             wheelbase_m: 3.3,
             min_turning_radius_m: 7.5,
             max_speed_mps: 10.0,
@@ -86,35 +107,99 @@ impl VehicleConfig {
         config::in_range("max_slope_deg", self.max_slope_deg, 0.1, 89.0)?;
         config::positive("wheel_radius_m", self.wheel_radius_m)?;
         config::positive("track_m", self.track_m)?;
-        if self.track_m > self.width_m {
+        let body = self.try_footprint()?;
+        let shape = self.footprint.name();
+        if self.track_m > 2.0 * body.half_width {
             return Err(ConfigError::new(
                 "track_m",
                 format!(
-                    "is {} m, wider than the body (width_m {} m)",
-                    self.track_m, self.width_m
+                    "is {} m, wider than the body ({} m across its {shape})",
+                    self.track_m,
+                    2.0 * body.half_width
                 ),
             ));
         }
-        if self.rear_overhang_m >= self.length_m {
+        if body.x_min > 0.0 || body.x_max <= 0.0 {
+            let key = match self.footprint {
+                FootprintShape::Rectangle => "rear_overhang_m",
+                FootprintShape::Circle => "centre_m",
+                FootprintShape::Polygon => "vertices_m",
+            };
             return Err(ConfigError::new(
-                "rear_overhang_m",
+                key,
                 format!(
-                    "is {} m, must be shorter than length_m ({} m): the rear axle must lie under the body",
-                    self.rear_overhang_m, self.length_m
+                    "puts the body from x = {} m to {} m: the rear axle (x = 0) must lie under it, with body ahead of it",
+                    body.x_min, body.x_max
                 ),
             ));
         }
-        if self.wheelbase_m > self.length_m - self.rear_overhang_m {
+        if self.wheelbase_m > body.x_max {
             return Err(ConfigError::new(
                 "wheelbase_m",
                 format!(
-                    "is {} m, but the body reaches only {} m ahead of the rear axle (length_m - rear_overhang_m)",
-                    self.wheelbase_m,
-                    self.length_m - self.rear_overhang_m
+                    "is {} m, but the body reaches only {} m ahead of the rear axle",
+                    self.wheelbase_m, body.x_max
                 ),
             ));
         }
         Ok(())
+    }
+
+    /// The body's outline from the keys of its shape, or which key is wrong.
+    pub fn try_footprint(&self) -> Result<Footprint, ConfigError> {
+        let only = |key: &str, given: bool, with: FootprintShape| {
+            if given && self.footprint != with {
+                Err(ConfigError::new(
+                    key,
+                    format!(
+                        "is read only with footprint = \"{}\" (footprint is \"{}\")",
+                        with.name(),
+                        self.footprint.name()
+                    ),
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        only("radius_m", self.radius_m.is_some(), FootprintShape::Circle)?;
+        only("centre_m", self.centre_m.is_some(), FootprintShape::Circle)?;
+        only(
+            "vertices_m",
+            self.vertices_m.is_some(),
+            FootprintShape::Polygon,
+        )?;
+        match self.footprint {
+            FootprintShape::Rectangle => Ok(Footprint::rectangle(
+                -self.rear_overhang_m,
+                self.length_m - self.rear_overhang_m,
+                self.width_m / 2.0,
+            )),
+            FootprintShape::Circle => {
+                let radius = self.radius_m.ok_or_else(|| {
+                    ConfigError::new("radius_m", "is needed with footprint = \"circle\"")
+                })?;
+                config::positive("radius_m", radius)?;
+                let [x, y] = self.centre_m.unwrap_or([0.0, 0.0]);
+                Footprint::circle(Point2::new(x, y), radius)
+                    .map_err(|e| ConfigError::new("centre_m", e.to_string()))
+            }
+            FootprintShape::Polygon => {
+                let vertices: Vec<Point2<f64>> = self
+                    .vertices_m
+                    .as_deref()
+                    .ok_or_else(|| {
+                        ConfigError::new(
+                            "vertices_m",
+                            "is needed with footprint = \"polygon\": [[x, y], ...] in the vehicle frame, m",
+                        )
+                    })?
+                    .iter()
+                    .map(|&[x, y]| Point2::new(x, y))
+                    .collect();
+                Footprint::polygon(&vertices)
+                    .map_err(|e| ConfigError::new("vertices_m", e.to_string()))
+            }
+        }
     }
 
     /// The widest gap in the ground a wheel rolls across, m: a wheel of
@@ -130,13 +215,15 @@ impl VehicleConfig {
         2.0 * (2.0 * r * s - s * s).max(0.0).sqrt()
     }
 
-    /// The body outline in the vehicle frame.
+    /// The body outline in the vehicle frame. [`VehicleConfig::validate`]
+    /// refuses the keys that give no outline; unvalidated, those give the
+    /// rectangle of `length_m`, `width_m` and `rear_overhang_m`.
     pub fn footprint(&self) -> Footprint {
-        Footprint {
-            x_min: -self.rear_overhang_m,
-            x_max: self.length_m - self.rear_overhang_m,
-            half_width: self.width_m / 2.0,
-        }
+        self.try_footprint().unwrap_or(Footprint::rectangle(
+            -self.rear_overhang_m,
+            self.length_m - self.rear_overhang_m,
+            self.width_m / 2.0,
+        ))
     }
 
     /// Largest curvature the vehicle can steer, 1/m.
@@ -150,41 +237,27 @@ impl VehicleConfig {
     }
 }
 
-/// The vehicle body as a rectangle in the vehicle frame (x forward, y left).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Footprint {
-    /// Rear edge, m (negative: behind the rear axle).
-    pub x_min: f64,
-    /// Front edge, m.
-    pub x_max: f64,
-    /// Half the width, m.
-    pub half_width: f64,
+/// The kinds of body outline (`[vehicle] footprint`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FootprintShape {
+    /// `length_m` × `width_m`, `rear_overhang_m` of it behind the rear axle.
+    #[default]
+    Rectangle,
+    /// `radius_m` about `centre_m`.
+    Circle,
+    /// `vertices_m`.
+    Polygon,
 }
 
-impl Footprint {
-    /// True when `p` (vehicle frame) lies inside or on the outline.
-    pub fn contains(&self, p: Point2<f64>) -> bool {
-        (self.x_min..=self.x_max).contains(&p.x) && p.y.abs() <= self.half_width
-    }
-
-    /// The same rectangle widened by `margin_m` on both sides (used for
-    /// near-miss clearance bands).
-    #[must_use]
-    pub fn widened(&self, margin_m: f64) -> Self {
-        Self {
-            half_width: self.half_width + margin_m,
-            ..*self
+impl FootprintShape {
+    /// The name as the configuration spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Rectangle => "rectangle",
+            Self::Circle => "circle",
+            Self::Polygon => "polygon",
         }
-    }
-
-    /// Corners in the vehicle frame, counter-clockwise from rear right.
-    pub fn corners(&self) -> [Point2<f64>; 4] {
-        [
-            Point2::new(self.x_min, -self.half_width),
-            Point2::new(self.x_max, -self.half_width),
-            Point2::new(self.x_max, self.half_width),
-            Point2::new(self.x_min, self.half_width),
-        ]
     }
 }
 
@@ -229,5 +302,62 @@ mod tests {
             ..VehicleConfig::default()
         };
         assert_eq!(v.validate().unwrap_err().key, "max_slope_deg");
+    }
+
+    #[test]
+    fn a_circle_and_a_polygon_are_bodies_and_their_keys_are_checked() {
+        let circle = VehicleConfig {
+            footprint: FootprintShape::Circle,
+            radius_m: Some(0.6),
+            wheelbase_m: 0.5,
+            track_m: 1.0,
+            ..VehicleConfig::default()
+        };
+        circle.validate().unwrap();
+        let f = circle.footprint();
+        assert!(!f.is_rectangle() && (f.x_max - 0.6).abs() < 0.003);
+        let missing = VehicleConfig {
+            radius_m: None,
+            ..circle.clone()
+        };
+        assert_eq!(missing.validate().unwrap_err().key, "radius_m");
+        let stray = VehicleConfig {
+            vertices_m: Some(vec![[0.0, 0.0]]),
+            ..circle.clone()
+        };
+        let err = stray.validate().unwrap_err();
+        assert_eq!(err.key, "vertices_m");
+        assert!(
+            err.reason.contains("only with footprint = \"polygon\""),
+            "{err}"
+        );
+        let ell = VehicleConfig {
+            footprint: FootprintShape::Polygon,
+            vertices_m: Some(vec![
+                [-0.5, -1.0],
+                [1.0, -1.0],
+                [1.0, 0.0],
+                [2.5, 0.0],
+                [2.5, 1.0],
+                [-0.5, 1.0],
+            ]),
+            wheelbase_m: 1.0,
+            track_m: 1.6,
+            ..VehicleConfig::default()
+        };
+        ell.validate().unwrap();
+        assert!(!ell.footprint().contains(Point2::new(2.0, -0.5)));
+        let crossed = VehicleConfig {
+            vertices_m: Some(vec![[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]),
+            ..ell.clone()
+        };
+        let err = crossed.validate().unwrap_err();
+        assert_eq!(err.key, "vertices_m");
+        assert!(err.reason.contains("cross"), "{err}");
+        let ahead = VehicleConfig {
+            vertices_m: Some(vec![[1.0, -1.0], [3.0, -1.0], [3.0, 1.0], [1.0, 1.0]]),
+            ..ell
+        };
+        assert_eq!(ahead.validate().unwrap_err().key, "vertices_m");
     }
 }

@@ -38,6 +38,24 @@ pub fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> boo
     d1 * d2 < 0.0 && d3 * d4 < 0.0
 }
 
+/// Whether `p` lies inside the polygon whose edges are `edges` (crossing
+/// number: a ray from `p` along +x crosses them an odd number of times).
+pub fn crossing_number_inside(
+    edges: impl Iterator<Item = ([f64; 2], [f64; 2])>,
+    p: [f64; 2],
+) -> bool {
+    let mut inside = false;
+    for (a, b) in edges {
+        if (a[1] > p[1]) != (b[1] > p[1]) {
+            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if p[0] < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,26 +13,18 @@ const STEP_M: f64 = 0.5;
 
 /// The body's outline points checked against the area, vehicle frame:
 /// its corners and the middles of its sides.
-fn outline(body: &Footprint) -> [[f64; 2]; 8] {
-    let (x0, x1, w) = (body.x_min, body.x_max, body.half_width);
-    let xm = 0.5 * (x0 + x1);
-    [
-        [x0, -w],
-        [xm, -w],
-        [x1, -w],
-        [x1, 0.0],
-        [x1, w],
-        [xm, w],
-        [x0, w],
-        [x0, 0.0],
-    ]
+fn outline(body: &Footprint) -> Vec<[f64; 2]> {
+    body.outline()
+        .edges()
+        .flat_map(|(a, b)| [[a.x, a.y], [0.5 * (a.x + b.x), 0.5 * (a.y + b.y)]])
+        .collect()
 }
 
 /// The area and the body it keeps.
 #[derive(Debug, Clone)]
 pub(super) struct AreaEdge {
     area: Area,
-    outline: [[f64; 2]; 8],
+    outline: Vec<[f64; 2]>,
     /// From the rear axle to the farthest point of the body, m.
     radius: f64,
     /// Scratch: a path's poses.
@@ -71,7 +63,7 @@ impl AreaEdge {
         Self {
             area,
             outline: outline(body),
-            radius: body.x_max.max(-body.x_min).hypot(body.half_width),
+            radius: body.reach(),
             poses: Vec::new(),
         }
     }
@@ -96,14 +88,16 @@ impl AreaEdge {
                 self.area.distance_to_edge(w)
             }
         };
-        let start = self
+        let start: Vec<f64> = self
             .outline
-            .map(|[x, y]| depth(placed.world(Point2::new(x, y))));
+            .iter()
+            .map(|&[x, y]| depth(placed.world(Point2::new(x, y))))
+            .collect();
         self.poses.iter().skip(1).find_map(|&(s, pose)| {
             self.outline
                 .iter()
-                .zip(start)
-                .find_map(|(&[x, y], before)| {
+                .zip(&start)
+                .find_map(|(&[x, y], &before)| {
                     let q = pose.transform_point(Point2::new(x, y));
                     (depth(placed.world(q)) > before + 1e-6)
                         .then_some((s, [q.x as f32, q.y as f32]))

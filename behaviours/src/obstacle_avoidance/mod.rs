@@ -213,11 +213,7 @@ impl ObstacleAvoidance {
         // The body grown by half a patch ahead and to the sides (the local
         // map clears patches overlapping its flanks), not behind: driving
         // forwards, what lies behind the rear bumper stays behind.
-        let footprint = Footprint {
-            x_min: body.x_min,
-            x_max: body.x_max + half_patch,
-            half_width: body.half_width + half_patch,
-        };
+        let footprint = body.grown(half_patch, 0.0, half_patch);
         let bands = config.near_miss_bands as usize;
         let margins: Vec<f64> = (0..=bands)
             .map(|b| config.near_miss_m * b as f64 / bands.max(1) as f64)
@@ -239,18 +235,12 @@ impl ObstacleAvoidance {
         // patch). Not the front overhang: crept forward onto ground no
         // image has seen (a ledge in a lidar's blind zone), it must still
         // stop the vehicle.
-        let wheels = footprint.x_min..=setup.vehicle.wheelbase_m.min(body.x_max);
-        let ahead = Raster::new(grid, 1.0, |p| {
-            wheels.contains(&p.x) && p.y.abs() <= footprint.half_width
-        });
+        let wheels = footprint.clipped(footprint.x_min, setup.vehicle.wheelbase_m.min(body.x_max));
+        let ahead = Raster::new(grid, 1.0, |p| wheels.contains(p));
         let reverse = (config.reverse_reach_m > 0.0).then(|| {
             // The body mirrored (x -> -x), grown behind and to the sides:
             // backing up, what lies ahead of the front bumper stays there.
-            let mirrored = Footprint {
-                x_min: -body.x_max,
-                x_max: -(body.x_min - half_patch),
-                half_width: footprint.half_width,
-            };
+            let mirrored = body.grown(0.0, half_patch, half_patch).mirrored();
             let margin = config.reverse_margin_m;
             let grid = grid_around(
                 setup.arcs,
@@ -278,10 +268,7 @@ impl ObstacleAvoidance {
                 .collect();
             // Backing up, the whole body stands on seen ground (the
             // overhang over ground it drove across).
-            let standing = Footprint {
-                x_min: body.x_min - half_patch,
-                ..footprint
-            };
+            let standing = body.grown(half_patch, half_patch, half_patch);
             let raster = Raster::new(grid, -1.0, |p| standing.contains(p));
             Reverse {
                 blocked: vec![0; raster.bitmap.len()],
@@ -305,11 +292,7 @@ impl ObstacleAvoidance {
         Self {
             terrain,
             footprint,
-            standing: Footprint {
-                x_min: footprint.x_min,
-                x_max: setup.vehicle.wheelbase_m.min(body.x_max),
-                half_width: footprint.half_width,
-            },
+            standing: wheels,
             response: setup.steering_response(),
             paths: setup
                 .arcs
@@ -460,7 +443,7 @@ impl ObstacleAvoidance {
             let rigid = Rigid::of(pose);
             self.footprint
                 .widened(self.margins[band])
-                .corners()
+                .outline()
                 .map(|c| rigid.apply(c))
         };
         // The first cell of `layer` under the footprint of `band` at `pose`.

@@ -364,16 +364,21 @@ pub(super) fn first_in<'t>(bitmap: &[u64], band: &'t [Entry], reach: f32) -> Opt
 }
 
 /// Visits, row by row, the cells of `grid` whose centres lie inside the
-/// convex quadrilateral `corners` (grid frame) as runs `(row, first
-/// column, last column)`; stops when `visit` returns true, and says
-/// whether it did.
+/// polygon `corners` (grid frame; a body's outline, convex or not) as runs
+/// `(row, first column, last column)`; stops when `visit` returns true,
+/// and says whether it did.
 pub(super) fn cells_inside(
     grid: &Grid,
-    corners: &[Point2<f64>; 4],
+    corners: &[Point2<f64>],
     mut visit: impl FnMut(usize, usize, usize) -> bool,
 ) -> bool {
+    const MAX_EDGES: usize = 64;
+    let n = corners.len().min(MAX_EDGES);
+    if n < 3 {
+        return false;
+    }
     let r = grid.resolution;
-    let (lo_x, hi_x) = corners
+    let (lo_x, hi_x) = corners[..n]
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
             (lo.min(c.x), hi.max(c.x))
@@ -386,37 +391,69 @@ pub(super) fn cells_inside(
     }
     let last = (last as usize).min(grid.rows - 1);
     // Each edge: its ends and its slope dy/dx (none when it runs along y).
-    let edges: [(Point2<f64>, Point2<f64>, Option<f64>); 4] = std::array::from_fn(|i| {
-        let (a, b) = (corners[i], corners[(i + 1) % 4]);
-        (a, b, (a.x != b.x).then(|| (b.y - a.y) / (b.x - a.x)))
-    });
-    for row in first as usize..=last {
-        let x = grid.x0 + (row as f64 + 0.5) * r;
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for &(a, b, slope) in &edges {
-            if (a.x - x) * (b.x - x) > 0.0 {
-                continue;
-            }
-            let (y0, y1) = match slope {
-                Some(slope) => {
-                    let y = a.y + (x - a.x) * slope;
-                    (y, y)
-                }
-                None => (a.y, b.y),
-            };
-            lo = lo.min(y0).min(y1);
-            hi = hi.max(y0).max(y1);
-        }
+    let mut edges = [(Point2::origin(), Point2::origin(), None); MAX_EDGES];
+    for (i, edge) in edges.iter_mut().enumerate().take(n) {
+        let (a, b) = (corners[i], corners[(i + 1) % n]);
+        *edge = (a, b, (a.x != b.x).then(|| (b.y - a.y) / (b.x - a.x)));
+    }
+    let edges = &edges[..n];
+    let convex = is_convex(&corners[..n]);
+    // A row's runs: one across a convex outline; for any other, the
+    // stretches between the outline's crossings taken in pairs.
+    let mut crossings: Vec<f64> = Vec::new();
+    let mut run = |row: usize, lo: f64, hi: f64| {
         let from = ceil((lo - grid.y0) / r - 0.5).max(0.0);
         let to = floor((hi - grid.y0) / r - 0.5);
         if from.is_nan() || to.is_nan() || from > to || from >= grid.columns as f64 {
-            continue;
+            return false;
         }
-        if visit(row, from as usize, (to as usize).min(grid.columns - 1)) {
-            return true;
+        visit(row, from as usize, (to as usize).min(grid.columns - 1))
+    };
+    for row in first as usize..=last {
+        let x = grid.x0 + (row as f64 + 0.5) * r;
+        if convex {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for &(a, b, slope) in edges {
+                if (a.x - x) * (b.x - x) > 0.0 {
+                    continue;
+                }
+                let (y0, y1) = match slope {
+                    Some(slope) => {
+                        let y = a.y + (x - a.x) * slope;
+                        (y, y)
+                    }
+                    None => (a.y, b.y),
+                };
+                lo = lo.min(y0).min(y1);
+                hi = hi.max(y0).max(y1);
+            }
+            if run(row, lo, hi) {
+                return true;
+            }
+        } else {
+            crossings.clear();
+            crossings.extend(edges.iter().filter_map(|&(a, b, slope)| {
+                ((a.x > x) != (b.x > x)).then(|| a.y + (x - a.x) * slope.unwrap_or(0.0))
+            }));
+            crossings.sort_unstable_by(f64::total_cmp);
+            for pair in crossings.chunks_exact(2) {
+                if run(row, pair[0], pair[1]) {
+                    return true;
+                }
+            }
         }
     }
     false
+}
+
+/// Whether the polygon turns the same way at every vertex.
+fn is_convex(corners: &[Point2<f64>]) -> bool {
+    let n = corners.len();
+    let turn = |i: usize| {
+        let (a, b, c) = (corners[i], corners[(i + 1) % n], corners[(i + 2) % n]);
+        (b.x - a.x) * (c.y - b.y) - (b.y - a.y) * (c.x - b.x)
+    };
+    (0..n).all(|i| turn(i) >= 0.0) || (0..n).all(|i| turn(i) <= 0.0)
 }
 
 /// `x.floor()` without the library call the baseline x86-64 target makes

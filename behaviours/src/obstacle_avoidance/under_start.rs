@@ -29,7 +29,7 @@ impl UnderStart {
     pub(super) fn find(&mut self, raster: &Raster, footprint: &Footprint) {
         self.cells.clear();
         let grid = &raster.grid;
-        cells_inside(grid, &footprint.corners(), |row, from, to| {
+        cells_inside(grid, &footprint.outline(), |row, from, to| {
             for column in from..=to {
                 let word = row * grid.words_per_row + column / 64;
                 let bit = 1u64 << (column % 64);
@@ -67,14 +67,10 @@ impl UnderStart {
 
 /// Whether driving `arc` takes `footprint` deeper over the point `p` (the
 /// arc's start frame, inside the footprint there) within the footprint's
-/// own length and width: the point's depth inside the rectangle, sampled
+/// own length and width: the point's depth inside the outline, sampled
 /// every `step` along the arc, grows.
 pub(super) fn deepens(arc: Arc, footprint: &Footprint, p: Point2<f64>, step: f64) -> bool {
-    let depth = |q: Point2<f64>| {
-        (footprint.x_max - q.x)
-            .min(q.x - footprint.x_min)
-            .min(footprint.half_width - q.y.abs())
-    };
+    let depth = |q: Point2<f64>| footprint.depth(q);
     let start = depth(p);
     let length = (footprint.x_max - footprint.x_min).hypot(2.0 * footprint.half_width) + step;
     let steps = (length / step).ceil() as usize;

@@ -249,7 +249,7 @@ impl Route {
             stood_at: None,
             area: setup.area.cloned(),
             outside: vec![false; n],
-            half_width_m: 0.5 * setup.vehicle.width_m,
+            half_width_m: setup.vehicle.footprint().half_width,
             unreachable: setup.unreachable,
             no_way_since: None,
             no_routes: Vec::new(),

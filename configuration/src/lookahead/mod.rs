@@ -118,7 +118,7 @@ impl Lookahead {
             .fold(0.0, f64::max);
         let half = config.localmap.half_width_m;
         let widened = if moved > 0.0 {
-            (sideways + 0.5 * config.vehicle.width_m + 1.0 - half).max(0.0)
+            (sideways + config.vehicle.footprint().half_width + 1.0 - half).max(0.0)
         } else {
             0.0
         };

@@ -620,12 +620,11 @@ pub fn snapshot_picture(
         "grey: ground not seen · black: cells · orange: drop-offs (pale: suspected) · purple: graded ground (by cost) · dashed: operating area",
     );
     let f = config.vehicle.footprint();
-    let body = [
-        to_px(f.x_max as f32, f.half_width as f32),
-        to_px(f.x_max as f32, -f.half_width as f32),
-        to_px(f.x_min as f32, -f.half_width as f32),
-        to_px(f.x_min as f32, f.half_width as f32),
-    ];
+    let body: Vec<_> = f
+        .outline()
+        .iter()
+        .map(|p| to_px(p.x as f32, p.y as f32))
+        .collect();
     canvas.polygon(&body, Some([70, 110, 200, 180]), Some((BLACK, 1.5)));
 
     // Vote bars, the key and the decision, right of the map.
