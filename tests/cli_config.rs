@@ -88,6 +88,69 @@ fn the_operating_area_and_unreachable_keys_are_checked() {
     }
 }
 
+/// `[vehicle] footprint`: a circle and a polygon are accepted; each key
+/// of a shape is refused with its reason when it is missing, malformed,
+/// or given with another shape.
+#[test]
+fn the_footprint_keys_are_checked() {
+    for good in [
+        "[vehicle]\nfootprint = \"circle\"\nradius_m = 1.5\ncentre_m = [1.5, 0.0]\nwheelbase_m = 2.0\n",
+        "[vehicle]\nfootprint = \"polygon\"\nvertices_m = [[-0.6, -1.1], [2.0, -1.1], [2.0, 0.0], \
+         [4.0, 0.0], [4.0, 1.1], [-0.6, 1.1]]\n",
+    ] {
+        let (_dir, file) = temp_file("shape.toml", good);
+        let (code, stdout, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+        assert_eq!(code, 0, "{good}: {stdout}{stderr}");
+    }
+    for (text, expect) in [
+        (
+            "[vehicle]\nfootprint = \"oval\"\n",
+            "unknown variant `oval`, expected one of `rectangle`, `circle`, `polygon`",
+        ),
+        (
+            "[vehicle]\nfootprint = \"circle\"\n",
+            "`vehicle.radius_m`: is needed with footprint = \"circle\"",
+        ),
+        (
+            "[vehicle]\nfootprint = \"circle\"\nradius_m = -1.0\n",
+            "`vehicle.radius_m`: is -1, must be a finite number > 0",
+        ),
+        (
+            "[vehicle]\nfootprint = \"circle\"\nradius_m = 1e300\n",
+            "`vehicle.radius_m`: puts a point of the body",
+        ),
+        (
+            "[vehicle]\nfootprint = \"circle\"\nradius_m = 1.5\nwidth_m = 3.0\nwheelbase_m = 1.0\n",
+            "`vehicle.width_m`: is a rectangle's, and footprint is \"circle\"",
+        ),
+        (
+            "[vehicle]\nradius_m = 1.5\n",
+            "`vehicle.radius_m`: is read only with footprint = \"circle\" (footprint is \"rectangle\")",
+        ),
+        (
+            "[vehicle]\nfootprint = \"polygon\"\n",
+            "`vehicle.vertices_m`: is needed with footprint = \"polygon\"",
+        ),
+        (
+            "[vehicle]\nfootprint = \"polygon\"\nvertices_m = [[0, -1], [4, 1], [4, -1], [0, 1]]\n",
+            "`vehicle.vertices_m`: edges 0 and 2 cross",
+        ),
+        (
+            "[vehicle]\nfootprint = \"polygon\"\nvertices_m = [[0, -1], [4, -1]]\n",
+            "`vehicle.vertices_m`: has 2 vertices",
+        ),
+        (
+            "[vehicle]\nfootprint = \"polygon\"\nvertices_m = [[1, -1], [4, -1], [4, 1], [1, 1]]\n",
+            "`vehicle.vertices_m`: puts the body from x = 1 m to 4 m: the rear axle (x = 0) must lie under it",
+        ),
+    ] {
+        let (_dir, file) = temp_file("bad-shape.toml", text);
+        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+        assert_eq!(code, 1, "{text}: {stderr}");
+        assert!(stderr.contains(expect), "{text}: {stderr}");
+    }
+}
+
 /// Values that aborted or hung `arcnav sim` (found by setting every number
 /// of config/default.toml to ±1e300 in turn), refused by their key.
 #[test]

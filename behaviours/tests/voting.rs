@@ -1516,3 +1516,122 @@ fn a_cell_touching_the_flank_where_the_vehicle_stands_stops_only_the_arcs_that_d
         votes.values()
     );
 }
+
+/// 004 checks the robot's own shape. On the hardest left arc (radius 8 m,
+/// centre 8 m left of the rear axle) a body sweeps the ring between its
+/// nearest and farthest points from the centre: a body whose front right
+/// corner is cut away (an L) or rounded (a circle) sweeps a narrower ring
+/// than the rectangle that bounds it, and passes between a rock inside
+/// the ring and one outside it that the rectangle strikes. A rock inside
+/// the shape's own ring stops the shape too.
+#[test]
+fn a_circle_and_an_l_pass_between_rocks_their_bounding_rectangle_strikes() {
+    use arcnav_vehicle::model::FootprintShape;
+    let hardest_left = 38;
+    // Rocks on the centres of map patches (0.2 m), 30-50° round the turn,
+    // by their distance from the turning centre (0, 8): 6.24 m, inside
+    // every body's ring; 9.93 m, outside the L's and the circle's, inside
+    // their rectangles'.
+    let (inner, outer) = ((4.1, 3.3), (6.5, 0.5));
+    let votes_for = |vehicle: &VehicleConfig, rocks: &[(f64, f64)]| {
+        let cells: Vec<_> = rocks.iter().map(|&(x, y)| rock(x, y)).collect();
+        let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+        let mut map = LocalMap::new(
+            &LocalMapConfig {
+                assume_seen_m: 0.0,
+                ..LocalMapConfig::default()
+            },
+            vehicle,
+        );
+        map.update(&pose);
+        let report = ObstacleReport {
+            sensor: "test".into(),
+            cell_size_m: 0.2,
+            cells,
+            fov: FovPolygon::new(vec![
+                Point2::new(-40.0, 40.0),
+                Point2::new(40.0, 40.0),
+                Point2::new(40.0, -40.0),
+                Point2::new(-40.0, -40.0),
+            ]),
+            ..ObstacleReport::default()
+        };
+        map.insert(&report).unwrap();
+        let arcs = arcs();
+        let mut behaviour =
+            ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, vehicle));
+        let mission = Mission::default();
+        let snapshot = map.snapshot();
+        let ctx = VoteContext::new(0, &pose, &snapshot, &mission, &arcs);
+        let mut votes = Votes::new(arcs.len());
+        behaviour.vote(&ctx, &mut votes);
+        votes
+    };
+    // The bounding rectangle of a shape, as a vehicle.
+    let bounding = |shaped: &VehicleConfig| {
+        let f = shaped.footprint();
+        VehicleConfig {
+            footprint: FootprintShape::Rectangle,
+            radius_m: None,
+            centre_m: None,
+            vertices_m: None,
+            length_m: f.x_max - f.x_min,
+            width_m: 2.0 * f.half_width,
+            rear_overhang_m: -f.x_min,
+            ..shaped.clone()
+        }
+    };
+    // The HMMWV's rectangle with its front right quarter cut away from
+    // 2 m ahead of the rear axle: its right side sweeps out to
+    // hypot(2, 9.1) = 9.32 m from the centre, the rectangle's to
+    // hypot(4, 9.1) = 9.94 m (each grown by half a patch).
+    let ell = VehicleConfig {
+        footprint: FootprintShape::Polygon,
+        vertices_m: Some(vec![
+            [-0.6, -1.1],
+            [2.0, -1.1],
+            [2.0, 0.0],
+            [4.0, 0.0],
+            [4.0, 1.1],
+            [-0.6, 1.1],
+        ]),
+        ..VehicleConfig::default()
+    };
+    // A round body 3 m across just ahead of the rear axle: out to
+    // hypot(1.5, 8) + 1.5 = 9.64 m; its bounding square to
+    // hypot(3, 9.5) = 9.96 m.
+    let round = VehicleConfig {
+        footprint: FootprintShape::Circle,
+        radius_m: Some(1.5),
+        centre_m: Some([1.5, 0.0]),
+        wheelbase_m: 2.0,
+        ..VehicleConfig::default()
+    };
+    // Inside each shape's own ring: 9.08 m from the centre (the L), 9.36 m
+    // (the circle).
+    for (name, shaped, inside) in [
+        ("the L", ell, (5.9, 1.1)),
+        ("the circle", round, (6.1, 0.9)),
+    ] {
+        let between = [inner, outer];
+        shaped.validate().unwrap();
+        let shape = votes_for(&shaped, &between);
+        let rectangle = votes_for(&bounding(&shaped), &between);
+        assert!(
+            !shape.is_vetoed(hardest_left) && shape.vote(hardest_left).unwrap() > -0.5,
+            "{name} passes between the rocks: {:?}",
+            shape.vote(hardest_left)
+        );
+        assert!(
+            rectangle.is_vetoed(hardest_left),
+            "its bounding rectangle strikes the outer rock: {:?}",
+            rectangle.vote(hardest_left)
+        );
+        let struck = votes_for(&shaped, &[inner, inside]);
+        assert!(
+            struck.is_vetoed(hardest_left),
+            "{name} strikes a rock inside its own ring: {:?}",
+            struck.vote(hardest_left)
+        );
+    }
+}

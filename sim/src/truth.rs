@@ -219,4 +219,18 @@ mod tests {
         assert!((segment_box_distance([5.0, 2.0], [5.0, 2.0], &f) - 2f64.sqrt()).abs() < 1e-12);
         assert_eq!(segment_box_distance([0.0, 0.0], [0.0, 0.0], &f), 0.0);
     }
+
+    #[test]
+    fn a_round_body_clears_what_stands_in_its_bounding_squares_corner() {
+        use nalgebra::Point2;
+        let round = Footprint::circle(Point2::new(1.5, 0.0), 1.5).unwrap();
+        let square = Footprint::rectangle(round.x_min, round.x_max, round.half_width);
+        // A post in the square's front left corner, 0.32 m off the circle.
+        let post = [2.9, 1.4];
+        let gap = segment_box_distance(post, post, &round);
+        assert!((gap - (1.4f64.hypot(1.4) - 1.5)).abs() < 0.01, "{gap}");
+        assert_eq!(segment_box_distance(post, post, &square), 0.0);
+        // A trunk lying across the body's middle touches both.
+        assert_eq!(segment_box_distance([1.5, -3.0], [1.5, 3.0], &round), 0.0);
+    }
 }

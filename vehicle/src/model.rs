@@ -8,6 +8,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{self, ConfigError};
 
+/// How far from the rear axle the body may reach, m: every sweep and
+/// raster of the body is sized by it.
+pub const MAX_BODY_REACH_M: f64 = 50.0;
+
 /// Everything arcnav needs to know about the vehicle. Lives in `[vehicle]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -109,6 +113,20 @@ impl VehicleConfig {
         config::positive("track_m", self.track_m)?;
         let body = self.try_footprint()?;
         let shape = self.footprint.name();
+        if body.reach() > MAX_BODY_REACH_M {
+            let key = match self.footprint {
+                FootprintShape::Rectangle => "length_m",
+                FootprintShape::Circle => "radius_m",
+                FootprintShape::Polygon => "vertices_m",
+            };
+            return Err(ConfigError::new(
+                key,
+                format!(
+                    "puts a point of the body {:.1} m from the rear axle; at most {MAX_BODY_REACH_M} m is accepted",
+                    body.reach()
+                ),
+            ));
+        }
         if self.track_m > 2.0 * body.half_width {
             return Err(ConfigError::new(
                 "track_m",

@@ -432,9 +432,12 @@ pub(super) fn cells_inside(
             }
         } else {
             crossings.clear();
-            crossings.extend(edges.iter().filter_map(|&(a, b, slope)| {
-                ((a.x > x) != (b.x > x)).then(|| a.y + (x - a.x) * slope.unwrap_or(0.0))
-            }));
+            crossings.extend(
+                edges
+                    .iter()
+                    .filter(|(a, b, _)| (a.x > x) != (b.x > x))
+                    .map(|&(a, _, slope)| a.y + (x - a.x) * slope.unwrap_or(0.0)),
+            );
             crossings.sort_unstable_by(f64::total_cmp);
             for pair in crossings.chunks_exact(2) {
                 if run(row, pair[0], pair[1]) {
@@ -622,4 +625,63 @@ pub(super) fn build_template(
         })
         .collect();
     Template { bands, body }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every cell of a grid of 0.1 m over [-1, 5] × [-2, 2] whose centre
+    /// lies inside `outline`, by `cells_inside`.
+    fn inside(outline: &[Point2<f64>]) -> Vec<(usize, usize)> {
+        let (rows, columns) = (60, 40);
+        let grid = Grid {
+            x0: -1.0,
+            y0: -2.0,
+            resolution: 0.1,
+            per_m: 10.0,
+            rows,
+            columns,
+            words_per_row: 1,
+        };
+        let mut cells = Vec::new();
+        cells_inside(&grid, outline, |row, from, to| {
+            cells.extend((from..=to).map(|column| (row, column)));
+            false
+        });
+        cells
+    }
+
+    #[test]
+    fn the_cells_inside_an_l_leave_out_its_notch() {
+        use arcnav_vehicle::Footprint;
+        let p = Point2::new;
+        let ell = Footprint::polygon(&[
+            p(-0.6, -1.1),
+            p(2.0, -1.1),
+            p(2.0, 0.0),
+            p(4.0, 0.0),
+            p(4.0, 1.1),
+            p(-0.6, 1.1),
+        ])
+        .unwrap();
+        let cells = inside(&ell.outline());
+        // The cell centres (x, y) = (-1 + 0.1·(row + ½), -2 + 0.1·(column + ½)).
+        let centre = |(row, column): (usize, usize)| {
+            p(
+                -1.0 + 0.1 * (row as f64 + 0.5),
+                -2.0 + 0.1 * (column as f64 + 0.5),
+            )
+        };
+        let expected: Vec<_> = (0..60)
+            .flat_map(|row| (0..40).map(move |column| (row, column)))
+            .filter(|&c| ell.contains(centre(c)))
+            .collect();
+        assert_eq!(cells, expected);
+        // 26 rows of 22 cells, and 20 rows of 11 (the arm).
+        assert_eq!(cells.len(), 26 * 22 + 20 * 11);
+        // A rectangle: one run per row, as before.
+        let box_ = Footprint::rectangle(-0.6, 4.0, 1.1);
+        assert_eq!(inside(&box_.outline()).len(), 46 * 22);
+    }
 }
