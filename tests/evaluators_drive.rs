@@ -109,6 +109,63 @@ fn pca_keeps_to_the_track_beside_rubble_it_could_drive() {
     );
 }
 
+/// 000's graded cost reaches the route and obstacle avoidance: 7 cm
+/// rubble (D̃ about 0.77, graded, no obstacle) along the way, a smooth
+/// track beside it. Graded, the vehicle keeps to the track; with
+/// `graded_from = 0` (no graded ground) the same run drives through the
+/// rubble (RMS vertical acceleration 0.77 m/s² against 0.10 on
+/// 2026-12-07).
+#[test]
+fn height_diff_grades_fine_rubble_and_the_vehicle_keeps_to_the_smooth_track() {
+    let world = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/worlds/fine_rubble_strip.toml"
+    );
+    let out = out_dir("fine-rubble-config");
+    std::fs::create_dir_all(&out).unwrap();
+    let ungraded = out.join("ungraded.toml");
+    std::fs::write(&ungraded, "[perception.height_diff]\ngraded_from = 0.0\n").unwrap();
+    let rms =
+        |report: &serde_json::Value| report["ride"]["rms_vertical_accel_mps2"].as_f64().unwrap();
+    let (graded, _run, printed) = sim(
+        "fine-rubble-graded",
+        &[
+            "--world",
+            world,
+            "--evaluator",
+            "height_diff",
+            "--no-images",
+        ],
+    );
+    assert_completed("fine rubble, graded", &graded, &printed);
+    assert!(
+        graded["graded_cells"].as_u64().unwrap_or(0) > 1000,
+        "{printed}"
+    );
+    assert!(
+        rms(&graded) < 0.2,
+        "RMS vertical acceleration {}: over the rubble\n{printed}",
+        rms(&graded)
+    );
+    let (plain, _run, printed) = sim(
+        "fine-rubble-ungraded",
+        &[
+            "--world",
+            world,
+            "--evaluator",
+            "height_diff",
+            "--no-images",
+            "--config",
+            ungraded.to_str().unwrap(),
+        ],
+    );
+    assert_completed("fine rubble, not graded", &plain, &printed);
+    assert!(
+        rms(&plain) > 2.0 * rms(&graded),
+        "not graded, it drove the track all the same\n{printed}"
+    );
+}
+
 #[test]
 fn a_vehicle_with_a_front_lidar_and_a_rear_depth_camera_completes_the_short_course() {
     let out = out_dir("two-sensors-config");
