@@ -116,9 +116,10 @@ pub enum Reason {
     /// turn, or standing to steer for the next leg.
     Manoeuvre { backing: bool, standing: bool },
     /// Stop with arcs allowed: the best arc's speed limit is 0 (unseen
-    /// ground, cells right ahead), or `asked`: a behaviour asked to stop
-    /// (a mission complete).
-    SpeedLimited { asked: bool },
+    /// ground, cells right ahead; `asked_by` empty), or the behaviours in
+    /// `asked_by` asked to stop (a mission complete, a waypoint no route
+    /// reaches).
+    SpeedLimited { asked_by: Vec<String> },
     /// Stop, and why; with the behaviours that vetoed arcs in this
     /// decision, whatever the stop's cause (a stop for no acceptable arc
     /// among a few left by vetoes names them too).
@@ -137,9 +138,11 @@ impl std::fmt::Display for Reason {
                 write!(f, "recovery: standing to steer for the next leg")
             }
             Reason::Manoeuvre { .. } => write!(f, "recovery: a forward leg of a turn"),
-            Reason::SpeedLimited { asked: true } => write!(f, "a behaviour asked to stop"),
-            Reason::SpeedLimited { asked: false } => {
+            Reason::SpeedLimited { asked_by } if asked_by.is_empty() => {
                 write!(f, "arcs are allowed, but the best arc's speed limit is 0")
+            }
+            Reason::SpeedLimited { asked_by } => {
+                write!(f, "{} asked to stop", asked_by.join(" and "))
             }
             Reason::Stop { stop, vetoers } => {
                 stop.fmt(f)?;
@@ -609,7 +612,16 @@ impl Arbiter {
                 backing: command.is_reverse(),
                 standing: command.is_stop(),
             },
-            Ok(_) if command.is_stop() => Reason::SpeedLimited { asked: stop_asked },
+            Ok(_) if command.is_stop() => Reason::SpeedLimited {
+                asked_by: if stop_asked {
+                    self.used(now)
+                        .filter(|(_, votes)| votes.speed_mps().is_some_and(|s| s <= creep))
+                        .map(|(input, _)| input.name.clone())
+                        .collect()
+                } else {
+                    Vec::new()
+                },
+            },
             Ok(_) => Reason::Drive,
         };
         if self.explain {

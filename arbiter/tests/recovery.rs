@@ -176,6 +176,8 @@ fn no_backing_up_when_a_behaviour_asks_to_stop_or_votes_are_missing() {
         [avoid, seek]
     });
     assert!(commands.iter().all(SteeringCommand::is_stop));
+    // The stop names who asked for it (live, its status lines say so).
+    assert_eq!(a.reason().to_string(), "route asked to stop");
     // The same speed limits without the stop request: blocked, so it backs up.
     let mut a = arbiter();
     let commands = drive(&mut a, 0, 4.0, |t| {

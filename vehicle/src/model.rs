@@ -113,14 +113,16 @@ impl VehicleConfig {
         config::positive("track_m", self.track_m)?;
         let body = self.try_footprint()?;
         let shape = self.footprint.name();
+        // The key that placed the body's outline where it is (a rectangle's
+        // `rectangle_key`).
+        let outline_key = |rectangle_key: &'static str| match self.footprint {
+            FootprintShape::Rectangle => rectangle_key,
+            FootprintShape::Circle => "radius_m",
+            FootprintShape::Polygon => "vertices_m",
+        };
         if body.reach() > MAX_BODY_REACH_M {
-            let key = match self.footprint {
-                FootprintShape::Rectangle => "length_m",
-                FootprintShape::Circle => "radius_m",
-                FootprintShape::Polygon => "vertices_m",
-            };
             return Err(ConfigError::new(
-                key,
+                outline_key("length_m"),
                 format!(
                     "puts a point of the body {:.1} m from the rear axle; at most {MAX_BODY_REACH_M} m is accepted",
                     body.reach()
@@ -139,9 +141,8 @@ impl VehicleConfig {
         }
         if body.x_min > 0.0 || body.x_max <= 0.0 {
             let key = match self.footprint {
-                FootprintShape::Rectangle => "rear_overhang_m",
                 FootprintShape::Circle => "centre_m",
-                FootprintShape::Polygon => "vertices_m",
+                _ => outline_key("rear_overhang_m"),
             };
             return Err(ConfigError::new(
                 key,
