@@ -89,8 +89,11 @@ fn sim_log_of(config: &Config) -> PathBuf {
 /// the tests.
 fn sim_log_on(world: &str, config: &Config) -> PathBuf {
     let key = format!(
-        "{world}-{:?}-{}",
-        config.sensor.preset, config.sim.slice_lines
+        "{}-{:?}-{}-{}",
+        world.replace('/', "-"),
+        config.sensor.preset,
+        config.sim.slice_lines,
+        config.sim.time_limit_s
     );
     arcnav_testkit::shared_file(&format!("{key}.lcm"), |path| {
         let world = Arc::new(
@@ -1307,6 +1310,62 @@ fn arcnav_run_with_its_guard_stops_a_blind_pipeline_short_of_a_box() {
         "at x = {x:.1} m, the box hit at {hit_x:.1} m"
     );
     assert!(stats.contains("guard_interventions"), "{stats}");
+}
+
+/// Issue 62, live: `arcnav run` fed a drive round a closed ring of trench
+/// (the waypoint on the island inside) gives the waypoint up, stands,
+/// says on the bus which behaviour asked to stop, and counts it in
+/// `--stats`. The simulated run ended `unreachable` 5 s after its route
+/// last found no way; live, `unreachable_after_s` is 2 s, so that the
+/// same evidence is judged before the drive's inputs end. Played at 4×.
+#[test]
+fn arcnav_run_gives_up_a_waypoint_no_route_reaches_and_says_who_stopped() {
+    // The whole drive (it ends `unreachable` at about 61 s).
+    let mut drive = config(SensorPreset::Erim, false);
+    drive.sim.time_limit_s = 300.0;
+    let mut live = drive.clone();
+    live.mission.unreachable_after_s = 2.0;
+    let Some(net) = Net::setup("run-unreachable", live, |_| {
+        sim_log_on("barriers/ring_trench", &drive)
+    }) else {
+        return;
+    };
+    let recorded = temp_dir("run-unreachable").join("bus.lcm");
+    let logger = net.logger(&recorded);
+    let run = net.arcnav("run", &["run", "--stats"]);
+    run.wait_ready();
+    assert!(net.play(INPUTS, 4.0).wait().unwrap().success());
+    run.signal("TERM");
+    let stderr = run.stderr.lock().unwrap().clone();
+    let (code, stats) = run.finish();
+    assert_eq!(code, Some(0), "{stderr}");
+    logger.finish();
+    assert!(
+        stats.contains("unreachable_waypoints 1") || stats.contains("\"unreachable_waypoints\":1"),
+        "{stats}"
+    );
+    let said = decisions(&recorded);
+    let (&at, _) = said
+        .iter()
+        .find(|(_, d)| d.cause == decision_t::SPEED_LIMITED && d.reason == "route asked to stop")
+        .unwrap_or_else(|| panic!("no DECISION says the route asked to stop:\n{stats}\n{stderr}"));
+    // From then on it stands.
+    let mut reader = LogReader::open(&recorded).unwrap();
+    while let Some(event) = reader.next_event().unwrap() {
+        if event.channel == channels::STEERING_COMMAND {
+            let c = steering_command_t::decode(&event.data).unwrap();
+            assert!(
+                c.utime < at || c.speed == 0.0,
+                "{} m/s at {} after the stop at {at}",
+                c.speed,
+                c.utime
+            );
+        }
+    }
+    assert!(
+        stderr.contains("no route to the waypoint"),
+        "the route warns: {stderr}"
+    );
 }
 
 #[test]

@@ -840,6 +840,11 @@ impl Route {
         });
         let ring = self.ring_round(closed, goal);
         let skipped = self.unreachable.then == OnUnreachable::Skip;
+        let within = if self.area.is_some() {
+            "inside the operating area"
+        } else {
+            "through the ground around it"
+        };
         tracing::warn!(
             waypoint = index,
             x = position[0],
@@ -847,7 +852,7 @@ impl Route {
             known_m2 = known as f64 * cell_area,
             ring_cells = ring.len(),
             skipped,
-            "route: no route to the waypoint inside the operating area"
+            "route: no route to the waypoint {within}"
         );
         self.no_routes.push(NoRoute {
             waypoint: index,
