@@ -863,6 +863,50 @@ fn narrow_cul_de_sacs_are_left_by_turning_round() {
     }
 }
 
+/// 004's own shape (issue 68): an L-shaped body (the HMMWV's rectangle
+/// with its front right quarter cut away) and a round one drive the
+/// narrow cul-de-sac out, turning round in legs forwards and backing (the
+/// outline mirrored), with the ground truth and every sweep on the shape.
+#[test]
+fn bodies_of_their_own_shape_turn_round_in_a_narrow_cul_de_sac() {
+    let dir = arcnav_testkit::temp_dir("shapes");
+    let shape = |name: &str, text: &str| {
+        let file = dir.join(format!("{name}.toml"));
+        std::fs::write(&file, text).unwrap();
+        let world = format!(
+            "{}/tests/worlds/cul_de_sac_narrow.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let args = [
+            "--world",
+            &world,
+            "--config",
+            file.to_str().unwrap(),
+            "--no-images",
+        ];
+        (name.to_string(), args.map(String::from).to_vec())
+    };
+    let runs = [
+        shape(
+            "ell",
+            "[vehicle]\nfootprint = \"polygon\"\n\
+             vertices_m = [[-0.6, -1.1], [2.0, -1.1], [2.0, 0.0], [4.0, 0.0], [4.0, 1.1], [-0.6, 1.1]]\n",
+        ),
+        shape(
+            "round",
+            "[vehicle]\nfootprint = \"circle\"\nradius_m = 1.5\ncentre_m = [1.5, 0.0]\nwheelbase_m = 2.0\n",
+        ),
+    ];
+    for (tag, report, stdout) in &missions("shape", &runs) {
+        assert_completed_without_collision(tag, report, stdout);
+        let recovery = &report["recovery"];
+        assert!(
+            recovery["turns"].as_u64().unwrap() >= 1,
+            "{tag}: {recovery}"
+        );
+    }
+}
+
 /// A ditch square across the way that a sensor flags only from near (the
 /// 64-beam lidar: within about 8 m), its near end beyond the map's side.
 /// The vehicle stops at it and turns round; the images it takes backing
