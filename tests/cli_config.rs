@@ -98,9 +98,18 @@ fn the_footprint_keys_are_checked() {
         "[vehicle]\nfootprint = \"polygon\"\nvertices_m = [[-0.6, -1.1], [2.0, -1.1], [2.0, 0.0], \
          [4.0, 0.0], [4.0, 1.1], [-0.6, 1.1]]\n",
     ] {
-        let (_dir, file) = temp_file("shape.toml", good);
+        let (dir, file) = temp_file("shape.toml", good);
         let (code, stdout, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
         assert_eq!(code, 0, "{good}: {stdout}{stderr}");
+        // What `arcnav config` prints (as a run's config.toml is written)
+        // reads back: no rectangle's keys beside the outline.
+        let (code, printed, stderr) = arcnav(&["config", file.to_str().unwrap()]);
+        assert_eq!(code, 0, "{stderr}");
+        assert!(!printed.contains("length_m"), "{printed}");
+        let again = dir.path().join("printed.toml");
+        std::fs::write(&again, &printed).unwrap();
+        let (code, stdout, stderr) = arcnav(&["config", "--check", again.to_str().unwrap()]);
+        assert_eq!(code, 0, "{printed}: {stdout}{stderr}");
     }
     for (text, expect) in [
         (

@@ -29,6 +29,9 @@ use serde::{Deserialize, Serialize};
 use crate::bus::BusConfig;
 use crate::lookahead::section::LookaheadConfig;
 
+/// `[vehicle]`'s keys that only a rectangle's body reads.
+const RECTANGLE_KEYS: [&str; 3] = ["length_m", "width_m", "rear_overhang_m"];
+
 /// The table under `[behaviours]` that holds the external behaviours,
 /// `[behaviours.external.NAME]` (no built-in behaviour has this name).
 pub const EXTERNAL: &str = "external";
@@ -475,7 +478,7 @@ impl Config {
         if shape == arcnav_vehicle::model::FootprintShape::Rectangle {
             return Ok(());
         }
-        for key in ["length_m", "width_m", "rear_overhang_m"] {
+        for key in RECTANGLE_KEYS {
             if self.origin(&format!("vehicle.{key}")).is_some() {
                 return Err(ConfigError::new(
                     format!("vehicle.{key}"),
@@ -554,7 +557,37 @@ impl Config {
     /// The configuration as given, as TOML.
     pub fn to_toml(&self) -> String {
         // Plain structs of numbers, strings and tables always serialise.
-        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
+        let text =
+            toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"));
+        if self.vehicle.footprint == arcnav_vehicle::model::FootprintShape::Rectangle {
+            return text;
+        }
+        // A circle's or a polygon's body has no rectangle's keys (given,
+        // they are refused): what is written reads back.
+        let Ok(mut document) = text.parse::<toml_edit::DocumentMut>() else {
+            return text;
+        };
+        if let Some(vehicle) = document
+            .get_mut("vehicle")
+            .and_then(toml_edit::Item::as_table_mut)
+        {
+            for key in RECTANGLE_KEYS {
+                vehicle.remove(key);
+            }
+            // A polygon's vertices one line, `[[x, y], ...]`, as written.
+            if let Some(vertices) = vehicle
+                .get_mut("vertices_m")
+                .and_then(toml_edit::Item::as_array_mut)
+            {
+                for vertex in vertices.iter_mut() {
+                    if let Some(pair) = vertex.as_array_mut() {
+                        pair.fmt();
+                    }
+                }
+                vertices.fmt();
+            }
+        }
+        document.to_string()
     }
 }
 
