@@ -143,6 +143,13 @@ pub struct RouteStats {
     pub path_switches: u64,
 }
 
+/// The elevation grid and the memory's origin the route's roughness levels
+/// were read for.
+type RoughnessOf = (
+    std::sync::Arc<arcnav_localmap::ElevationGrid>,
+    Option<(i64, i64)>,
+);
+
 /// The route behaviour.
 #[derive(Debug, Clone)]
 pub struct Route {
@@ -167,6 +174,15 @@ pub struct Route {
     /// Per cell: the stamp of the cycle a graded patch lay in it, and the
     /// highest roughness level of those patches.
     graded: Vec<(u32, u8)>,
+    /// Per cell: its roughness level from the elevation layer, and the
+    /// `rough_epoch` it was read in. The level of a cell depends only on
+    /// the layer's grid (one shared snapshot between images) and on where
+    /// the cell lies, so it is read again only when either changed.
+    rough: Vec<(u32, u8)>,
+    rough_epoch: u32,
+    /// The grid and the memory's origin the epoch stands for (the grid
+    /// held, so that its address is never another's).
+    rough_of: Option<RoughnessOf>,
     stamp: u32,
     changed: Vec<usize>,
     path: Vec<usize>,
@@ -232,6 +248,9 @@ impl Route {
             hits: vec![0; n],
             near_hits: vec![0; n],
             graded: vec![(0, 0); n],
+            rough: vec![(0, 0); n],
+            rough_epoch: 0,
+            rough_of: None,
             stamp: 0,
             changed: Vec::new(),
             path: Vec::new(),
@@ -571,6 +590,17 @@ impl Route {
             self.graded.fill((0, 0));
             self.stamp = 1;
         }
+        let same_grid = self.rough_of.as_ref().is_some_and(|(grid, origin)| {
+            std::sync::Arc::ptr_eq(grid, &map.elevation) && *origin == self.layout.origin
+        });
+        if !same_grid {
+            self.rough_epoch = self.rough_epoch.wrapping_add(1);
+            if self.rough_epoch == 0 {
+                self.rough.fill((0, 0));
+                self.rough_epoch = 1;
+            }
+            self.rough_of = Some((map.elevation.clone(), self.layout.origin));
+        }
         let s = map.patch_size_m;
         for patch in &map.patches {
             let (x, y) = ((patch.i as f64 + 0.5) * s, (patch.j as f64 + 0.5) * s);
@@ -648,7 +678,12 @@ impl Route {
                         let state = if graded == SUSPECTED_LEVEL {
                             SUSPECT
                         } else {
-                            match roughness_level(&self.config, map, x, y).max(graded) {
+                            let rough = &mut self.rough[c];
+                            if rough.0 != self.rough_epoch {
+                                *rough =
+                                    (self.rough_epoch, roughness_level(&self.config, map, x, y));
+                            }
+                            match rough.1.max(graded) {
                                 0 => FREE,
                                 level => ROUGH + level - 1,
                             }
