@@ -29,6 +29,9 @@ pub(super) struct AreaEdge {
     radius: f64,
     /// Scratch: a path's poses.
     poses: Vec<(f64, ArcPose)>,
+    /// Scratch: how far outside the area each outline point lies where
+    /// the vehicle stands.
+    standing: Vec<f64>,
 }
 
 /// A vehicle-frame pose's point in the world, for a vehicle at `pose`.
@@ -65,6 +68,7 @@ impl AreaEdge {
             outline: outline(body),
             radius: body.reach(),
             poses: Vec::new(),
+            standing: Vec::new(),
         }
     }
 
@@ -80,29 +84,40 @@ impl AreaEdge {
     /// where a point of the body lies outside the area and deeper than it
     /// lay where the vehicle stands (a body already over the edge may
     /// turn back in): the distance and that point, vehicle frame.
+    /// `self.standing` must hold the depths where the vehicle stands
+    /// ([`AreaEdge::stand`]).
     fn first_out(&self, placed: &Placed) -> Option<(f64, [f32; 2])> {
-        let depth = |w: [f64; 2]| {
-            if self.area.contains(w) {
-                0.0
-            } else {
-                self.area.distance_to_edge(w)
-            }
-        };
-        let start: Vec<f64> = self
-            .outline
-            .iter()
-            .map(|&[x, y]| depth(placed.world(Point2::new(x, y))))
-            .collect();
         self.poses.iter().skip(1).find_map(|&(s, pose)| {
             self.outline
                 .iter()
-                .zip(&start)
+                .zip(&self.standing)
                 .find_map(|(&[x, y], &before)| {
                     let q = pose.transform_point(Point2::new(x, y));
-                    (depth(placed.world(q)) > before + 1e-6)
+                    (self.depth(placed.world(q)) > before + 1e-6)
                         .then_some((s, [q.x as f32, q.y as f32]))
                 })
         })
+    }
+
+    /// How far outside the area world point `w` lies (0 inside).
+    fn depth(&self, w: [f64; 2]) -> f64 {
+        if self.area.contains(w) {
+            0.0
+        } else {
+            self.area.distance_to_edge(w)
+        }
+    }
+
+    /// Fills `self.standing` for a vehicle placed at `placed`.
+    fn stand(&mut self, placed: &Placed) {
+        let mut standing = std::mem::take(&mut self.standing);
+        standing.clear();
+        standing.extend(
+            self.outline
+                .iter()
+                .map(|&[x, y]| self.depth(placed.world(Point2::new(x, y)))),
+        );
+        self.standing = standing;
     }
 
     /// Per path (forwards, within `reach`): where the body first leaves the
@@ -119,6 +134,7 @@ impl AreaEdge {
             return;
         }
         let placed = Placed::of(pose);
+        self.stand(&placed);
         for (path, exit) in paths.iter().zip(exits.iter_mut()) {
             path.sample_into(reach, STEP_M, &mut self.poses);
             *exit = self.first_out(&placed);
@@ -136,7 +152,9 @@ impl AreaEdge {
             let s = (i as f64 * STEP_M).min(reach);
             (s, arc.pose_at(-s))
         }));
-        self.first_out(&Placed::of(pose)).map(|(s, _)| s - STEP_M)
+        let placed = Placed::of(pose);
+        self.stand(&placed);
+        self.first_out(&placed).map(|(s, _)| s - STEP_M)
     }
 }
 

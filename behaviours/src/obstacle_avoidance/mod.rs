@@ -66,6 +66,7 @@
 
 use arcnav_arbiter::{VetoCause, Votes};
 use arcnav_vehicle::config::ConfigError;
+use arcnav_vehicle::footprint::Outline;
 use arcnav_vehicle::{Arc, ArcPose, DrivenPath, Footprint, SteeringResponse};
 use nalgebra::Point2;
 
@@ -95,6 +96,12 @@ pub struct ObstacleAvoidance {
     templates: Vec<Template>,
     /// Margin of band b (0 for the footprint itself).
     margins: Vec<f64>,
+    /// The footprint widened by each band's margin, its outline (the lead
+    /// of a path places them at each of its poses, every cycle).
+    band_outlines: Vec<Outline>,
+    /// How far from the rear axle the widest band's footprint reaches (its
+    /// bounding box's corner), m.
+    widest_reach: f64,
     /// The widest band within `reverse_margin_m`: the clearance a
     /// manoeuvre's leg keeps creeping forwards, as backing up keeps
     /// `reverse_margin_m`.
@@ -319,6 +326,14 @@ impl ObstacleAvoidance {
             ahead,
             templates,
             crawl_band,
+            band_outlines: margins
+                .iter()
+                .map(|&m| footprint.widened(m).outline())
+                .collect(),
+            widest_reach: {
+                let body = footprint.widened(margins[margins.len() - 1]);
+                body.x_max.max(-body.x_min).hypot(body.half_width)
+            },
             margins,
             reverse,
         }
@@ -441,10 +456,7 @@ impl ObstacleAvoidance {
         let widest = self.margins.len() - 1;
         let corners = |pose: &ArcPose, band: usize| {
             let rigid = Rigid::of(pose);
-            self.footprint
-                .widened(self.margins[band])
-                .outline()
-                .map(|c| rigid.apply(c))
+            self.band_outlines[band].map(|c| rigid.apply(c))
         };
         // The first cell of `layer` under the footprint of `band` at `pose`.
         let under = |pose: &ArcPose, band: usize, layer: &[u64]| {
@@ -461,8 +473,7 @@ impl ObstacleAvoidance {
         // How far from the rear axle the footprints of this lead reach: a
         // layer with nothing that near has nothing to meet.
         let lead = poses.last().map_or(0.0, |(s, _)| *s);
-        let body = self.footprint.widened(self.margins[widest]);
-        let within = lead + body.x_max.max(-body.x_min).hypot(body.half_width) + grid.resolution;
+        let within = lead + self.widest_reach + grid.resolution;
         let near = |layer: Layer| self.nearest[layer as usize] <= within;
         if near(Layer::Blocked)
             && let Some(from) = poses
