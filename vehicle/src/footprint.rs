@@ -285,17 +285,12 @@ impl Footprint {
         best
     }
 
-    /// The same body widened by `margin_m`: a rectangle on both sides
-    /// (near-miss bands run beside the body), any other outline all round.
+    /// The same body widened by `margin_m` at its sides (near-miss bands
+    /// run beside the body; its front and rear stay where they are):
+    /// [`Footprint::grown`] by `margin_m` at the sides only.
     #[must_use]
     pub fn widened(&self, margin_m: f64) -> Self {
-        match &self.polygon {
-            None => Self {
-                half_width: self.half_width + margin_m,
-                ..*self
-            },
-            Some(outline) => Self::of_outline(offset(outline, margin_m)),
-        }
+        self.grown(0.0, 0.0, margin_m)
     }
 
     /// The body grown by `ahead` at the front, `behind` at the rear and
@@ -557,18 +552,25 @@ mod tests {
     }
 
     #[test]
-    fn growing_keeps_everything_within_the_margin_and_little_more() {
+    fn widening_keeps_everything_within_the_margin_beside_the_body_and_little_more() {
         for f in [ell(), Footprint::circle(p(0.3, 0.1), 0.7).unwrap()] {
             let g = f.widened(0.25);
-            // Points on a fine grid: within 0.25 of the body → inside.
+            assert_eq!(
+                (g.x_min, g.x_max),
+                (f.x_min, f.x_max),
+                "front and rear stay"
+            );
+            // Points on a fine grid within the body's span along x: within
+            // 0.25 of the body → inside; beyond the span → outside.
             for i in -20..=40 {
                 for j in -20..=20 {
-                    let q = p(f64::from(i) * 0.1, f64::from(j) * 0.1);
+                    let q = p(f64::from(i) * 0.1 + 0.05, f64::from(j) * 0.1);
                     let gap = f.distance_to_segment(q, q);
-                    if gap <= 0.25 - 1e-9 {
+                    let beside = (f.x_min..=f.x_max).contains(&q.x);
+                    if beside && gap <= 0.25 - 1e-9 {
                         assert!(g.contains(q), "{q:?} is {gap} m from the body");
                     }
-                    if gap > 0.25 * std::f64::consts::SQRT_2 + 1e-9 {
+                    if !beside || gap > 0.25 * std::f64::consts::SQRT_2 + 1e-9 {
                         assert!(!g.contains(q), "{q:?} is {gap} m from the body");
                     }
                 }
