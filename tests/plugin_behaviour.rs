@@ -92,6 +92,7 @@ fn it_votes_for_the_current_curvature_and_falls_off_on_both_sides() {
         speed_mps: 2.0,
         arc_index: Some(25),
         vote: 1.0,
+        turn_rate_radps: 0.0,
     });
     let v = set.vote(100_000, &pose, &map)[0].votes.values();
     assert_eq!(v[25], 1.0);

@@ -791,6 +791,7 @@ impl Arbiter {
                 speed_mps: base * factor,
                 arc_index: Some(best),
                 vote: best_vote,
+                turn_rate_radps: 0.0,
             },
             limits,
         ))

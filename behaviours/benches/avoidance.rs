@@ -102,6 +102,7 @@ fn main() {
                 speed_mps: speed,
                 arc_index: Some(arcs.nearest_index(curvature)),
                 vote: 1.0,
+                turn_rate_radps: 0.0,
             };
             let mut ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
             ctx.last_command = Some(&last);

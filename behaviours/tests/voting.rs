@@ -376,6 +376,7 @@ fn arc_vote_steering(map: &MapSnapshot, arc: usize, speed: f64, curvature: f64) 
         speed_mps: speed,
         arc_index: Some(arcs.nearest_index(curvature)),
         vote: 1.0,
+        turn_rate_radps: 0.0,
     };
     let mission = Mission::default();
     let mut ctx = VoteContext::new(0, &pose, map, &mission, &arcs);

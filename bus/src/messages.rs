@@ -356,6 +356,7 @@ impl From<&steering_command_t> for SteeringCommand {
             speed_mps: msg.speed,
             arc_index: usize::try_from(msg.arc_index).ok(),
             vote: msg.vote,
+            turn_rate_radps: 0.0,
         }
     }
 }

@@ -63,6 +63,7 @@ fn bench_sensor(bencher: Bencher, sensor: SensorModel) {
         speed_mps: 2.0,
         arc_index: Some(20),
         vote: 1.0,
+        turn_rate_radps: 0.0,
     };
     let mut t = 0;
     let mut step = move |guard: &mut Guard| {

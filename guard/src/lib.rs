@@ -600,6 +600,7 @@ mod tests {
             speed_mps,
             arc_index: Some(0),
             vote: 1.0,
+            turn_rate_radps: 0.0,
         }
     }
 

@@ -114,6 +114,7 @@ impl Executed {
                 speed_mps: self.speed_mps,
                 arc_index: self.arc_index,
                 vote: 0.0,
+                turn_rate_radps: 0.0,
             },
             _ => SteeringCommand::stop(self.command_utime),
         }
@@ -259,6 +260,7 @@ mod tests {
                 speed_mps: 2.0,
                 arc_index: Some(25),
                 vote: 0.8,
+                turn_rate_radps: 0.0,
             };
             publisher
                 .publish_message(

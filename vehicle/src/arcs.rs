@@ -11,7 +11,7 @@ use nalgebra::{Point2, Vector2};
 use serde::{Deserialize, Serialize};
 
 use crate::config::{self, ConfigError};
-use crate::model::{Footprint, VehicleConfig};
+use crate::model::{Footprint, Kinematics, VehicleConfig};
 
 /// How the arc set is laid out. Lives in `[arcs]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -26,6 +26,13 @@ pub struct ArcSetConfig {
     /// rate) rather than along the arc itself (020 item 2): always, never,
     /// or above [`DrivenPaths::AUTO_ABOVE_MPS`] of cruise.
     pub driven_paths: DrivenPaths,
+    /// Add two arcs of curvature -∞ and +∞ at the ends of the set (index 0
+    /// and the last): turning in place, right and left, at the vehicle's
+    /// `max_yaw_rate_dps` (a skid-steer vehicle's only). Behaviours judge
+    /// them like any arc (obstacle avoidance sweeps the body through the
+    /// turn); the arbiter turns on them to turn round, where an Ackermann
+    /// vehicle makes a K-point turn.
+    pub turn_in_place: bool,
 }
 
 /// When behaviours judge arcs along the paths the vehicle drives onto them
@@ -111,6 +118,7 @@ impl Default for ArcSetConfig {
             count: 39,
             min_radius_m: 8.0,
             driven_paths: DrivenPaths::Auto,
+            turn_in_place: false,
         }
     }
 }
@@ -137,6 +145,12 @@ impl ArcSetConfig {
     /// vehicle's minimum turning radius could win and could not be driven.
     pub fn validate_for(&self, vehicle: &VehicleConfig) -> Result<(), ConfigError> {
         self.validate()?;
+        if self.turn_in_place && vehicle.kinematics != Kinematics::SkidSteer {
+            return Err(ConfigError::new(
+                "turn_in_place",
+                "needs a vehicle that turns in place (vehicle.kinematics = \"skid_steer\")",
+            ));
+        }
         if self.min_radius_m < vehicle.min_turning_radius_m {
             return Err(ConfigError::new(
                 "min_radius_m",
@@ -150,12 +164,15 @@ impl ArcSetConfig {
     }
 }
 
-/// The arcs, evenly spaced in curvature between `-1/R` and `+1/R`.
+/// The arcs, evenly spaced in curvature between `-1/R` and `+1/R`; with
+/// `turn_in_place`, a turn in place (curvature ∓∞) at each end.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArcSet {
     curvatures: Vec<f64>,
     max_curvature: f64,
     driven_paths: bool,
+    /// Arcs before the first driving one: 1 with turns in place, else 0.
+    offset: usize,
 }
 
 impl ArcSet {
@@ -177,14 +194,34 @@ impl ArcSet {
         let n = config.count;
         let half = (n - 1) as f64;
         // Integer numerators make the set exactly symmetric with an exact 0.
-        let curvatures = (0..n)
-            .map(|i| max_curvature * (2.0 * i as f64 - half) / half)
+        let driving = (0..n).map(|i| max_curvature * (2.0 * i as f64 - half) / half);
+        let offset = usize::from(config.turn_in_place);
+        let curvatures = std::iter::repeat_n(f64::NEG_INFINITY, offset)
+            .chain(driving)
+            .chain(std::iter::repeat_n(f64::INFINITY, offset))
             .collect();
         Ok(Self {
             curvatures,
             max_curvature,
             driven_paths: config.driven_paths == DrivenPaths::On,
+            offset,
         })
+    }
+
+    /// Whether the set holds turns in place (`[arcs] turn_in_place`).
+    pub fn turns_in_place(&self) -> bool {
+        self.offset > 0
+    }
+
+    /// True when the arc at `index` is a turn in place (curvature ±∞).
+    pub fn is_turn_in_place(&self, index: usize) -> bool {
+        self.curvature(index).is_some_and(f64::is_infinite)
+    }
+
+    /// Indices of the arcs the vehicle drives along (all but the turns in
+    /// place).
+    pub fn driving(&self) -> std::ops::Range<usize> {
+        self.offset..self.curvatures.len() - self.offset
     }
 
     pub fn len(&self) -> usize {
@@ -227,23 +264,24 @@ impl ArcSet {
         self.curvatures.len() / 2
     }
 
-    /// The largest |curvature| in the set, 1/m.
+    /// The largest |curvature| of the driving arcs, 1/m.
     pub fn max_curvature(&self) -> f64 {
         self.max_curvature
     }
 
-    /// Curvature difference between neighbouring arcs, 1/m.
+    /// Curvature difference between neighbouring driving arcs, 1/m.
     pub fn spacing(&self) -> f64 {
-        2.0 * self.max_curvature / (self.curvatures.len() - 1) as f64
+        2.0 * self.max_curvature / (self.driving().len() - 1) as f64
     }
 
-    /// Index of the arc nearest in curvature to `curvature` (clamped to the set).
+    /// Index of the driving arc nearest in curvature to `curvature`
+    /// (clamped to the driving arcs; a turn in place is never the nearest).
     pub fn nearest_index(&self, curvature: f64) -> usize {
         if !curvature.is_finite() {
             return self.straight_index();
         }
         let position = (curvature + self.max_curvature) / self.spacing();
-        (position.round().max(0.0) as usize).min(self.curvatures.len() - 1)
+        (position.round().max(0.0) as usize).min(self.driving().len() - 1) + self.offset
     }
 }
 
@@ -276,6 +314,12 @@ pub struct Arc {
 impl Arc {
     pub fn new(curvature: f64) -> Self {
         Self { curvature }
+    }
+
+    /// True for a turn in place (curvature ±∞): [`Arc::pose_at`] and the
+    /// sweeps of a driven arc do not apply; see [`TurnInPlace`].
+    pub fn is_turn_in_place(&self) -> bool {
+        self.curvature.is_infinite()
     }
 
     /// Turning radius, m, signed like the curvature; `None` when straight.
@@ -442,38 +486,106 @@ impl SweptFootprint {
             }
             return first;
         };
-        // In the moving frame the point turns about `center` by −k·s: its
-        // circle's crossings with each edge, by the turn to reach them.
-        let offset: Vector2<f64> = p - center;
-        let radius2 = offset.norm_squared();
-        let angle_p = offset.y.atan2(offset.x);
-        for (a, b) in outline.edges() {
-            let (d, f) = (b - a, a - center);
-            let (qa, qb, qc) = (
-                d.norm_squared(),
-                2.0 * f.dot(&d),
-                f.norm_squared() - radius2,
-            );
-            let disc = qb * qb - 4.0 * qa * qc;
-            if qa == 0.0 || disc < 0.0 {
+        // In the moving frame the point turns about `center` by −k·s.
+        turn_to_meet(&outline, center, p, k > 0.0).map(|turn| turn / k.abs())
+    }
+}
+
+/// The angle the outline turns about `center` (to the left when `left`)
+/// before it first meets the fixed point `p` (outside it), in [0, 2π)
+/// radians: in the moving frame the point turns the other way about
+/// `center`, and its circle's crossings with each edge are the candidates.
+fn turn_to_meet(
+    outline: &crate::footprint::Outline,
+    center: Point2<f64>,
+    p: Point2<f64>,
+    left: bool,
+) -> Option<f64> {
+    let offset: Vector2<f64> = p - center;
+    let radius2 = offset.norm_squared();
+    let angle_p = offset.y.atan2(offset.x);
+    let mut first: Option<f64> = None;
+    for (a, b) in outline.edges() {
+        let (d, f) = (b - a, a - center);
+        let (qa, qb, qc) = (
+            d.norm_squared(),
+            2.0 * f.dot(&d),
+            f.norm_squared() - radius2,
+        );
+        let disc = qb * qb - 4.0 * qa * qc;
+        if qa == 0.0 || disc < 0.0 {
+            continue;
+        }
+        let root = disc.sqrt();
+        for t in [(-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa)] {
+            if !(0.0..=1.0).contains(&t) {
                 continue;
             }
-            let root = disc.sqrt();
-            for t in [(-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa)] {
-                if !(0.0..=1.0).contains(&t) {
-                    continue;
-                }
-                let q = a + d * t;
-                let angle_q = (q.y - center.y).atan2(q.x - center.x);
-                let turn = if k > 0.0 {
-                    angle_p - angle_q
-                } else {
-                    angle_q - angle_p
-                };
-                consider(turn.rem_euclid(std::f64::consts::TAU) / k.abs());
-            }
+            let q = a + d * t;
+            let angle_q = (q.y - center.y).atan2(q.x - center.x);
+            let turn = if left {
+                angle_p - angle_q
+            } else {
+                angle_q - angle_p
+            };
+            let turn = turn.rem_euclid(std::f64::consts::TAU);
+            first = Some(first.map_or(turn, |best: f64| best.min(turn)));
         }
-        first
+    }
+    first
+}
+
+/// The body turning in place about `centre` (a skid-steer vehicle's turn,
+/// an arc of curvature ±∞), by at most `max_angle` radians.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TurnInPlace {
+    /// The point turned about, vehicle frame (the middle of the wheelbase).
+    pub centre: Point2<f64>,
+    /// Turning left (anticlockwise seen from above).
+    pub left: bool,
+    pub footprint: Footprint,
+    /// How far the turn goes, radians.
+    pub max_angle: f64,
+}
+
+impl TurnInPlace {
+    /// The angle, radians, at which the turning body first touches the
+    /// fixed point `p` (start frame), or `None` if it does not within
+    /// `max_angle`. Exact, like [`SweptFootprint::first_contact`].
+    pub fn first_contact(&self, p: Point2<f64>) -> Option<f64> {
+        if self.footprint.contains(p) {
+            return Some(0.0);
+        }
+        turn_to_meet(&self.footprint.outline(), self.centre, p, self.left)
+            .filter(|&turn| turn <= self.max_angle)
+    }
+
+    /// Where the vehicle's origin is, and its heading, after turning by
+    /// `angle` radians (start frame).
+    pub fn pose_at(&self, angle: f64) -> ArcPose {
+        let heading = if self.left { angle } else { -angle };
+        let (sin, cos) = heading.sin_cos();
+        let (cx, cy) = (self.centre.x, self.centre.y);
+        ArcPose {
+            position: Point2::new(cx - cos * cx + sin * cy, cy - sin * cx - cos * cy),
+            heading,
+        }
+    }
+
+    /// Body outlines every `step_rad` through the turn (for drawing).
+    pub fn outlines(&self, step_rad: f64) -> Vec<Vec<Point2<f64>>> {
+        let outline = self.footprint.outline();
+        let steps = if step_rad > 0.0 {
+            (self.max_angle / step_rad).ceil().clamp(1.0, 720.0) as usize
+        } else {
+            1
+        };
+        (0..=steps)
+            .map(|i| {
+                let pose = self.pose_at(self.max_angle * i as f64 / steps as f64);
+                outline.iter().map(|c| pose.transform_point(*c)).collect()
+            })
+            .collect()
     }
 }
 
@@ -699,5 +811,72 @@ mod tests {
         assert!((s - 8.0).abs() < 1e-12, "{s}");
         let s = swept.first_contact(Point2::new(10.0, 0.5)).unwrap();
         assert!((s - 6.0).abs() < 1e-12, "{s}");
+    }
+
+    #[test]
+    fn turns_in_place_end_the_set_and_are_never_the_nearest_driving_arc() {
+        let arcs = ArcSet::new(&ArcSetConfig {
+            turn_in_place: true,
+            ..ArcSetConfig::default()
+        })
+        .unwrap();
+        assert_eq!(arcs.len(), 41);
+        assert_eq!(arcs.curvature(0), Some(f64::NEG_INFINITY));
+        assert_eq!(arcs.curvature(40), Some(f64::INFINITY));
+        assert!(arcs.is_turn_in_place(0) && arcs.is_turn_in_place(40) && !arcs.is_turn_in_place(1));
+        assert_eq!(arcs.driving(), 1..40);
+        assert_eq!(arcs.curvature(arcs.straight_index()), Some(0.0));
+        assert_eq!(arcs.nearest_index(1.0), 39);
+        assert_eq!(arcs.nearest_index(-1.0), 1);
+        assert_eq!(arcs.curvature(1), Some(-1.0 / 8.0));
+        let plain = ArcSet::new(&ArcSetConfig::default()).unwrap();
+        assert_eq!(arcs.spacing(), plain.spacing());
+        let err = ArcSetConfig {
+            turn_in_place: true,
+            ..ArcSetConfig::default()
+        }
+        .validate_for(&VehicleConfig::default())
+        .unwrap_err();
+        assert_eq!(err.key, "turn_in_place");
+    }
+
+    #[test]
+    fn a_body_turning_in_place_meets_what_stands_beside_its_corners() {
+        // A 1.6 m × 1.2 m body over a 1 m wheelbase, origin on the rear
+        // axle 0.3 m from the back: it turns about (0.5, 0).
+        let body = Footprint::rectangle(-0.3, 1.3, 0.6);
+        let turn = |left| TurnInPlace {
+            centre: Point2::new(0.5, 0.0),
+            left,
+            footprint: body,
+            max_angle: std::f64::consts::PI,
+        };
+        // A point 1.0 m from the centre, straight ahead of it: the corners
+        // (1.0 m from the centre at 0.8 m, 0.6 m) reach it; turning left,
+        // the front-right corner swings into it.
+        let ahead = Point2::new(0.5 + 0.95, 0.0);
+        let left = turn(true).first_contact(ahead).unwrap();
+        let right = turn(false).first_contact(ahead).unwrap();
+        assert!((left - right).abs() < 1e-9, "symmetric: {left} {right}");
+        // Checked against a dense walk of the turn.
+        let dense = (0..=18000)
+            .map(|i| i as f64 * std::f64::consts::PI / 18000.0)
+            .find(|&a| {
+                let pose = turn(true).pose_at(a);
+                // The point in the turned body's frame.
+                let (sin, cos) = pose.heading.sin_cos();
+                let d = ahead - pose.position;
+                body.contains(Point2::new(cos * d.x + sin * d.y, -sin * d.x + cos * d.y))
+            })
+            .unwrap();
+        assert!((left - dense).abs() < 2e-4, "{left} vs {dense}");
+        // Beyond the corners' reach nothing is met; inside the body, at once.
+        assert_eq!(turn(true).first_contact(Point2::new(0.5 + 1.01, 0.0)), None);
+        assert_eq!(turn(true).first_contact(Point2::new(0.5, 0.1)), Some(0.0));
+        // The turn centre stays put as the origin swings round it.
+        let pose = turn(true).pose_at(1.0);
+        let centre = pose.transform_point(Point2::new(0.5, 0.0));
+        assert!((centre - Point2::new(0.5, 0.0)).norm() < 1e-12);
+        assert_eq!(turn(false).pose_at(1.0).heading, -1.0);
     }
 }

@@ -430,6 +430,7 @@ mod tests {
             speed_mps,
             arc_index: Some(0),
             vote: 1.0,
+            turn_rate_radps: 0.0,
         };
         for (v, k_now, k_flight, k_new) in [
             (8.0, 0.0, 0.0, 0.125),

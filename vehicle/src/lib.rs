@@ -24,12 +24,12 @@ pub mod pose_history;
 pub mod time;
 pub mod watchdog;
 
-pub use arcs::{Arc, ArcPose, ArcSet, ArcSetConfig, DrivenPaths, SweptFootprint};
+pub use arcs::{Arc, ArcPose, ArcSet, ArcSetConfig, DrivenPaths, SweptFootprint, TurnInPlace};
 pub use command::SteeringCommand;
 pub use config::ConfigError;
 pub use drive::{DrivenPath, Steering, SteeringResponse};
 pub use frames::{Isometry, Pose};
-pub use model::{Footprint, VehicleConfig};
+pub use model::{Footprint, Kinematics, VehicleConfig};
 pub use motion::{MotionLimits, MotionModel, PlanarState};
 pub use pose_history::{PoseHistory, PoseHistoryError};
 pub use time::Utime;

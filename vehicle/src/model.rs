@@ -64,6 +64,15 @@ pub struct VehicleConfig {
     pub wheel_radius_m: f64,
     /// Wheel centre to wheel centre across an axle, m (M998: 1.82 m).
     pub track_m: f64,
+    /// How the vehicle steers: `ackermann` (steered wheels, a minimum
+    /// turning radius; the HMMWV) or `skid_steer` (wheels or tracks driven
+    /// at different speeds on each side: it also turns in place, about the
+    /// middle of its wheelbase).
+    pub kinematics: Kinematics,
+    /// A skid-steer vehicle's fastest turn in place, degrees per second
+    /// (needed with `kinematics = "skid_steer"`, refused otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_yaw_rate_dps: Option<f64>,
 }
 
 impl Default for VehicleConfig {
@@ -89,6 +98,8 @@ impl Default for VehicleConfig {
             max_slope_deg: 25.0,
             wheel_radius_m: 0.47,
             track_m: 1.82,
+            kinematics: Kinematics::Ackermann,
+            max_yaw_rate_dps: None,
         }
     }
 }
@@ -111,6 +122,24 @@ impl VehicleConfig {
         config::in_range("max_slope_deg", self.max_slope_deg, 0.1, 89.0)?;
         config::positive("wheel_radius_m", self.wheel_radius_m)?;
         config::positive("track_m", self.track_m)?;
+        match (self.kinematics, self.max_yaw_rate_dps) {
+            (Kinematics::SkidSteer, None) => {
+                return Err(ConfigError::new(
+                    "max_yaw_rate_dps",
+                    "is needed with kinematics = \"skid_steer\": how fast the vehicle turns in place, degrees per second",
+                ));
+            }
+            (Kinematics::SkidSteer, Some(rate)) => {
+                config::in_range("max_yaw_rate_dps", rate, 1.0, 720.0)?;
+            }
+            (Kinematics::Ackermann, Some(_)) => {
+                return Err(ConfigError::new(
+                    "max_yaw_rate_dps",
+                    "is read only with kinematics = \"skid_steer\" (an Ackermann vehicle does not turn in place)",
+                ));
+            }
+            (Kinematics::Ackermann, None) => {}
+        }
         let body = self.try_footprint()?;
         let shape = self.footprint.name();
         // The key that placed the body's outline where it is (a rectangle's
@@ -254,6 +283,34 @@ impl VehicleConfig {
     pub fn max_slope_rad(&self) -> f64 {
         self.max_slope_deg.to_radians()
     }
+
+    /// How fast the vehicle turns in place, rad/s: 0 for an Ackermann
+    /// vehicle, which cannot.
+    pub fn turn_in_place_rate(&self) -> f64 {
+        match self.kinematics {
+            Kinematics::Ackermann => 0.0,
+            Kinematics::SkidSteer => self.max_yaw_rate_dps.unwrap_or(0.0).to_radians(),
+        }
+    }
+
+    /// The point a turn in place turns about, vehicle frame: the middle of
+    /// the wheelbase, where a skid-steer vehicle's wheels slip evenly.
+    pub fn turn_centre(&self) -> Point2<f64> {
+        Point2::new(0.5 * self.wheelbase_m, 0.0)
+    }
+}
+
+/// How the vehicle steers (`[vehicle] kinematics`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kinematics {
+    /// Steered wheels: arcs no tighter than `min_turning_radius_m`; a
+    /// turn round is a K-point turn.
+    #[default]
+    Ackermann,
+    /// Each side driven at its own speed: arcs of any radius and turns in
+    /// place at `max_yaw_rate_dps`.
+    SkidSteer,
 }
 
 /// The kinds of body outline (`[vehicle] footprint`).

@@ -41,7 +41,15 @@ pub struct MotionLimits {
     pub max_curvature: f64,
     pub max_curvature_rate: f64,
     pub latency_us: Utime,
+    /// Fastest turn in place, rad/s; 0 for a vehicle that cannot (a turn
+    /// in place asked of it is a stop).
+    pub max_turn_rate: f64,
+    /// How far ahead of the origin a turn in place turns about, m.
+    pub turn_centre_x_m: f64,
 }
+
+/// A turn in place reaches its rate (or stops) in this long, s.
+pub const TURN_RATE_RAMP_S: f64 = 0.25;
 
 impl MotionLimits {
     /// The limits of a configured vehicle.
@@ -53,6 +61,8 @@ impl MotionLimits {
             max_curvature: vehicle.max_curvature(),
             max_curvature_rate: vehicle.max_curvature_rate,
             latency_us: seconds_to_micros(vehicle.command_latency_s),
+            max_turn_rate: vehicle.turn_in_place_rate(),
+            turn_centre_x_m: vehicle.turn_centre().x,
         }
     }
 
@@ -65,6 +75,8 @@ impl MotionLimits {
             max_curvature: f64::INFINITY,
             max_curvature_rate: f64::INFINITY,
             latency_us: 0,
+            max_turn_rate: f64::INFINITY,
+            turn_centre_x_m: 0.0,
         }
     }
 }
@@ -77,6 +89,10 @@ pub struct MotionModel {
     utime: Utime,
     target_curvature: f64,
     target_speed_mps: f64,
+    /// Turning in place: the yaw rate asked for, rad/s (0: not turning).
+    target_turn_rate: f64,
+    /// The yaw rate of the turn in place under way, rad/s.
+    turn_rate: f64,
     /// Commands not yet acting, with the time they take effect.
     pending: VecDeque<(Utime, SteeringCommand)>,
     /// Signed distance driven (backing up counts down), m.
@@ -93,6 +109,8 @@ impl MotionModel {
             utime,
             target_curvature: state.curvature,
             target_speed_mps: state.speed_mps,
+            target_turn_rate: 0.0,
+            turn_rate: 0.0,
             pending: VecDeque::new(),
             odometer_m: 0.0,
         }
@@ -138,6 +156,15 @@ impl MotionModel {
                     break;
                 }
                 self.pending.pop_front();
+                if command.is_turn_in_place() {
+                    // Brake to a stand, then turn: the wheels' curvature
+                    // is left as it is.
+                    self.target_speed_mps = 0.0;
+                    self.target_turn_rate =
+                        clamp_abs(command.turn_rate_radps, self.limits.max_turn_rate);
+                    continue;
+                }
+                self.target_turn_rate = 0.0;
                 self.target_curvature = command.curvature;
                 self.target_speed_mps = if command.is_stop() {
                     0.0
@@ -154,10 +181,38 @@ impl MotionModel {
         self.state
     }
 
+    /// The yaw rate of a turn in place under way, rad/s (0 otherwise).
+    pub fn turn_rate(&self) -> f64 {
+        self.turn_rate
+    }
+
     /// One sub-step to `end`: controls move towards their targets within the
     /// limits; the pose follows the arc of the mean curvature at mean speed.
+    /// A turn in place starts once the vehicle stands, and turns it about
+    /// the turn centre.
     fn step(&mut self, end: Utime) {
         let dt = micros_to_seconds(end - self.utime);
+        let standing = self.state.speed_mps == 0.0;
+        if self.turn_rate != 0.0 || (standing && self.target_turn_rate != 0.0) {
+            let target = if standing { self.target_turn_rate } else { 0.0 };
+            let rate = self.limits.max_turn_rate / TURN_RATE_RAMP_S;
+            let (w1, w_mean) = ramp(self.turn_rate, target, rate, dt);
+            let turn = w_mean * dt;
+            let c = self.limits.turn_centre_x_m;
+            let (x, y, yaw) = (self.state.x, self.state.y, self.state.yaw);
+            // The origin swings about the centre, c ahead of it.
+            let (cx, cy) = (x + c * yaw.cos(), y + c * yaw.sin());
+            let after = yaw + turn;
+            self.state = PlanarState {
+                x: cx - c * after.cos(),
+                y: cy - c * after.sin(),
+                yaw: wrap_angle(after),
+                ..self.state
+            };
+            self.turn_rate = w1;
+            self.utime = end;
+            return;
+        }
         let limits = &self.limits;
         let k_target = clamp_abs(self.target_curvature, limits.max_curvature);
         let v_target = clamp_abs(self.target_speed_mps, limits.max_speed_mps);
@@ -237,6 +292,7 @@ fn ramp(from: f64, to: f64, rate: f64, dt: f64) -> (f64, f64) {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+    use nalgebra::Point2;
     use std::f64::consts::{FRAC_PI_2, PI};
 
     fn drive(curvature: f64, speed_mps: f64) -> SteeringCommand {
@@ -246,6 +302,7 @@ mod tests {
             speed_mps,
             arc_index: Some(0),
             vote: 1.0,
+            turn_rate_radps: 0.0,
         }
     }
 
@@ -385,5 +442,68 @@ mod tests {
         });
         assert_eq!(model.advance_to(150_000).curvature, -0.05);
         assert_eq!(model.advance_to(250_000).curvature, 0.05);
+    }
+
+    fn skid_steer() -> VehicleConfig {
+        VehicleConfig {
+            kinematics: crate::model::Kinematics::SkidSteer,
+            max_yaw_rate_dps: Some(90.0),
+            wheelbase_m: 1.0,
+            ..VehicleConfig::default()
+        }
+    }
+
+    #[test]
+    fn a_skid_steer_vehicle_brakes_then_turns_in_place_about_the_middle_of_its_wheelbase() {
+        let vehicle = skid_steer();
+        let limits = MotionLimits::from_vehicle(&vehicle);
+        let moving = PlanarState {
+            speed_mps: 1.5,
+            ..PlanarState::default()
+        };
+        let mut model = MotionModel::new(limits, moving, 0);
+        model.command(SteeringCommand::turn_in_place(0, FRAC_PI_2, 0, 1.0));
+        // Latency 0.25 s, braking 1.5 m/s at 3 m/s² 0.5 s, then the turn:
+        // by 2.2 s, 1.45 s of it less half its 0.25 s ramp at π/2 rad/s.
+        let braked = model.advance_to(760_000);
+        assert!(
+            braked.speed_mps == 0.0 && braked.yaw.abs() < 0.01,
+            "{braked:?}"
+        );
+        let stopped_at = Point2::new(braked.x, braked.y);
+        let s = model.advance_to(2_200_000);
+        assert_relative_eq!(model.turn_rate(), FRAC_PI_2);
+        // The centre of the turn, half the wheelbase ahead of the origin,
+        // stays where it was; the origin swings round it.
+        let centre =
+            |s: &PlanarState| Point2::new(s.x + 0.5 * s.yaw.cos(), s.y + 0.5 * s.yaw.sin());
+        assert!((centre(&s) - centre(&braked)).norm() < 1e-9);
+        let expected = (1.45 - 0.125) * FRAC_PI_2;
+        assert!((s.yaw - expected).abs() < 0.02, "turned {} rad", s.yaw);
+        assert!((Point2::new(s.x, s.y) - stopped_at).norm() < 1.0);
+        assert_eq!(s.speed_mps, 0.0);
+        // A drive command ends the turn (its rate ramps down) and drives on.
+        model.command(SteeringCommand {
+            utime: 2_200_000,
+            ..drive(0.0, 1.0)
+        });
+        let after = model.advance_to(4_000_000);
+        assert_eq!(model.turn_rate(), 0.0);
+        assert!(after.speed_mps > 0.5);
+    }
+
+    #[test]
+    fn an_ackermann_vehicle_asked_to_turn_in_place_stops() {
+        let mut model = MotionModel::new(
+            MotionLimits::from_vehicle(&VehicleConfig::default()),
+            PlanarState {
+                speed_mps: 2.0,
+                ..PlanarState::default()
+            },
+            0,
+        );
+        model.command(SteeringCommand::turn_in_place(0, 1.0, 0, 1.0));
+        let s = model.advance_to(3_000_000);
+        assert_eq!((s.speed_mps, s.yaw), (0.0, 0.0));
     }
 }

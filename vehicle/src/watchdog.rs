@@ -71,6 +71,7 @@ mod tests {
             speed_mps: 2.0,
             arc_index: Some(25),
             vote: 0.8,
+            turn_rate_radps: 0.0,
         }
     }
 

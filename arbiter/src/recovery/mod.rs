@@ -511,6 +511,7 @@ impl Recovery {
             speed_mps: 0.0,
             arc_index: Some(leg.arc),
             vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
+            turn_rate_radps: 0.0,
         }
     }
 
@@ -745,6 +746,7 @@ impl Recovery {
             speed_mps: if leg.reverse { -speed } else { speed },
             arc_index: Some(leg.arc),
             vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
+            turn_rate_radps: 0.0,
         })
     }
 
