@@ -8,8 +8,8 @@ use nalgebra::Vector3;
 
 use crate::codec::{DecodeError, EncodeError, Message, peek_fingerprint};
 use crate::lcmtypes::{
-    arc_votes_t, arc_votes_v1_t, decision_t, guard_status_t, local_map_t, obstacle_cells_t, pose_t,
-    range_image_t, range_slice_t, steering_command_t, waypoints_t,
+    arc_votes_t, arc_votes_v1_t, decision_t, drive_command_t, guard_status_t, local_map_t,
+    obstacle_cells_t, pose_t, range_image_t, range_slice_t, steering_command_t, waypoints_t,
 };
 use crate::log::{EventSource, LogStats};
 
@@ -56,6 +56,9 @@ pub enum AnyMessage {
     RangeImage(range_image_t),
     RangeSlice(range_slice_t),
     SteeringCommand(steering_command_t),
+    /// A skid-steer vehicle's command (with the yaw rate), on
+    /// STEERING_COMMAND.
+    DriveCommand(drive_command_t),
     ArcVotes(arc_votes_t),
     ObstacleCells(obstacle_cells_t),
     Waypoints(waypoints_t),
@@ -111,6 +114,7 @@ impl AnyMessage {
             steering_command_t::FINGERPRINT => {
                 Self::SteeringCommand(steering_command_t::decode(bytes)?)
             }
+            drive_command_t::FINGERPRINT => Self::DriveCommand(drive_command_t::decode(bytes)?),
             arc_votes_t::FINGERPRINT | arc_votes_v1_t::FINGERPRINT => {
                 Self::ArcVotes(decode_votes(bytes)?)
             }
@@ -129,6 +133,7 @@ impl AnyMessage {
             Self::RangeImage(m) => m.encode(),
             Self::RangeSlice(m) => m.encode(),
             Self::SteeringCommand(m) => m.encode(),
+            Self::DriveCommand(m) => m.encode(),
             Self::ArcVotes(m) => m.encode(),
             Self::ObstacleCells(m) => m.encode(),
             Self::Waypoints(m) => m.encode(),
@@ -145,6 +150,7 @@ impl AnyMessage {
             Self::RangeImage(m) => m.utime,
             Self::RangeSlice(m) => m.utime,
             Self::SteeringCommand(m) => m.utime,
+            Self::DriveCommand(m) => m.utime,
             Self::ArcVotes(m) => m.utime,
             Self::ObstacleCells(m) => m.utime,
             Self::Waypoints(m) => m.utime,
@@ -170,7 +176,7 @@ impl AnyMessage {
                         .and_then(|rest| rest.strip_prefix('_'))
                         .is_some_and(|sensor| !sensor.is_empty())
             }
-            Self::SteeringCommand(_) => channel == STEERING_COMMAND,
+            Self::SteeringCommand(_) | Self::DriveCommand(_) => channel == STEERING_COMMAND,
             Self::ArcVotes(_) => channel
                 .strip_prefix(ARC_VOTES_PREFIX)
                 .is_some_and(|name| !name.is_empty()),
@@ -189,6 +195,7 @@ impl AnyMessage {
             Self::RangeImage(_) => range_image_t::TYPE_NAME,
             Self::RangeSlice(_) => range_slice_t::TYPE_NAME,
             Self::SteeringCommand(_) => steering_command_t::TYPE_NAME,
+            Self::DriveCommand(_) => drive_command_t::TYPE_NAME,
             Self::ArcVotes(_) => arc_votes_t::TYPE_NAME,
             Self::ObstacleCells(_) => obstacle_cells_t::TYPE_NAME,
             Self::Waypoints(_) => waypoints_t::TYPE_NAME,
@@ -361,10 +368,132 @@ impl From<&steering_command_t> for SteeringCommand {
     }
 }
 
+impl From<&SteeringCommand> for drive_command_t {
+    fn from(command: &SteeringCommand) -> Self {
+        let plain = steering_command_t::from(command);
+        Self {
+            utime: plain.utime,
+            curvature: plain.curvature,
+            speed: plain.speed,
+            yaw_rate: command.yaw_rate(),
+            arc_index: plain.arc_index,
+            vote: plain.vote,
+        }
+    }
+}
+
+impl From<&drive_command_t> for SteeringCommand {
+    /// A turn in place (infinite curvature, speed 0, a finite yaw rate and
+    /// an arc) is one; otherwise as [`steering_command_t`]: values a
+    /// vehicle must not act on become a stop.
+    fn from(msg: &drive_command_t) -> Self {
+        let turning = msg.curvature.is_infinite()
+            && msg.speed == 0.0
+            && msg.yaw_rate.is_finite()
+            && msg.yaw_rate != 0.0
+            && msg.curvature.signum() == msg.yaw_rate.signum();
+        match usize::try_from(msg.arc_index) {
+            Ok(arc) if turning => {
+                SteeringCommand::turn_in_place(msg.utime, msg.yaw_rate, arc, msg.vote)
+            }
+            _ => SteeringCommand::from(&steering_command_t {
+                utime: msg.utime,
+                curvature: msg.curvature,
+                speed: msg.speed,
+                arc_index: msg.arc_index,
+                vote: msg.vote,
+            }),
+        }
+    }
+}
+
+impl AnyMessage {
+    /// The arbiter's command as `kinematics` puts it on STEERING_COMMAND:
+    /// `steering_command_t` for an Ackermann vehicle, `drive_command_t`
+    /// (with the yaw rate) for one that turns in place.
+    pub fn command(command: &SteeringCommand, kinematics: arcnav_vehicle::Kinematics) -> Self {
+        match kinematics {
+            arcnav_vehicle::Kinematics::Ackermann => Self::SteeringCommand(command.into()),
+            arcnav_vehicle::Kinematics::SkidSteer => Self::DriveCommand(command.into()),
+        }
+    }
+
+    /// Decodes a STEERING_COMMAND message of either type into the command.
+    pub fn decode_command(bytes: &[u8]) -> Result<SteeringCommand, DecodeError> {
+        match peek_fingerprint(bytes) {
+            Some(drive_command_t::FINGERPRINT) => Ok((&drive_command_t::decode(bytes)?).into()),
+            _ => Ok((&steering_command_t::decode(bytes)?).into()),
+        }
+    }
+
+    /// The command a STEERING_COMMAND message carries, of either type.
+    pub fn as_command(&self) -> Option<SteeringCommand> {
+        match self {
+            Self::SteeringCommand(m) => Some(m.into()),
+            Self::DriveCommand(m) => Some(m.into()),
+            _ => None,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use arcnav_vehicle::frames::isometry_from_xyz_rpy;
+
+    #[test]
+    fn a_skid_steer_vehicles_commands_carry_the_yaw_rate_and_decode_either_type() {
+        use arcnav_vehicle::Kinematics;
+        let turn = SteeringCommand::turn_in_place(7, -0.8, 0, 0.4);
+        let AnyMessage::DriveCommand(msg) = AnyMessage::command(&turn, Kinematics::SkidSteer)
+        else {
+            panic!("a skid-steer vehicle's command is a drive_command_t")
+        };
+        assert_eq!(
+            (msg.curvature, msg.speed, msg.yaw_rate),
+            (f64::NEG_INFINITY, 0.0, -0.8)
+        );
+        let bytes = msg.encode().unwrap();
+        assert_eq!(AnyMessage::decode_command(&bytes).unwrap(), turn);
+        let arc = SteeringCommand {
+            utime: 8,
+            curvature: 0.1,
+            speed_mps: 2.0,
+            arc_index: Some(30),
+            vote: 0.5,
+            turn_rate_radps: 0.0,
+        };
+        let AnyMessage::DriveCommand(msg) = AnyMessage::command(&arc, Kinematics::SkidSteer) else {
+            panic!()
+        };
+        assert!((msg.yaw_rate - 0.2).abs() < 1e-12);
+        assert_eq!(
+            AnyMessage::decode_command(&msg.encode().unwrap()).unwrap(),
+            arc
+        );
+        // An Ackermann vehicle's stay steering_command_t, and decode alike.
+        let plain = AnyMessage::command(&arc, Kinematics::Ackermann);
+        assert!(matches!(plain, AnyMessage::SteeringCommand(_)));
+        assert_eq!(
+            AnyMessage::decode_command(&plain.encode().unwrap()).unwrap(),
+            arc
+        );
+        // A turn whose signs disagree, or with no rate, is a stop.
+        let odd = drive_command_t {
+            yaw_rate: 0.8,
+            ..msg_of(&turn)
+        };
+        assert!(SteeringCommand::from(&odd).is_stop());
+        let still = drive_command_t {
+            yaw_rate: 0.0,
+            ..msg_of(&turn)
+        };
+        assert!(SteeringCommand::from(&still).is_stop());
+    }
+
+    fn msg_of(command: &SteeringCommand) -> drive_command_t {
+        command.into()
+    }
 
     #[test]
     fn channel_names_follow_the_wire_contract() {

@@ -130,7 +130,7 @@ fn fingerprints_equal_what_lcm_gen_generates() {
         .collect();
     let rust: BTreeMap<String, u64> = ALL_TYPES.iter().map(|(n, f)| (n.to_string(), *f)).collect();
     assert_eq!(rust, python);
-    assert_eq!(rust.len(), 13);
+    assert_eq!(rust.len(), 14);
 }
 
 #[test]

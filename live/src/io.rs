@@ -5,7 +5,6 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use arcnav_behaviours::Mission;
-use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_bus::transport::{Lcm, Publisher, ReceivedMessage};
 use arcnav_pipeline::{Decided, LiveConfig, Why};
@@ -174,14 +173,14 @@ pub(crate) fn publish_command(
     publisher: &Publisher,
     decided: &Decided,
     tap: Option<&Sender<Decided>>,
+    kinematics: arcnav_vehicle::Kinematics,
 ) {
     if let Why::Deadline { missing } = &decided.why {
         tracing::debug!(?missing, "decided at the deadline without every behaviour");
     }
-    if let Err(e) = publisher.publish_message(
-        channels::STEERING_COMMAND,
-        &steering_command_t::from(&decided.command),
-    ) {
+    if let Err(e) =
+        publisher.publish_command(channels::STEERING_COMMAND, &decided.command, kinematics)
+    {
         tracing::error!(%e, "cannot publish the steering command");
     }
     let hazard;

@@ -271,8 +271,10 @@ fn behaviour(
                         Ok(mission) => node.on_waypoints(mission),
                         Err(e) => bad.refuse("waypoints", &message.channel, &e),
                     },
-                    Some(AnyMessage::SteeringCommand(msg)) => {
-                        node.on_command(&arcnav_vehicle::SteeringCommand::from(&msg));
+                    Some(msg @ (AnyMessage::SteeringCommand(_) | AnyMessage::DriveCommand(_))) => {
+                        if let Some(command) = msg.as_command() {
+                            node.on_command(&command);
+                        }
                     }
                     _ => status.dropped += 1,
                 }
@@ -295,6 +297,7 @@ fn arbiter(
     options: &LiveOptions,
 ) -> Result<LiveReport, LiveError> {
     let arcs = config.arcs.clone();
+    let kinematics = config.vehicle.kinematics;
     let expected = config.expected_behaviours();
     tracing::info!(
         ?expected,
@@ -352,7 +355,7 @@ fn arbiter(
             }
             stage.on_tick(now, &mut out);
             for decided in out.drain(..) {
-                publish_command(&publisher, &decided, tap.as_ref());
+                publish_command(&publisher, &decided, tap.as_ref(), kinematics);
             }
             if ticker.due(now) {
                 arbiter_status(&stage, &mut status);
@@ -363,7 +366,7 @@ fn arbiter(
     );
     // The final stop goes out whatever ended the loop.
     let last = stage.final_stop(options.clock().now_us());
-    publish_command(&publisher, &last, tap.as_ref());
+    publish_command(&publisher, &last, tap.as_ref(), kinematics);
     result?;
     arbiter_status(&stage, &mut status);
     status.busy_ms = busy.summary();
@@ -388,8 +391,6 @@ fn arbiter(
 /// command periods) publishes it again at once.
 fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveReport, LiveError> {
     use super::guarded::{BridgeGuard, guard_status, say};
-    use arcnav_bus::Message as _;
-    use arcnav_bus::lcmtypes::steering_command_t;
     use arcnav_vehicle::SteeringCommand;
 
     if !config.guard.enabled {
@@ -413,8 +414,12 @@ fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
     let fresh_us = (3e6 / config.pipeline.command_rate_hz) as i64;
     let mut newest: Option<(SteeringCommand, i64)> = None;
     let send = |command: &SteeringCommand, at: i64, verdict: &arcnav_guard::Verdict| {
-        let sent = steering_command_t::from(&verdict.apply(command));
-        if let Err(e) = publisher.publish_message(channels::STEERING_COMMAND_GUARDED, &sent) {
+        let sent = verdict.apply(command);
+        if let Err(e) = publisher.publish_command(
+            channels::STEERING_COMMAND_GUARDED,
+            &sent,
+            config.vehicle.kinematics,
+        ) {
             tracing::error!(%e, "cannot publish the guarded command");
         }
         say(&publisher, at, command.utime, verdict);
@@ -428,10 +433,9 @@ fn guard(config: &Resolved, mut lcm: Lcm, options: &LiveOptions) -> Result<LiveR
             let started = Instant::now();
             if let Some(message) = message {
                 if message.channel == channels::STEERING_COMMAND {
-                    match steering_command_t::decode(&message.data) {
-                        Ok(msg) => {
+                    match AnyMessage::decode_command(&message.data) {
+                        Ok(command) => {
                             status.handled += 1;
-                            let command = SteeringCommand::from(&msg);
                             newest = Some((command, now));
                             let (at, verdict) = guard.judge(&command, now);
                             send(&command, at, &verdict);

@@ -182,6 +182,7 @@ pub fn run(
     };
 
     let arbiter_thread = {
+        let kinematics = config.vehicle.kinematics;
         let tap = options.command_tap.clone();
         let period = live.status_period_s;
         let tick = Duration::from_secs_f64((period_s / 4.0).min(0.01));
@@ -198,7 +199,7 @@ pub fn run(
                     }
                     None => decided,
                 };
-                publish_command(&publisher, decided, tap.as_ref());
+                publish_command(&publisher, decided, tap.as_ref(), kinematics);
                 let _ = commands_tx.try_send(decided.command);
             })
         })?

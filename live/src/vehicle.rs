@@ -19,8 +19,6 @@
 
 use std::time::Duration;
 
-use arcnav_bus::codec::Message as _;
-use arcnav_bus::lcmtypes::steering_command_t;
 use arcnav_bus::messages::AnyMessage;
 use arcnav_bus::transport::Lcm;
 use arcnav_guard::{Guard, Verdict};
@@ -163,10 +161,10 @@ pub fn run_bridge(
                         }
                     }
                 } else {
-                    match steering_command_t::decode(&message.data) {
-                        Ok(msg) => {
+                    match AnyMessage::decode_command(&message.data) {
+                        Ok(command) => {
                             status.handled += 1;
-                            watchdog.on_command(now, SteeringCommand::from(&msg));
+                            watchdog.on_command(now, command);
                         }
                         Err(e) => bad.refuse("steering command", &message.channel, &e),
                     }
@@ -231,6 +229,7 @@ pub fn run_bridge(
 mod tests {
     use super::*;
     use crate::threaded::StopWhen;
+    use arcnav_bus::lcmtypes::steering_command_t;
     use arcnav_bus::messages::channels;
 
     /// Stops before the first command, the command while it is fresh, stops

@@ -128,6 +128,9 @@ pub fn lcm_messages(data: &[u8]) {
             AnyMessage::SteeringCommand(m) => {
                 let _ = arcnav_vehicle::SteeringCommand::from(&m);
             }
+            AnyMessage::DriveCommand(m) => {
+                let _ = arcnav_vehicle::SteeringCommand::from(&m);
+            }
             AnyMessage::ArcVotes(_) => {}
             AnyMessage::Decision(m) => drop(arcnav_wire::decision_from_wire(&m)),
             AnyMessage::GuardStatus(m) => drop(arcnav_wire::guard_status_from_wire(&m)),

@@ -6,11 +6,11 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use arcnav_arbiter::{BehaviourVotes, Reason};
-use arcnav_bus::lcmtypes::steering_command_t;
+use arcnav_bus::lcmtypes::{drive_command_t, steering_command_t};
 use arcnav_bus::log::{LogWriteError, LogWriter};
 use arcnav_bus::messages::channels;
 use arcnav_perception::ObstacleReport;
-use arcnav_vehicle::{ArcSet, SteeringCommand, Utime};
+use arcnav_vehicle::{ArcSet, Kinematics, SteeringCommand, Utime};
 
 use crate::output::Staged;
 use arcnav_wire as wire;
@@ -92,14 +92,27 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
         );
     }
 
-    /// Writes the arbiter's command on STEERING_COMMAND.
-    /// Writes the command (STEERING_COMMAND) and why (DECISION).
-    pub fn command(&mut self, at: Utime, command: &SteeringCommand, reason: &Reason) {
-        self.message(
-            at,
-            channels::STEERING_COMMAND,
-            &steering_command_t::from(command),
-        );
+    /// Writes the command (STEERING_COMMAND, in the type `kinematics`
+    /// calls for) and why (DECISION).
+    pub fn command(
+        &mut self,
+        at: Utime,
+        command: &SteeringCommand,
+        kinematics: Kinematics,
+        reason: &Reason,
+    ) {
+        match kinematics {
+            Kinematics::Ackermann => self.message(
+                at,
+                channels::STEERING_COMMAND,
+                &steering_command_t::from(command),
+            ),
+            Kinematics::SkidSteer => self.message(
+                at,
+                channels::STEERING_COMMAND,
+                &drive_command_t::from(command),
+            ),
+        }
         self.message(
             at,
             channels::DECISION,

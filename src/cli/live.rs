@@ -126,7 +126,6 @@ fn start(args: &LiveArgs, registry: &Registry) -> anyhow::Result<Started> {
 pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
     use arcnav::live::threaded::LiveOptions;
     use arcnav::live::vehicle::{BridgeOptions, run_bridge};
-    use arcnav_bus::lcmtypes::steering_command_t;
     use arcnav_bus::messages::channels;
     use std::io::Write as _;
 
@@ -254,9 +253,11 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
             }
         }
         if let Some(publisher) = &forward {
-            let msg = steering_command_t::from(&executed.command());
-            if let Err(e) = publisher.publish_message(channels::STEERING_COMMAND, &msg)
-                && !forward_failed
+            if let Err(e) = publisher.publish_command(
+                channels::STEERING_COMMAND,
+                &executed.command(),
+                config.vehicle.kinematics,
+            ) && !forward_failed
             {
                 forward_failed = true;
                 tracing::error!(%e, "cannot forward the command to the controller");

@@ -149,6 +149,20 @@ impl Publisher {
         self.publish(channel, &message.encode()?)
     }
 
+    /// Publishes a command on `channel` in the type `kinematics` calls for
+    /// (see [`crate::AnyMessage::command`]).
+    pub fn publish_command(
+        &self,
+        channel: &str,
+        command: &arcnav_vehicle::SteeringCommand,
+        kinematics: arcnav_vehicle::Kinematics,
+    ) -> Result<(), TransportError> {
+        self.publish(
+            channel,
+            &crate::AnyMessage::command(command, kinematics).encode()?,
+        )
+    }
+
     /// The UDP port this publisher sends from (`None` for `memq://`).
     pub fn source_port(&self) -> Option<u16> {
         match &*self.sender {

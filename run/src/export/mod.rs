@@ -130,7 +130,14 @@ pub fn feed(
             }
             AnyMessage::Decision(msg) => sink.decision(&msg, time, summary),
             AnyMessage::GuardStatus(msg) => sink.guard(&msg, time, summary),
-            AnyMessage::SteeringCommand(msg) => {
+            command @ (AnyMessage::SteeringCommand(_) | AnyMessage::DriveCommand(_)) => {
+                // A skid-steer vehicle's drive_command_t is drawn as the
+                // steering_command_t it extends (a turn in place with its
+                // infinite curvature).
+                let Some(command) = command.as_command() else {
+                    unreachable!("a command message")
+                };
+                let msg = arcnav_bus::lcmtypes::steering_command_t::from(&command);
                 arbiter.decide(msg.utime);
                 // A command whose arc is not this arc set's was decided over
                 // another: drawn here, its index would mark the wrong arc.

@@ -103,6 +103,8 @@ pub enum MissionError {
 struct MissionSink<'a> {
     /// The mission log, and the first error of the mission.
     log: Recorder<'a, MissionError>,
+    /// How commands go on the wire (`[vehicle] kinematics`).
+    kinematics: arcnav_vehicle::Kinematics,
     arcs: arcnav_vehicle::ArcSet,
     commands: Vec<SteeringCommand>,
     previous_curvature: Option<f64>,
@@ -146,7 +148,7 @@ impl Sink for MissionSink<'_> {
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.log.command(at, command, reason);
+        self.log.command(at, command, self.kinematics, reason);
         self.commands.push(*command);
         if let Some(previous) = self.previous_curvature {
             self.curvature_change.0 += (command.curvature - previous).abs();
@@ -296,6 +298,7 @@ pub fn run_mission(
         .map_err(|(path, source)| MissionError::CreateLog { path, source })?;
     let mut sink = MissionSink {
         log,
+        kinematics: config.vehicle.kinematics,
         arcs: pipeline.arcs().clone(),
         commands: Vec::new(),
         previous_curvature: None,

@@ -162,6 +162,8 @@ pub enum ReplayError {
 struct ReplaySink<'a> {
     /// The output log, and the first error of the replay.
     out: Recorder<'a, ReplayError>,
+    /// How commands go on the wire (`[vehicle] kinematics`).
+    kinematics: arcnav_vehicle::Kinematics,
     arcs: ArcSet,
     cycles: Decisions,
     /// The run of the log being replayed (see [`Decisions`]).
@@ -205,7 +207,7 @@ impl Sink for ReplaySink<'_> {
         decision: Option<&Decision>,
         map: &MapSnapshot,
     ) {
-        self.out.command(at, command, reason);
+        self.out.command(at, command, self.kinematics, reason);
         if self.warming {
             return;
         }
@@ -410,7 +412,7 @@ fn take(
         // Decisions are keyed by their cycle's time (the message's own
         // utime), as the replayed ones are: a logger stamps events when
         // it receives them, later than the cycle.
-        AnyMessage::SteeringCommand(_) if fed.warming => {}
+        AnyMessage::SteeringCommand(_) | AnyMessage::DriveCommand(_) if fed.warming => {}
         AnyMessage::ArcVotes(_) if fed.warming => {}
         AnyMessage::Decision(_) | AnyMessage::GuardStatus(_) if fed.warming => {}
         AnyMessage::GuardStatus(msg) => match wire::guard_status_from_wire(&msg) {
@@ -424,12 +426,18 @@ fn take(
             }
             Err(_) => *fed.problems.undecodable.entry(event.channel).or_default() += 1,
         },
-        AnyMessage::SteeringCommand(msg) => {
+        AnyMessage::SteeringCommand(_) | AnyMessage::DriveCommand(_) => {
+            let Some(command) = event.message.as_command() else {
+                unreachable!("a command message")
+            };
             fed.recorded.insert(
-                (fed.run, msg.utime),
+                (fed.run, command.utime),
                 Cycle {
-                    command: SteeringCommand::from(&msg),
-                    votes: fed.recorded_votes.remove(&msg.utime).unwrap_or_default(),
+                    command,
+                    votes: fed
+                        .recorded_votes
+                        .remove(&command.utime)
+                        .unwrap_or_default(),
                 },
             );
         }
@@ -591,6 +599,7 @@ fn replay_events<S: EventSource>(
         .map_err(|(path, source)| ReplayError::Create { path, source })?;
     let mut sink = ReplaySink {
         out,
+        kinematics: config.vehicle.kinematics,
         arcs: arcs.clone(),
         cycles: Decisions::new(),
         run: 0,
