@@ -543,12 +543,24 @@ impl Arbiter {
             Err(_) => (false, false),
         };
         let wished = self.gather_clearance(now);
+        // Manoeuvres drive the driving arcs; the turns in place at the
+        // ends of the set (if any) are read apart, their clearance an angle.
+        let driving = self.arcs.driving();
+        let turns = self.arcs.turns_in_place().then(|| {
+            let last = self.arcs.len() - 1;
+            [
+                (0, self.forward[0], self.preference[0]),
+                (last, self.forward[last], self.preference[last]),
+            ]
+        });
         let behind = Behind {
-            clearance: &self.clearance,
-            forward: &self.forward,
-            preference: &self.preference,
-            wish: wished.then_some(self.wish.as_slice()),
-            curvatures: self.arcs.curvatures(),
+            clearance: &self.clearance[driving.clone()],
+            forward: &self.forward[driving.clone()],
+            preference: &self.preference[driving.clone()],
+            wish: wished.then_some(&self.wish[driving.clone()]),
+            curvatures: &self.arcs.curvatures()[driving.clone()],
+            offset: driving.start,
+            turns,
         };
         match self.recovery.step(now, blocked, safe, &behind) {
             recovery::Outcome::Keep => {}
@@ -747,7 +759,10 @@ impl Arbiter {
                 // Ties: the straighter arc wins.
                 .then(b.abs_diff(straight).cmp(&a.abs_diff(straight)))
         };
-        let best = (0..self.smoothed.len())
+        // Turns in place are the recovery's to take, never a forward choice.
+        let driving = self.arcs.driving();
+        let best = driving
+            .clone()
             .filter(|&i| !self.vetoed[i])
             .max_by(|&a, &b| by_vote(a, b));
         // Near-ties: the arc that may be driven fastest.
@@ -757,7 +772,8 @@ impl Arbiter {
                 return best;
             }
             let floor = self.smoothed[best] - margin;
-            (0..self.smoothed.len())
+            driving
+                .clone()
                 .filter(|&i| !self.vetoed[i] && self.smoothed[i] >= floor)
                 .map(|i| (i, self.speed_on(i, self.arcs.curvatures()[i], now).0))
                 .max_by(|&(a, va), &(b, vb)| va.total_cmp(&vb).then(by_vote(a, b)))
@@ -828,15 +844,21 @@ impl Arbiter {
         (base, limits)
     }
 
-    /// Gaussian smoothing of the fused votes across arcs (vetoed arcs count as -1).
+    /// Gaussian smoothing of the fused votes across the driving arcs
+    /// (vetoed arcs count as -1); a turn in place keeps its own.
     fn smooth(&mut self) {
-        let n = self.fused.len() as i64;
+        let driving = self.arcs.driving();
+        let (start, n) = (driving.start as i64, driving.end as i64);
         let half = (self.kernel.len() / 2) as i64;
-        for i in 0..n {
+        for i in 0..self.fused.len() as i64 {
+            if !(start..n).contains(&i) {
+                self.smoothed[i as usize] = self.fused[i as usize];
+                continue;
+            }
             let (mut sum, mut weight) = (0.0f32, 0.0f32);
             for (k, &w) in self.kernel.iter().enumerate() {
                 let j = i + k as i64 - half;
-                if (0..n).contains(&j) {
+                if (start..n).contains(&j) {
                     sum += w * self.fused[j as usize];
                     weight += w;
                 }
@@ -849,7 +871,8 @@ impl Arbiter {
     /// it and its neighbours when that is enabled and they are not vetoed.
     fn peak_curvature(&self, best: usize) -> f64 {
         let k = self.arcs.curvatures()[best];
-        if !self.config.interpolate_peak || best == 0 || best + 1 >= self.smoothed.len() {
+        let driving = self.arcs.driving();
+        if !self.config.interpolate_peak || best == driving.start || best + 1 >= driving.end {
             return k;
         }
         if self.vetoed[best - 1] || self.vetoed[best + 1] {

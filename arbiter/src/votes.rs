@@ -108,6 +108,18 @@ impl Votes {
         self.forward_clear.fill(NO_OPINION);
     }
 
+    /// Arc `index` back to neutral (a behaviour judging it afresh).
+    pub fn reset(&mut self, index: usize) {
+        if index < self.values.len() {
+            self.values[index] = 0.0;
+            self.vetoed[index] = false;
+            self.causes[index] = None;
+            self.arc_speeds[index] = f32::INFINITY;
+            self.reverse_clear[index] = NO_OPINION;
+            self.forward_clear[index] = NO_OPINION;
+        }
+    }
+
     /// Sets the vote of arc `index`, clamped to [-1, 1] (NaN counts as -1).
     pub fn set(&mut self, index: usize, vote: f32) {
         if let Some(v) = self.values.get_mut(index) {

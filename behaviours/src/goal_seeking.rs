@@ -167,7 +167,8 @@ pub(crate) fn lookahead(lookahead_m: f64, lookahead_s: f64, cruise_mps: f64) -> 
 /// `lookahead_m` along the path its command would put it on ([`DrivenPath`]:
 /// the latency and the steering's rate first, the arc after; or the
 /// distance to the target, if nearer) and the direction from there to the
-/// target.
+/// target. A turn in place is judged by where it points after a quarter
+/// turn.
 pub(crate) fn vote_towards(
     ctx: &VoteContext<'_>,
     response: &SteeringResponse,
@@ -183,6 +184,11 @@ pub(crate) fn vote_towards(
     let lookahead = lookahead_m.min(gx.hypot(gy));
     let steering = ctx.steering();
     for (index, &k) in ctx.arcs.curvatures().iter().enumerate() {
+        if k.is_infinite() {
+            let heading = std::f64::consts::FRAC_PI_2.copysign(k);
+            votes.set(index, wrap_angle(gy.atan2(gx) - heading).cos() as f32);
+            continue;
+        }
         let end = DrivenPath::new(&steering, response, k).pose_at(lookahead);
         let bearing = (gy - end.position.y).atan2(gx - end.position.x);
         votes.set(index, wrap_angle(bearing - end.heading).cos() as f32);

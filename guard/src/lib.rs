@@ -120,6 +120,7 @@ impl Verdict {
                 speed_mps: 0.0,
                 curvature: *curvature,
                 arc_index: None,
+                turn_rate_radps: 0.0,
                 ..*command
             },
         }
@@ -243,6 +244,11 @@ pub struct Guard {
     braking: Braking,
     response: SteeringResponse,
     footprint: arcnav_vehicle::model::Footprint,
+    /// Where a turn in place turns about (vehicle frame), and how far the
+    /// vehicle turns once told to stop turning: the command's latency at
+    /// its rate, then the rate's ramp down, radians per rad/s.
+    turn_centre: Point2<f64>,
+    turn_stop_s: f64,
     max_tilt_rad: f64,
     /// Each sensor's id, period and last image or slice.
     sensors: Vec<(String, Utime, Option<Utime>)>,
@@ -278,6 +284,8 @@ impl Guard {
             braking: Braking::of(vehicle, config.margin_m),
             response: SteeringResponse::of(vehicle),
             footprint: vehicle.footprint().widened(config.side_margin_m),
+            turn_centre: vehicle.turn_centre(),
+            turn_stop_s: vehicle.command_latency_s + 0.5 * arcnav_vehicle::motion::TURN_RATE_RAMP_S,
             max_tilt_rad: (vehicle.max_slope_deg - config.tilt_margin_deg)
                 .max(0.0)
                 .to_radians(),
@@ -473,6 +481,8 @@ impl Guard {
         };
         self.sent = Some(match verdict {
             Verdict::Stop { curvature, .. } => curvature,
+            // A turn in place leaves the wheels' curvature as it was.
+            _ if command.is_turn_in_place() => hold,
             _ => command.curvature,
         });
         verdict
@@ -517,6 +527,9 @@ impl Guard {
                 pitch_deg: pitch.to_degrees(),
             });
         }
+        if command.is_turn_in_place() {
+            return self.judge_turn(command, &pose);
+        }
         let Some((s, hazard)) = self.contact(command, &pose) else {
             return Ok(Verdict::Clear);
         };
@@ -538,6 +551,43 @@ impl Guard {
         } else {
             Verdict::Clear
         })
+    }
+
+    /// A turn in place: stopped when a hazard stands where the body turns
+    /// before it could stop turning (with `side_margin_m` all round, and a
+    /// tenth of a radian more).
+    fn judge_turn(&mut self, command: &SteeringCommand, pose: &Pose) -> Result<Verdict, Reason> {
+        let rate = command.turn_rate_radps.abs();
+        let turn = arcnav_vehicle::TurnInPlace {
+            centre: self.turn_centre,
+            left: command.turn_rate_radps > 0.0,
+            footprint: self.footprint.grown(
+                self.config.side_margin_m,
+                self.config.side_margin_m,
+                0.0,
+            ),
+            max_angle: rate * self.turn_stop_s + 0.1,
+        };
+        let to_level = level_frame(&pose.world_from_vehicle).inverse();
+        let met = self
+            .hazards()
+            .filter_map(|h| {
+                let p = to_level * h.position;
+                let p = Point2::new(p.x, p.y);
+                // How far the body turns to meet it, along the hazard's
+                // circle about the centre, m.
+                let along = turn.first_contact(p)? * (p - turn.centre).norm();
+                Some((along, *h))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        match met {
+            Some((along, hazard)) => Err(Reason::Hazard {
+                kind: hazard.kind,
+                at: [hazard.position.x, hazard.position.y],
+                distance_m: along,
+            }),
+            None => Ok(Verdict::Clear),
+        }
     }
 
     /// The nearest hazard on the path `command` puts the vehicle on, and

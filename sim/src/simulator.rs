@@ -269,7 +269,8 @@ impl Simulator {
                 state.speed_mps * state.yaw.sin(),
                 0.0,
             ),
-            yaw_rate: state.speed_mps * state.curvature,
+            // On an arc, or turning in place.
+            yaw_rate: state.speed_mps * state.curvature + self.motion.turn_rate(),
         }
     }
 

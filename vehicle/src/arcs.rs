@@ -322,9 +322,10 @@ impl Arc {
         self.curvature.is_infinite()
     }
 
-    /// Turning radius, m, signed like the curvature; `None` when straight.
+    /// Turning radius, m, signed like the curvature; `None` when straight
+    /// or turning in place.
     pub fn radius(&self) -> Option<f64> {
-        (self.curvature != 0.0).then(|| 1.0 / self.curvature)
+        (self.curvature != 0.0 && self.curvature.is_finite()).then(|| 1.0 / self.curvature)
     }
 
     /// Centre of the turning circle; `None` when straight.
@@ -332,8 +333,16 @@ impl Arc {
         self.radius().map(|r| Point2::new(0.0, r))
     }
 
-    /// The pose after driving `s` metres along the arc.
+    /// The pose after driving `s` metres along the arc. A turn in place
+    /// drives nowhere: its poses are the start (the turn's own poses are
+    /// [`TurnInPlace::pose_at`]'s).
     pub fn pose_at(&self, s: f64) -> ArcPose {
+        if self.is_turn_in_place() {
+            return ArcPose {
+                position: Point2::origin(),
+                heading: 0.0,
+            };
+        }
         let theta = self.curvature * s;
         // sin(θ)/k and (1 - cos θ)/k written as s·f(θ), exact as k → 0.
         let (along, across) = if theta.abs() < 1e-6 {
@@ -407,6 +416,10 @@ impl SweptFootprint {
         let f = &self.footprint;
         if f.contains(p) {
             return Some(0.0);
+        }
+        if self.arc.is_turn_in_place() {
+            // It drives nowhere: see [`TurnInPlace::first_contact`].
+            return None;
         }
         if !f.is_rectangle() {
             return self.first_contact_with_outline(p);

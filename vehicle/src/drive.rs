@@ -137,8 +137,14 @@ impl DrivenPath {
         } else {
             f64::INFINITY
         };
-        let target = clamp(target);
-        if v == 0.0 || per_m.is_infinite() {
+        // A turn in place (±∞) is not steered towards: its path is its arc,
+        // which drives nowhere.
+        let target = if target.is_infinite() {
+            target
+        } else {
+            clamp(target)
+        };
+        if v == 0.0 || per_m.is_infinite() || target.is_infinite() {
             // Standing, or steering at once: the arc.
             return Self {
                 knots: [(0.0, target); MAX_KNOTS],

@@ -28,7 +28,15 @@ pub(crate) struct Behind<'a> {
     /// no ground (give no clearance): where the vehicle wants to go (`None`:
     /// no such behaviour voted).
     pub wish: Option<&'a [f32]>,
+    /// The driving arcs' curvatures (these slices' arcs).
     pub curvatures: &'a [f64],
+    /// Index in the arc set of these slices' first arc (the arcs before
+    /// it turn in place).
+    pub offset: usize,
+    /// The turns in place, right and left: their index in the arc set,
+    /// the angle the behaviours judging ground found them clear (radians)
+    /// and their fused vote.
+    pub turns: Option<[(usize, Option<f64>, f32); 2]>,
 }
 
 impl Behind<'_> {

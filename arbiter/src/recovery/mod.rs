@@ -109,6 +109,15 @@ const RETRACE_STEER_SLACK: f64 = 0.05;
 /// past the margin (or the rest of the run), m.
 const RETRACE_ROOM_M: f64 = 0.5;
 
+/// A turn in place starts only when clear for this much, radians (20°).
+const SPIN_MIN_RAD: f64 = 0.35;
+
+/// A turn in place stops this far before what it would meet, radians (5°).
+const SPIN_MARGIN_RAD: f64 = 0.087;
+
+/// A turn in place gives up after a whole turn, degrees.
+const SPIN_MAX_DEG: f64 = 360.0;
+
 /// A turn round ends once the way has lain ahead this long, s: a route's
 /// path can swing for a cycle as it re-plans.
 const WISH_HELD_S: f64 = 1.0;
@@ -137,6 +146,8 @@ pub struct RecoveryStats {
     pub retraces: u64,
     /// Metres retraced (estimated from the commands), m.
     pub retraced_m: f64,
+    /// Of the turns round, turns in place (a skid-steer vehicle's).
+    pub turns_in_place: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -149,6 +160,12 @@ enum Mode {
         side: f64,
         leg: Leg,
         legs: u32,
+    },
+    /// Turning in place towards `side` on the arc-set arc `arc` (a vehicle
+    /// that can, where another makes a K-point turn).
+    Spinning {
+        side: f64,
+        arc: usize,
     },
     /// Undoing the vehicle's own motions, newest first, for at most
     /// `budget_m`; towards a turn to `side`, until there is room to turn.
@@ -292,6 +309,12 @@ impl Recovery {
                 self.turn_deg += turned;
                 leg
             }
+            Mode::Spinning { .. } => {
+                let turned = wrap_angle(after.yaw - before.yaw).to_degrees().abs();
+                self.stats.turned_deg += turned;
+                self.turn_deg += turned;
+                return;
+            }
             Mode::Retracing { .. } => return,
         };
         if (distance < 0.0) == leg.reverse {
@@ -405,6 +428,7 @@ impl Recovery {
                 self.start_turn_leg(side, next, legs + 1);
                 self.step(now, blocked, safe, behind)
             }
+            Mode::Spinning { side, arc } => self.spin(now, side, arc, blocked, behind),
             Mode::Retracing {
                 side,
                 done_m,
@@ -509,7 +533,7 @@ impl Recovery {
             utime: now,
             curvature: leg.curvature,
             speed_mps: 0.0,
-            arc_index: Some(leg.arc),
+            arc_index: Some(leg.arc + behind.offset),
             vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
             turn_rate_radps: 0.0,
         }
@@ -599,6 +623,23 @@ impl Recovery {
         if self.cramped && self.start_retrace(now, side.or(self.unfinished_turn), behind) {
             return self.step(now, blocked, true, behind);
         }
+        // A vehicle that turns in place turns round so, where that turn is
+        // clear.
+        if let Some((side, arc)) = side.and_then(|side| Some((side, self.spin_arc(side, behind)?)))
+        {
+            self.begin();
+            self.stats.turns += 1;
+            self.stats.turns_in_place += 1;
+            self.turn_deg = 0.0;
+            tracing::info!(
+                t_s = micros_to_seconds(now),
+                attempt = self.attempts,
+                side,
+                "blocked, the way behind: turning round in place"
+            );
+            self.mode = Mode::Spinning { side, arc };
+            return self.step(now, blocked, true, behind);
+        }
         // Turning round starts with the leg that has room: backing first.
         let turn = side.and_then(|side| {
             [true, false]
@@ -651,6 +692,64 @@ impl Recovery {
             );
         }
         self.step(now, blocked, true, behind)
+    }
+
+    /// The turn in place towards `side` (its index in the arc set), if the
+    /// arc set has one and it is clear for at least [`SPIN_MIN_RAD`].
+    fn spin_arc(&self, side: f64, behind: &Behind<'_>) -> Option<usize> {
+        if self.limits.max_turn_rate <= 0.0 {
+            return None;
+        }
+        let [right, left] = behind.turns?;
+        let (arc, clear, _) = if side > 0.0 { left } else { right };
+        (clear? >= SPIN_MIN_RAD).then_some(arc)
+    }
+
+    /// Turning in place: on while the way lies behind and the turn is
+    /// clear for more than the vehicle turns while it stops turning.
+    fn spin(
+        &mut self,
+        now: Utime,
+        side: f64,
+        arc: usize,
+        blocked: bool,
+        behind: &Behind<'_>,
+    ) -> Outcome {
+        if self.wish_ahead(side, behind) {
+            tracing::info!(
+                t_s = micros_to_seconds(now),
+                turned_deg = self.turn_deg,
+                "turned round in place"
+            );
+            self.unfinished_turn = None;
+            return self.end(now, blocked);
+        }
+        let rate = self.model.as_ref().map_or(0.0, |m| m.turn_rate().abs());
+        let latency = micros_to_seconds(self.limits.latency_us);
+        // Turned while the command to stop acts, then while the rate ramps
+        // down, and a margin.
+        let stopping = rate * latency
+            + 0.5 * rate * arcnav_vehicle::motion::TURN_RATE_RAMP_S
+            + SPIN_MARGIN_RAD;
+        let [right, left] = behind.turns.unwrap_or([(0, None, 0.0); 2]);
+        let clear = if side > 0.0 { left.1 } else { right.1 }.unwrap_or(0.0);
+        if clear <= stopping || self.turn_deg >= SPIN_MAX_DEG {
+            tracing::info!(
+                t_s = micros_to_seconds(now),
+                turned_deg = self.turn_deg,
+                clear_rad = clear,
+                "turning in place ends: not clear, or turned a whole turn"
+            );
+            self.unfinished_turn = Some(side);
+            return self.end(now, blocked);
+        }
+        let vote = if side > 0.0 { left.2 } else { right.2 };
+        Outcome::Drive(SteeringCommand::turn_in_place(
+            now,
+            side * self.limits.max_turn_rate,
+            arc,
+            vote,
+        ))
     }
 
     /// Starts a turn round towards `side` with `leg` (one more turn; the
@@ -744,7 +843,7 @@ impl Recovery {
             utime: now,
             curvature: leg.curvature,
             speed_mps: if leg.reverse { -speed } else { speed },
-            arc_index: Some(leg.arc),
+            arc_index: Some(leg.arc + behind.offset),
             vote: behind.preference.get(leg.arc).copied().unwrap_or(0.0),
             turn_rate_radps: 0.0,
         })

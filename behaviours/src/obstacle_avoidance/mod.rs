@@ -77,6 +77,7 @@ mod area;
 mod backing;
 pub mod config;
 mod raster;
+mod turning;
 mod under_start;
 
 use area::AreaEdge;
@@ -86,6 +87,7 @@ use raster::{
     Raster, Rigid, Template, build_template, cells_inside, first_in, first_set, grid_around,
     nearest_set,
 };
+use turning::Turning;
 use under_start::UnderStart;
 
 /// The obstacle-avoidance behaviour.
@@ -150,6 +152,8 @@ pub struct ObstacleAvoidance {
     /// Per arc: where its body first leaves the area (distance along,
     /// vehicle-frame point).
     area_exit: Vec<Option<(f64, [f32; 2])>>,
+    /// The turns in place' sweeps, when the arc set has them.
+    turning: Option<Turning>,
 }
 
 /// The layers of a raster a path's lead is checked against.
@@ -314,6 +318,10 @@ impl ObstacleAvoidance {
             nearest: [f64::INFINITY; 4],
             area: setup.area.map(|a| AreaEdge::new(a.clone(), &body)),
             area_exit: vec![None; setup.arcs.len()],
+            turning: setup
+                .arcs
+                .turns_in_place()
+                .then(|| Turning::new(setup.vehicle, half_patch, config.reverse_margin_m)),
             verdicts: vec![ArcTerrain::default(); setup.arcs.len()],
             cruise_mps: setup.cruise_mps,
             deceleration: setup.vehicle.max_deceleration_mps2 * config.braking_fraction,
@@ -758,6 +766,9 @@ impl Behaviour for ObstacleAvoidance {
         }
         if self.config.speed_vote {
             self.vote_speeds(ctx, arcs, votes);
+        }
+        if let Some(turning) = &self.turning {
+            turning.vote(ctx, votes);
         }
     }
 }
