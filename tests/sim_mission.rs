@@ -911,6 +911,111 @@ fn bodies_of_their_own_shape_turn_round_in_a_narrow_cul_de_sac() {
     }
 }
 
+/// Issue 68: the skid-steer preset (`config/skid_steer.toml`, a
+/// Warthog-class vehicle on the HMMWV's arcs) drives paper_loop,
+/// short_course and the cul-de-sacs without a collision, and turns round
+/// in place where the HMMWV makes a K-point turn (the narrow cul-de-sac:
+/// `narrow_cul_de_sacs_are_left_by_turning_round`): in no legs, its
+/// commands `drive_command_t` with the yaw rate, and in its log the
+/// heading swings through more than 90° while the point it turns about
+/// moves less than 0.3 m.
+#[test]
+fn the_skid_steer_preset_turns_round_in_place_where_the_hmmwv_makes_a_k_point_turn() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let preset = format!("{root}/config/skid_steer.toml");
+    let worlds = [
+        (
+            "cul_de_sac_narrow",
+            format!("{root}/tests/worlds/cul_de_sac_narrow.toml"),
+        ),
+        (
+            "lane_dead_end",
+            format!("{root}/tests/worlds/lane_dead_end.toml"),
+        ),
+        ("cul_de_sac", format!("{root}/tests/worlds/cul_de_sac.toml")),
+        ("short_course", "short_course".to_owned()),
+        ("paper_loop", "paper_loop".to_owned()),
+    ];
+    let runs: Vec<_> = std::thread::scope(|scope| {
+        let handles: Vec<_> = worlds
+            .iter()
+            .map(|(tag, world)| {
+                let preset = &preset;
+                scope.spawn(move || {
+                    let out = out_dir(&format!("skid-{tag}"));
+                    let args = [
+                        "sim",
+                        "--out",
+                        out.to_str().unwrap(),
+                        "--world",
+                        world,
+                        "--config",
+                        preset,
+                        "--no-images",
+                    ];
+                    let (_, stdout, stderr) = arcnav(&args);
+                    let report: Value = std::fs::read_to_string(out.join("report.json"))
+                        .map(|r| serde_json::from_str(&r).unwrap())
+                        .unwrap_or_else(|e| panic!("{tag}: no report ({e}):\n{stdout}\n{stderr}"));
+                    (*tag, out, report, stdout)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for (tag, out, report, stdout) in &runs {
+        assert_completed_without_collision(tag, report, stdout);
+        if !tag.contains("cul_de_sac") && *tag != "lane_dead_end" {
+            continue;
+        }
+        let recovery = &report["recovery"];
+        assert!(
+            recovery["turns_in_place"].as_u64().unwrap() >= 1
+                && recovery["turn_legs"].as_u64().unwrap() == 0,
+            "{tag}: {recovery}"
+        );
+        // From the log: the commands, and the heading swung standing.
+        let (mut turning, mut poses) = (0, Vec::new());
+        for event in TypedEvents::new(LogReader::open(out.join("mission.lcm")).unwrap()) {
+            match event.unwrap().message {
+                AnyMessage::SteeringCommand(_) => panic!("{tag}: a steering_command_t"),
+                AnyMessage::DriveCommand(c) => {
+                    if c.curvature.is_infinite() {
+                        assert!(
+                            c.speed == 0.0 && c.yaw_rate * c.curvature > 0.0,
+                            "{tag}: {c:?}"
+                        );
+                        turning += 1;
+                    }
+                }
+                AnyMessage::Pose(p) => {
+                    let pose = arcnav_vehicle::Pose::try_from(&p).unwrap();
+                    let (x, y, yaw) = (pose.position().x, pose.position().y, pose.yaw());
+                    // The turn centre, half the 1 m wheelbase ahead.
+                    poses.push((x + 0.5 * yaw.cos(), y + 0.5 * yaw.sin(), yaw));
+                }
+                _ => {}
+            }
+        }
+        assert!(turning > 5, "{tag}: {turning} turns in place commanded");
+        let mut swung: f64 = 0.0;
+        for i in 0..poses.len() {
+            let (mut turned, mut j) = (0.0f64, i + 1);
+            while j < poses.len() && (poses[j].0 - poses[i].0).hypot(poses[j].1 - poses[i].1) < 0.3
+            {
+                turned += arcnav_vehicle::frames::wrap_angle(poses[j].2 - poses[j - 1].2);
+                swung = swung.max(turned.abs());
+                j += 1;
+            }
+        }
+        assert!(
+            swung.to_degrees() > 90.0,
+            "{tag}: the heading swung at most {:.0}° standing",
+            swung.to_degrees()
+        );
+    }
+}
+
 /// A ditch square across the way that a sensor flags only from near (the
 /// 64-beam lidar: within about 8 m), its near end beyond the map's side.
 /// The vehicle stops at it and turns round; the images it takes backing
