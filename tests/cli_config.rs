@@ -160,6 +160,51 @@ fn the_footprint_keys_are_checked() {
     }
 }
 
+/// Issue 68: the skid-steer keys. The preset is valid and its printed
+/// configuration reads back; each key's errors name it.
+#[test]
+fn the_kinematics_keys_are_checked() {
+    let preset = format!("{}/config/skid_steer.toml", env!("CARGO_MANIFEST_DIR"));
+    let (code, printed, stderr) = arcnav(&["config", &preset]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        printed.contains("kinematics = \"skid_steer\"") && printed.contains("turn_in_place = true"),
+        "{printed}"
+    );
+    let (dir, again) = temp_file("printed.toml", &printed);
+    let (code, stdout, stderr) = arcnav(&["config", "--check", again.to_str().unwrap()]);
+    assert_eq!(code, 0, "{printed}: {stdout}{stderr}");
+    drop(dir);
+    for (text, expect) in [
+        (
+            "[vehicle]\nkinematics = \"tracked\"\n",
+            "unknown variant `tracked`, expected `ackermann` or `skid_steer`",
+        ),
+        (
+            "[vehicle]\nkinematics = \"skid_steer\"\n",
+            "`vehicle.max_yaw_rate_dps`: is needed with kinematics = \"skid_steer\"",
+        ),
+        (
+            "[vehicle]\nkinematics = \"skid_steer\"\nmax_yaw_rate_dps = 0.0\n",
+            "`vehicle.max_yaw_rate_dps`: is 0",
+        ),
+        (
+            "[vehicle]\nmax_yaw_rate_dps = 60.0\n",
+            "`vehicle.max_yaw_rate_dps`: is read only with kinematics = \"skid_steer\"",
+        ),
+        (
+            "[arcs]\nturn_in_place = true\n",
+            "`arcs.turn_in_place`: needs a vehicle that turns in place",
+        ),
+        ("[arcs]\nturn_in_place = \"yes\"\n", "`arcs.turn_in_place`"),
+    ] {
+        let (_dir, file) = temp_file("bad-kinematics.toml", text);
+        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+        assert_eq!(code, 1, "{text}: {stderr}");
+        assert!(stderr.contains(expect), "{text}: {stderr}");
+    }
+}
+
 /// Values that aborted or hung `arcnav sim` (found by setting every number
 /// of config/default.toml to ±1e300 in turn), refused by their key.
 #[test]

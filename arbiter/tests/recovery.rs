@@ -683,3 +683,100 @@ fn where_nothing_behind_is_known_it_turns_towards_the_way_forwards_as_far_as_the
     assert!((5..=19).contains(&first.arc_index.unwrap()), "{first:?}");
     assert_eq!(a.recovery_stats().turns, 1, "{:?}", a.recovery_stats());
 }
+
+/// Issue 68: a skid-steer vehicle's arc set ends in turns in place (index
+/// 0 right, 40 left). Cornered with the way behind and to the left, it
+/// turns round in place to the left: never as a forward choice (for the
+/// `wait_s` a block is waited out it stops, though the turn's fused vote
+/// is the best), then on the left turn at the vehicle's yaw rate, no legs.
+/// Where obstacle avoidance finds the turn clear for less than 20°, the
+/// K-point turn of an Ackermann vehicle, on the driving arcs.
+#[test]
+fn a_vehicle_that_turns_in_place_turns_round_in_place_where_the_turn_is_clear() {
+    let vehicle = VehicleConfig {
+        length_m: 1.52,
+        width_m: 1.38,
+        rear_overhang_m: 0.26,
+        wheelbase_m: 1.0,
+        min_turning_radius_m: 1.0,
+        track_m: 1.1,
+        wheel_radius_m: 0.3,
+        kinematics: arcnav_vehicle::Kinematics::SkidSteer,
+        max_yaw_rate_dps: Some(60.0),
+        ..VehicleConfig::default()
+    };
+    let arcs = ArcSet::new(&ArcSetConfig {
+        turn_in_place: true,
+        ..ArcSetConfig::default()
+    })
+    .unwrap();
+    let config = ArbiterConfig::default();
+    // The driving arcs 1..=39 as `cornered` has them; the turns in place
+    // clear for `turn_clear` radians, obstacle avoidance's best.
+    let votes = |t: i64, turn_clear: f64| {
+        let inner = cornered(t, true, 3.0, behind_left);
+        inner.map(|b| {
+            let mut v = Votes::new(41);
+            for arc in 0..39 {
+                let (value, vetoed) = (b.votes.values()[arc], b.votes.vetoed()[arc]);
+                v.set(arc + 1, value);
+                if vetoed {
+                    v.veto(arc + 1, None);
+                }
+                if let Some(c) = b.votes.forward_clearance(arc) {
+                    v.set_forward_clearance(arc + 1, c);
+                }
+                if let Some(c) = b.votes.reverse_clearance(arc) {
+                    v.set_reverse_clearance(arc + 1, c);
+                }
+            }
+            for turn in [0, 40] {
+                if b.behaviour == "obstacle_avoidance" {
+                    v.set(turn, 1.0);
+                    v.set_forward_clearance(turn, turn_clear);
+                    v.set_reverse_clearance(turn, 0.0);
+                } else {
+                    v.set(turn, if turn == 40 { 0.5 } else { -0.5 });
+                }
+            }
+            BehaviourVotes { votes: v, ..b }
+        })
+    };
+    let mut a = Arbiter::new(&config, arcs.clone(), &vehicle);
+    let commands = drive(&mut a, 0, 6.0, |t| votes(t, std::f64::consts::PI));
+    let wait = (config.recovery.wait_s * 10.0) as usize;
+    assert!(
+        commands[..wait].iter().all(SteeringCommand::is_stop),
+        "{:?}",
+        &commands[..wait]
+    );
+    let turning: Vec<_> = commands.iter().filter(|c| c.is_turn_in_place()).collect();
+    assert!(turning.len() > 20, "{commands:?}");
+    for c in &turning {
+        assert_eq!(c.arc_index, Some(40));
+        assert!(
+            (c.turn_rate_radps - 60f64.to_radians()).abs() < 1e-9,
+            "{c:?}"
+        );
+        assert_eq!((c.speed_mps, c.curvature), (0.0, f64::INFINITY));
+    }
+    let stats = *a.recovery_stats();
+    assert_eq!((stats.turns_in_place, stats.turn_legs), (1, 0), "{stats:?}");
+    // Over 4 s of turning at 60°/s, less the start: round and on.
+    assert!(stats.turned_deg > 180.0, "{stats:?}");
+    // Hemmed in: the K-point turn, on the driving arcs.
+    let mut a = Arbiter::new(&config, arcs, &vehicle);
+    let commands = drive(&mut a, 0, 20.0, |t| votes(t, 0.2));
+    assert!(!commands.iter().any(SteeringCommand::is_turn_in_place));
+    let stats = *a.recovery_stats();
+    assert!(
+        stats.turns_in_place == 0 && stats.turn_legs >= 2,
+        "{stats:?}"
+    );
+    assert!(
+        commands
+            .iter()
+            .filter(|c| !c.is_stop())
+            .all(|c| c.arc_index == Some(1) || c.arc_index == Some(39))
+    );
+}

@@ -115,12 +115,21 @@ fn snapshot_after_rectangles(images: Vec<(Vec<ObstacleCell>, [f64; 4])>) -> MapS
 
 /// ... the vehicle at `pose` (cells and rectangles in the world frame).
 fn snapshot_at(pose: &Pose, images: Vec<(Vec<ObstacleCell>, [f64; 4])>) -> MapSnapshot {
+    snapshot_of_vehicle_at(&VehicleConfig::default(), pose, images)
+}
+
+/// ... the local map kept for `vehicle` (which clears its own ground).
+fn snapshot_of_vehicle_at(
+    vehicle: &VehicleConfig,
+    pose: &Pose,
+    images: Vec<(Vec<ObstacleCell>, [f64; 4])>,
+) -> MapSnapshot {
     let mut map = LocalMap::new(
         &LocalMapConfig {
             assume_seen_m: 0.0,
             ..LocalMapConfig::default()
         },
-        &VehicleConfig::default(),
+        vehicle,
     );
     map.update(pose);
     for (cells, [near, far, left, right]) in images {
@@ -1635,4 +1644,64 @@ fn a_circle_and_an_l_pass_between_rocks_their_bounding_rectangle_strikes() {
             struck.vote(hardest_left)
         );
     }
+}
+
+/// Issue 68, skid-steer: obstacle avoidance sweeps the body through each
+/// turn in place about the middle of the wheelbase (the arcs of curvature
+/// ±∞ at the ends of the set), grown by half a 0.4 m patch and the
+/// manoeuvres' 0.3 m: from the turn centre ±1.26 m along, ±1.19 m across.
+/// A rock whose patch centre lies 1.43 m from the centre, 24.8° right,
+/// just off that box's front edge (which meets the patch's circle at
+/// ±28.4°): turning left brings it in after 3.6°, a veto; turning right,
+/// after 53.2°, the clearance given (in radians). Open ground all round:
+/// both clear for half a turn, voted +1. Neither is ever backed along.
+#[test]
+fn a_turn_in_place_is_vetoed_towards_a_rock_its_corner_swings_into() {
+    let vehicle = VehicleConfig {
+        length_m: 1.52,
+        width_m: 1.38,
+        rear_overhang_m: 0.26,
+        wheelbase_m: 1.0,
+        min_turning_radius_m: 1.0,
+        track_m: 1.1,
+        wheel_radius_m: 0.3,
+        kinematics: arcnav_vehicle::Kinematics::SkidSteer,
+        max_yaw_rate_dps: Some(60.0),
+        ..VehicleConfig::default()
+    };
+    let arcs = ArcSet::new(&ArcSetConfig {
+        turn_in_place: true,
+        ..ArcSetConfig::default()
+    })
+    .unwrap();
+    let (right, left) = (0, arcs.len() - 1);
+    let votes_with = |cells: &[(f64, f64)]| {
+        let pose = Pose::at_rest(0, planar_isometry(0.0, 0.0, 0.0));
+        let cells = cells.iter().map(|&(x, y)| rock(x, y)).collect();
+        let map =
+            snapshot_of_vehicle_at(&vehicle, &pose, vec![(cells, [-40.0, 40.0, -40.0, 40.0])]);
+        let mut behaviour =
+            ObstacleAvoidance::new(ObstacleAvoidanceConfig::default(), &setup(&arcs, &vehicle));
+        let mission = Mission::default();
+        let ctx = VoteContext::new(0, &pose, &map, &mission, &arcs);
+        let mut votes = Votes::new(arcs.len());
+        behaviour.vote(&ctx, &mut votes);
+        votes
+    };
+    let open = votes_with(&[]);
+    for arc in [right, left] {
+        assert!(!open.is_vetoed(arc), "{arc}");
+        assert_eq!(open.vote(arc), Some(1.0));
+        assert!((open.forward_clearance(arc).unwrap() - std::f64::consts::PI).abs() < 1e-6);
+        assert_eq!(open.reverse_clearance(arc), Some(0.0));
+    }
+    // The turn centre is 0.5 m ahead of the origin; the rock's patch
+    // centre (1.8, -0.6), (1.3, -0.6) from it.
+    let votes = votes_with(&[(1.7, -0.5)]);
+    assert!(votes.is_vetoed(left), "{:?}", votes.forward_clearance(left));
+    let clear = votes.forward_clearance(right).unwrap().to_degrees();
+    assert!(
+        !votes.is_vetoed(right) && (clear - 53.2).abs() < 0.2,
+        "{clear}°"
+    );
 }

@@ -264,6 +264,9 @@ pub struct Guard {
     in_flight: f64,
     /// The curvature the last verdict sent the vehicle on.
     sent: Option<f64>,
+    /// The last verdict stopped or slowed the vehicle for a hazard: the
+    /// next ones hold it one cell nearer (see [`Guard::judge`]).
+    held_for_hazard: bool,
     contact: Option<Contact>,
     counts: GuardCounts,
 }
@@ -301,6 +304,7 @@ impl Guard {
             current: None,
             in_flight: 0.0,
             sent: None,
+            held_for_hazard: false,
             contact: None,
             counts: GuardCounts::default(),
         }
@@ -531,6 +535,7 @@ impl Guard {
             return self.judge_turn(command, &pose);
         }
         let Some((s, hazard)) = self.contact(command, &pose) else {
+            self.held_for_hazard = false;
             return Ok(Verdict::Clear);
         };
         let reason = Reason::Hazard {
@@ -538,19 +543,32 @@ impl Guard {
             at: [hazard.position.x, hazard.position.y],
             distance_m: s,
         };
-        let speed = pose.velocity.xy().norm();
-        if s - self.braking.margin_m <= self.braking.stopping_m(speed) {
-            return Err(reason);
-        }
-        let cap = self.braking.allowed_mps(s);
-        Ok(if cap < command.speed_mps.abs() {
-            Verdict::Slow {
-                cap_mps: cap,
-                reason,
-            }
+        // Hazards are held by cells of `cell_size_m`, and the distance to
+        // the nearest jitters by a cell from image to image: a vehicle
+        // stopped or slowed for one is let go only once it is a cell clear
+        // of that (at the edge of the stop zone, the verdict went stop,
+        // clear, stop with each image).
+        let s = if self.held_for_hazard {
+            s - self.config.cell_size_m
         } else {
-            Verdict::Clear
-        })
+            s
+        };
+        let speed = pose.velocity.xy().norm();
+        let verdict = if s - self.braking.margin_m <= self.braking.stopping_m(speed) {
+            Err(reason)
+        } else {
+            let cap = self.braking.allowed_mps(s);
+            Ok(if cap < command.speed_mps.abs() {
+                Verdict::Slow {
+                    cap_mps: cap,
+                    reason,
+                }
+            } else {
+                Verdict::Clear
+            })
+        };
+        self.held_for_hazard = !matches!(verdict, Ok(Verdict::Clear));
+        verdict
     }
 
     /// A turn in place: stopped when a hazard stands where the body turns
@@ -726,6 +744,101 @@ mod tests {
         assert_eq!(far.check(&command(8.0, 0.2), T0), Verdict::Clear);
         // A stop is a stop.
         assert_eq!(far.check(&SteeringCommand::stop(T0), T0), Verdict::Clear);
+    }
+
+    /// Issue 68: a skid-steer vehicle's turn in place sweeps its body
+    /// (widened by `side_margin_m` all round) about the middle of its
+    /// wheelbase. A box seen 6 m back, now beside the body's right side:
+    /// turning left swings the rear right corner into it, turning right
+    /// the front right one, within what the vehicle turns before it stops
+    /// turning (at 1 rad/s: 0.25 s of latency, half the 0.25 s ramp, and
+    /// 0.1 rad); both are stopped, as a stop. The same box 1.5 m farther
+    /// out lets both through.
+    #[test]
+    fn a_turn_in_place_is_stopped_where_a_corner_would_swing_into_a_box_beside_it() {
+        let vehicle = VehicleConfig {
+            length_m: 1.52,
+            width_m: 1.38,
+            rear_overhang_m: 0.26,
+            wheelbase_m: 1.0,
+            min_turning_radius_m: 1.0,
+            track_m: 1.1,
+            wheel_radius_m: 0.3,
+            kinematics: arcnav_vehicle::Kinematics::SkidSteer,
+            max_yaw_rate_dps: Some(60.0),
+            ..VehicleConfig::default()
+        };
+        let verdicts = |off: f64| {
+            let sensor = SensorModel::erim();
+            let mut guard = Guard::new(
+                &GuardConfig::default(),
+                &vehicle,
+                std::slice::from_ref(&sensor),
+            );
+            let beside = move |x: f64, y: f64| {
+                if (0.0..1.2).contains(&x) && (-1.25 - off..-0.95 - off).contains(&y) {
+                    0.6
+                } else {
+                    0.0
+                }
+            };
+            let back = Pose::at_rest(T0, Isometry::translation(-6.0, 0.0, 0.0));
+            guard.observe_pose(&back);
+            let image = sensor.render(T0, &back.world_from_vehicle, &HeightFunction::new(beside));
+            guard.observe_image(&image);
+            let now = T0 + 100_000;
+            guard.observe_pose(&Pose::at_rest(now, Isometry::identity()));
+            [1.0, -1.0].map(|rate| {
+                let turn = SteeringCommand::turn_in_place(now, rate, 0, 1.0);
+                let verdict = guard.check(&turn, now);
+                (verdict.clone(), verdict.apply(&turn))
+            })
+        };
+        for (verdict, sent) in verdicts(0.0) {
+            assert!(matches!(verdict, Verdict::Stop { .. }), "{verdict:?}");
+            assert_eq!(reason_name(&verdict), Some("obstacle"));
+            assert!(sent.is_stop() && !sent.is_turn_in_place(), "{sent:?}");
+        }
+        for (verdict, sent) in verdicts(1.5) {
+            assert_eq!(verdict, Verdict::Clear);
+            assert!(sent.is_turn_in_place());
+        }
+    }
+
+    /// A vehicle stopped for a hazard is let go only a cell (0.2 m) clear
+    /// of the stop zone: the distance to held cells jitters by that much
+    /// from image to image, and at the zone's edge the verdict flipped
+    /// stop, clear, stop (`the_vehicle_side_guard_stops_commands_that_drive_at_a_box_it_sees`,
+    /// one run in four). Stopped for a box at 5.2 m/s, then at the speed
+    /// whose stopping distance leaves 0.1 m more than the margin, it stays
+    /// stopped; a command slow enough for the box a cell nearer goes.
+    #[test]
+    fn a_stop_for_a_hazard_is_let_go_only_a_cell_clear_of_the_stop_zone() {
+        let mut guard = guard_seeing(box_at(6.3), 5.2);
+        let verdict = guard.check(&command(5.2, 0.0), T0);
+        let Verdict::Stop {
+            reason: Reason::Hazard { distance_m: s, .. },
+            ..
+        } = verdict
+        else {
+            panic!("{verdict:?}");
+        };
+        let braking = Braking::of(&VehicleConfig::default(), GuardConfig::default().margin_m);
+        let edge = braking.allowed_mps(s - 0.1);
+        let at_edge = Pose {
+            velocity: Vector3::new(edge, 0.0, 0.0),
+            ..Pose::at_rest(T0, Isometry::identity())
+        };
+        guard.observe_pose(&at_edge);
+        let again = guard.check(&command(edge, 0.0), T0);
+        assert!(matches!(again, Verdict::Stop { .. }), "{again:?}");
+        // Standing, a command slow enough for the box a cell nearer goes.
+        guard.observe_pose(&Pose::at_rest(T0, Isometry::identity()));
+        let creep = braking.allowed_mps(s - 0.25);
+        assert_eq!(guard.check(&command(creep, 0.0), T0), Verdict::Clear);
+        // ... and then, clear, it is judged at the distance measured.
+        let faster = braking.allowed_mps(s - 0.05);
+        assert_eq!(guard.check(&command(faster, 0.0), T0), Verdict::Clear);
     }
 
     /// A command that turns into a hazard is stopped on the path the
