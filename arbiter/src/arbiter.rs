@@ -113,8 +113,13 @@ pub enum Reason {
     /// The fused votes' best arc.
     Drive,
     /// A recovery manoeuvre's command: backing up, a forward leg of a
-    /// turn, or standing to steer for the next leg.
-    Manoeuvre { backing: bool, standing: bool },
+    /// turn, standing to steer for the next leg, or turning round in
+    /// place.
+    Manoeuvre {
+        backing: bool,
+        standing: bool,
+        in_place: bool,
+    },
     /// Stop with arcs allowed: the best arc's speed limit is 0 (unseen
     /// ground, cells right ahead; `asked_by` empty), or the behaviours in
     /// `asked_by` asked to stop (a mission complete, a waypoint no route
@@ -134,6 +139,9 @@ impl std::fmt::Display for Reason {
         match self {
             Reason::Drive => write!(f, "driving the best arc"),
             Reason::Manoeuvre { backing: true, .. } => write!(f, "recovery: backing up"),
+            Reason::Manoeuvre { in_place: true, .. } => {
+                write!(f, "recovery: turning round in place")
+            }
             Reason::Manoeuvre { standing: true, .. } => {
                 write!(f, "recovery: standing to steer for the next leg")
             }
@@ -623,6 +631,7 @@ impl Arbiter {
             Ok((_, limits)) if SpeedTime::manoeuvre(limits) => Reason::Manoeuvre {
                 backing: command.is_reverse(),
                 standing: command.is_stop(),
+                in_place: command.is_turn_in_place(),
             },
             Ok(_) if command.is_stop() => Reason::SpeedLimited {
                 asked_by: if stop_asked {

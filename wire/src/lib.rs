@@ -1178,6 +1178,7 @@ mod tests {
                 Said::Arbiter(&Reason::Manoeuvre {
                     backing: true,
                     standing: false,
+                    in_place: false,
                 }),
                 decision_t::MANOEUVRE,
             ),

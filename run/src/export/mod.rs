@@ -209,9 +209,10 @@ fn commanded_arc_is_in(arcs: &ArcSet, msg: &steering_command_t) -> bool {
     let Ok(index) = usize::try_from(msg.arc_index) else {
         return true;
     };
-    arcs.curvatures()
-        .get(index)
-        .is_some_and(|&k| (k - msg.curvature).abs() <= 1e-9_f64.max(1e-6 * k.abs()))
+    arcs.curvatures().get(index).is_some_and(|&k| {
+        // A turn in place's ±∞ is equal, not near.
+        k == msg.curvature || (k - msg.curvature).abs() <= 1e-9_f64.max(1e-6 * k.abs())
+    })
 }
 
 /// The error of reading `log`.

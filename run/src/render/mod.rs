@@ -739,6 +739,15 @@ fn vote_panel(
         };
         let line = match &d.stop {
             Some(reason) => format!("STOP: {reason}"),
+            None if c.is_turn_in_place() => format!(
+                "manoeuvre: turning {} in place at {:.0}°/s",
+                if c.turn_rate_radps > 0.0 {
+                    "left"
+                } else {
+                    "right"
+                },
+                c.turn_rate_radps.abs().to_degrees()
+            ),
             None if d.is_manoeuvre() => format!(
                 "manoeuvre: curvature {:+.4} 1/m (radius {radius}), {:.2} m/s",
                 c.curvature, c.speed_mps

@@ -82,9 +82,12 @@ pub fn compare(
     for (t, ca) in a {
         let Some(cb) = b.get(t) else { continue };
         compared += 1;
+        // A turn in place's curvature is ±∞ (equal, not near).
+        let (ka, kb) = (ca.command.curvature, cb.command.curvature);
         let same = ca.command.arc_index == cb.command.arc_index
             && (ca.command.speed_mps - cb.command.speed_mps).abs() < 1e-6
-            && (ca.command.curvature - cb.command.curvature).abs() < 1e-9;
+            && (ka == kb || (ka - kb).abs() < 1e-9)
+            && (ca.command.turn_rate_radps - cb.command.turn_rate_radps).abs() < 1e-9;
         if same {
             continue;
         }
@@ -99,9 +102,14 @@ pub fn compare(
     let largest = differences
         .iter()
         .max_by(|x, y| {
-            (x.a.curvature - x.b.curvature)
-                .abs()
-                .total_cmp(&(y.a.curvature - y.b.curvature).abs())
+            let apart = |d: &Difference| {
+                if d.a.curvature == d.b.curvature {
+                    0.0
+                } else {
+                    (d.a.curvature - d.b.curvature).abs()
+                }
+            };
+            apart(x).total_cmp(&apart(y))
         })
         .cloned();
     Comparison {
