@@ -86,7 +86,8 @@ pub enum ExternalError {
 /// the pipeline's behaviours (after the built-in ones, in name order).
 pub fn attach(config: &Resolved, pipeline: &mut Pipeline) -> Result<(), ExternalError> {
     for (name, external) in &config.external {
-        let behaviour = ExternalBehaviour::start(name, external, &config.arcs)?;
+        let behaviour =
+            ExternalBehaviour::start(name, external, &config.arcs, config.vehicle.kinematics)?;
         pipeline.behaviours.push(Box::new(behaviour));
     }
     Ok(())
@@ -140,14 +141,19 @@ pub struct ExternalBehaviour {
     fault: Option<String>,
     counts: ExternalCounts,
     buf: Vec<u8>,
+    /// How commands go on the wire (`[vehicle] kinematics`).
+    kinematics: arcnav_vehicle::Kinematics,
 }
 
 impl ExternalBehaviour {
-    /// Starts `config.command` as behaviour `name`, voting over `arcs`.
+    /// Starts `config.command` as behaviour `name`, voting over `arcs`,
+    /// for a vehicle of `kinematics` (which sets the type of the commands
+    /// it is sent, as on the bus).
     pub fn start(
         name: &str,
         config: &ExternalConfig,
         arcs: &ArcSet,
+        kinematics: arcnav_vehicle::Kinematics,
     ) -> Result<Self, ExternalError> {
         let Some((program, args)) = config.command.split_first() else {
             return Err(ExternalError::NoCommand { name: name.into() });
@@ -184,6 +190,7 @@ impl ExternalBehaviour {
             channel: channels::arc_votes(name),
             config: config.clone(),
             arcs: arcs.clone(),
+            kinematics,
             child: Some(child),
             to_program: Some(to_program),
             from_program,
@@ -219,10 +226,17 @@ impl ExternalBehaviour {
         if let Some(command) = ctx.last_command
             && self.command_sent != Some(command.utime)
         {
-            put(
-                channels::STEERING_COMMAND,
-                &steering_command_t::from(command),
-            )?;
+            // The type the bus carries for this vehicle.
+            match self.kinematics {
+                arcnav_vehicle::Kinematics::Ackermann => put(
+                    channels::STEERING_COMMAND,
+                    &steering_command_t::from(command),
+                )?,
+                arcnav_vehicle::Kinematics::SkidSteer => put(
+                    channels::STEERING_COMMAND,
+                    &arcnav_bus::lcmtypes::drive_command_t::from(command),
+                )?,
+            }
             self.command_sent = Some(command.utime);
         }
         put(channels::POSE, &pose_t::from(ctx.pose))?;
