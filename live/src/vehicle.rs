@@ -69,9 +69,13 @@ pub struct Executed {
     /// The command's own stamp (the arbiter's cycle time); the tick's time
     /// for stops the bridge makes itself.
     pub command_utime: i64,
+    /// 1/m, + left (JSON `null` when turning in place: ±∞).
     pub curvature: f64,
     /// The speed to execute: the command's, held to the guard's verdict.
     pub speed_mps: f64,
+    /// The yaw rate to execute, rad/s, + left: speed × curvature on an
+    /// arc, the turn's rate in place (a skid-steer vehicle), 0 stopped.
+    pub yaw_rate_radps: f64,
     pub arc_index: Option<usize>,
     pub guard: Guarded,
     /// Why the guard slowed or stopped the vehicle.
@@ -87,6 +91,7 @@ impl Executed {
             command_utime: command.utime,
             curvature: command.curvature,
             speed_mps: command.speed_mps,
+            yaw_rate_radps: command.yaw_rate(),
             arc_index: command.arc_index,
             guard: Guarded::Off,
             guard_reason: None,
@@ -112,7 +117,11 @@ impl Executed {
                 speed_mps: self.speed_mps,
                 arc_index: self.arc_index,
                 vote: 0.0,
-                turn_rate_radps: 0.0,
+                turn_rate_radps: if self.curvature.is_infinite() {
+                    self.yaw_rate_radps
+                } else {
+                    0.0
+                },
             },
             _ => SteeringCommand::stop(self.command_utime),
         }
