@@ -982,14 +982,12 @@ fn the_skid_steer_preset_turns_round_in_place_where_the_hmmwv_makes_a_k_point_tu
         for event in TypedEvents::new(LogReader::open(out.join("mission.lcm")).unwrap()) {
             match event.unwrap().message {
                 AnyMessage::SteeringCommand(_) => panic!("{tag}: a steering_command_t"),
-                AnyMessage::DriveCommand(c) => {
-                    if c.curvature.is_infinite() {
-                        assert!(
-                            c.speed == 0.0 && c.yaw_rate * c.curvature > 0.0,
-                            "{tag}: {c:?}"
-                        );
-                        turning += 1;
-                    }
+                AnyMessage::DriveCommand(c) if c.curvature.is_infinite() => {
+                    assert!(
+                        c.speed == 0.0 && c.yaw_rate * c.curvature > 0.0,
+                        "{tag}: {c:?}"
+                    );
+                    turning += 1;
                 }
                 AnyMessage::Pose(p) => {
                     let pose = arcnav_vehicle::Pose::try_from(&p).unwrap();

@@ -693,18 +693,7 @@ fn where_nothing_behind_is_known_it_turns_towards_the_way_forwards_as_far_as_the
 /// K-point turn of an Ackermann vehicle, on the driving arcs.
 #[test]
 fn a_vehicle_that_turns_in_place_turns_round_in_place_where_the_turn_is_clear() {
-    let vehicle = VehicleConfig {
-        length_m: 1.52,
-        width_m: 1.38,
-        rear_overhang_m: 0.26,
-        wheelbase_m: 1.0,
-        min_turning_radius_m: 1.0,
-        track_m: 1.1,
-        wheel_radius_m: 0.3,
-        kinematics: arcnav_vehicle::Kinematics::SkidSteer,
-        max_yaw_rate_dps: Some(60.0),
-        ..VehicleConfig::default()
-    };
+    let vehicle = VehicleConfig::warthog();
     let arcs = ArcSet::new(&ArcSetConfig {
         turn_in_place: true,
         ..ArcSetConfig::default()

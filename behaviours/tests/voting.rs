@@ -1657,18 +1657,7 @@ fn a_circle_and_an_l_pass_between_rocks_their_bounding_rectangle_strikes() {
 /// both clear for half a turn, voted +1. Neither is ever backed along.
 #[test]
 fn a_turn_in_place_is_vetoed_towards_a_rock_its_corner_swings_into() {
-    let vehicle = VehicleConfig {
-        length_m: 1.52,
-        width_m: 1.38,
-        rear_overhang_m: 0.26,
-        wheelbase_m: 1.0,
-        min_turning_radius_m: 1.0,
-        track_m: 1.1,
-        wheel_radius_m: 0.3,
-        kinematics: arcnav_vehicle::Kinematics::SkidSteer,
-        max_yaw_rate_dps: Some(60.0),
-        ..VehicleConfig::default()
-    };
+    let vehicle = VehicleConfig::warthog();
     let arcs = ArcSet::new(&ArcSetConfig {
         turn_in_place: true,
         ..ArcSetConfig::default()

@@ -34,6 +34,16 @@ fn the_shipped_default_toml_parses_and_equals_the_defaults() {
     from_toml(DEFAULT_TOML, "config/default.toml").expect("the shipped defaults resolve");
 }
 
+/// `config/skid_steer.toml` is `VehicleConfig::warthog()` (which tests
+/// of turning in place use) and resolves.
+#[test]
+fn the_skid_steer_preset_is_the_warthog_and_resolves() {
+    let text = include_str!("../../config/skid_steer.toml");
+    let resolved = from_toml(text, "config/skid_steer.toml").expect("the preset resolves");
+    assert_eq!(resolved.vehicle, VehicleConfig::warthog());
+    assert!(resolved.arcs.turns_in_place());
+}
+
 #[test]
 fn the_shipped_default_toml_documents_every_key() {
     fn keys(prefix: &str, table: &toml::Table, out: &mut Vec<String>) {

@@ -756,18 +756,7 @@ mod tests {
     /// out lets both through.
     #[test]
     fn a_turn_in_place_is_stopped_where_a_corner_would_swing_into_a_box_beside_it() {
-        let vehicle = VehicleConfig {
-            length_m: 1.52,
-            width_m: 1.38,
-            rear_overhang_m: 0.26,
-            wheelbase_m: 1.0,
-            min_turning_radius_m: 1.0,
-            track_m: 1.1,
-            wheel_radius_m: 0.3,
-            kinematics: arcnav_vehicle::Kinematics::SkidSteer,
-            max_yaw_rate_dps: Some(60.0),
-            ..VehicleConfig::default()
-        };
+        let vehicle = VehicleConfig::warthog();
         let verdicts = |off: f64| {
             let sensor = SensorModel::erim();
             let mut guard = Guard::new(

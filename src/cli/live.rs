@@ -252,16 +252,16 @@ pub fn vehicle(args: VehicleArgs) -> anyhow::Result<ExitCode> {
                 Err(e) => tracing::error!(%e, "cannot write the command as JSON"),
             }
         }
-        if let Some(publisher) = &forward {
-            if let Err(e) = publisher.publish_command(
+        if let Some(publisher) = &forward
+            && let Err(e) = publisher.publish_command(
                 channels::STEERING_COMMAND,
                 &executed.command(),
                 config.vehicle.kinematics,
-            ) && !forward_failed
-            {
-                forward_failed = true;
-                tracing::error!(%e, "cannot forward the command to the controller");
-            }
+            )
+            && !forward_failed
+        {
+            forward_failed = true;
+            tracing::error!(%e, "cannot forward the command to the controller");
         }
     })?;
     drop(stdout);

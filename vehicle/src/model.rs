@@ -105,6 +105,28 @@ impl Default for VehicleConfig {
 }
 
 impl VehicleConfig {
+    /// A Warthog-class skid-steer vehicle (Clearpath Warthog: 1.52 m ×
+    /// 1.38 m, 0.25 m clearance, 5 m/s), turning in place at 60°/s about
+    /// the middle of its 1 m wheelbase: the `[vehicle]` of
+    /// `config/skid_steer.toml` (a test holds the two equal).
+    pub fn warthog() -> Self {
+        Self {
+            length_m: 1.52,
+            width_m: 1.38,
+            rear_overhang_m: 0.26,
+            wheelbase_m: 1.0,
+            min_turning_radius_m: 1.0,
+            max_speed_mps: 5.0,
+            max_curvature_rate: 1.0,
+            ground_clearance_m: 0.25,
+            wheel_radius_m: 0.3,
+            track_m: 1.1,
+            kinematics: Kinematics::SkidSteer,
+            max_yaw_rate_dps: Some(60.0),
+            ..Self::default()
+        }
+    }
+
     /// Checks every value; keys are relative to `[vehicle]`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         config::positive("length_m", self.length_m)?;
