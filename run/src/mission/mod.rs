@@ -34,7 +34,7 @@ use arcnav_wire as wire;
 pub use guarded::{GuardEvent, GuardReport};
 pub use report::{
     FaultReport, MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats,
-    TrackPoint,
+    TrackPoint, TurnInPlaceMark,
 };
 
 /// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
@@ -117,8 +117,41 @@ struct MissionSink<'a> {
     snapshots: Vec<PathBuf>,
     config: &'a Resolved,
     track: Vec<TrackPoint>,
+    /// Where the vehicle turned in place, and how far.
+    turns_in_place: Vec<TurnInPlaceMark>,
+    /// The heading at the last command, while turning in place.
+    turning_from: Option<f64>,
     /// The behaviours' overlays of the cycle whose snapshot is due.
     overlays: Vec<(String, arcnav_behaviours::Overlay)>,
+}
+
+impl MissionSink<'_> {
+    /// Marks a turn in place: begun where the first of its commands was
+    /// sent, the heading turned summed over the decisions it lasted.
+    fn mark_turn_in_place(&mut self, at: Utime, command: &SteeringCommand, map: &MapSnapshot) {
+        let yaw = arcnav_vehicle::frames::yaw_of(&map.world_from_vehicle);
+        if let (Some(before), Some(mark)) = (self.turning_from, self.turns_in_place.last_mut()) {
+            mark.turned_deg += arcnav_vehicle::frames::wrap_angle(yaw - before).to_degrees();
+        }
+        self.turning_from = None;
+        if command.is_turn_in_place() {
+            if self.turns_in_place.last().is_none_or(|m| m.ended.is_some()) {
+                let t = map.world_from_vehicle.translation.vector;
+                self.turns_in_place.push(TurnInPlaceMark {
+                    x: t.x,
+                    y: t.y,
+                    utime: at,
+                    turned_deg: 0.0,
+                    ended: None,
+                });
+            }
+            self.turning_from = Some(yaw);
+        } else if let Some(mark) = self.turns_in_place.last_mut()
+            && mark.ended.is_none()
+        {
+            mark.ended = Some(at);
+        }
+    }
 }
 
 impl Sink for MissionSink<'_> {
@@ -150,11 +183,16 @@ impl Sink for MissionSink<'_> {
     ) {
         self.log.command(at, command, self.kinematics, reason);
         self.commands.push(*command);
-        if let Some(previous) = self.previous_curvature {
-            self.curvature_change.0 += (command.curvature - previous).abs();
-            self.curvature_change.1 += 1;
+        // Steering between driving arcs: a turn in place (±∞) steers no
+        // wheels, and is marked on the map instead.
+        if command.curvature.is_finite() {
+            if let Some(previous) = self.previous_curvature {
+                self.curvature_change.0 += (command.curvature - previous).abs();
+                self.curvature_change.1 += 1;
+            }
+            self.previous_curvature = Some(command.curvature);
         }
-        self.previous_curvature = Some(command.curvature);
+        self.mark_turn_in_place(at, command, map);
         if command.is_stop() {
             self.stops.stop_commands += 1;
             if !self.stopped {
@@ -314,6 +352,8 @@ pub fn run_mission(
         snapshots: Vec::new(),
         config,
         track: Vec::new(),
+        turns_in_place: Vec::new(),
+        turning_from: None,
         overlays: Vec::new(),
     };
     let mission = mission_of(&world, t0);
@@ -430,6 +470,7 @@ pub fn run_mission(
     Ok(MissionRun {
         report,
         track: sink.track,
+        turns_in_place: sink.turns_in_place,
         image_positions: simulator.image_positions().to_vec(),
         obstacle_patches: sink.patches,
         seen_patches: sink.seen.patches(),

@@ -195,11 +195,27 @@ pub struct TrackPoint {
     pub speed_mps: f64,
 }
 
+/// Where a vehicle turned in place (a skid-steer vehicle's turn round).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TurnInPlaceMark {
+    /// Where it began, world frame, m.
+    pub x: f64,
+    pub y: f64,
+    /// The first command of the turn.
+    pub utime: Utime,
+    /// Heading turned, degrees, + left.
+    pub turned_deg: f64,
+    /// The first command after it; `None` while it lasts.
+    pub ended: Option<Utime>,
+}
+
 /// Everything a mission produced.
 #[derive(Debug, Clone)]
 pub struct MissionRun {
     pub report: MissionReport,
     pub track: Vec<TrackPoint>,
+    /// Where the vehicle turned in place.
+    pub turns_in_place: Vec<TurnInPlaceMark>,
     /// Where images were taken.
     pub image_positions: Vec<[f64; 2]>,
     /// World patches that were ever in the local map (i, j), with the

@@ -224,6 +224,40 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
             ),
         );
     }
+    // Where the vehicle turned in place: a circular arrow the way it
+    // turned, and how far.
+    for turn in &run.turns_in_place {
+        let (x, y) = to_px(turn.x, turn.y);
+        let r = 11.0f32;
+        let sweep = (turn.turned_deg.abs().min(330.0) as f32)
+            .to_radians()
+            .max(0.5);
+        let side = if turn.turned_deg >= 0.0 { 1.0f32 } else { -1.0 };
+        // Screen y points down: a left (anticlockwise) turn runs to -y.
+        let at = |a: f32| (x + r * a.cos(), y - side * r * a.sin());
+        let arc: Vec<(f32, f32)> = (0..=24).map(|k| at(sweep * k as f32 / 24.0)).collect();
+        canvas.polyline(&arc, TURN_IN_PLACE, 2.5, false);
+        let (hx, hy) = at(sweep);
+        let (bx, by) = at(sweep - 0.45);
+        let (dx, dy) = (hx - bx, hy - by);
+        canvas.polyline(
+            &[
+                (bx - 0.6 * dy, by + 0.6 * dx),
+                (hx, hy),
+                (bx + 0.6 * dy, by - 0.6 * dx),
+            ],
+            TURN_IN_PLACE,
+            2.5,
+            false,
+        );
+        canvas.label(
+            x + r + 4.0,
+            y + 4.0,
+            12.0,
+            TURN_IN_PLACE,
+            &format!("turned {:.0}° in place", turn.turned_deg.abs()),
+        );
+    }
     for c in &run.report.collisions {
         let (x, y) = to_px(c.position[0], c.position[1]);
         canvas.polyline(&[(x - 8.0, y - 8.0), (x + 8.0, y + 8.0)], RED, 3.0, false);
@@ -350,6 +384,8 @@ const NO_GROUND: [u8; 3] = [205, 205, 205];
 const AREA_EDGE: Rgba = [40, 40, 160, 255];
 /// The cells that closed a waypoint off.
 const NO_ROUTE: Rgba = [200, 0, 160, 255];
+/// Turns in place on the map.
+const TURN_IN_PLACE: Rgba = [120, 40, 200, 255];
 
 fn shade_terrain(
     canvas: &mut Canvas,
