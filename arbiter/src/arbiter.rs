@@ -555,11 +555,11 @@ impl Arbiter {
         // ends of the set (if any) are read apart, their clearance an angle.
         let driving = self.arcs.driving();
         let turns = self.arcs.turns_in_place().then(|| {
-            let last = self.arcs.len() - 1;
-            [
-                (0, self.forward[0], self.preference[0]),
-                (last, self.forward[last], self.preference[last]),
-            ]
+            [0, self.arcs.len() - 1].map(|arc| recovery::TurnArc {
+                arc,
+                clear: self.forward[arc],
+                vote: self.preference[arc],
+            })
         });
         let behind = Behind {
             clearance: &self.clearance[driving.clone()],

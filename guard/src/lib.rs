@@ -288,7 +288,7 @@ impl Guard {
             response: SteeringResponse::of(vehicle),
             footprint: vehicle.footprint().widened(config.side_margin_m),
             turn_centre: vehicle.turn_centre(),
-            turn_stop_s: vehicle.command_latency_s + 0.5 * arcnav_vehicle::motion::TURN_RATE_RAMP_S,
+            turn_stop_s: arcnav_vehicle::MotionLimits::from_vehicle(vehicle).turn_stop_s(),
             max_tilt_rad: (vehicle.max_slope_deg - config.tilt_margin_deg)
                 .max(0.0)
                 .to_radians(),

@@ -6,9 +6,8 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use arcnav_arbiter::{BehaviourVotes, Reason};
-use arcnav_bus::lcmtypes::{drive_command_t, steering_command_t};
 use arcnav_bus::log::{LogWriteError, LogWriter};
-use arcnav_bus::messages::channels;
+use arcnav_bus::messages::{AnyMessage, channels};
 use arcnav_perception::ObstacleReport;
 use arcnav_vehicle::{ArcSet, Kinematics, SteeringCommand, Utime};
 
@@ -101,18 +100,13 @@ impl<'a, E: From<WriteFailed>> Recorder<'a, E> {
         kinematics: Kinematics,
         reason: &Reason,
     ) {
-        match kinematics {
-            Kinematics::Ackermann => self.message(
-                at,
-                channels::STEERING_COMMAND,
-                &steering_command_t::from(command),
-            ),
-            Kinematics::SkidSteer => self.message(
-                at,
-                channels::STEERING_COMMAND,
-                &drive_command_t::from(command),
-            ),
-        }
+        let message = AnyMessage::command(command, kinematics);
+        self.write(|writer| {
+            let data = message.encode()?;
+            writer
+                .write_event(at, channels::STEERING_COMMAND, &data)
+                .map(drop)
+        });
         self.message(
             at,
             channels::DECISION,

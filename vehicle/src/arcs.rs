@@ -584,22 +584,6 @@ impl TurnInPlace {
             heading,
         }
     }
-
-    /// Body outlines every `step_rad` through the turn (for drawing).
-    pub fn outlines(&self, step_rad: f64) -> Vec<Vec<Point2<f64>>> {
-        let outline = self.footprint.outline();
-        let steps = if step_rad > 0.0 {
-            (self.max_angle / step_rad).ceil().clamp(1.0, 720.0) as usize
-        } else {
-            1
-        };
-        (0..=steps)
-            .map(|i| {
-                let pose = self.pose_at(self.max_angle * i as f64 / steps as f64);
-                outline.iter().map(|c| pose.transform_point(*c)).collect()
-            })
-            .collect()
-    }
 }
 
 #[cfg(test)]

@@ -66,6 +66,13 @@ impl MotionLimits {
         }
     }
 
+    /// How long a turn in place goes on once told to stop, s: the
+    /// command's latency at its rate, then the rate's ramp down (half of
+    /// [`TURN_RATE_RAMP_S`] at that rate). Times the rate, the angle.
+    pub fn turn_stop_s(&self) -> f64 {
+        micros_to_seconds(self.latency_us) + 0.5 * TURN_RATE_RAMP_S
+    }
+
     /// An ideal vehicle: commands act at once and in full.
     pub fn unlimited() -> Self {
         Self {

@@ -33,13 +33,29 @@ pub(crate) struct Behind<'a> {
     /// Index in the arc set of these slices' first arc (the arcs before
     /// it turn in place).
     pub offset: usize,
-    /// The turns in place, right and left: their index in the arc set,
-    /// the angle the behaviours judging ground found them clear (radians)
-    /// and their fused vote.
-    pub turns: Option<[(usize, Option<f64>, f32); 2]>,
+    /// The turns in place, right and left.
+    pub turns: Option<[TurnArc; 2]>,
+}
+
+/// A turn in place as the arbiter knows it at one decision.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct TurnArc {
+    /// Its index in the arc set.
+    pub arc: usize,
+    /// The angle the behaviours judging ground found it clear, radians.
+    pub clear: Option<f64>,
+    /// Its fused vote.
+    pub vote: f32,
 }
 
 impl Behind<'_> {
+    /// The turn in place towards `side` (+1 left, -1 right), if the arc
+    /// set has turns in place.
+    pub(super) fn turn(&self, side: f64) -> Option<TurnArc> {
+        let [right, left] = self.turns?;
+        Some(if side > 0.0 { left } else { right })
+    }
+
     /// The clearance along `arc` driven forwards or backing up.
     pub(super) fn clear(&self, arc: usize, reverse: bool) -> Option<f64> {
         let side = if reverse {

@@ -82,8 +82,8 @@ use serde::Serialize;
 mod behind;
 mod config;
 
-pub(crate) use behind::Behind;
 use behind::Leg;
+pub(crate) use behind::{Behind, TurnArc};
 pub use config::RecoveryConfig;
 
 /// A leg starts moving once the steering is this near its curvature, 1/m
@@ -161,11 +161,10 @@ enum Mode {
         leg: Leg,
         legs: u32,
     },
-    /// Turning in place towards `side` on the arc-set arc `arc` (a vehicle
-    /// that can, where another makes a K-point turn).
+    /// Turning in place towards `side` (a vehicle that can, where another
+    /// makes a K-point turn).
     Spinning {
         side: f64,
-        arc: usize,
     },
     /// Undoing the vehicle's own motions, newest first, for at most
     /// `budget_m`; towards a turn to `side`, until there is room to turn.
@@ -290,6 +289,11 @@ impl Recovery {
         }
         self.trail
             .record(&before, odometer_before, &after, odometer);
+        if matches!(self.mode, Mode::Turning { .. } | Mode::Spinning { .. }) {
+            let turned = wrap_angle(after.yaw - before.yaw).to_degrees().abs();
+            self.stats.turned_deg += turned;
+            self.turn_deg += turned;
+        }
         let leg = match &mut self.mode {
             Mode::Forward => {
                 if distance > 0.0 {
@@ -303,19 +307,8 @@ impl Recovery {
                 return;
             }
             Mode::Backing(leg) => leg,
-            Mode::Turning { leg, .. } => {
-                let turned = wrap_angle(after.yaw - before.yaw).to_degrees().abs();
-                self.stats.turned_deg += turned;
-                self.turn_deg += turned;
-                leg
-            }
-            Mode::Spinning { .. } => {
-                let turned = wrap_angle(after.yaw - before.yaw).to_degrees().abs();
-                self.stats.turned_deg += turned;
-                self.turn_deg += turned;
-                return;
-            }
-            Mode::Retracing { .. } => return,
+            Mode::Turning { leg, .. } => leg,
+            Mode::Spinning { .. } | Mode::Retracing { .. } => return,
         };
         if (distance < 0.0) == leg.reverse {
             leg.done_m += distance.abs();
@@ -428,7 +421,7 @@ impl Recovery {
                 self.start_turn_leg(side, next, legs + 1);
                 self.step(now, blocked, safe, behind)
             }
-            Mode::Spinning { side, arc } => self.spin(now, side, arc, blocked, behind),
+            Mode::Spinning { side } => self.spin(now, side, blocked, behind),
             Mode::Retracing {
                 side,
                 done_m,
@@ -625,8 +618,7 @@ impl Recovery {
         }
         // A vehicle that turns in place turns round so, where that turn is
         // clear.
-        if let Some((side, arc)) = side.and_then(|side| Some((side, self.spin_arc(side, behind)?)))
-        {
+        if let Some(side) = side.filter(|&side| self.can_spin(side, behind)) {
             self.begin();
             self.stats.turns += 1;
             self.stats.turns_in_place += 1;
@@ -637,7 +629,7 @@ impl Recovery {
                 side,
                 "blocked, the way behind: turning round in place"
             );
-            self.mode = Mode::Spinning { side, arc };
+            self.mode = Mode::Spinning { side };
             return self.step(now, blocked, true, behind);
         }
         // Turning round starts with the leg that has room: backing first.
@@ -694,27 +686,19 @@ impl Recovery {
         self.step(now, blocked, true, behind)
     }
 
-    /// The turn in place towards `side` (its index in the arc set), if the
-    /// arc set has one and it is clear for at least [`SPIN_MIN_RAD`].
-    fn spin_arc(&self, side: f64, behind: &Behind<'_>) -> Option<usize> {
-        if self.limits.max_turn_rate <= 0.0 {
-            return None;
-        }
-        let [right, left] = behind.turns?;
-        let (arc, clear, _) = if side > 0.0 { left } else { right };
-        (clear? >= SPIN_MIN_RAD).then_some(arc)
+    /// Whether the vehicle turns in place and its turn towards `side` is
+    /// clear for at least [`SPIN_MIN_RAD`].
+    fn can_spin(&self, side: f64, behind: &Behind<'_>) -> bool {
+        self.limits.max_turn_rate > 0.0
+            && behind
+                .turn(side)
+                .and_then(|turn| turn.clear)
+                .is_some_and(|clear| clear >= SPIN_MIN_RAD)
     }
 
     /// Turning in place: on while the way lies behind and the turn is
     /// clear for more than the vehicle turns while it stops turning.
-    fn spin(
-        &mut self,
-        now: Utime,
-        side: f64,
-        arc: usize,
-        blocked: bool,
-        behind: &Behind<'_>,
-    ) -> Outcome {
+    fn spin(&mut self, now: Utime, side: f64, blocked: bool, behind: &Behind<'_>) -> Outcome {
         if self.wish_ahead(side, behind) {
             tracing::info!(
                 t_s = micros_to_seconds(now),
@@ -725,15 +709,12 @@ impl Recovery {
             return self.end(now, blocked);
         }
         let rate = self.model.as_ref().map_or(0.0, |m| m.turn_rate().abs());
-        let latency = micros_to_seconds(self.limits.latency_us);
-        // Turned while the command to stop acts, then while the rate ramps
-        // down, and a margin.
-        let stopping = rate * latency
-            + 0.5 * rate * arcnav_vehicle::motion::TURN_RATE_RAMP_S
-            + SPIN_MARGIN_RAD;
-        let [right, left] = behind.turns.unwrap_or([(0, None, 0.0); 2]);
-        let clear = if side > 0.0 { left.1 } else { right.1 }.unwrap_or(0.0);
-        if clear <= stopping || self.turn_deg >= SPIN_MAX_DEG {
+        // Turned while the command to stop acts and the rate ramps down,
+        // and a margin.
+        let stopping = rate * self.limits.turn_stop_s() + SPIN_MARGIN_RAD;
+        let turn = behind.turn(side);
+        let clear = turn.and_then(|turn| turn.clear).unwrap_or(0.0);
+        let Some(turn) = turn.filter(|_| clear > stopping && self.turn_deg < SPIN_MAX_DEG) else {
             tracing::info!(
                 t_s = micros_to_seconds(now),
                 turned_deg = self.turn_deg,
@@ -742,13 +723,12 @@ impl Recovery {
             );
             self.unfinished_turn = Some(side);
             return self.end(now, blocked);
-        }
-        let vote = if side > 0.0 { left.2 } else { right.2 };
+        };
         Outcome::Drive(SteeringCommand::turn_in_place(
             now,
             side * self.limits.max_turn_rate,
-            arc,
-            vote,
+            turn.arc,
+            turn.vote,
         ))
     }
 

@@ -31,9 +31,10 @@ use std::time::{Duration, Instant};
 
 use arcnav_arbiter::Votes;
 use arcnav_behaviours::{Behaviour, VoteContext};
-use arcnav_bus::Message;
-use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
+use arcnav_bus::lcmtypes::pose_t;
+use arcnav_bus::messages::AnyMessage;
 use arcnav_bus::messages::channels;
+use arcnav_bus::{EncodeError, Message};
 use arcnav_config::Resolved;
 use arcnav_pipeline::{ExternalConfig, Pipeline};
 use arcnav_vehicle::{ArcSet, Utime};
@@ -214,37 +215,34 @@ impl ExternalBehaviour {
     fn cycle_frames(&mut self, ctx: &VoteContext<'_>) -> Result<Vec<u8>, String> {
         let mut out = std::mem::take(&mut self.buf);
         out.clear();
-        let mut put = |channel: &str, message: &dyn Encode| -> Result<(), String> {
-            let payload = message.encoded().map_err(|e| format!("{channel}: {e}"))?;
+        let mut put = |channel: &str, payload: Result<Vec<u8>, EncodeError>| {
+            let payload = payload.map_err(|e| format!("{channel}: {e}"))?;
             frames::encode(channel, &payload, &mut out);
-            Ok(())
+            Ok::<(), String>(())
         };
         if self.mission_sent != Some(ctx.mission.version) {
-            put(channels::WAYPOINTS, &wire::mission_to_wire(ctx.mission))?;
+            put(
+                channels::WAYPOINTS,
+                wire::mission_to_wire(ctx.mission).encode(),
+            )?;
             self.mission_sent = Some(ctx.mission.version);
         }
         if let Some(command) = ctx.last_command
             && self.command_sent != Some(command.utime)
         {
             // The type the bus carries for this vehicle.
-            match self.kinematics {
-                arcnav_vehicle::Kinematics::Ackermann => put(
-                    channels::STEERING_COMMAND,
-                    &steering_command_t::from(command),
-                )?,
-                arcnav_vehicle::Kinematics::SkidSteer => put(
-                    channels::STEERING_COMMAND,
-                    &arcnav_bus::lcmtypes::drive_command_t::from(command),
-                )?,
-            }
+            put(
+                channels::STEERING_COMMAND,
+                AnyMessage::command(command, self.kinematics).encode(),
+            )?;
             self.command_sent = Some(command.utime);
         }
-        put(channels::POSE, &pose_t::from(ctx.pose))?;
+        put(channels::POSE, pose_t::from(ctx.pose).encode())?;
         let mut map = wire::map_to_wire(ctx.utime, ctx.pose, ctx.map, self.resets);
         if !self.config.elevation {
             wire::drop_elevation(&mut map);
         }
-        put(channels::LOCAL_MAP, &map)?;
+        put(channels::LOCAL_MAP, map.encode())?;
         Ok(out)
     }
 
@@ -373,17 +371,6 @@ impl ExternalBehaviour {
         tracing::warn!("{message}; the run goes on without it");
         self.counts.ended = 1;
         self.fault = Some(message);
-    }
-}
-
-/// A message that can be framed.
-trait Encode {
-    fn encoded(&self) -> Result<Vec<u8>, arcnav_bus::EncodeError>;
-}
-
-impl<M: Message> Encode for M {
-    fn encoded(&self) -> Result<Vec<u8>, arcnav_bus::EncodeError> {
-        self.encode()
     }
 }
 

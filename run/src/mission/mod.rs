@@ -130,26 +130,22 @@ impl MissionSink<'_> {
     /// sent, the heading turned summed over the decisions it lasted.
     fn mark_turn_in_place(&mut self, at: Utime, command: &SteeringCommand, map: &MapSnapshot) {
         let yaw = arcnav_vehicle::frames::yaw_of(&map.world_from_vehicle);
-        if let (Some(before), Some(mark)) = (self.turning_from, self.turns_in_place.last_mut()) {
+        // The heading when the last command turned in place: a turn under way.
+        let under_way = self.turning_from.take();
+        if let (Some(before), Some(mark)) = (under_way, self.turns_in_place.last_mut()) {
             mark.turned_deg += arcnav_vehicle::frames::wrap_angle(yaw - before).to_degrees();
         }
-        self.turning_from = None;
         if command.is_turn_in_place() {
-            if self.turns_in_place.last().is_none_or(|m| m.ended.is_some()) {
+            if under_way.is_none() {
                 let t = map.world_from_vehicle.translation.vector;
                 self.turns_in_place.push(TurnInPlaceMark {
                     x: t.x,
                     y: t.y,
                     utime: at,
                     turned_deg: 0.0,
-                    ended: None,
                 });
             }
             self.turning_from = Some(yaw);
-        } else if let Some(mark) = self.turns_in_place.last_mut()
-            && mark.ended.is_none()
-        {
-            mark.ended = Some(at);
         }
     }
 }

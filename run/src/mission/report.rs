@@ -205,8 +205,6 @@ pub struct TurnInPlaceMark {
     pub utime: Utime,
     /// Heading turned, degrees, + left.
     pub turned_deg: f64,
-    /// The first command after it; `None` while it lasts.
-    pub ended: Option<Utime>,
 }
 
 /// Everything a mission produced.
