@@ -107,6 +107,8 @@ pub(crate) fn perception_worker(
         status.set("clock_restart", node.drops.clock_restart);
         status.set("too_many_sensors", node.drops.too_many_sensors);
         status.set("late", node.late);
+        status.set("fused_evaluations", node.fused.evaluations);
+        status.set("fused_images", node.fused.images);
         let s = node.slices;
         status.dropped += s.invalid + s.stream.out_of_order + s.stream.inconsistent;
         status.set("slices", s.received);

@@ -22,6 +22,11 @@ pub struct PerceptionConfig {
     pub max_range_m: f64,
     /// Most vertices of the field-of-view polygon sent to the local map.
     pub fov_max_vertices: usize,
+    /// Images of different sensors captured within this many seconds of
+    /// each other are judged together, in one height map (000 §4.1's
+    /// eight cameras), by an evaluator that builds one (`height_diff`);
+    /// 0: each image on its own. See [`crate::TerrainEvaluator::evaluate_fused`].
+    pub fuse_within_s: f64,
     /// The ground evaluated around the vehicle.
     pub region: RegionConfig,
     /// The per-cell classifier of 002 §4.
@@ -44,6 +49,10 @@ pub struct PerceptionConfig {
     pub plugins: BTreeMap<String, toml::Table>,
 }
 
+/// The largest `fuse_within_s`: an image waits up to that long for the
+/// images it is fused with (a ring's cameras are triggered together).
+pub const MAX_FUSE_WITHIN_S: f64 = 0.5;
+
 impl Default for PerceptionConfig {
     fn default() -> Self {
         Self {
@@ -51,6 +60,7 @@ impl Default for PerceptionConfig {
             min_range_m: 0.5,
             max_range_m: 40.0,
             fov_max_vertices: 512,
+            fuse_within_s: 0.0,
             region: RegionConfig::default(),
             cells: CellsConfig::default(),
             drop_off: DropOffConfig::default(),
@@ -302,6 +312,17 @@ impl PerceptionConfig {
             return Err(ConfigError::new(
                 "fov_max_vertices",
                 format!("is {}, must be 6 to 100000", self.fov_max_vertices),
+            ));
+        }
+        config::non_negative("fuse_within_s", self.fuse_within_s)?;
+        if self.fuse_within_s > MAX_FUSE_WITHIN_S {
+            return Err(ConfigError::new(
+                "fuse_within_s",
+                format!(
+                    "is {} s; images are fused within at most {MAX_FUSE_WITHIN_S} s (each waits \
+                     that long on the pose clock for the others)",
+                    self.fuse_within_s
+                ),
             ));
         }
         let r = &self.region;

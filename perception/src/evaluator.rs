@@ -305,6 +305,28 @@ pub trait TerrainEvaluator: Send {
         self.evaluate_with(image, world_from_vehicle, report, &InOrder)
     }
 
+    /// Evaluates images of several sensors captured close together
+    /// (`perception.fuse_within_s`), each with the vehicle pose at its own
+    /// capture, into one report per image (`reports[k]` for `images[k]`,
+    /// which must be as many); returns each image's counts, or why it was
+    /// refused (the others are evaluated all the same). An evaluator that
+    /// builds a height map puts them all into one (000 §4.1's eight
+    /// cameras) and reports each cell with the image its height came from,
+    /// so that the local map keeps and prunes every sensor's cells as
+    /// before. The default judges each image on its own.
+    fn evaluate_fused(
+        &mut self,
+        images: &[(&RangeImage, &Isometry)],
+        reports: &mut [ObstacleReport],
+        runner: &dyn Runner,
+    ) -> Vec<Result<ImageStats, PerceptionError>> {
+        images
+            .iter()
+            .zip(reports)
+            .map(|((image, pose), report)| self.evaluate_with(image, pose, report, runner))
+            .collect()
+    }
+
     /// Forgets anything carried between images (for evaluators that fuse).
     fn reset(&mut self) {}
 

@@ -16,6 +16,10 @@ pub trait EvaluatorPlugin: TerrainEvaluator + Sized + 'static {
     const ABOUT: &'static str;
     /// Its configuration, with the documented defaults in `Default`.
     type Config: Serialize + DeserializeOwned + Default + Clone;
+    /// Whether it judges images of several sensors together, in one
+    /// height map, when `perception.fuse_within_s` asks it to (it then
+    /// overrides [`TerrainEvaluator::evaluate_fused`]).
+    const FUSES_IMAGES: bool = false;
 
     /// Its table, typed: `[perception.plugins.NAME]` (the built-ins read
     /// their own `[perception.NAME]`). Errors name keys relative to

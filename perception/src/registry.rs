@@ -32,6 +32,7 @@ type Builder =
 
 struct Entry {
     about: &'static str,
+    fuses_images: bool,
     validate: Validator,
     build: Builder,
 }
@@ -73,6 +74,7 @@ impl EvaluatorRegistry {
             P::NAME,
             Entry {
                 about: P::ABOUT,
+                fuses_images: P::FUSES_IMAGES,
                 validate: Box::new(|perception, vehicle| {
                     let config = P::config(perception)?;
                     P::validate(&config, perception, vehicle)
@@ -137,7 +139,28 @@ impl EvaluatorRegistry {
                 ),
             ));
         }
-        (self.entry(&perception.evaluator)?.validate)(perception, vehicle)
+        let entry = self.entry(&perception.evaluator)?;
+        if perception.fuse_within_s > 0.0 && !entry.fuses_images {
+            let fusing: Vec<_> = (self.entries.iter())
+                .filter(|(_, e)| e.fuses_images)
+                .map(|(name, _)| *name)
+                .collect();
+            return Err(ConfigError::new(
+                "fuse_within_s",
+                format!(
+                    "is {} s, but evaluator {:?} judges each image alone (images are fused into \
+                     one height map by: {}); set it to 0 or choose one of those",
+                    perception.fuse_within_s,
+                    perception.evaluator,
+                    if fusing.is_empty() {
+                        "none registered".to_owned()
+                    } else {
+                        fusing.join(", ")
+                    }
+                ),
+            ));
+        }
+        (entry.validate)(perception, vehicle)
     }
 
     /// Builds the evaluator `perception.evaluator` names (validate first).

@@ -38,5 +38,5 @@ pub use cycle::{Cycle, CycleCounts, DecisionCycle, Delivery, LocalMapNode, MAX_C
 pub use lockstep::{
     Commands, Discard, FaultCounts, Input, Pipeline, Sink, StageTime, StageTimes, Stopwatch,
 };
-pub use perception::{PerceptionDrops, PerceptionNode, SliceCounts};
+pub use perception::{FusionCounts, PerceptionDrops, PerceptionNode, SliceCounts};
 pub use stats::{Samples, Summary};

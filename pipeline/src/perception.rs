@@ -48,6 +48,26 @@ impl PerceptionDrops {
 /// The most sensors perception keeps state for: the local map's limit.
 pub use arcnav_localmap::MAX_SENSORS;
 
+/// Images judged together (`perception.fuse_within_s`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct FusionCounts {
+    /// Evaluations of more than one image (one height map each).
+    pub evaluations: u64,
+    /// Images judged in them.
+    pub images: u64,
+}
+
+impl FusionCounts {
+    /// Images per fused evaluation (0 when none was).
+    pub fn images_per_evaluation(&self) -> f64 {
+        if self.evaluations == 0 {
+            0.0
+        } else {
+            self.images as f64 / self.evaluations as f64
+        }
+    }
+}
+
 /// A range image or a slice of one, waiting for its pose.
 #[derive(Debug)]
 enum Pending {
@@ -105,6 +125,9 @@ pub struct PerceptionNode {
     /// on the pose clock (still evaluated), and the latest of them, µs.
     pub late: u64,
     pub max_lateness_us: Utime,
+    /// `perception.fuse_within_s`, µs (0: each image alone).
+    fuse_within_us: Utime,
+    pub fused: FusionCounts,
 }
 
 /// An image this long behind the newest pose has arrived late: the vehicle
@@ -147,6 +170,8 @@ impl PerceptionNode {
             totals: ImageStats::default(),
             late: 0,
             max_lateness_us: 0,
+            fuse_within_us: seconds_to_micros(perception.fuse_within_s),
+            fused: FusionCounts::default(),
         })
     }
 
@@ -314,8 +339,28 @@ impl PerceptionNode {
             .front()
             .is_some_and(|pending| pending.due(self.extrapolation_us) <= newest)
         {
+            if self.fuse_within_us > 0
+                && let Some(Pending::Image(_)) = self.waiting.front()
+            {
+                let Some(partners) = self.partners(newest) else {
+                    break; // waits for the images it is fused with
+                };
+                let mut group = Vec::with_capacity(partners.len() + 1);
+                // Taken from the back first, so that the indices hold.
+                for &i in partners.iter().rev() {
+                    if let Some(Pending::Image(image)) = self.waiting.remove(i) {
+                        group.push(image);
+                    }
+                }
+                if let Some(Pending::Image(image)) = self.waiting.pop_front() {
+                    group.push(image);
+                }
+                group.reverse();
+                self.evaluate_together(group, out);
+                continue;
+            }
             match self.waiting.pop_front() {
-                Some(Pending::Image(image)) => self.evaluate(image, out),
+                Some(Pending::Image(image)) => self.evaluate_together(vec![image], out),
                 Some(Pending::Slice(slice)) => self.evaluate_slice(slice, out),
                 None => {}
             }
@@ -325,6 +370,36 @@ impl PerceptionNode {
             self.waiting.pop_front();
             self.drops.no_pose += 1;
         }
+    }
+
+    /// The images waiting to be fused with the first (indices into
+    /// `waiting`, ascending): the first image of each other sensor captured
+    /// within `fuse_within_s` after it. `None` while more may come: until
+    /// the pose clock passes the window's end, unless every sensor known
+    /// (seen, or waiting) is already there.
+    fn partners(&self, newest: Utime) -> Option<Vec<usize>> {
+        let Some(Pending::Image(first)) = self.waiting.front() else {
+            return Some(Vec::new());
+        };
+        let end = first.utime.saturating_add(self.fuse_within_us);
+        let mut found: Vec<(usize, &str)> = Vec::new();
+        for (i, pending) in self.waiting.iter().enumerate().skip(1) {
+            if let Pending::Image(image) = pending
+                && (first.utime..=end).contains(&image.utime)
+                && image.sensor != first.sensor
+                && found.iter().all(|(_, s)| *s != image.sensor)
+            {
+                found.push((i, &image.sensor));
+            }
+        }
+        let waiting_sensors = self.waiting.iter().map(|p| match p {
+            Pending::Image(image) => image.sensor.as_str(),
+            Pending::Slice(slice) => slice.sensor.as_str(),
+        });
+        let complete = (self.sensors.iter().map(String::as_str))
+            .chain(waiting_sensors)
+            .all(|s| s == first.sensor || found.iter().any(|(_, f)| *f == s));
+        (complete || newest >= end).then(|| found.into_iter().map(|(i, _)| i).collect())
     }
 
     /// The pose at `t`: interpolated between poses, or carried ahead from
@@ -422,16 +497,19 @@ impl PerceptionNode {
         self.refresh_stream_counts();
     }
 
-    fn evaluate(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
+    /// The pose `image` was captured at, if it is to be evaluated: from a
+    /// sensor admitted, with a pose around its capture time, newer than
+    /// any image of its sensor already evaluated (each refusal counted).
+    fn admit_image(&mut self, image: &RangeImage) -> Option<Pose> {
         if !self.admit(&image.sensor) {
-            return;
+            return None;
         }
         let pose = match self.poses.at_within(image.utime, self.max_gap_us) {
             Ok(pose) => pose,
             Err(e) => {
                 tracing::debug!(%e, image = image.utime, "image dropped: no pose at capture time");
                 self.drops.no_pose += 1;
-                return;
+                return None;
             }
         };
         if let Some((_, stream)) = self.streams.iter_mut().find(|(s, _)| *s == image.sensor)
@@ -439,7 +517,7 @@ impl PerceptionNode {
         {
             // A whole image no newer than the frame being streamed.
             self.drops.out_of_order += 1;
-            return;
+            return None;
         }
         match self
             .newest_capture
@@ -448,31 +526,58 @@ impl PerceptionNode {
         {
             Some((_, newest)) if image.utime <= *newest => {
                 self.drops.out_of_order += 1;
-                return;
+                return None;
             }
             Some((_, newest)) => *newest = image.utime,
             None => self
                 .newest_capture
                 .push((image.sensor.clone(), image.utime)),
         }
-        let mut report = ObstacleReport::default();
-        match self.evaluator.evaluate_with(
-            &image,
-            &pose.world_from_vehicle,
-            &mut report,
-            &*self.runner,
-        ) {
-            Ok(stats) => {
-                report.acquired = image.utime;
-                self.heights
-                    .sample(&image, &pose.world_from_vehicle, &mut report);
-                self.totals.accumulate(&stats);
-                self.reports += 1;
-                out(report);
+        Some(pose)
+    }
+
+    /// Evaluates `images` (one, or several of different sensors to be
+    /// fused) and hands on a report for each.
+    fn evaluate_together(&mut self, images: Vec<RangeImage>, out: &mut dyn FnMut(ObstacleReport)) {
+        let mut admitted = Vec::with_capacity(images.len());
+        for image in images {
+            if let Some(pose) = self.admit_image(&image) {
+                admitted.push((image, pose.world_from_vehicle));
             }
-            Err(e) => {
-                tracing::warn!(%e, image = image.utime, "image dropped by perception");
-                self.drops.invalid += 1;
+        }
+        let mut reports: Vec<ObstacleReport> = Vec::new();
+        let results = match admitted.as_slice() {
+            [] => return,
+            [(image, pose)] => {
+                reports.push(ObstacleReport::default());
+                vec![
+                    self.evaluator
+                        .evaluate_with(image, pose, &mut reports[0], &*self.runner),
+                ]
+            }
+            several => {
+                reports.resize_with(several.len(), ObstacleReport::default);
+                let placed: Vec<_> = several.iter().map(|(i, p)| (i, p)).collect();
+                self.fused.evaluations += 1;
+                self.fused.images += several.len() as u64;
+                self.evaluator
+                    .evaluate_fused(&placed, &mut reports, &*self.runner)
+            }
+        };
+        for (((image, pose), mut report), result) in admitted.into_iter().zip(reports).zip(results)
+        {
+            match result {
+                Ok(stats) => {
+                    report.acquired = image.utime;
+                    self.heights.sample(&image, &pose, &mut report);
+                    self.totals.accumulate(&stats);
+                    self.reports += 1;
+                    out(report);
+                }
+                Err(e) => {
+                    tracing::warn!(%e, image = image.utime, "image dropped by perception");
+                    self.drops.invalid += 1;
+                }
             }
         }
     }
@@ -487,8 +592,11 @@ mod tests {
     /// A node with the defaults that has had poses at rest every 20 ms for
     /// 3 s (no image yet, so no report).
     fn at_rest_for_3_s() -> PerceptionNode {
-        let mut node =
-            PerceptionNode::new(&PerceptionConfig::default(), &PipelineConfig::default()).unwrap();
+        at_rest_with(&PerceptionConfig::default())
+    }
+
+    fn at_rest_with(perception: &PerceptionConfig) -> PerceptionNode {
+        let mut node = PerceptionNode::new(perception, &PipelineConfig::default()).unwrap();
         for k in 0..=150 {
             let pose = Pose::at_rest(k * 20_000, planar_isometry(0.0, 0.0, 0.0));
             node.on_pose(&pose, &mut |_| panic!("a report before any image"));
@@ -529,5 +637,89 @@ mod tests {
         again.sensor = "s0".into();
         node.on_image(again, &mut |_| reports += 1);
         assert_eq!(reports, MAX_SENSORS + 1);
+    }
+
+    /// With `fuse_within_s`, the images of different sensors captured
+    /// within it are judged together, one report each; an image waits for
+    /// the others until every sensor known has sent one or the pose clock
+    /// passes the window; two images of one sensor are never fused.
+    #[test]
+    fn images_of_different_sensors_within_fuse_within_s_are_judged_together() {
+        let perception = PerceptionConfig {
+            evaluator: "height_diff".into(),
+            fuse_within_s: 0.05,
+            ..PerceptionConfig::default()
+        };
+        let mut node = at_rest_with(&perception);
+        let image = |sensor: &str, utime: Utime| {
+            let mut image = SensorModel::erim().blank_image(utime);
+            image.sensor = sensor.into();
+            image
+        };
+        let mut reports = 0;
+        // Poses every 10 ms up to `t` (the clock stood at 3 s).
+        let mut clock = 3_000_000;
+        let mut until = |node: &mut PerceptionNode, reports: &mut usize, t: Utime| {
+            while clock < t {
+                clock += 10_000;
+                let pose = Pose::at_rest(clock, planar_isometry(0.0, 0.0, 0.0));
+                node.on_pose(&pose, &mut |_| *reports += 1);
+            }
+        };
+        // No sensor known yet: the first is judged alone at once.
+        node.on_image(image("a", 2_990_000), &mut |_| reports += 1);
+        assert_eq!((reports, node.fused.evaluations), (1, 0));
+        // Sensor "a" is known: "b" waits for it...
+        until(&mut node, &mut reports, 3_100_000);
+        node.on_image(image("b", 3_100_000), &mut |_| reports += 1);
+        assert_eq!((reports, node.waiting()), (1, 1));
+        // ...and is fused with it, captured 20 ms later.
+        until(&mut node, &mut reports, 3_120_000);
+        assert_eq!((reports, node.waiting()), (1, 1));
+        node.on_image(image("a", 3_120_000), &mut |_| reports += 1);
+        assert_eq!((reports, node.waiting()), (3, 0));
+        assert_eq!(
+            node.fused,
+            FusionCounts {
+                evaluations: 1,
+                images: 2
+            }
+        );
+        // Both known now: "a" waits for "b", whose image is captured 80 ms
+        // later, outside the window: "a" alone once the pose clock passes
+        // its window, "b" alone once the clock passes its own.
+        until(&mut node, &mut reports, 3_200_000);
+        node.on_image(image("a", 3_200_000), &mut |_| reports += 1);
+        until(&mut node, &mut reports, 3_240_000);
+        assert_eq!((reports, node.waiting()), (3, 1));
+        until(&mut node, &mut reports, 3_280_000);
+        assert_eq!((reports, node.waiting()), (4, 0));
+        node.on_image(image("b", 3_280_000), &mut |_| reports += 1);
+        assert_eq!((reports, node.waiting()), (4, 1));
+        until(&mut node, &mut reports, 3_340_000);
+        assert_eq!((reports, node.waiting()), (5, 0));
+        assert_eq!(
+            node.fused,
+            FusionCounts {
+                evaluations: 1,
+                images: 2
+            }
+        );
+        // A second image of one sensor within the window is not fused with
+        // the first: "a" is fused with "b", the second "a" waits for the
+        // next "b".
+        until(&mut node, &mut reports, 3_420_000);
+        node.on_image(image("a", 3_400_000), &mut |_| reports += 1);
+        node.on_image(image("a", 3_410_000), &mut |_| reports += 1);
+        node.on_image(image("b", 3_405_000), &mut |_| reports += 1);
+        assert_eq!((reports, node.waiting()), (7, 1));
+        assert_eq!(
+            node.fused,
+            FusionCounts {
+                evaluations: 2,
+                images: 4
+            }
+        );
+        assert_eq!(node.drops.total(), 0);
     }
 }

@@ -149,6 +149,7 @@ impl EvaluatorPlugin for HeightDiff {
     const NAME: &'static str = "height_diff";
     const ABOUT: &'static str = "multi-scale height differences of a max-height map with gap filling (000, Schwarz & Behnke)";
     type Config = HeightDiffConfig;
+    const FUSES_IMAGES: bool = true;
 
     fn config(perception: &PerceptionConfig) -> Result<Self::Config, ConfigError> {
         Ok(perception.height_diff.clone())
@@ -221,6 +222,30 @@ impl HeightDiff {
         world_from_vehicle: &Isometry,
         stats: &mut ImageStats,
     ) -> Result<&HeightDiffMaps, PerceptionError> {
+        let images = &images[..images.len().min(usize::from(u8::MAX))];
+        for image in images {
+            image.validate()?;
+        }
+        self.bin(
+            images,
+            |k| grid::level_frames(images[k], world_from_vehicle).1,
+            |_, outliers| stats.outliers += outliers,
+        );
+        self.judge_heights();
+        Ok(&self.maps)
+    }
+
+    /// Bins the filtered returns of each of `images` (valid, at most 255),
+    /// image k placed by `map_from_sensor(k)`, into the height map,
+    /// remembering which image each cell's highest return came from;
+    /// `outliers(k, n)` is told how many returns the median filter removed
+    /// from image k.
+    fn bin(
+        &mut self,
+        images: &[&RangeImage],
+        map_from_sensor: impl Fn(usize) -> Isometry,
+        mut outliers: impl FnMut(usize, u32),
+    ) {
         let n = self.grid.cols * self.grid.rows;
         let maps = &mut self.maps;
         // Heights binned into one array of cells (one cache line per run,
@@ -234,18 +259,19 @@ impl HeightDiff {
         maps.sensor.resize(n, u8::MAX);
         let sensors = &mut maps.sensor;
         for (k, image) in images.iter().enumerate().take(usize::from(u8::MAX)) {
-            image.validate()?;
+            let map_from_sensor = map_from_sensor(k);
             let cols = image.cols();
             let params = median_params(&self.config, self.max_range, image);
-            stats.outliers += self
-                .median
-                .filter(&image.range, cols, &params, &mut self.filtered);
-            let (_, level_from_sensor) = grid::level_frames(image, world_from_vehicle);
+            outliers(
+                k,
+                self.median
+                    .filter(&image.range, cols, &params, &mut self.filtered),
+            );
             let (grid, cell) = (&self.grid, self.cell);
             self.projector.for_each_cell(
                 image,
                 &self.filtered,
-                &level_from_sensor,
+                &map_from_sensor,
                 (self.min_range, self.max_range),
                 (grid, cell),
                 &mut ImageStats::default(),
@@ -272,8 +298,91 @@ impl HeightDiff {
         }));
         self.lowest.clear();
         self.lowest.extend(bins.iter().map(|b| b.lowest));
-        self.judge_heights();
-        Ok(&self.maps)
+    }
+
+    /// Marks, for `image`'s report, the cells of the maps built last whose
+    /// height came from image `owner` of the set: untraversable ones
+    /// (`D̃ ≥ obstacle_cost` or an absolute obstacle) and graded ones. The
+    /// maps lie in the level frame `map`; the marks go on the grid of
+    /// `image`'s own level frame `own` (the same grid when the two are
+    /// one, as for a single image or a ring captured at once). A cell whose
+    /// centre leaves that grid is counted in `outside_grid`.
+    fn mark(&mut self, owner: u8, map: &Isometry, own: &Isometry, stats: &mut ImageStats) {
+        let maps = &self.maps;
+        let obstacle = self.config.obstacle_cost as f32;
+        let graded = self.config.graded_from as f32 * obstacle;
+        let own_from_map = (own != map).then(|| own.inverse() * map);
+        let (cols, cell) = (maps.cols, maps.cell);
+        for i in 0..maps.filled.len() {
+            let h = maps.filled[i];
+            if h.is_nan() || maps.sensor[i] != owner {
+                continue;
+            }
+            stats.cells_evaluated += 1;
+            let cost = maps.cost[i];
+            let untraversable = maps.absolute[i] || cost >= obstacle;
+            if !(untraversable || (graded > 0.0 && cost >= graded)) {
+                continue;
+            }
+            let low = self.lowest[i];
+            let (z_min, z_max) = (if low.is_finite() { low } else { h }, h);
+            let index = match &own_from_map {
+                None => Some(i),
+                Some(own_from_map) => {
+                    let centre = |k: usize, origin: f32| origin + (k as f32 + 0.5) * cell;
+                    let p = own_from_map
+                        * nalgebra::Point3::new(
+                            f64::from(centre(i % cols, maps.origin[0])),
+                            f64::from(centre(i / cols, maps.origin[1])),
+                            0.0,
+                        );
+                    maps.index(p.x as f32, p.y as f32)
+                }
+            };
+            let Some(index) = index else {
+                stats.outside_grid += 1;
+                continue;
+            };
+            // Heights move with the frame's height (level frames differ by
+            // a translation and a yaw).
+            let dz = own_from_map
+                .as_ref()
+                .map_or(0.0, |t| t.translation.vector.z as f32);
+            self.out.marked.push(Marked {
+                index: index as u32,
+                reasons: if untraversable {
+                    Reasons::HEIGHT_DIFFERENCE
+                } else {
+                    Reasons::NONE
+                },
+                cost: if untraversable { 1.0 } else { cost / obstacle },
+                z_min: z_min + dz,
+                z_max: z_max + dz,
+            });
+        }
+    }
+
+    /// The report of image `owner` of the maps built last (lying in the
+    /// level frame `map`): its footprint, shadows and drop-offs, and the
+    /// cells it gave the height of.
+    #[allow(clippy::too_many_arguments)]
+    fn report_member(
+        &mut self,
+        owner: usize,
+        outliers: u32,
+        image: &RangeImage,
+        world_from_vehicle: &Isometry,
+        map: &Isometry,
+        report: &mut ObstacleReport,
+        runner: &dyn Runner,
+    ) -> Result<ImageStats, PerceptionError> {
+        let mut stats = self.out.start(image, world_from_vehicle, runner, report)?;
+        stats.outliers += outliers;
+        let (own, _) = grid::level_frames(image, world_from_vehicle);
+        self.mark(owner as u8, map, &own, &mut stats);
+        self.out
+            .finish(image, world_from_vehicle, report, &mut stats);
+        Ok(stats)
     }
 
     /// Gap filling, height differences and costs of the height map, with
@@ -726,34 +835,73 @@ impl TerrainEvaluator for HeightDiff {
             return Ok(stats);
         }
         self.build_maps(&[image], world_from_vehicle, &mut stats)?;
-        let maps = &self.maps;
-        let obstacle = self.config.obstacle_cost as f32;
-        let graded = self.config.graded_from as f32 * obstacle;
-        for i in 0..maps.filled.len() {
-            let h = maps.filled[i];
-            if h.is_nan() {
-                continue;
-            }
-            stats.cells_evaluated += 1;
-            let cost = maps.cost[i];
-            let untraversable = maps.absolute[i] || cost >= obstacle;
-            if untraversable || (graded > 0.0 && cost >= graded) {
-                let low = self.lowest[i];
-                self.out.marked.push(Marked {
-                    index: i as u32,
-                    reasons: if untraversable {
-                        Reasons::HEIGHT_DIFFERENCE
-                    } else {
-                        Reasons::NONE
-                    },
-                    cost: if untraversable { 1.0 } else { cost / obstacle },
-                    z_min: if low.is_finite() { low } else { h },
-                    z_max: h,
-                });
-            }
-        }
+        let (level, _) = grid::level_frames(image, world_from_vehicle);
+        self.mark(0, &level, &level, &mut stats);
         self.out
             .finish(image, world_from_vehicle, report, &mut stats);
         Ok(stats)
+    }
+
+    /// One height map from every valid image (000 §4.1), in the level
+    /// frame of the newest image's capture pose, each image's returns
+    /// placed with its own pose; differences within each image's cells
+    /// (§4.3); each image reports the cells its returns gave the height of,
+    /// and its own footprint, shadows and drop-offs.
+    fn evaluate_fused(
+        &mut self,
+        images: &[(&RangeImage, &Isometry)],
+        reports: &mut [ObstacleReport],
+        runner: &dyn Runner,
+    ) -> Vec<Result<ImageStats, PerceptionError>> {
+        // The images the map is built of (at most 255: a cell names its
+        // image in a byte), by index into `images`.
+        let mut members = Vec::with_capacity(images.len());
+        let mut results: Vec<Result<ImageStats, PerceptionError>> =
+            Vec::with_capacity(images.len());
+        for (k, (image, _)) in images.iter().enumerate() {
+            let valid = image.validate();
+            if valid.is_ok() && !image.range.is_empty() && members.len() < usize::from(u8::MAX) {
+                members.push(k);
+            }
+            results.push(
+                valid
+                    .map(|()| ImageStats::default())
+                    .map_err(PerceptionError::from),
+            );
+        }
+        let Some(&newest) = members.iter().max_by_key(|&&k| images[k].0.utime) else {
+            // Nothing to build a map of: each image as it is.
+            return images
+                .iter()
+                .zip(reports)
+                .map(|((image, pose), report)| self.evaluate_with(image, pose, report, runner))
+                .collect();
+        };
+        let (map, _) = grid::level_frames(images[newest].0, images[newest].1);
+        let map_from_world = map.inverse();
+        let member_images: Vec<&RangeImage> = members.iter().map(|&k| images[k].0).collect();
+        let mut outliers = vec![0; members.len()];
+        self.bin(
+            &member_images,
+            |j| {
+                let (image, pose) = images[members[j]];
+                map_from_world * pose * image.vehicle_from_sensor
+            },
+            |j, n| outliers[j] = n,
+        );
+        self.judge_heights();
+        for (k, ((image, pose), report)) in images.iter().zip(reports).enumerate() {
+            let owner = members.iter().position(|&m| m == k);
+            let result = match (owner, &results[k]) {
+                (Some(j), Ok(_)) => {
+                    self.report_member(j, outliers[j], image, pose, &map, report, runner)
+                }
+                // Valid but empty: its report says so.
+                (None, Ok(_)) => self.evaluate_with(image, pose, report, runner),
+                (_, Err(_)) => continue,
+            };
+            results[k] = result;
+        }
+        results
     }
 }

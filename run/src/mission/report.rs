@@ -106,6 +106,10 @@ pub struct MissionReport {
     /// with them (slices, steps, lines lost). Absent for whole images.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub slices: Option<arcnav_pipeline::SliceCounts>,
+    /// Images of different sensors judged together in one height map
+    /// (`perception.fuse_within_s`); absent when it is 0.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fused: Option<arcnav_pipeline::FusionCounts>,
     /// Untraversable cells perception reported, summed over the images,
     /// per reason (a cell with two reasons counts in both).
     pub untraversable_cells: BTreeMap<&'static str, u64>,
