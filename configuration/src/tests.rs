@@ -44,6 +44,16 @@ fn the_skid_steer_preset_is_the_warthog_and_resolves() {
     assert!(resolved.arcs.turns_in_place());
 }
 
+/// `config/camera_ring.toml` resolves: 000's four cameras, judged together.
+#[test]
+fn the_camera_ring_preset_resolves_with_four_cameras_judged_together() {
+    let text = include_str!("../../config/camera_ring.toml");
+    let resolved = from_toml(text, "config/camera_ring.toml").expect("the preset resolves");
+    assert_eq!(resolved.sensors.len(), 4);
+    assert_eq!(resolved.perception.evaluator, "height_diff");
+    assert!(resolved.perception.fuse_within_s > 0.0);
+}
+
 #[test]
 fn the_shipped_default_toml_documents_every_key() {
     fn keys(prefix: &str, table: &toml::Table, out: &mut Vec<String>) {

@@ -108,13 +108,20 @@ pub struct StageTime {
 
 impl StageTime {
     fn add(&mut self, started: Option<Instant>, clock: Option<Stopwatch>) {
+        self.add_for(1, started, clock);
+    }
+
+    /// A call that did the work of `n` (images judged together): counted
+    /// as `n`, each taking its share.
+    fn add_for(&mut self, n: usize, started: Option<Instant>, clock: Option<Stopwatch>) {
         let (Some(started), Some(clock)) = (started, clock) else {
             return;
         };
+        let n = n.max(1);
         let ms = clock().duration_since(started).as_secs_f64() * 1e3;
-        self.count += 1;
+        self.count += n as u64;
         self.total_ms += ms;
-        self.max_ms = self.max_ms.max(ms);
+        self.max_ms = self.max_ms.max(ms / n as f64);
     }
 
     pub fn mean_ms(&self) -> f64 {
@@ -315,7 +322,11 @@ impl Pipeline {
         if self.reports.is_empty() {
             return;
         }
-        self.times.perception.add(started, self.stopwatch);
+        // Images judged together (`fuse_within_s`) come out of one call:
+        // each is counted, so that the mean stays a mean per image.
+        self.times
+            .perception
+            .add_for(self.reports.len(), started, self.stopwatch);
         // A blind perception's reports are empty as they leave it; a
         // forgetful map's lose their cells as they reach it.
         let fault = self.fault.active(now).then_some(self.fault.fault);
