@@ -320,11 +320,7 @@ pub trait TerrainEvaluator: Send {
         reports: &mut [ObstacleReport],
         runner: &dyn Runner,
     ) -> Vec<Result<ImageStats, PerceptionError>> {
-        images
-            .iter()
-            .zip(reports)
-            .map(|((image, pose), report)| self.evaluate_with(image, pose, report, runner))
-            .collect()
+        evaluate_each(self, images, reports, runner)
     }
 
     /// Forgets anything carried between images (for evaluators that fuse).
@@ -349,6 +345,19 @@ pub trait TerrainEvaluator: Send {
     fn judges_each_image_alone(&self) -> bool {
         true
     }
+}
+
+/// Each of `images` judged on its own by `evaluator` (what
+/// [`TerrainEvaluator::evaluate_fused`] does unless an evaluator fuses).
+pub fn evaluate_each<E: TerrainEvaluator + ?Sized>(
+    evaluator: &mut E,
+    images: &[(&RangeImage, &Isometry)],
+    reports: &mut [ObstacleReport],
+    runner: &dyn Runner,
+) -> Vec<Result<ImageStats, PerceptionError>> {
+    (images.iter().zip(reports))
+        .map(|((image, pose), report)| evaluator.evaluate_with(image, pose, report, runner))
+        .collect()
 }
 
 /// Time of the last return a report rests on.

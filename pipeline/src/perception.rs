@@ -678,13 +678,7 @@ mod tests {
         assert_eq!((reports, node.waiting()), (1, 1));
         node.on_image(image("a", 3_120_000), &mut |_| reports += 1);
         assert_eq!((reports, node.waiting()), (3, 0));
-        assert_eq!(
-            node.fused,
-            FusionCounts {
-                evaluations: 1,
-                images: 2
-            }
-        );
+        assert_eq!((node.fused.evaluations, node.fused.images), (1, 2));
         // Both known now: "a" waits for "b", whose image is captured 80 ms
         // later, outside the window: "a" alone once the pose clock passes
         // its window, "b" alone once the clock passes its own.
@@ -698,13 +692,7 @@ mod tests {
         assert_eq!((reports, node.waiting()), (4, 1));
         until(&mut node, &mut reports, 3_340_000);
         assert_eq!((reports, node.waiting()), (5, 0));
-        assert_eq!(
-            node.fused,
-            FusionCounts {
-                evaluations: 1,
-                images: 2
-            }
-        );
+        assert_eq!((node.fused.evaluations, node.fused.images), (1, 2));
         // A second image of one sensor within the window is not fused with
         // the first: "a" is fused with "b", the second "a" waits for the
         // next "b".
@@ -713,13 +701,7 @@ mod tests {
         node.on_image(image("a", 3_410_000), &mut |_| reports += 1);
         node.on_image(image("b", 3_405_000), &mut |_| reports += 1);
         assert_eq!((reports, node.waiting()), (7, 1));
-        assert_eq!(
-            node.fused,
-            FusionCounts {
-                evaluations: 2,
-                images: 4
-            }
-        );
+        assert_eq!((node.fused.evaluations, node.fused.images), (2, 4));
         assert_eq!(node.drops.total(), 0);
     }
 }

@@ -871,11 +871,7 @@ impl TerrainEvaluator for HeightDiff {
         }
         let Some(&newest) = members.iter().max_by_key(|&&k| images[k].0.utime) else {
             // Nothing to build a map of: each image as it is.
-            return images
-                .iter()
-                .zip(reports)
-                .map(|((image, pose), report)| self.evaluate_with(image, pose, report, runner))
-                .collect();
+            return crate::evaluator::evaluate_each(self, images, reports, runner);
         };
         let (map, _) = grid::level_frames(images[newest].0, images[newest].1);
         let map_from_world = map.inverse();
