@@ -37,14 +37,6 @@ fn height_diff() -> HeightDiff {
     HeightDiff::new(p.height_diff.clone(), &p)
 }
 
-/// With 000's own absolute cost: a cell is untraversable from D̃ = 1
-/// (§5.1), as the small robot of the paper judged ground.
-fn height_diff_000() -> HeightDiff {
-    let mut p = PerceptionConfig::default();
-    p.height_diff.obstacle_cost = 1.0;
-    HeightDiff::new(p.height_diff.clone(), &p)
-}
-
 fn pca() -> HierarchicalPca {
     let p = PerceptionConfig::default();
     HierarchicalPca::new(p.pca.clone(), &p)
@@ -93,8 +85,7 @@ fn evaluate(
 
 #[test]
 fn a_step_shows_in_d1_and_the_cost_follows_000() {
-    // D̃ of a step s: min(.5, 5s) + min(.5, 2.5s) + min(.5, 3.5s); 1 from 9 cm,
-    // untraversable there with 000's absolute cost (1).
+    // D̃ of a step s: min(.5, 5s) + min(.5, 2.5s) + min(.5, 3.5s); 1 from 9 cm.
     for (step, obstacle, absolute) in [(0.06, false, false), (0.1, true, false), (0.25, true, true)]
     {
         let image = noisy(
@@ -106,7 +97,7 @@ fn a_step_shows_in_d1_and_the_cost_follows_000() {
             ),
             0.01,
         );
-        let mut hd = height_diff_000();
+        let mut hd = height_diff();
         let (report, _) = evaluate(&mut hd, &image);
         let maps = hd.maps();
         let index = |x, y| maps.index(x, y);
@@ -201,9 +192,8 @@ fn d_d_inflates_absolute_obstacles_by_the_robot_radius_and_never_lowers_the_cost
 
 #[test]
 fn a_step_short_of_an_obstacle_is_reported_as_graded_ground_with_its_cost() {
-    // With 000's absolute cost (1): 7 cm: D̃ = 0.35 + 0.175 + 0.245 = 0.77,
-    // below 1 and above graded_from (0.75): graded ground of cost D̃, no
-    // reasons. 12 cm: cost 1.
+    // 7 cm: D̃ = 0.35 + 0.175 + 0.245 = 0.77, below 1 and above
+    // graded_from (0.75): graded ground of cost D̃, no reasons. 12 cm: cost 1.
     for (step, graded) in [(0.07, true), (0.12, false)] {
         let image = noisy(
             render(
@@ -214,7 +204,7 @@ fn a_step_short_of_an_obstacle_is_reported_as_graded_ground_with_its_cost() {
             ),
             0.005,
         );
-        let (report, stats) = evaluate(&mut height_diff_000(), &image);
+        let (report, stats) = evaluate(&mut height_diff(), &image);
         let edge: Vec<_> = report
             .cells
             .iter()
@@ -492,69 +482,6 @@ fn a_15_cm_box_is_found_at_10_cm_resolution() {
         );
     }
     assert_eq!(report.cell_size_m, 0.1, "cells of the smallest region");
-}
-
-/// 000 gives the footprint's rollout D_1 (§5.2) and the point planner
-/// every scale's absolute obstacles, inflated. The flat ground beside a
-/// tall trunk is absolute in D_6 (its window reaches the trunk, 0.6 m) but
-/// is ground: reported, it closed the gaps between a forest's trees. The
-/// trunk is an obstacle; no cell farther from it than about 0.5 m is (the
-/// gaps between the lidar's rows are filled from the trunk and the ground
-/// alike), and the cells out to 0.6 m are absolute in the maps all the
-/// same.
-#[test]
-fn the_flat_ground_beside_a_trunk_is_no_obstacle_though_d6_reaches_the_trunk() {
-    // A 0.3 m square trunk, 4 m tall, 6 m ahead.
-    let (x0, x1, half) = (6.0, 6.3, 0.15);
-    let image = noisy(
-        render(&SensorModel::lidar64(), move |x, y| {
-            if (x0..x1).contains(&x) && y.abs() < half {
-                4.0
-            } else {
-                0.0
-            }
-        }),
-        0.01,
-    );
-    let mut hd = height_diff();
-    let (report, _) = evaluate(&mut hd, &image);
-    // Distance from the trunk's square, m.
-    let from_trunk = |x: f64, y: f64| {
-        let dx = (x0 - x).max(x - x1).max(0.0);
-        let dy = (y.abs() - half).max(0.0);
-        dx.hypot(dy)
-    };
-    let obstacles: Vec<_> = (report.cells.iter())
-        .filter(|c| c.reasons.contains(Reasons::HEIGHT_DIFFERENCE))
-        .collect();
-    assert!(
-        obstacles.iter().any(|c| from_trunk(c.x, c.y) < 0.1),
-        "the trunk is not an obstacle"
-    );
-    for c in &obstacles {
-        let d = from_trunk(c.x, c.y);
-        assert!(
-            d < 0.3 * std::f64::consts::SQRT_2 + 0.1,
-            "an obstacle at ({:.2}, {:.2}), {d:.2} m from the trunk",
-            c.x,
-            c.y
-        );
-    }
-    // The maps still hold D_6's absolute obstacles out to 0.6 m (for a
-    // planner that treats the vehicle as a point).
-    let maps = hd.maps();
-    let absolute_far = (0..maps.absolute.len())
-        .filter(|&i| maps.absolute[i] && !maps.sharp[i])
-        .filter(|&i| {
-            let x = maps.origin[0] + ((i % maps.cols) as f32 + 0.5) * maps.cell;
-            let y = maps.origin[1] + ((i / maps.cols) as f32 + 0.5) * maps.cell;
-            (0.35..0.65).contains(&from_trunk(f64::from(x), f64::from(y)))
-        })
-        .count();
-    assert!(
-        absolute_far > 10,
-        "{absolute_far} cells absolute in D_6 only"
-    );
 }
 
 #[test]
@@ -878,7 +805,7 @@ fn a_grid_too_fine_for_the_region_is_refused_before_anything_is_allocated() {
     }
 }
 
-/// The 30 cm blocks (12 cm square) at 3, 6 and 9 m on the seams at 0° and
+/// The 15 cm blocks (12 cm square) at 3, 6 and 9 m on the seams at 0° and
 /// 45° of a ring of four depth cameras 45° apart (000's), 2.2 m up, tilted
 /// 25° down; with the cameras either side of each block's seam.
 #[allow(clippy::type_complexity)]
@@ -903,7 +830,7 @@ fn blocks_in_a_ring_s_seams() -> (
             .iter()
             .any(|&(bx, by)| (x - bx).abs() < 0.06 && (y - by).abs() < 0.06)
         {
-            0.3
+            0.15
         } else {
             0.0
         }

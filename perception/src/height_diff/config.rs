@@ -27,17 +27,11 @@ pub struct HeightDiffConfig {
     pub weights: [f64; 3],
     /// Each scale's summand is capped at this (000 §5.1: 0.5).
     pub cap: f64,
-    /// A cell whose D̃ reaches this is untraversable, besides absolute
-    /// obstacles at the finest scale. 1.5 (three caps: every scale's
-    /// difference large) by default; 000 §5.1's 1, which no single scale
-    /// reaches alone, is its point planner's absolute cost and made walls of
-    /// the ground beside tall obstacles and of 22° slopes for this vehicle's
-    /// footprint checks (docs/tuning.md).
+    /// A cell whose D̃ reaches this is untraversable (000 §5.1: 1, which the
+    /// caps let no single scale reach alone), besides absolute obstacles.
     pub obstacle_cost: f64,
-    /// Cells with D̃ of at least this (and short of `obstacle_cost`) are
-    /// reported as graded ground with cost D̃, 000's cost (absolute at 1,
-    /// reported just below: the route keeps off it, the footprint may
-    /// cross it) (0: none).
+    /// Cells with D̃ of at least this fraction of `obstacle_cost` are
+    /// reported as graded ground with cost D̃ / obstacle_cost (0: none).
     pub graded_from: f64,
     /// Absolute obstacles are inflated by this radius in the drivability
     /// map D_D, m (default: half the vehicle's width).
@@ -56,7 +50,7 @@ impl Default for HeightDiffConfig {
             scales: [1, 3, 6],
             weights: [5.0, 2.5, 3.5],
             cap: 0.5,
-            obstacle_cost: 1.5,
+            obstacle_cost: 1.0,
             graded_from: 0.75,
             robot_radius_m: VehicleConfig::default().width_m / 2.0,
         }

@@ -32,35 +32,25 @@
 //!    the robot radius is taken as the square of the same area).
 //!
 //! What the report carries: graded ground, the cells with
-//! `graded_from ≤ D̃ < obstacle_cost`, with cost D̃ (000's, absolute at 1;
-//! kept below 1, [`MAX_GRADED_COST`]); and, untraversable,
-//! the cells with `D̃ ≥ 1` (`obstacle_cost`) or an absolute obstacle at the
-//! finest scale (`λ_1·D_1 ≥ 1`: [`HeightDiffMaps::sharp`]), reason `height
-//! difference`, and the drop-offs, footprint and shadows every evaluator
-//! reports (`grid::SeenGround`). 000 gives its two planners two maps
-//! (§5.1–5.2): the Dijkstra planner, which treats the robot as a point,
-//! absolute obstacles of every scale inflated by the robot radius and
-//! averaged (`D_D`); the trajectory rollout, which sums costs under the
-//! robot's polygon, D_1 ("larger obstacles and general inclines are
-//! managed by the Dijkstra planner"). arcnav's behaviours all sweep the
-//! vehicle's footprint, so the cells reported are the rollout's: a cell
-//! absolute only at a coarser scale is flat ground within l cells of
-//! something tall (a trunk's neighbours out to 0.6 m), and reporting it as
-//! an obstacle closed the gaps between the trees of a forest (000's
-//! evaluator got stuck in `tests/worlds/forest.toml` with every sensor);
-//! such a cell is an obstacle only when its D̃ is. `D_D` is kept, graded,
-//! in [`HeightDiffMaps::drivability`] (reported as obstacles it would
-//! close every gap narrower than two vehicle widths).
+//! `graded_from ≤ D̃ / obstacle_cost < 1`, with that cost; and, untraversable,
+//! the cells with `D̃ ≥ 1` (`obstacle_cost`) or
+//! an absolute obstacle, reason `height difference`, and the drop-offs, footprint and
+//! shadows every evaluator reports (`grid::SeenGround`). The
+//! inflation and averaging of `D_D` are for planners that treat the
+//! vehicle as a point (the paper's navfn); arcnav's behaviours sweep the
+//! vehicle's footprint along each arc, so `D_D` is kept, graded, in
+//! [`HeightDiffMaps::drivability`] rather than reported as obstacles
+//! (that would close every gap narrower than two vehicle widths).
 //!
 //! The cell size sets what the scales mean on the ground. With 10 cm
-//! cells D_6 spans ±0.6 m: an even incline is absolute in D_6
+//! cells D_6 spans ±0.6 m: an even incline is an absolute obstacle
 //! (λ_6·D_6 ≥ 1) from 25.5° along a grid axis (18.6° along a diagonal,
-//! where the window reaches 0.85 m), and D̃ reaches 1 near 22°: graded
-//! ground, for the terrain check to judge the vehicle's attitude on. A
-//! step of `1/λ_1` = 0.2 m is an absolute obstacle at the finest scale at
-//! any cell size: the vehicle's tolerated step. A step reaches D̃ = 1 from
-//! about 9 cm (0.5 + 0.25 + 0.35 at 10 cm): 000's small robot, with
-//! `obstacle_cost` 1, avoided what this vehicle climbs.
+//! where the window reaches 0.85 m), about the vehicle's 25°, and D̃
+//! reaches 1 near 22° along an axis. A step of `1/λ_1` = 0.2 m is an
+//! absolute obstacle at any cell size: the vehicle's tolerated step. A
+//! step reaches D̃ = 1 from about 9 cm (0.5 + 0.25 + 0.35 at 10 cm): 000's
+//! small robot avoided what this vehicle could climb; raise
+//! `obstacle_cost` (at most 1.5, the three caps) to let it.
 
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::{Isometry, VehicleConfig};
@@ -77,11 +67,6 @@ use crate::median::{MedianOutliers, MedianParams};
 use crate::plugin::EvaluatorPlugin;
 use crate::window::WindowStats;
 pub use config::HeightDiffConfig;
-
-/// The highest cost of a graded cell: D̃ from 1 (000's absolute cost, for
-/// its point planner) up to `obstacle_cost` is ground the route should
-/// keep off but the footprint may cross.
-pub const MAX_GRADED_COST: f32 = 0.99;
 
 /// The maps of the last image (or set of images), row-major over the grid
 /// (`cols` cells along x ahead, `rows` along y left); NaN = unknown.
@@ -103,12 +88,8 @@ pub struct HeightDiffMaps {
     pub differences: [Vec<f32>; 3],
     /// D̃.
     pub cost: Vec<f32>,
-    /// Cells that are absolute obstacles (λ_l·D_l ≥ 1 in some map): what
-    /// D_D inflates for a planner that treats the robot as a point.
+    /// Cells that are absolute obstacles (λ_l·D_l ≥ 1 in some map).
     pub absolute: Vec<bool>,
-    /// Cells that are absolute obstacles at the finest scale (λ_1·D_1 ≥ 1):
-    /// 000's obstacle map for the footprint's rollout (§5.2).
-    pub sharp: Vec<bool>,
     /// D_D: D̃ with absolute obstacles inflated and local averages.
     pub drivability: Vec<f32>,
 }
@@ -321,8 +302,7 @@ impl HeightDiff {
 
     /// Marks, for `image`'s report, the cells of the maps built last whose
     /// height came from image `owner` of the set: untraversable ones
-    /// (`D̃ ≥ obstacle_cost` or an absolute obstacle at the finest scale)
-    /// and graded ones. The
+    /// (`D̃ ≥ obstacle_cost` or an absolute obstacle) and graded ones. The
     /// maps lie in the level frame `map`; the marks go on the grid of
     /// `image`'s own level frame `own` (the same grid when the two are
     /// one, as for a single image or a ring captured at once). A cell whose
@@ -330,7 +310,7 @@ impl HeightDiff {
     fn mark(&mut self, owner: u8, map: &Isometry, own: &Isometry, stats: &mut ImageStats) {
         let maps = &self.maps;
         let obstacle = self.config.obstacle_cost as f32;
-        let graded = self.config.graded_from as f32;
+        let graded = self.config.graded_from as f32 * obstacle;
         let own_from_map = (own != map).then(|| own.inverse() * map);
         let (cols, cell) = (maps.cols, maps.cell);
         for i in 0..maps.filled.len() {
@@ -340,7 +320,7 @@ impl HeightDiff {
             }
             stats.cells_evaluated += 1;
             let cost = maps.cost[i];
-            let untraversable = maps.sharp[i] || cost >= obstacle;
+            let untraversable = maps.absolute[i] || cost >= obstacle;
             if !(untraversable || (graded > 0.0 && cost >= graded)) {
                 continue;
             }
@@ -375,13 +355,7 @@ impl HeightDiff {
                 } else {
                     Reasons::NONE
                 },
-                // D̃ itself, 000's cost (absolute at 1, which the
-                // footprint checks leave to the route: kept just below).
-                cost: if untraversable {
-                    1.0
-                } else {
-                    cost.min(MAX_GRADED_COST)
-                },
+                cost: if untraversable { 1.0 } else { cost / obstacle },
                 z_min: z_min + dz,
                 z_max: z_max + dz,
             });
@@ -650,10 +624,6 @@ impl HeightDiff {
                 *total = if weighted.is_nan() { *total } else { sum };
             }
         }
-        let finest = c.weights[0] as f32;
-        maps.sharp.clear();
-        maps.sharp
-            .extend(maps.differences[0].iter().map(|&d| finest * d >= 1.0));
         // D_D: absolute obstacles inflated by the robot radius, then the
         // larger of D̃ and its local mean over a square of the disc's area.
         maps.drivability.clone_from(&maps.cost);
