@@ -381,3 +381,71 @@ fn detect_writes_its_table_json_and_picture_and_evaluators_lists_them() {
         .collect();
     assert_eq!(names, ["cells", "height_diff", "pca"], "{listed}");
 }
+
+/// `perception.fuse_within_s` end to end: two of the camera ring's
+/// cameras, triggered together, are judged in one height map a frame in
+/// the simulator, and replaying the log groups them the same way and
+/// decides as the simulator did.
+#[test]
+fn a_camera_pair_judged_together_replays_to_the_sims_own_decisions() {
+    let out = out_dir("fused-config");
+    std::fs::create_dir_all(&out).unwrap();
+    let config = out.join("pair.toml");
+    let camera = |id: &str, yaw: f64| {
+        format!(
+            "[[sensors]]\npreset = \"depth_camera\"\nid = \"{id}\"\nrate_hz = 10.0\n\
+             mount_position_m = [0.0, 0.0, 2.2]\nmount_rpy_deg = [0.0, 25.0, {yaw}]\n"
+        )
+    };
+    std::fs::write(
+        &config,
+        format!(
+            "[perception]\nevaluator = \"height_diff\"\nfuse_within_s = 0.02\n\
+             [sim]\ntime_limit_s = 12.0\n{}{}",
+            camera("right", -22.5),
+            camera("left", 22.5)
+        ),
+    )
+    .unwrap();
+    let (report, run, printed) = sim(
+        "fused-pair",
+        &[
+            "--world",
+            "short_course",
+            "--config",
+            config.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(
+        report["collisions"].as_array().map(Vec::len),
+        Some(0),
+        "{printed}"
+    );
+    let fused = &report["fused"];
+    let (evaluations, images) = (
+        fused["evaluations"].as_u64().unwrap_or(0),
+        fused["images"].as_u64().unwrap_or(0),
+    );
+    // Every frame but the first (no sensor known yet) is a pair.
+    assert!(
+        evaluations >= 100 && images == 2 * evaluations,
+        "{fused}\n{printed}"
+    );
+    assert!(printed.contains("images judged together"), "{printed}");
+    let _slot = arcnav_testkit::cpu_slot();
+    let output = Command::new(env!("CARGO_BIN_EXE_arcnav"))
+        .arg("replay")
+        .arg(run.join("mission.lcm"))
+        .args(["--config", run.join("config.toml").to_str().unwrap()])
+        .output()
+        .expect("the arcnav binary runs");
+    let replayed = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{replayed}");
+    assert!(
+        replayed.contains(&format!(
+            "{images} images judged together in {evaluations} height maps"
+        )),
+        "{replayed}"
+    );
+    assert!(replayed.contains("(100.00%)"), "{replayed}");
+}

@@ -136,6 +136,9 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         }
     }
     super::terminal::print_guard(last.guard.as_ref());
+    if let Some(f) = &last.fused {
+        super::terminal::print_fused(f);
+    }
     let weight_of = |c: &Resolved| {
         let c = c.clone();
         move |name: &str| c.arbiter.weight(name)
@@ -190,6 +193,7 @@ pub fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             "input_lost": problems.lost_input(),
             "comparisons": comparisons,
             "guard": last.guard,
+            "fused": last.fused,
         });
         arcnav::output::write_file(path, serde_json::to_string_pretty(&json)?.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;

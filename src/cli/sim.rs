@@ -296,13 +296,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
         r.images, r.images_dropped
     );
     if let Some(f) = &r.fused {
-        println!(
-            "fused         {} images judged together in {} height maps ({:.1} per evaluation, \
-             perception.fuse_within_s)",
-            f.images,
-            f.evaluations,
-            f.images_per_evaluation()
-        );
+        super::terminal::print_fused(f);
     }
     if let Some(s) = &r.slices {
         let c = &s.stream;

@@ -68,3 +68,14 @@ pub(super) fn print_guard(guard: Option<&arcnav::mission::GuardReport>) {
         None => println!("guard         off ([guard] enabled = false)"),
     }
 }
+
+/// The summary's line for images judged together (`perception.fuse_within_s`).
+pub fn print_fused(f: &arcnav_pipeline::FusionCounts) {
+    println!(
+        "fused         {} images judged together in {} height maps ({:.1} per evaluation, \
+         perception.fuse_within_s)",
+        f.images,
+        f.evaluations,
+        f.images_per_evaluation()
+    );
+}

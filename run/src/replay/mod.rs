@@ -102,6 +102,9 @@ pub struct ReplayResult {
     /// What the guard would have done with the recomputed commands
     /// (`[guard] enabled`); its verdicts are in `--out`'s GUARD_STATUS.
     pub guard: Option<GuardReport>,
+    /// Images of different sensors judged together in one height map
+    /// (`perception.fuse_within_s`); absent when it is 0.
+    pub fused: Option<arcnav_pipeline::FusionCounts>,
 }
 
 /// What an external behaviour did in a replay.
@@ -747,6 +750,7 @@ fn replay_events<S: EventSource>(
         arcs,
         external: external_runs(config, &pipeline),
         guard: sink.guard.as_ref().map(GuardWatch::report),
+        fused: (config.perception.fuse_within_s > 0.0).then_some(pipeline.perception.fused),
     })
 }
 
