@@ -356,11 +356,14 @@ impl PerceptionNode {
                     group.push(image);
                 }
                 group.reverse();
-                self.evaluate_together(group, out);
+                match <[RangeImage; 1]>::try_from(group) {
+                    Ok([image]) => self.evaluate(image, out),
+                    Err(group) => self.evaluate_fused(group, out),
+                }
                 continue;
             }
             match self.waiting.pop_front() {
-                Some(Pending::Image(image)) => self.evaluate_together(vec![image], out),
+                Some(Pending::Image(image)) => self.evaluate(image, out),
                 Some(Pending::Slice(slice)) => self.evaluate_slice(slice, out),
                 None => {}
             }
@@ -536,50 +539,83 @@ impl PerceptionNode {
         Some(pose)
     }
 
-    /// Evaluates `images` (one, or several of different sensors to be
-    /// fused) and hands on a report for each.
-    fn evaluate_together(&mut self, images: Vec<RangeImage>, out: &mut dyn FnMut(ObstacleReport)) {
+    /// Evaluates `image` on its own and hands on its report.
+    fn evaluate(&mut self, image: RangeImage, out: &mut dyn FnMut(ObstacleReport)) {
+        if let Some(pose) = self.admit_image(&image) {
+            self.judge_alone(&image, &pose.world_from_vehicle, out);
+        }
+    }
+
+    /// Evaluates an admitted image on its own and hands on its report.
+    fn judge_alone(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &arcnav_vehicle::Isometry,
+        out: &mut dyn FnMut(ObstacleReport),
+    ) {
+        let mut report = ObstacleReport::default();
+        let result =
+            (self.evaluator).evaluate_with(image, world_from_vehicle, &mut report, &*self.runner);
+        self.deliver(image, world_from_vehicle, report, result, out);
+    }
+
+    /// Evaluates images of different sensors captured within
+    /// `fuse_within_s` together (those admitted) and hands on a report for
+    /// each.
+    fn evaluate_fused(&mut self, images: Vec<RangeImage>, out: &mut dyn FnMut(ObstacleReport)) {
         let mut admitted = Vec::with_capacity(images.len());
         for image in images {
             if let Some(pose) = self.admit_image(&image) {
                 admitted.push((image, pose.world_from_vehicle));
             }
         }
-        let mut reports: Vec<ObstacleReport> = Vec::new();
-        let results = match admitted.as_slice() {
-            [] => return,
-            [(image, pose)] => {
-                reports.push(ObstacleReport::default());
-                vec![
-                    self.evaluator
-                        .evaluate_with(image, pose, &mut reports[0], &*self.runner),
-                ]
+        match admitted.len() {
+            0 => return,
+            1 => {
+                let (image, pose) = &admitted[0];
+                self.judge_alone(image, pose, out);
+                return;
             }
-            several => {
-                reports.resize_with(several.len(), ObstacleReport::default);
-                let placed: Vec<_> = several.iter().map(|(i, p)| (i, p)).collect();
+            n => {
                 self.fused.evaluations += 1;
-                self.fused.images += several.len() as u64;
-                self.evaluator
-                    .evaluate_fused(&placed, &mut reports, &*self.runner)
-            }
-        };
-        for (((image, pose), mut report), result) in admitted.into_iter().zip(reports).zip(results)
-        {
-            match result {
-                Ok(stats) => {
-                    report.acquired = image.utime;
-                    self.heights.sample(&image, &pose, &mut report);
-                    self.totals.accumulate(&stats);
-                    self.reports += 1;
-                    out(report);
-                }
-                Err(e) => {
-                    tracing::warn!(%e, image = image.utime, "image dropped by perception");
-                    self.drops.invalid += 1;
-                }
+                self.fused.images += n as u64;
             }
         }
+        let mut reports = vec![ObstacleReport::default(); admitted.len()];
+        let placed: Vec<_> = admitted.iter().map(|(i, p)| (i, p)).collect();
+        let results = (self.evaluator).evaluate_fused(&placed, &mut reports, &*self.runner);
+        for (((image, pose), report), result) in admitted.iter().zip(reports).zip(results) {
+            self.deliver(image, pose, report, result, out);
+        }
+    }
+
+    /// Hands on `image`'s report once evaluated, or counts it dropped.
+    fn deliver(
+        &mut self,
+        image: &RangeImage,
+        world_from_vehicle: &arcnav_vehicle::Isometry,
+        mut report: ObstacleReport,
+        result: Result<ImageStats, arcnav_perception::PerceptionError>,
+        out: &mut dyn FnMut(ObstacleReport),
+    ) {
+        match result {
+            Ok(stats) => {
+                report.acquired = image.utime;
+                self.heights.sample(image, world_from_vehicle, &mut report);
+                self.totals.accumulate(&stats);
+                self.reports += 1;
+                out(report);
+            }
+            Err(e) => {
+                tracing::warn!(%e, image = image.utime, "image dropped by perception");
+                self.drops.invalid += 1;
+            }
+        }
+    }
+
+    /// What fusion did, when `perception.fuse_within_s` asks for it.
+    pub fn fusion(&self) -> Option<FusionCounts> {
+        (self.fuse_within_us > 0).then_some(self.fused)
     }
 }
 

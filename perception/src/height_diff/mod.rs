@@ -313,6 +313,10 @@ impl HeightDiff {
         let graded = self.config.graded_from as f32 * obstacle;
         let own_from_map = (own != map).then(|| own.inverse() * map);
         let (cols, cell) = (maps.cols, maps.cell);
+        let centre = |k: usize, origin: f32| f64::from(origin + (k as f32 + 0.5) * cell);
+        // Heights move with the frame's height (level frames differ by a
+        // translation and a yaw).
+        let dz = (own_from_map.as_ref()).map_or(0.0, |t| t.translation.vector.z as f32);
         for i in 0..maps.filled.len() {
             let h = maps.filled[i];
             if h.is_nan() || maps.sensor[i] != owner {
@@ -329,11 +333,10 @@ impl HeightDiff {
             let index = match &own_from_map {
                 None => Some(i),
                 Some(own_from_map) => {
-                    let centre = |k: usize, origin: f32| origin + (k as f32 + 0.5) * cell;
                     let p = own_from_map
                         * nalgebra::Point3::new(
-                            f64::from(centre(i % cols, maps.origin[0])),
-                            f64::from(centre(i / cols, maps.origin[1])),
+                            centre(i % cols, maps.origin[0]),
+                            centre(i / cols, maps.origin[1]),
                             0.0,
                         );
                     maps.index(p.x as f32, p.y as f32)
@@ -343,11 +346,6 @@ impl HeightDiff {
                 stats.outside_grid += 1;
                 continue;
             };
-            // Heights move with the frame's height (level frames differ by
-            // a translation and a yaw).
-            let dz = own_from_map
-                .as_ref()
-                .map_or(0.0, |t| t.translation.vector.z as f32);
             self.out.marked.push(Marked {
                 index: index as u32,
                 reasons: if untraversable {

@@ -623,7 +623,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         images: simulator.images(),
         images_dropped: drops.total(),
         slices: (pipeline.perception.slices.received > 0).then_some(pipeline.perception.slices),
-        fused: (config.perception.fuse_within_s > 0.0).then_some(pipeline.perception.fused),
+        fused: pipeline.perception.fusion(),
         untraversable_cells: Reasons::ALL
             .iter()
             .zip(pipeline.perception.totals.by_reason)

@@ -750,7 +750,7 @@ fn replay_events<S: EventSource>(
         arcs,
         external: external_runs(config, &pipeline),
         guard: sink.guard.as_ref().map(GuardWatch::report),
-        fused: (config.perception.fuse_within_s > 0.0).then_some(pipeline.perception.fused),
+        fused: pipeline.perception.fusion(),
     })
 }
 
