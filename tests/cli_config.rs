@@ -8,6 +8,15 @@ fn arcnav(args: &[&str]) -> (i32, String, String) {
 }
 
 /// `text` written to `name` in a directory removed when the guard drops.
+/// `arcnav config --check` of a file holding `text` fails (exit 1) with a
+/// message containing `expect`.
+fn assert_check_refuses(text: &str, expect: &str) {
+    let (_dir, file) = temp_file("bad.toml", text);
+    let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
+    assert_eq!(code, 1, "{text}: {stderr}");
+    assert!(stderr.contains(expect), "{text}: {stderr}");
+}
+
 fn temp_file(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::Builder::new()
         .prefix("arcnav-cli-config-")
@@ -81,10 +90,7 @@ fn the_operating_area_and_unreachable_keys_are_checked() {
         ),
         ("[mission]\non_unreachable = \"wait\"\n", "on_unreachable"),
     ] {
-        let (_dir, file) = temp_file("bad-area.toml", text);
-        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
-        assert_eq!(code, 1, "{text}");
-        assert!(stderr.contains(expect), "{text}: {stderr}");
+        assert_check_refuses(text, expect);
     }
 }
 
@@ -153,10 +159,7 @@ fn the_footprint_keys_are_checked() {
             "`vehicle.vertices_m`: puts the body from x = 1 m to 4 m: the rear axle (x = 0) must lie under it",
         ),
     ] {
-        let (_dir, file) = temp_file("bad-shape.toml", text);
-        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
-        assert_eq!(code, 1, "{text}: {stderr}");
-        assert!(stderr.contains(expect), "{text}: {stderr}");
+        assert_check_refuses(text, expect);
     }
 }
 
@@ -198,10 +201,7 @@ fn the_kinematics_keys_are_checked() {
         ),
         ("[arcs]\nturn_in_place = \"yes\"\n", "`arcs.turn_in_place`"),
     ] {
-        let (_dir, file) = temp_file("bad-kinematics.toml", text);
-        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
-        assert_eq!(code, 1, "{text}: {stderr}");
-        assert!(stderr.contains(expect), "{text}: {stderr}");
+        assert_check_refuses(text, expect);
     }
 }
 
@@ -224,10 +224,7 @@ fn values_that_aborted_or_hung_a_run_are_refused_by_key() {
             "`behaviours.obstacle_avoidance.near_miss_m`",
         ),
     ] {
-        let (_dir, file) = temp_file("bad.toml", text);
-        let (code, _, stderr) = arcnav(&["config", "--check", file.to_str().unwrap()]);
-        assert_eq!(code, 1, "{text}: {stderr}");
-        assert!(stderr.contains(expect), "{text}: {stderr}");
+        assert_check_refuses(text, expect);
     }
 }
 
