@@ -18,6 +18,6 @@ pub use config::{JumpPolicy, LocalMapConfig, OccupancyConfig};
 pub use elevation::{ElevationConfig, ElevationGrid, ElevationLayer, ElevationStats};
 pub use map::{
     InsertError, InsertOutcome, JumpReason, LocalMap, MAX_SENSORS, MapSnapshot, MapStats, Patch,
-    PoseUpdate, SeenGround,
+    PoseUpdate, SeenFrame, SeenGround, SeenLine,
 };
 pub use static_map::{OccupancyGrid, StaticMap, StaticMapError};

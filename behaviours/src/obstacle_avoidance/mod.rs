@@ -140,6 +140,8 @@ pub struct ObstacleAvoidance {
     /// the poses of the path before it does.
     shifted: Raster,
     lead_poses: Vec<(f64, ArcPose)>,
+    /// The same poses, their sines and cosines taken.
+    lead: Vec<(f64, Rigid)>,
     /// Cells under the footprint where the vehicle stands.
     under_start: UnderStart,
     /// Scratch: the map patches a path's arc may reach this cycle.
@@ -313,6 +315,7 @@ impl ObstacleAvoidance {
                 .collect(),
             shifted,
             lead_poses: Vec::new(),
+            lead: Vec::new(),
             under_start: UnderStart::default(),
             near: Vec::new(),
             nearest: [f64::INFINITY; 4],
@@ -358,6 +361,9 @@ impl ObstacleAvoidance {
         let mut met = Met::default();
         if lead > 0.0 {
             path.sample_into(lead, self.ahead.grid.resolution, &mut self.lead_poses);
+            self.lead.clear();
+            self.lead
+                .extend(self.lead_poses.iter().map(|(s, p)| (*s, Rigid::of(p))));
             met = self.meet_lead(ctx, horizon);
         }
         let rest = reach - lead;
@@ -437,20 +443,43 @@ impl ObstacleAvoidance {
                     (f64::from(hit.s), [c.x as f32, c.y as f32])
                 })
             } else {
-                // Cell by cell along the body's band, nearest first.
+                // Cell by cell along the body's band, nearest first, a
+                // run at a time: a run whose box lies on the vehicle-frame
+                // grid over no unseen cell has none.
                 let seen = ctx.map.seen_lookup();
-                template
-                    .body
-                    .iter()
-                    .take_while(|(s, _)| *s <= rest)
-                    .find_map(|&(s, [x, y])| {
-                        let q = to_vehicle(Point2::new(f64::from(x), f64::from(y)));
-                        let unseen = self
-                            .ahead
-                            .unseen_at(q)
-                            .unwrap_or_else(|| !seen(q.x, q.y) && !self.standing.contains(q));
-                        unseen.then_some((f64::from(s) + lead, [q.x as f32, q.y as f32]))
-                    })
+                let ahead = &self.ahead;
+                let mut start = 0;
+                let mut found = None;
+                for &(end, [x0, y0, x1, y1]) in &template.body_runs {
+                    if template.body.get(start).is_none_or(|(s, _)| *s > rest) {
+                        break;
+                    }
+                    let (lo, hi) = raster::bounds(
+                        [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
+                            .into_iter()
+                            .map(|(x, y)| to_vehicle(Point2::new(x, y))),
+                    );
+                    let clear = ahead.grid.cover(lo, hi).is_some_and(|cover| {
+                        cover.whole && !ahead.grid.any_set(&ahead.unseen, &cover)
+                    });
+                    if !clear {
+                        found = template.body[start..end]
+                            .iter()
+                            .take_while(|(s, _)| *s <= rest)
+                            .find_map(|&(s, [x, y])| {
+                                let q = to_vehicle(Point2::new(f64::from(x), f64::from(y)));
+                                let unseen = ahead.unseen_at(q).unwrap_or_else(|| {
+                                    !seen(q.x, q.y) && !self.standing.contains(q)
+                                });
+                                unseen.then_some((f64::from(s) + lead, [q.x as f32, q.y as f32]))
+                            });
+                        if found.is_some() {
+                            break;
+                        }
+                    }
+                    start = end;
+                }
+                found
             };
         }
         met.and(part)
@@ -462,20 +491,21 @@ impl ObstacleAvoidance {
         let raster = &self.ahead;
         let grid = &raster.grid;
         let widest = self.margins.len() - 1;
-        let corners = |pose: &ArcPose, band: usize| {
-            let rigid = Rigid::of(pose);
-            self.band_outlines[band].map(|c| rigid.apply(c))
-        };
+        let corners = |pose: &Rigid, band: usize| self.band_outlines[band].map(|c| pose.apply(c));
         // The first cell of `layer` under the footprint of `band` at `pose`.
-        let under = |pose: &ArcPose, band: usize, layer: &[u64]| {
+        let under = |pose: &Rigid, band: usize, layer: &[u64]| {
+            let corners = corners(pose, band);
+            if !grid.may_hold(layer, &corners) {
+                return None;
+            }
             let mut found = None;
-            cells_inside(grid, &corners(pose, band), |row, from, to| {
+            cells_inside(grid, &corners, |row, from, to| {
                 found = first_set(layer, grid, row, from, to).map(|column| (row, column));
                 found.is_some()
             });
             found
         };
-        let poses = &self.lead_poses;
+        let poses = &self.lead;
         let blocked = raster.blocked();
         let mut met = Met::default();
         // How far from the rear axle the footprints of this lead reach: a
@@ -517,7 +547,11 @@ impl ObstacleAvoidance {
         }
         if !raster.graded_cells.is_empty() && near(Layer::Graded) {
             for (s, p) in poses {
-                cells_inside(grid, &corners(p, 0), |row, from, to| {
+                let corners = corners(p, 0);
+                if !grid.may_hold(&raster.graded, &corners) {
+                    continue;
+                }
+                cells_inside(grid, &corners, |row, from, to| {
                     for column in from..=to {
                         if raster.graded[row * grid.words_per_row + column / 64]
                             & (1 << (column % 64))

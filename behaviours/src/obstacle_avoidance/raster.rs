@@ -27,6 +27,23 @@ pub(super) struct Template {
     /// The body's band (band 0) cell by cell: the distance at which the
     /// footprint first touches the cell, and its centre, by distance.
     pub(super) body: Vec<(f32, [f32; 2])>,
+    /// `body` in runs of [`BODY_RUN`] cells: where each run ends in it,
+    /// and the box its centres lie in (lowest and highest x and y), so
+    /// that a run whose box holds nothing can be passed over whole.
+    pub(super) body_runs: Vec<(usize, [f64; 4])>,
+}
+
+/// Cells of a body run (see [`Template::body_runs`]).
+const BODY_RUN: usize = 32;
+
+/// The grid cells that the points of a box, and those within half a cell
+/// of it, fall in: first and last row and column, clipped to the grid.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Cover {
+    pub(super) rows: (usize, usize),
+    pub(super) columns: (usize, usize),
+    /// Whether every such point lies on the grid (none was clipped).
+    pub(super) whole: bool,
 }
 
 /// The vehicle-frame grid the map is rasterised into.
@@ -47,6 +64,45 @@ impl Grid {
         let (fx, fy) = ((x - self.x0) * self.per_m, (y - self.y0) * self.per_m);
         (fx >= 0.0 && fy >= 0.0 && fx < self.rows as f64 && fy < self.columns as f64)
             .then_some((fx as usize, fy as usize))
+    }
+
+    /// The cells that the points of the box `lo`..`hi` (grid frame) fall
+    /// in, with a margin of half a cell so that rounding cannot move a
+    /// point of the box (or a cell centre a polygon within it holds) out
+    /// of them; none when the box misses the grid (or is not a number).
+    pub(super) fn cover(&self, lo: Point2<f64>, hi: Point2<f64>) -> Option<Cover> {
+        let (r0, r1) = (
+            (lo.x - self.x0) * self.per_m - 0.5,
+            (hi.x - self.x0) * self.per_m + 0.5,
+        );
+        let (c0, c1) = (
+            (lo.y - self.y0) * self.per_m - 0.5,
+            (hi.y - self.y0) * self.per_m + 0.5,
+        );
+        let (rows, columns) = (self.rows as f64, self.columns as f64);
+        if !(r0 < rows && c0 < columns && r1 >= 0.0 && c1 >= 0.0 && r0 <= r1 && c0 <= c1) {
+            return None;
+        }
+        Some(Cover {
+            rows: (r0.max(0.0) as usize, (r1 as usize).min(self.rows - 1)),
+            columns: (c0.max(0.0) as usize, (c1 as usize).min(self.columns - 1)),
+            whole: r0 >= 0.0 && c0 >= 0.0 && r1 < rows && c1 < columns,
+        })
+    }
+
+    /// Whether `layer` has a cell set in `cover`.
+    pub(super) fn any_set(&self, layer: &[u64], cover: &Cover) -> bool {
+        let (from, to) = cover.columns;
+        (cover.rows.0..=cover.rows.1).any(|row| first_set(layer, self, row, from, to).is_some())
+    }
+
+    /// Whether `layer` may have a cell set whose centre lies inside the
+    /// polygon `corners` (false only when none can: no cell of the
+    /// polygon's box is set).
+    pub(super) fn may_hold(&self, layer: &[u64], corners: &[Point2<f64>]) -> bool {
+        let (lo, hi) = bounds(corners.iter().copied());
+        self.cover(lo, hi)
+            .is_some_and(|cover| self.any_set(layer, &cover))
     }
 
     /// The first cell of `bitmap` that `entry` holds (it must hold one).
@@ -101,6 +157,8 @@ pub(super) struct Raster {
     /// obstacle (`unseen_blocks`).
     pub(super) blocked: Vec<u64>,
     pub(super) unseen_blocks: bool,
+    /// The y of each column's cell centres.
+    column_y: Vec<f64>,
 }
 
 impl Raster {
@@ -130,6 +188,9 @@ impl Raster {
             suspect_cells: Vec::new(),
             blocked: vec![0; words],
             unseen_blocks: false,
+            column_y: (0..grid.columns)
+                .map(|column| grid.centre(0, column).y)
+                .collect(),
             mirror,
             grid,
         }
@@ -201,14 +262,14 @@ impl Raster {
 
     /// Marks the cells whose ground no image has seen.
     pub(super) fn rasterise_unseen(&mut self, ctx: &VoteContext<'_>) {
-        let seen = ctx.map.seen_lookup();
+        let seen = ctx.map.seen_frame();
         let grid = &self.grid;
         for row in 0..grid.rows {
             let words = &mut self.unseen[row * grid.words_per_row..][..grid.words_per_row];
             words.fill(0);
-            for column in 0..grid.columns {
-                let p = grid.centre(row, column);
-                if !seen(self.mirror * p.x, p.y) {
+            let line = seen.across(self.mirror * grid.centre(row, 0).x);
+            for (column, &y) in self.column_y.iter().enumerate() {
+                if !line.seen(y) {
                     words[column / 64] |= 1 << (column % 64);
                 }
             }
@@ -601,6 +662,17 @@ pub(super) fn build_template(
         })
         .collect();
     body.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let body_runs = body
+        .chunks(BODY_RUN)
+        .scan(0, |end, run| {
+            *end += run.len();
+            let (lo, hi) = bounds(
+                run.iter()
+                    .map(|(_, [x, y])| Point2::new(f64::from(*x), f64::from(*y))),
+            );
+            Some((*end, [lo.x, lo.y, hi.x, hi.y]))
+        })
+        .collect();
     let bin = grid.resolution as f32;
     let bands = cells
         .into_iter()
@@ -624,7 +696,22 @@ pub(super) fn build_template(
             entries
         })
         .collect();
-    Template { bands, body }
+    Template {
+        bands,
+        body,
+        body_runs,
+    }
+}
+
+/// The lowest and highest x and y of `points`.
+pub(super) fn bounds(points: impl Iterator<Item = Point2<f64>>) -> (Point2<f64>, Point2<f64>) {
+    points.fold(
+        (
+            Point2::new(f64::INFINITY, f64::INFINITY),
+            Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
+        ),
+        |(lo, hi), p| (lo.inf(&p), hi.sup(&p)),
+    )
 }
 
 #[cfg(test)]

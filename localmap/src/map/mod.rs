@@ -76,7 +76,7 @@ pub use outcome::{
 };
 pub use patch::Patch;
 pub use seen::SeenGround;
-pub use snapshot::MapSnapshot;
+pub use snapshot::{MapSnapshot, SeenFrame, SeenLine};
 
 const EMPTY: u32 = u32::MAX;
 

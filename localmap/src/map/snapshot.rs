@@ -36,13 +36,22 @@ impl MapSnapshot {
     /// [`MapSnapshot::is_seen`] with the pose's trigonometry done once, for
     /// many lookups.
     pub fn seen_lookup(&self) -> impl Fn(f64, f64) -> bool + '_ {
+        let frame = self.seen_frame();
+        move |x, y| frame.across(x).seen(y)
+    }
+
+    /// The seen ground in the vehicle frame, for lookups line by line
+    /// ([`SeenFrame::across`]).
+    pub fn seen_frame(&self) -> SeenFrame<'_> {
         let t = self.world_from_vehicle.translation.vector;
         let (sin, cos) = yaw_of(&self.world_from_vehicle).sin_cos();
-        let inverse = 1.0 / self.patch_size_m;
-        move |x, y| {
-            let (wx, wy) = (t.x + cos * x - sin * y, t.y + sin * x + cos * y);
-            self.seen
-                .contains(floor_i64(wx * inverse), floor_i64(wy * inverse))
+        SeenFrame {
+            seen: &self.seen,
+            x: t.x,
+            y: t.y,
+            sin,
+            cos,
+            inverse: 1.0 / self.patch_size_m,
         }
     }
 
@@ -52,5 +61,55 @@ impl MapSnapshot {
 
     pub fn is_empty(&self) -> bool {
         self.patches.is_empty()
+    }
+}
+
+/// A snapshot's seen ground with the pose's trigonometry done once.
+#[derive(Debug, Clone, Copy)]
+pub struct SeenFrame<'a> {
+    seen: &'a SeenGround,
+    x: f64,
+    y: f64,
+    sin: f64,
+    cos: f64,
+    inverse: f64,
+}
+
+impl<'a> SeenFrame<'a> {
+    /// The line of vehicle-frame points at `x`: the part of each lookup
+    /// that depends on x alone taken once.
+    pub fn across(&self, x: f64) -> SeenLine<'a> {
+        SeenLine {
+            seen: self.seen,
+            x: self.x + self.cos * x,
+            y: self.y + self.sin * x,
+            sin: self.sin,
+            cos: self.cos,
+            inverse: self.inverse,
+        }
+    }
+}
+
+/// The vehicle-frame points of one x ([`SeenFrame::across`]).
+#[derive(Debug, Clone, Copy)]
+pub struct SeenLine<'a> {
+    seen: &'a SeenGround,
+    /// World x and y of the line's point at vehicle-frame y = 0.
+    x: f64,
+    y: f64,
+    sin: f64,
+    cos: f64,
+    inverse: f64,
+}
+
+impl SeenLine<'_> {
+    /// Whether the ground at vehicle-frame `y` on this line has been seen
+    /// (the world point `t + R·(x, y)`, summed in the order
+    /// [`MapSnapshot::seen_lookup`] always has).
+    #[inline]
+    pub fn seen(&self, y: f64) -> bool {
+        let (wx, wy) = (self.x - self.sin * y, self.y + self.cos * y);
+        self.seen
+            .contains(floor_i64(wx * self.inverse), floor_i64(wy * self.inverse))
     }
 }
