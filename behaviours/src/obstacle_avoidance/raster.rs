@@ -574,20 +574,47 @@ impl Rigid {
 }
 
 /// Distance from the origin to the nearest cell centre set in `layer`, m.
+/// On a row (one x) that is the set cell of least |y|: the last set
+/// before the first column of centre y ≥ 0, or the first set from it.
 pub(super) fn nearest_set(layer: &[u64], grid: &Grid) -> f64 {
+    let split = (0..grid.columns)
+        .find(|&column| grid.centre(0, column).y >= 0.0)
+        .unwrap_or(grid.columns);
     let mut nearest = f64::INFINITY;
-    for (word, &bits) in layer.iter().enumerate() {
-        let mut bits = bits;
-        let row = word / grid.words_per_row;
-        let base = (word % grid.words_per_row) * 64;
-        while bits != 0 {
-            let column = base + bits.trailing_zeros() as usize;
-            bits &= bits - 1;
+    for row in 0..grid.rows {
+        let below = split
+            .checked_sub(1)
+            .and_then(|to| last_set(layer, grid, row, 0, to));
+        let above = (split < grid.columns)
+            .then(|| first_set(layer, grid, row, split, grid.columns - 1))
+            .flatten();
+        for column in below.into_iter().chain(above) {
             let c = grid.centre(row, column);
             nearest = nearest.min(c.x.hypot(c.y));
         }
     }
     nearest
+}
+
+/// The last column in `from..=to` of `row` set in `layer`.
+pub(super) fn last_set(
+    layer: &[u64],
+    grid: &Grid,
+    row: usize,
+    from: usize,
+    to: usize,
+) -> Option<usize> {
+    let base = row * grid.words_per_row;
+    for word in (from / 64..=to / 64).rev() {
+        let low = if word == from / 64 { from % 64 } else { 0 };
+        let high = if word == to / 64 { to % 64 } else { 63 };
+        let mask = (u64::MAX << low) & (u64::MAX >> (63 - high));
+        let hits = layer[base + word] & mask;
+        if hits != 0 {
+            return Some(word * 64 + 63 - hits.leading_zeros() as usize);
+        }
+    }
+    None
 }
 
 /// The first column in `from..=to` of `row` set in `layer`.
@@ -737,6 +764,127 @@ mod tests {
             false
         });
         cells
+    }
+
+    /// A grid of 0.2 m over [-2, 18] × [-9.9, 9.9] (two words a row) and
+    /// layers of it with about one cell in `one_in` set.
+    fn layers(one_in: u64, count: usize) -> (Grid, Vec<Vec<u64>>) {
+        let grid = Grid {
+            x0: -2.0,
+            y0: -9.9,
+            resolution: 0.2,
+            per_m: 5.0,
+            rows: 100,
+            columns: 99,
+            words_per_row: 2,
+        };
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let layers = (0..count)
+            .map(|_| {
+                let mut layer = vec![0u64; grid.rows * grid.words_per_row];
+                for row in 0..grid.rows {
+                    for column in 0..grid.columns {
+                        if next() % one_in == 0 {
+                            layer[row * 2 + column / 64] |= 1 << (column % 64);
+                        }
+                    }
+                }
+                layer
+            })
+            .collect();
+        (grid, layers)
+    }
+
+    #[test]
+    fn the_nearest_set_cell_is_the_nearest_of_all_set_cells() {
+        let (grid, layers) = layers(400, 50);
+        let mut empty = vec![0u64; grid.rows * grid.words_per_row];
+        for layer in layers.iter().chain([&empty]) {
+            let mut every = f64::INFINITY;
+            for row in 0..grid.rows {
+                for column in 0..grid.columns {
+                    if layer[row * 2 + column / 64] & (1 << (column % 64)) != 0 {
+                        let c = grid.centre(row, column);
+                        every = every.min(c.x.hypot(c.y));
+                    }
+                }
+            }
+            assert_eq!(nearest_set(layer, &grid), every);
+        }
+        // One cell, in the last column: found from either side.
+        empty[99 * 2 + 1] = 1 << (98 - 64);
+        let c = grid.centre(99, 98);
+        assert_eq!(nearest_set(&empty, &grid), c.x.hypot(c.y));
+    }
+
+    #[test]
+    fn a_footprint_whose_box_holds_no_set_cell_has_none_under_it() {
+        let (grid, layers) = layers(1500, 40);
+        let body = Footprint::rectangle(-1.2, 4.1, 1.6).outline();
+        let (mut skipped, mut held) = (0, 0);
+        for (i, layer) in layers.iter().enumerate() {
+            for step in 0..60 {
+                let heading = (i * 60 + step) as f64 * 0.37;
+                let rigid = Rigid {
+                    cos: heading.cos(),
+                    sin: heading.sin(),
+                    x: -3.0 + 0.37 * step as f64,
+                    y: -11.0 + 0.41 * step as f64,
+                };
+                let corners = body.map(|c| rigid.apply(c));
+                let mut under = false;
+                cells_inside(&grid, &corners, |row, from, to| {
+                    under = first_set(layer, &grid, row, from, to).is_some();
+                    under
+                });
+                if grid.may_hold(layer, &corners) {
+                    held += usize::from(under);
+                } else {
+                    assert!(!under, "a set cell under a footprint whose box holds none");
+                    skipped += 1;
+                }
+            }
+        }
+        // Both kinds of footprint were met.
+        assert!(
+            skipped > 100 && held > 100,
+            "{skipped} skipped, {held} held"
+        );
+    }
+
+    #[test]
+    fn the_cover_of_a_box_holds_the_cells_of_its_points() {
+        let (grid, _) = layers(1, 0);
+        let (lo, hi) = (Point2::new(3.05, -0.31), Point2::new(4.93, 2.2));
+        let cover = grid.cover(lo, hi).expect("on the grid");
+        assert!(cover.whole);
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let p = lo
+                    + (hi - lo).component_mul(&nalgebra::Vector2::new(
+                        f64::from(i) / 20.0,
+                        f64::from(j) / 20.0,
+                    ));
+                let (row, column) = grid.cell(p.x, p.y).expect("on the grid");
+                assert!((cover.rows.0..=cover.rows.1).contains(&row));
+                assert!((cover.columns.0..=cover.columns.1).contains(&column));
+            }
+        }
+        // Over an edge: clipped, not whole; off the grid: none.
+        let over = grid
+            .cover(Point2::new(17.5, 0.0), Point2::new(19.0, 1.0))
+            .expect("partly on");
+        assert!(!over.whole && over.rows.1 == grid.rows - 1);
+        assert!(
+            grid.cover(Point2::new(18.5, 0.0), Point2::new(19.0, 1.0))
+                .is_none()
+        );
     }
 
     #[test]
