@@ -596,25 +596,24 @@ impl World {
     /// `out`: the same values bit for bit, the terrain's noise worked out
     /// along the row (see [`Noise::row`]). A tile's cells are built so.
     pub fn heights_along(&self, y: f64, xs: impl Iterator<Item = f64>, out: &mut [f64]) {
-        let mut hills = match &self.base {
+        // The terrain's row: its hills' noise, or its height file's.
+        enum BaseRow<'a> {
+            Hills(crate::noise::FbmRow<'a>, f64, f64),
+            File(crate::heightmap::HeightRow<'a>, f64),
+        }
+        let mut base = match &self.base {
             Base::Procedural {
-                noise, wavelength, ..
-            } => Some(noise.fbm_row(y / wavelength, 3)),
-            Base::File { .. } => None,
+                noise,
+                wavelength,
+                amplitude,
+            } => BaseRow::Hills(noise.fbm_row(y / wavelength, 3), *amplitude, *wavelength),
+            Base::File { grid, scale } => BaseRow::File(grid.row(y), *scale),
         };
         let mut roughness = self.roughness.fbm_row(y / self.roughness_wavelength, 2);
         for (x, out) in xs.zip(out) {
-            let base = match (&self.base, &mut hills) {
-                (
-                    Base::Procedural {
-                        amplitude,
-                        wavelength,
-                        ..
-                    },
-                    Some(row),
-                ) => amplitude * row.at(x / wavelength),
-                (Base::File { grid, scale }, _) => scale * grid.height(x, y),
-                (Base::Procedural { .. }, None) => unreachable!("a procedural base has its row"),
+            let base = match &mut base {
+                BaseRow::Hills(row, amplitude, wavelength) => *amplitude * row.at(x / *wavelength),
+                BaseRow::File(row, scale) => *scale * row.at(x),
             };
             let mut h =
                 base + self.roughness_amplitude * roughness.at(x / self.roughness_wavelength);
