@@ -23,14 +23,19 @@ pub fn data_dir() -> PathBuf {
     data
 }
 
-/// The log of a simulated mission on the embedded `world` under `config`,
-/// made unless `path` exists.
+/// The log of a simulated mission on `world` (an embedded world's name,
+/// or a world file's path from the workspace, ending in `.toml`) under
+/// `config`, made unless `path` exists.
 pub fn make_log(path: &Path, world: &str, config: &Config) {
     if path.exists() {
         return;
     }
     eprintln!("making {} (once)...", path.display());
-    let world = Arc::new(World::embedded(world).expect("embedded").expect("valid"));
+    let world = Arc::new(if world.ends_with(".toml") {
+        World::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(world)).expect("the world loads")
+    } else {
+        World::embedded(world).expect("embedded").expect("valid")
+    });
     let options = MissionOptions {
         log: Some(path.to_owned()),
         ..MissionOptions::default()

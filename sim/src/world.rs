@@ -596,6 +596,18 @@ impl World {
     /// `out`: the same values bit for bit, the terrain's noise worked out
     /// along the row (see [`Noise::row`]). A tile's cells are built so.
     pub fn heights_along(&self, y: f64, xs: impl Iterator<Item = f64>, out: &mut [f64]) {
+        self.along(y, xs, out, true);
+    }
+
+    /// [`terrain_height`](Self::terrain_height) at each of `xs` on the row
+    /// at `y`, into `out`, as [`heights_along`](Self::heights_along) gives
+    /// [`height`](Self::height): the same values bit for bit.
+    pub fn terrain_heights_along(&self, y: f64, xs: impl Iterator<Item = f64>, out: &mut [f64]) {
+        self.along(y, xs, out, false);
+    }
+
+    /// The heights along a row, the features' with `features`.
+    fn along(&self, y: f64, xs: impl Iterator<Item = f64>, out: &mut [f64], features: bool) {
         // The terrain's row: its hills' noise, or its height file's.
         enum BaseRow<'a> {
             Hills(crate::noise::FbmRow<'a>, f64, f64),
@@ -617,8 +629,10 @@ impl World {
             };
             let mut h =
                 base + self.roughness_amplitude * roughness.at(x / self.roughness_wavelength);
-            for &i in self.index.at(x, y) {
-                h += self.features[i as usize].height_at([x, y]);
+            if features {
+                for &i in self.index.at(x, y) {
+                    h += self.features[i as usize].height_at([x, y]);
+                }
             }
             *out = h;
         }

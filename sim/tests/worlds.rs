@@ -246,8 +246,10 @@ fn a_height_file_covering_a_sliver_of_the_world_is_refused() {
 }
 
 /// A tile's heights, taken row by row (`World::heights_along`), are the
-/// world's heights point by point, bit for bit: every embedded world, a
-/// generated hard one and the DEM loop.
+/// world's heights point by point, bit for bit, and so are the terrain's
+/// without its features (`World::terrain_heights_along`, what map.png is
+/// shaded from): every embedded world, a generated hard one and the DEM
+/// loop.
 #[test]
 fn heights_along_a_row_are_the_heights_point_by_point() {
     let mut worlds: Vec<World> = EMBEDDED
@@ -273,11 +275,19 @@ fn heights_along_a_row_are_the_heights_point_by_point() {
                 .collect();
             let mut row = vec![0.0; xs.len()];
             world.heights_along(y, xs.iter().copied(), &mut row);
-            for (x, h) in xs.iter().zip(&row) {
+            let mut terrain = vec![0.0; xs.len()];
+            world.terrain_heights_along(y, xs.iter().copied(), &mut terrain);
+            for ((x, h), t) in xs.iter().zip(&row).zip(&terrain) {
                 assert_eq!(
                     h.to_bits(),
                     world.height(*x, y).to_bits(),
                     "{} at ({x}, {y})",
+                    world.spec.name
+                );
+                assert_eq!(
+                    t.to_bits(),
+                    world.terrain_height(*x, y).to_bits(),
+                    "{}'s terrain at ({x}, {y})",
                     world.spec.name
                 );
             }

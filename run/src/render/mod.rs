@@ -399,15 +399,11 @@ fn shade_terrain(
         (canvas.pixmap.height() as usize).saturating_sub(header),
     );
     let step = 1.0 / scale;
-    let heights: Vec<f64> = (0..gh)
-        .flat_map(|r| (0..gw).map(move |c| (c, r)))
-        .map(|(c, r)| {
-            world.terrain_height(
-                min_x + (c as f64 + 0.5) * step,
-                max_y - (r as f64 + 0.5) * step,
-            )
-        })
-        .collect();
+    let mut heights = vec![0.0; gw * gh];
+    for (r, row) in heights.chunks_exact_mut(gw.max(1)).enumerate() {
+        let xs = (0..gw).map(|c| min_x + (c as f64 + 0.5) * step);
+        world.terrain_heights_along(max_y - (r as f64 + 0.5) * step, xs, row);
+    }
     // The tint spans the heights on the map only.
     let (lo, hi) = heights
         .iter()
