@@ -301,9 +301,10 @@ impl Drop for Taken<'_> {
     }
 }
 
-/// The binned ground an image of `sensor` is cast through, if any: the
-/// whole turn for a frame of many rays, the wedge its rays run along for
-/// a smaller one (found from the rays at its extreme elevations and
+/// The binned ground an image of `sensor` is cast through, if any: for a
+/// frame of many rays the whole turn, or the headings of one spanning
+/// less than half a turn (binned from the tiles they meet); the wedge its
+/// rays run along for a smaller one (found from the rays at its extreme elevations and
 /// azimuths: along a row, and along a column, a ray's heading turns one
 /// way; a ray outside the wedge is cast in the view).
 fn table(
@@ -314,9 +315,6 @@ fn table(
     threads: usize,
 ) -> Option<PolarView> {
     let rays = sensor.beams.rows() * sensor.beams.cols();
-    if rays >= POLAR_MIN_RAYS {
-        return Some(PolarView::new(view, origin, sensor.max_range_m, threads));
-    }
     if rays < WEDGE_MIN_RAYS {
         return None;
     }
@@ -337,6 +335,22 @@ fn table(
                 rotation * Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
             })
         });
+    if rays >= POLAR_MIN_RAYS {
+        // A sensor looking one way (the ERIM's 128°) bins the tiles its
+        // headings meet; a rotating lidar, the whole turn.
+        let headings = if azimuths[1] - azimuths[0] < std::f64::consts::PI {
+            Headings::frame_around(corners).unwrap_or(Headings::ALL)
+        } else {
+            Headings::ALL
+        };
+        return Some(PolarView::within(
+            view,
+            origin,
+            sensor.max_range_m,
+            threads,
+            headings,
+        ));
+    }
     let headings = Headings::around(corners)?;
     Some(PolarView::wedge(view, origin, sensor.max_range_m, headings))
 }

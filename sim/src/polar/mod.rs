@@ -97,6 +97,21 @@ impl Headings {
     /// in the view, as before; wedges wider than that were not measured)
     /// or a direction is (nearly) vertical.
     pub fn around(directions: impl IntoIterator<Item = Vector3<f64>>) -> Option<Self> {
+        Self::around_within(directions, HEADINGS / 4)
+    }
+
+    /// [`Headings::around`] for a whole image of a sensor that looks
+    /// one way (the ERIM's 128°): wedges up to half a turn, binned from
+    /// the tiles they meet ([`PolarView::within`]) rather than band by
+    /// band.
+    pub fn frame_around(directions: impl IntoIterator<Item = Vector3<f64>>) -> Option<Self> {
+        Self::around_within(directions, HEADINGS / 2)
+    }
+
+    fn around_within(
+        directions: impl IntoIterator<Item = Vector3<f64>>,
+        widest: usize,
+    ) -> Option<Self> {
         const WIDEN: usize = 2;
         let mut bins = Vec::new();
         for d in directions {
@@ -115,7 +130,7 @@ impl Headings {
             .chain(std::iter::once((highest, lowest + HEADINGS - highest)))
             .max_by_key(|&(_, gap)| gap)?;
         let width = HEADINGS - gap + 1 + 2 * WIDEN;
-        (width <= HEADINGS / 4).then(|| Self {
+        (width <= widest).then(|| Self {
             first: (gap_after + gap + HEADINGS - WIDEN) % HEADINGS,
             width,
         })
@@ -133,6 +148,15 @@ impl Headings {
     #[inline]
     fn offset(self, heading: usize) -> usize {
         heading.wrapping_sub(self.first) & (HEADINGS - 1)
+    }
+
+    /// Whether any of heading bins `lo..=hi` (as [`Headings::raise`]
+    /// takes them) is one of these.
+    #[inline]
+    fn meets(self, lo: i64, hi: i64) -> bool {
+        let start = (lo - self.first as i64).rem_euclid(HEADINGS as i64) as usize;
+        let end = start + (hi - lo).clamp(0, HEADINGS as i64 - 1) as usize;
+        start < self.width || end >= HEADINGS
     }
 
     /// Raises to `top` the columns of `row` (one distance bin) that hold
@@ -182,20 +206,35 @@ impl PolarView {
     /// Bins the ground of `view` within `range_m` of `origin` (horizontally),
     /// on up to `threads` threads.
     pub fn new(view: &TileView, origin: Point3<f64>, range_m: f64, threads: usize) -> Self {
+        Self::within(view, origin, range_m, threads, Headings::ALL)
+    }
+
+    /// [`PolarView::new`] along `headings` only: the tiles whose headings
+    /// miss them are passed over, and the table is as wide as they are.
+    /// A ray along them meets what it meets in a table of every heading;
+    /// any other ray is cast in the view.
+    pub fn within(
+        view: &TileView,
+        origin: Point3<f64>,
+        range_m: f64,
+        threads: usize,
+        headings: Headings,
+    ) -> Self {
         let range_m = Self::binned_range(range_m);
         let bins = ((range_m / BIN_M).ceil() as usize).max(1);
         let parts = threads.max(1);
+        let width = headings.width;
         let table = Table {
             origin,
             range_m,
             bins,
-            headings: Headings::ALL,
+            headings,
         };
         // Each thread bins a share of the tiles into a table of its own;
         // then each takes a share of the headings, merges the tables there
         // (highest wins) and derives the coarse bins and the clearing rises.
         let bin_part = |part: usize| {
-            let mut highest = vec![f32::NEG_INFINITY; bins * HEADINGS];
+            let mut highest = vec![f32::NEG_INFINITY; bins * width];
             let mut corners = Vec::new();
             view.for_each_tile(part, parts, |first, block_max| {
                 table.bin_tile(&mut highest, &mut corners, first, block_max);
@@ -214,22 +253,22 @@ impl PolarView {
                 .map(|other| {
                     other
                         .join()
-                        .unwrap_or_else(|_| vec![f32::INFINITY; bins * HEADINGS])
+                        .unwrap_or_else(|_| vec![f32::INFINITY; bins * width])
                 })
                 .collect();
             (highest, others)
         });
         let groups = bins.div_ceil(GROUP);
-        let mut coarse = vec![f32::NEG_INFINITY; groups * HEADINGS];
-        let mut clears = vec![f32::NEG_INFINITY; bins * HEADINGS];
+        let mut coarse = vec![f32::NEG_INFINITY; groups * width];
+        let mut clears = vec![f32::NEG_INFINITY; bins * width];
         let z = origin.z;
-        let width = HEADINGS.div_ceil(parts);
+        let share = width.div_ceil(parts);
         let others = &others;
         std::thread::scope(|scope| {
-            let mut shares = columns(&mut highest, HEADINGS, parts)
+            let mut shares = columns(&mut highest, width, parts)
                 .into_iter()
-                .zip(columns(&mut coarse, HEADINGS, parts))
-                .zip(columns(&mut clears, HEADINGS, parts))
+                .zip(columns(&mut coarse, width, parts))
+                .zip(columns(&mut clears, width, parts))
                 .enumerate();
             // The first share on this thread, the others each on one more.
             let here = shares.next();
@@ -237,7 +276,7 @@ impl PolarView {
                 scope.spawn(move || {
                     derive(
                         &mut highest,
-                        (others, HEADINGS, part * width),
+                        (others, width, part * share),
                         &mut coarse,
                         &mut clears,
                         z,
@@ -247,7 +286,7 @@ impl PolarView {
             if let Some((_, ((mut highest, mut coarse), mut clears))) = here {
                 derive(
                     &mut highest,
-                    (others, HEADINGS, 0),
+                    (others, width, 0),
                     &mut coarse,
                     &mut clears,
                     z,
@@ -259,7 +298,7 @@ impl PolarView {
             origin,
             range_m,
             bins,
-            headings: Headings::ALL,
+            headings,
             highest,
             coarse,
             clears,
@@ -408,6 +447,19 @@ impl Table {
         if (nx * nx + ny * ny).sqrt() - DISTANCE_MARGIN > self.range_m {
             return;
         }
+        if self.headings.width < HEADINGS {
+            // A tile whose headings miss the table's raises none of its
+            // bins (its blocks' headings lie within its own).
+            let edge = |k: i64| k as f64 * BLOCK_M;
+            let [x0, y0] = [edge(first.0), edge(first.1)];
+            let edges = [x0, y0, x0 + side, y0 + side];
+            let corners = [(0, 1), (2, 1), (0, 3), (2, 3)]
+                .map(|(x, y)| pseudo_angle(edges[x] - ox, edges[y] - oy));
+            let (lo, hi) = self.heading_span(edges, corners);
+            if !self.headings.meets(lo, hi) {
+                return;
+            }
+        }
         self.bin_blocks(highest, corners, first, (BLOCKS, BLOCKS), |i, j| {
             Some(block_max[j * BLOCKS + i])
         });
@@ -495,6 +547,34 @@ impl Table {
         }
     }
 
+    /// The heading bins the square `[x0, y0, x1, y1]` spans (`corners`:
+    /// the pseudo-angles of its corners, lower left, lower right, upper
+    /// left, upper right): all of them around a square holding the
+    /// sensor; else the span of its corners, across +x when it straddles
+    /// it (`lo` may be below 0).
+    #[inline(always)]
+    fn heading_span(&self, [bx0, by0, bx1, by1]: [f64; 4], corners: [f64; 4]) -> (i64, i64) {
+        let (ox, oy) = (self.origin.x, self.origin.y);
+        let holds = bx0 <= ox && ox <= bx1 && by0 <= oy && oy <= by1;
+        if holds {
+            return (0, HEADINGS as i64 - 1);
+        }
+        let wraps = by0 <= oy && oy <= by1 && bx0 > ox;
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for mut p in corners {
+            if wraps && p > 2.0 {
+                p -= 4.0;
+            }
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        (
+            heading_bin(lo - ANGLE_MARGIN),
+            heading_bin(hi + ANGLE_MARGIN),
+        )
+    }
+
     /// Raises to `top` the bins of `highest` that the block `[x0, y0, x1,
     /// y1]` overlaps: its span of distances from the sensor and of headings
     /// (`corners`: the pseudo-angles of its four corners, computed from
@@ -516,27 +596,7 @@ impl Table {
         let bins = self.bins;
         let first = ((near.max(0.0) / BIN_M) as usize).min(bins - 1);
         let last = ((far / BIN_M) as usize).min(bins - 1);
-        // Headings: all of them around a block holding the sensor; else
-        // the span of its corners, across +x when it straddles it.
-        let holds = bx0 <= ox && ox <= bx1 && by0 <= oy && oy <= by1;
-        let (lo, hi) = if holds {
-            (0, HEADINGS as i64 - 1)
-        } else {
-            let wraps = by0 <= oy && oy <= by1 && bx0 > ox;
-            let mut lo = f64::INFINITY;
-            let mut hi = f64::NEG_INFINITY;
-            for mut p in corners {
-                if wraps && p > 2.0 {
-                    p -= 4.0;
-                }
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-            (
-                heading_bin(lo - ANGLE_MARGIN),
-                heading_bin(hi + ANGLE_MARGIN),
-            )
-        };
+        let (lo, hi) = self.heading_span(edges, corners);
         let width = self.headings.width;
         for bin in first..=last {
             self.headings

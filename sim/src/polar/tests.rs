@@ -248,3 +248,71 @@ fn rays_cast_with_avx2_meet_what_the_portable_cast_meets_bit_for_bit() {
     // Most rays below the horizon met the ground.
     assert!(hits > 3 * 2048 * 40, "{hits} hits");
 }
+
+#[test]
+fn a_frame_cast_within_its_headings_is_the_frame_cast_through_every_heading() {
+    // An ERIM-like image (±64° of azimuth, 16° up to 34° down) from
+    // 2.4 m up, facing four ways (one across +x, where the bins wrap) and
+    // tilted on a side slope: the table of its headings alone answers
+    // every ray as the table of the whole turn does, bit for bit; a ray
+    // outside its headings is cast in the view.
+    let world = Arc::new(World::embedded("paper_loop").unwrap().unwrap());
+    let mut cache = TileCache::new(Arc::clone(&world), 64, 2);
+    let range = 45.0;
+    let (mut hits, mut rays) = (0, 0);
+    for &(x, y, yaw, tilt) in &[
+        (0.013, 0.029, 0.0f64, 0.0f64),
+        (60.0, 35.0, 1.9, 0.2),
+        (12.8, 25.6, 3.3, -0.15),
+        (-20.0, 80.0, -1.2, 0.1),
+    ] {
+        let view = cache.view(x, y, range + 1.0);
+        let origin = Point3::new(x, y, world.height(x, y) + 2.4);
+        let aim = |azimuth: f64, elevation: f64| {
+            let (a, e) = (yaw + azimuth, elevation + tilt * azimuth.sin());
+            Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin())
+        };
+        let (left, right) = (64f64.to_radians(), -64f64.to_radians());
+        let (top, bottom) = (16f64.to_radians(), -34f64.to_radians());
+        let headings = Headings::frame_around([
+            aim(left, top),
+            aim(left, bottom),
+            aim(right, top),
+            aim(right, bottom),
+        ])
+        .expect("128° is within half a turn");
+        let within = PolarView::within(&view, origin, range, 2, headings);
+        let every = PolarView::new(&view, origin, range, 2);
+        for row in 0..64 {
+            let elevation = top + (bottom - top) * f64::from(row) / 63.0;
+            let directions: Vec<Vector3<f64>> = (0..256)
+                .map(|col| aim(left + (right - left) * f64::from(col) / 255.0, elevation))
+                .collect();
+            let mut a = vec![0.0f32; directions.len()];
+            let mut b = vec![0.0f32; directions.len()];
+            within.cast_each(&origin, &directions, range, &mut a);
+            every.cast_each(&origin, &directions, range, &mut b);
+            for (col, (a, b)) in a.iter().zip(&b).enumerate() {
+                assert!(
+                    a.to_bits() == b.to_bits(),
+                    "from {origin}, row {row}, column {col}: {a} vs {b}"
+                );
+            }
+            hits += b.iter().filter(|r| r.is_finite()).count();
+            rays += b.len();
+        }
+        // Behind the sensor: outside the headings, cast in the view.
+        let behind = aim(std::f64::consts::PI, -0.3);
+        assert_eq!(
+            within.cast(&origin, &behind, range),
+            view.cast(&origin, &behind, range)
+        );
+    }
+    assert!(hits > rays / 2 && hits < rays, "{hits} of {rays}");
+    // A rotating lidar's turn is no wedge.
+    let turn = (0..8).map(|k| {
+        let a = f64::from(k) * std::f64::consts::FRAC_PI_4;
+        Vector3::new(a.cos(), a.sin(), -0.1)
+    });
+    assert!(Headings::frame_around(turn).is_none());
+}
