@@ -39,7 +39,9 @@ pub struct Setup<'a> {
     /// `sim.render_margin_m` are never used, so never rendered.
     pub evaluated_range_m: f64,
     /// Whether the simulator has the machine's cores to itself (not one of
-    /// several missions side by side): only then are frames rendered ahead.
+    /// several missions side by side): only then are frames rendered ahead,
+    /// and only then does `sim.threads = 0` (all cores) render on more
+    /// than this thread.
     pub exclusive: bool,
     /// The time of the first tick.
     pub start: Utime,
@@ -128,7 +130,15 @@ impl Simulator {
                 Arc::new(rendered)
             })
             .collect();
-        let threads = sim.thread_count();
+        // Beside other missions (a sweep's jobs, one a core) a mission
+        // renders and builds tiles on its own thread unless told
+        // otherwise: a frame split among threads the other missions also
+        // want waits for the one descheduled last.
+        let threads = if setup.exclusive || sim.threads != 0 {
+            sim.thread_count()
+        } else {
+            1
+        };
         let (start, heading) = world.start;
         let motion = MotionModel::new(
             MotionLimits::from_vehicle(setup.vehicle),
