@@ -596,25 +596,22 @@ pub(super) fn nearest_set(layer: &[u64], grid: &Grid) -> f64 {
     nearest
 }
 
-/// The last column in `from..=to` of `row` set in `layer`.
-pub(super) fn last_set(
-    layer: &[u64],
+/// The words of `row` of `layer` that hold columns `from..=to`, each
+/// masked to them: (its first column, its bits).
+fn masked_words<'a>(
+    layer: &'a [u64],
     grid: &Grid,
     row: usize,
     from: usize,
     to: usize,
-) -> Option<usize> {
+) -> impl DoubleEndedIterator<Item = (usize, u64)> + 'a {
     let base = row * grid.words_per_row;
-    for word in (from / 64..=to / 64).rev() {
+    (from / 64..=to / 64).map(move |word| {
         let low = if word == from / 64 { from % 64 } else { 0 };
         let high = if word == to / 64 { to % 64 } else { 63 };
         let mask = (u64::MAX << low) & (u64::MAX >> (63 - high));
-        let hits = layer[base + word] & mask;
-        if hits != 0 {
-            return Some(word * 64 + 63 - hits.leading_zeros() as usize);
-        }
-    }
-    None
+        (word * 64, layer[base + word] & mask)
+    })
 }
 
 /// The first column in `from..=to` of `row` set in `layer`.
@@ -625,17 +622,21 @@ pub(super) fn first_set(
     from: usize,
     to: usize,
 ) -> Option<usize> {
-    let base = row * grid.words_per_row;
-    for word in from / 64..=to / 64 {
-        let low = if word == from / 64 { from % 64 } else { 0 };
-        let high = if word == to / 64 { to % 64 } else { 63 };
-        let mask = (u64::MAX << low) & (u64::MAX >> (63 - high));
-        let hits = layer[base + word] & mask;
-        if hits != 0 {
-            return Some(word * 64 + hits.trailing_zeros() as usize);
-        }
-    }
-    None
+    masked_words(layer, grid, row, from, to)
+        .find_map(|(first, bits)| (bits != 0).then(|| first + bits.trailing_zeros() as usize))
+}
+
+/// The last column in `from..=to` of `row` set in `layer`.
+pub(super) fn last_set(
+    layer: &[u64],
+    grid: &Grid,
+    row: usize,
+    from: usize,
+    to: usize,
+) -> Option<usize> {
+    masked_words(layer, grid, row, from, to)
+        .rev()
+        .find_map(|(first, bits)| (bits != 0).then(|| first + 63 - bits.leading_zeros() as usize))
 }
 
 pub(super) fn build_template(

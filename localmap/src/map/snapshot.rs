@@ -68,10 +68,12 @@ impl MapSnapshot {
 #[derive(Debug, Clone, Copy)]
 pub struct SeenFrame<'a> {
     seen: &'a SeenGround,
+    /// The pose's position in the world, the sine and cosine of its yaw.
     x: f64,
     y: f64,
     sin: f64,
     cos: f64,
+    /// 1 / the patch size.
     inverse: f64,
 }
 
@@ -80,12 +82,9 @@ impl<'a> SeenFrame<'a> {
     /// that depends on x alone taken once.
     pub fn across(&self, x: f64) -> SeenLine<'a> {
         SeenLine {
-            seen: self.seen,
+            frame: *self,
             x: self.x + self.cos * x,
             y: self.y + self.sin * x,
-            sin: self.sin,
-            cos: self.cos,
-            inverse: self.inverse,
         }
     }
 }
@@ -93,13 +92,10 @@ impl<'a> SeenFrame<'a> {
 /// The vehicle-frame points of one x ([`SeenFrame::across`]).
 #[derive(Debug, Clone, Copy)]
 pub struct SeenLine<'a> {
-    seen: &'a SeenGround,
+    frame: SeenFrame<'a>,
     /// World x and y of the line's point at vehicle-frame y = 0.
     x: f64,
     y: f64,
-    sin: f64,
-    cos: f64,
-    inverse: f64,
 }
 
 impl SeenLine<'_> {
@@ -108,8 +104,9 @@ impl SeenLine<'_> {
     /// [`MapSnapshot::seen_lookup`] always has).
     #[inline]
     pub fn seen(&self, y: f64) -> bool {
-        let (wx, wy) = (self.x - self.sin * y, self.y + self.cos * y);
-        self.seen
-            .contains(floor_i64(wx * self.inverse), floor_i64(wy * self.inverse))
+        let f = &self.frame;
+        let (wx, wy) = (self.x - f.sin * y, self.y + f.cos * y);
+        f.seen
+            .contains(floor_i64(wx * f.inverse), floor_i64(wy * f.inverse))
     }
 }
