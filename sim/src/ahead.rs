@@ -216,6 +216,22 @@ impl Drop for Frames {
     }
 }
 
+/// Asks for the tiles `sensor` will see a tile's side further on along
+/// the vehicle's heading from `world_from_vehicle` to be built ahead
+/// ([`TileCache::prefetch`]).
+pub(crate) fn prefetch_for(
+    sensor: &SensorModel,
+    tiles: &mut TileCache,
+    world_from_vehicle: &Isometry,
+) {
+    let at = (world_from_vehicle * sensor.vehicle_from_sensor)
+        .translation
+        .vector;
+    let heading = world_from_vehicle * nalgebra::Vector3::x();
+    let along = heading.xy().try_normalize(1e-9).unwrap_or_default() * crate::tiles::TILE_M;
+    tiles.prefetch(at.x + along.x, at.y + along.y, sensor.max_range_m + 1.0);
+}
+
 /// The tiles `sensor` on the vehicle at `world_from_vehicle` sees.
 pub(crate) fn view_for(
     sensor: &SensorModel,

@@ -112,6 +112,8 @@ pub struct Simulator {
     distance_m: f64,
     max_speed_mps: f64,
     render_ms: f64,
+    /// Whether this simulator has the cores to itself (see [`Setup`]).
+    exclusive: bool,
 }
 
 impl Simulator {
@@ -175,6 +177,7 @@ impl Simulator {
             slicers,
             frames,
             render_ahead,
+            exclusive: setup.exclusive,
             previous: *motion.state(),
             previous_stance: None,
             motion,
@@ -374,6 +377,11 @@ impl Simulator {
             };
             let (image, ms) = self.frames[i].render(&mut self.tiles, &request);
             self.render_ms += ms;
+            if self.exclusive {
+                // The tiles the vehicle drives towards are built while the
+                // pipeline works, on a core of their own.
+                crate::ahead::prefetch_for(&self.sensors[i], &mut self.tiles, now);
+            }
             self.next_images[i] += self.sensors[i].period_us();
             if self.render_ahead {
                 let (utime, world_from_vehicle) = self.pose_when_due(self.next_images[i]);

@@ -8,8 +8,9 @@
 //! cells of the blocks they may hit. A whole frame's rays, all from one
 //! point, go faster through [`crate::polar::PolarView`].
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
+use std::sync::mpsc::{Receiver, Sender};
 
 use arcnav_perception::RayCast;
 use nalgebra::{Point3, Vector3};
@@ -115,6 +116,18 @@ pub struct TileCache {
     capacity: usize,
     clock: u64,
     threads: usize,
+    /// The thread building tiles asked for ahead ([`TileCache::prefetch`]),
+    /// once asked.
+    ahead: Option<Ahead>,
+}
+
+/// A thread building tiles before a view needs them: the keys it was
+/// sent and has not handed back yet.
+#[derive(Debug)]
+struct Ahead {
+    jobs: Sender<(i64, i64)>,
+    built: Receiver<((i64, i64), Tile)>,
+    pending: HashSet<(i64, i64)>,
 }
 
 /// The tiles around one sensor position, read-only: what rays are cast in.
@@ -138,6 +151,81 @@ impl TileCache {
             capacity: capacity.max(16),
             clock: 0,
             threads: threads.max(1),
+            ahead: None,
+        }
+    }
+
+    /// Starts building, on a thread of its own, the tiles a view of
+    /// `radius` about (x, y) would need that are neither here nor asked for
+    /// already: a later [`TileCache::view`] takes them (waiting for those
+    /// still being built) rather than building them itself. A tile is a
+    /// pure function of the world, so views are the same either way.
+    pub fn prefetch(&mut self, x: f64, y: f64, radius: f64) {
+        if self.ahead.is_none() {
+            self.ahead = self.start_ahead();
+        }
+        let Some(ahead) = &mut self.ahead else {
+            return;
+        };
+        for key in keys_around(x, y, radius) {
+            if self.tiles.contains_key(&key) || ahead.pending.contains(&key) {
+                continue;
+            }
+            if ahead.jobs.send(key).is_err() {
+                // The thread is gone: views build their own tiles.
+                self.ahead = None;
+                return;
+            }
+            ahead.pending.insert(key);
+        }
+    }
+
+    fn start_ahead(&self) -> Option<Ahead> {
+        let (jobs, queue) = std::sync::mpsc::channel::<(i64, i64)>();
+        let (hand, built) = std::sync::mpsc::channel();
+        let world = Arc::clone(&self.world);
+        std::thread::Builder::new()
+            .name("tiles-ahead".into())
+            .spawn(move || {
+                for (tx, ty) in queue {
+                    if hand.send(((tx, ty), Tile::build(&world, tx, ty))).is_err() {
+                        return;
+                    }
+                }
+            })
+            .ok()?;
+        Some(Ahead {
+            jobs,
+            built,
+            pending: HashSet::new(),
+        })
+    }
+
+    /// Takes in the tiles built ahead so far, and waits for those of
+    /// `needed` still being built.
+    fn take_ahead(&mut self, needed: &[(i64, i64)]) {
+        let Some(ahead) = &mut self.ahead else {
+            return;
+        };
+        loop {
+            let waiting = needed.iter().any(|key| ahead.pending.contains(key));
+            let next = if waiting {
+                ahead.built.recv().ok()
+            } else {
+                ahead.built.try_recv().ok()
+            };
+            match next {
+                Some((key, tile)) => {
+                    ahead.pending.remove(&key);
+                    self.tiles.insert(key, (Arc::new(tile), self.clock));
+                }
+                None if waiting => {
+                    // The thread is gone (it panicked): build here.
+                    self.ahead = None;
+                    return;
+                }
+                None => return,
+            }
         }
     }
 
@@ -165,10 +253,13 @@ impl TileCache {
             index(x + radius),
             index(y + radius),
         );
-        let missing: Vec<(i64, i64)> = (ty0..=ty1)
-            .flat_map(|ty| (tx0..=tx1).map(move |tx| (tx, ty)))
+        let mut missing: Vec<(i64, i64)> = keys_around(x, y, radius)
             .filter(|key| !self.tiles.contains_key(key))
             .collect();
+        if self.ahead.is_some() {
+            self.take_ahead(&missing);
+            missing.retain(|key| !self.tiles.contains_key(key));
+        }
         // Build missing tiles in parallel: each is a pure function of the world.
         let world = &self.world;
         let built: Vec<((i64, i64), Tile)> = if missing.len() > 1 && self.threads > 1 {
@@ -235,6 +326,18 @@ impl TileCache {
             max,
         }
     }
+}
+
+/// The keys of the tiles a view of `radius` about (x, y) holds, row by row.
+fn keys_around(x: f64, y: f64, radius: f64) -> impl Iterator<Item = (i64, i64)> {
+    let index = |v: f64| floor(v / TILE_M);
+    let (tx0, ty0, tx1, ty1) = (
+        index(x - radius),
+        index(y - radius),
+        index(x + radius),
+        index(y + radius),
+    );
+    (ty0..=ty1).flat_map(move |ty| (tx0..=tx1).map(move |tx| (tx, ty)))
 }
 
 impl TileView {
@@ -536,6 +639,54 @@ impl RayCast for TileView {
 mod tests {
     use super::*;
     use crate::world::World;
+
+    /// Views of tiles built ahead on their own thread are the views of
+    /// tiles built when needed: the same heights everywhere, the same
+    /// highest cell; and the tiles asked for ahead are the ones built.
+    #[test]
+    fn tiles_built_ahead_make_the_views_tiles_built_when_needed_make() {
+        let world = Arc::new(World::embedded("paper_loop").unwrap().unwrap());
+        let mut ahead = TileCache::new(Arc::clone(&world), 64, 1);
+        let mut when_needed = TileCache::new(Arc::clone(&world), 64, 1);
+        for k in 0..8 {
+            let (x, y) = (-60.0 + 17.0 * f64::from(k), 5.0 * f64::from(k));
+            ahead.prefetch(x + TILE_M, y, 46.0);
+            let (a, b) = (ahead.view(x, y, 46.0), when_needed.view(x, y, 46.0));
+            assert_eq!(a.max.to_bits(), b.max.to_bits());
+            for cy in (floor((y - 46.0) * PER_CELL)..floor((y + 46.0) * PER_CELL)).step_by(7) {
+                for cx in (floor((x - 46.0) * PER_CELL)..floor((x + 46.0) * PER_CELL)).step_by(5) {
+                    assert_eq!(
+                        a.cell_height(cx, cy).map(f64::to_bits),
+                        b.cell_height(cx, cy).map(f64::to_bits),
+                        "cell ({cx}, {cy}) seen from ({x}, {y})"
+                    );
+                }
+            }
+        }
+        // Everything asked for ahead was taken in by the last view, or is
+        // still on its way: none was built twice.
+        let pending = ahead.ahead.as_ref().map_or(0, |a| a.pending.len());
+        assert!(
+            ahead.len() + pending > when_needed.len(),
+            "{} + {pending} against {}",
+            ahead.len(),
+            when_needed.len()
+        );
+        let asked: HashSet<(i64, i64)> =
+            (0..8)
+                .flat_map(|k| {
+                    keys_around(
+                        -60.0 + 17.0 * f64::from(k) + TILE_M,
+                        5.0 * f64::from(k),
+                        46.0,
+                    )
+                })
+                .chain((0..8).flat_map(|k| {
+                    keys_around(-60.0 + 17.0 * f64::from(k), 5.0 * f64::from(k), 46.0)
+                }))
+                .collect();
+        assert_eq!(ahead.len() + pending, asked.len());
+    }
 
     fn flat_world_with_wall() -> Arc<World> {
         let text = r#"
