@@ -25,6 +25,7 @@ use arcnav_sim::World;
 mod common;
 
 fn main() {
+    arcnav::keep_freed_memory();
     let args: Vec<String> = std::env::args()
         .skip(1)
         .filter(|a| !a.starts_with('-'))

@@ -45,6 +45,7 @@ fn measure(label: &str, log: &Path, config: &Config, target: f64) {
 }
 
 fn main() {
+    arcnav::keep_freed_memory();
     let data = common::data_dir();
     let quick = common::quick();
     let mut erim = Config::default();

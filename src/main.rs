@@ -512,6 +512,7 @@ impl From<SensorArg> for arcnav_perception::SensorPreset {
 }
 
 fn main() -> ExitCode {
+    arcnav::keep_freed_memory();
     let cli = Cli::parse();
     // A sweep's many missions would bury its progress in their log lines:
     // warnings only, unless asked.
