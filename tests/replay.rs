@@ -922,7 +922,10 @@ fn messages_on_other_programs_channels_are_listed_and_never_taken_as_inputs() {
     use arcnav_bus::lcmtypes::{pose_t, steering_command_t};
     // A second pose stream 50 m off, and a teleoperation stream that steers
     // hard left, beside the log's own.
-    let mixed = dir("foreign").join("mixed.lcm");
+    // Its own directory: `foreign_channels_are_skipped_…` writes its own
+    // mixed.lcm, and the two may run at once (a run with four tests at a
+    // time replayed one's log half written over by the other).
+    let mixed = dir("other-programs").join("mixed.lcm");
     let mut writer = LogWriter::create(&mixed).unwrap();
     for e in LogReader::open(sim_log()).unwrap().map(Result::unwrap) {
         writer
