@@ -246,13 +246,7 @@ impl TileCache {
     /// them as a view.
     pub fn view(&mut self, x: f64, y: f64, radius: f64) -> TileView {
         self.clock += 1;
-        let index = |v: f64| floor(v / TILE_M);
-        let (tx0, ty0, tx1, ty1) = (
-            index(x - radius),
-            index(y - radius),
-            index(x + radius),
-            index(y + radius),
-        );
+        let (tx0, ty0, tx1, ty1) = tile_span(x, y, radius);
         let mut missing: Vec<(i64, i64)> = keys_around(x, y, radius)
             .filter(|key| !self.tiles.contains_key(key))
             .collect();
@@ -328,15 +322,21 @@ impl TileCache {
     }
 }
 
-/// The keys of the tiles a view of `radius` about (x, y) holds, row by row.
-fn keys_around(x: f64, y: f64, radius: f64) -> impl Iterator<Item = (i64, i64)> {
+/// The first and last tile, along x and along y, of a view of `radius`
+/// about (x, y).
+fn tile_span(x: f64, y: f64, radius: f64) -> (i64, i64, i64, i64) {
     let index = |v: f64| floor(v / TILE_M);
-    let (tx0, ty0, tx1, ty1) = (
+    (
         index(x - radius),
         index(y - radius),
         index(x + radius),
         index(y + radius),
-    );
+    )
+}
+
+/// The keys of the tiles a view of `radius` about (x, y) holds, row by row.
+fn keys_around(x: f64, y: f64, radius: f64) -> impl Iterator<Item = (i64, i64)> {
+    let (tx0, ty0, tx1, ty1) = tile_span(x, y, radius);
     (ty0..=ty1).flat_map(move |ty| (tx0..=tx1).map(move |tx| (tx, ty)))
 }
 
