@@ -7,7 +7,6 @@ fn arcnav(args: &[&str]) -> (i32, String, String) {
     arcnav_testkit::output_of(env!("CARGO_BIN_EXE_arcnav"), args)
 }
 
-/// `text` written to `name` in a directory removed when the guard drops.
 /// `arcnav config --check` of a file holding `text` fails (exit 1) with a
 /// message containing `expect`.
 fn assert_check_refuses(text: &str, expect: &str) {
@@ -17,6 +16,7 @@ fn assert_check_refuses(text: &str, expect: &str) {
     assert!(stderr.contains(expect), "{text}: {stderr}");
 }
 
+/// `text` written to `name` in a directory removed when the guard drops.
 fn temp_file(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::Builder::new()
         .prefix("arcnav-cli-config-")

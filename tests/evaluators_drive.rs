@@ -1,6 +1,7 @@
 //! Missions with each terrain evaluator and with two sensors, as a user
 //! runs them (`arcnav sim --evaluator`, `[[sensors]]`).
 
+use std::path::PathBuf;
 use std::process::Command;
 
 use arcnav_bus::log::LogReader;
@@ -30,6 +31,16 @@ fn sim(tag: &str, args: &[&str]) -> (Value, ScratchDir, String) {
     let report = std::fs::read_to_string(out.join("report.json"))
         .unwrap_or_else(|e| panic!("{tag}: no report ({e}):\n{printed}"));
     (serde_json::from_str(&report).unwrap(), out, printed)
+}
+
+/// A configuration file `name` holding `text`, in a directory of its own
+/// (`tag`) kept while the guard lives.
+fn config_file(tag: &str, name: &str, text: &str) -> (ScratchDir, PathBuf) {
+    let dir = out_dir(tag);
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    (dir, path)
 }
 
 fn assert_completed(tag: &str, report: &Value, printed: &str) {
@@ -121,10 +132,11 @@ fn height_diff_grades_fine_rubble_and_the_vehicle_keeps_to_the_smooth_track() {
         env!("CARGO_MANIFEST_DIR"),
         "/tests/worlds/fine_rubble_strip.toml"
     );
-    let out = out_dir("fine-rubble-config");
-    std::fs::create_dir_all(&out).unwrap();
-    let ungraded = out.join("ungraded.toml");
-    std::fs::write(&ungraded, "[perception.height_diff]\ngraded_from = 0.0\n").unwrap();
+    let (_dir, ungraded) = config_file(
+        "fine-rubble-config",
+        "ungraded.toml",
+        "[perception.height_diff]\ngraded_from = 0.0\n",
+    );
     let rms =
         |report: &serde_json::Value| report["ride"]["rms_vertical_accel_mps2"].as_f64().unwrap();
     let (graded, _run, printed) = sim(
@@ -168,16 +180,13 @@ fn height_diff_grades_fine_rubble_and_the_vehicle_keeps_to_the_smooth_track() {
 
 #[test]
 fn a_vehicle_with_a_front_lidar_and_a_rear_depth_camera_completes_the_short_course() {
-    let out = out_dir("two-sensors-config");
-    std::fs::create_dir_all(&out).unwrap();
-    let config = out.join("two.toml");
-    std::fs::write(
-        &config,
+    let (_dir, config) = config_file(
+        "two-sensors-config",
+        "two.toml",
         "[[sensors]]\npreset = \"lidar64\"\nrate_hz = 5.0\n\n\
          [[sensors]]\npreset = \"depth_camera\"\nid = \"rear\"\nrate_hz = 10.0\n\
          mount_position_m = [-0.6, 0.0, 2.0]\nmount_rpy_deg = [0.0, 25.0, 180.0]\n",
-    )
-    .unwrap();
+    );
     let (report, run, printed) = sim(
         "two-sensors",
         &[
@@ -388,25 +397,22 @@ fn detect_writes_its_table_json_and_picture_and_evaluators_lists_them() {
 /// decides as the simulator did.
 #[test]
 fn a_camera_pair_judged_together_replays_to_the_sims_own_decisions() {
-    let out = out_dir("fused-config");
-    std::fs::create_dir_all(&out).unwrap();
-    let config = out.join("pair.toml");
     let camera = |id: &str, yaw: f64| {
         format!(
             "[[sensors]]\npreset = \"depth_camera\"\nid = \"{id}\"\nrate_hz = 10.0\n\
              mount_position_m = [0.0, 0.0, 2.2]\nmount_rpy_deg = [0.0, 25.0, {yaw}]\n"
         )
     };
-    std::fs::write(
-        &config,
-        format!(
+    let (_dir, config) = config_file(
+        "fused-config",
+        "pair.toml",
+        &format!(
             "[perception]\nevaluator = \"height_diff\"\nfuse_within_s = 0.02\n\
              [sim]\ntime_limit_s = 12.0\n{}{}",
             camera("right", -22.5),
             camera("left", 22.5)
         ),
-    )
-    .unwrap();
+    );
     let (report, run, printed) = sim(
         "fused-pair",
         &[

@@ -5,10 +5,11 @@
 //! barriers ahead (a row of boulders, a row of trunks, a bank, a ditch) at
 //! 2.5 and 4.5 m/s with the ERIM (the defaults; 40 m ahead) and, all but
 //! the forgetful map (below), at 8 m/s
-//! with the 64-beam lidar (every test run: each barrier once, the faults in
-//! turn; `ARCNAV_GUARD_GRID=whole`: every pair) (60 m ahead: room to reach that speed at 1 m/s²;
+//! with the 64-beam lidar (60 m ahead: room to reach that speed at 1 m/s²;
 //! the top speeds reached, 7.3-8.0 m/s, within 0.1 m/s of those at 70 m,
-//! for a tenth less of the test's time): with the
+//! for a tenth less of the test's time; in every test run each barrier
+//! once, the faults in turn, and every pair with
+//! `ARCNAV_GUARD_GRID=whole`): with the
 //! guard no run touches a hazard it could have stopped for; without it the
 //! same runs collide.
 //!

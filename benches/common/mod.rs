@@ -32,7 +32,7 @@ pub fn make_log(path: &Path, world: &str, config: &Config) {
     }
     eprintln!("making {} (once)...", path.display());
     let world = Arc::new(if world.ends_with(".toml") {
-        World::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(world)).expect("the world loads")
+        World::load(&arcnav_testkit::workspace_root().join(world)).expect("the world loads")
     } else {
         World::embedded(world).expect("embedded").expect("valid")
     });

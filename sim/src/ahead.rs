@@ -224,12 +224,23 @@ pub(crate) fn prefetch_for(
     tiles: &mut TileCache,
     world_from_vehicle: &Isometry,
 ) {
-    let at = (world_from_vehicle * sensor.vehicle_from_sensor)
-        .translation
-        .vector;
+    let at = sensor_position(sensor, world_from_vehicle);
     let heading = world_from_vehicle * nalgebra::Vector3::x();
     let along = heading.xy().try_normalize(1e-9).unwrap_or_default() * crate::tiles::TILE_M;
-    tiles.prefetch(at.x + along.x, at.y + along.y, sensor.max_range_m + 1.0);
+    tiles.prefetch(at.x + along.x, at.y + along.y, view_radius(sensor));
+}
+
+/// Where `sensor` is in the world with the vehicle at `world_from_vehicle`.
+fn sensor_position(sensor: &SensorModel, world_from_vehicle: &Isometry) -> nalgebra::Vector3<f64> {
+    (world_from_vehicle * sensor.vehicle_from_sensor)
+        .translation
+        .vector
+}
+
+/// How far about the sensor its view's tiles reach: its range and a
+/// metre more.
+fn view_radius(sensor: &SensorModel) -> f64 {
+    sensor.max_range_m + 1.0
 }
 
 /// The tiles `sensor` on the vehicle at `world_from_vehicle` sees.
@@ -238,10 +249,8 @@ pub(crate) fn view_for(
     tiles: &mut TileCache,
     world_from_vehicle: &Isometry,
 ) -> TileView {
-    let at = (world_from_vehicle * sensor.vehicle_from_sensor)
-        .translation
-        .vector;
-    tiles.view(at.x, at.y, sensor.max_range_m + 1.0)
+    let at = sensor_position(sensor, world_from_vehicle);
+    tiles.view(at.x, at.y, view_radius(sensor))
 }
 
 fn render_timed(

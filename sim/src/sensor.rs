@@ -304,9 +304,9 @@ impl Drop for Taken<'_> {
 /// The binned ground an image of `sensor` is cast through, if any: for a
 /// frame of many rays the whole turn, or the headings of one spanning
 /// less than half a turn (binned from the tiles they meet); the wedge its
-/// rays run along for a smaller one (found from the rays at its extreme elevations and
-/// azimuths: along a row, and along a column, a ray's heading turns one
-/// way; a ray outside the wedge is cast in the view).
+/// rays run along for a smaller one. Headings are found from the rays at
+/// its extreme elevations and azimuths (along a row, and along a column, a
+/// ray's heading turns one way); a ray outside them is cast in the view.
 fn table(
     sensor: &SensorModel,
     view: &TileView,

@@ -70,7 +70,7 @@ pub(super) fn print_guard(guard: Option<&arcnav::mission::GuardReport>) {
 }
 
 /// The summary's line for images judged together (`perception.fuse_within_s`).
-pub fn print_fused(f: &arcnav_pipeline::FusionCounts) {
+pub(super) fn print_fused(f: &arcnav_pipeline::FusionCounts) {
     println!(
         "fused         {} images judged together in {} height maps ({:.1} per evaluation, \
          perception.fuse_within_s)",

@@ -391,14 +391,11 @@ impl ObstacleAvoidance {
                 // Unseen ground is an obstacle, in every near-miss band:
                 // read off the vehicle-frame layer (it comes in areas, not
                 // single cells), or the map's own beyond that layer.
-                let (ahead, standing) = (&self.ahead, self.standing);
+                let (ahead, standing) = (&self.ahead, &self.standing);
                 let seen = ctx.map.seen_lookup();
                 self.shifted
                     .unseen_over(&template.bands[widest], rest as f32, |c| {
-                        let q = to_vehicle(c);
-                        ahead
-                            .unseen_at(q)
-                            .unwrap_or_else(|| !seen(q.x, q.y) && !standing.contains(q))
+                        ahead.unseen_or_beyond(to_vehicle(c), &seen, standing)
                     });
             }
             self.shifted.block(policy);
@@ -443,46 +440,58 @@ impl ObstacleAvoidance {
                     (f64::from(hit.s), [c.x as f32, c.y as f32])
                 })
             } else {
-                // Cell by cell along the body's band, nearest first, a
-                // run at a time: a run whose box lies on the vehicle-frame
-                // grid over no unseen cell has none.
-                let seen = ctx.map.seen_lookup();
-                let ahead = &self.ahead;
-                let mut start = 0;
-                let mut found = None;
-                for &(end, [x0, y0, x1, y1]) in &template.body_runs {
-                    if template.body.get(start).is_none_or(|(s, _)| *s > rest) {
-                        break;
-                    }
-                    let (lo, hi) = raster::bounds(
-                        [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
-                            .into_iter()
-                            .map(|(x, y)| to_vehicle(Point2::new(x, y))),
-                    );
-                    let clear = ahead.grid.cover(lo, hi).is_some_and(|cover| {
-                        cover.whole && !ahead.grid.any_set(&ahead.unseen, &cover)
-                    });
-                    if !clear {
-                        found = template.body[start..end]
-                            .iter()
-                            .take_while(|(s, _)| *s <= rest)
-                            .find_map(|&(s, [x, y])| {
-                                let q = to_vehicle(Point2::new(f64::from(x), f64::from(y)));
-                                let unseen = ahead.unseen_at(q).unwrap_or_else(|| {
-                                    !seen(q.x, q.y) && !self.standing.contains(q)
-                                });
-                                unseen.then_some((f64::from(s) + lead, [q.x as f32, q.y as f32]))
-                            });
-                        if found.is_some() {
-                            break;
-                        }
-                    }
-                    start = end;
-                }
-                found
+                self.first_unseen_on_body(template, rest, to_vehicle, ctx.map.seen_lookup())
+                    .map(|(s, q)| (f64::from(s) + lead, [q.x as f32, q.y as f32]))
             };
         }
         met.and(part)
+    }
+
+    /// The first ground no image has seen along the body's band of
+    /// `template` within `rest`, the band placed by `to_vehicle` (from the
+    /// frame where a path settles on its arc): its distance along the band
+    /// and where it lies (vehicle frame). Cell by cell, nearest first, a
+    /// run of cells at a time: a run whose box lies on the vehicle-frame
+    /// grid over no unseen cell has none.
+    fn first_unseen_on_body(
+        &self,
+        template: &Template,
+        rest: f32,
+        to_vehicle: impl Fn(Point2<f64>) -> Point2<f64>,
+        seen: impl Fn(f64, f64) -> bool,
+    ) -> Option<(f32, Point2<f64>)> {
+        let ahead = &self.ahead;
+        let mut start = 0;
+        for &(end, [x0, y0, x1, y1]) in &template.body_runs {
+            if template.body.get(start).is_none_or(|(s, _)| *s > rest) {
+                return None;
+            }
+            let (lo, hi) = raster::bounds(
+                [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
+                    .into_iter()
+                    .map(|(x, y)| to_vehicle(Point2::new(x, y))),
+            );
+            let clear = ahead
+                .grid
+                .cover(lo, hi)
+                .is_some_and(|cover| cover.whole && !ahead.grid.any_set(&ahead.unseen, &cover));
+            if !clear {
+                let found = template.body[start..end]
+                    .iter()
+                    .take_while(|(s, _)| *s <= rest)
+                    .find_map(|&(s, [x, y])| {
+                        let q = to_vehicle(Point2::new(f64::from(x), f64::from(y)));
+                        ahead
+                            .unseen_or_beyond(q, &seen, &self.standing)
+                            .then_some((s, q))
+                    });
+                if found.is_some() {
+                    return found;
+                }
+            }
+            start = end;
+        }
+        None
     }
 
     /// What the path meets before it settles on its arc (`lead_poses`):

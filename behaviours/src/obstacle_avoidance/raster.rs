@@ -311,6 +311,19 @@ impl Raster {
         Some(self.unseen[row * self.grid.words_per_row + column / 64] & (1 << (column % 64)) != 0)
     }
 
+    /// Whether the ground at `p` (this raster's frame) is unseen: the
+    /// raster's cell where `p` lies on it, the map's own (`seen`) beyond
+    /// it, but never where the wheels stand (`standing`).
+    pub(super) fn unseen_or_beyond(
+        &self,
+        p: Point2<f64>,
+        seen: &impl Fn(f64, f64) -> bool,
+        standing: &Footprint,
+    ) -> bool {
+        self.unseen_at(p)
+            .unwrap_or_else(|| !seen(p.x, p.y) && !standing.contains(p))
+    }
+
     /// What collisions are tested against: the map's cells, and unseen
     /// ground when it is an obstacle (see [`Raster::block`]).
     pub(super) fn blocked(&self) -> &[u64] {
@@ -392,18 +405,12 @@ pub(super) fn grid_around(
     reach: f64,
     r: f64,
 ) -> Grid {
-    let (mut lo, mut hi) = (
-        Point2::new(f64::MAX, f64::MAX),
-        Point2::new(f64::MIN, f64::MIN),
-    );
-    for arc in arcs.iter() {
-        for outline in arc.swept(footprint, reach).outlines(0.25) {
-            for corner in outline {
-                lo = lo.inf(&corner);
-                hi = hi.sup(&corner);
-            }
-        }
-    }
+    let (lo, hi) = bounds(arcs.iter().flat_map(|arc| {
+        arc.swept(footprint, reach)
+            .outlines(0.25)
+            .into_iter()
+            .flatten()
+    }));
     let rows = ((hi.x - lo.x) / r).ceil() as usize + 1;
     let columns = ((hi.y - lo.y) / r).ceil() as usize + 1;
     Grid {
@@ -648,16 +655,7 @@ pub(super) fn build_template(
 ) -> Template {
     let widest = arc.swept(footprint.widened(margins[margins.len() - 1]), reach);
     // Bounds of this arc's widest band, in grid cells.
-    let (mut lo, mut hi) = (
-        Point2::new(f64::MAX, f64::MAX),
-        Point2::new(f64::MIN, f64::MIN),
-    );
-    for outline in widest.outlines(0.25) {
-        for corner in outline {
-            lo = lo.inf(&corner);
-            hi = hi.sup(&corner);
-        }
-    }
+    let (lo, hi) = bounds(widest.outlines(0.25).into_iter().flatten());
     let to_row =
         |x: f64| (((x - grid.x0) / grid.resolution).floor().max(0.0) as usize).min(grid.rows - 1);
     let to_column = |y: f64| {
