@@ -156,29 +156,6 @@ fn seeded(
     (format!("{tag}-seed{seed}"), run)
 }
 
-/// Two missions in parallel with `args`: with the defaults ("now") and
-/// with `as_before` (TOML merged over them: the setting that turns the
-/// change off). Their reports, in that order.
-fn now_and_as_before(prefix: &str, args: &[&str], as_before: &str) -> Vec<(String, Value, String)> {
-    let config = out_dir(&format!("{prefix}-config"));
-    let path = config.join("as_before.toml");
-    std::fs::write(&path, as_before).unwrap();
-    let with = |extra: &[&str]| {
-        args.iter()
-            .chain(extra)
-            .map(|a| a.to_string())
-            .collect::<Vec<_>>()
-    };
-    let runs = [
-        ("now", with(&[])),
-        ("as-before", with(&["--config", path.to_str().unwrap()])),
-    ];
-    missions(prefix, &runs)
-        .into_iter()
-        .map(|(tag, report, stdout)| (tag.to_owned(), report, stdout))
-        .collect()
-}
-
 fn run_short_course(tag: &str) -> ScratchDir {
     let out = out_dir(tag);
     let (code, stdout, stderr) = arcnav(&[
@@ -1073,16 +1050,27 @@ fn a_ditch_seen_only_from_near_is_not_forgotten_when_the_vehicle_backs_away() {
         );
     }
     // Every overlapping image counting a miss (seed 5 was stuck so,
-    // 2026-11-28).
+    // 2026-11-28): the first 45 s, up to the ditch and along it (with the
+    // defaults, images from afar had left 16 486 misses uncounted by then).
     let configs = out_dir("ditch-as-002-configs");
-    let run = [seeded(
-        &configs,
-        ("lidar64-as-002", "lidar64", as_002),
-        &args,
-        5,
+    let config = configs.join("as-002.toml");
+    std::fs::write(
+        &config,
+        format!("{as_002}[sim]\nseed = 5\ntime_limit_s = 45.0\n"),
+    )
+    .unwrap();
+    let mut run = vec!["--sensor", "lidar64", "--config", config.to_str().unwrap()];
+    run.extend(args);
+    let run = [(
+        "lidar64-as-002-seed5",
+        run.into_iter().map(String::from).collect(),
     )];
     for (tag, report, stdout) in &missions("ditch", &run) {
         assert_eq!(report["localmap"]["seen_from_afar"], 0, "{tag}");
+        assert!(
+            report["localmap"]["reports"].as_u64().unwrap() > 400,
+            "{tag}"
+        );
         assert_no_collision(tag, report, stdout);
     }
 }
@@ -1139,18 +1127,16 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
 /// zone. So the edge is never flagged: the shadow beyond it stays unseen,
 /// and the vehicle is held 2 m short of it. Counted passable at
 /// `unseen_cost`, the shadow kept the route's path across it, and the
-/// vehicle backed up and came back to the same edge until stuck. Shutting
-/// the unseen ground it backed away from, and the shadow along the edge,
-/// the route leads it round.
+/// vehicle backed up and came back to the same edge until stuck (with
+/// `shut_unseen_m = 0`, stuck after 100 s, 2026-12-07; no longer driven in
+/// every test run). Shutting the unseen ground it backed away from, and
+/// the shadow along the edge, the route leads it round.
 #[test]
 fn held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge() {
     let world = format!("{}/tests/worlds/ledge.toml", env!("CARGO_MANIFEST_DIR"));
-    let reports = now_and_as_before(
-        "ledge-shut",
-        &["--world", &world, "--sensor", "lidar64", "--no-images"],
-        "[behaviours.route]\nshut_unseen_m = 0.0\n",
-    );
-    let (tag, report, stdout) = &reports[0];
+    let args = ["--world", &world, "--sensor", "lidar64", "--no-images"];
+    let runs = [("now", args.map(String::from).to_vec())];
+    let (tag, report, stdout) = &missions("ledge-shut", &runs)[0];
     assert_completed_without_collision(tag, report, stdout);
     assert!(
         report["behaviour_counters"]["route"]["shut_cells"]
@@ -1159,8 +1145,6 @@ fn held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge() {
             > 0,
         "{tag}: unseen ground was shut:\n{stdout}"
     );
-    let (tag, report, stdout) = &reports[1];
-    assert_eq!(report["outcome"], "stuck", "{tag}:\n{stdout}");
 }
 
 /// The same ledge with the ERIM, over the noise seeds, and the ledge open
@@ -1252,8 +1236,10 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
 /// way when the way came to lie ahead there (468° in 16 legs); since the
 /// route plans inside an operating area with obstacles seen only from
 /// afar doubtful (issue 62), the plan no longer flips here and the vehicle
-/// gets round without the hold too (64° in 3 legs): both complete without
-/// a collision, the held run holding and turning less than 90°.
+/// gets round without the hold too (64° in 3 legs, 2026-12-06), so that
+/// run shows nothing the held one does not and is no longer driven: the
+/// held run completes without a collision, holding and turning less than
+/// 90°.
 #[test]
 fn at_speed_the_route_holds_to_one_end_of_a_ditch_across_the_way() {
     let world = format!(
@@ -1262,28 +1248,14 @@ fn at_speed_the_route_holds_to_one_end_of_a_ditch_across_the_way() {
     );
     let args = ["--world", &world, "--speed", "10", "--no-images"];
     let configs = out_dir("hold-configs");
-    let runs = [
-        seeded(&configs, ("held", "lidar64", ""), &args, 5),
-        seeded(
-            &configs,
-            (
-                "flipping",
-                "lidar64",
-                "[behaviours.route]\nhold_fraction = 0.0",
-            ),
-            &args,
-            5,
-        ),
-    ];
+    let runs = [seeded(&configs, ("held", "lidar64", ""), &args, 5)];
     let done = missions("hold", &runs);
     let (tag, report, stdout) = &done[0];
     assert_completed_without_collision(tag, report, stdout);
     let route = &report["behaviour_counters"]["route"];
     assert!(route["held_cycles"].as_u64().unwrap() > 0, "{tag}: {route}");
-    let turned = |r: &Value| r["recovery"]["turned_deg"].as_f64().unwrap();
-    assert!(turned(report) < 90.0, "{tag}:\n{stdout}");
-    let (tag, flipping, stdout) = &done[1];
-    assert_completed_without_collision(tag, flipping, stdout);
+    let turned = report["recovery"]["turned_deg"].as_f64().unwrap();
+    assert!(turned < 90.0, "{tag}:\n{stdout}");
 }
 
 /// 020 at speed: a ditch too short to be seen from afar, square across

@@ -394,7 +394,7 @@ impl MedianOutliers {
             for col in cols.saturating_sub(hc + 1)..cols {
                 column(&mut window, col, false);
             }
-            debug_assert_eq!(window.count, 0);
+            assert_eq!(window.count, 0);
             window.median = 0;
             window.below = 0;
         }
@@ -493,7 +493,7 @@ impl WindowBounds {
             hi,
         } = row;
         let inner = cols - 2 * hc;
-        debug_assert!(lo.len() == inner && hi.len() == inner);
+        assert!(lo.len() == inner && hi.len() == inner);
         let (low, high) = (&mut self.column_low, &mut self.column_high);
         low.resize(cols, 0.0);
         high.resize(cols, 0.0);
@@ -661,8 +661,8 @@ unsafe fn window_counts_avx2(w: RowWindows<'_>) {
         if !any_undecided(&w.undecided[j..j + 8]) {
             continue;
         }
-        debug_assert_eq!(w.first, 0);
-        debug_assert!(inner + 2 * w.half_cols <= w.cols && w.hi.len() == inner);
+        assert_eq!(w.first, 0);
+        assert!(inner + 2 * w.half_cols <= w.cols && w.hi.len() == inner);
         // SAFETY: j + 8 <= inner = lo.len() = hi.len(); every window value
         // read, a row's column j + dc + 7 with dc < width, lies within the
         // row: j + 7 + 2·half_cols < inner + 2·half_cols <= cols.

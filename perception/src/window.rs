@@ -115,7 +115,7 @@ impl WindowStats {
     #[inline(always)]
     fn compute_portable(&mut self, layer: &[f32], cols: usize, rows: usize, halves: &[usize]) {
         let n = cols * rows;
-        debug_assert_eq!(layer.len(), n);
+        assert_eq!(layer.len(), n);
         for out in [&mut self.max, &mut self.min] {
             out.resize_with(halves.len(), Vec::new);
             for o in out.iter_mut() {
@@ -170,7 +170,7 @@ impl WindowStats {
         }
         let mut half_before = 0;
         for (k, &half) in halves.iter().enumerate() {
-            debug_assert!(half >= half_before, "window sizes decrease: {halves:?}");
+            assert!(half >= half_before, "window sizes decrease: {halves:?}");
             let reach = half.saturating_sub(half_before);
             let step = 2 * half_before + 1;
             // Along the rows, then down the columns.

@@ -393,7 +393,7 @@ impl HierarchicalPca {
     fn grade_rough_ground(&mut self) {
         let c = &self.config;
         let (from, full, top) = (c.rough_from_m, c.rough_full_m, c.rough_max_cost);
-        debug_assert!(full > from);
+        assert!(full > from);
         for &i in &self.touched {
             let i = i as usize;
             let r = f64::from(self.maps.roughness[i]);
