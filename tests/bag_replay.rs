@@ -9,7 +9,6 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::OnceLock;
 
 use arcnav_bus::Message as _;
 use arcnav_bus::lcmtypes::steering_command_t;
@@ -31,20 +30,40 @@ fn arcnav(args: &[&str]) -> (i32, String, String) {
     )
 }
 
-/// The run a bag is made from: `short_course` with `sensor`, in a
-/// directory of its own (its log, and its config.toml).
-fn run(sensor: &str) -> &'static Path {
-    static RUNS: OnceLock<std::sync::Mutex<BTreeMap<String, &'static Path>>> = OnceLock::new();
-    let runs = RUNS.get_or_init(Default::default);
-    let mut runs = runs.lock().unwrap();
-    runs.entry(sensor.to_owned()).or_insert_with(|| {
-        let dir: &'static Path =
-            Box::leak(arcnav_testkit::temp_dir(&format!("bag-run-{sensor}")).into_boxed_path());
+/// The run a bag is made from (`short_course` with a sensor), and a
+/// directory of the test's own for what it writes.
+struct Run {
+    /// Holds `run/` (the log and its config.toml): made once for this
+    /// build of the tests and shared by their processes, never written.
+    shared: PathBuf,
+    /// Removed when the test passes.
+    work: arcnav_testkit::ScratchDir,
+}
+
+impl Run {
+    fn log(&self) -> PathBuf {
+        self.shared.join("run/mission.lcm")
+    }
+
+    fn config(&self) -> PathBuf {
+        self.shared.join("run/config.toml")
+    }
+
+    /// A file of this test's own, `name`.
+    fn out(&self, name: &str) -> PathBuf {
+        self.work.join(name)
+    }
+}
+
+/// `short_course` with `sensor` ("-sliced": its images streamed in slices
+/// of 16 columns, as `sim_mission`'s streamed missions are), made once for
+/// this build of the tests ([`arcnav_testkit::shared_file`]); the lidar's
+/// runs end at 6 s (a timeout, exit status 1): its bags take its first
+/// seconds only.
+fn run(sensor: &str) -> Run {
+    let shared = arcnav_testkit::shared_file(&format!("bag-run-{sensor}"), |dir| {
+        std::fs::create_dir_all(dir).unwrap();
         let out = dir.join("run");
-        // The lidar's bags take its first seconds only: the run ends at 6 s
-        // (a timeout, exit status 1).
-        // "-sliced": its images streamed in slices of 16 columns, as
-        // `sim_mission`'s streamed missions are.
         let limit = dir.join("six-seconds.toml");
         let (sensor, sliced) = match sensor.strip_suffix("-sliced") {
             Some(sensor) => (
@@ -76,22 +95,23 @@ fn run(sensor: &str) -> &'static Path {
             if sensor == "erim" { 0 } else { 1 },
             "{stdout}\n{stderr}"
         );
-        dir
-    })
+    });
+    Run {
+        shared,
+        work: arcnav_testkit::scratch_dir(&format!("arcnav-bag-{sensor}")),
+    }
 }
 
 /// A bag of `run`'s log written by rosbags (`lcm_to_bag.py ARGS`): the
 /// path of its .mcap (or .bag), or `None` when the reference tools are
 /// missing (a failure under CI).
-fn make_bag(run: &Path, name: &str, args: &[&str]) -> Option<PathBuf> {
+fn make_bag(run: &Run, name: &str, args: &[&str]) -> Option<PathBuf> {
     let (reference, types) = LcmReference::with_arcnav_types()?;
-    let out = run.join(name);
-    let _ = std::fs::remove_dir_all(&out);
-    let _ = std::fs::remove_file(&out);
+    let out = run.out(name);
     let output = reference
         .python()
         .arg(workspace_root().join("tests/tools/lcm_to_bag.py"))
-        .arg(run.join("run/mission.lcm"))
+        .arg(run.log())
         .arg(&out)
         .args(args)
         .env("PYTHONPATH", types)
@@ -133,8 +153,8 @@ fn organized<'a>(seconds: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
 
 /// `arcnav replay BAG` with the run's configuration and the course's
 /// waypoints, and `extra`; the recomputed log is `out`.
-fn replay(run: &Path, bag: &Path, out: &Path, extra: &[&str]) -> (i32, String, String) {
-    let config = run.join("run/config.toml");
+fn replay(run: &Run, bag: &Path, out: &Path, extra: &[&str]) -> (i32, String, String) {
+    let config = run.config();
     let waypoints = workspace_root().join("sim/worlds/short_course.toml");
     let mut args = vec![
         "replay",
@@ -198,11 +218,11 @@ fn bags_written_by_rosbags_replay_to_the_decisions_of_the_log_they_came_from() {
     ] {
         let mut all = vec!["--format", "mcap", "--seconds", "30"];
         all.extend_from_slice(args);
-        let Some(bag) = make_bag(erim, name, &all) else {
+        let Some(bag) = make_bag(&erim, name, &all) else {
             return;
         };
-        let out = erim.join(format!("{name}.lcm"));
-        let (code, stdout, stderr) = replay(erim, &bag, &out, &[]);
+        let out = erim.out(&format!("{name}.lcm"));
+        let (code, stdout, stderr) = replay(&erim, &bag, &out, &[]);
         assert_eq!(code, 0, "{name}:\n{stdout}\n{stderr}");
         assert!(stdout.contains("problems      none"), "{name}:\n{stdout}");
         assert!(
@@ -210,37 +230,37 @@ fn bags_written_by_rosbags_replay_to_the_decisions_of_the_log_they_came_from() {
             "{name}:\n{stdout}"
         );
         // The course's first 30 s: a decision every 0.1 s.
-        assert_same_decisions(name, &erim.join("run/mission.lcm"), &out, 295);
+        assert_same_decisions(name, &erim.log(), &out, 295);
     }
     // The 64-beam lidar's 64 × 2048 organized clouds, 4 s of them.
     let lidar = run("lidar64");
     let args = organized("4", &[]);
-    let Some(bag) = make_bag(lidar, "organized-odometry", &args) else {
+    let Some(bag) = make_bag(&lidar, "organized-odometry", &args) else {
         return;
     };
-    let out = lidar.join("organized.lcm");
-    let (code, stdout, stderr) = replay(lidar, &bag, &out, &[]);
+    let out = lidar.out("organized.lcm");
+    let (code, stdout, stderr) = replay(&lidar, &bag, &out, &[]);
     assert_eq!(code, 0, "lidar64:\n{stdout}\n{stderr}");
     assert!(
         stdout.contains("clouds        41 organized from /points"),
         "{stdout}"
     );
-    assert_same_decisions("lidar64", &lidar.join("run/mission.lcm"), &out, 40);
+    assert_same_decisions("lidar64", &lidar.log(), &out, 40);
 }
 
 #[test]
 fn a_bag_replays_toward_a_goal_ahead_and_names_what_it_cannot_choose() {
     let erim = run("erim");
-    let Some(bag) = make_bag(erim, "goal", &organized("10", &[])) else {
+    let Some(bag) = make_bag(&erim, "goal", &organized("10", &[])) else {
         return;
     };
-    let out = erim.join("goal.lcm");
-    let (code, stdout, stderr) = replay(erim, &bag, &out, &["--goal-ahead", "30"]);
+    let out = erim.out("goal.lcm");
+    let (code, stdout, stderr) = replay(&erim, &bag, &out, &["--goal-ahead", "30"]);
     assert_eq!(code, 0, "{stdout}\n{stderr}");
     assert!(stdout.contains("1 waypoint lists"), "{stdout}");
     assert!(commands(&out).len() >= 90, "{stdout}");
     // A topic that is not there, or not of the kind asked for.
-    let (code, _, stderr) = replay(erim, &bag, &out, &["--cloud", "/velodyne_points"]);
+    let (code, _, stderr) = replay(&erim, &bag, &out, &["--cloud", "/velodyne_points"]);
     assert_eq!(code, 1);
     assert!(
         stderr.contains(
@@ -248,7 +268,7 @@ fn a_bag_replays_toward_a_goal_ahead_and_names_what_it_cannot_choose() {
         ),
         "{stderr}"
     );
-    let (code, _, stderr) = replay(erim, &bag, &out, &["--pose", "/points"]);
+    let (code, _, stderr) = replay(&erim, &bag, &out, &["--pose", "/points"]);
     assert_eq!(code, 1);
     assert!(
         stderr.contains("/points is a sensor_msgs/msg/PointCloud2, not a pose"),
@@ -279,11 +299,11 @@ fn ros_1_bags_replay_to_the_decisions_of_the_log_they_came_from() {
             "--seconds",
             "10",
         ];
-        let Some(bag) = make_bag(erim, name, &args) else {
+        let Some(bag) = make_bag(&erim, name, &args) else {
             return;
         };
-        let out = erim.join(format!("{name}.lcm"));
-        let (code, stdout, stderr) = replay(erim, &bag, &out, &[]);
+        let out = erim.out(&format!("{name}.lcm"));
+        let (code, stdout, stderr) = replay(&erim, &bag, &out, &[]);
         assert_eq!(code, 0, "{name}:\n{stdout}\n{stderr}");
         assert!(stdout.contains("ROS 1 (bag)"), "{name}:\n{stdout}");
         assert!(stdout.contains("problems      none"), "{name}:\n{stdout}");
@@ -291,20 +311,20 @@ fn ros_1_bags_replay_to_the_decisions_of_the_log_they_came_from() {
             stdout.contains("mount         from /tf_static: base_link ← lidar"),
             "{name}:\n{stdout}"
         );
-        assert_same_decisions(name, &erim.join("run/mission.lcm"), &out, 95);
+        assert_same_decisions(name, &erim.log(), &out, 95);
         if compression != "lz4" {
             continue;
         }
         // Cut two thirds in (a copy interrupted): what the whole chunks
         // hold replays, the loss named, exit 3.
         let bytes = std::fs::read(&bag).unwrap();
-        let cut = erim.join("ros1-cut.bag");
+        let cut = erim.out("ros1-cut.bag");
         std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
-        let (code, stdout, stderr) = replay(erim, &cut, &out, &[]);
+        let (code, stdout, stderr) = replay(&erim, &cut, &out, &[]);
         assert_eq!(code, 3, "cut:\n{stdout}\n{stderr}");
         assert!(stdout.contains("the bag is damaged"), "cut:\n{stdout}");
         assert!(stdout.contains("cut short"), "cut:\n{stdout}");
-        assert_same_decisions("cut", &erim.join("run/mission.lcm"), &out, 30);
+        assert_same_decisions("cut", &erim.log(), &out, 30);
     }
 }
 
@@ -328,7 +348,7 @@ fn records(bytes: &[u8]) -> Vec<(usize, u8)> {
 #[test]
 fn a_damaged_bag_ends_in_a_clear_message_and_exit_3_with_counts() {
     let erim = run("erim");
-    let Some(bag) = make_bag(erim, "damage", &organized("20", &["--rewrite"])) else {
+    let Some(bag) = make_bag(&erim, "damage", &organized("20", &["--rewrite"])) else {
         return;
     };
     let bytes = std::fs::read(&bag).unwrap();
@@ -338,11 +358,11 @@ fn a_damaged_bag_ends_in_a_clear_message_and_exit_3_with_counts() {
         .map(|(at, _)| at)
         .collect();
     assert!(chunks.len() >= 3, "{} chunks", chunks.len());
-    let out = erim.join("damage.lcm");
-    let damaged = erim.join("damaged.mcap");
+    let out = erim.out("damage.lcm");
+    let damaged = erim.out("damaged.mcap");
     let check = |what: &str, bytes: &[u8], says: &str| {
         std::fs::write(&damaged, bytes).unwrap();
-        let (code, stdout, stderr) = replay(erim, &damaged, &out, &[]);
+        let (code, stdout, stderr) = replay(&erim, &damaged, &out, &[]);
         assert_eq!(code, 3, "{what}:\n{stdout}\n{stderr}");
         assert!(stdout.contains(says), "{what}: not {says:?}:\n{stdout}");
         // What came before the damage was replayed.
@@ -365,13 +385,13 @@ fn a_damaged_bag_ends_in_a_clear_message_and_exit_3_with_counts() {
     // The cloud topic's schema is not ROS 2's: every cloud counted, none
     // misread.
     let Some(renamed) = make_bag(
-        erim,
+        &erim,
         "renamed",
         &organized("3", &["--cloud-schema-renamed"]),
     ) else {
         return;
     };
-    let (code, stdout, stderr) = replay(erim, &renamed, &out, &[]);
+    let (code, stdout, stderr) = replay(&erim, &renamed, &out, &[]);
     assert_eq!(code, 3, "{stdout}\n{stderr}");
     assert!(
         stdout.contains(
@@ -469,8 +489,8 @@ fn real_ouster_frames_replay_with_the_street_s_sides_as_obstacles_and_its_road_c
 #[test]
 fn a_run_exported_as_a_ros_2_bag_is_read_by_ros_tools_and_replays_to_its_own_decisions() {
     let erim = run("erim");
-    let log = erim.join("run/mission.lcm");
-    let bag = erim.join("exported.mcap");
+    let log = erim.log();
+    let bag = erim.out("exported.mcap");
     let (code, stdout, stderr) = arcnav(&[
         "export",
         log.to_str().unwrap(),
@@ -610,8 +630,8 @@ fn a_run_exported_as_a_ros_2_bag_is_read_by_ros_tools_and_replays_to_its_own_dec
     assert_eq!(markers["/waypoints"]["types"], serde_json::json!([2]));
 
     // Replayed, the bag gives the log's own decisions, every one of them.
-    let out = erim.join("exported.lcm");
-    let (code, stdout, stderr) = replay(erim, &bag, &out, &[]);
+    let out = erim.out("exported.lcm");
+    let (code, stdout, stderr) = replay(&erim, &bag, &out, &[]);
     assert_eq!(code, 0, "{stdout}\n{stderr}");
     assert!(stdout.contains("problems      none"), "{stdout}");
     assert!(
@@ -644,18 +664,18 @@ fn clouds_with_per_point_times_replay_as_the_slices_they_were_streamed_in() {
         "--seconds",
         "3",
     ];
-    let Some(bag) = make_bag(sliced, "timed", &args) else {
+    let Some(bag) = make_bag(&sliced, "timed", &args) else {
         return;
     };
-    let out = sliced.join("timed.lcm");
-    let (code, stdout, stderr) = replay(sliced, &bag, &out, &[]);
+    let out = sliced.out("timed.lcm");
+    let (code, stdout, stderr) = replay(&sliced, &bag, &out, &[]);
     assert_eq!(code, 0, "{stdout}\n{stderr}");
     assert!(stdout.contains("problems      none"), "{stdout}");
     assert!(
         stdout.contains("slices of 16 columns, each at its points' times (field t)"),
         "{stdout}"
     );
-    let log = sliced.join("run/mission.lcm");
+    let log = sliced.log();
     // Each 64 × 2048 cloud 128 slices, and nothing else to perception.
     let clouds: usize = stdout
         .split("clouds        ")
@@ -670,8 +690,8 @@ fn clouds_with_per_point_times_replay_as_the_slices_they_were_streamed_in() {
     );
     assert_same_decisions("timed", &log, &out, 28);
     // `--slice-lines 0`: each cloud one image at its stamp.
-    let whole = sliced.join("whole.lcm");
-    let (code, stdout, _) = replay(sliced, &bag, &whole, &["--slice-lines", "0"]);
+    let whole = sliced.out("whole.lcm");
+    let (code, stdout, _) = replay(&sliced, &bag, &whole, &["--slice-lines", "0"]);
     assert_eq!(code, 0, "{stdout}");
     assert!(
         stdout.contains(&format!("from {clouds} images and 0 slices")),

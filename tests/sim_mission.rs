@@ -733,10 +733,10 @@ fn the_drop_offs_world_completes_without_falling_into_anything() {
 /// away, so the ground beyond it must count as unseen (a shadow) and the
 /// vehicle must already be slow enough to stop before it. Before shadows
 /// (the whole footprint counted as seen), the ERIM at 4 m/s and both lidars
-/// drove into these. Each completes without a collision; the ledge, whose
-/// shadow the 64-beam lidar never sees into, since the route shuts the
-/// unseen ground the vehicle backed away from (see
-/// `held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge`).
+/// drove into these. Each completes without a collision; so does the
+/// ledge, whose shadow the 64-beam lidar never sees into, with the
+/// lidar at 8 m/s asked (`held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge`:
+/// the route shuts the unseen ground the vehicle backed away from).
 #[test]
 fn trenches_too_wide_to_see_into_are_driven_round_never_into() {
     let world = |name: &str| format!("{}/tests/worlds/{name}.toml", env!("CARGO_MANIFEST_DIR"));
@@ -750,11 +750,6 @@ fn trenches_too_wide_to_see_into_are_driven_round_never_into() {
             "oblique-lidar128-6",
             "oblique_trench",
             &["--sensor", "lidar128", "--speed", "6"][..],
-        ),
-        (
-            "ledge-lidar64-8",
-            "ledge",
-            &["--sensor", "lidar64", "--speed", "8"][..],
         ),
     ] {
         let out = out_dir(tag);
@@ -1120,8 +1115,10 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
     );
 }
 
-/// `tests/worlds/ledge.toml` with the 64-beam lidar at the default speed:
-/// a 2 m drop across the way, open 25 m to one side. From afar the floor
+/// `tests/worlds/ledge.toml` with the 64-beam lidar at `--speed 8` (held
+/// to 5.28 m/s by the hole speed cap; at the default speed it goes round
+/// the same way, 163 s of mission against 81 s, and is no longer driven
+/// in every test run): a 2 m drop across the way, open 25 m to one side. From afar the floor
 /// beyond the edge looks like a slope the vehicle may drive; from within
 /// 5 m, where it would show as a drop, the edge lies in the lidar's blind
 /// zone. So the edge is never flagged: the shadow beyond it stays unseen,
@@ -1134,8 +1131,16 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
 #[test]
 fn held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge() {
     let world = format!("{}/tests/worlds/ledge.toml", env!("CARGO_MANIFEST_DIR"));
-    let args = ["--world", &world, "--sensor", "lidar64", "--no-images"];
-    let runs = [("now", args.map(String::from).to_vec())];
+    let args = [
+        "--world",
+        &world,
+        "--sensor",
+        "lidar64",
+        "--speed",
+        "8",
+        "--no-images",
+    ];
+    let runs = [("lidar64-8", args.map(String::from).to_vec())];
     let (tag, report, stdout) = &missions("ledge-shut", &runs)[0];
     assert_completed_without_collision(tag, report, stdout);
     assert!(
