@@ -734,9 +734,10 @@ fn the_drop_offs_world_completes_without_falling_into_anything() {
 /// vehicle must already be slow enough to stop before it. Before shadows
 /// (the whole footprint counted as seen), the ERIM at 4 m/s and both lidars
 /// drove into these. Each completes without a collision; so does the
-/// ledge, whose shadow the 64-beam lidar never sees into, with the
-/// lidar at 8 m/s asked (`held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge`:
-/// the route shuts the unseen ground the vehicle backed away from).
+/// ledge, whose shadow the 64-beam lidar never sees into, with the lidar
+/// at 8 m/s asked (see
+/// `held_short_of_a_ledge_s_shadow_the_vehicle_goes_round_the_ledge`: the
+/// route shuts the unseen ground the vehicle backed away from).
 #[test]
 fn trenches_too_wide_to_see_into_are_driven_round_never_into() {
     let world = |name: &str| format!("{}/tests/worlds/{name}.toml", env!("CARGO_MANIFEST_DIR"));
@@ -1118,8 +1119,9 @@ fn a_vehicle_turning_before_a_ditch_keeps_it_and_drives_round_its_end() {
 /// `tests/worlds/ledge.toml` with the 64-beam lidar at `--speed 8` (held
 /// to 5.28 m/s by the hole speed cap; at the default speed it goes round
 /// the same way, 163 s of mission against 81 s, and is no longer driven
-/// in every test run): a 2 m drop across the way, open 25 m to one side. From afar the floor
-/// beyond the edge looks like a slope the vehicle may drive; from within
+/// in every test run): a 2 m drop across the way, open 25 m to one side.
+/// From afar the floor beyond the edge looks like a slope the vehicle may
+/// drive; from within
 /// 5 m, where it would show as a drop, the edge lies in the lidar's blind
 /// zone. So the edge is never flagged: the shadow beyond it stays unseen,
 /// and the vehicle is held 2 m short of it. Counted passable at
