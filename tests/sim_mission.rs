@@ -1214,6 +1214,18 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
         let cap = report["speed_bound"]["suspect_bound_mps"].as_f64().unwrap();
         let max = report["max_speed_mps"].as_f64().unwrap();
         assert!(max <= cap + 0.05, "{tag}: {max} m/s, held to {cap}");
+        let range = report["speed_bound"]["suspect_range_m"].as_f64().unwrap();
+        // The ditch was first flagged or suspected at least as far off as
+        // one image is certain to (less a frame's travel), and the report
+        // says how far (issue 63's measure).
+        let drops = report["drops_first_seen"].as_array().unwrap();
+        assert_eq!(drops.len(), 1, "{tag}: {drops:?}");
+        let first = drops[0]["first_range_m"].as_f64().unwrap();
+        assert!(first >= range - 1.0, "{tag}: first reported {first} m away");
+        assert!(
+            stdout.contains("drop hazards  1 hole or ditch the wheels do not bridge: first"),
+            "{tag}:\n{stdout}"
+        );
     }
     let configs = out_dir("suspect-unsuspected-config");
     let config = configs.join("config.toml");
@@ -1302,6 +1314,17 @@ fn at_speed_a_short_ditch_is_suspected_in_time_to_stop() {
         let cap = report["speed_bound"]["suspect_bound_mps"].as_f64().unwrap();
         let max = report["max_speed_mps"].as_f64().unwrap();
         assert!(max <= cap + 0.05, "{tag}: {max} m/s, held to {cap}");
+        // The ditch was first flagged or suspected at least as far off as
+        // one image is certain to (less a frame's travel), and the report
+        // says how far (issue 63's measure).
+        let drops = report["drops_first_seen"].as_array().unwrap();
+        assert_eq!(drops.len(), 1, "{tag}: {drops:?}");
+        let first = drops[0]["first_range_m"].as_f64().unwrap();
+        assert!(first >= range - 1.0, "{tag}: first reported {first} m away");
+        assert!(
+            stdout.contains("drop hazards  1 hole or ditch the wheels do not bridge: first"),
+            "{tag}:\n{stdout}"
+        );
     }
     assert!(
         runs[1]

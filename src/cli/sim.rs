@@ -355,6 +355,7 @@ fn print_summary(r: &arcnav::mission::MissionReport, out: &Path, snapshots: &[Pa
             None => println!("closest       {gap:.2} m between the vehicle and a hazard"),
         }
     }
+    print_drops_first_seen(r);
     print_ride_stops_and_recoveries(r);
     for (behaviour, counters) in &r.behaviour_counters {
         let counts: Vec<String> = counters.iter().map(|(k, v)| format!("{k} {v}")).collect();
@@ -504,4 +505,36 @@ fn seconds_list(seconds: &std::collections::BTreeMap<&'static str, f64>) -> Stri
         .map(|(why, s)| format!("{why} {s:.1} s"))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// How far ahead the world's holes and ditches were first reported.
+fn print_drops_first_seen(r: &arcnav::mission::MissionReport) {
+    let all = &r.drops_first_seen;
+    if all.is_empty() {
+        return;
+    }
+    let mut ranges: Vec<f64> = all.iter().filter_map(|d| d.first_range_m).collect();
+    ranges.sort_by(f64::total_cmp);
+    let never = all.len() - ranges.len();
+    let never = if never > 0 {
+        format!("; {never} never reported")
+    } else {
+        String::new()
+    };
+    let what = match all.len() {
+        1 => "1 hole or ditch".to_owned(),
+        n => format!("{n} holes and ditches"),
+    };
+    match (ranges.first(), ranges.last()) {
+        (Some(near), Some(far)) if ranges.len() == 1 || near == far => println!(
+            "drop hazards  {what} the wheels do not bridge: first flagged or suspected {near:.1} m \
+             from the sensor{never}"
+        ),
+        (Some(near), Some(far)) => println!(
+            "drop hazards  {what} the wheels do not bridge: first flagged or suspected {near:.1} to \
+             {far:.1} m from the sensor, median {:.1} m{never}",
+            ranges[ranges.len() / 2]
+        ),
+        _ => println!("drop hazards  {what} the wheels do not bridge: none reported"),
+    }
 }

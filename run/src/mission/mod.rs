@@ -7,6 +7,7 @@
 //! and, at the sensor's rate, a range image ray-cast from the true pose. The
 //! pipeline sees nothing else of the world: no shortcut through ground truth.
 
+pub mod first_seen;
 pub(crate) mod guarded;
 pub mod report;
 
@@ -123,6 +124,8 @@ struct MissionSink<'a> {
     turning_from: Option<f64>,
     /// The behaviours' overlays of the cycle whose snapshot is due.
     overlays: Vec<(String, arcnav_behaviours::Overlay)>,
+    /// When each drop hazard was first reported (ground truth).
+    drops: first_seen::DropWatch,
 }
 
 impl MissionSink<'_> {
@@ -153,6 +156,7 @@ impl MissionSink<'_> {
 impl Sink for MissionSink<'_> {
     fn on_obstacles(&mut self, at: Utime, report: &ObstacleReport) {
         self.log.obstacles(at, report);
+        self.drops.report(report);
     }
 
     fn on_votes(&mut self, at: Utime, votes: &[BehaviourVotes]) {
@@ -351,6 +355,7 @@ pub fn run_mission(
         turns_in_place: Vec::new(),
         turning_from: None,
         overlays: Vec::new(),
+        drops: first_seen::DropWatch::new(&world, &config.vehicle, sensors),
     };
     let mission = mission_of(&world, t0);
     sink.log
@@ -372,6 +377,7 @@ pub fn run_mission(
             }
         };
         let state = step.state;
+        sink.drops.pose(t, [state.x, state.y, state.yaw]);
         if step.tick.is_multiple_of(5) {
             sink.track.push(TrackPoint {
                 utime: t,
@@ -646,6 +652,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
                 position: m.position,
                 hazard: m.hazard.clone(),
             }),
+        drops_first_seen: sink.drops.first_seen(t0),
         stops,
         ride: simulator.ride().report(),
         recovery,

@@ -123,6 +123,10 @@ pub struct MissionReport {
     /// When (s from the start), where and to what that gap was: `arcnav
     /// render mission.lcm --at S` draws the decision of that moment.
     pub closest_approach: Option<NearMissReport>,
+    /// Each hole and ditch the wheels do not bridge (ground truth), with
+    /// the range from the sensor at which perception first flagged or
+    /// suspected it (see [`super::first_seen`]).
+    pub drops_first_seen: Vec<super::first_seen::DropFirstSeen>,
     pub stops: StopStats,
     /// What the ground did to the vehicle (ground truth): peak roll and
     /// pitch, vertical acceleration of the body.
