@@ -94,6 +94,14 @@ fn a_sweep_writes_a_reproducible_table_a_consistent_summary_and_a_picture() {
         assert!(r["duration_s"].as_f64().unwrap() <= 25.0 + 1e-9, "{r}");
         assert!(r["distance_m"].as_f64().unwrap() > 10.0, "it drove: {r}");
     }
+    // At 4 m/s the short course's first 25 s pass its ditch: the row says
+    // how far ahead a hole or ditch was first reported.
+    let first = rows[1]["drops_first_seen_min_m"].as_f64();
+    assert!(
+        first.is_some_and(|m| (5.0..40.0).contains(&m)),
+        "{}",
+        rows[1]
+    );
     let csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
     assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(

@@ -560,6 +560,11 @@ pub struct Row {
     /// The speed the configuration allows (002 §7), m/s.
     #[serde(default)]
     pub speed_bound_mps: f64,
+    /// The nearest of the ranges at which the world's holes and ditches
+    /// were first flagged or suspected (`drops_first_seen`), m; none when
+    /// no drop hazard was reported.
+    #[serde(default)]
+    pub drops_first_seen_min_m: Option<f64>,
     /// Runs of consecutive stop commands, and the time stood.
     pub stops: u64,
     pub stopped_s: f64,
@@ -607,6 +612,7 @@ impl Row {
             closest_approach_m: None,
             closest_approach_at_s: None,
             speed_bound_mps: 0.0,
+            drops_first_seen_min_m: None,
             stops: 0,
             stopped_s: 0.0,
             recoveries: 0,
@@ -653,6 +659,11 @@ impl Row {
             closest_approach_m: r.closest_approach_m,
             closest_approach_at_s: r.closest_approach.as_ref().map(|m| m.at_s),
             speed_bound_mps: r.speed_bound.bound_mps,
+            drops_first_seen_min_m: r
+                .drops_first_seen
+                .iter()
+                .filter_map(|d| d.first_range_m)
+                .min_by(f64::total_cmp),
             stops: r.stops.episodes,
             stopped_s: r.stops.stopped_s.values().sum(),
             recoveries: r.recovery.recoveries,
@@ -760,7 +771,7 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
     out.push_str(
         ",outcome,success,collisions,collision_cause,waypoints_reached,waypoints,distance_m,\
          duration_s,average_speed_mps,closest_approach_m,closest_approach_at_s,speed_bound_mps,\
-         stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,\
+         drops_first_seen_min_m,stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,\
          external_votes,behaviour_faults,error\n",
     );
     for r in rows {
@@ -779,6 +790,7 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
             optional(r.closest_approach_m),
             optional(r.closest_approach_at_s),
             number(r.speed_bound_mps),
+            optional(r.drops_first_seen_min_m),
             r.stops.to_string(),
             number(r.stopped_s),
             r.recoveries.to_string(),
@@ -1140,6 +1152,7 @@ mod tests {
             closest_approach_m: Some(1.5),
             closest_approach_at_s: Some(12.0),
             speed_bound_mps: 7.4,
+            drops_first_seen_min_m: Some(14.2),
             stops: 0,
             stopped_s: 0.0,
             recoveries: 0,
