@@ -156,6 +156,26 @@ fn seeded(
     (format!("{tag}-seed{seed}"), run)
 }
 
+/// Held to the hole speed cap (`speed_bound.suspect_bound_mps`), and the
+/// world's one ditch first flagged or suspected at least as far off as one
+/// image is certain to (`suspect_range_m`, less a frame's travel): the
+/// report and the summary say how far (issue 63's measure).
+fn assert_held_to_the_cap_and_the_ditch_reported_in_time(tag: &str, report: &Value, stdout: &str) {
+    let bound = &report["speed_bound"];
+    let cap = bound["suspect_bound_mps"].as_f64().unwrap();
+    let max = report["max_speed_mps"].as_f64().unwrap();
+    assert!(max <= cap + 0.05, "{tag}: {max} m/s, held to {cap}");
+    let range = bound["suspect_range_m"].as_f64().unwrap();
+    let drops = report["drops_first_seen"].as_array().unwrap();
+    assert_eq!(drops.len(), 1, "{tag}: {drops:?}");
+    let first = drops[0]["first_range_m"].as_f64().unwrap();
+    assert!(first >= range - 1.0, "{tag}: first reported {first} m away");
+    assert!(
+        stdout.contains("drop hazards  1 hole or ditch the wheels do not bridge: first"),
+        "{tag}:\n{stdout}"
+    );
+}
+
 fn run_short_course(tag: &str) -> ScratchDir {
     let out = out_dir(tag);
     let (code, stdout, stderr) = arcnav(&[
@@ -1211,21 +1231,7 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
             report["suspected_drop_offs"].as_u64().unwrap() > 0,
             "{tag}:\n{stdout}"
         );
-        let cap = report["speed_bound"]["suspect_bound_mps"].as_f64().unwrap();
-        let max = report["max_speed_mps"].as_f64().unwrap();
-        assert!(max <= cap + 0.05, "{tag}: {max} m/s, held to {cap}");
-        let range = report["speed_bound"]["suspect_range_m"].as_f64().unwrap();
-        // The ditch was first flagged or suspected at least as far off as
-        // one image is certain to (less a frame's travel), and the report
-        // says how far (issue 63's measure).
-        let drops = report["drops_first_seen"].as_array().unwrap();
-        assert_eq!(drops.len(), 1, "{tag}: {drops:?}");
-        let first = drops[0]["first_range_m"].as_f64().unwrap();
-        assert!(first >= range - 1.0, "{tag}: first reported {first} m away");
-        assert!(
-            stdout.contains("drop hazards  1 hole or ditch the wheels do not bridge: first"),
-            "{tag}:\n{stdout}"
-        );
+        assert_held_to_the_cap_and_the_ditch_reported_in_time(tag, report, stdout);
     }
     let configs = out_dir("suspect-unsuspected-config");
     let config = configs.join("config.toml");
@@ -1311,20 +1317,7 @@ fn at_speed_a_short_ditch_is_suspected_in_time_to_stop() {
         assert_completed_without_collision(tag, report, stdout);
         let range = report["speed_bound"]["suspect_range_m"].as_f64().unwrap();
         assert!((11.0..12.0).contains(&range), "{tag}: {range} m");
-        let cap = report["speed_bound"]["suspect_bound_mps"].as_f64().unwrap();
-        let max = report["max_speed_mps"].as_f64().unwrap();
-        assert!(max <= cap + 0.05, "{tag}: {max} m/s, held to {cap}");
-        // The ditch was first flagged or suspected at least as far off as
-        // one image is certain to (less a frame's travel), and the report
-        // says how far (issue 63's measure).
-        let drops = report["drops_first_seen"].as_array().unwrap();
-        assert_eq!(drops.len(), 1, "{tag}: {drops:?}");
-        let first = drops[0]["first_range_m"].as_f64().unwrap();
-        assert!(first >= range - 1.0, "{tag}: first reported {first} m away");
-        assert!(
-            stdout.contains("drop hazards  1 hole or ditch the wheels do not bridge: first"),
-            "{tag}:\n{stdout}"
-        );
+        assert_held_to_the_cap_and_the_ditch_reported_in_time(tag, report, stdout);
     }
     assert!(
         runs[1]
