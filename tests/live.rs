@@ -315,7 +315,9 @@ fn assert_threaded_gives_lockstep_on(mut config: Config, speed: f64) {
     assert_eq!(last.why, Why::Final);
     assert!(last.command.is_stop());
     // Figures for every node, the guard's among them: it judged every
-    // command and, with no fault, changed none.
+    // command and, with no fault, changed none but the startup stop
+    // allowed above (no image or pose of its own yet: under load, one CI
+    // run of five, 2026-12-07, where this counted it).
     let names: Vec<&str> = report.nodes.iter().map(|n| n.node.as_str()).collect();
     assert_eq!(
         names,
@@ -329,10 +331,14 @@ fn assert_threaded_gives_lockstep_on(mut config: Config, speed: f64) {
         ]
     );
     let guard = &report.nodes[5];
+    let stopped_at_start = decided
+        .iter()
+        .any(|d| d.command.utime < first && matches!(d.why, Why::Guard(_)));
     assert!(
-        guard
-            .counters
-            .contains(&("guard_interventions".to_owned(), 0)),
+        guard.counters.contains(&(
+            "guard_interventions".to_owned(),
+            u64::from(stopped_at_start)
+        )),
         "{}",
         report.table()
     );
