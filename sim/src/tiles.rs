@@ -648,8 +648,10 @@ mod tests {
         let world = Arc::new(World::embedded("paper_loop").unwrap().unwrap());
         let mut ahead = TileCache::new(Arc::clone(&world), 64, 1);
         let mut when_needed = TileCache::new(Arc::clone(&world), 64, 1);
-        for k in 0..8 {
-            let (x, y) = (-60.0 + 17.0 * f64::from(k), 5.0 * f64::from(k));
+        let places: Vec<(f64, f64)> = (0..8)
+            .map(|k| (-60.0 + 17.0 * f64::from(k), 5.0 * f64::from(k)))
+            .collect();
+        for &(x, y) in &places {
             ahead.prefetch(x + TILE_M, y, 46.0);
             let (a, b) = (ahead.view(x, y, 46.0), when_needed.view(x, y, 46.0));
             assert_eq!(a.max.to_bits(), b.max.to_bits());
@@ -672,19 +674,10 @@ mod tests {
             ahead.len(),
             when_needed.len()
         );
-        let asked: HashSet<(i64, i64)> =
-            (0..8)
-                .flat_map(|k| {
-                    keys_around(
-                        -60.0 + 17.0 * f64::from(k) + TILE_M,
-                        5.0 * f64::from(k),
-                        46.0,
-                    )
-                })
-                .chain((0..8).flat_map(|k| {
-                    keys_around(-60.0 + 17.0 * f64::from(k), 5.0 * f64::from(k), 46.0)
-                }))
-                .collect();
+        let asked: HashSet<(i64, i64)> = places
+            .iter()
+            .flat_map(|&(x, y)| keys_around(x + TILE_M, y, 46.0).chain(keys_around(x, y, 46.0)))
+            .collect();
         assert_eq!(ahead.len() + pending, asked.len());
     }
 

@@ -526,7 +526,7 @@ fn print_drops_first_seen(r: &arcnav::mission::MissionReport) {
         n => format!("{n} holes and ditches"),
     };
     match (ranges.first(), ranges.last()) {
-        (Some(near), Some(far)) if ranges.len() == 1 || near == far => println!(
+        (Some(near), Some(far)) if near == far => println!(
             "drop hazards  {what} the wheels do not bridge: first flagged or suspected {near:.1} m \
              from the sensor{never}"
         ),

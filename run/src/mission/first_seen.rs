@@ -93,9 +93,15 @@ impl DropWatch {
         }
     }
 
+    /// Whether every hazard has been reported (or there is none): nothing
+    /// is left to watch for.
+    fn all_reported(&self) -> bool {
+        self.watched.iter().all(|w| w.first.is_some())
+    }
+
     /// The vehicle's true pose at tick `t`: rear-axle (x, y), yaw.
     pub fn pose(&mut self, t: Utime, pose: [f64; 3]) {
-        if self.watched.is_empty() {
+        if self.all_reported() {
             return;
         }
         self.poses.push_back((t, pose));
@@ -123,7 +129,7 @@ impl DropWatch {
 
     /// Takes in one of perception's reports.
     pub fn report(&mut self, report: &ObstacleReport) {
-        if self.watched.iter().all(|w| w.first.is_some()) {
+        if self.all_reported() {
             return;
         }
         let Some(sensor) = self.sensor_at(report) else {
