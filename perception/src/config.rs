@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use std::collections::BTreeMap;
 
+use crate::evidence::EvidenceConfig;
 use crate::height_diff::config::HeightDiffConfig;
 use crate::pca::config::PcaConfig;
 
@@ -34,6 +35,9 @@ pub struct PerceptionConfig {
     /// The near edges of unseen ground (holes, trenches, ledges), found
     /// the same way whichever evaluator judges the ground that was seen.
     pub drop_off: DropOffConfig,
+    /// Hole evidence accumulated over images, whichever evaluator judges
+    /// each (see [`crate::evidence`]).
+    pub evidence: EvidenceConfig,
     /// Multi-scale height differences (000 §4–5.1), `evaluator = "height_diff"`.
     pub height_diff: HeightDiffConfig,
     /// Hierarchical PCA and scan-line roughness (001 §3), `evaluator = "pca"`.
@@ -64,6 +68,7 @@ impl Default for PerceptionConfig {
             region: RegionConfig::default(),
             cells: CellsConfig::default(),
             drop_off: DropOffConfig::default(),
+            evidence: EvidenceConfig::default(),
             height_diff: HeightDiffConfig::default(),
             pca: PcaConfig::default(),
             heights: HeightsConfig::default(),
@@ -403,6 +408,9 @@ impl PerceptionConfig {
         config::in_range("drop_off.depth_per_m", d.depth_per_m, 0.0, 0.1)?;
         config::in_range("drop_off.noise_m", d.noise_m, 0.0, 1.0)?;
         config::in_range("drop_off.suspect_cost", d.suspect_cost, 0.0, 0.99)?;
+        self.evidence
+            .validate(d)
+            .map_err(|e| e.within("evidence"))?;
         let too_lax = |key: &str, value: f64, vehicle_key: &str, limit: f64| {
             (value > limit).then(|| {
                 ConfigError::new(

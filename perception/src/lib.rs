@@ -14,6 +14,8 @@
 //!   [`median`] outlier filtering;
 //! - [`pca`]: 001's hierarchical PCA and roughness;
 //! - [`registry`]: evaluators by name, and the plug-in trait;
+//! - [`evidence`]: hole evidence accumulated over images (the one
+//!   stateful judgement every evaluator shares);
 //! - [`fov`]: the observed footprint polygon;
 //! - [`shadow`]: the ground in it the image did not see;
 //! - [`stream`]: range images arriving in slices, judged as they come
@@ -24,6 +26,7 @@
 pub mod cells;
 pub mod config;
 pub mod evaluator;
+pub mod evidence;
 pub mod fov;
 mod grid;
 pub mod height_diff;
@@ -48,6 +51,7 @@ pub use evaluator::{
     HeightSample, ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons,
     Region, Runner, Support, TerrainEvaluator, suspected_drop_off,
 };
+pub use evidence::{EvidenceConfig, EvidenceStats, HoleEvidence};
 pub use fov::FovPolygon;
 pub use height_diff::{HeightDiff, HeightDiffConfig, HeightDiffMaps};
 pub use heights::HeightSampler;

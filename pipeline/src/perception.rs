@@ -5,8 +5,9 @@
 use std::collections::VecDeque;
 
 use arcnav_perception::{
-    FrameStream, HeightSampler, ImageStats, InOrder, ObstacleReport, PerceptionConfig, RangeImage,
-    RangeSlice, Runner, StreamCounts, StreamingConfig, TerrainEvaluator,
+    EvidenceStats, FrameStream, HeightSampler, HoleEvidence, ImageStats, InOrder, ObstacleReport,
+    PerceptionConfig, RangeImage, RangeSlice, Runner, StreamCounts, StreamingConfig,
+    TerrainEvaluator,
 };
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::time::seconds_to_micros;
@@ -97,6 +98,25 @@ pub struct SliceCounts {
     pub stream: StreamCounts,
 }
 
+/// What the hole evidence (`[perception.evidence]`) found over a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EvidenceTotals {
+    /// Images (or slices) it judged.
+    pub images: u64,
+    /// Near edges suspected, summed over images.
+    pub suspected: u64,
+    /// Gaps that dipped and rose as a hole's would.
+    pub candidates: u64,
+}
+
+impl EvidenceTotals {
+    fn add(&mut self, found: EvidenceStats) {
+        self.images += 1;
+        self.suspected += u64::from(found.suspected);
+        self.candidates += u64::from(found.candidates);
+    }
+}
+
 /// Perception: range images + poses → obstacle reports.
 pub struct PerceptionNode {
     evaluator: Box<dyn TerrainEvaluator>,
@@ -110,8 +130,13 @@ pub struct PerceptionNode {
     streams: Vec<(String, FrameStream)>,
     /// The sensor ids seen, at most [`MAX_SENSORS`].
     sensors: Vec<String>,
-    /// Heights sampled from slices not yet sent with a report.
-    pending_heights: ObstacleReport,
+    /// Heights sampled from slices, and the holes the evidence suspected
+    /// in them, not yet sent with a report.
+    pending: ObstacleReport,
+    /// Hole evidence over images (`[perception.evidence]`).
+    evidence: HoleEvidence,
+    /// What it suspected, over the run.
+    pub evidence_totals: EvidenceTotals,
     pub slices: SliceCounts,
     max_waiting: usize,
     max_gap_us: Utime,
@@ -158,7 +183,9 @@ impl PerceptionNode {
             perception_config: perception.clone(),
             streams: Vec::new(),
             sensors: Vec::new(),
-            pending_heights: ObstacleReport::default(),
+            pending: ObstacleReport::default(),
+            evidence: HoleEvidence::new(perception),
+            evidence_totals: EvidenceTotals::default(),
             slices: SliceCounts::default(),
             max_waiting: timing.max_waiting_images,
             max_gap_us: seconds_to_micros(timing.max_pose_gap_s),
@@ -280,7 +307,7 @@ impl PerceptionNode {
                 &pose_at,
                 self.evaluator.as_mut(),
                 &*self.runner,
-                &mut |report| Self::send(&mut self.pending_heights, &mut self.reports, report, out),
+                &mut |report| Self::send(&mut self.pending, &mut self.reports, report, out),
             ));
         }
         self.streams = streams;
@@ -319,7 +346,8 @@ impl PerceptionNode {
         }
     }
 
-    /// Hands `report` on with the heights of the slices since the last one.
+    /// Hands `report` on with the heights of the slices since the last
+    /// one, and the holes the evidence suspected in them.
     fn send(
         pending: &mut ObstacleReport,
         reports: &mut u64,
@@ -328,6 +356,12 @@ impl PerceptionNode {
     ) {
         report.heights_cell_m = pending.heights_cell_m;
         report.heights.append(&mut pending.heights);
+        let offset = report.regions.len() as u32;
+        report.regions.append(&mut pending.regions);
+        report.cells.extend(pending.cells.drain(..).map(|mut cell| {
+            cell.region += offset;
+            cell
+        }));
         *reports += 1;
         out(report);
     }
@@ -484,8 +518,9 @@ impl PerceptionNode {
         };
         // The slice's own heights go with the next report.
         let image = slice.to_image();
-        self.heights
-            .sample(&image, &pose, &mut self.pending_heights);
+        self.heights.sample(&image, &pose, &mut self.pending);
+        let found = self.evidence.observe(&image, &pose, &mut self.pending);
+        self.evidence_totals.add(found);
         let stream = &mut self.streams[index].1;
         let (poses, max_gap, newest) = (&self.poses, self.max_gap_us, self.poses.newest().copied());
         let pose_at = |t: Utime| Self::pose_at(poses, newest, max_gap, t);
@@ -494,7 +529,7 @@ impl PerceptionNode {
             &pose_at,
             self.evaluator.as_mut(),
             &*self.runner,
-            &mut |report| Self::send(&mut self.pending_heights, &mut self.reports, report, out),
+            &mut |report| Self::send(&mut self.pending, &mut self.reports, report, out),
         );
         self.account(result);
         self.refresh_stream_counts();
@@ -600,6 +635,10 @@ impl PerceptionNode {
     ) {
         match result {
             Ok(stats) => {
+                let found = self
+                    .evidence
+                    .observe(image, world_from_vehicle, &mut report);
+                self.evidence_totals.add(found);
                 report.acquired = image.utime;
                 self.heights.sample(image, world_from_vehicle, &mut report);
                 self.totals.accumulate(&stats);

@@ -565,6 +565,10 @@ pub struct Row {
     /// no drop hazard was reported.
     #[serde(default)]
     pub drops_first_seen_min_m: Option<f64>,
+    /// Near edges the hole evidence over images suspected, summed over
+    /// the images (report.json `evidence_suspected`).
+    #[serde(default)]
+    pub evidence_suspected: u64,
     /// Runs of consecutive stop commands, and the time stood.
     pub stops: u64,
     pub stopped_s: f64,
@@ -613,6 +617,7 @@ impl Row {
             closest_approach_at_s: None,
             speed_bound_mps: 0.0,
             drops_first_seen_min_m: None,
+            evidence_suspected: 0,
             stops: 0,
             stopped_s: 0.0,
             recoveries: 0,
@@ -664,6 +669,7 @@ impl Row {
                 .iter()
                 .filter_map(|d| d.first_range_m)
                 .min_by(f64::total_cmp),
+            evidence_suspected: r.evidence_suspected,
             stops: r.stops.episodes,
             stopped_s: r.stops.stopped_s.values().sum(),
             recoveries: r.recovery.recoveries,
@@ -771,7 +777,7 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
     out.push_str(
         ",outcome,success,collisions,collision_cause,waypoints_reached,waypoints,distance_m,\
          duration_s,average_speed_mps,closest_approach_m,closest_approach_at_s,speed_bound_mps,\
-         drops_first_seen_min_m,stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,\
+         drops_first_seen_min_m,evidence_suspected,stops,stopped_s,recoveries,backed_m,replans,wall_time_s,guard_stops,guard_slows,\
          external_votes,behaviour_faults,error\n",
     );
     for r in rows {
@@ -791,6 +797,7 @@ pub fn table_csv(plan: &PlanIdentity, rows: &[Row]) -> String {
             optional(r.closest_approach_at_s),
             number(r.speed_bound_mps),
             optional(r.drops_first_seen_min_m),
+            r.evidence_suspected.to_string(),
             r.stops.to_string(),
             number(r.stopped_s),
             r.recoveries.to_string(),
@@ -1153,6 +1160,7 @@ mod tests {
             closest_approach_at_s: Some(12.0),
             speed_bound_mps: 7.4,
             drops_first_seen_min_m: Some(14.2),
+            evidence_suspected: 3,
             stops: 0,
             stopped_s: 0.0,
             recoveries: 0,

@@ -637,6 +637,7 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
             .collect(),
         graded_cells: u64::from(pipeline.perception.totals.graded),
         suspected_drop_offs: u64::from(pipeline.perception.totals.suspected),
+        evidence_suspected: pipeline.perception.evidence_totals.suspected,
         collisions: simulator.truth().collisions.clone(),
         closest_approach_m: simulator
             .truth()

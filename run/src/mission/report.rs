@@ -117,6 +117,10 @@ pub struct MissionReport {
     pub graded_cells: u64,
     /// Of those, suspected drop-offs (`[perception.drop_off] suspect_cost`).
     pub suspected_drop_offs: u64,
+    /// Near edges of holes the evidence over images
+    /// (`[perception.evidence]`) suspected, summed over the images: cells
+    /// reported as suspected drop-offs besides the evaluator's.
+    pub evidence_suspected: u64,
     pub collisions: Vec<Collision>,
     /// Smallest gap between the footprint and a true hazard, m.
     pub closest_approach_m: Option<f64>,
