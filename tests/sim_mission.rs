@@ -1292,8 +1292,12 @@ fn at_speed_the_route_holds_to_one_end_of_a_ditch_across_the_way() {
 /// instead (15.9 m, a cap of 6.89 m/s), the vehicle drove in at
 /// `--speed 10` with noise seeds 2, 3 and 6 of 6; held to 5.28 m/s it
 /// stops or goes round with every seed (2026-11-29: 0.09-0.40 m from the
-/// ditch as it passes its end slowly). Without the cap it drives in
-/// (seeds 1, 3, 4 and 5 of 6).
+/// ditch as it passes its end slowly). Without the cap it drove in (seeds
+/// 1, 3, 4 and 5 of 6) until the hole evidence over images
+/// (`[perception.evidence]`, issue 63): the rows of a moving sensor never
+/// land in the ditch while they sweep the ground around it, and it is
+/// suspected from 16 m and more, where one image cannot show it; uncapped
+/// at 10 m/s the vehicle now stops or goes round.
 #[test]
 fn at_speed_a_short_ditch_is_suspected_in_time_to_stop() {
     let world = format!(
@@ -1319,16 +1323,13 @@ fn at_speed_a_short_ditch_is_suspected_in_time_to_stop() {
         assert!((11.0..12.0).contains(&range), "{tag}: {range} m");
         assert_held_to_the_cap_and_the_ditch_reported_in_time(tag, report, stdout);
     }
-    assert!(
-        runs[1]
-            .iter()
-            .any(|(_, report, _)| report["outcome"] == "collision"),
-        "without the cap some noise seed drives into the ditch: {:?}",
-        runs[1]
-            .iter()
-            .map(|(tag, report, _)| (tag, &report["outcome"]))
-            .collect::<Vec<_>>()
-    );
+    for (tag, report, stdout) in &runs[1] {
+        assert_completed_without_collision(tag, report, stdout);
+        let drops = report["drops_first_seen"].as_array().unwrap();
+        let first = drops[0]["first_range_m"].as_f64().unwrap();
+        assert!(first >= 16.0, "{tag}: first reported {first} m away");
+        assert!(report["evidence_suspected"].as_u64().unwrap() > 0, "{tag}");
+    }
 }
 
 /// 017, narrower still: a dead-end lane with 5.7 m of floor, where no
@@ -1521,12 +1522,15 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
 /// 020's target speed, where the ground allows it: with
 /// `config/open_ground_fast.toml` (the speed votes count on all of the
 /// braking, the route aims 2 s ahead, 2.5 m/s² on arcs) the 64-beam lidar
-/// at `--speed 10` drives the paper's 1 km loop at 8 m/s or more on
+/// at `--speed 10` drives the paper's 1 km loop at nearly 8 m/s on
 /// average without a collision (5.1 m/s with the defaults). The file says
 /// what it costs: ditches narrower than the lidar's rows lie apart at
-/// range are seen too late for that speed.
+/// range are seen too late for that speed by one image (the hole evidence
+/// over images suspects the loop's six ditches from 24 m, and obstacle
+/// avoidance slows for them from there: 8.08 m/s without it, 7.91 with it,
+/// 2026-12-08).
 #[test]
-fn on_open_ground_the_fast_profile_drives_the_paper_loop_at_8_m_s() {
+fn on_open_ground_the_fast_profile_drives_the_paper_loop_near_8_m_s() {
     let profile = format!(
         "{}/config/open_ground_fast.toml",
         env!("CARGO_MANIFEST_DIR")
@@ -1548,7 +1552,7 @@ fn on_open_ground_the_fast_profile_drives_the_paper_loop_at_8_m_s() {
     for (tag, report, stdout) in &missions("fast", &runs) {
         assert_completed_without_collision(tag, report, stdout);
         let average = report["average_speed_mps"].as_f64().unwrap();
-        assert!(average >= 8.0, "{tag}: {average} m/s on average:\n{stdout}");
+        assert!(average >= 7.8, "{tag}: {average} m/s on average:\n{stdout}");
     }
 }
 
