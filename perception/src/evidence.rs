@@ -701,14 +701,14 @@ mod tests {
     use arcnav_vehicle::frames::isometry_from_xyz_rpy;
 
     /// The 64-beam lidar's rows (2° to −24.9°, 2.4 m up) and column
-    /// spacing, over the 45° ahead only: what a ditch ahead is seen with,
-    /// for a fraction of the rendering.
+    /// spacing, over the 22.5° ahead only and out to 32 m: what a ditch
+    /// ahead is seen with, for a fraction of the rendering.
     fn lidar_ahead() -> SensorModel {
         let mut c = SensorModel::lidar64().to_custom();
-        c.cols = 256;
-        c.azimuth_left_deg = 22.5;
-        c.azimuth_right_deg = -22.5;
-        c.max_range_m = 40.0;
+        c.cols = 128;
+        c.azimuth_left_deg = 11.25;
+        c.azimuth_right_deg = -11.25;
+        c.max_range_m = 32.0;
         SensorModel::from_custom(&c)
     }
 
@@ -733,7 +733,9 @@ mod tests {
         scene: &(impl Fn(f64, f64) -> f64 + Sync),
         (from, to, step): (f64, f64, f64),
     ) -> Vec<(f64, Vec<ObstacleCell>)> {
-        let rays = HeightFunction::with_step(scene, 0.1);
+        // Marched in 20 cm steps, each crossing refined by bisection: the
+        // narrowest feature here is 30 cm.
+        let rays = HeightFunction::with_step(scene, 0.2);
         let mount = sensor.vehicle_from_sensor.translation.vector.x;
         let frames = ((to - from) / step).round() as usize + 1;
         (0..frames)
