@@ -519,6 +519,9 @@ impl PerceptionNode {
         // The slice's own heights go with the next report.
         let image = slice.to_image();
         self.heights.sample(&image, &pose, &mut self.pending);
+        // Each slice adds to the evidence as it comes: a lidar's slice of
+        // columns walks them whole; a scanning sensor's slice of rows walks
+        // its own rows only (a gap across two slices is not judged).
         let found = self.evidence.observe(&image, &pose, &mut self.pending);
         self.evidence_totals.add(found);
         let stream = &mut self.streams[index].1;
