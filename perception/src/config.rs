@@ -6,7 +6,6 @@ use serde::{Deserialize, Serialize};
 
 use std::collections::BTreeMap;
 
-use crate::evidence::EvidenceConfig;
 use crate::height_diff::config::HeightDiffConfig;
 use crate::pca::config::PcaConfig;
 
@@ -75,6 +74,74 @@ impl Default for PerceptionConfig {
             streaming: StreamingConfig::default(),
             plugins: BTreeMap::new(),
         }
+    }
+}
+
+/// Lives in `[perception.evidence]`: hole evidence accumulated over
+/// images (see [`crate::evidence`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EvidenceConfig {
+    /// Accumulate returns over images and suspect the holes they show
+    /// (reported as `[perception.drop_off]` suspected drop-offs, at
+    /// `suspect_cost`).
+    pub enabled: bool,
+    /// World-aligned cell of the layer, m: a gap the wheels do not
+    /// bridge must span several.
+    pub cell_size_m: f64,
+    /// How far the sensor travels, after a ray first passed over a cell,
+    /// before the absence of a return there counts, m.
+    pub settle_m: f64,
+    /// Returns within this horizontal distance of the sensor are kept,
+    /// m: beyond the region ahead, so that the ground there has settled
+    /// by the time the vehicle nears it.
+    pub reach_m: f64,
+}
+
+impl Default for EvidenceConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            cell_size_m: 0.1,
+            settle_m: 3.0,
+            reach_m: 30.0,
+        }
+    }
+}
+
+/// The most cells on a side of the hole evidence's ring.
+pub(crate) const MAX_EVIDENCE_SIDE: usize = 4096;
+
+impl EvidenceConfig {
+    /// Checks the keys (relative to `[perception.evidence]`), with the
+    /// drop-off rule's gap it must resolve.
+    pub fn validate(&self, drop_off: &DropOffConfig) -> Result<(), ConfigError> {
+        config::in_range("cell_size_m", self.cell_size_m, 0.02, 1.0)?;
+        config::in_range("settle_m", self.settle_m, 0.0, 100.0)?;
+        config::in_range("reach_m", self.reach_m, 1.0, 500.0)?;
+        if self.enabled && 3.0 * self.cell_size_m > drop_off.max_gap_m {
+            return Err(ConfigError::new(
+                "cell_size_m",
+                format!(
+                    "is {} m; a gap of drop_off.max_gap_m ({} m) must span at least three \
+                     cells: use cells of at most {:.3} m",
+                    self.cell_size_m,
+                    drop_off.max_gap_m,
+                    drop_off.max_gap_m / 3.0
+                ),
+            ));
+        }
+        if self.enabled && 2.0 * self.reach_m / self.cell_size_m + 8.0 > MAX_EVIDENCE_SIDE as f64 {
+            return Err(ConfigError::new(
+                "cell_size_m",
+                format!(
+                    "{} m cells out to reach_m ({} m) need a ring of more than \
+                     {MAX_EVIDENCE_SIDE} cells a side: use larger cells or a shorter reach",
+                    self.cell_size_m, self.reach_m
+                ),
+            ));
+        }
+        Ok(())
     }
 }
 

@@ -61,80 +61,13 @@
 //! Memory is fixed by `reach_m` and the cell size (1.7 MiB by default).
 
 use arcnav_vehicle::Isometry;
-use arcnav_vehicle::config::{self, ConfigError};
-use serde::{Deserialize, Serialize};
 
-use crate::config::{DropOffConfig, PerceptionConfig};
+#[cfg(test)]
+use crate::config::DropOffConfig;
+use crate::config::{EvidenceConfig, MAX_EVIDENCE_SIDE, PerceptionConfig};
 use crate::evaluator::{ImageStats, ObstacleCell, ObstacleReport, Reasons, Region};
 use crate::grid::{Projector, RowPoints, level_frames};
 use crate::image::RangeImage;
-
-/// Lives in `[perception.evidence]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct EvidenceConfig {
-    /// Accumulate returns over images and suspect the holes they show
-    /// (reported as `[perception.drop_off]` suspected drop-offs, at
-    /// `suspect_cost`).
-    pub enabled: bool,
-    /// World-aligned cell of the layer, m: a gap the wheels do not
-    /// bridge must span several.
-    pub cell_size_m: f64,
-    /// How far the sensor travels, after a ray first passed over a cell,
-    /// before the absence of a return there counts, m.
-    pub settle_m: f64,
-    /// Returns within this horizontal distance of the sensor are kept,
-    /// m: beyond the region ahead, so that the ground there has settled
-    /// by the time the vehicle nears it.
-    pub reach_m: f64,
-}
-
-impl Default for EvidenceConfig {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            cell_size_m: 0.1,
-            settle_m: 3.0,
-            reach_m: 30.0,
-        }
-    }
-}
-
-/// The most cells on a side of the layer's ring.
-const MAX_SIDE: usize = 4096;
-
-impl EvidenceConfig {
-    /// Checks the keys (relative to `[perception.evidence]`), with the
-    /// drop-off rule's gap it must resolve.
-    pub(crate) fn validate(&self, drop_off: &DropOffConfig) -> Result<(), ConfigError> {
-        config::in_range("cell_size_m", self.cell_size_m, 0.02, 1.0)?;
-        config::in_range("settle_m", self.settle_m, 0.0, 100.0)?;
-        config::in_range("reach_m", self.reach_m, 1.0, 500.0)?;
-        if self.enabled && 3.0 * self.cell_size_m > drop_off.max_gap_m {
-            return Err(ConfigError::new(
-                "cell_size_m",
-                format!(
-                    "is {} m; a gap of drop_off.max_gap_m ({} m) must span at least three \
-                     cells: use cells of at most {:.3} m",
-                    self.cell_size_m,
-                    drop_off.max_gap_m,
-                    drop_off.max_gap_m / 3.0
-                ),
-            ));
-        }
-        if self.enabled && ring_side(self.reach_m, self.cell_size_m) > MAX_SIDE {
-            return Err(ConfigError::new(
-                "cell_size_m",
-                format!(
-                    "{} m cells out to reach_m ({} m) need a ring of more than {MAX_SIDE} \
-                     cells a side: use larger cells or a shorter reach",
-                    self.cell_size_m, self.reach_m
-                ),
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// Cells are kept in square tiles of this many a side: the cells of a
 /// tile share a cache line (16 heights of 4 bytes), and a tile knows the
@@ -143,13 +76,10 @@ const TILE: usize = 4;
 const TILE_CELLS: usize = TILE * TILE;
 
 /// The side of the ring holding every cell within `reach` of the sensor,
-/// tiles.
+/// tiles (at most [`MAX_EVIDENCE_SIDE`] cells: what validation allows).
 fn ring_side(reach: f64, cell: f64) -> usize {
     let tiles = (2.0 * reach / (cell * TILE as f64)).ceil() + 2.0;
-    if tiles * TILE as f64 > MAX_SIDE as f64 {
-        return usize::MAX;
-    }
-    tiles as usize
+    (tiles.max(1.0) as usize).min(MAX_EVIDENCE_SIDE / TILE)
 }
 
 /// One tile of the ring.
@@ -230,6 +160,8 @@ pub struct HoleEvidence {
     /// where each row's end.
     kept: Vec<(u32, Return)>,
     row_ends: Vec<usize>,
+    /// The image's columns looking ahead, in runs.
+    columns: Vec<std::ops::Range<usize>>,
     order: Vec<usize>,
 }
 
@@ -449,16 +381,43 @@ impl HoleEvidence {
         // row by row again.
         self.kept.clear();
         self.row_ends.clear();
+        // Only the columns looking ahead (or about: a column's returns
+        // spread a little either side of its heading).
+        self.columns.clear();
+        let mut run: Option<usize> = None;
+        for (c, &forward) in self.projector.forward().iter().enumerate() {
+            match (forward > -0.05, run) {
+                (true, None) => run = Some(c),
+                (false, Some(first)) => {
+                    self.columns.push(first..c);
+                    run = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(first) = run {
+            self.columns.push(first..cols);
+        }
+        let columns = std::mem::take(&mut self.columns);
         for position in 0..self.order.len() {
             let row = self.order[position];
             let line = &image.range[row * cols..(row + 1) * cols];
-            let mut points = std::mem::take(&mut self.points);
-            self.projector
-                .project_row(&start, row, line, kept, &mut points, &mut skipped);
-            self.raise(&points, &place, sensor_level);
+            for span in &columns {
+                let mut points = std::mem::take(&mut self.points);
+                self.projector.project_columns(
+                    &start,
+                    row,
+                    (&line[span.clone()], span.start),
+                    kept,
+                    &mut points,
+                    &mut skipped,
+                );
+                self.raise(&points, span.start, &place, sensor_level);
+                self.points = points;
+            }
             self.row_ends.push(self.kept.len());
-            self.points = points;
         }
+        self.columns = columns;
         let mut from = 0;
         for end in std::mem::take(&mut self.row_ends) {
             for i in from..end {
@@ -502,9 +461,10 @@ impl HoleEvidence {
         tile
     }
 
-    /// Raises each cell to the highest return of the row in it, keeping
-    /// the returns for the walk.
-    fn raise(&mut self, points: &RowPoints, place: &Placement, sensor: [f32; 3]) {
+    /// Raises each cell to the highest return of the row in it (`points`,
+    /// its column 0 the image's `first`), keeping the returns for the
+    /// walk.
+    fn raise(&mut self, points: &RowPoints, first: usize, place: &Placement, sensor: [f32; 3]) {
         for k in 0..points.x.len() {
             let (x, y) = (points.x[k], points.y[k]);
             if !points.used[k] || !self.inside(x, y, sensor) {
@@ -516,7 +476,7 @@ impl HoleEvidence {
             let top = &mut self.tops[spot.slot][spot.sub];
             *top = top.max(z);
             let d = ((x - sensor[0]).powi(2) + (y - sensor[1]).powi(2)).sqrt();
-            self.kept.push((k as u32, Return { d, x, y, z }));
+            self.kept.push(((first + k) as u32, Return { d, x, y, z }));
         }
     }
 

@@ -248,12 +248,28 @@ impl Projector {
     #[inline(always)]
     pub(crate) fn project_row(
         &self,
+        start: &RowStart,
+        row: usize,
+        line: &[f32],
+        kept: (f32, f32),
+        points: &mut RowPoints,
+        stats: &mut ImageStats,
+    ) {
+        self.project_columns(start, row, (line, 0), kept, points, stats);
+    }
+
+    /// Columns `first..first + ranges.len()` of row `row`, their ranges
+    /// `ranges`, projected into `points` (its column 0 the image's
+    /// `first`), as [`Projector::project_row`] projects a whole row.
+    #[inline(always)]
+    pub(crate) fn project_columns(
+        &self,
         &RowStart {
             translation: t,
             vertical,
         }: &RowStart,
         row: usize,
-        line: &[f32],
+        (line, first): (&[f32], usize),
         kept: (f32, f32),
         points: &mut RowPoints,
         stats: &mut ImageStats,
@@ -262,7 +278,10 @@ impl Projector {
         let v = [se * vertical[0], se * vertical[1], se * vertical[2]];
         points.resize(line.len());
         let (mut no_return, mut out_of_range) = (0u32, 0u32);
-        let beams = self.cos_az.iter().zip(&self.sin_az).zip(&self.up);
+        let beams = self.cos_az[first..]
+            .iter()
+            .zip(&self.sin_az[first..])
+            .zip(&self.up[first..]);
         let RowPoints { x, y, z, used } = points;
         for (((((&range, ((&ca, &sa), &up)), x), y), z), used) in line
             .iter()
@@ -398,6 +417,13 @@ impl Projector {
     }
 
     /// Readies [`Projector::project_row`] for `image` seen from
+    /// Per column of the image [`Projector::prepare`] readied, the x
+    /// (forward) part of its beams' horizontal direction in the level
+    /// frame.
+    pub(crate) fn forward(&self) -> &[f32] {
+        &self.cos_az
+    }
+
     /// `level_from_sensor`: per row the elevation's cosine and sine, per
     /// column the rotated horizontal direction; the sensor's position and
     /// the rotated vertical.

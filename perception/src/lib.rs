@@ -45,13 +45,14 @@ mod window;
 
 pub use cells::CellClassifier;
 pub use config::{
-    CellsConfig, DropOffConfig, HeightsConfig, PerceptionConfig, RegionConfig, StreamingConfig,
+    CellsConfig, DropOffConfig, EvidenceConfig, HeightsConfig, PerceptionConfig, RegionConfig,
+    StreamingConfig,
 };
 pub use evaluator::{
     HeightSample, ImageStats, InOrder, ObstacleCell, ObstacleReport, PerceptionError, Reasons,
     Region, Runner, Support, TerrainEvaluator, suspected_drop_off,
 };
-pub use evidence::{EvidenceConfig, EvidenceStats, HoleEvidence};
+pub use evidence::{EvidenceStats, HoleEvidence};
 pub use fov::FovPolygon;
 pub use height_diff::{HeightDiff, HeightDiffConfig, HeightDiffMaps};
 pub use heights::HeightSampler;
