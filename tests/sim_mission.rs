@@ -466,7 +466,8 @@ fn the_missions_write_the_logs_their_committed_digests_hold() {
 /// A lidar's images rendered beside the pipeline (`sim.render_ahead`) make
 /// the mission that renders each image when due, byte for byte: every image
 /// but the first was rendered ahead, none had to be rendered again, and the
-/// logs are the same. 15 s of short_course with the 64-beam lidar.
+/// logs are the same. 8 s of short_course with the 64-beam lidar (the
+/// vehicle under way, turning and meeting the course's first cells).
 #[test]
 fn images_rendered_beside_the_pipeline_make_the_same_mission() {
     let run = |tag: &str, ahead: bool| {
@@ -474,7 +475,7 @@ fn images_rendered_beside_the_pipeline_make_the_same_mission() {
         let config = out.join("ahead.toml");
         std::fs::write(
             &config,
-            format!("[sim]\ntime_limit_s = 15.0\nrender_ahead = {ahead}\n"),
+            format!("[sim]\ntime_limit_s = 8.0\nrender_ahead = {ahead}\n"),
         )
         .unwrap();
         let (_, stdout, stderr) = arcnav(&[
@@ -498,7 +499,7 @@ fn images_rendered_beside_the_pipeline_make_the_same_mission() {
     let (ahead, ahead_log, stdout, _a) = run("ahead-on", true);
     let (when_due, when_due_log, _, _b) = run("ahead-off", false);
     let images = ahead["images"].as_u64().unwrap();
-    assert!(images >= 150, "{ahead}");
+    assert!(images >= 80, "{ahead}");
     assert_eq!(ahead["images_rendered_ahead"], images - 1);
     assert_eq!(ahead["images_rendered_again"], 0);
     assert!(
@@ -510,7 +511,7 @@ fn images_rendered_beside_the_pipeline_make_the_same_mission() {
     );
     assert_eq!(when_due["images_rendered_ahead"], 0);
     assert_eq!(when_due["images"], images);
-    assert!(ahead_log.len() > 10_000_000, "{} bytes", ahead_log.len());
+    assert!(ahead_log.len() > 5_000_000, "{} bytes", ahead_log.len());
     assert!(
         ahead_log == when_due_log,
         "rendering ahead changed the mission's log"
@@ -1305,26 +1306,22 @@ fn at_speed_a_short_ditch_is_suspected_in_time_to_stop() {
         env!("CARGO_MANIFEST_DIR")
     );
     let args = ["--world", &world, "--speed", "10", "--no-images"];
+    // Held to the cap, ditch_across's test shows the cap at work
+    // (`at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time`).
     let runs = over_noise_seeds(
         "short-ditch",
-        &[
-            ("held", "lidar64", ""),
-            (
-                "uncapped",
-                "lidar64",
-                "[lookahead]\nhole_speed_cap = false\n",
-            ),
-        ],
+        &[(
+            "uncapped",
+            "lidar64",
+            "[lookahead]\nhole_speed_cap = false\n",
+        )],
         &args,
     );
     for (tag, report, stdout) in &runs[0] {
         assert_completed_without_collision(tag, report, stdout);
+        // One image is certain to suspect it only within 11.4 m.
         let range = report["speed_bound"]["suspect_range_m"].as_f64().unwrap();
         assert!((11.0..12.0).contains(&range), "{tag}: {range} m");
-        assert_held_to_the_cap_and_the_ditch_reported_in_time(tag, report, stdout);
-    }
-    for (tag, report, stdout) in &runs[1] {
-        assert_completed_without_collision(tag, report, stdout);
         let drops = report["drops_first_seen"].as_array().unwrap();
         let first = drops[0]["first_range_m"].as_f64().unwrap();
         assert!(first >= 16.0, "{tag}: first reported {first} m away");

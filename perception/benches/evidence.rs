@@ -36,7 +36,7 @@ fn main() {
     );
     let lidar = SensorModel::lidar64();
     let config = PerceptionConfig::default();
-    let frames = if quick() { 6 } else { 60 };
+    let frames = if quick() { 2 } else { 60 };
     let sensor_x = lidar.vehicle_from_sensor.translation.vector.x;
     // 8 m/s at 10 Hz, the last frame 8 m short of the ditch.
     let frames: Vec<_> = (0..frames)

@@ -759,7 +759,7 @@ mod tests {
     #[test]
     fn level_ground_is_never_suspected_nor_a_rut_the_wheels_roll_over_from_near() {
         // A rut 0.3 m wide and 1 m deep (the wheels bridge 0.77 m), at 8
-        // and at 5 m/s (the rows land in other places): its far wall is a
+        // and at 5.5 m/s (the rows land in other places): its far wall is a
         // notch each image. From 20 m, where a 10 cm cell of level ground
         // has even odds of no return yet, the ground before it may join it
         // in a run of unseen ground as long as a hole the wheels do not
@@ -813,7 +813,7 @@ mod tests {
         let sensor = lidar_ahead();
         let mut evidence = HoleEvidence::new(&PerceptionConfig::default());
         let bytes = evidence.memory_bytes();
-        drive(&mut evidence, &sensor, &scene, (0.0, 20.0, 0.8));
+        drive(&mut evidence, &sensor, &scene, (8.0, 20.0, 0.8));
         // Jumped 22 m on: nothing seen before counts (the ditch, now 17 m
         // ahead, has not settled).
         let jumped = drive(&mut evidence, &sensor, &scene, (at - 18.2, at - 18.2, 0.0));
