@@ -21,7 +21,7 @@
 //! This layer keeps, per world-aligned cell of `[perception.evidence]
 //! cell_size_m` (0.1 m: a gap the wheels do not bridge spans several),
 //! the highest return that landed in it (any image), and per tile of 4×4
-//! cells how far the sensor had travelled when a ray first passed over
+//! cells how far the vehicle had travelled when a ray first passed over
 //! it. A return of a column (the near edge), its next return a gap `g`
 //! beyond (`g·|cos φ| > max_gap_m` along the heading) and the one beyond
 //! that, is a suspected hole when
@@ -42,7 +42,7 @@
 //! (a row landing far past the edge shows almost no dip) the history
 //! tells: no return has ever been seen in the gap. A hole `w` wide holds
 //! at least `⌊w/cell⌋ − 1` whole cells, so one 0.8 m wide or more is
-//! certain to leave the run. A cell is *settled* once the sensor has
+//! certain to leave the run. A cell is *settled* once the vehicle has
 //! travelled `settle_m` since a ray first passed over its tile, so ground
 //! newly in view, or watched from a standstill (the rows land where they
 //! landed), is not taken for a hole because no row has yet landed in it.
@@ -143,9 +143,10 @@ pub struct HoleEvidence {
     tops: Vec<[f32; TILE_CELLS]>,
     /// The ring's side, tiles.
     side: usize,
-    /// Distance the sensor has travelled, m, and where it was last.
+    /// Distance the vehicle has travelled, m, and where its origin was
+    /// last.
     travelled: f64,
-    last_sensor: Option<[f64; 2]>,
+    last_origin: Option<[f64; 2]>,
     projector: Projector,
     points: RowPoints,
     /// Per column, the last two returns walking up from the lowest beam.
@@ -321,7 +322,7 @@ impl HoleEvidence {
     /// Forgets everything (the pose jumped: what was seen is elsewhere).
     pub fn reset(&mut self) {
         self.tiles.fill(EMPTY);
-        self.last_sensor = None;
+        self.last_origin = None;
     }
 
     /// Adds `image`, captured at `world_from_vehicle`, to the evidence and
@@ -339,8 +340,11 @@ impl HoleEvidence {
         }
         let (world_from_level, level_from_sensor) = level_frames(image, world_from_vehicle);
         let sensor = (world_from_level * level_from_sensor).translation.vector;
-        if let Some([x, y]) = self.last_sensor {
-            let moved = (sensor.x - x).hypot(sensor.y - y);
+        // The vehicle's travel (not a sensor's: images of two sensors
+        // mounted apart alternate).
+        let origin = world_from_vehicle.translation.vector;
+        if let Some([x, y]) = self.last_origin {
+            let moved = (origin.x - x).hypot(origin.y - y);
             // A jump of the pose puts what was seen elsewhere.
             if !moved.is_finite() || moved > 0.5 * self.config.reach_m {
                 self.reset();
@@ -348,7 +352,7 @@ impl HoleEvidence {
                 self.travelled += moved;
             }
         }
-        self.last_sensor = Some([sensor.x, sensor.y]);
+        self.last_origin = Some([origin.x, origin.y]);
         let t = world_from_level.translation.vector;
         let s = level_from_sensor.translation.vector;
         let sensor_level = [s.x as f32, s.y as f32, s.z as f32];
@@ -802,7 +806,22 @@ mod tests {
             &scene,
             (x, x + 0.0001, 0.0001),
         );
-        let reported: Vec<_> = frames.iter().chain(&again).flat_map(|(_, c)| c).collect();
+        // A second lidar mounted 3 m further back, its images between the
+        // first's: the vehicle stands, whichever sensor sees.
+        let mut behind = lidar_ahead().to_custom();
+        behind.mount_position_m[0] -= 3.0;
+        let behind = SensorModel::from_custom(&behind);
+        let mut others = Vec::new();
+        for _ in 0..4 {
+            others.extend(drive(&mut evidence, &behind, &scene, (x, x, 0.0)));
+            others.extend(drive(&mut evidence, &lidar_ahead(), &scene, (x, x, 0.0)));
+        }
+        let reported: Vec<_> = frames
+            .iter()
+            .chain(&again)
+            .chain(&others)
+            .flat_map(|(_, c)| c)
+            .collect();
         assert!(reported.is_empty(), "{reported:?}");
     }
 
