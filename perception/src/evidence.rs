@@ -87,7 +87,7 @@ fn ring_side(reach: f64, cell: f64) -> usize {
 struct Tile {
     /// The world tile held.
     key: [i32; 2],
-    /// The sensor's travel when a ray first passed over it (NaN: none did).
+    /// The vehicle's travel when a ray first passed over it (NaN: none did).
     passed: f32,
 }
 
@@ -157,10 +157,8 @@ pub struct HoleEvidence {
     found: Vec<([i32; 2], [f64; 2], f32)>,
     /// Cells along a gap, with their distance along it.
     keys: Vec<(Spot, f32)>,
-    /// This image's returns kept (column, return), row after row, and
-    /// where each row's end.
+    /// This image's returns kept (column, return), row after row.
     kept: Vec<(u32, Return)>,
-    row_ends: Vec<usize>,
     /// The image's columns looking ahead, in runs.
     columns: Vec<std::ops::Range<usize>>,
     order: Vec<usize>,
@@ -226,14 +224,24 @@ impl Placement {
         }
     }
 
+    /// Level-frame (x, y) in cells from the corner of world cell `base`,
+    /// plus the ring's side in cells.
+    #[inline(always)]
+    fn cells_from_base(&self, x: f32, y: f32) -> [f32; 2] {
+        let (x, y) = (x - self.sensor[0], y - self.sensor[1]);
+        [
+            self.origin[0] + (self.cos * x - self.sin * y) * self.inverse,
+            self.origin[1] + (self.sin * x + self.cos * y) * self.inverse,
+        ]
+    }
+
     /// Where level-frame (x, y), within reach of the sensor, is.
     #[inline(always)]
     fn locate(&self, x: f32, y: f32) -> Spot {
         // In [0, 2·side·TILE): the reach is less than half the side.
-        let (x, y) = (x - self.sensor[0], y - self.sensor[1]);
+        let [gx, gy] = self.cells_from_base(x, y);
         // Through i32: one conversion instruction (to usize, several).
-        let lx = (self.origin[0] + (self.cos * x - self.sin * y) * self.inverse) as i32 as usize;
-        let ly = (self.origin[1] + (self.sin * x + self.cos * y) * self.inverse) as i32 as usize;
+        let (lx, ly) = (gx as i32 as usize, gy as i32 as usize);
         let side = self.side;
         let cells = (side * TILE) as i64;
         // From the corner of `base`'s tile: whole tiles and the rest.
@@ -262,12 +270,10 @@ impl Placement {
     fn world(&self, x: f32, y: f32) -> [f64; 2] {
         let cell = 1.0 / f64::from(self.inverse);
         let cells = (self.side * TILE) as f64;
-        let (x, y) = (x - self.sensor[0], y - self.sensor[1]);
-        let gx = f64::from(self.origin[0] + (self.cos * x - self.sin * y) * self.inverse);
-        let gy = f64::from(self.origin[1] + (self.sin * x + self.cos * y) * self.inverse);
+        let [gx, gy] = self.cells_from_base(x, y);
         [
-            (self.base[0] as f64 + gx - cells) * cell,
-            (self.base[1] as f64 + gy - cells) * cell,
+            (self.base[0] as f64 + f64::from(gx) - cells) * cell,
+            (self.base[1] as f64 + f64::from(gy) - cells) * cell,
         ]
     }
 }
@@ -312,11 +318,6 @@ impl HoleEvidence {
     pub fn memory_bytes(&self) -> usize {
         self.tiles.len() * std::mem::size_of::<Tile>()
             + self.tops.len() * std::mem::size_of::<[f32; TILE_CELLS]>()
-    }
-
-    /// Whether the layer judges anything.
-    pub fn enabled(&self) -> bool {
-        self.config.enabled
     }
 
     /// Forgets everything (the pose jumped: what was seen is elsewhere).
@@ -384,7 +385,6 @@ impl HoleEvidence {
         // ground in a column's gap), keeping the returns; then the walk,
         // row by row again.
         self.kept.clear();
-        self.row_ends.clear();
         // Only the columns looking ahead (or about: a column's returns
         // spread a little either side of its heading).
         self.columns.clear();
@@ -419,17 +419,12 @@ impl HoleEvidence {
                 self.raise(&points, span.start, &place, sensor_level);
                 self.points = points;
             }
-            self.row_ends.push(self.kept.len());
         }
         self.columns = columns;
-        let mut from = 0;
-        for end in std::mem::take(&mut self.row_ends) {
-            for i in from..end {
-                let (k, here) = self.kept[i];
-                self.walk(k as usize, here, &place, sensor_level, &mut stats);
-            }
-            from = end;
-            self.row_ends.push(end);
+        // Row after row, as kept: each column's returns near to far.
+        for i in 0..self.kept.len() {
+            let (k, here) = self.kept[i];
+            self.walk(k as usize, here, &place, sensor_level, &mut stats);
         }
         self.report(report, &mut stats);
         stats
@@ -523,12 +518,9 @@ impl HoleEvidence {
         }
         let travelled = self.travelled as f32;
         let step = 0.5 * TILE as f32 * self.config.cell_size_m as f32;
-        let length = ((b.x - a.x).powi(2) + (b.y - a.y).powi(2)).sqrt();
-        let (dx, dy) = ((b.x - a.x) / length * step, (b.y - a.y) / length * step);
-        // Both ends lie within reach: the count is bounded by its diameter.
-        for s in 1..=(length / step) as usize {
-            let spot = place.locate(a.x + dx * s as f32, a.y + dy * s as f32);
-            let tile = self.hold(spot);
+        let (steps, points) = along(a, b, step);
+        for (_, x, y) in points.take(steps) {
+            let tile = self.hold(place.locate(x, y));
             if tile.passed.is_nan() {
                 tile.passed = travelled;
             }
@@ -641,20 +633,28 @@ impl HoleEvidence {
 /// `a`, into `out`; the cells of `a` and `b` themselves are left out.
 fn cells_between(a: Return, b: Return, place: &Placement, step: f32, out: &mut Vec<(Spot, f32)>) {
     out.clear();
-    let length = ((b.x - a.x).powi(2) + (b.y - a.y).powi(2)).sqrt();
-    // Both ends lie within reach: the count is bounded by its diameter.
-    let steps = (length / step) as usize;
     let (ka, kb) = (place.locate(a.x, a.y).cell, place.locate(b.x, b.y).cell);
     let mut previous = ka;
-    let (dx, dy) = ((b.x - a.x) / length * step, (b.y - a.y) / length * step);
-    for s in 1..steps {
-        let spot = place.locate(a.x + dx * s as f32, a.y + dy * s as f32);
+    let (steps, points) = along(a, b, step);
+    for (s, x, y) in points.take(steps.saturating_sub(1)) {
+        let spot = place.locate(x, y);
         if spot.cell == previous || spot.cell == ka || spot.cell == kb {
             continue;
         }
         previous = spot.cell;
         out.push((spot, s as f32 * step));
     }
+}
+
+/// The segment from `a` to `b` (level frame) in `step`s: how many whole
+/// steps it holds, and the points one step, two steps, … from `a`, each
+/// with its count of steps. Both ends lie within reach: the count is
+/// bounded by its diameter.
+fn along(a: Return, b: Return, step: f32) -> (usize, impl Iterator<Item = (usize, f32, f32)>) {
+    let length = ((b.x - a.x).powi(2) + (b.y - a.y).powi(2)).sqrt();
+    let (dx, dy) = ((b.x - a.x) / length * step, (b.y - a.y) / length * step);
+    let points = (1..).map(move |s| (s, a.x + dx * s as f32, a.y + dy * s as f32));
+    ((length / step) as usize, points)
 }
 
 #[cfg(test)]
