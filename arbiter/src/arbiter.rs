@@ -24,7 +24,7 @@ use arcnav_vehicle::{ArcSet, SteeringCommand, Utime, VehicleConfig};
 
 use crate::config::ArbiterConfig;
 use crate::recovery::{self, Behind, Recovery, RecoveryStats};
-use crate::votes::{BehaviourVotes, VetoCause, Votes};
+use crate::votes::{BehaviourVotes, SpeedCause, VetoCause, Votes};
 
 /// Why the arbiter commanded stop.
 #[derive(Debug, Clone, PartialEq)]
@@ -260,7 +260,14 @@ pub struct SpeedTime {
     pub cruise_us: u64,
     /// `vehicle.max_speed_mps`.
     pub vehicle_us: u64,
-    /// A behaviour's speed vote (stopping distance, unseen ground, terrain).
+    /// A behaviour's speed vote, by the cause it gave: stopping within the
+    /// free distance (cells), within the verified distance (the speed
+    /// governor), the terrain, a suspected drop-off; and votes that gave
+    /// none.
+    pub free_distance_us: u64,
+    pub verified_distance_us: u64,
+    pub terrain_us: u64,
+    pub suspected_drop_off_us: u64,
     pub speed_vote_us: u64,
     /// Lateral acceleration on the arc driven.
     pub lateral_us: u64,
@@ -278,7 +285,17 @@ impl SpeedTime {
         nonzero_seconds([
             ("cruise", self.cruise_us),
             ("vehicle", self.vehicle_us),
-            ("speed vote", self.speed_vote_us),
+            (SpeedCause::FreeDistance.name(), self.free_distance_us),
+            (
+                SpeedCause::VerifiedDistance.name(),
+                self.verified_distance_us,
+            ),
+            (SpeedCause::Terrain.name(), self.terrain_us),
+            (
+                SpeedCause::SuspectedDropOff.name(),
+                self.suspected_drop_off_us,
+            ),
+            (SpeedCause::NotSaid.name(), self.speed_vote_us),
             ("lateral", self.lateral_us),
             ("weak vote", self.weak_vote_us),
             ("reverse", self.reverse_us),
@@ -292,8 +309,9 @@ impl SpeedTime {
     }
 
     /// The counter of the limit that set `limits`' speed (the arbiter's
-    /// list: cruise, vehicle, a speed vote, lateral, weak vote last).
-    fn binding(limits: &[(String, f64)]) -> TimeCounter {
+    /// list: cruise, vehicle, a speed vote, lateral, weak vote last), a
+    /// speed vote's by its `cause`.
+    fn binding(limits: &[(String, f64)], cause: SpeedCause) -> TimeCounter {
         let weak = limits.iter().any(|(name, _)| name == "weak vote");
         let lowest = limits
             .iter()
@@ -307,7 +325,13 @@ impl SpeedTime {
             (_, Some("cruise")) => |t| &mut t.moving.cruise_us,
             (_, Some("vehicle")) => |t| &mut t.moving.vehicle_us,
             (_, Some("lateral")) => |t| &mut t.moving.lateral_us,
-            _ => |t| &mut t.moving.speed_vote_us,
+            _ => match cause {
+                SpeedCause::FreeDistance => |t| &mut t.moving.free_distance_us,
+                SpeedCause::VerifiedDistance => |t| &mut t.moving.verified_distance_us,
+                SpeedCause::Terrain => |t| &mut t.moving.terrain_us,
+                SpeedCause::SuspectedDropOff => |t| &mut t.moving.suspected_drop_off_us,
+                SpeedCause::NotSaid => |t| &mut t.moving.speed_vote_us,
+            },
         }
     }
 }
@@ -336,6 +360,63 @@ pub struct ArbiterStats {
     pub rejected_votes: u64,
     pub stopped: StopTime,
     pub moving: SpeedTime,
+    /// The verified distance of the arc driven, decision by decision.
+    pub verified: VerifiedDistances,
+}
+
+/// The verified distance of the arcs driven forwards (where a behaviour
+/// said it), one count per decision: in bins of [`Self::BIN_M`] to
+/// [`Self::BINS`] of them (the last holds everything farther), and the
+/// least to the centimetre.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VerifiedDistances {
+    pub counts: [u32; Self::BINS],
+    pub min_cm: Option<u32>,
+}
+
+impl Default for VerifiedDistances {
+    fn default() -> Self {
+        Self {
+            counts: [0; Self::BINS],
+            min_cm: None,
+        }
+    }
+}
+
+impl VerifiedDistances {
+    pub const BIN_M: f64 = 0.5;
+    pub const BINS: usize = 200;
+
+    pub fn record(&mut self, metres: f64) {
+        let bin = ((metres / Self::BIN_M) as usize).min(Self::BINS - 1);
+        self.counts[bin] = self.counts[bin].saturating_add(1);
+        let cm = (metres * 100.0).round().clamp(0.0, f64::from(u32::MAX)) as u32;
+        self.min_cm = Some(self.min_cm.map_or(cm, |m| m.min(cm)));
+    }
+
+    /// Decisions counted.
+    pub fn len(&self) -> u64 {
+        self.counts.iter().map(|&c| u64::from(c)).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The least, m.
+    pub fn min_m(&self) -> Option<f64> {
+        self.min_cm.map(|cm| f64::from(cm) / 100.0)
+    }
+
+    /// The median, m: the middle of the bin holding it.
+    pub fn median_m(&self) -> Option<f64> {
+        let half = self.len().div_ceil(2);
+        let mut seen = 0;
+        self.counts.iter().enumerate().find_map(|(bin, &c)| {
+            seen += u64::from(c);
+            (c > 0 && seen >= half).then_some((bin as f64 + 0.5) * Self::BIN_M)
+        })
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -613,7 +694,17 @@ impl Arbiter {
             }
             Ok(_) if command.is_stop() && stop_asked => |t| &mut t.stopped.asked_us,
             Ok(_) if command.is_stop() => |t| &mut t.stopped.speed_limited_us,
-            Ok((_, limits)) => SpeedTime::binding(limits),
+            Ok((command, limits)) => {
+                let arc = command.arc_index;
+                if let Some(verified) = arc
+                    .filter(|_| !SpeedTime::manoeuvre(limits))
+                    .and_then(|arc| self.verified_on(arc, now))
+                {
+                    self.stats.verified.record(verified);
+                }
+                let cause = arc.map_or(SpeedCause::NotSaid, |arc| self.speed_cause(arc, now));
+                SpeedTime::binding(limits, cause)
+            }
         };
         self.last_command = Some((now, counter));
         self.recovery.sent(now, &command);
@@ -820,6 +911,32 @@ impl Arbiter {
             },
             limits,
         ))
+    }
+
+    /// Why the lowest speed a behaviour accepts on arc `arc` is what it
+    /// is, where that behaviour said.
+    fn speed_cause(&self, arc: usize, now: Utime) -> SpeedCause {
+        self.used(now)
+            .filter_map(|(_, votes)| {
+                let on_arc = votes
+                    .arc_speed(arc)
+                    .map(|s| (s, votes.arc_speed_cause(arc)));
+                let any = votes.speed_mps().map(|s| (s, SpeedCause::NotSaid));
+                [on_arc, any]
+                    .into_iter()
+                    .flatten()
+                    .reduce(|a, b| if b.0 < a.0 { b } else { a })
+            })
+            .reduce(|a, b| if b.0 < a.0 { b } else { a })
+            .map_or(SpeedCause::NotSaid, |(_, cause)| cause)
+    }
+
+    /// How far along arc `arc` the ground is verified, by the behaviours
+    /// that said (the least).
+    fn verified_on(&self, arc: usize, now: Utime) -> Option<f64> {
+        self.used(now)
+            .filter_map(|(_, votes)| votes.verified_distance(arc))
+            .reduce(f64::min)
     }
 
     /// The speed arc `arc` may be driven at, steering `curvature`, and the

@@ -16,4 +16,4 @@ pub use arbiter::{
 };
 pub use config::ArbiterConfig;
 pub use recovery::{RecoveryConfig, RecoveryStats};
-pub use votes::{BehaviourVotes, VetoCause, Votes};
+pub use votes::{BehaviourVotes, SpeedCause, VetoCause, Votes};

@@ -25,6 +25,37 @@ fn clearance_of(slots: &[f32], index: usize) -> Option<f64> {
         .map(|&m| f64::from(m))
 }
 
+/// Why a behaviour limits an arc's speed, where it says. Kept with the
+/// votes in memory (every executor's arbiter reads it there); the votes'
+/// message does not carry it, so votes read from the bus say nothing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum SpeedCause {
+    #[default]
+    NotSaid,
+    /// Stopping within the arc's free distance (to the first cell).
+    FreeDistance,
+    /// Stopping within the arc's verified distance (to the first ground
+    /// not seen, or seen only where a hole may hide).
+    VerifiedDistance,
+    /// The terrain's severity along the arc.
+    Terrain,
+    /// Slowing for a suspected drop-off along the arc.
+    SuspectedDropOff,
+}
+
+impl SpeedCause {
+    /// How reports name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::NotSaid => "speed vote",
+            Self::FreeDistance => "free distance",
+            Self::VerifiedDistance => "verified distance",
+            Self::Terrain => "terrain",
+            Self::SuspectedDropOff => "suspected drop-off",
+        }
+    }
+}
+
 /// What makes an arc forbidden, where a behaviour says.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum VetoCause {
@@ -66,8 +97,12 @@ pub struct Votes {
     vetoed: Vec<bool>,
     causes: Vec<Option<VetoCause>>,
     speed_mps: Option<f64>,
-    /// Per arc: the highest speed accepted on it (∞: no limit).
+    /// Per arc: the highest speed accepted on it (∞: no limit), and why.
     arc_speeds: Vec<f32>,
+    speed_causes: Vec<SpeedCause>,
+    /// Per arc: how far along it the ground is verified, m (negative: not
+    /// said). In memory only, as the speed causes.
+    verified: Vec<f32>,
     /// Per arc: metres the vehicle may back up along it (negative: no opinion).
     reverse_clear: Vec<f32>,
     /// Per arc: metres the vehicle may creep forwards along it, however
@@ -84,6 +119,8 @@ impl Votes {
             causes: vec![None; arcs],
             speed_mps: None,
             arc_speeds: vec![f32::INFINITY; arcs],
+            speed_causes: vec![SpeedCause::NotSaid; arcs],
+            verified: vec![NO_OPINION; arcs],
             reverse_clear: vec![NO_OPINION; arcs],
             forward_clear: vec![NO_OPINION; arcs],
         }
@@ -104,6 +141,8 @@ impl Votes {
         self.causes.fill(None);
         self.speed_mps = None;
         self.arc_speeds.fill(f32::INFINITY);
+        self.speed_causes.fill(SpeedCause::NotSaid);
+        self.verified.fill(NO_OPINION);
         self.reverse_clear.fill(NO_OPINION);
         self.forward_clear.fill(NO_OPINION);
     }
@@ -115,6 +154,8 @@ impl Votes {
             self.vetoed[index] = false;
             self.causes[index] = None;
             self.arc_speeds[index] = f32::INFINITY;
+            self.speed_causes[index] = SpeedCause::NotSaid;
+            self.verified[index] = NO_OPINION;
             self.reverse_clear[index] = NO_OPINION;
             self.forward_clear[index] = NO_OPINION;
         }
@@ -154,9 +195,34 @@ impl Votes {
     /// The highest speed this behaviour accepts on arc `index`, m/s
     /// (negative or NaN: 0): applies when that arc is driven.
     pub fn limit_arc_speed(&mut self, index: usize, speed_mps: f64) {
+        self.limit_arc_speed_for(index, speed_mps, SpeedCause::NotSaid);
+    }
+
+    /// [`Votes::limit_arc_speed`], saying why.
+    pub fn limit_arc_speed_for(&mut self, index: usize, speed_mps: f64, cause: SpeedCause) {
         if let Some(limit) = self.arc_speeds.get_mut(index) {
             *limit = zero_or_more(speed_mps) as f32;
+            self.speed_causes[index] = cause;
         }
+    }
+
+    /// Why arc `index`'s speed is limited, where said.
+    pub fn arc_speed_cause(&self, index: usize) -> SpeedCause {
+        self.speed_causes
+            .get(index)
+            .copied()
+            .unwrap_or(SpeedCause::NotSaid)
+    }
+
+    /// How far along arc `index` the ground is verified, m (negative or
+    /// NaN: 0).
+    pub fn set_verified_distance(&mut self, index: usize, metres: f64) {
+        clearance_slot(self.verified.get_mut(index), metres);
+    }
+
+    /// How far along arc `index` the ground is verified, if said.
+    pub fn verified_distance(&self, index: usize) -> Option<f64> {
+        clearance_of(&self.verified, index)
     }
 
     /// The speed limit on arc `index`, if this behaviour set one.
@@ -240,6 +306,8 @@ impl Votes {
         self.causes.clone_from(&other.causes);
         self.speed_mps = other.speed_mps;
         self.arc_speeds.clone_from(&other.arc_speeds);
+        self.speed_causes.clone_from(&other.speed_causes);
+        self.verified.clone_from(&other.verified);
         self.reverse_clear.clone_from(&other.reverse_clear);
         self.forward_clear.clone_from(&other.forward_clear);
     }

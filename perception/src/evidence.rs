@@ -68,6 +68,7 @@ use crate::config::{EvidenceConfig, MAX_EVIDENCE_SIDE, PerceptionConfig};
 use crate::evaluator::{ImageStats, ObstacleCell, ObstacleReport, Reasons, Region};
 use crate::grid::{Projector, RowPoints, level_frames};
 use crate::image::RangeImage;
+use crate::shadow::{Shadow, Shadows};
 
 /// Cells are kept in square tiles of this many a side: the cells of a
 /// tile share a cache line (16 heights of 4 bytes), and a tile knows the
@@ -126,12 +127,28 @@ pub struct EvidenceStats {
     pub suspected: u32,
     /// Gaps whose dip and rise made them candidates.
     pub candidates: u32,
+    /// Stretches of columns left unverified (shadows reported).
+    pub unverified: u32,
+}
+
+/// A stretch of a column no return has verified: from `near` to `far`
+/// (horizontal distances from the sensor), in level-frame direction
+/// (`dx`, `dy`).
+#[derive(Debug, Clone, Copy)]
+struct Stretch {
+    col: u32,
+    near: f32,
+    far: f32,
+    dx: f32,
+    dy: f32,
 }
 
 /// The layer (see the module's documentation).
 #[derive(Debug, Default)]
 pub struct HoleEvidence {
     config: EvidenceConfig,
+    /// Near edges are suspected (`[perception.drop_off] suspect_cost` > 0).
+    suspect: bool,
     rule: Rule,
     /// `[perception.region]`, ahead, behind and to each side: near edges
     /// are judged only there (the local map keeps nothing beyond).
@@ -159,6 +176,12 @@ pub struct HoleEvidence {
     keys: Vec<(Spot, f32)>,
     /// This image's returns kept (column, return), row after row.
     kept: Vec<(u32, Return)>,
+    /// This image's unverified stretches, and per column the index of
+    /// its last one (`u32::MAX`: none), to extend.
+    stretches: Vec<Stretch>,
+    open: Vec<u32>,
+    /// The unverified stretches as shadows, world frame.
+    shadows: Shadows,
     /// The image's columns looking ahead, in runs.
     columns: Vec<std::ops::Range<usize>>,
     order: Vec<usize>,
@@ -168,6 +191,7 @@ pub struct HoleEvidence {
 #[derive(Debug, Default, Clone, Copy)]
 struct Rule {
     max_gap: f32,
+    min_depth: f32,
     noise: f32,
     depth_per_m: f32,
     cost: f32,
@@ -279,12 +303,12 @@ impl Placement {
 }
 
 impl HoleEvidence {
-    /// From `[perception]`; judges nothing when `[perception.evidence]` or
-    /// `[perception.drop_off]` is off, or suspected drop-offs are not
-    /// reported (`suspect_cost = 0`).
+    /// From `[perception]`; keeps nothing when `[perception.evidence]` or
+    /// `[perception.drop_off]` is off, and suspects no hole when suspected
+    /// drop-offs are not reported (`suspect_cost = 0`).
     pub fn new(perception: &PerceptionConfig) -> Self {
         let d = &perception.drop_off;
-        let on = perception.evidence.enabled && d.enabled && d.suspect_cost > 0.0;
+        let on = perception.evidence.enabled && d.enabled;
         let mut config = perception.evidence.clone();
         config.enabled = on;
         let side = if on {
@@ -293,8 +317,10 @@ impl HoleEvidence {
             0
         };
         Self {
+            suspect: on && d.suspect_cost > 0.0,
             rule: Rule {
                 max_gap: d.max_gap_m as f32,
+                min_depth: d.min_depth_m as f32,
                 noise: d.noise_m as f32,
                 depth_per_m: d.depth_per_m as f32,
                 cost: d.suspect_cost as f32,
@@ -378,6 +404,9 @@ impl HoleEvidence {
             walk.resize(cols, None);
         }
         self.found.clear();
+        self.stretches.clear();
+        self.open.clear();
+        self.open.resize(cols, u32::MAX);
         let start = self.projector.prepare(image, &level_from_sensor);
         let kept = (self.min_range, self.max_range);
         let mut skipped = ImageStats::default();
@@ -427,17 +456,28 @@ impl HoleEvidence {
             self.walk(k as usize, here, &place, sensor_level, &mut stats);
         }
         self.report(report, &mut stats);
+        let ground = world_from_level * nalgebra::Point3::new(s.x, s.y, 0.0);
+        self.emit_shadows(
+            image,
+            nalgebra::Point2::new(ground.x, ground.y),
+            arcnav_vehicle::frames::yaw_of(&world_from_level),
+        );
+        stats.unverified = self.shadows.sectors.len() as u32;
         stats
     }
 
+    /// The stretches of this image's columns that no return has verified
+    /// (see [`HoleEvidence::verify`]), as shadows.
+    pub fn unverified(&self) -> &Shadows {
+        &self.shadows
+    }
+
     /// Whether level-frame (x, y) is kept: ahead of the sensor at
-    /// level-frame `sensor` (what the vehicle drives into), within reach
-    /// of it and no wider than the region.
+    /// level-frame `sensor` (what the vehicle drives into) and no wider
+    /// than the region. Only those within reach of it raise cells.
     #[inline(always)]
     fn inside(&self, x: f32, y: f32, sensor: [f32; 3]) -> bool {
-        let reach = self.config.reach_m as f32;
-        let (dx, dy) = (x - sensor[0], y - sensor[1]);
-        dx >= 0.0 && dx * dx + dy * dy <= reach * reach && y.abs() <= self.region[2]
+        x >= sensor[0] && y.abs() <= self.region[2]
     }
 
     /// Whether `r` lies in `[perception.region]`.
@@ -464,17 +504,20 @@ impl HoleEvidence {
     /// its column 0 the image's `first`), keeping the returns for the
     /// walk.
     fn raise(&mut self, points: &RowPoints, first: usize, place: &Placement, sensor: [f32; 3]) {
+        let reach = self.config.reach_m as f32;
         for k in 0..points.x.len() {
             let (x, y) = (points.x[k], points.y[k]);
             if !points.used[k] || !self.inside(x, y, sensor) {
                 continue;
             }
-            let spot = place.locate(x, y);
             let z = points.z[k] + place.tz;
-            self.hold(spot);
-            let top = &mut self.tops[spot.slot][spot.sub];
-            *top = top.max(z);
             let d = ((x - sensor[0]).powi(2) + (y - sensor[1]).powi(2)).sqrt();
+            if d <= reach {
+                let spot = place.locate(x, y);
+                self.hold(spot);
+                let top = &mut self.tops[spot.slot][spot.sub];
+                *top = top.max(z);
+            }
             self.kept.push(((first + k) as u32, Return { d, x, y, z }));
         }
     }
@@ -499,8 +542,16 @@ impl HoleEvidence {
             // Nearer than the last return (a wall's face): not a gap.
             return;
         }
-        self.pass_over(far, here, place);
+        let reach = self.config.reach_m as f32;
+        if here.d <= reach {
+            self.pass_over(far, here, place);
+        }
+        if self.in_region(far) {
+            self.verify(k, far, here, place);
+        }
         if let Some(near) = self.near[k]
+            && self.suspect
+            && far.d <= reach
             && self.in_region(near)
         {
             stats.candidates += u32::from(self.judge(near, far, here, place, sensor));
@@ -524,6 +575,86 @@ impl HoleEvidence {
             if tile.passed.is_nan() {
                 tile.passed = travelled;
             }
+        }
+    }
+
+    /// Whether the gap from `a` to `b`, returns of column `k` one after the
+    /// other, is verified ground: no longer than the wheels bridge, or
+    /// within reach with no run of cells along it, `max_gap_m − cell` or
+    /// longer, that no return (of any image) reached at ground height (no
+    /// deeper than `δ = min_depth_m + Δ·g` below the lower end, for a gap
+    /// `g`: a smaller step down is driven). A stretch that is not is kept
+    /// as unverified, joined to the column's last one when they meet.
+    fn verify(&mut self, k: usize, a: Return, b: Return, place: &Placement) {
+        let rule = self.rule;
+        let gap = b.d - a.d;
+        if gap <= rule.max_gap {
+            return;
+        }
+        let cell = self.config.cell_size_m as f32;
+        let verified = b.d <= self.config.reach_m as f32 && {
+            let ground = a.z.min(b.z) - (rule.min_depth + rule.depth_per_m * gap);
+            let mut keys = std::mem::take(&mut self.keys);
+            cells_between(a, b, place, 0.5 * cell, &mut keys);
+            let (mut start, mut longest) = (None, 0.0f32);
+            for &(spot, at) in &keys {
+                let tile = &self.tiles[spot.slot];
+                if tile.key != spot.tile || self.tops[spot.slot][spot.sub] < ground {
+                    let first = *start.get_or_insert(at);
+                    longest = longest.max(at - first + cell);
+                } else {
+                    start = None;
+                }
+            }
+            self.keys = keys;
+            longest < rule.max_gap - cell
+        };
+        if verified {
+            return;
+        }
+        let open = self.open[k];
+        if let Some(last) = self.stretches.get_mut(open as usize)
+            && last.far == a.d
+        {
+            last.far = b.d;
+            return;
+        }
+        self.open[k] = self.stretches.len() as u32;
+        self.stretches.push(Stretch {
+            col: k as u32,
+            near: a.d,
+            far: b.d,
+            dx: b.x - a.x,
+            dy: b.y - a.y,
+        });
+    }
+
+    /// This image's unverified stretches as shadows seen from `origin`
+    /// (the sensor's ground position, world frame), the level frame
+    /// turned `yaw` from the world's: each as wide as its column (half
+    /// way to the farther neighbour, a hair more, as the evaluators'
+    /// shadows).
+    fn emit_shadows(&mut self, image: &RangeImage, origin: nalgebra::Point2<f64>, yaw: f64) {
+        self.shadows.clear();
+        self.shadows.origin = origin;
+        let azimuth = &image.beams.azimuth;
+        let spacing = |c: usize| {
+            [c.checked_sub(1), (c + 1 < azimuth.len()).then_some(c + 1)]
+                .into_iter()
+                .flatten()
+                .map(|n| {
+                    arcnav_vehicle::frames::wrap_angle(f64::from(azimuth[n] - azimuth[c])).abs()
+                })
+                .fold(0.0f64, f64::max)
+        };
+        for s in &self.stretches {
+            let direction = f64::from(s.dy).atan2(f64::from(s.dx)) + yaw;
+            self.shadows.sectors.push(Shadow {
+                azimuth: arcnav_vehicle::frames::wrap_angle(direction) as f32,
+                half_width: ((0.51 * spacing(s.col as usize)) as f32).min(Shadow::MAX_HALF_WIDTH),
+                near: s.near,
+                far: s.far,
+            });
         }
     }
 
@@ -695,8 +826,21 @@ mod tests {
         evidence: &mut HoleEvidence,
         sensor: &SensorModel,
         scene: &(impl Fn(f64, f64) -> f64 + Sync),
-        (from, to, step): (f64, f64, f64),
+        span: (f64, f64, f64),
     ) -> Vec<(f64, Vec<ObstacleCell>)> {
+        drive_seeing(evidence, sensor, scene, span)
+            .into_iter()
+            .map(|(x, cells, _)| (x, cells))
+            .collect()
+    }
+
+    /// [`drive`], with each frame's unverified stretches as well.
+    fn drive_seeing(
+        evidence: &mut HoleEvidence,
+        sensor: &SensorModel,
+        scene: &(impl Fn(f64, f64) -> f64 + Sync),
+        (from, to, step): (f64, f64, f64),
+    ) -> Vec<(f64, Vec<ObstacleCell>, Shadows)> {
         // Marched in 20 cm steps, each crossing refined by bisection: the
         // narrowest feature here is 30 cm.
         let rays = HeightFunction::with_step(scene, 0.2);
@@ -709,7 +853,7 @@ mod tests {
                 let image = sensor.render(k as i64 * 100_000, &pose, &rays);
                 let mut report = ObstacleReport::default();
                 evidence.observe(&image, &pose, &mut report);
-                (x + mount, report.cells)
+                (x + mount, report.cells, evidence.unverified().clone())
             })
             .collect()
     }
@@ -788,6 +932,76 @@ mod tests {
             let near: Vec<_> = reported.iter().filter(|r| r.0 < 16.0).collect();
             assert!(near.is_empty(), "{step} m a frame: {near:?}");
         }
+    }
+
+    /// Issue 63 item 2: ground is verified where returns at ground height
+    /// have covered it so densely that no gap the wheels do not bridge
+    /// can hide in it; the rest of each image's columns is reported as
+    /// shadow (not seen).
+    #[test]
+    fn ground_swept_by_returns_is_verified_and_a_ditch_never_is() {
+        let at = 60.0;
+        let scene = ground(at, 0.8);
+        // Judged out to 40 m ahead, as the region reaches at speed.
+        let mut config = PerceptionConfig::default();
+        config.region.ahead_m = 40.0;
+        config.max_range_m = 40.0;
+        let mut evidence = HoleEvidence::new(&config);
+        // 8 m/s at 10 Hz, from 45 m short of the ditch to 8 m short.
+        let frames = drive_seeing(&mut evidence, &lidar_ahead(), &scene, (15.0, at - 8.0, 0.8));
+        let mut index = crate::ShadowIndex::default();
+        // How far straight ahead the ground is verified, frame by frame:
+        // to the nearest unverified point along the line (10 cm steps).
+        let verified: Vec<(f64, f64)> = frames
+            .iter()
+            .map(|(sensor, _, shadows)| {
+                index.build(shadows);
+                let first = (1..400)
+                    .map(|k| sensor + 0.1 * f64::from(k))
+                    .find(|&x| index.contains(x, 0.0))
+                    .map_or(f64::INFINITY, |x| x - sensor);
+                (*sensor, first)
+            })
+            .collect();
+        // One image alone: its rows lie farther apart than 0.77 m on the
+        // ground beyond about 15.7 m (R²·δθ/H), and no history fills them.
+        let (_, alone) = verified[0];
+        assert!((12.0..17.0).contains(&alone), "first image: {alone:.1} m");
+        // Swept by the rows of the frames before (8 of them, 5.6 m of
+        // travel), level ground is verified farther: to at least 18 m (to
+        // the last return, 32 m, on much of the way) short of the ditch.
+        for &(sensor, ahead) in &verified[8..] {
+            let to_ditch = at - sensor;
+            // (Short of the ditch: from its edge's last return, a row's
+            // spacing before it, under a metre within 18 m.)
+            assert!(
+                ahead >= 18.0_f64.min(to_ditch - 1.5),
+                "{ahead:.1} m verified from {sensor:.1} m ({to_ditch:.1} m to the ditch)"
+            );
+            // ... and never across the ditch, once returns reach well past
+            // it (beyond the last return, 32 m, the ground is no image's).
+            assert!(
+                to_ditch > 26.0 || ahead <= to_ditch + 0.5,
+                "verified past the ditch from {sensor:.1} m"
+            );
+        }
+        // Without the history, the same frames verify no farther than one
+        // image does.
+        let mut forgetful = HoleEvidence::new(&config);
+        let mut nearest = f64::INFINITY;
+        for k in 0..5 {
+            forgetful.reset();
+            let x = 10.0 + 0.8 * f64::from(k);
+            let (sensor, _, shadows) =
+                drive_seeing(&mut forgetful, &lidar_ahead(), &scene, (x, x, 0.0)).remove(0);
+            index.build(&shadows);
+            let first = (1..400)
+                .map(|k| sensor + 0.1 * f64::from(k))
+                .find(|&x| index.contains(x, 0.0))
+                .map_or(f64::INFINITY, |x| x - sensor);
+            nearest = nearest.min(first);
+        }
+        assert!(nearest < 17.0, "one image verified to {nearest:.1} m");
     }
 
     #[test]

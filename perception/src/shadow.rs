@@ -63,6 +63,42 @@ impl Shadows {
     pub fn is_empty(&self) -> bool {
         self.sectors.is_empty()
     }
+
+    /// Adds `other`'s sectors, seen from `other.origin`, to these: taking
+    /// its origin when these hold none yet, or else each sector redrawn
+    /// from this origin (the sensor moved a little between the slices of
+    /// one frame): the direction of its middle, the distances of its two
+    /// ends, widened by the angle the stretch between them subtends.
+    pub fn append(&mut self, other: &Shadows) {
+        if self.sectors.is_empty() {
+            self.origin = other.origin;
+        }
+        let (from, to) = (other.origin, self.origin);
+        if from == to {
+            self.sectors.extend_from_slice(&other.sectors);
+            return;
+        }
+        self.sectors.extend(other.sectors.iter().map(|s| {
+            let (sin, cos) = f64::from(s.azimuth).sin_cos();
+            let end = |d: f32| {
+                let d = f64::from(d);
+                let (x, y) = (from.x + d * cos - to.x, from.y + d * sin - to.y);
+                (y.atan2(x), x.hypot(y))
+            };
+            let ((a, near), (b, far)) = (end(s.near), end(s.far));
+            let (mid, spread) = (a + 0.5 * wrap_angle(b - a), 0.5 * wrap_angle(b - a).abs());
+            // The column's width at its middle, seen from here.
+            let middle = 0.5 * f64::from(s.near + s.far);
+            let scale = middle / (0.5 * (near + far)).max(1e-3);
+            Shadow {
+                azimuth: wrap_angle(mid) as f32,
+                half_width: ((f64::from(s.half_width) * scale + spread) as f32)
+                    .min(Shadow::MAX_HALF_WIDTH),
+                near: near.min(far) as f32,
+                far: near.max(far) as f32,
+            }
+        }));
+    }
 }
 
 /// Bins of direction, each listing the shadows that reach into it.
@@ -196,6 +232,38 @@ mod tests {
             );
         }
         assert!(!index.contains(6.0, 0.0));
+    }
+
+    #[test]
+    fn sectors_appended_from_elsewhere_cover_the_same_ground() {
+        let seen_from = |origin: (f64, f64), sectors| Shadows {
+            origin: Point2::new(origin.0, origin.1),
+            sectors,
+        };
+        let column = Shadow {
+            azimuth: 0.3,
+            half_width: 0.004,
+            near: 18.0,
+            far: 19.5,
+        };
+        let mut shadows = Shadows::default();
+        shadows.append(&seen_from((2.0, 1.0), vec![column]));
+        assert_eq!(shadows, seen_from((2.0, 1.0), vec![column]), "taken whole");
+        // From 0.8 m on and a little aside (the next slice's sensor): the
+        // same stretch of ground, seen from the first origin.
+        shadows.append(&seen_from((2.8, 1.1), vec![column]));
+        assert_eq!(shadows.sectors.len(), 2);
+        let mut index = ShadowIndex::default();
+        index.build(&seen_from((2.0, 1.0), vec![shadows.sectors[1]]));
+        let at = |d: f64, angle: f64| (2.8 + d * angle.cos(), 1.1 + d * angle.sin());
+        for d in [18.1, 18.75, 19.4] {
+            let (x, y) = at(d, 0.3);
+            assert!(index.contains(x, y), "{d} m along the column");
+        }
+        for (d, angle) in [(17.8, 0.3), (19.8, 0.3), (18.75, 0.31)] {
+            let (x, y) = at(d, angle);
+            assert!(!index.contains(x, y), "{d} m at {angle} rad");
+        }
     }
 
     #[test]

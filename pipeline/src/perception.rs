@@ -107,6 +107,9 @@ pub struct EvidenceTotals {
     pub suspected: u64,
     /// Gaps that dipped and rose as a hole's would.
     pub candidates: u64,
+    /// Stretches of columns left unverified (reported as shadows), summed
+    /// over images.
+    pub unverified: u64,
 }
 
 impl EvidenceTotals {
@@ -114,6 +117,7 @@ impl EvidenceTotals {
         self.images += 1;
         self.suspected += u64::from(found.suspected);
         self.candidates += u64::from(found.candidates);
+        self.unverified += u64::from(found.unverified);
     }
 }
 
@@ -362,6 +366,8 @@ impl PerceptionNode {
             cell.region += offset;
             cell
         }));
+        report.shadows.append(&pending.shadows);
+        pending.shadows.clear();
         *reports += 1;
         out(report);
     }
@@ -523,6 +529,7 @@ impl PerceptionNode {
         // columns walks them whole; a scanning sensor's slice of rows walks
         // its own rows only (a gap across two slices is not judged).
         let found = self.evidence.observe(&image, &pose, &mut self.pending);
+        self.pending.shadows.append(self.evidence.unverified());
         self.evidence_totals.add(found);
         let stream = &mut self.streams[index].1;
         let (poses, max_gap, newest) = (&self.poses, self.max_gap_us, self.poses.newest().copied());
@@ -641,6 +648,7 @@ impl PerceptionNode {
                 let found = self
                     .evidence
                     .observe(image, world_from_vehicle, &mut report);
+                report.shadows.append(self.evidence.unverified());
                 self.evidence_totals.add(found);
                 report.acquired = image.utime;
                 self.heights.sample(image, world_from_vehicle, &mut report);

@@ -428,6 +428,12 @@ fn print_speed_bound(r: &arcnav::mission::MissionReport) {
     if !r.speed_limited_by_s.is_empty() {
         println!("speed set by  {}", seconds_list(&r.speed_limited_by_s));
     }
+    if let Some(v) = r.verified_distance_m {
+        println!(
+            "verified      the ground along the arc driven: {:.1} m at least, {:.1} m median",
+            v.min, v.median
+        );
+    }
 }
 
 /// The summary's lines on the ride, the stops and the recoveries.

@@ -27,13 +27,21 @@
 //! speed falls as for the terrain's severity (see [`crate::terrain`]).
 //!
 //! Ground no image has seen is not free ground (000 §4.2 treats unknown
-//! height as an obstacle). `unseen_ground` sets what it is:
-//! - `slow` (default): each arc's speed is limited so that the vehicle can
-//!   stop `stop_margin_m` short of the ground not seen along it (and of
-//!   its free distance, as before): `v·t + v²/2a = room`. An arc whose
-//!   unseen ground lies closer than the vehicle, braking as hard as it can
-//!   from the speed it has, would stop in is forbidden: turning onto it, its
-//!   limit would come too late;
+//! height as an obstacle), and ground seen only between rows of returns
+//! farther apart than the wheels bridge is not seen either: a hole may
+//! hide there (perception reports such stretches, unless its hole
+//! evidence has since verified them, as shadows; issue 63). How far an
+//! arc's footprint runs over seen ground before it meets any is the
+//! arc's *verified distance*. `unseen_ground` sets what the rest is:
+//! - `slow` (default), the speed governor: each arc's speed is limited so
+//!   that the vehicle can stop `stop_margin_m` short of the ground not
+//!   seen along it, braking as hard as it can (`a` the vehicle's
+//!   `max_deceleration_mps2`, not the `braking_fraction` of it kept for
+//!   cells known to be there): `v·t + v²/2a = verified − stop_margin_m`
+//!   (what `arcnav_config::speed_bound` reasons for one image). An arc
+//!   whose unseen ground lies closer than the vehicle, braking as hard as
+//!   it can from the speed it has, would stop in is forbidden: turning
+//!   onto it, its limit would come too late;
 //! - `obstacle`: unseen ground is an obstacle like a cell;
 //! - `free`: it is ignored (the paper's behaviour).
 //!
@@ -64,7 +72,7 @@
 //! room backing up keeps (clear to the body itself, a retrace's forward run
 //! brought a corner 0.2 m from a bank's side).
 
-use arcnav_arbiter::{VetoCause, Votes};
+use arcnav_arbiter::{SpeedCause, VetoCause, Votes};
 use arcnav_vehicle::config::ConfigError;
 use arcnav_vehicle::footprint::Outline;
 use arcnav_vehicle::{Arc, ArcPose, DrivenPath, Footprint, SteeringResponse};
@@ -690,9 +698,10 @@ impl ObstacleAvoidance {
         let max = self.config.max_distance_m;
         // Per arc, the speed at which the vehicle stops in time on it:
         // v·t + v²/2a = room, solved for v.
-        let (a, t) = (self.deceleration, self.config.reaction_s);
-        let stopping_speed =
-            |room: f64| -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt();
+        let t = self.config.reaction_s;
+        let stopping_at =
+            |a: f64, room: f64| -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt();
+        let stopping_speed = |room: f64| stopping_at(self.deceleration, room);
         // How far the vehicle runs before it stands, braking as hard as it
         // can from its speed now.
         let speed = ctx.pose.velocity.norm();
@@ -701,26 +710,37 @@ impl ObstacleAvoidance {
         // the front is `hole_seen_within_m` from it: an arc towards one is
         // driven no faster than the vehicle stops short of it, and never
         // slower than it stops within that distance (by then a hole would
-        // be a cell, and an edge still suspected is none).
+        // be a cell, and an edge still suspected is none). A hole that may
+        // be there, as unverified ground: braking as hard as it can.
         let margin = self.config.stop_margin_m;
-        let hole_speed = stopping_speed(self.config.hole_seen_within_m - margin);
+        let possible_hole = |room: f64| stopping_at(self.max_deceleration, room);
+        let hole_speed = possible_hole(self.config.hole_seen_within_m - margin);
         for arc in 0..arcs {
             if votes.is_vetoed(arc) {
                 continue;
             }
-            let mut room = self.free[arc].min(max) - self.config.stop_margin_m;
-            if let Some((distance, at)) = self.unseen_at[arc] {
-                // Stop `stop_margin_m` before the first unseen ground the
-                // footprint meets (its patch may begin past the edge);
-                // an arc the vehicle can no longer stop on before it, at
-                // the speed it has, is forbidden: its speed limit would
-                // come too late.
-                if distance < braking {
+            let room = self.free[arc].min(max) - self.config.stop_margin_m;
+            // The governor: stop `stop_margin_m` before the first unseen
+            // ground the footprint meets (its patch may begin past the
+            // edge), braking as hard as the vehicle can (a hole may hide
+            // there, or may not: `braking_fraction` is the margin kept for
+            // what is known to be there). An arc the vehicle can no longer
+            // stop on before it, at the speed it has, is forbidden: its
+            // speed limit would come too late.
+            let verified = match self.unseen_at[arc] {
+                Some((distance, at)) if distance < braking => {
                     votes.veto(arc, Some(at));
                     continue;
                 }
-                room = room.min(distance - self.config.stop_margin_m);
-            }
+                Some((distance, _)) => {
+                    votes.set_verified_distance(arc, distance);
+                    possible_hole(distance - margin)
+                }
+                None => {
+                    votes.set_verified_distance(arc, max);
+                    f64::INFINITY
+                }
+            };
             // Terrain speed: from cruise at severity 0 down to
             // min_speed_fraction of it at severity 1 over the ground reached
             // before the vehicle could slow down.
@@ -733,9 +753,19 @@ impl ObstacleAvoidance {
                 f64::INFINITY
             };
             let suspect = self.suspect_at[arc].map_or(f64::INFINITY, |distance| {
-                stopping_speed(distance - margin).max(hole_speed)
+                possible_hole(distance - margin).max(hole_speed)
             });
-            votes.limit_arc_speed(arc, stopping_speed(room).min(terrain).min(suspect));
+            let (speed, cause) = [
+                (stopping_speed(room), SpeedCause::FreeDistance),
+                (verified, SpeedCause::VerifiedDistance),
+                (terrain, SpeedCause::Terrain),
+                (suspect, SpeedCause::SuspectedDropOff),
+            ]
+            .into_iter()
+            .fold((f64::INFINITY, SpeedCause::NotSaid), |best, c| {
+                if c.0 < best.0 { c } else { best }
+            });
+            votes.limit_arc_speed_for(arc, speed, cause);
         }
     }
 

@@ -35,7 +35,7 @@ use arcnav_wire as wire;
 pub use guarded::{GuardEvent, GuardReport};
 pub use report::{
     FaultReport, MissionProgress, MissionReport, MissionRun, NearMissReport, Outcome, StopStats,
-    TrackPoint, TurnInPlaceMark,
+    TrackPoint, TurnInPlaceMark, VerifiedDistanceReport,
 };
 
 /// Simulated time starts here: 2026-01-01T00:00:00Z, µs.
@@ -679,6 +679,16 @@ fn mission_report(ended: &Ended<'_, '_>) -> MissionReport {
         speed_fraction_of_bound: average_speed / config.speed_bound.bound_mps.max(1e-9),
         speed_bound: config.speed_bound.clone(),
         speed_limited_by_s: arbiter.moving.seconds().into_iter().collect(),
+        verified_distance_m: arbiter
+            .verified
+            .min_m()
+            .zip(arbiter.verified.median_m())
+            .map(|(min, median)| VerifiedDistanceReport {
+                min,
+                median,
+                decisions: arbiter.verified.len(),
+            }),
+        evidence_unverified: pipeline.perception.evidence_totals.unverified,
     }
 }
 

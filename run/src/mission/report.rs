@@ -168,8 +168,26 @@ pub struct MissionReport {
     pub speed_bound: SpeedBound,
     pub speed_fraction_of_bound: f64,
     /// Seconds driving, by the limit that set the speed (cruise, vehicle,
-    /// speed vote, lateral, weak vote, reverse): what held the average down.
+    /// a speed vote by its cause: free distance, verified distance,
+    /// terrain, suspected drop-off; lateral, weak vote, reverse): what held
+    /// the average down.
     pub speed_limited_by_s: BTreeMap<&'static str, f64>,
+    /// How far the ground was verified along the arc driven forwards,
+    /// over the decisions: the least and the median, m (none when no
+    /// behaviour said).
+    pub verified_distance_m: Option<VerifiedDistanceReport>,
+    /// Stretches of image columns the hole evidence left unverified
+    /// (reported as shadows: ground not seen), summed over the images.
+    pub evidence_unverified: u64,
+}
+
+/// The verified distance over a run.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct VerifiedDistanceReport {
+    pub min: f64,
+    pub median: f64,
+    /// Decisions counted.
+    pub decisions: u64,
 }
 
 /// The moment of the closest approach.
