@@ -1140,7 +1140,7 @@ fn streamed_log(tag: &str, sensor: SensorPreset, lines: usize, seconds: f64) -> 
     config.sensor.preset = sensor;
     config.sim.slice_lines = lines;
     config.sim.time_limit_s = seconds;
-    config.pipeline.perception_latency_s = 0.02;
+    config.pipeline.perception_latency_s = arcnav_pipeline::Latency::Seconds(0.02);
     let world = Arc::new(World::embedded("short_course").unwrap().unwrap());
     let options = MissionOptions {
         log: Some(path.clone()),

@@ -160,11 +160,23 @@ fn seeded(
 /// world's one ditch first flagged or suspected at least as far off as one
 /// image is certain to (`suspect_range_m`, less a frame's travel): the
 /// report and the summary say how far (issue 63's measure).
-fn assert_held_to_the_cap_and_the_ditch_reported_in_time(tag: &str, report: &Value, stdout: &str) {
+/// The run drove faster than one image shows a hole in time (the old
+/// cap), the governor holding its speed where the ground was not verified,
+/// and the ditch was reported no nearer than one image would.
+fn assert_governed_and_the_ditch_reported_in_time(tag: &str, report: &Value, stdout: &str) {
     let bound = &report["speed_bound"];
     let cap = bound["suspect_bound_mps"].as_f64().unwrap();
     let max = report["max_speed_mps"].as_f64().unwrap();
-    assert!(max <= cap + 0.05, "{tag}: {max} m/s, held to {cap}");
+    assert!(max > cap + 0.5, "{tag}: {max} m/s, not above {cap}");
+    let governed = report["speed_limited_by_s"]["verified distance"]
+        .as_f64()
+        .unwrap_or(0.0);
+    assert!(governed > 1.0, "{tag}: governed {governed} s:\n{stdout}");
+    assert!(
+        report["verified_distance_m"]["median"].as_f64().unwrap() > 10.0,
+        "{tag}: {}",
+        report["verified_distance_m"]
+    );
     let range = bound["suspect_range_m"].as_f64().unwrap();
     let drops = report["drops_first_seen"].as_array().unwrap();
     assert_eq!(drops.len(), 1, "{tag}: {drops:?}");
@@ -871,7 +883,7 @@ fn narrow_cul_de_sacs_are_left_by_turning_round() {
 }
 
 /// 004's own shape (issue 68): an L-shaped body (the HMMWV's rectangle
-/// with its front right quarter cut away; the 64-beam lidar, 10 m/s asked)
+/// with its front right quarter cut away; the 64-beam lidar at 5 m/s)
 /// and a round one (the ERIM, the defaults) drive the narrow cul-de-sac
 /// out, turning round in legs forwards and backing (the outline
 /// mirrored), with the ground truth and every sweep on the shape. The L
@@ -901,7 +913,7 @@ fn bodies_of_their_own_shape_turn_round_in_a_narrow_cul_de_sac() {
             "ell",
             "[vehicle]\nfootprint = \"polygon\"\n\
              vertices_m = [[-0.6, -1.1], [2.0, -1.1], [2.0, 0.0], [4.0, 0.0], [4.0, 1.1], [-0.6, 1.1]]\n\
-             [sensor]\npreset = \"lidar64\"\n[arbiter]\ncruise_speed_mps = 10.0\n",
+             [sensor]\npreset = \"lidar64\"\n[arbiter]\ncruise_speed_mps = 5.0\n",
         ),
         shape(
             "round",
@@ -1218,6 +1230,10 @@ fn the_erim_goes_round_a_ledge_through_no_gap_in_its_shut_shadow() {
 /// 1-6 went round, 0.92-1.45 m from the ditch, at 6.5 m/s at most. Since
 /// 2026-11-29 the range counts the rows' spacing against the dip (11.4 m,
 /// 5.28 m/s; `at_speed_a_short_ditch_is_suspected_in_time_to_stop`).
+/// Since issue 63 the cap is off: the speed governor lets the vehicle
+/// drive faster than it wherever the ground ahead is verified over images
+/// and slows it where it is not; with neither the suspicion nor the
+/// verification it drives in.
 #[test]
 fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
     let world = format!(
@@ -1232,11 +1248,16 @@ fn at_speed_a_ditch_suspected_from_afar_slows_the_vehicle_in_time() {
             report["suspected_drop_offs"].as_u64().unwrap() > 0,
             "{tag}:\n{stdout}"
         );
-        assert_held_to_the_cap_and_the_ditch_reported_in_time(tag, report, stdout);
+        assert_governed_and_the_ditch_reported_in_time(tag, report, stdout);
     }
+    // Neither suspected nor left unverified, the ditch is driven into.
     let configs = out_dir("suspect-unsuspected-config");
     let config = configs.join("config.toml");
-    std::fs::write(&config, "[perception.drop_off]\nsuspect_cost = 0\n").unwrap();
+    std::fs::write(
+        &config,
+        "[perception.drop_off]\nsuspect_cost = 0\n[perception.evidence]\nverify = false\n",
+    )
+    .unwrap();
     let mut unsuspected = vec!["--sensor", "lidar64", "--config", config.to_str().unwrap()];
     unsuspected.extend(args);
     let runs = [(
@@ -1403,10 +1424,12 @@ fn at_speed_arcs_judged_along_driven_paths_keep_clear_of_ditches_and_boulders() 
 /// the 20 m window of 002 §5, obstacle avoidance's stopping-distance vote
 /// caps every sensor at 5.9 m/s; with the lookahead from speed
 /// (`lookahead.from_speed`, on by default since 020) the 64-beam lidar at 10 m/s
-/// cruise drives faster than that, still without a collision (both with
-/// `hole_speed_cap` off, to compare the windows alone), and the report
-/// says what set the speed. With the cap on, the cruise speed is held to
-/// the speed that stops where a ditch is first suspected (5.28 m/s).
+/// cruise drives faster than that, still without a collision, and the
+/// report says what set the speed. Faster than one image shows a hole in
+/// time, the speed governor slows where the ground is not verified (said
+/// before the run); with `hole_speed_cap` asked for, the cruise speed is
+/// held to the speed that stops where one image first suspects a ditch
+/// (5.61 m/s).
 #[test]
 fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows() {
     let run = |tag: &str, config: &str| -> Value {
@@ -1440,11 +1463,12 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
             stdout.contains("and first suspected within 11.4 m"),
             "{stdout}"
         );
-        // 10 m/s is beyond what a ditch first suspected allows: held to it,
-        // unless the cap is off, and then said before the run.
-        let held = !config.contains("hole_speed_cap = false");
+        // 10 m/s is beyond what one image shows of a ditch in time: the
+        // governor slows where the ground is not verified, or, with the
+        // cap asked for, the cruise is held to it; said before the run.
+        let held = config.contains("hole_speed_cap = true");
         assert_eq!(
-            stderr.contains("m/s is faster than 5.28 m/s"),
+            stderr.contains("the speed governor slows wherever the ground ahead is not verified"),
             !held,
             "{stderr}"
         );
@@ -1458,7 +1482,7 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
         let _ = std::fs::remove_file(&file);
         report
     };
-    let uncapped = "hole_speed_cap = false\n";
+    let uncapped = "";
     let fixed = run(
         "window-fixed",
         &format!("[lookahead]\nfrom_speed = false\n{uncapped}"),
@@ -1485,10 +1509,13 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
             > fixed["average_speed_mps"].as_f64().unwrap(),
         "and faster on average"
     );
-    // No faster than the speed from which it stops short of a ditch first
-    // suspected (`[lookahead] hole_speed_cap`, the default): said before
+    // Asked for (`[lookahead] hole_speed_cap`), no faster than the speed
+    // from which it stops short of a ditch first suspected: said before
     // the run and in the report.
-    let looking = run("window-held", "[lookahead]\nfrom_speed = true\n");
+    let looking = run(
+        "window-held",
+        "[lookahead]\nfrom_speed = true\nhole_speed_cap = true\n",
+    );
     let cap = looking["speed_bound"]["suspect_bound_mps"]
         .as_f64()
         .unwrap();
@@ -1525,7 +1552,8 @@ fn a_faster_vehicle_looks_farther_and_drives_faster_than_the_20_m_window_allows(
 /// range are seen too late for that speed by one image (the hole evidence
 /// over images suspects the loop's six ditches from 24 m, and obstacle
 /// avoidance slows for them from there: 8.08 m/s without it, 7.91 with it,
-/// 2026-12-08).
+/// 2026-12-08; the speed governor, slowing where the ground ahead is not
+/// verified over images, 7.62).
 #[test]
 fn on_open_ground_the_fast_profile_drives_the_paper_loop_near_8_m_s() {
     let profile = format!(
@@ -1549,7 +1577,7 @@ fn on_open_ground_the_fast_profile_drives_the_paper_loop_near_8_m_s() {
     for (tag, report, stdout) in &missions("fast", &runs) {
         assert_completed_without_collision(tag, report, stdout);
         let average = report["average_speed_mps"].as_f64().unwrap();
-        assert!(average >= 7.8, "{tag}: {average} m/s on average:\n{stdout}");
+        assert!(average >= 7.4, "{tag}: {average} m/s on average:\n{stdout}");
     }
 }
 

@@ -198,9 +198,20 @@ pub struct Decision {
     pub inputs: Vec<InputExplanation>,
     /// The speed limits that applied, m/s: cruise, speed votes, lateral, weak vote.
     pub speed_limits: Vec<(String, f64)>,
+    /// Why the lowest speed vote on the arc driven is what it is, where its
+    /// behaviour said.
+    pub speed_cause: SpeedCause,
 }
 
 impl Decision {
+    /// True when the speed governor set the speed: the lowest of the
+    /// limits is a behaviour's speed vote, stopping within the arc's
+    /// verified distance.
+    pub fn governed(&self) -> bool {
+        self.speed_cause == SpeedCause::VerifiedDistance
+            && SpeedTime::set_by_vote(&self.speed_limits)
+    }
+
     /// True when the command is a manoeuvre's (backing up, turning round,
     /// or standing for one), not the fused vote's.
     pub fn is_manoeuvre(&self) -> bool {
@@ -308,6 +319,16 @@ impl SpeedTime {
         matches!(limits, [(name, _)] if name == BACKING || name == TURNING)
     }
 
+    /// Whether a behaviour's speed vote set `limits`' speed (not a limit of
+    /// the arbiter's own, a weak vote or a manoeuvre).
+    fn set_by_vote(limits: &[(String, f64)]) -> bool {
+        !limits.iter().any(|(name, _)| name == "weak vote")
+            && limits
+                .iter()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .is_some_and(|(name, _)| !OWN_LIMITS.contains(&name.as_str()))
+    }
+
     /// The counter of the limit that set `limits`' speed (the arbiter's
     /// list: cruise, vehicle, a speed vote, lateral, weak vote last), a
     /// speed vote's by its `cause`.
@@ -340,6 +361,9 @@ impl SpeedTime {
 /// turning-round's forward legs.
 const BACKING: &str = "recovery";
 const TURNING: &str = "turning";
+
+/// The limits of the arbiter's own (besides the weak vote's).
+const OWN_LIMITS: [&str; 5] = [BACKING, TURNING, "cruise", "vehicle", "lateral"];
 
 /// Picks the [`ArbiterStats`] time counter a command feeds until the next
 /// decision.
@@ -458,6 +482,8 @@ pub struct Arbiter {
     wish: Vec<f32>,
     /// The last command's time and the counter it feeds.
     last_command: Option<(Utime, TimeCounter)>,
+    /// The last command's speed was the speed governor's.
+    governed: bool,
 }
 
 impl Arbiter {
@@ -497,6 +523,7 @@ impl Arbiter {
             forward: vec![None; n],
             wish: vec![0.0; n],
             last_command: None,
+            governed: false,
         };
         for name in &config.required {
             arbiter.input_index(name);
@@ -608,11 +635,18 @@ impl Arbiter {
             .filter_map(|input| input.latest.as_ref().map(|(_, votes)| (input, votes)))
     }
 
+    /// Whether the speed governor set the last command's speed (a
+    /// behaviour's speed vote stopping within the verified distance).
+    pub fn governed(&self) -> bool {
+        self.governed
+    }
+
     /// Fuses the fresh votes into a command at time `now`; backs the
     /// vehicle up when the way forward stays blocked (see
     /// [`crate::recovery`]).
     pub fn decide(&mut self, now: Utime) -> SteeringCommand {
         self.stats.decisions += 1;
+        self.governed = false;
         let mut outcome = self.fuse(now);
         let creep = self.config.recovery.creep_mps;
         if let Some((since, counter)) = self.last_command.take() {
@@ -703,6 +737,8 @@ impl Arbiter {
                     self.stats.verified.record(verified);
                 }
                 let cause = arc.map_or(SpeedCause::NotSaid, |arc| self.speed_cause(arc, now));
+                self.governed =
+                    cause == SpeedCause::VerifiedDistance && SpeedTime::set_by_vote(limits);
                 SpeedTime::binding(limits, cause)
             }
         };
@@ -1051,6 +1087,9 @@ impl Arbiter {
             vetoes,
             inputs,
             speed_limits,
+            speed_cause: command
+                .arc_index
+                .map_or(SpeedCause::NotSaid, |arc| self.speed_cause(arc, now)),
         }
     }
 }

@@ -19,7 +19,7 @@ use arcnav_behaviours::{
 use arcnav_localmap::{LocalMapConfig, StaticMap};
 use arcnav_perception::{PerceptionConfig, SensorModel};
 use arcnav_pipeline::{
-    BehaviourSet, DecisionCycle, Delivery, ExternalConfig, LiveConfig, LocalMapNode,
+    BehaviourSet, DecisionCycle, Delivery, ExternalConfig, Latency, LiveConfig, LocalMapNode,
     PerceptionNode, Pipeline, PipelineConfig,
 };
 use arcnav_sim::SimConfig;
@@ -158,8 +158,19 @@ impl Resolved {
             localmap,
             perception,
             avoidance: oa,
-            derived,
+            mut derived,
         } = in_place(&given, &avoidance, &cruise, &lookahead, &speed_bound);
+        let mut pipeline = given.pipeline.clone();
+        if pipeline.perception_latency_s == Latency::Auto
+            && let Some(slowest) = sensors.iter().map(|s| s.latency_s).reduce(f64::max)
+        {
+            pipeline.perception_latency_s = Latency::Seconds(slowest);
+            derived.push(Derivation {
+                key: "pipeline.perception_latency_s".into(),
+                from: "\"auto\": the slowest sensor's latency_s (its acquisition and processing)"
+                    .into(),
+            });
+        }
         // The derived values are checked as the keys they stand in for.
         let as_derived =
             |e: ConfigError| ConfigError::new(e.key, format!("(derived) {}", e.reason));
@@ -190,7 +201,7 @@ impl Resolved {
             perception,
             localmap,
             arbiter: given.arbiter.clone(),
-            pipeline: given.pipeline.clone(),
+            pipeline,
             live: given.live.clone(),
             bus: given.bus.clone(),
             sim: given.sim.clone(),
@@ -411,6 +422,7 @@ impl Resolved {
         let mut config = self.given.clone();
         config.localmap = self.localmap.clone();
         config.perception = self.perception.clone();
+        config.pipeline = self.pipeline.clone();
         for (name, prepared) in &self.behaviours {
             config
                 .behaviours
@@ -495,6 +507,29 @@ fn in_place(
             "localmap.hole_range_m",
             "given as 0: where the sensor's ray grazing a hole's edge flags it \
              (speed bound's hole_grazed_m)"
+                .into(),
+        );
+    }
+    if perception.evidence.verify
+        && let Some(bound) = bound.suspect_bound_mps
+        && cruise.mps <= bound
+    {
+        perception.evidence.verify = false;
+        derive(
+            "perception.evidence.verify",
+            format!(
+                "at {:.2} m/s one image suspects a hole in time (speed bound's \
+                 suspect_bound_mps {bound:.2}): no ground need be verified over images",
+                cruise.mps
+            ),
+        );
+    }
+    if oa.governor_reaction_s == 0.0 {
+        oa.governor_reaction_s = bound.reaction_s;
+        derive(
+            "behaviours.obstacle_avoidance.governor_reaction_s",
+            "given as 0: from image to effect (speed bound's reaction_s: acquisition, \
+             perception latency, command period, actuation)"
                 .into(),
         );
     }

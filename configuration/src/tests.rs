@@ -520,7 +520,8 @@ fn a_configuration_is_parsed_and_validated_once_however_many_nodes_are_built() {
 #[test]
 fn every_node_of_a_lockstep_build_gets_the_same_cruise_lookahead_and_arcs() {
     let capped = from_toml(
-        "[arbiter]\ncruise_speed_mps = 10.0\n[sensor]\npreset = \"lidar64\"\n",
+        "[arbiter]\ncruise_speed_mps = 10.0\n[sensor]\npreset = \"lidar64\"\n\
+         [lookahead]\nhole_speed_cap = true\n",
         "test.toml",
     )
     .unwrap();
@@ -574,7 +575,11 @@ fn every_node_of_a_lockstep_build_gets_the_same_cruise_lookahead_and_arcs() {
 /// file or the command line, or was derived, and from what.
 #[test]
 fn each_key_says_where_its_value_came_from() {
-    let mut given = Config::parse("[sensor]\npreset = \"lidar64\"\n", "my.toml").unwrap();
+    let mut given = Config::parse(
+        "[sensor]\npreset = \"lidar64\"\n[lookahead]\nhole_speed_cap = true\n",
+        "my.toml",
+    )
+    .unwrap();
     given.arbiter.cruise_speed_mps = 10.0;
     given.set_by("arbiter.cruise_speed_mps", "--speed");
     let resolved = given.resolve(&Registry::builtin()).unwrap();
@@ -583,7 +588,7 @@ fn each_key_says_where_its_value_came_from() {
     assert!(
         resolved
             .origin("arbiter.cruise_speed_mps")
-            .starts_with("from --speed; derived: driven at 5.2"),
+            .starts_with("from --speed; derived: driven at 5.6"),
         "{}",
         resolved.origin("arbiter.cruise_speed_mps")
     );

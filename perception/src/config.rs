@@ -86,6 +86,12 @@ pub struct EvidenceConfig {
     /// (reported as `[perception.drop_off]` suspected drop-offs, at
     /// `suspect_cost`).
     pub enabled: bool,
+    /// Report the stretches of each image's columns that no return has
+    /// verified as shadows (ground not seen: the speed governor slows
+    /// before them), when the cruise speed needs it: resolving turns it
+    /// off at or below `speed_bound.suspect_bound_mps`, from where one
+    /// image suspects a hole in time.
+    pub verify: bool,
     /// World-aligned cell of the layer, m: a gap the wheels do not
     /// bridge must span several.
     pub cell_size_m: f64,
@@ -102,6 +108,7 @@ impl Default for EvidenceConfig {
     fn default() -> Self {
         Self {
             enabled: true,
+            verify: true,
             cell_size_m: 0.1,
             settle_m: 3.0,
             reach_m: 30.0,

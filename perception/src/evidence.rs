@@ -546,7 +546,7 @@ impl HoleEvidence {
         if here.d <= reach {
             self.pass_over(far, here, place);
         }
-        if self.in_region(far) {
+        if self.config.verify && self.in_region(far) {
             self.verify(k, far, here, place);
         }
         if let Some(near) = self.near[k]

@@ -59,6 +59,11 @@ pub struct CustomSensorConfig {
     pub azimuth_right_deg: f64,
     pub rate_hz: f64,
     pub max_range_m: f64,
+    /// From an image's (or a slice's) time stamp to its cells in the local
+    /// map: the acquisition the stamp does not cover and perception's
+    /// processing, s (`[pipeline] perception_latency_s = "auto"` takes the
+    /// slowest sensor's).
+    pub latency_s: f64,
     /// Sensor origin in the vehicle frame, m.
     pub mount_position_m: [f64; 3],
     /// Sensor → vehicle roll, pitch (+ down), yaw, degrees.
@@ -91,6 +96,9 @@ pub struct SensorConfig {
     /// Images per second, instead of the preset's.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rate_hz: Option<f64>,
+    /// Capture to cells, instead of the preset's, s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latency_s: Option<f64>,
 }
 
 impl Default for SensorConfig {
@@ -102,6 +110,7 @@ impl Default for SensorConfig {
             mount_position_m: None,
             mount_rpy_deg: None,
             rate_hz: None,
+            latency_s: None,
         }
     }
 }
@@ -148,6 +157,9 @@ impl SensorConfig {
         }
         if let Some(rate) = self.rate_hz {
             config::positive("rate_hz", rate)?;
+        }
+        if let Some(latency) = self.latency_s {
+            config::in_range("latency_s", latency, 0.0, 10.0)?;
         }
         for (k, values) in [
             ("mount_position_m", self.mount_position_m),
@@ -214,6 +226,7 @@ impl SensorConfig {
         }
         config::positive(&key("rate_hz"), c.rate_hz)?;
         config::positive(&key("max_range_m"), c.max_range_m)?;
+        config::in_range(&key("latency_s"), c.latency_s, 0.0, 10.0)?;
         for (i, v) in c
             .mount_position_m
             .iter()
@@ -251,6 +264,7 @@ impl SensorConfig {
             && self.mount_position_m.is_none()
             && self.mount_rpy_deg.is_none()
             && self.rate_hz.is_none()
+            && self.latency_s.is_none()
         {
             return Ok(preset);
         }
@@ -272,6 +286,9 @@ impl SensorConfig {
         if let Some(r) = self.rate_hz {
             c.rate_hz = r;
         }
+        if let Some(l) = self.latency_s {
+            c.latency_s = l;
+        }
         c
     }
 }
@@ -286,6 +303,9 @@ pub struct SensorModel {
     pub rate_hz: f64,
     /// Returns beyond this are not reported, m.
     pub max_range_m: f64,
+    /// Capture to cells in the local map, s (see
+    /// [`CustomSensorConfig::latency_s`]).
+    pub latency_s: f64,
     custom: CustomSensorConfig,
 }
 
@@ -311,6 +331,7 @@ impl SensorModel {
             ),
             rate_hz: c.rate_hz,
             max_range_m: c.max_range_m,
+            latency_s: c.latency_s,
             custom: c.clone(),
         }
     }
@@ -329,6 +350,9 @@ impl SensorModel {
             azimuth_right_deg: -64.0,
             rate_hz: 2.0,
             max_range_m: 40.0,
+            // The frame's scan and 1993's processing (002 §5 saw ~0.6 s
+            // from image to map).
+            latency_s: 0.3,
             mount_position_m: [1.5, 0.0, 2.2],
             mount_rpy_deg: [0.0, 18.0, 0.0],
         })
@@ -346,6 +370,9 @@ impl SensorModel {
             azimuth_right_deg: -180.0,
             rate_hz: 10.0,
             max_range_m: 100.0,
+            // A rotation (0.1 s) and perception's processing: 6-10 ms a
+            // frame measured (`arcnav sim` stage times), 50 ms allowed.
+            latency_s: 0.15,
             mount_position_m: [1.2, 0.0, 2.4],
             mount_rpy_deg: [0.0, 0.0, 0.0],
         })
@@ -385,6 +412,8 @@ impl SensorModel {
             azimuth_right_deg: -22.5,
             rate_hz: 30.0,
             max_range_m: 10.0,
+            // A frame (33 ms) and 50 ms of processing.
+            latency_s: 0.08,
             mount_position_m: [1.5, 0.0, 2.2],
             mount_rpy_deg: [0.0, 25.0, 0.0],
         })

@@ -201,7 +201,7 @@ impl ArbiterNode {
             images: Vec::new(),
             latency_from_cells: false,
             hold_us: if live.reproduce_lockstep {
-                seconds_to_micros(timing.perception_latency_s)
+                seconds_to_micros(timing.perception_latency_s.seconds())
             } else {
                 0
             },

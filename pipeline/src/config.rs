@@ -15,8 +15,9 @@ pub struct PipelineConfig {
     /// Commands per second (one cycle of map update, votes and decision).
     pub command_rate_hz: f64,
     /// Time from image capture until its cells reach the local map in
-    /// lock-step runs, s (002 §5 measured ~0.6 s on 1993 hardware).
-    pub perception_latency_s: f64,
+    /// lock-step runs (002 §5 measured ~0.6 s on 1993 hardware): `"auto"`,
+    /// the sensors' own (`[sensor] latency_s`, the slowest's), or seconds.
+    pub perception_latency_s: Latency,
     /// Poses kept to find the pose at an image's capture time, s.
     pub pose_history_s: f64,
     /// Images waiting for the pose at their capture time; beyond, the
@@ -37,6 +38,75 @@ pub struct PipelineConfig {
     pub fault: Fault,
     /// The fault begins this long after the first pose, s.
     pub fault_after_s: f64,
+}
+
+/// `[pipeline] perception_latency_s`: the sensors' own, or seconds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Latency {
+    /// What the sensors take (`[sensor] latency_s`): the configuration
+    /// puts the slowest one's in its place when it is resolved.
+    Auto,
+    Seconds(f64),
+}
+
+impl Latency {
+    /// What a configuration that was never resolved against its sensors
+    /// assumes for `Auto`: the built-in sensor's (the ERIM's), s.
+    pub const UNRESOLVED_AUTO_S: f64 = 0.3;
+
+    /// Seconds ([`Self::UNRESOLVED_AUTO_S`] for `Auto`, not resolved).
+    pub fn seconds(self) -> f64 {
+        match self {
+            Self::Auto => Self::UNRESOLVED_AUTO_S,
+            Self::Seconds(s) => s,
+        }
+    }
+
+    /// The seconds given, or `sensor_s` for `Auto`.
+    pub fn or_sensor(self, sensor_s: f64) -> f64 {
+        match self {
+            Self::Auto => sensor_s,
+            Self::Seconds(s) => s,
+        }
+    }
+}
+
+impl Serialize for Latency {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Self::Auto => serializer.serialize_str("auto"),
+            Self::Seconds(s) => serializer.serialize_f64(*s),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Latency {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = Latency;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("\"auto\" or a number of seconds")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Latency, E> {
+                if v == "auto" {
+                    Ok(Latency::Auto)
+                } else {
+                    Err(E::invalid_value(serde::de::Unexpected::Str(v), &self))
+                }
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Latency, E> {
+                Ok(Latency::Seconds(v))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Latency, E> {
+                Ok(Latency::Seconds(v as f64))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Latency, E> {
+                Ok(Latency::Seconds(v as f64))
+            }
+        }
+        deserializer.deserialize_any(Visitor)
+    }
 }
 
 /// A defect of the pipeline, injected on purpose (`[pipeline] fault`).
@@ -75,7 +145,7 @@ impl Default for PipelineConfig {
     fn default() -> Self {
         Self {
             command_rate_hz: 10.0,
-            perception_latency_s: 0.3,
+            perception_latency_s: Latency::Auto,
             pose_history_s: 10.0,
             max_waiting_images: 4,
             max_pose_gap_s: 0.2,
@@ -90,7 +160,9 @@ impl PipelineConfig {
     /// Keys relative to `[pipeline]`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         check::in_range("command_rate_hz", self.command_rate_hz, 0.5, 1000.0)?;
-        check::in_range("perception_latency_s", self.perception_latency_s, 0.0, 10.0)?;
+        if let Latency::Seconds(s) = self.perception_latency_s {
+            check::in_range("perception_latency_s", s, 0.0, 10.0)?;
+        }
         check::in_range("pose_history_s", self.pose_history_s, 0.5, 600.0)?;
         check::in_range("max_pose_gap_s", self.max_pose_gap_s, 0.001, 60.0)?;
         check::in_range(

@@ -86,7 +86,7 @@ impl Delivery {
     /// Lock-step timing, from the pipeline's `perception_latency_s`.
     pub fn held(timing: &PipelineConfig) -> Self {
         Delivery::Held {
-            latency_us: seconds_to_micros(timing.perception_latency_s),
+            latency_us: seconds_to_micros(timing.perception_latency_s.seconds()),
         }
     }
 }

@@ -33,7 +33,7 @@ pub mod stats;
 
 pub use arbiter::{ArbiterCounts, ArbiterNode, Decided, Hazard, Why};
 pub use behaviours::BehaviourSet;
-pub use config::{ExternalConfig, Fault, LiveConfig, PipelineConfig};
+pub use config::{ExternalConfig, Fault, Latency, LiveConfig, PipelineConfig};
 pub use cycle::{Cycle, CycleCounts, DecisionCycle, Delivery, LocalMapNode, MAX_CATCH_UP_US};
 pub use lockstep::{
     Commands, Discard, FaultCounts, Input, Pipeline, Sink, StageTime, StageTimes, Stopwatch,

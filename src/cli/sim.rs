@@ -226,10 +226,17 @@ fn speed_notes(config: &Resolved) {
     if let Some((range, speed, how)) = in_time
         && cruise > speed + 1e-6
     {
+        let governed = config.perception.evidence.verify;
         eprintln!(
-            "note: {cruise:.1} m/s is faster than {speed:.2} m/s, at which a hole the wheels do \
-             not bridge is certain to be seen in time: the sensor {how} one for certain only \
-             within {range:.1} m (report.json speed_bound; a higher mount sees farther)"
+            "note: {cruise:.1} m/s is faster than {speed:.2} m/s, at which one image is certain \
+             to show a hole the wheels do not bridge in time: the sensor {how} one for certain \
+             only within {range:.1} m (report.json speed_bound; a higher mount sees farther){}",
+            if governed {
+                "; the speed governor slows wherever the ground ahead is not verified over \
+                 images (report.json verified_distance_m)"
+            } else {
+                ""
+            }
         );
     }
 }

@@ -34,6 +34,12 @@ pub struct ObstacleAvoidanceConfig {
     /// What ground no image has seen is: slow (drive only as fast as the
     /// vehicle can stop within seen ground), obstacle, or free.
     pub unseen_ground: UnseenGround,
+    /// The speed governor's reaction time (`unseen_ground = "slow"`):
+    /// from an image to the brakes acting, s (0: the pipeline's, derived
+    /// from the sensor, the perception latency, the command period and
+    /// the actuation delay: `speed_bound.reaction_s`; a behaviour built
+    /// from a configuration never resolved uses `reaction_s`).
+    pub governor_reaction_s: f64,
     /// How far the front is from a hole when the ray grazing its edge flags
     /// it, m: a suspected drop-off (graded ground with the reason
     /// drop-off) slows an arc only to the speed at which the vehicle stops
@@ -77,6 +83,7 @@ impl Default for ObstacleAvoidanceConfig {
             reaction_s: 0.75,
             braking_fraction: 0.5,
             unseen_ground: UnseenGround::Slow,
+            governor_reaction_s: 0.0,
             hole_seen_within_m: 0.0,
             reverse_reach_m: 5.0,
             reverse_margin_m: 0.3,
@@ -120,6 +127,7 @@ impl ObstacleAvoidanceConfig {
         config::in_range("grid_resolution_m", c.grid_resolution_m, 0.05, 1.0)?;
         config::non_negative("stop_margin_m", c.stop_margin_m)?;
         config::non_negative("reaction_s", c.reaction_s)?;
+        config::in_range("governor_reaction_s", c.governor_reaction_s, 0.0, 10.0)?;
         config::in_range("braking_fraction", c.braking_fraction, 0.1, 1.0)?;
         config::in_range("reverse_reach_m", c.reverse_reach_m, 0.0, 20.0)?;
         config::in_range("reverse_margin_m", c.reverse_margin_m, 0.0, 2.0)?;

@@ -713,7 +713,15 @@ impl ObstacleAvoidance {
         // be a cell, and an edge still suspected is none). A hole that may
         // be there, as unverified ground: braking as hard as it can.
         let margin = self.config.stop_margin_m;
-        let possible_hole = |room: f64| stopping_at(self.max_deceleration, room);
+        let possible_hole = |room: f64| {
+            // (0, never derived from a pipeline: `reaction_s`.)
+            let t = match self.config.governor_reaction_s {
+                0.0 => self.config.reaction_s,
+                t => t,
+            };
+            let a = self.max_deceleration;
+            -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt()
+        };
         let hole_speed = possible_hole(self.config.hole_seen_within_m - margin);
         for arc in 0..arcs {
             if votes.is_vetoed(arc) {

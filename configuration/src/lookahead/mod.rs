@@ -172,15 +172,15 @@ mod tests {
         assert_eq!(again.cruise, resolved.cruise);
     }
 
-    /// `config` with where holes show configured, as resolving would
-    /// otherwise set it from the sensor.
+    /// `config` with where holes show and the pipeline's timing
+    /// configured, as resolving would otherwise set them from the sensor.
     fn holes_configured(mut config: Config) -> Config {
         config.localmap.hole_range_m = 7.0;
-        config
-            .behaviours
-            .get_mut("obstacle_avoidance")
-            .unwrap()
-            .insert("hole_seen_within_m".into(), toml::Value::Float(5.0));
+        config.pipeline.perception_latency_s = arcnav_pipeline::Latency::Seconds(0.3);
+        config.perception.evidence.verify = false;
+        let avoidance = config.behaviours.get_mut("obstacle_avoidance").unwrap();
+        avoidance.insert("hole_seen_within_m".into(), toml::Value::Float(5.0));
+        avoidance.insert("governor_reaction_s".into(), toml::Value::Float(1.0));
         config
     }
 
@@ -283,7 +283,11 @@ mod tests {
     /// that looks ahead follows from that speed, the arbiter's too.
     #[test]
     fn the_cruise_speed_is_held_to_stopping_where_a_hole_is_first_suspected() {
-        let config = at(10.0, SensorPreset::Lidar64);
+        // Off by default (the speed governor slows where ground is not
+        // verified); a user may still ask for it.
+        let mut config = at(10.0, SensorPreset::Lidar64);
+        assert!(!resolved(&config).cruise.capped());
+        config.lookahead.hole_speed_cap = true;
         let capped = resolved(&config);
         let cap = capped.speed_bound.suspect_bound_mps.unwrap();
         assert!((5.0..6.0).contains(&cap), "{:?}", capped.speed_bound);
@@ -321,7 +325,9 @@ mod tests {
         assert_eq!(resolved(&unsuspected).cruise.mps, 10.0);
         // The ERIM sees holes nearer and reacts later: a lower cap (4.19
         // m/s, so 020's 4.5 m/s is held to it).
-        let erim = resolved(&at(10.0, SensorPreset::Erim)).cruise;
+        let mut erim = at(10.0, SensorPreset::Erim);
+        erim.lookahead.hole_speed_cap = true;
+        let erim = resolved(&erim).cruise;
         assert!(erim.capped() && (4.0..cap).contains(&erim.mps), "{erim:?}");
     }
 }

@@ -28,11 +28,10 @@ impl Default for LookaheadConfig {
             // 10 m/s (see `config/default.toml`).
             from_speed: true,
             max_ahead_m: 60.0,
-            // On: lidar64 at 10 m/s learnt of a 0.9 m ditch 15-19 m
-            // ahead, too late to stop from 9.5 m/s, and drove into it on
-            // `ditch_ends_out_of_sight` and with 1 of 6 noise seeds on
-            // `ditch_across` (see `config/default.toml`).
-            hole_speed_cap: true,
+            // Off: the speed governor (obstacle avoidance's unseen ground,
+            // with the hole evidence's verified ground) slows where a hole
+            // may hide, and only there (issue 63; docs/tuning.md).
+            hole_speed_cap: false,
         }
     }
 }

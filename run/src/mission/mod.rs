@@ -384,6 +384,7 @@ pub fn run_mission(
                 x: state.x,
                 y: state.y,
                 speed_mps: state.speed_mps,
+                governed: pipeline.arbiter.governed(),
             });
         }
         // The guard takes the tick's pose and images before the pipeline

@@ -223,6 +223,8 @@ pub struct TrackPoint {
     pub x: f64,
     pub y: f64,
     pub speed_mps: f64,
+    /// The speed governor set the speed commanded last.
+    pub governed: bool,
 }
 
 /// Where a vehicle turned in place (a skid-steer vehicle's turn round).

@@ -174,6 +174,11 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         let (x, y) = to_px(p[0], p[1]);
         canvas.circle(x, y, 1.6, Some(WHITE), Some((BLACK, 0.5)));
     }
+    // Where the speed governor held the speed: a ring beside the path.
+    for p in run.track.iter().filter(|p| p.governed) {
+        let (x, y) = to_px(p.x, p.y);
+        canvas.circle(x, y, 4.0, None, Some((GOVERNED, 1.5)));
+    }
     // Waypoints and the start.
     let (sx, sy) = to_px(world.start.0[0], world.start.0[1]);
     canvas.circle(sx, sy, 7.0, None, Some((BLACK, 2.5)));
@@ -338,7 +343,7 @@ pub fn mission_picture(path: &Path, world: &World, run: &MissionRun) -> Result<(
         50.0,
         14.0,
         BLACK,
-        &format!("black: cells in the local map · orange: drop-offs (pale: suspected) · purple: graded ground · light: ground seen · white: images · circles: waypoints ({} reached) · dashed: operating area · magenta: no way through · grey: no map · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
+        &format!("black: cells in the local map · orange: drop-offs (pale: suspected) · purple: graded ground · light: ground seen · white: images · violet rings: speed held by the governor (ground not verified) · circles: waypoints ({} reached) · dashed: operating area · magenta: no way through · grey: no map · {:.2} m/px", r.waypoints_reached, 1.0 / scale),
     );
     canvas.save(path)
 }
@@ -384,6 +389,8 @@ const NO_GROUND: [u8; 3] = [205, 205, 205];
 const AREA_EDGE: Rgba = [40, 40, 160, 255];
 /// The cells that closed a waypoint off.
 const NO_ROUTE: Rgba = [200, 0, 160, 255];
+/// Where the speed governor held the speed.
+const GOVERNED: Rgba = [120, 60, 220, 200];
 /// Turns in place on the map.
 const TURN_IN_PLACE: Rgba = [120, 40, 200, 255];
 
