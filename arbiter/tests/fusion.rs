@@ -398,6 +398,66 @@ fn time_driving_is_counted_by_the_limit_that_set_the_speed() {
     );
 }
 
+/// Issue 63: a speed vote's time is counted by the cause its behaviour
+/// gave for the arc driven (the governor's verified distance apart from
+/// the rest), the verified distance of the arc driven is kept decision by
+/// decision, and the arbiter says when the governor set the speed.
+#[test]
+fn time_held_by_a_speed_vote_is_counted_by_its_cause_with_the_verified_distance() {
+    use arcnav_arbiter::SpeedCause;
+    let mut config = plain();
+    config.cruise_speed_mps = 8.0;
+    let mut a = arbiter(config);
+    let tenth = SECOND / 10;
+    let straight = |n: i64, speed: f64, cause: SpeedCause, verified: f64| {
+        let mut v = votes("obstacle_avoidance", n * tenth, |i| {
+            if i == 19 { 1.0 } else { 0.0 }
+        });
+        for arc in 0..v.votes.len() {
+            v.votes.limit_arc_speed_for(arc, speed, cause);
+            v.votes.set_verified_distance(arc, verified);
+        }
+        v
+    };
+    // Ground verified 14 m ahead: the governor holds it to 6 m/s, 0.3 s.
+    for n in 0..3 {
+        a.on_votes(&straight(
+            n,
+            6.0,
+            SpeedCause::VerifiedDistance,
+            14.0 + n as f64,
+        ))
+        .unwrap();
+        assert_eq!(a.decide(n * tenth).speed_mps, 6.0);
+        assert!(a.governed());
+    }
+    // A cell 9 m ahead: the free distance, 0.2 s.
+    for n in 3..5 {
+        a.on_votes(&straight(n, 4.0, SpeedCause::FreeDistance, 30.0))
+            .unwrap();
+        assert_eq!(a.decide(n * tenth).speed_mps, 4.0);
+        assert!(!a.governed());
+    }
+    // Verified far enough for the cruise: the cruise sets it, 0.1 s.
+    a.on_votes(&straight(5, 12.0, SpeedCause::VerifiedDistance, 40.0))
+        .unwrap();
+    assert_eq!(a.decide(5 * tenth).speed_mps, 8.0);
+    assert!(!a.governed(), "the cruise set the speed");
+    a.decide(6 * tenth);
+    let stats = a.stats();
+    assert_eq!(stats.moving.verified_distance_us, 3 * tenth as u64);
+    assert_eq!(stats.moving.free_distance_us, 2 * tenth as u64);
+    assert_eq!(stats.moving.cruise_us, tenth as u64);
+    assert_eq!(stats.moving.speed_vote_us, 0);
+    let names: Vec<&str> = stats.moving.seconds().iter().map(|(n, _)| *n).collect();
+    assert_eq!(names, ["cruise", "free distance", "verified distance"]);
+    // Seven decisions drove the straight arc: 14, 15, 16, 30, 30, 40, 40 m.
+    let verified = stats.verified;
+    assert_eq!(verified.len(), 7);
+    assert_eq!(verified.min_m(), Some(14.0));
+    assert_eq!(verified.median_m(), Some(30.25));
+}
+
 #[test]
 fn votes_for_another_arc_set_are_refused() {
     let mut a = arbiter(plain());

@@ -397,6 +397,54 @@ fn several_sensors_each_with_its_own_id_mount_and_rate() {
     assert_eq!(Resolved::default().sensors.len(), 1);
 }
 
+/// Issue 63 item 4: the perception latency sim and replay assume is the
+/// sensor's own unless given (the slowest sensor's with several), and the
+/// speed governor reasons with the reaction time it makes.
+#[test]
+fn the_perception_latency_is_each_sensors_own_unless_given() {
+    use arcnav_pipeline::Latency;
+    let latency = |text: &str| from_toml(text, "test.toml").unwrap();
+    let erim = latency("");
+    assert_eq!(erim.pipeline.perception_latency_s, Latency::Seconds(0.3));
+    let lidar = latency("[sensor]\npreset = \"lidar64\"\n");
+    assert_eq!(lidar.pipeline.perception_latency_s, Latency::Seconds(0.15));
+    // 0.1 s to the next frame, 0.15 s to the map, 0.1 s to the next
+    // command, 0.25 s to the wheels.
+    assert!((lidar.speed_bound.reaction_s - 0.6).abs() < 1e-9);
+    let governor = lidar
+        .behaviour_config::<arcnav_behaviours::ObstacleAvoidanceConfig>("obstacle_avoidance")
+        .unwrap()
+        .governor_reaction_s;
+    assert_eq!(governor, lidar.speed_bound.reaction_s);
+    assert!(
+        lidar
+            .derivations()
+            .iter()
+            .any(|d| d.key == "pipeline.perception_latency_s"),
+        "{:?}",
+        lidar.derivations()
+    );
+    let both = latency(
+        "[[sensors]]\npreset = \"lidar64\"\n[[sensors]]\npreset = \"depth_camera\"\n\
+         latency_s = 0.4\n",
+    );
+    assert_eq!(both.pipeline.perception_latency_s, Latency::Seconds(0.4));
+    let given =
+        latency("[sensor]\npreset = \"lidar64\"\n[pipeline]\nperception_latency_s = 0.05\n");
+    assert_eq!(given.pipeline.perception_latency_s, Latency::Seconds(0.05));
+    assert!((given.speed_bound.reaction_s - 0.5).abs() < 1e-9);
+    // The effective configuration holds the number and resolves to itself.
+    let effective = lidar.effective();
+    assert_eq!(
+        effective.pipeline.perception_latency_s,
+        Latency::Seconds(0.15)
+    );
+    let msg = parse_error("[pipeline]\nperception_latency_s = \"soon\"\n");
+    assert!(msg.contains("\"auto\" or a number of seconds"), "{msg}");
+    let msg = parse_error("[sensor]\nlatency_s = -1.0\n");
+    assert!(msg.contains("`sensor.latency_s`"), "{msg}");
+}
+
 #[test]
 fn two_sensors_with_one_id_or_sensor_and_sensors_together_are_refused() {
     let msg = parse_error("[[sensors]]\npreset = \"lidar64\"\n[[sensors]]\npreset = \"lidar64\"\n");
