@@ -524,6 +524,17 @@ fn in_place(
             ),
         );
     }
+    if perception.evidence.verified_within_m == 0.0
+        && let Some(range) = bound.suspect_range_m
+    {
+        perception.evidence.verified_within_m = range;
+        derive(
+            "perception.evidence.verified_within_m",
+            "given as 0: where one image is certain to suspect a hole the wheels do not \
+             bridge (speed bound's suspect_range_m)"
+                .into(),
+        );
+    }
     if oa.governor_reaction_s == 0.0 {
         oa.governor_reaction_s = bound.reaction_s;
         derive(

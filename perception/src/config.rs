@@ -92,6 +92,11 @@ pub struct EvidenceConfig {
     /// off at or below `speed_bound.suspect_bound_mps`, from where one
     /// image suspects a hole in time.
     pub verify: bool,
+    /// Within this horizontal distance of the sensor one image is certain
+    /// to show a hole the wheels do not bridge (to suspect it at least):
+    /// ground there is verified by that image, m (0: resolving sets it
+    /// to `speed_bound.suspect_range_m`).
+    pub verified_within_m: f64,
     /// World-aligned cell of the layer, m: a gap the wheels do not
     /// bridge must span several.
     pub cell_size_m: f64,
@@ -109,6 +114,7 @@ impl Default for EvidenceConfig {
         Self {
             enabled: true,
             verify: true,
+            verified_within_m: 0.0,
             cell_size_m: 0.1,
             settle_m: 3.0,
             reach_m: 30.0,
@@ -126,6 +132,7 @@ impl EvidenceConfig {
         config::in_range("cell_size_m", self.cell_size_m, 0.02, 1.0)?;
         config::in_range("settle_m", self.settle_m, 0.0, 100.0)?;
         config::in_range("reach_m", self.reach_m, 1.0, 500.0)?;
+        config::in_range("verified_within_m", self.verified_within_m, 0.0, 500.0)?;
         if self.enabled && 3.0 * self.cell_size_m > drop_off.max_gap_m {
             return Err(ConfigError::new(
                 "cell_size_m",

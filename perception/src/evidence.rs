@@ -579,7 +579,9 @@ impl HoleEvidence {
     }
 
     /// Whether the gap from `a` to `b`, returns of column `k` one after the
-    /// other, is verified ground: no longer than the wheels bridge, or
+    /// other, is verified ground: within `verified_within_m` of the sensor
+    /// (where one image is certain to suspect a hole), no longer than the
+    /// wheels bridge, or
     /// within reach with no run of cells along it, `max_gap_m − cell` or
     /// longer, that no return (of any image) reached at ground height (no
     /// deeper than `δ = min_depth_m + Δ·g` below the lower end, for a gap
@@ -588,7 +590,8 @@ impl HoleEvidence {
     fn verify(&mut self, k: usize, a: Return, b: Return, place: &Placement) {
         let rule = self.rule;
         let gap = b.d - a.d;
-        if gap <= rule.max_gap {
+        // One image shows a hole there (`verified_within_m`).
+        if gap <= rule.max_gap || b.d <= self.config.verified_within_m as f32 {
             return;
         }
         let cell = self.config.cell_size_m as f32;

@@ -178,6 +178,7 @@ mod tests {
         config.localmap.hole_range_m = 7.0;
         config.pipeline.perception_latency_s = arcnav_pipeline::Latency::Seconds(0.3);
         config.perception.evidence.verify = false;
+        config.perception.evidence.verified_within_m = 11.0;
         let avoidance = config.behaviours.get_mut("obstacle_avoidance").unwrap();
         avoidance.insert("hole_seen_within_m".into(), toml::Value::Float(5.0));
         avoidance.insert("governor_reaction_s".into(), toml::Value::Float(1.0));
