@@ -53,8 +53,21 @@
 //! has about even odds of no return yet at 8 m/s, a 0.3 m rut may be
 //! suspected; from 16 m it is not (the tests drive both).
 //!
-//! Only what the vehicle drives into is kept: returns ahead of the
-//! sensor, within `reach_m` of it and no wider than the region. The
+//! The same history says where the ground is *verified* (issue 63 item
+//! 2): a gap of a column no longer than the wheels bridge hides no hole,
+//! nor does one within `verified_within_m` of the sensor (where one image
+//! is certain to suspect a hole, `speed_bound.suspect_range_m`), nor one
+//! whose cells hold no run of `max_gap_m − cell` that no return of any
+//! image reached at ground height (`min_depth_m + Δ·g` below the lower
+//! end: a smaller step down is driven). The rest of each column, and all
+//! of it beyond `reach_m`, is reported as shadow (ground not seen), so
+//! that the local map sees only verified ground and obstacle avoidance's
+//! speed governor stops short of the rest (`verify`, on where the cruise
+//! speed needs it).
+//!
+//! Only what the vehicle drives into is walked: returns ahead of the
+//! sensor and no wider than the region; only those within `reach_m` of it
+//! are kept in cells. The
 //! window is robot-centric and scrolls: a ring of tiles indexed by world
 //! tile modulo its side, each knowing which world tile it holds, so
 //! ground left behind is forgotten when ground ahead takes its place.
