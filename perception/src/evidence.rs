@@ -65,9 +65,8 @@
 //! speed governor stops short of the rest (`verify`, on where the cruise
 //! speed needs it).
 //!
-//! Only what the vehicle drives into is walked: returns ahead of the
-//! sensor and no wider than the region; only those within `reach_m` of it
-//! are kept in cells. The
+//! Only what the vehicle drives into is kept: returns ahead of the
+//! sensor, within `reach_m` of it and no wider than the region. The
 //! window is robot-centric and scrolls: a ring of tiles indexed by world
 //! tile modulo its side, each knowing which world tile it holds, so
 //! ground left behind is forgotten when ground ahead takes its place.
@@ -469,6 +468,9 @@ impl HoleEvidence {
             self.walk(k as usize, here, &place, sensor_level, &mut stats);
         }
         self.report(report, &mut stats);
+        if self.config.verify {
+            self.beyond_reach(sensor_level);
+        }
         let ground = world_from_level * nalgebra::Point3::new(s.x, s.y, 0.0);
         self.emit_shadows(
             image,
@@ -486,11 +488,26 @@ impl HoleEvidence {
     }
 
     /// Whether level-frame (x, y) is kept: ahead of the sensor at
-    /// level-frame `sensor` (what the vehicle drives into) and no wider
-    /// than the region. Only those within reach of it raise cells.
+    /// level-frame `sensor` (what the vehicle drives into), within reach
+    /// of it and no wider than the region.
     #[inline(always)]
     fn inside(&self, x: f32, y: f32, sensor: [f32; 3]) -> bool {
-        x >= sensor[0] && y.abs() <= self.region[2]
+        let reach = self.config.reach_m as f32;
+        let (dx, dy) = (x - sensor[0], y - sensor[1]);
+        dx >= 0.0 && dx * dx + dy * dy <= reach * reach && y.abs() <= self.region[2]
+    }
+
+    /// Nothing beyond reach is verified: each column's stretch from its
+    /// last return in the region on to the farthest range is unverified
+    /// (its gaps there are longer than the wheels bridge anyway).
+    fn beyond_reach(&mut self, sensor: [f32; 3]) {
+        for k in 0..self.far.len() {
+            let Some(last) = self.far[k].filter(|&r| self.in_region(r)) else {
+                continue;
+            };
+            let (dx, dy) = (last.x - sensor[0], last.y - sensor[1]);
+            self.stretch(k, last.d, self.max_range.max(last.d), (dx, dy));
+        }
     }
 
     /// Whether `r` lies in `[perception.region]`.
@@ -517,20 +534,17 @@ impl HoleEvidence {
     /// its column 0 the image's `first`), keeping the returns for the
     /// walk.
     fn raise(&mut self, points: &RowPoints, first: usize, place: &Placement, sensor: [f32; 3]) {
-        let reach = self.config.reach_m as f32;
         for k in 0..points.x.len() {
             let (x, y) = (points.x[k], points.y[k]);
             if !points.used[k] || !self.inside(x, y, sensor) {
                 continue;
             }
+            let spot = place.locate(x, y);
             let z = points.z[k] + place.tz;
+            self.hold(spot);
+            let top = &mut self.tops[spot.slot][spot.sub];
+            *top = top.max(z);
             let d = ((x - sensor[0]).powi(2) + (y - sensor[1]).powi(2)).sqrt();
-            if d <= reach {
-                let spot = place.locate(x, y);
-                self.hold(spot);
-                let top = &mut self.tops[spot.slot][spot.sub];
-                *top = top.max(z);
-            }
             self.kept.push(((first + k) as u32, Return { d, x, y, z }));
         }
     }
@@ -555,16 +569,12 @@ impl HoleEvidence {
             // Nearer than the last return (a wall's face): not a gap.
             return;
         }
-        let reach = self.config.reach_m as f32;
-        if here.d <= reach {
-            self.pass_over(far, here, place);
-        }
+        self.pass_over(far, here, place);
         if self.config.verify && self.in_region(far) {
             self.verify(k, far, here, place);
         }
         if let Some(near) = self.near[k]
             && self.suspect
-            && far.d <= reach
             && self.in_region(near)
         {
             stats.candidates += u32::from(self.judge(near, far, here, place, sensor));
@@ -608,7 +618,7 @@ impl HoleEvidence {
             return;
         }
         let cell = self.config.cell_size_m as f32;
-        let verified = b.d <= self.config.reach_m as f32 && {
+        let verified = {
             let ground = a.z.min(b.z) - (rule.min_depth + rule.depth_per_m * gap);
             let mut keys = std::mem::take(&mut self.keys);
             cells_between(a, b, place, 0.5 * cell, &mut keys);
@@ -625,23 +635,29 @@ impl HoleEvidence {
             self.keys = keys;
             longest < rule.max_gap - cell
         };
-        if verified {
-            return;
+        if !verified {
+            self.stretch(k, a.d, b.d, (b.x - a.x, b.y - a.y));
         }
+    }
+
+    /// Keeps column `k`'s stretch from `near` to `far` (m from the sensor,
+    /// in level-frame direction `(dx, dy)`) as unverified, joined to the
+    /// column's last one when they meet.
+    fn stretch(&mut self, k: usize, near: f32, far: f32, (dx, dy): (f32, f32)) {
         let open = self.open[k];
         if let Some(last) = self.stretches.get_mut(open as usize)
-            && last.far == a.d
+            && last.far == near
         {
-            last.far = b.d;
+            last.far = far;
             return;
         }
         self.open[k] = self.stretches.len() as u32;
         self.stretches.push(Stretch {
             col: k as u32,
-            near: a.d,
-            far: b.d,
-            dx: b.x - a.x,
-            dy: b.y - a.y,
+            near,
+            far,
+            dx,
+            dy,
         });
     }
 
