@@ -78,17 +78,18 @@ fn config(fault: &str, speed: f64, guard: bool) -> Config {
         }
         fault => format!("[pipeline]\nfault = \"{fault}\"\nfault_after_s = 2.0\n"),
     };
+    // The ERIM held to what one image shows of a hole in time (4.19 m/s
+    // for 4.5 asked), as the matrix was drawn up: uncapped, the route
+    // alone steered round the boulders at 4.5 m/s, and the fault had no
+    // barrier to drive into.
     let sensor = if speed > 5.0 {
-        "[sensor]\npreset = \"lidar64\"\n[lookahead]\nhole_speed_cap = false\n"
+        "[sensor]\npreset = \"lidar64\"\n"
     } else {
-        ""
+        "[lookahead]\nhole_speed_cap = true\n"
     };
-    // The pipeline's map as each image shows it, ground verified over
-    // images or not (what is tested is the guard beside it: verifying, the
-    // route alone steered round the boulders at 4.5 m/s).
     let text = format!(
         "{fault}{sensor}[sim]\nstuck_after_s = 4.0\ntime_limit_s = 40.0\nthreads = 1\n\
-         [guard]\nenabled = {guard}\n[perception.evidence]\nverify = false\n"
+         [guard]\nenabled = {guard}\n"
     );
     let mut config = Config::parse(&text, "the fault's configuration").unwrap();
     config.arbiter.cruise_speed_mps = speed;
