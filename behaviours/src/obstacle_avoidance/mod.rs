@@ -700,8 +700,8 @@ impl ObstacleAvoidance {
         // v·t + v²/2a = room, solved for v.
         let t = self.config.reaction_s;
         let stopping_at =
-            |a: f64, room: f64| -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt();
-        let stopping_speed = |room: f64| stopping_at(self.deceleration, room);
+            |a: f64, t: f64, room: f64| -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt();
+        let stopping_speed = |room: f64| stopping_at(self.deceleration, t, room);
         // How far the vehicle runs before it stands, braking as hard as it
         // can from its speed now.
         let speed = ctx.pose.velocity.norm();
@@ -713,15 +713,12 @@ impl ObstacleAvoidance {
         // be a cell, and an edge still suspected is none). A hole that may
         // be there, as unverified ground: braking as hard as it can.
         let margin = self.config.stop_margin_m;
-        let possible_hole = |room: f64| {
-            // (0, never derived from a pipeline: `reaction_s`.)
-            let t = match self.config.governor_reaction_s {
-                0.0 => self.config.reaction_s,
-                t => t,
-            };
-            let a = self.max_deceleration;
-            -a * t + ((a * t).powi(2) + 2.0 * a * room.max(0.0)).sqrt()
+        // (0, never derived from a pipeline: `reaction_s`.)
+        let governor_t = match self.config.governor_reaction_s {
+            0.0 => t,
+            given => given,
         };
+        let possible_hole = |room: f64| stopping_at(self.max_deceleration, governor_t, room);
         let hole_speed = possible_hole(self.config.hole_seen_within_m - margin);
         for arc in 0..arcs {
             if votes.is_vetoed(arc) {
