@@ -198,20 +198,9 @@ pub struct Decision {
     pub inputs: Vec<InputExplanation>,
     /// The speed limits that applied, m/s: cruise, speed votes, lateral, weak vote.
     pub speed_limits: Vec<(String, f64)>,
-    /// Why the lowest speed vote on the arc driven is what it is, where its
-    /// behaviour said.
-    pub speed_cause: SpeedCause,
 }
 
 impl Decision {
-    /// True when the speed governor set the speed: the lowest of the
-    /// limits is a behaviour's speed vote, stopping within the arc's
-    /// verified distance.
-    pub fn governed(&self) -> bool {
-        self.speed_cause == SpeedCause::VerifiedDistance
-            && SpeedTime::set_by_vote(&self.speed_limits)
-    }
-
     /// True when the command is a manoeuvre's (backing up, turning round,
     /// or standing for one), not the fused vote's.
     pub fn is_manoeuvre(&self) -> bool {
@@ -1087,9 +1076,6 @@ impl Arbiter {
             vetoes,
             inputs,
             speed_limits,
-            speed_cause: command
-                .arc_index
-                .map_or(SpeedCause::NotSaid, |arc| self.speed_cause(arc, now)),
         }
     }
 }

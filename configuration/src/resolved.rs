@@ -161,10 +161,9 @@ impl Resolved {
             mut derived,
         } = in_place(&given, &avoidance, &cruise, &lookahead, &speed_bound);
         let mut pipeline = given.pipeline.clone();
-        if pipeline.perception_latency_s == Latency::Auto
-            && let Some(slowest) = sensors.iter().map(|s| s.latency_s).reduce(f64::max)
-        {
-            pipeline.perception_latency_s = Latency::Seconds(slowest);
+        if pipeline.perception_latency_s == Latency::Auto && !sensors.is_empty() {
+            pipeline.perception_latency_s =
+                Latency::Seconds(speed_bound::perception_latency_s(&given, &sensors));
             derived.push(Derivation {
                 key: "pipeline.perception_latency_s".into(),
                 from: "\"auto\": the slowest sensor's latency_s (its acquisition and processing)"

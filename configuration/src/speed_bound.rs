@@ -136,7 +136,14 @@ pub fn speed_bound(
 ) -> Result<SpeedBound, arcnav_vehicle::ConfigError> {
     looking_ahead(sensors)
         .into_iter()
-        .map(|sensor| bound_with(config, sensor, window))
+        .map(|sensor| {
+            bound_with(
+                config,
+                sensor,
+                window,
+                perception_latency_s(config, sensors),
+            )
+        })
         .max_by(|a, b| a.bound_mps.total_cmp(&b.bound_mps))
         .ok_or_else(|| arcnav_vehicle::ConfigError::new("sensors", "the vehicle has no sensor"))
 }
@@ -150,7 +157,10 @@ pub fn speed_bound(
 pub fn hole_speed_cap(config: &Config, sensors: &[SensorModel]) -> Option<f64> {
     looking_ahead(sensors)
         .into_iter()
-        .filter_map(|sensor| bound_with(config, sensor, f64::INFINITY).suspect_bound_mps)
+        .filter_map(|sensor| {
+            let latency = perception_latency_s(config, sensors);
+            bound_with(config, sensor, f64::INFINITY, latency).suspect_bound_mps
+        })
         .max_by(f64::total_cmp)
 }
 
@@ -171,9 +181,20 @@ fn looking_ahead(sensors: &[SensorModel]) -> Vec<&SensorModel> {
     }
 }
 
+/// From an image's capture to its cells in the map, s: `[pipeline]
+/// perception_latency_s`, or for `"auto"` the slowest of the `sensors`'
+/// own (what sim and replay then hold cells for).
+pub fn perception_latency_s(config: &Config, sensors: &[SensorModel]) -> f64 {
+    let slowest = sensors.iter().map(|s| s.latency_s).reduce(f64::max);
+    match slowest {
+        Some(slowest) => config.pipeline.perception_latency_s.or_sensor(slowest),
+        None => config.pipeline.perception_latency_s.seconds(),
+    }
+}
+
 /// The bound of `config` with `sensor` alone, the map window reaching
-/// `window` m ahead.
-fn bound_with(config: &Config, sensor: &SensorModel, window: f64) -> SpeedBound {
+/// `window` m ahead, its cells in the map `latency` s after capture.
+fn bound_with(config: &Config, sensor: &SensorModel, window: f64, latency: f64) -> SpeedBound {
     let v = &config.vehicle;
     let elevations = &sensor.beams.elevation;
     let span = elevations
@@ -207,13 +228,8 @@ fn bound_with(config: &Config, sensor: &SensorModel, window: f64) -> SpeedBound 
     } else {
         1.0 / sensor.rate_hz
     };
-    let reaction = acquisition
-        + config
-            .pipeline
-            .perception_latency_s
-            .or_sensor(sensor.latency_s)
-        + 1.0 / config.pipeline.command_rate_hz
-        + v.command_latency_s;
+    let reaction =
+        acquisition + latency + 1.0 / config.pipeline.command_rate_hz + v.command_latency_s;
     let a = v.max_deceleration_mps2;
     let r = v.min_turning_radius_m;
     let w = v.footprint().half_width.min(r);

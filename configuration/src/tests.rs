@@ -429,6 +429,13 @@ fn the_perception_latency_is_each_sensors_own_unless_given() {
          latency_s = 0.4\n",
     );
     assert_eq!(both.pipeline.perception_latency_s, Latency::Seconds(0.4));
+    // The bound reacts as the cells are held: the lidar's frame with the
+    // slowest sensor's latency, 0.1 + 0.4 + 0.1 + 0.25 s.
+    assert!(
+        (both.speed_bound.reaction_s - 0.85).abs() < 1e-9,
+        "{:?}",
+        both.speed_bound
+    );
     let given =
         latency("[sensor]\npreset = \"lidar64\"\n[pipeline]\nperception_latency_s = 0.05\n");
     assert_eq!(given.pipeline.perception_latency_s, Latency::Seconds(0.05));
